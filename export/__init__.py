@@ -1,0 +1,1 @@
+"""Quantisation of a trained float network into a fixed-point model."""

@@ -1,0 +1,212 @@
+"""The fixed-point model: integer arrays plus a JSON header, the contract between every target.
+
+Integer dynamics, per presentation, per step t (all integers; see docs/fixed-point.md):
+
+    a_j[t] = sum_i q_ij s_i[t]                                   (weight mantissas q, unsigned, `bits` wide)
+    V_j[t] = sat24( trunc0(V_j[t-1] (4096 - dv) / 4096) + (a_j[t] << voltage_shift) )
+    C[t]   = { j : V_j[t] > theta_j << voltage_shift }
+    WTA:     S_j[t] = 1 for the j in C[t] maximising a_j[t] m_j   (ties: lowest index)
+    V_j[t] <- 0 for j in C[t]
+
+trunc0 rounds toward zero (Lava's decay); sat24 clips to [-(2**23 - 1), 2**23 - 1] and
+every clip is counted as a saturation event. The float weight the mantissa stands for
+is w_ij ~= q_ij * m_j * 2**scale_exponent, and the float threshold theta_j ~=
+theta_int_j * m_j * 2**scale_exponent, so each neuron's voltage lives in its own
+scale and comparing currents across neurons (the WTA) uses a_j m_j.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vprsnn_export import __version__
+from vprsnn_export.config import Config
+from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.fileio import read_container, write_container
+
+FORMAT = "vprsnn-fixed-point"
+FORMAT_VERSION = 1
+SUPPORTED_BITS = (2, 3, 4, 5, 6, 7, 8)
+DECAY_BITS = 12  # Loihi: decays are 12-bit, 4096 = no decay
+VOLTAGE_BITS = 24  # Loihi: 24-bit signed membrane voltage
+VOLTAGE_SHIFT = 6  # Loihi: the synaptic input and vth mantissa are shifted left by 6
+MULTIPLIER_BITS = 16  # per-neuron scale multipliers m_j are unsigned 16-bit
+THRESHOLD_BITS = 17  # Loihi: vth mantissa is 17 bits unsigned
+
+
+def decay_mantissa(beta: float) -> int:
+    """dv = round(4096 (1 - beta)) (Loihi's 12-bit voltage decay)."""
+    return int(round((1 << DECAY_BITS) * (1.0 - beta)))
+
+
+def check_bits(bits: int) -> int:
+    if bits not in SUPPORTED_BITS:
+        raise OptionError(f"unsupported weight bit width {bits}: choose from {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}")
+    return bits
+
+
+@dataclass
+class FixedPointModel:
+    """A quantised network, self-describing (every width, rounding and scale is in here)."""
+
+    bits: int
+    weight_mantissa: np.ndarray  # (inputs, neurons) int32 in [0, 2**bits - 1]
+    scale_multiplier: np.ndarray  # (neurons,) int32 in [1, 2**16 - 1]; all equal when per-tensor
+    scale_exponent: int  # w ~= q * m * 2**scale_exponent
+    threshold: np.ndarray  # (neurons,) int32 in [1, 2**17 - 1]: vth mantissas
+    decay_dv: int  # 12-bit voltage decay
+    config: Config  # the source network's full config (encoder, T, beta, WTA, ...)
+    calibration: np.ndarray  # (neurons, places) int64: S^R of this deployed network
+    float_calibration: np.ndarray  # (neurons, places) int64: S^R of the float source network
+    reference_place_ids: np.ndarray  # (places,) int64
+    reference_traversals: list[str]
+    quantisation: dict[str, Any]  # per_neuron, scale_method, threshold_folding, errors...
+    source_sha256: str  # sha256 of the float checkpoint file
+    data: dict[str, Any] = field(default_factory=dict)
+    voltage_shift: int = VOLTAGE_SHIFT
+    voltage_bits: int = VOLTAGE_BITS
+    version: str = __version__
+
+    @property
+    def n_inputs(self) -> int:
+        return int(self.weight_mantissa.shape[0])
+
+    @property
+    def n_neurons(self) -> int:
+        return int(self.weight_mantissa.shape[1])
+
+    @property
+    def voltage_limit(self) -> int:
+        """Largest voltage magnitude: 2**(voltage_bits - 1) - 1."""
+        return (1 << (self.voltage_bits - 1)) - 1
+
+    def float_weights(self) -> np.ndarray:
+        """The float weights the mantissas stand for: q_ij m_j 2**e."""
+        return self.weight_mantissa * (self.scale_multiplier * 2.0**self.scale_exponent)[None, :]
+
+    def float_thresholds(self) -> np.ndarray:
+        return self.threshold * self.scale_multiplier * 2.0**self.scale_exponent
+
+    def header(self) -> dict[str, Any]:
+        """The JSON header: every width, rounding rule and scale, for humans and other tools."""
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "package_version": self.version,
+            "source_sha256": self.source_sha256,
+            "bits": self.bits,
+            "scale_exponent": self.scale_exponent,
+            "decay_dv": self.decay_dv,
+            "voltage_shift": self.voltage_shift,
+            "voltage_bits": self.voltage_bits,
+            "quantisation": self.quantisation,
+            "config": self.config.to_dict(),
+            "reference_traversals": self.reference_traversals,
+            "data": self.data,
+            "arithmetic": {
+                "weights": f"unsigned {self.bits}-bit mantissas q_ij; w_ij ~= q_ij * m_j * 2**scale_exponent",
+                "scale_multiplier": f"unsigned {MULTIPLIER_BITS}-bit m_j per neuron (all equal when per-tensor)",
+                "threshold": f"unsigned {THRESHOLD_BITS}-bit vth mantissa, compared as vth << voltage_shift",
+                "current": "a_j[t] = sum_i q_ij s_i[t] (exact integer)",
+                "decay": "V <- trunc_toward_zero(V * (4096 - decay_dv) / 4096)",
+                "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), 2**{self.voltage_bits - 1} - 1), clips counted",
+                "candidates": "C = {j : V_j > threshold_j << voltage_shift}",
+                "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index" if self.config.network.wta else "off: every candidate spikes",
+                "reset": "V_j <- 0 for every j in C",
+                "state": "V zeroed at the start of every presentation" if self.config.network.state_isolation else "V carried across presentations",
+                "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), keyed by (seed, stream, traversal, place_id)",
+            },
+        }
+
+
+def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
+    validate(model, Path(path))
+    arrays = {
+        "weight_mantissa": model.weight_mantissa.astype(np.int32),
+        "scale_multiplier": model.scale_multiplier.astype(np.int32),
+        "threshold": model.threshold.astype(np.int32),
+        "calibration": model.calibration.astype(np.int64),
+        "float_calibration": model.float_calibration.astype(np.int64),
+        "reference_place_ids": model.reference_place_ids.astype(np.int64),
+    }
+    return write_container(path, model.header(), arrays)
+
+
+def load_fixed_point(path: str | Path) -> FixedPointModel:
+    path = Path(path)
+    meta, arrays = read_container(path, "fixed-point model")
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn fixed-point model (format {meta.get('format')!r})", path)
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported fixed-point format version {meta.get('format_version')!r}", path)
+    needed = {"weight_mantissa", "scale_multiplier", "threshold", "calibration", "float_calibration", "reference_place_ids"}
+    if needed - set(arrays):
+        raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
+    try:
+        model = FixedPointModel(
+            bits=int(meta["bits"]),
+            weight_mantissa=arrays["weight_mantissa"],
+            scale_multiplier=arrays["scale_multiplier"],
+            scale_exponent=int(meta["scale_exponent"]),
+            threshold=arrays["threshold"],
+            decay_dv=int(meta["decay_dv"]),
+            config=Config.from_dict(meta["config"]),
+            calibration=arrays["calibration"],
+            float_calibration=arrays["float_calibration"],
+            reference_place_ids=arrays["reference_place_ids"],
+            reference_traversals=list(meta["reference_traversals"]),
+            quantisation=dict(meta["quantisation"]),
+            source_sha256=str(meta["source_sha256"]),
+            data=dict(meta.get("data", {})),
+            voltage_shift=int(meta["voltage_shift"]),
+            voltage_bits=int(meta["voltage_bits"]),
+            version=str(meta.get("package_version", "unknown")),
+        )
+    except (KeyError, TypeError, ValueError, VprError) as exc:
+        raise ModelFileError(f"invalid fixed-point header ({exc})", path) from None
+    validate(model, path)
+    return model
+
+
+def validate(model: FixedPointModel, path: Path) -> None:
+    """Every array has its declared shape, an integer dtype, and values that fit their widths."""
+
+    def fail(message: str) -> None:
+        raise ModelFileError(message, path)
+
+    if model.bits not in SUPPORTED_BITS:
+        fail(f"unsupported weight bit width {model.bits}")
+    net = model.config.network
+    shapes = {
+        "weight_mantissa": (net.n_inputs, net.n_neurons),
+        "scale_multiplier": (net.n_neurons,),
+        "threshold": (net.n_neurons,),
+    }
+    for name, shape in shapes.items():
+        array = getattr(model, name)
+        if array.shape != shape:
+            fail(f"{name} has shape {array.shape}, expected {shape}")
+        if not np.issubdtype(array.dtype, np.integer):
+            fail(f"{name} has dtype {array.dtype}, expected integers")
+    ranges = {
+        "weight_mantissa": (0, (1 << model.bits) - 1),
+        "scale_multiplier": (1, (1 << MULTIPLIER_BITS) - 1),
+        "threshold": (1, (1 << THRESHOLD_BITS) - 1),
+    }
+    for name, (low, high) in ranges.items():
+        array = getattr(model, name)
+        if array.size and (array.min() < low or array.max() > high):
+            fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")
+    if not 0 <= model.decay_dv < (1 << DECAY_BITS):
+        fail(f"decay_dv {model.decay_dv} does not fit {DECAY_BITS} bits")
+    if model.voltage_bits != VOLTAGE_BITS or not 0 <= model.voltage_shift < model.voltage_bits:
+        fail(f"unsupported voltage format ({model.voltage_bits} bits, shift {model.voltage_shift})")
+    n_places = model.reference_place_ids.shape[0]
+    for name in ("calibration", "float_calibration"):
+        array = getattr(model, name)
+        if array.shape != (net.n_neurons, n_places) or not np.issubdtype(array.dtype, np.integer) or (array < 0).any():
+            fail(f"{name} must be non-negative integer counts of shape {(net.n_neurons, n_places)}")

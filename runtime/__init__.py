@@ -1,0 +1,1 @@
+"""Inference, neuron assignment, metrics, sequence aggregation, verification and reports."""

@@ -1,0 +1,166 @@
+"""Exact precision-recall metrics for single-match place recognition.
+
+Every query has exactly one true place in the reference map and receives one
+prediction (or a no-match). A confidence threshold tau accepts the queries with
+confidence >= tau; a query is a true positive when it is accepted and correct.
+Instead of sweeping a fixed grid of thresholds (which can under-estimate
+R@100P, field notes Sec. 1), every distinct confidence value is one operating
+point, computed exactly from the queries sorted by confidence. Equal
+confidences are never split: they are accepted or rejected together.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.MaskedArray:
+    """Map predicted place indices to place ids; no-matches (index -1) are masked.
+
+    .. math:: \\mathrm{id}_q = \\mathrm{place\\_ids}[\\hat l_q] \\text{ if } \\hat l_q \\ge 0, \\text{ else masked}
+
+    The result can be passed straight to :func:`is_correct`, which never counts
+    a masked (no-match) entry as correct. This avoids the classic bug of
+    ``place_ids[-1]`` silently turning a no-match into the last place.
+    """
+    idx = np.asarray(pred_index)
+    ids = np.asarray(place_ids)
+    if idx.ndim != 1 or ids.ndim != 1:
+        raise ValueError("pred_index and place_ids must be 1-D")
+    if not np.issubdtype(idx.dtype, np.integer):
+        raise ValueError("pred_index must be an integer array")
+    if np.any(idx < -1) or np.any(idx >= ids.shape[0]):
+        raise ValueError(f"pred_index must lie in [-1, {ids.shape[0] - 1}]")
+    matched = idx >= 0
+    values = ids[np.where(matched, idx, 0)] if ids.shape[0] else np.zeros(idx.shape, ids.dtype)
+    return np.ma.MaskedArray(values, mask=~matched)
+
+
+def is_correct(
+    pred_place_ids: np.ndarray | np.ma.MaskedArray,
+    true_place_ids: np.ndarray,
+    tolerance: float = 0,
+    *,
+    matched: np.ndarray | None = None,
+) -> np.ndarray:
+    """Whether each query's prediction is correct, boolean array ``(n_queries,)``.
+
+    .. math:: \\mathrm{correct}_q = \\mathrm{matched}_q \\wedge |\\mathrm{pred}_q - \\mathrm{true}_q| \\le \\mathrm{tolerance}
+
+    ``tolerance`` is in place-id units (0 = exact match). A no-match is never
+    correct. Mark no-matches either by passing a masked array (see
+    :func:`predicted_place_ids`; masked entries are no-matches) or with the
+    boolean ``matched`` mask (False = no-match; the value of
+    ``pred_place_ids`` there is ignored). Both may be given; they combine with
+    AND. With neither, every prediction counts as a match.
+    """
+    if tolerance < 0 or not np.isfinite(tolerance):
+        raise ValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
+    ok = np.ones(np.shape(pred_place_ids), dtype=bool)
+    if isinstance(pred_place_ids, np.ma.MaskedArray):
+        ok &= ~np.ma.getmaskarray(pred_place_ids)
+        pred = np.asarray(pred_place_ids.filled(0))
+    else:
+        pred = np.asarray(pred_place_ids)
+    true = np.asarray(true_place_ids)
+    if pred.ndim != 1 or pred.shape != true.shape:
+        raise ValueError(
+            f"pred_place_ids {pred.shape} and true_place_ids {true.shape} must be 1-D of equal length"
+        )
+    if matched is not None:
+        m = np.asarray(matched)
+        if m.dtype != np.bool_ or m.shape != pred.shape:
+            raise ValueError("matched must be a boolean array with one entry per query")
+        ok &= m
+    diff = np.abs(pred.astype(np.float64) - true.astype(np.float64))
+    return ok & (diff <= tolerance)
+
+
+def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c = np.asarray(correct)
+    conf = np.asarray(confidence, dtype=np.float64)
+    if c.ndim != 1 or conf.shape != c.shape:
+        raise ValueError(
+            f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length"
+        )
+    if c.shape[0] == 0:
+        raise ValueError("no queries: precision and recall are undefined")
+    if c.dtype != np.bool_:
+        if not np.all((c == 0) | (c == 1)):
+            raise ValueError("correct must be boolean (or 0/1)")
+        c = c.astype(bool)
+    if not np.all(np.isfinite(conf)):
+        raise ValueError("confidence contains NaN or infinite values")
+    return c, conf
+
+
+def _operating_points(
+    correct: np.ndarray, confidence: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
+    c, conf = _check(correct, confidence)
+    order = np.argsort(-conf, kind="stable")
+    conf_sorted = conf[order]
+    tp_cum = np.cumsum(c[order], dtype=np.int64)
+    # last position of each run of equal confidences (ties are never split)
+    ends = np.flatnonzero(np.append(conf_sorted[1:] != conf_sorted[:-1], True))
+    return tp_cum[ends], ends + 1, conf_sorted[ends].copy(), int(c.shape[0])
+
+
+def pr_curve(
+    correct: np.ndarray, confidence: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact precision-recall operating points, one per distinct confidence value.
+
+    Sort queries by confidence, descending. For each distinct value tau_k
+    (descending), accept every query with confidence >= tau_k:
+
+    .. math:: P_k = \\frac{TP_k}{\\#\\{q : c_q \\ge \\tau_k\\}}, \\qquad
+              R_k = \\frac{TP_k}{N_{queries}}, \\qquad
+              TP_k = \\#\\{q : c_q \\ge \\tau_k \\wedge \\mathrm{correct}_q\\}
+
+    Recall divides by the number of queries because every query has a true
+    match in the reference map. Ties are never split. No-matches (confidence 0,
+    never correct) are ordinary queries accepted only at the lowest thresholds.
+    Returns ``(precision, recall, thresholds)``, all float64 of equal length,
+    thresholds strictly decreasing, recall non-decreasing; the last point
+    accepts every query.
+    """
+    tp, accepted, thresholds, n = _operating_points(correct, confidence)
+    return tp / accepted, tp / n, thresholds
+
+
+def pr_metrics(correct: np.ndarray, confidence: np.ndarray) -> dict[str, float | int]:
+    """Accuracy, P@100R, R@100P and AUC-PR, computed exactly.
+
+    .. math::
+        \\mathrm{accuracy} = \\frac{\\#\\mathrm{correct}}{N}, \\qquad
+        \\mathrm{P@100R} = P_K \\;(\\text{all queries accepted}), \\qquad
+        \\mathrm{R@100P} = \\max\\{R_k : P_k = 1\\} \\;(0 \\text{ if none})
+
+        \\mathrm{AUC\\text{-}PR} = \\sum_k (R_k - R_{k-1})\\, P_k, \\quad R_0 = 0
+
+    over the operating points of :func:`pr_curve` (the exact area under the
+    step curve, i.e. average precision). With single-match VPR every query
+    has one true place and one prediction, so accepting all queries gives
+    precision = #correct / N: **P@100R always equals accuracy** (field notes
+    Sec. 1); it is reported for comparison with the literature. Precision 1 is
+    tested exactly in integers (TP == accepted). Returns floats in [0, 1]
+    under keys ``accuracy``, ``p_at_100r``, ``r_at_100p``, ``auc_pr`` and
+    ``n_queries`` (the latter an int). Empty input raises ``ValueError``.
+    """
+    tp, accepted, _, n = _operating_points(correct, confidence)
+    precision = tp / accepted
+    recall = tp / n
+    perfect = tp == accepted
+    r_at_100p = float(recall[perfect].max()) if np.any(perfect) else 0.0
+    recall_prev = np.concatenate(([0.0], recall[:-1]))
+    auc = float(np.sum((recall - recall_prev) * precision))
+    n_correct = int(tp[-1])  # the last point accepts every query
+    return {
+        "accuracy": n_correct / n,
+        "p_at_100r": float(precision[-1]),
+        "r_at_100p": r_at_100p,
+        "auc_pr": auc,
+        "n_queries": n,
+    }

@@ -1,0 +1,122 @@
+"""The float checkpoint: weights, thresholds, calibration, full config and provenance in one file.
+
+Format: an npz container (no pickle) from :mod:`vprsnn_export.fileio` with arrays
+``weights`` (inputs, neurons) float32, ``thresholds`` (neurons,) float32,
+``calibration`` (neurons, places) int64 = S^R and ``reference_place_ids``
+(places,) int64, and a JSON header holding the config, the seed, the data
+provenance (source, manifest sha256, reference traversals, place selection),
+the training history and the package version.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import __version__
+from .config import Config
+from .errors import ModelFileError, VprError
+from .fileio import read_container, sha256_file, write_container
+
+FORMAT = "vprsnn-checkpoint"
+FORMAT_VERSION = 1
+
+
+@dataclass
+class Checkpoint:
+    config: Config
+    weights: np.ndarray
+    thresholds: np.ndarray
+    calibration: np.ndarray
+    reference_place_ids: np.ndarray
+    reference_traversals: list[str]
+    data: dict[str, Any]  # source, manifest_sha256, subset, places
+    history: list[dict] = field(default_factory=list)
+    version: str = __version__
+
+
+def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
+    _validate(ckpt, Path(path))
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "package_version": ckpt.version,
+        "config": ckpt.config.to_dict(),
+        "seed": ckpt.config.seed,
+        "reference_traversals": list(ckpt.reference_traversals),
+        "data": ckpt.data,
+        "history": ckpt.history,
+    }
+    arrays = {
+        "weights": ckpt.weights.astype(np.float32),
+        "thresholds": ckpt.thresholds.astype(np.float32),
+        "calibration": ckpt.calibration.astype(np.int64),
+        "reference_place_ids": ckpt.reference_place_ids.astype(np.int64),
+    }
+    return write_container(path, meta, arrays)
+
+
+def load_checkpoint(path: str | Path) -> Checkpoint:
+    path = Path(path)
+    meta, arrays = read_container(path, "checkpoint")
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    missing = {"weights", "thresholds", "calibration", "reference_place_ids"} - set(arrays)
+    if missing:
+        raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
+    try:
+        config = Config.from_dict(meta["config"])
+    except (KeyError, VprError) as exc:
+        raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
+    ckpt = Checkpoint(
+        config=config,
+        weights=arrays["weights"],
+        thresholds=arrays["thresholds"],
+        calibration=arrays["calibration"],
+        reference_place_ids=arrays["reference_place_ids"],
+        reference_traversals=list(meta.get("reference_traversals", [])),
+        data=dict(meta.get("data", {})),
+        history=list(meta.get("history", [])),
+        version=str(meta.get("package_version", "unknown")),
+    )
+    _validate(ckpt, path)
+    return ckpt
+
+
+def checkpoint_sha256(path: str | Path) -> str:
+    return sha256_file(path)
+
+
+def _validate(ckpt: Checkpoint, path: Path) -> None:
+    """Shapes agree with the config, dtypes are numeric, values finite and in range."""
+    net = ckpt.config.network
+    expect = {
+        "weights": (net.n_inputs, net.n_neurons),
+        "thresholds": (net.n_neurons,),
+    }
+    for name, shape in expect.items():
+        array = getattr(ckpt, name)
+        if array.shape != shape:
+            raise ModelFileError(f"{name} has shape {array.shape}, expected {shape} from its config", path)
+        if not np.issubdtype(array.dtype, np.floating):
+            raise ModelFileError(f"{name} has dtype {array.dtype}, expected float32", path)
+        if not np.all(np.isfinite(array)):
+            raise ModelFileError(f"{name} contains NaN or infinite values", path)
+    if np.any(ckpt.weights < 0):
+        raise ModelFileError("weights contain negative values (STDP weights are non-negative)", path)
+    n_places = ckpt.reference_place_ids.shape[0]
+    if ckpt.reference_place_ids.ndim != 1 or n_places == 0:
+        raise ModelFileError("reference_place_ids must be a non-empty 1-D array", path)
+    if ckpt.calibration.shape != (net.n_neurons, n_places):
+        raise ModelFileError(
+            f"calibration has shape {ckpt.calibration.shape}, expected {(net.n_neurons, n_places)}", path
+        )
+    if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(ckpt.calibration < 0):
+        raise ModelFileError("calibration must hold non-negative integer spike counts", path)
+    if not ckpt.reference_traversals:
+        raise ModelFileError("checkpoint names no reference traversal", path)

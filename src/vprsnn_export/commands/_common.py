@@ -1,0 +1,158 @@
+"""Options and helpers shared by several subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from ..config import Config
+from ..errors import OptionError
+
+
+def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) -> None:
+    group = parser.add_argument_group("data")
+    group.add_argument(
+        "--data",
+        required=data_required,
+        help="place manifest CSV (or its folder), or 'synthetic[:N]' for the embedded synthetic route",
+    )
+    selection = group.add_mutually_exclusive_group()
+    selection.add_argument("--subset", help="CSV with a place_id column: the places to use, in order")
+    selection.add_argument("--places", help="START:COUNT[:STRIDE] consecutive place ids")
+
+
+def add_runtime_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def add_readout_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("readout")
+    group.add_argument("--k", default="1", help="sequence lengths, e.g. 1,3,5 (W+Prob aggregated for k > 1)")
+    group.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
+    group.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
+    group.add_argument(
+        "--velocity-search",
+        metavar="LO:HI:STEP",
+        help="estimate the velocity per window over this grid instead of using --velocity",
+    )
+    group.add_argument("--tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n)")
+    group.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+
+
+def add_config_options(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("configuration (defaults: the paper's text)")
+    group.add_argument("--seed", type=int, help="seed for weights, shuffles and every spike")
+    group.add_argument("--epochs", type=int, help="training epochs")
+    group.add_argument("--timesteps", type=int, help="presentation window T")
+    group.add_argument("--neurons", type=int, help="excitatory neurons N_exc")
+    group.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="any config value by dotted name, e.g. --set stdp.a_plus=1e-3 (repeatable)",
+    )
+    for flag, key, what in (
+        ("--no-wta", "network.wta", "hard winner-take-all"),
+        ("--no-homeostasis", "homeostasis.enabled", "homeostasis"),
+        ("--no-patch-norm", "preprocess.patch_norm", "image patch normalisation"),
+        ("--no-weight-norm", "stdp.weight_norm", "column L2 weight normalisation"),
+        ("--no-state-isolation", "network.state_isolation", "state reset between presentations"),
+    ):
+        group.add_argument(flag, dest=key, action="store_false", default=None, help=f"ablation: switch off {what}")
+
+
+def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Config:
+    """The base config (defaults) with every override given on the command line applied."""
+    overrides: dict[str, Any] = {}
+    for name, key in (("seed", "seed"), ("epochs", "train.epochs"), ("timesteps", "encoder.timesteps"),
+                      ("neurons", "network.n_neurons")):
+        value = getattr(args, name, None)
+        if value is not None:
+            overrides[key] = value
+    for key in ("network.wta", "homeostasis.enabled", "preprocess.patch_norm", "stdp.weight_norm",
+                "network.state_isolation"):
+        if getattr(args, key, None) is False:
+            overrides[key] = False
+    for item in getattr(args, "set", []):
+        key, sep, raw = item.partition("=")
+        if not sep:
+            raise OptionError(f"--set expects KEY=VALUE, got {item!r}")
+        overrides[key.strip()] = _parse_value(raw.strip())
+    return (base or Config()).replace(**overrides)
+
+
+def _parse_value(raw: str) -> Any:
+    try:
+        return json.loads(raw)
+    except json.JSONDecodeError:
+        return raw
+
+
+def parse_int_list(raw: str, option: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in raw.split(",") if v.strip())
+    except ValueError:
+        raise OptionError(f"{option} expects comma-separated integers, got {raw!r}") from None
+    if not values or min(values) < 1:
+        raise OptionError(f"{option} expects positive integers, got {raw!r}")
+    return values
+
+
+def parse_names(raw: str, option: str) -> list[str]:
+    names = [v.strip() for v in raw.split(",") if v.strip()]
+    if not names:
+        raise OptionError(f"{option} needs at least one traversal name")
+    return names
+
+
+def parse_velocity_grid(raw: str | None) -> tuple[float, ...] | None:
+    if raw is None:
+        return None
+    try:
+        lo, hi, step = (float(v) for v in raw.split(":"))
+    except ValueError:
+        raise OptionError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
+    if step <= 0 or hi < lo:
+        raise OptionError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
+    count = int(round((hi - lo) / step)) + 1
+    return tuple(round(lo + i * step, 10) for i in range(count))
+
+
+def print_json(payload: dict) -> None:
+    json.dump(payload, sys.stdout, indent=2, sort_keys=False)
+    sys.stdout.write("\n")
+
+
+def format_table(rows: Sequence[dict], columns: Sequence[tuple[str, str]]) -> str:
+    """Plain text table; floats in [0, 1] metric columns are shown as percentages."""
+    cells = [[title for _, title in columns]]
+    for row in rows:
+        line = []
+        for key, _ in columns:
+            value = row.get(key, "")
+            if isinstance(value, float):
+                line.append(f"{100 * value:6.2f}" if key in PERCENT_KEYS else f"{value:.4g}")
+            else:
+                line.append(str(value))
+        cells.append(line)
+    widths = [max(len(r[i]) for r in cells) for i in range(len(columns))]
+    out = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
+    out.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(out)
+
+
+PERCENT_KEYS = {"accuracy", "p_at_100r", "r_at_100p", "auc_pr"}
+RESULT_COLUMNS = (
+    ("strategy", "strategy"),
+    ("k", "k"),
+    ("accuracy", "acc %"),
+    ("p_at_100r", "P@100R %"),
+    ("r_at_100p", "R@100P %"),
+    ("auc_pr", "AUC-PR %"),
+    ("n_queries", "queries"),
+)

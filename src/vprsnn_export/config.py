@@ -1,0 +1,161 @@
+"""The one typed configuration: every hyperparameter of the method lives here.
+
+It is written whole into every checkpoint, fixed-point model and report, and read
+back from them; no other module holds a default for these values. Defaults follow
+the paper's text (Sections III-IV), not its scripts (field notes §1).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+from .errors import OptionError
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """Bernoulli rate code: s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), t = 0..timesteps-1."""
+
+    rate_scale: float = 0.25
+    timesteps: int = 300
+
+
+@dataclass(frozen=True)
+class PreprocessConfig:
+    """Greyscale, resize to image_size x image_size (INTER_AREA), patch min-max normalisation."""
+
+    image_size: int = 28
+    patch_size: int = 7
+    patch_norm: bool = True  # ablation switch: False scales the whole image to [0, 1] instead
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """One layer of discrete LIF neurons with hard WTA (paper eq. 1-4)."""
+
+    n_inputs: int = 784
+    n_neurons: int = 400
+    beta: float = 0.95
+    theta_init: float = 1.5
+    wta: bool = True  # ablation switch: False lets every candidate spike
+    state_isolation: bool = True  # ablation switch: False carries V across presentations in order
+
+
+@dataclass(frozen=True)
+class STDPConfig:
+    """Trace STDP with soft bounds (paper eq. 5-7) and column L2 normalisation."""
+
+    a_plus: float = 5e-4
+    a_minus: float = 5e-6
+    tau_pre: float = 15.0
+    tau_post: float = 15.0
+    w_max: float = 1.0
+    weight_norm: bool = True  # ablation switch: column L2 normalisation after each update
+
+
+@dataclass(frozen=True)
+class HomeostasisConfig:
+    """Global homeostasis theta_j += eta (rbar_j - r_target) once per batch (paper eq. 8)."""
+
+    enabled: bool = True  # ablation switch
+    eta: float = 0.001
+    r_target: float = 0.01
+    theta_min: float = 0.6
+    theta_max: float = 100.0
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    epochs: int = 60
+    batch_size: int = 64
+
+
+@dataclass(frozen=True)
+class AssignmentConfig:
+    """Weighted assignment involvement threshold gamma (paper eq. 9)."""
+
+    gamma: float = 0.02
+
+
+@dataclass(frozen=True)
+class Config:
+    seed: int = 42
+    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    stdp: STDPConfig = field(default_factory=STDPConfig)
+    homeostasis: HomeostasisConfig = field(default_factory=HomeostasisConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    assignment: AssignmentConfig = field(default_factory=AssignmentConfig)
+
+    def __post_init__(self) -> None:
+        side = self.preprocess.image_size
+        if side % self.preprocess.patch_size:
+            raise OptionError(f"image_size {side} is not a multiple of patch_size {self.preprocess.patch_size}")
+        if self.network.n_inputs != side * side:
+            raise OptionError(f"n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}")
+        if self.encoder.timesteps < 1:
+            raise OptionError(f"timesteps must be >= 1, got {self.encoder.timesteps}")
+        if self.train.batch_size < 1 or self.train.epochs < 0:
+            raise OptionError("batch_size must be >= 1 and epochs >= 0")
+        if not 0.0 < self.network.beta <= 1.0:
+            raise OptionError(f"beta must lie in (0, 1], got {self.network.beta}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "Config":
+        """Rebuild a Config; unknown keys are an error, missing keys take the defaults."""
+        return _build(cls, data, "config")
+
+    def replace(self, **dotted: Any) -> "Config":
+        """Copy with overrides given as dotted names: ``cfg.replace(**{"encoder.timesteps": 150})``."""
+        data = self.to_dict()
+        for name, value in dotted.items():
+            section, _, key = name.rpartition(".")
+            target = data
+            for part in filter(None, section.split(".")):
+                if part not in target or not isinstance(target[part], dict):
+                    raise OptionError(f"unknown config section {name!r}")
+                target = target[part]
+            if key not in target:
+                raise OptionError(f"unknown config key {name!r}")
+            target[key] = value
+        return Config.from_dict(data)
+
+
+def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+    if not isinstance(data, dict):
+        raise OptionError(f"{where}: expected a mapping, got {type(data).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = set(data) - set(known)
+    if unknown:
+        raise OptionError(f"{where}: unknown keys {sorted(unknown)}")
+    kwargs: dict[str, Any] = {}
+    for name, value in data.items():
+        default = getattr(cls(), name) if name in known else None
+        if is_dataclass(default):
+            kwargs[name] = _build(type(default), value, f"{where}.{name}")
+        else:
+            kwargs[name] = _coerce(value, type(default), f"{where}.{name}")
+    return cls(**kwargs)
+
+
+def _coerce(value: Any, kind: type, where: str) -> Any:
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+        raise OptionError(f"{where}: expected true/false, got {value!r}")
+    if kind is int:
+        if isinstance(value, bool) or not float(value).is_integer():
+            raise OptionError(f"{where}: expected an integer, got {value!r}")
+        return int(value)
+    if kind is float:
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            raise OptionError(f"{where}: expected a number, got {value!r}") from None
+    return value

@@ -1,0 +1,281 @@
+"""Place manifests, place selection and the preprocessed image set.
+
+A place manifest is a CSV with one row per place: an integer ``place_id`` column and
+one column per traversal holding an image path relative to the CSV's folder. The
+same place id in two traversals is the same place (the ground truth).
+
+``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, or
+``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
+START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from .config import PreprocessConfig
+from .errors import DataError, OptionError
+from .fileio import sha256_bytes
+from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
+from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
+
+PLACE_ID = "place_id"
+MANIFEST_NAME = "places.csv"
+SYNTHETIC = "synthetic"
+NORDLAND_HINT = "the Nordland data lives under ../shared/data/nordland_64x32_summer_winter (relative to the repository)"
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """Preprocessed images of the selected places, one aligned array per traversal."""
+
+    source: str  # manifest path as given, or "synthetic[:N]"
+    manifest_sha256: str  # sha256 of the manifest file bytes, or the synthetic fingerprint
+    place_ids: np.ndarray  # (N,) int64, in selection order
+    images: dict[str, np.ndarray]  # traversal -> (N, image_size**2) float32, row k is place_ids[k]
+
+    @property
+    def n_places(self) -> int:
+        return len(self.place_ids)
+
+    @property
+    def traversals(self) -> tuple[str, ...]:
+        return tuple(self.images)
+
+    def traversal(self, name: str) -> np.ndarray:
+        """The ``(N, image_size**2)`` images of traversal ``name``; DataError listing the loaded ones if absent."""
+        if name not in self.images:
+            raise DataError(f"traversal {name!r} is not loaded from {self.source}; available: {', '.join(self.images) or 'none'}")
+        return self.images[name]
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A parsed place manifest: its resolved path, content hash, header and rows by place id."""
+
+    path: Path
+    sha256: str
+    columns: tuple[str, ...]
+    rows: dict[int, tuple[int, dict[str, str]]]  # place_id -> (CSV line number, row)
+
+
+def parse_places(spec: str) -> tuple[int, int, int]:
+    """``"START:COUNT[:STRIDE]"`` -> ``(start, count, stride)``: place ids ``start + k * stride``, k = 0..count-1.
+
+    START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an OptionError.
+    """
+    parts = str(spec).strip().split(":")
+    usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
+    if len(parts) not in (2, 3):
+        raise OptionError(usage)
+    try:
+        values = [int(part) for part in parts]
+    except ValueError:
+        raise OptionError(usage) from None
+    start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
+    if start < 0 or count < 1 or stride < 1:
+        raise OptionError(usage)
+    return start, count, stride
+
+
+def parse_synthetic(data: str) -> int | None:
+    """``"synthetic"`` -> 60 places, ``"synthetic:N"`` -> N, anything else -> None (a path)."""
+    if data == SYNTHETIC:
+        return DEFAULT_PLACES
+    if not data.startswith(SYNTHETIC + ":"):
+        return None
+    text = data[len(SYNTHETIC) + 1 :]
+    if not text.isdigit() or int(text) < 1:
+        raise OptionError(f"--data {data!r}: expected synthetic or synthetic:N with a positive number of places N")
+    return int(text)
+
+
+def load_dataset(
+    data: str | Path,
+    traversals: Sequence[str],
+    cfg: PreprocessConfig,
+    *,
+    subset: str | Path | None = None,
+    places: str | None = None,
+    progress: bool = False,
+) -> Dataset:
+    """Load, select, decode and preprocess; every expected problem is a DataError/OptionError naming the file."""
+    names = _check_traversals(traversals)
+    if subset is not None and places is not None:
+        raise OptionError("give either --subset or --places, not both")
+    n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
+    if n_synthetic is not None:
+        return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
+    manifest = read_manifest(data)
+    missing = [name for name in names if name not in manifest.columns]
+    if missing:
+        raise DataError(
+            f"traversal column(s) {', '.join(repr(m) for m in missing)} not in the manifest; its columns are: {', '.join(manifest.columns)}",
+            manifest.path,
+        )
+    selected = _select(np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path))
+    cells = {name: _image_paths(manifest, name, selected) for name in names}
+    images: dict[str, np.ndarray] = {}
+    with tqdm(total=len(selected) * len(names), desc="decoding images", unit="img", file=sys.stderr, disable=not progress) as bar:
+        for name in names:
+            images[name] = _decode(cells[name], cfg, bar)
+    return Dataset(source=str(data), manifest_sha256=manifest.sha256, place_ids=selected, images=images)
+
+
+def read_manifest(data: str | Path) -> Manifest:
+    """Resolve ``data`` (a CSV, or a folder holding ``places.csv``) and parse it; DataError on any defect."""
+    path = Path(data)
+    if path.is_dir():
+        if not (path / MANIFEST_NAME).is_file():
+            raise DataError(f"this folder has no {MANIFEST_NAME} place manifest", path)
+        path = path / MANIFEST_NAME
+    elif not path.is_file():
+        hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
+        raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
+    raw = path.read_bytes()
+    columns, records = _read_csv(raw, path, "place manifest")
+    if PLACE_ID not in columns:
+        raise DataError(f"the place manifest has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path)
+    rows: dict[int, tuple[int, dict[str, str]]] = {}
+    for line, record in records:
+        place = _place_id(record.get(PLACE_ID), line, path)
+        if place in rows:
+            raise DataError(f"duplicate place_id {place} on lines {rows[place][0]} and {line}", path)
+        rows[place] = (line, record)
+    if not rows:
+        raise DataError("the place manifest lists no places", path)
+    return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
+
+
+def read_subset(path: str | Path) -> np.ndarray:
+    """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("no such subset file (a CSV with a place_id column)", path)
+    columns, records = _read_csv(path.read_bytes(), path, "subset file")
+    if PLACE_ID not in columns:
+        raise DataError(f"the subset file has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path)
+    ids: list[int] = []
+    lines: dict[int, int] = {}
+    for line, record in records:
+        place = _place_id(record.get(PLACE_ID), line, path)
+        if place in lines:
+            raise DataError(f"duplicate place_id {place} on lines {lines[place]} and {line}", path)
+        lines[place] = line
+        ids.append(place)
+    if not ids:
+        raise DataError("empty selection: the subset file lists no places", path)
+    return np.asarray(ids, dtype=np.int64)
+
+
+def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
+    if isinstance(traversals, str):
+        traversals = (traversals,)
+    names = tuple(dict.fromkeys(str(name).strip() for name in traversals))
+    if not names or "" in names:
+        raise OptionError(f"expected one or more traversal names, got {list(traversals)!r}")
+    if PLACE_ID in names:
+        raise OptionError(f"{PLACE_ID!r} is the place id column, not a traversal")
+    return names
+
+
+def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[tuple[int, dict[str, str]]]]:
+    """Header and ``(line number, row)`` pairs of a UTF-8 CSV, names and cells stripped of spaces."""
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"the {kind} is not UTF-8 CSV text ({exc})", path) from None
+    try:
+        reader = csv.reader(io.StringIO(text, newline=""))
+        header = next(reader, None)
+        if header is None:
+            raise DataError(f"the {kind} is empty (no header row)", path)
+        columns = tuple(name.strip() for name in header)
+        duplicated = sorted({name for name in columns if columns.count(name) > 1})
+        if duplicated:
+            raise DataError(f"the {kind} repeats column(s) {', '.join(duplicated)}", path)
+        records = []
+        for cells in reader:
+            if not any(cell.strip() for cell in cells):
+                continue
+            records.append((reader.line_num, {name: cell.strip() for name, cell in zip(columns, cells)}))
+    except csv.Error as exc:
+        raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
+    return columns, records
+
+
+def _place_id(value: str | None, line: int, path: Path) -> int:
+    try:
+        return int(value or "")
+    except ValueError:
+        raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
+
+
+def _select(available: np.ndarray, subset: str | Path | None, places: str | None, source: str) -> np.ndarray:
+    """Selected place ids in selection order; every one must be in ``available``."""
+    if subset is not None:
+        selected = read_subset(subset)
+        where = f"subset file {subset}"
+    elif places is not None:
+        start, count, stride = parse_places(places)
+        selected = start + stride * np.arange(count, dtype=np.int64)
+        where = f"--places {places}"
+    else:
+        selected = available.copy()
+        where = source
+    if not len(selected):
+        raise DataError(f"empty selection ({where})", source)
+    absent = selected[~np.isin(selected, available)]
+    if len(absent):
+        shown = ", ".join(str(int(place)) for place in absent[:5]) + (", ..." if len(absent) > 5 else "")
+        raise DataError(
+            f"{len(absent)} selected place id(s) from {where} are not in the data ({shown}); "
+            f"it holds {len(available)} places, ids {int(available.min())}..{int(available.max())}",
+            source,
+        )
+    return selected
+
+
+def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tuple[Path, str]]:
+    """Image path and a context string for every selected place of one traversal; DataError on an empty cell."""
+    folder = manifest.path.parent
+    paths = []
+    for place in selected.tolist():
+        line, record = manifest.rows[place]
+        cell = record.get(name, "")
+        if not cell:
+            raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
+        paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
+    return paths
+
+
+def _decode(paths: list[tuple[Path, str]], cfg: PreprocessConfig, bar: tqdm) -> np.ndarray:
+    size = cfg.image_size
+    resized = np.empty((len(paths), size, size), dtype=np.uint8)
+    for index, (path, context) in enumerate(paths):
+        resized[index] = resize_image(read_grey_image(path, context), size)
+        bar.update(1)
+    return normalise_resized(resized, cfg)
+
+
+def _load_synthetic(
+    source: str, n_places: int, names: tuple[str, ...], cfg: PreprocessConfig, subset: str | Path | None, places: str | None
+) -> Dataset:
+    missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]
+    if missing:
+        raise DataError(
+            f"the synthetic route has no traversal(s) {', '.join(repr(m) for m in missing)}; available: {', '.join(SYNTHETIC_TRAVERSALS)}",
+            source,
+        )
+    selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
+    route = synthetic_route(n_places, names)
+    images = {name: preprocess_images(route[name][selected], cfg) for name in names}
+    return Dataset(source=source, manifest_sha256=synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS), place_ids=selected, images=images)

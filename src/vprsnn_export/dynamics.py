@@ -1,0 +1,128 @@
+"""Float discrete LIF dynamics with hard winner-take-all (paper eq. 1-4, as the issue fixes them).
+
+Per time step t, for a batch of presentations (rows) and neurons j:
+
+    I_j[t] = sum_i w_ij s_i[t]
+    V_j[t] = beta V_j[t-1] + I_j[t]
+    C[t]   = {j : V_j[t] > theta_j}                       (candidates)
+    WTA on:  S_j[t] = 1 for the one j in C[t] with the largest I_j[t]
+             (ties: lowest index); nothing fires if C[t] is empty
+    WTA off: S_j[t] = 1 for every j in C[t]
+    V_j[t] <- 0 for every j in C[t]                        (reset to zero)
+
+State is zeroed at t = 0 of every presentation (state isolation); with
+isolation off the presentations run one after another and V carries over.
+The input currents of all steps are one matrix product; only the recurrence
+over t is a loop, vectorised over presentations and neurons.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+QUERY_CHUNK = 128  # presentations per matmul chunk: bounds the (chunk, T, neurons) current tensor
+
+
+@dataclass
+class NetworkRun:
+    """The outcome of presenting N spike trains to the network."""
+
+    counts: torch.Tensor  # (N, neurons) int64 output spike counts
+    candidates_per_step: torch.Tensor  # (N, T) int32 |C[t]|
+    raster: torch.Tensor | None = None  # (N, T, neurons) bool, when recorded
+    final_voltage: torch.Tensor | None = None  # (N, neurons) V after the last step
+
+    @property
+    def mean_candidates(self) -> float:
+        return float(self.candidates_per_step.float().mean())
+
+    @property
+    def multi_candidate_fraction(self) -> float:
+        return float((self.candidates_per_step > 1).float().mean())
+
+
+def wta_step(
+    voltage: torch.Tensor, current: torch.Tensor, theta: torch.Tensor, beta: float, wta: bool
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One step: V = beta V + I; C = {V > theta}; S = winner(C) or C; V[C] = 0.
+
+    Returns (new voltage, spikes as bool (B, neurons), candidates as bool (B, neurons)).
+    """
+    voltage = beta * voltage + current
+    candidates = voltage > theta
+    if wta:
+        masked = current.masked_fill(~candidates, float("-inf"))
+        winner = masked.argmax(dim=1, keepdim=True)  # first index on ties
+        spikes = torch.zeros_like(candidates).scatter_(1, winner, candidates.any(dim=1, keepdim=True))
+    else:
+        spikes = candidates
+    return voltage.masked_fill(candidates, 0.0), spikes, candidates
+
+
+def input_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """I[n, t, j] = sum_i s[n, t, i] w_ij for spikes (N, T, inputs) -> (N, T, neurons)."""
+    return torch.matmul(spikes.to(weights.dtype), weights)
+
+
+def run_network(
+    spikes: torch.Tensor,
+    weights: torch.Tensor,
+    theta: torch.Tensor,
+    *,
+    beta: float,
+    wta: bool = True,
+    state_isolation: bool = True,
+    record: bool = False,
+) -> NetworkRun:
+    """Present N spike trains (N, T, inputs) to the network with plasticity off.
+
+    The spikes may live on the CPU; they are moved to ``weights.device`` chunk by chunk.
+    """
+    device = weights.device
+    n_presentations, timesteps, _ = spikes.shape
+    n_neurons = weights.shape[1]
+    if not state_isolation:
+        return _run_sequential(spikes, weights, theta, beta=beta, wta=wta, record=record)
+    counts = torch.zeros((n_presentations, n_neurons), dtype=torch.int64)
+    n_candidates = torch.zeros((n_presentations, timesteps), dtype=torch.int32)
+    raster = torch.zeros((n_presentations, timesteps, n_neurons), dtype=torch.bool) if record else None
+    final_voltage = torch.zeros((n_presentations, n_neurons), dtype=weights.dtype)
+    for start in range(0, n_presentations, QUERY_CHUNK):
+        stop = min(start + QUERY_CHUNK, n_presentations)
+        currents = input_currents(spikes[start:stop].to(device), weights)
+        voltage = torch.zeros((stop - start, n_neurons), dtype=weights.dtype, device=device)
+        chunk_counts = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
+        chunk_candidates = torch.zeros((stop - start, timesteps), dtype=torch.int32, device=device)
+        chunk_raster = (
+            torch.zeros((stop - start, timesteps, n_neurons), dtype=torch.bool, device=device) if record else None
+        )
+        for t in range(timesteps):
+            voltage, fired, candidates = wta_step(voltage, currents[:, t], theta, beta, wta)
+            chunk_counts += fired
+            chunk_candidates[:, t] = candidates.sum(dim=1, dtype=torch.int32)
+            if chunk_raster is not None:
+                chunk_raster[:, t] = fired
+        counts[start:stop] = chunk_counts.cpu()
+        n_candidates[start:stop] = chunk_candidates.cpu()
+        final_voltage[start:stop] = voltage.cpu()
+        if raster is not None:
+            raster[start:stop] = chunk_raster.cpu()
+    return NetworkRun(counts, n_candidates, raster, final_voltage)
+
+
+def _run_sequential(
+    spikes: torch.Tensor, weights: torch.Tensor, theta: torch.Tensor, *, beta: float, wta: bool, record: bool
+) -> NetworkRun:
+    """State isolation off: all presentations form one stream, in order (the spillover ablation)."""
+    n_presentations, timesteps, n_inputs = spikes.shape
+    stream = spikes.reshape(1, n_presentations * timesteps, n_inputs)
+    whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True)
+    raster = whole.raster.reshape(n_presentations, timesteps, -1)
+    return NetworkRun(
+        counts=raster.sum(dim=1, dtype=torch.int64),
+        candidates_per_step=whole.candidates_per_step.reshape(n_presentations, timesteps),
+        raster=raster if record else None,
+        final_voltage=None,
+    )

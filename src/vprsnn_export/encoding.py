@@ -1,0 +1,74 @@
+"""Bernoulli rate encoding whose spikes are a pure function of (seed, image, presentation).
+
+s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)) for t = 0..T-1 and i = 0..783.
+
+Every presentation of an image (a training epoch, calibration, a query) has a
+*presentation key* (seed, stream, traversal, place_id, epoch). The key is hashed
+to a 63-bit generator seed and the image's uniforms u[t, i] are drawn from its
+own CPU generator, so the spikes of one image never depend on batching, on the
+other images, or on the device that later consumes them. The float network, the
+integer simulator and the ONNX graph are all fed these same tensors.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from .config import EncoderConfig
+
+
+def presentation_seed(seed: int, stream: str, traversal: str, place_id: int, epoch: int = 0) -> int:
+    """Hash a presentation key to a 63-bit generator seed (sha256, first 8 bytes)."""
+    key = f"vprsnn/v1|{seed}|{stream}|{traversal}|{int(place_id)}|{epoch}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:8], "little") & ((1 << 63) - 1)
+
+
+def presentation_seeds(
+    seed: int, stream: str, traversal: str, place_ids: Sequence[int] | np.ndarray, epoch: int = 0
+) -> list[int]:
+    return [presentation_seed(seed, stream, traversal, int(p), epoch) for p in place_ids]
+
+
+def firing_probabilities(images: np.ndarray | torch.Tensor, cfg: EncoderConfig) -> torch.Tensor:
+    """p_i = clip(rate_scale * pixel_i, 0, 1), shape (N, D), float32."""
+    pixels = torch.as_tensor(np.asarray(images, dtype=np.float32))
+    return torch.clamp(cfg.rate_scale * pixels, 0.0, 1.0)
+
+
+def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torch.Tensor:
+    """Spike trains of shape (N, T, D), dtype uint8, on the CPU.
+
+    Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i]
+    with u drawn from ``torch.Generator().manual_seed(seeds[n])``.
+    """
+    images = np.asarray(images, dtype=np.float32)
+    if images.ndim != 2 or len(seeds) != images.shape[0]:
+        raise ValueError(f"expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
+    prob = firing_probabilities(images, cfg)
+    n_images, n_inputs = images.shape
+    spikes = torch.empty((n_images, cfg.timesteps, n_inputs), dtype=torch.uint8)
+    uniforms = torch.empty((cfg.timesteps, n_inputs), dtype=torch.float32)
+    generator = torch.Generator()
+    for row, seed in enumerate(seeds):
+        generator.manual_seed(int(seed))
+        torch.rand((cfg.timesteps, n_inputs), generator=generator, out=uniforms)
+        torch.lt(uniforms, prob[row], out=spikes[row])
+    return spikes
+
+
+def encode_presentations(
+    images: np.ndarray,
+    place_ids: Sequence[int] | np.ndarray,
+    cfg: EncoderConfig,
+    *,
+    seed: int,
+    stream: str,
+    traversal: str,
+    epoch: int = 0,
+) -> torch.Tensor:
+    """Encode a traversal's images under their presentation keys (see module docstring)."""
+    return encode(images, presentation_seeds(seed, stream, traversal, place_ids, epoch), cfg)

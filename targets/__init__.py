@@ -1,0 +1,1 @@
+"""Deployment targets: the bit-exact integer simulator, NIR, a Loihi-style description and ONNX."""

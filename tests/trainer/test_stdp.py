@@ -1,0 +1,55 @@
+import torch
+
+from vprsnn_export.config import HomeostasisConfig, STDPConfig
+from vprsnn_export.trainer.homeostasis import homeostasis_update
+from vprsnn_export.trainer.stdp import apply_update, decay_trace, normalise_columns, stdp_delta
+
+
+def test_trace_decay():
+    x = decay_trace(torch.tensor([[2.0, 0.0]]), torch.tensor([[0.0, 1.0]]), tau=4.0)
+    assert torch.allclose(x, torch.tensor([[1.5, 1.0]]))
+
+
+def test_stdp_delta_by_hand():
+    cfg = STDPConfig(a_plus=0.1, a_minus=0.01, w_max=1.0)
+    w = torch.tensor([[0.5, 1.0], [0.0, 0.25]])  # (inputs=2, neurons=2)
+    x = torch.tensor([[1.0, 2.0]])  # pre traces
+    s = torch.tensor([[1.0, 0.0]])  # pre spikes
+    y = torch.tensor([[0.0, 4.0]])  # post traces
+    post = torch.tensor([[1.0, 0.0]])  # neuron 0 fired
+    dw = stdp_delta(w, x, s, y, post, cfg)
+    # potentiation only in column 0: A+ (1 - w_i0) x_i ; depression only in row 0: A- w_0j y_j
+    expected = torch.tensor(
+        [[0.1 * 0.5 * 1.0 - 0.01 * 0.5 * 0.0, 0.0 - 0.01 * 1.0 * 4.0], [0.1 * 1.0 * 2.0, 0.0]]
+    )
+    assert torch.allclose(dw, expected)
+
+
+def test_soft_bound_stops_potentiation_at_w_max_and_depression_at_zero():
+    cfg = STDPConfig(a_plus=0.5, a_minus=0.5, w_max=1.0)
+    w = torch.tensor([[1.0], [0.0]])
+    ones = torch.ones(1, 2)
+    dw = stdp_delta(w, ones, ones, torch.ones(1, 1), torch.ones(1, 1), cfg)
+    # w = w_max gets no potentiation (only depression); w = 0 gets no depression (only potentiation)
+    assert torch.allclose(dw, torch.tensor([[-0.5], [0.5]]))
+
+
+def test_update_clips_then_normalises_columns():
+    cfg = STDPConfig(w_max=1.0)
+    w = apply_update(torch.tensor([[0.9, 0.0], [0.5, 0.0]]), torch.tensor([[0.5, 0.3], [-1.0, 0.4]]), cfg)
+    # clip -> [[1.0, 0.3], [0.0, 0.4]]; columns normalised to unit L2 norm
+    assert torch.allclose(w, torch.tensor([[1.0, 0.6], [0.0, 0.8]]))
+    assert torch.allclose(normalise_columns(torch.zeros(3, 2)), torch.zeros(3, 2))
+    raw = apply_update(torch.tensor([[0.9]]), torch.tensor([[0.5]]), STDPConfig(weight_norm=False))
+    assert torch.allclose(raw, torch.tensor([[1.0]]))
+
+
+def test_homeostasis_direction_and_bounds():
+    cfg = HomeostasisConfig(eta=0.1, r_target=0.01, theta_min=0.6, theta_max=100.0)
+    theta = torch.tensor([1.0, 1.0, 0.6])
+    rates = torch.tensor([0.51, 0.01, 0.0])
+    new = homeostasis_update(theta, rates, cfg)
+    assert new[0] > 1.0 and new[1] == 1.0 and new[2] == 0.6  # busy up, on-target unchanged, clamped
+    assert torch.allclose(new[0], torch.tensor(1.05))
+    off = homeostasis_update(theta, rates, HomeostasisConfig(enabled=False))
+    assert torch.equal(off, theta)

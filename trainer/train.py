@@ -1,0 +1,116 @@
+"""Unsupervised STDP training: batches of presentations, per-step STDP, per-batch homeostasis."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from vprsnn_export.config import Config
+from vprsnn_export.dynamics import wta_step
+from vprsnn_export.encoding import encode, presentation_seed
+
+from .homeostasis import homeostasis_update
+from .stdp import apply_update, decay_trace, initial_weights, stdp_delta
+
+
+@dataclass(frozen=True)
+class Presentation:
+    """Which image a training row is: its traversal and place id (the encoder's key)."""
+
+    traversal: str
+    place_id: int
+
+
+@dataclass
+class TrainedNetwork:
+    weights: torch.Tensor  # (inputs, neurons) float32, CPU
+    thresholds: torch.Tensor  # (neurons,) float32, CPU
+    history: list[dict] = field(default_factory=list)  # one entry per epoch
+
+
+def train_batch(
+    weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Present one batch (B, T, inputs) with plasticity on; state starts at zero for every row.
+
+    Per step: the WTA step of :mod:`vprsnn_export.dynamics`, trace decay, STDP
+    (summed over the batch), clip and column normalisation. After the window:
+    homeostasis with rbar_j = (spikes of j in the batch) / (B T).
+    Returns (weights, thresholds, per-neuron spike counts of the batch).
+    """
+    batch, timesteps, n_inputs = spikes.shape
+    n_neurons = weights.shape[1]
+    voltage = torch.zeros((batch, n_neurons), dtype=weights.dtype, device=weights.device)
+    post_trace = torch.zeros_like(voltage)
+    pre_trace = torch.zeros((batch, n_inputs), dtype=weights.dtype, device=weights.device)
+    fired_total = torch.zeros(n_neurons, dtype=weights.dtype, device=weights.device)
+    for t in range(timesteps):
+        pre = spikes[:, t].to(weights.dtype)
+        voltage, fired, _ = wta_step(voltage, pre @ weights, theta, cfg.network.beta, cfg.network.wta)
+        post = fired.to(weights.dtype)
+        pre_trace = decay_trace(pre_trace, pre, cfg.stdp.tau_pre)
+        post_trace = decay_trace(post_trace, post, cfg.stdp.tau_post)
+        weights = apply_update(weights, stdp_delta(weights, pre_trace, pre, post_trace, post, cfg.stdp), cfg.stdp)
+        fired_total += post.sum(dim=0)
+    theta = homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis)
+    return weights, theta, fired_total
+
+
+def epoch_order(seed: int, epoch: int, n_rows: int) -> torch.Tensor:
+    """The seeded shuffle of the training rows for one epoch."""
+    generator = torch.Generator().manual_seed(presentation_seed(seed, "shuffle", "", 0, epoch))
+    return torch.randperm(n_rows, generator=generator)
+
+
+def train_network(
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    cfg: Config,
+    *,
+    device: torch.device,
+    progress: bool = True,
+    on_epoch: Callable[[int, torch.Tensor, torch.Tensor], dict | None] | None = None,
+) -> TrainedNetwork:
+    """Train from the preprocessed reference images (rows aligned with ``presentations``).
+
+    Everything random derives from ``cfg.seed``: initial weights, the shuffle of
+    each epoch and every spike. ``on_epoch(epoch, weights, theta)`` may return
+    extra numbers to store in the history (used by the epoch-curve experiment).
+    """
+    if len(images) == 0:
+        raise ValueError("no training images")
+    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
+    weights = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator).to(device)
+    theta = torch.full((cfg.network.n_neurons,), cfg.network.theta_init, dtype=torch.float32, device=device)
+    history: list[dict] = []
+    epochs = tqdm(range(cfg.train.epochs), desc="train", unit="epoch", disable=not progress, leave=False)
+    for epoch in epochs:
+        started = time.perf_counter()
+        order = epoch_order(cfg.seed, epoch, len(images)).numpy()
+        fired = torch.zeros(cfg.network.n_neurons, dtype=torch.float32, device=device)
+        for start in range(0, len(order), cfg.train.batch_size):
+            rows = order[start : start + cfg.train.batch_size]
+            seeds = [
+                presentation_seed(cfg.seed, "train", presentations[r].traversal, presentations[r].place_id, epoch)
+                for r in rows
+            ]
+            spikes = encode(images[rows], seeds, cfg.encoder).to(device)
+            weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
+            fired += batch_fired
+        entry = {
+            "epoch": epoch + 1,
+            "seconds": time.perf_counter() - started,
+            "spikes_per_presentation": float(fired.sum()) / len(images),
+            "active_neurons": int((fired > 0).sum()),
+            "theta_mean": float(theta.mean()),
+        }
+        if on_epoch is not None:
+            entry.update(on_epoch(epoch + 1, weights, theta) or {})
+        history.append(entry)
+        epochs.set_postfix(active=entry["active_neurons"], theta=f"{entry['theta_mean']:.3f}")
+    return TrainedNetwork(weights.cpu(), theta.cpu(), history)
