@@ -135,3 +135,22 @@ def evaluate_float(
         "spike_stats": spike_statistics(run.candidates_per_step.numpy(), counts),
         "query_counts": counts,
     }
+
+
+def calibrate_and_evaluate(
+    network,
+    reference_images: dict[str, np.ndarray],
+    reference_place_ids: np.ndarray,
+    query_images: np.ndarray,
+    query_place_ids: np.ndarray,
+    query_traversal: str,
+    options: ReadoutOptions,
+) -> list[dict]:
+    """Calibrate any network (``network.counts(spikes)``, ``network.cfg``) and read out the queries."""
+    from vprsnn_export.trainer.calibrate import calibrate
+
+    from .inference import query_spikes
+
+    calibration = calibrate(network.counts, reference_images, reference_place_ids, network.cfg)
+    counts = network.counts(query_spikes(query_images, query_place_ids, query_traversal, network.cfg)).numpy()
+    return readout_rows(calibration, counts, reference_place_ids, query_place_ids, options)

@@ -1,0 +1,270 @@
+"""Quantising a float checkpoint into the fixed-point model of :mod:`export.model`.
+
+Every neuron j gets a scale s_j ~= m_j 2**e (m_j an unsigned 16-bit multiplier, e
+one exponent for the network); the float weight w_ij becomes the unsigned mantissa
+
+    q_ij = clip(floor(w_ij / s_j + 1/2), 0, 2**b - 1)            (round to nearest, ties up)
+
+and the float threshold becomes theta_int_j = clip(floor(theta_j / s_j + 1/2), 1, 2**17 - 1).
+Per-tensor quantisation uses one scale for all neurons; per-neuron one per column.
+The scale method picks the desired s_j from the float weights:
+
+    max:  s_j = max_i w_ij / (2**b - 1)                           (no weight clips)
+    mse:  s_j = alpha* max_i w_ij / (2**b - 1),  alpha* = argmin_alpha sum_i (w_ij - s q_ij)**2
+          over the grid MSE_GRID (large weights may clip to 2**b - 1)
+
+Threshold folding (per-neuron only) gives every neuron the same integer threshold
+Theta by choosing s_j = theta_j / Theta, for hardware with one threshold per
+population. Everything is derived from the checkpoint; nothing is tuned by hand.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.errors import OptionError
+
+from .model import MULTIPLIER_BITS, THRESHOLD_BITS, FixedPointModel, check_bits, decay_mantissa
+
+SCALE_METHODS = ("max", "mse")
+MSE_GRID = np.linspace(0.2, 1.0, 81)  # fractions of the max-abs scale searched by the `mse` method
+FOLD_CANDIDATES = 96  # integer shared thresholds tried by `mse` folding
+ROUNDING = "round to nearest, ties up: floor(x + 1/2), then clip to the width"
+
+
+@dataclass(frozen=True)
+class QuantisedArrays:
+    """The integer arrays of one quantisation and how far they are from the float ones."""
+
+    weight_mantissa: np.ndarray  # (inputs, neurons) int32
+    scale_multiplier: np.ndarray  # (neurons,) int32
+    scale_exponent: int
+    threshold: np.ndarray  # (neurons,) int32
+    report: dict[str, Any]
+
+
+def levels(bits: int) -> int:
+    """Largest unsigned mantissa: L = 2**bits - 1 (2 bits: 4 levels 0..3)."""
+    return (1 << bits) - 1
+
+
+def round_half_up(x: np.ndarray) -> np.ndarray:
+    """floor(x + 1/2): the one rounding rule of the quantiser."""
+    return np.floor(np.asarray(x, dtype=np.float64) + 0.5)
+
+
+def quantise_mantissas(weights: np.ndarray, scales: np.ndarray, bits: int) -> np.ndarray:
+    """q_ij = clip(floor(w_ij / s_j + 1/2), 0, 2**bits - 1); ``scales`` broadcasts over columns."""
+    return np.clip(round_half_up(weights / scales), 0, levels(bits)).astype(np.int32)
+
+
+def column_sse(weights: np.ndarray, scales: np.ndarray, bits: int) -> np.ndarray:
+    """E_j = sum_i (w_ij - s_j q_ij)**2, the squared quantisation error of each column."""
+    error = weights - scales * quantise_mantissas(weights, scales, bits)
+    return np.sum(error * error, axis=0)
+
+
+def max_abs_scales(weights: np.ndarray, bits: int) -> np.ndarray:
+    """s_j = max_i w_ij / (2**bits - 1) per column (an all-zero column gives 0)."""
+    return weights.max(axis=0) / levels(bits)
+
+
+def mse_scales(weights: np.ndarray, bits: int) -> np.ndarray:
+    """s_j = alpha_j max_i w_ij / L with alpha_j in MSE_GRID minimising E_j (first minimum on ties)."""
+    top = max_abs_scales(weights, bits)
+    safe = np.where(top > 0, top, 1.0)
+    errors = np.stack([column_sse(weights, alpha * safe, bits) for alpha in MSE_GRID])
+    return MSE_GRID[np.argmin(errors, axis=0)] * top
+
+
+def desired_scales(weights: np.ndarray, bits: int, method: str, per_neuron: bool) -> np.ndarray:
+    """The float scale s_j of every neuron before it is split into m_j 2**e.
+
+    Per-tensor: the method applied to all weights as one column, broadcast to every
+    neuron. A neuron whose weights are all zero never fires; it takes the
+    per-tensor scale so that its threshold still has a representable mantissa.
+    """
+    if method not in SCALE_METHODS:
+        raise OptionError(f"unknown scale method {method!r}: choose from {', '.join(SCALE_METHODS)}")
+    choose = max_abs_scales if method == "max" else mse_scales
+    n_neurons = weights.shape[1]
+    whole = float(choose(weights.reshape(-1, 1), bits)[0])
+    whole = whole if whole > 0 else 1.0
+    if not per_neuron:
+        return np.full(n_neurons, whole)
+    scales = choose(weights, bits)
+    return np.where(scales > 0, scales, whole)
+
+
+def split_scales(scales: np.ndarray) -> tuple[np.ndarray, int]:
+    """s_j ~= m_j 2**e: e = floor(log2 max_j s_j) - (MULTIPLIER_BITS - 1), m_j = clip(floor(s_j 2**-e + 1/2), 1, 2**16 - 1).
+
+    The largest multiplier lands in [2**15, 2**16 - 1], so every m_j keeps as many
+    significant bits as the ratio max_k s_k / s_j allows.
+    """
+    exponent = int(np.floor(np.log2(scales.max()))) - (MULTIPLIER_BITS - 1)
+    multipliers = np.clip(round_half_up(np.ldexp(scales, -exponent)), 1, (1 << MULTIPLIER_BITS) - 1)
+    return multipliers.astype(np.int32), exponent
+
+
+def integer_thresholds(thresholds: np.ndarray, scales: np.ndarray) -> np.ndarray:
+    """theta_int_j = clip(floor(theta_j / s_j + 1/2), 1, 2**17 - 1)."""
+    return np.clip(round_half_up(thresholds / scales), 1, (1 << THRESHOLD_BITS) - 1).astype(np.int32)
+
+
+def shared_threshold(weights: np.ndarray, thresholds: np.ndarray, bits: int, method: str, per_neuron_scales: np.ndarray) -> int:
+    """The one integer threshold Theta of threshold folding (s_j = theta_j / Theta).
+
+    max: Theta = floor(min_j theta_j / s*_j), so s_j >= s*_j and no weight clips.
+    mse: Theta among integers spread geometrically over [min_j, max_j] of theta_j / s*_j
+         minimising the total squared weight error sum_j E_j.
+    """
+    natural = thresholds / per_neuron_scales
+    top = (1 << THRESHOLD_BITS) - 1
+    if method == "max":
+        return int(np.clip(np.floor(natural.min()), 1, top))
+    grid = np.geomspace(max(natural.min(), 1.0), max(natural.max(), 1.0), FOLD_CANDIDATES)
+    candidates = np.unique(np.clip(round_half_up(grid), 1, top)).astype(np.int64)
+    errors = [column_sse(weights, thresholds / theta, bits).sum() for theta in candidates]
+    return int(candidates[int(np.argmin(errors))])
+
+
+def quantise_arrays(
+    weights: np.ndarray,
+    thresholds: np.ndarray,
+    bits: int,
+    *,
+    per_neuron: bool,
+    scale_method: str,
+    fold_thresholds: bool,
+) -> QuantisedArrays:
+    """Float weights (inputs, neurons) and thresholds (neurons,) -> mantissas, scales, integer thresholds."""
+    check_bits(bits)
+    if fold_thresholds and not per_neuron:
+        raise OptionError("threshold folding needs per-neuron scales (--per-neuron)")
+    weights = np.asarray(weights, dtype=np.float64)
+    thresholds = np.asarray(thresholds, dtype=np.float64)
+    if fold_thresholds and np.any(thresholds <= 0):
+        raise OptionError("threshold folding needs positive float thresholds")
+    scales = desired_scales(weights, bits, scale_method, per_neuron)
+    theta_shared = None
+    if fold_thresholds:
+        theta_shared = shared_threshold(weights, thresholds, bits, scale_method, scales)
+        scales = thresholds / theta_shared
+    multipliers, exponent = split_scales(scales)
+    actual = np.ldexp(multipliers.astype(np.float64), exponent)
+    mantissas = quantise_mantissas(weights, actual, bits)
+    integer_theta = (
+        np.full(thresholds.shape, theta_shared, dtype=np.int32) if fold_thresholds else integer_thresholds(thresholds, actual)
+    )
+    report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits)
+    report.update(
+        bits=bits,
+        per_neuron=per_neuron,
+        scale_method=scale_method,
+        threshold_folding=fold_thresholds,
+        shared_threshold=theta_shared,
+        rounding=ROUNDING,
+        scale_exponent=exponent,
+        scale_multiplier_range=[int(multipliers.min()), int(multipliers.max())],
+        threshold_range=[int(integer_theta.min()), int(integer_theta.max())],
+    )
+    return QuantisedArrays(mantissas, multipliers, exponent, integer_theta, report)
+
+
+def error_report(
+    weights: np.ndarray, thresholds: np.ndarray, mantissas: np.ndarray, scales: np.ndarray, theta_int: np.ndarray, bits: int
+) -> dict[str, Any]:
+    """How far the fixed-point network is from the float one (all plain JSON numbers).
+
+    weight errors are w_ij - q_ij s_j; threshold errors (theta_int_j s_j - theta_j) / theta_j;
+    max_current is max_j sum_i q_ij, the largest possible a_j (every input spiking).
+    """
+    error = weights - mantissas * scales
+    rms = float(np.sqrt(np.mean(weights * weights))) or 1.0
+    ratio = weights / scales
+    return {
+        "weight_max_abs_error": float(np.abs(error).max()),
+        "weight_rmse": float(np.sqrt(np.mean(error * error))),
+        "weight_relative_rmse": float(np.sqrt(np.mean(error * error)) / rms),
+        "weights_clipped": int(np.sum(ratio >= levels(bits) + 0.5)),
+        "threshold_max_relative_error": float(
+            np.max(np.abs(theta_int * scales - thresholds) / np.maximum(np.abs(thresholds), 1e-12))
+        ),
+        "thresholds_clipped": int(np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))),
+        "max_current": int(mantissas.astype(np.int64).sum(axis=0).max()),
+    }
+
+
+def quantize_checkpoint(
+    ckpt: Checkpoint,
+    ckpt_sha256: str,
+    bits: int,
+    per_neuron: bool,
+    scale_method: str,
+    fold_thresholds: bool = False,
+) -> FixedPointModel:
+    """The fixed-point model of a float checkpoint, still carrying the float calibration.
+
+    ``calibration`` is a copy of the float S^R until :func:`recalibrate` replaces it.
+    """
+    arrays = quantise_arrays(
+        ckpt.weights, ckpt.thresholds, bits, per_neuron=per_neuron, scale_method=scale_method, fold_thresholds=fold_thresholds
+    )
+    report = dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
+    return FixedPointModel(
+        bits=bits,
+        weight_mantissa=arrays.weight_mantissa,
+        scale_multiplier=arrays.scale_multiplier,
+        scale_exponent=arrays.scale_exponent,
+        threshold=arrays.threshold,
+        decay_dv=decay_mantissa(ckpt.config.network.beta),
+        config=ckpt.config,
+        calibration=ckpt.calibration.astype(np.int64).copy(),
+        float_calibration=ckpt.calibration.astype(np.int64).copy(),
+        reference_place_ids=ckpt.reference_place_ids.astype(np.int64).copy(),
+        reference_traversals=list(ckpt.reference_traversals),
+        quantisation=report,
+        source_sha256=ckpt_sha256,
+        data=dict(ckpt.data),
+    )
+
+
+def recalibrate(
+    model: FixedPointModel,
+    reference_images: Mapping[str, np.ndarray],
+    place_ids: np.ndarray,
+    *,
+    reuse_float_calibration: bool = False,
+    device: torch.device | None = None,
+) -> FixedPointModel:
+    """S^R of the deployed network: the reference presentations run on the integer simulator.
+
+    With ``reuse_float_calibration`` the float S^R is kept instead (no simulation).
+    The saturation events counted during calibration go into the quantisation report.
+    """
+    from vprsnn_export.targets.intsim import IntegerNetwork
+    from vprsnn_export.trainer.calibrate import calibrate
+
+    if reuse_float_calibration:
+        report = dict(model.quantisation, calibration="float (reused)", calibration_saturations=None)
+        return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
+    if not np.array_equal(np.asarray(place_ids), model.reference_place_ids):
+        raise OptionError("calibration needs the checkpoint's reference places, in the same order")
+    missing = [name for name in model.reference_traversals if name not in reference_images]
+    if missing:
+        raise OptionError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
+    network = IntegerNetwork(model, device=device)
+    images = {name: reference_images[name] for name in model.reference_traversals}
+    calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
+    report = dict(
+        model.quantisation, calibration="deployed (integer simulator)", calibration_saturations=network.saturations
+    )
+    return dataclasses.replace(model, calibration=calibration, quantisation=report)

@@ -1,0 +1,88 @@
+"""`vprsnn-export experiment NAME`: regenerate one of the paper's tables or figures as JSON + Markdown + plots."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import pkgutil
+import shlex
+import sys
+from pathlib import Path
+
+from .. import experiments
+from ..errors import OptionError
+from ..fileio import atomic_write_text
+
+HELPER_MODULES = {"common", "plots"}
+
+
+def experiment_modules() -> dict:
+    names = sorted(m.name for m in pkgutil.iter_modules(experiments.__path__) if m.name not in HELPER_MODULES)
+    return {name: importlib.import_module(f"{experiments.__name__}.{name}") for name in names}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("experiment", help="run one of the paper's experiments (JSON, Markdown, plots)")
+    parser.add_argument("name", help="experiment name, or 'list'")
+    parser.add_argument("--quick", action="store_true", help="tiny synthetic size (CI); otherwise the real data")
+    parser.add_argument("--out", default="docs/results", help="output folder (default docs/results)")
+    parser.add_argument("--data", help="place manifest (default ../shared/data/nordland_64x32_summer_winter)")
+    parser.add_argument("--seeds", type=int, help="number of independently trained networks (seeds 1..N)")
+    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
+    parser.add_argument("--quiet", action="store_true")
+    parser.set_defaults(handler=run)
+
+
+def settings_from_args(args: argparse.Namespace):
+    from ..experiments.common import Settings
+    from ._common import _parse_value
+
+    changes: dict = {"device": args.device, "progress": not args.quiet}
+    if args.seeds:
+        changes["seeds"] = tuple(range(1, args.seeds + 1))
+    settings = Settings.quick_settings(**changes) if args.quick else Settings(**changes)
+    overrides = dict(settings.overrides)
+    for item in args.set:
+        key, sep, raw = item.partition("=")
+        if not sep:
+            raise OptionError(f"--set expects KEY=VALUE, got {item!r}")
+        overrides[key.strip()] = _parse_value(raw.strip())
+    extra = {"overrides": overrides}
+    if args.data:
+        extra.update(data=args.data, subset=None)
+    from dataclasses import replace
+
+    return replace(settings, **extra)
+
+
+def run(args: argparse.Namespace) -> int:
+    modules = experiment_modules()
+    if args.name == "list":
+        for name, module in modules.items():
+            print(f"{name:14s} {module.DESCRIPTION}")
+        return 0
+    if args.name not in modules:
+        raise OptionError(f"unknown experiment {args.name!r}; choose from {', '.join(modules)}")
+    module = modules[args.name]
+    settings = settings_from_args(args)
+    results = module.run(settings)
+    command = "vprsnn-export " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    results["command"] = command
+    out = Path(args.out)
+    stem = f"{args.name}_quick" if args.quick else args.name
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / f"{stem}.json", json.dumps(results, indent=1, default=float))
+    body = module.render(results, out)
+    if args.quick:
+        body = body.replace(f"]({args.name}", f"]({stem}")
+    prov = results["provenance"]
+    header = (
+        f"# Experiment: {args.name}\n\n{module.DESCRIPTION}.\n\n"
+        f"Generated from `{stem}.json` by `{command}` "
+        f"({prov['seconds']} s on {prov['machine']}, torch {prov['torch']}, vprsnn-export {prov['package_version']}).\n\n"
+    )
+    atomic_write_text(out / f"{stem}.md", header + body)
+    print(f"wrote {out / (stem + '.json')} and {out / (stem + '.md')}")
+    return 0

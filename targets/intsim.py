@@ -1,0 +1,249 @@
+"""The fast integer simulator: the fixed-point model of :mod:`export.model`, bit for bit.
+
+Per chunk of presentations (state isolation) or per presentation (one stream):
+
+1. Currents of all steps at once, already shifted: A[t, n, j] = (sum_i s[n, t, i] q_ij) << shift.
+   One float32 matmul computes them exactly: every term is a non-negative integer
+   multiple of 2**shift and every partial sum is bounded by the total
+   n_inputs (2**bits - 1) 2**shift (784 * 255 * 64 < 2**24), so no rounding can
+   occur. The bound is checked from the model; above 2**24 the matmul runs in
+   float64 (exact below 2**53). The result is cast to int32.
+2. The recurrence over t: one Python loop of T steps, each a handful of int64 tensor
+   ops over (presentations, neurons):
+
+       V = (V (4096 - dv)) >> 12             trunc toward zero (V >= 0, see below)
+       V = V + A[t];  saturations += #{V > Vmax};  V = min(V, Vmax)
+       C = {j : V_j > theta_j << shift}
+       WTA on:  winner = argmax_j of (a_j m_j if j in C else -1), first index on ties;
+                it spikes iff C is not empty
+       WTA off: every j in C spikes
+       V[C] = 0
+
+Invariants that make the fast path exact: weights are unsigned and the state starts
+and resets at 0, so V >= 0 always (floor = trunc toward zero, no negative clip); after
+every step V_j <= theta_j << shift (a neuron above it is a candidate and is reset), so
+the next voltage before clipping is at most theta_j << shift + A[t, n, j]. When that
+bound is <= Vmax for every neuron and step of a chunk, saturation is impossible there
+and the clip is skipped; otherwise every clip is counted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
+
+QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
+FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
+FLOAT64_EXACT = 1 << 53
+
+
+@dataclass
+class IntegerRun:
+    """The outcome of presenting N spike trains to the integer network."""
+
+    counts: torch.Tensor  # (N, neurons) int64 output spike counts
+    candidates_per_step: torch.Tensor  # (N, T) int32 |C[t]|
+    raster: torch.Tensor | None  # (N, T, neurons) bool, when recorded
+    final_voltage: torch.Tensor  # (N, neurons) int64: V after each presentation's last step
+    saturations: int  # voltage clips to +-(2**23 - 1), counted over all presentations
+
+    @property
+    def mean_candidates(self) -> float:
+        return float(self.candidates_per_step.float().mean())
+
+    @property
+    def multi_candidate_fraction(self) -> float:
+        return float((self.candidates_per_step > 1).float().mean())
+
+
+def current_bound(model: FixedPointModel) -> int:
+    """Largest possible shifted current: max_j sum_i q_ij << shift (every input spiking)."""
+    return int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) << model.voltage_shift
+
+
+def matmul_dtype(model: FixedPointModel, device: torch.device) -> torch.dtype:
+    """float32 when every current sum is below 2**24 on the CPU; float64 otherwise (exact below 2**53).
+
+    On CUDA float32 matmuls may run in TF32 (10-bit mantissa), so float64 is used there.
+    """
+    bound = current_bound(model)
+    if bound >= FLOAT64_EXACT:
+        raise ValueError(f"current sums up to {bound} cannot be computed exactly in float64")
+    if bound < FLOAT32_EXACT and device.type == "cpu":
+        return torch.float32
+    return torch.float64
+
+
+@dataclass
+class IntegerNetwork:
+    """A fixed-point model prepared for the fast simulator on one device.
+
+    ``saturations`` accumulates over every call (e.g. all calibration runs).
+    """
+
+    model: FixedPointModel
+    device: torch.device | None = None
+    saturations: int = 0
+    _prepared: dict = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
+        model, device = self.model, self.device
+        dtype = matmul_dtype(model, device)
+        multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
+        self._prepared = {
+            "weights": torch.as_tensor(
+                model.weight_mantissa.astype(np.int64) << model.voltage_shift, dtype=dtype, device=device
+            ),
+            "threshold": torch.as_tensor(model.threshold.astype(np.int64) << model.voltage_shift, device=device),
+            "multipliers": None if bool((multipliers == multipliers[0]).all()) else multipliers,
+            "keep": (1 << DECAY_BITS) - model.decay_dv,
+            "limit": model.voltage_limit,
+        }
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> IntegerRun:
+        """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
+        isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
+        check_spikes(spikes, self.model.n_inputs)
+        run = simulate_prepared(self._prepared, spikes, self.model.config.network.wta, isolation, record, self.device)
+        self.saturations += run.saturations
+        return run
+
+    def counts(self, spikes: torch.Tensor) -> torch.Tensor:
+        """Output spike counts (N, neurons): the ``run_counts`` callable of trainer.calibrate."""
+        return self.run(spikes).counts
+
+
+def simulate(
+    model: FixedPointModel,
+    spikes: torch.Tensor,
+    *,
+    record: bool = False,
+    state_isolation: bool | None = None,
+    device: torch.device | None = None,
+) -> IntegerRun:
+    """Run the fixed-point model on spike trains (N, T, inputs) uint8."""
+    return IntegerNetwork(model, device).run(spikes, record=record, state_isolation=state_isolation)
+
+
+def counts_runner(model: FixedPointModel, device: torch.device | None = None) -> Callable[[torch.Tensor], torch.Tensor]:
+    return IntegerNetwork(model, device).counts
+
+
+def check_spikes(spikes: torch.Tensor, n_inputs: int) -> None:
+    if spikes.ndim != 3 or spikes.shape[2] != n_inputs:
+        raise ValueError(f"expected spikes of shape (N, T, {n_inputs}), got {tuple(spikes.shape)}")
+    if spikes.dtype not in (torch.uint8, torch.bool):
+        raise ValueError(f"expected uint8 or bool spikes, got {spikes.dtype}")
+    if spikes.numel() and spikes.dtype == torch.uint8 and int(spikes.max()) > 1:
+        raise ValueError("spikes must be 0 or 1")
+
+
+def shifted_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """A[t, n, j] = sum_i s[n, t, i] (q_ij << shift) as int32, laid out (T, N, neurons) for the loop."""
+    n, timesteps, n_inputs = spikes.shape
+    dense = torch.empty((timesteps, n, n_inputs), dtype=weights.dtype, device=weights.device)
+    dense.copy_(spikes.to(weights.device).transpose(0, 1))
+    return torch.matmul(dense.view(timesteps * n, n_inputs), weights).view(timesteps, n, -1).to(torch.int32)
+
+
+def simulate_prepared(
+    prep: dict, spikes: torch.Tensor, wta: bool, isolation: bool, record: bool, device: torch.device
+) -> IntegerRun:
+    n, timesteps, _ = spikes.shape
+    n_neurons = prep["threshold"].shape[0]
+    counts = torch.zeros((n, n_neurons), dtype=torch.int64)
+    n_candidates = torch.zeros((n, timesteps), dtype=torch.int32)
+    raster = torch.zeros((n, timesteps, n_neurons), dtype=torch.bool) if record else None
+    final_voltage = torch.zeros((n, n_neurons), dtype=torch.int64)
+    saturations = 0
+    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)
+    chunk = QUERY_CHUNK if isolation else 1
+    for start in range(0, n, chunk):
+        stop = min(start + chunk, n)
+        currents = shifted_currents(spikes[start:stop], prep["weights"])
+        if isolation:
+            voltage = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
+        voltage, step = recur(prep, currents, voltage, wta, record)
+        counts[start:stop] = step["counts"].cpu()
+        n_candidates[start:stop] = step["candidates"].T.cpu()
+        final_voltage[start:stop] = voltage.cpu()
+        saturations += step["saturations"]
+        if raster is not None:
+            raster[start:stop] = step["raster"].transpose(0, 1).cpu()
+    return IntegerRun(counts, n_candidates, raster, final_voltage, saturations)
+
+
+def recur(prep: dict, currents: torch.Tensor, voltage: torch.Tensor, wta: bool, record: bool) -> tuple[torch.Tensor, dict]:
+    """The loop over t for currents (T, B, neurons) int32 from the given voltage (B, neurons) int64.
+
+    Returns the final voltage and {counts (B, neurons), candidates (T, B), raster (T, B, neurons) | None, saturations}.
+    """
+    timesteps, batch, n_neurons = currents.shape
+    device = currents.device
+    threshold, keep, limit, multipliers = prep["threshold"], prep["keep"], prep["limit"], prep["multipliers"]
+    may_saturate = bool((currents.amax(dim=(0, 1)).to(torch.int64) + threshold > limit).any())
+    voltage = voltage.clone()
+    candidates = torch.empty((batch, n_neurons), dtype=torch.bool, device=device)
+    n_candidates = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
+    minus_one = torch.tensor(-1, dtype=torch.int64, device=device)
+    score = torch.empty((batch, n_neurons), dtype=torch.int64, device=device)
+    best = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
+    winner = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
+    counts = torch.zeros((batch, n_neurons), dtype=torch.int64, device=device)
+    raster = torch.zeros((timesteps, batch, n_neurons), dtype=torch.bool, device=device) if record else None
+    saturations = torch.zeros((), dtype=torch.int64, device=device)
+    for t in range(timesteps):
+        current = currents[t]
+        voltage.mul_(keep).bitwise_right_shift_(DECAY_BITS).add_(current)
+        if may_saturate:
+            over = voltage > limit
+            saturations += over.sum()
+            voltage.clamp_(max=limit)
+        torch.gt(voltage, threshold, out=candidates)
+        torch.sum(candidates, dim=1, out=n_candidates[t])
+        if wta:
+            if multipliers is None:
+                torch.where(candidates, current, minus_one, out=score)
+            else:
+                torch.where(candidates, torch.mul(current, multipliers, out=score), minus_one, out=score)
+            torch.max(score, dim=1, out=(best[t], winner[t]))
+        else:
+            counts.add_(candidates)
+            if raster is not None:
+                raster[t] = candidates
+        voltage.masked_fill_(candidates, 0)
+    if wta:
+        fired = best >= 0
+        counts.scatter_add_(1, winner.T, fired.T.to(torch.int64))
+        if raster is not None:
+            raster.scatter_(2, winner.unsqueeze(2), fired.unsqueeze(2))
+    return voltage, {
+        "counts": counts,
+        "candidates": n_candidates.to(torch.int32),
+        "raster": raster,
+        "saturations": int(saturations),
+    }
+
+
+def step_agreement(raster_a: torch.Tensor, raster_b: torch.Tensor) -> dict[str, float]:
+    """How often two networks make the same decision on the same spike trains.
+
+    all_steps: fraction of (presentation, step) where both emit exactly the same spikes
+    (with WTA: the same winner, or both silent); active_steps: the same fraction over
+    the steps where at least one of them spikes.
+    """
+    same = (raster_a == raster_b).all(dim=2)
+    active = raster_a.any(dim=2) | raster_b.any(dim=2)
+    n_active = int(active.sum())
+    return {
+        "all_steps": float(same.float().mean()),
+        "active_steps": float((same & active).sum()) / n_active if n_active else 1.0,
+        "n_steps": int(same.numel()),
+        "n_active_steps": n_active,
+    }

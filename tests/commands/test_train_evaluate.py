@@ -1,0 +1,79 @@
+"""End to end through the CLI on the embedded synthetic route."""
+
+import json
+
+import numpy as np
+import pytest
+
+from vprsnn_export.checkpoint import load_checkpoint
+from vprsnn_export.cli import main
+
+SMALL = ["--timesteps", "100", "--epochs", "8", "--neurons", "100"]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    out = tmp_path_factory.mktemp("e2e") / "net.npz"
+    code = main(["train", "--data", "synthetic:40", "--reference", "summer", "--seed", "3", "--out", str(out),
+                 "--quiet", *SMALL])
+    assert code == 0
+    return out
+
+
+def test_checkpoint_holds_config_calibration_and_provenance(trained):
+    ckpt = load_checkpoint(trained)
+    assert ckpt.config.seed == 3 and ckpt.config.encoder.timesteps == 100 and ckpt.config.train.epochs == 8
+    assert ckpt.calibration.shape == (100, 40) and ckpt.calibration.sum() > 0
+    assert ckpt.reference_traversals == ["summer"]
+    assert ckpt.data["source"] == "synthetic:40" and len(ckpt.data["manifest_sha256"]) == 64
+    assert len(ckpt.history) == 8
+
+
+def test_evaluate_json_beats_chance_by_a_wide_margin(trained, capsys):
+    assert main(["evaluate", str(trained), "--query", "winter", "--k", "1,5", "--json", "--quiet"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    rows = {(r["strategy"], r["k"]): r for r in payload["results"]}
+    assert set(rows) == {("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)}
+    chance = 1 / 40
+    assert rows[("wprob", 1)]["accuracy"] > 5 * chance
+    assert rows[("wprob", 5)]["accuracy"] > 10 * chance
+    assert payload["config"]["seed"] == 3
+    assert 0 <= payload["spike_stats"]["multi_candidate_step_fraction"] <= 1
+    for row in payload["results"]:
+        assert row["n_queries"] == 40
+        assert 0 <= row["r_at_100p"] <= row["accuracy"] + 1e-12
+
+
+def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
+    again = tmp_path / "again.npz"
+    assert main(["train", "--data", "synthetic:40", "--reference", "summer", "--seed", "3", "--out", str(again),
+                 "--quiet", *SMALL]) == 0
+    np.testing.assert_array_equal(load_checkpoint(again).weights, load_checkpoint(trained).weights)
+    np.testing.assert_array_equal(load_checkpoint(again).calibration, load_checkpoint(trained).calibration)
+
+
+def test_evaluate_table_output(trained, capsys):
+    assert main(["evaluate", str(trained), "--query", "winter", "--quiet", "--baseline"]) == 0
+    out = capsys.readouterr().out
+    assert "wprob" in out and "sad" in out and "R@100P" in out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["evaluate", "missing.npz", "--query", "winter"], "missing.npz: no such checkpoint"),
+        (["train", "--data", "nowhere/places.csv", "--reference", "summer", "--out", "x.npz"], "nowhere"),
+        (["train", "--data", "synthetic:10", "--reference", "autumn", "--out", "x.npz"], "autumn"),
+        (["train", "--data", "synthetic:10", "--reference", "summer", "--places", "50:5", "--out", "x.npz"], "50"),
+        (["train", "--data", "synthetic:10", "--reference", "summer", "--set", "encoder.nope=1", "--out", "x.npz"],
+         "encoder.nope"),
+        (["evaluate", "CKPT", "--query", "winter", "--k", "0"], "--k"),
+    ],
+)
+def test_expected_errors_are_one_line_and_exit_2(argv, message, trained, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = [str(trained) if a == "CKPT" else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and message in err[0]
+    assert not (tmp_path / "x.npz").exists()
