@@ -201,6 +201,10 @@ def validate(model: FixedPointModel, path: Path) -> None:
         array = getattr(model, name)
         if array.size and (array.min() < low or array.max() > high):
             fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")
+    if model.quantisation.get("per_neuron") is False and np.unique(model.scale_multiplier).size > 1:
+        fail("per-tensor model with unequal scale multipliers")
+    if model.quantisation.get("threshold_folding") and np.unique(model.threshold).size > 1:
+        fail("threshold-folded model with unequal integer thresholds")
     if not 0 <= model.decay_dv < (1 << DECAY_BITS):
         fail(f"decay_dv {model.decay_dv} does not fit {DECAY_BITS} bits")
     if model.voltage_bits != VOLTAGE_BITS or not 0 <= model.voltage_shift < model.voltage_bits:

@@ -118,20 +118,25 @@ def shift_window(
     return shifted, valid
 
 
-def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> np.ndarray:
-    """Combine the window (product: softmax of summed logs; sum: L1 of the sum)."""
+def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Combine the window (product: softmax of summed logs; sum: L1 of the sum).
+
+    Also returns the window score max_l A_j(l) of the un-normalised aggregate
+    (the best joint log-likelihood for the product rule, the best summed
+    probability for the sum rule), which the velocity search maximises.
+    """
     n_places = shifted.shape[2]
     if rule == "product":
         logs = np.log(shifted + eps) * valid[:, :, None]
         a = logs.sum(axis=1)
-        a -= a.max(axis=1, keepdims=True)
-        e = np.exp(a)
-        return e / e.sum(axis=1, keepdims=True)
+        peak = a.max(axis=1, keepdims=True)
+        e = np.exp(a - peak)
+        return e / e.sum(axis=1, keepdims=True), peak[:, 0]
     a = shifted.sum(axis=1)
     total = a.sum(axis=1, keepdims=True)
     out = a / np.where(total > 0, total, 1.0)
     out[total[:, 0] <= 0, :] = 1.0 / n_places
-    return out
+    return out, a.max(axis=1)
 
 
 def aggregate(
@@ -168,20 +173,33 @@ def aggregate(
     float64 copy). Never takes ground truth: windows come from stream order
     and ``frame_positions`` only.
     """
+    return _aggregate_scored(prob, k, velocity, rule, frame_positions, eps)[0]
+
+
+def _aggregate_scored(
+    prob: np.ndarray,
+    k: int,
+    velocity: float | np.ndarray,
+    rule: str,
+    frame_positions: np.ndarray | None,
+    eps: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`aggregate` plus each window's score max_l A_j(l) (see :func:`_combine`)."""
     p = _prob2d(prob)
     k = _check_args(k, rule, eps)
     n_queries, n_places = p.shape
     t = _positions(frame_positions, n_queries)
     v = _velocities(velocity, n_queries)
     if k == 1:
-        return p.copy()
+        return p.copy(), p.max(axis=1)
     out = np.empty_like(p)
+    score = np.empty(n_queries)
     chunk = max(1, _MAX_ELEMENTS // (k * n_places))
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
         shifted, valid = shift_window(p, queries, k, v, t)
-        out[queries] = _combine(shifted, valid, rule, eps)
-    return out
+        out[queries], score[queries] = _combine(shifted, valid, rule, eps)
+    return out, score
 
 
 def estimate_velocity(
@@ -194,11 +212,14 @@ def estimate_velocity(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-query velocity search over a candidate grid; returns ``(velocity, aggregated)``.
 
-    .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} \\max_l \\hat P_j^{(v)}(l)
+    .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} \\max_l A_j^{(v)}(l)
 
-    where ``\\hat P^{(v)} = aggregate(prob, k, v, ...)``: for every query the
-    candidate whose aggregated distribution has the highest peak wins (ties:
-    the first candidate in the given order). Returns the chosen velocity per
+    where ``A^{(v)}`` is the un-normalised aggregate of :func:`aggregate` at
+    velocity v (summed logs for the product rule, summed probabilities for the
+    sum rule): for every query the candidate whose window explains the frames
+    best wins (ties: the first candidate in the given order). The normalised
+    peak is not used: it rewards velocities that pile the window onto one
+    place whatever the frames say. Returns the chosen velocity per
     query, shape ``(n_queries,)``, and the aggregated distributions at that
     velocity, shape ``(n_queries, n_places)``. Uses the query frames and their
     window only (no ground truth). With ``k == 1`` every candidate gives the
@@ -209,11 +230,9 @@ def estimate_velocity(
         raise ValueError("candidates must contain at least one velocity")
     p = _prob2d(prob)
     best_v = np.full(p.shape[0], cands[0])
-    best = aggregate(p, k, float(cands[0]), rule, frame_positions, eps)
-    best_peak = best.max(axis=1)
+    best, best_peak = _aggregate_scored(p, k, float(cands[0]), rule, frame_positions, eps)
     for c in cands[1:]:
-        agg = aggregate(p, k, float(c), rule, frame_positions, eps)
-        peak = agg.max(axis=1)
+        agg, peak = _aggregate_scored(p, k, float(c), rule, frame_positions, eps)
         better = peak > best_peak
         best_v[better] = c
         best[better] = agg[better]

@@ -191,9 +191,10 @@ def recur(prep: dict, currents: torch.Tensor, voltage: torch.Tensor, wta: bool, 
     voltage = voltage.clone()
     candidates = torch.empty((batch, n_neurons), dtype=torch.bool, device=device)
     n_candidates = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
-    minus_one = torch.tensor(-1, dtype=torch.int64, device=device)
-    score = torch.empty((batch, n_neurons), dtype=torch.int64, device=device)
-    best = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
+    score_dtype = torch.int32 if multipliers is None else torch.int64
+    minus_one = torch.tensor(-1, dtype=score_dtype, device=device)
+    score = torch.empty((batch, n_neurons), dtype=score_dtype, device=device)
+    best = torch.empty((timesteps, batch), dtype=score_dtype, device=device)
     winner = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
     counts = torch.zeros((batch, n_neurons), dtype=torch.int64, device=device)
     raster = torch.zeros((timesteps, batch, n_neurons), dtype=torch.bool, device=device) if record else None

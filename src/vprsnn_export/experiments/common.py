@@ -72,3 +72,57 @@ def provenance(settings: Settings, started: float) -> dict:
 
 def pct(summary: dict) -> str:
     return f"{100 * summary['mean']:.1f} ± {100 * summary['std']:.1f}"
+
+
+CACHE = Path.home() / ".cache" / "vprsnn-export" / "checkpoints"
+
+
+def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_key: str):
+    """Train (or reuse) the float checkpoint of ``cfg`` on ``data``'s reference traversal.
+
+    Training is deterministic, so a checkpoint is cached under a hash of everything
+    that determines it (config, data manifest hash, selected places, reference, version).
+    """
+    import hashlib
+    import json
+
+    from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
+    from vprsnn_export.device import resolve_device
+    from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+    key = json.dumps({
+        "config": cfg.to_dict(), "manifest": data.manifest_sha256, "places": data.place_ids.tolist(),
+        "reference": settings.reference, "version": __version__,
+    }, sort_keys=True)
+    path = CACHE / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    if path.exists():
+        return load_checkpoint(path)
+    ckpt = train_and_calibrate(data, [settings.reference], cfg, device=resolve_device(settings.device),
+                               progress=settings.progress, selection={"subset": None, "places": None})
+    save_checkpoint(path, ckpt)
+    return ckpt
+
+
+METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
+
+
+def summarise_rows(per_seed_rows: list[list[dict]], keys: tuple[str, ...] = ("strategy", "k")) -> list[dict]:
+    """Group rows of several seeds by ``keys`` and give mean ± std of every metric."""
+    groups: dict[tuple, list[dict]] = {}
+    for rows in per_seed_rows:
+        for row in rows:
+            groups.setdefault(tuple(row[k] for k in keys), []).append(row)
+    return [
+        {**dict(zip(keys, group)), **{m: mean_std(r[m] for r in rows) for m in METRICS}, "n_queries": rows[0]["n_queries"]}
+        for group, rows in groups.items()
+    ]
+
+
+def rows_table(summary: list[dict], keys: tuple[str, ...] = ("strategy", "k")) -> str:
+    """A Markdown table of summarised rows (percent, mean ± std over seeds)."""
+    head = "| " + " | ".join(keys) + " | accuracy % | P@100R % | R@100P % | AUC-PR % | seeds |"
+    lines = [head, "|" + "---|" * (len(keys) + 5)]
+    for row in summary:
+        cells = [str(row[k]) for k in keys] + [pct(row[m]) for m in METRICS] + [str(row["accuracy"]["n"])]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)

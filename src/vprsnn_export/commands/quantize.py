@@ -1,0 +1,96 @@
+"""`vprsnn-export quantize`: a float checkpoint -> one fixed-point model per bit width."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..checkpoint import checkpoint_sha256, load_checkpoint
+from ..device import resolve_device
+from ..errors import OptionError
+from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json
+from .evaluate import load_query_data
+
+TABLE_COLUMNS = (
+    ("bits", "bits"),
+    ("scheme", "scheme"),
+    ("scale_method", "scale"),
+    ("weight_max_abs_error", "max |w err|"),
+    ("weight_relative_rmse", "rel. RMSE"),
+    ("weights_clipped", "clipped w"),
+    ("threshold_max_relative_error", "max theta err"),
+    ("calibration_saturations", "cal. saturations"),
+    ("file", "file"),
+)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("quantize", help="quantise a float checkpoint into fixed-point models")
+    parser.add_argument("checkpoint", help="checkpoint written by train")
+    parser.add_argument("--bits", default="8,4,2", help="weight bit widths, each 2..8 (default 8,4,2)")
+    parser.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (default: per tensor)")
+    parser.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice: max-abs or minimum MSE")
+    parser.add_argument(
+        "--fold-thresholds",
+        action="store_true",
+        help="choose per-neuron scales so that all neurons share one integer threshold (needs --per-neuron)",
+    )
+    parser.add_argument(
+        "--reuse-float-calibration",
+        action="store_true",
+        help="keep the float network's S^R instead of recalibrating on the integer simulator (needs no data)",
+    )
+    parser.add_argument("--out", required=True, help="folder for the model files")
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    add_data_options(parser, data_required=False)
+    add_runtime_options(parser)
+    parser.set_defaults(handler=run)
+
+
+def model_filename(bits: int, per_neuron: bool, scale_method: str, fold_thresholds: bool) -> str:
+    """e.g. model_8bit_per-neuron_max.npz, model_4bit_per-neuron_mse_folded.npz."""
+    scheme = "per-neuron" if per_neuron else "per-tensor"
+    return f"model_{bits}bit_{scheme}_{scale_method}{'_folded' if fold_thresholds else ''}.npz"
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..export.model import check_bits, save_fixed_point
+    from ..export.quantize import quantize_checkpoint, recalibrate
+
+    bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
+    if args.fold_thresholds and not args.per_neuron:
+        raise OptionError("--fold-thresholds needs --per-neuron")
+    ckpt = load_checkpoint(args.checkpoint)
+    digest = checkpoint_sha256(args.checkpoint)
+    device = resolve_device(args.device)
+    reference_images, place_ids = None, ckpt.reference_place_ids
+    if not args.reuse_float_calibration:
+        dataset = load_query_data(args, ckpt, list(ckpt.reference_traversals))
+        reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
+        place_ids = dataset.place_ids
+    rows = []
+    for bits in bit_widths:
+        model = quantize_checkpoint(ckpt, digest, bits, args.per_neuron, args.scale, args.fold_thresholds)
+        model = recalibrate(
+            model,
+            reference_images or {},
+            place_ids,
+            reuse_float_calibration=args.reuse_float_calibration,
+            device=device,
+        )
+        path = save_fixed_point(Path(args.out) / model_filename(bits, args.per_neuron, args.scale, args.fold_thresholds), model)
+        report = model.quantisation
+        rows.append({
+            **report,
+            "scheme": ("per-neuron" if report["per_neuron"] else "per-tensor") + (" folded" if report["threshold_folding"] else ""),
+            "calibration_saturations": "-" if report["calibration_saturations"] is None else report["calibration_saturations"],
+            "file": str(path),
+        })
+    if args.json:
+        print_json({"checkpoint": str(args.checkpoint), "source_sha256": digest, "models": rows})
+    else:
+        print(format_table(rows, TABLE_COLUMNS))
+        if not args.quiet:
+            print(f"\nwrote {len(rows)} fixed-point model(s) to {args.out}", file=sys.stderr)
+    return 0

@@ -1,0 +1,50 @@
+"""Table V: W+Prob aggregated over k frames, product vs sum rule, on consecutive places."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from vprsnn_export.device import resolve_device
+from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
+
+from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .plots import line_plot
+
+NAME = "aggregation"
+DESCRIPTION = "W+Prob with k in {1, 3, 5, 7, 10, 15}, product vs sum rule, on 100 consecutive places"
+KS = (1, 3, 5, 7, 10, 15)
+RULES = ("product", "sum")
+
+
+def run(settings: Settings) -> dict:
+    started = time.perf_counter()
+    per_seed = []
+    for seed in settings.seeds:
+        cfg = settings.config(seed)
+        data = load(settings, "consecutive", cfg)
+        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+        counts = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
+                                ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
+        rows = []
+        for rule in RULES:
+            options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, rule=rule)
+            rows += [dict(r, rule=rule, seed=seed) for r in readout_rows(
+                ckpt.calibration, counts["query_counts"], ckpt.reference_place_ids, data.place_ids, options)
+                if r["strategy"] == "wprob"]
+        per_seed.append(rows)
+    return {"experiment": NAME, "summary": summarise_rows(per_seed, ("rule", "k")), "per_seed": per_seed,
+            "provenance": provenance(settings, started)}
+
+
+def render(results: dict, out_dir: Path) -> str:
+    summary = results["summary"]
+    series = {}
+    for rule in RULES:
+        rows = [r for r in summary if r["rule"] == rule]
+        for metric, label in (("r_at_100p", "R@100P"), ("accuracy", "accuracy")):
+            series[f"{rule} rule {label}"] = ([100 * r[metric]["mean"] for r in rows],
+                                              [100 * r[metric]["std"] for r in rows])
+    line_plot(out_dir / f"{NAME}.png", list(KS), series, xlabel="k (frames)", ylabel="%",
+              title="Sequence aggregation (W+Prob), consecutive places")
+    return rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({NAME}.png)\n"

@@ -1,0 +1,312 @@
+"""The deployed network as Loihi-convention fixed-point parameters (Lava's `fixed_pt` models).
+
+Written into one folder:
+
+    network.json   header: populations, connections, neuron parameters, WTA rule, input
+                   source, timing, arithmetic, and the fixed-point model's own header
+    network.npz    arrays named in the header (no pickle), sha256 recorded in the header
+    network.net    lava-dl netx HDF5 (one dense CUBA layer), only when every neuron shares
+                   one threshold: netx holds one vThMant per layer
+
+Mapping (Lava `Dense` + `LIF`, bit-accurate models, per step):
+
+    Dense:  weights w_ji = q_ij << (8 - bits) (8-bit mantissas, sign mode EXCITATORY),
+            num_weight_bits = bits, weight_exp = -(8 - bits), so
+            a_j = (sum_i w_ji s_i) >> (8 - bits) = sum_i q_ij s_i exactly; one step of delay
+    LIF:    du = 4095 (u = a << 6 each step), dv = decay_dv, vth = theta_int_j (17 bits, << 6),
+            bias_mant = 0, bias_exp = 0; v = clip(trunc0(v (4096 - dv) / 4096) + u), spike when
+            v > vth << 6, v <- 0
+
+Lava's LIF wraps u at 24 bits where the contract saturates v; the two agree while
+a_j << 6 < 2**23, i.e. a_j < 131072 (the header's ``current_bound`` says whether the
+model can reach it). Hard WTA is not a Lava process: the header describes the rule
+a Lava user adds after the LIF population (it only selects which candidate's spike is
+emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vprsnn_export import __version__
+from vprsnn_export.config import Config
+from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, sha256_bytes
+
+FORMAT = "vprsnn-loihi"
+FORMAT_VERSION = 1
+HEADER_NAME = "network.json"
+ARRAYS_NAME = "network.npz"
+NETX_NAME = "network.net"
+LAVA_WEIGHT_BITS = 8  # Lava's Dense holds 8-bit weight mantissas
+SIGN_MODE_EXCITATORY = 2  # lava.utils.weightutils.SignMode.EXCITATORY
+DU_NO_CURRENT_MEMORY = 4095  # Lava adds 1: decay 4096/4096, u = a << 6 every step
+U_WRAP_CURRENT = 1 << 17  # a_j >= 2**17 makes a << 6 reach 2**23, where Lava's u wraps
+ARRAY_NAMES = (
+    "input_exc_weights",
+    "exc_vth",
+    "exc_bias_mant",
+    "wta_score_multiplier",
+    "calibration",
+    "float_calibration",
+    "reference_place_ids",
+)
+
+
+@dataclass
+class LoihiDescription:
+    """The header and arrays of an exported description (what a Lava user loads)."""
+
+    header: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+
+def lava_weights(model: FixedPointModel) -> tuple[np.ndarray, int, int]:
+    """(weights (neurons, inputs) int32 = q << (8 - bits), num_weight_bits, weight_exp = -(8 - bits))."""
+    shift = LAVA_WEIGHT_BITS - model.bits
+    return (model.weight_mantissa.T.astype(np.int32) << shift), model.bits, -shift
+
+
+def mantissas_from_lava(weights: np.ndarray, weight_exp: int) -> np.ndarray:
+    """Inverse of :func:`lava_weights`: q_ij = w_ji >> -weight_exp (exact: the low bits are zero)."""
+    return (weights.astype(np.int32) >> -weight_exp).T.copy()
+
+
+def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> LoihiDescription:
+    """The Lava-convention description of ``model`` (see the module docstring)."""
+    validate(model, Path("<fixed-point model>"))
+    if model.bits > LAVA_WEIGHT_BITS:
+        raise OptionError(f"Lava's Dense holds {LAVA_WEIGHT_BITS}-bit weights; {model.bits}-bit mantissas do not fit")
+    weights, num_weight_bits, weight_exp = lava_weights(model)
+    cfg = model.config
+    n_in, n = model.n_inputs, model.n_neurons
+    bound = int(model.weight_mantissa.astype(np.int64).sum(axis=0).max())
+    arrays = {
+        "input_exc_weights": weights,
+        "exc_vth": model.threshold.astype(np.int32),
+        "exc_bias_mant": np.zeros(n, dtype=np.int16),
+        "wta_score_multiplier": model.scale_multiplier.astype(np.int32),
+        "calibration": model.calibration.astype(np.int64),
+        "float_calibration": model.float_calibration.astype(np.int64),
+        "reference_place_ids": model.reference_place_ids.astype(np.int64),
+    }
+    uniform = bool(np.all(model.threshold == model.threshold[0]))
+    header = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "package_version": __version__,
+        "source_sha256": source_sha256 or model.source_sha256,
+        "convention": "Lava bit-accurate fixed_pt models (lava.proc.dense Dense, lava.proc.lif LIF), lava-nc 0.10",
+        "timing": {
+            "timesteps": cfg.encoder.timesteps,
+            "synaptic_delay_steps": 1,
+            "state": (
+                "set exc.v and exc.u to 0 before each presentation and let one silent step flush the Dense buffer"
+                if cfg.network.state_isolation
+                else "v carried across presentations"
+            ),
+        },
+        "populations": [
+            {
+                "name": "input",
+                "kind": "spike_source",
+                "size": n_in,
+                "encoder": {
+                    "rule": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), p_i the preprocessed pixel",
+                    "rate_scale": cfg.encoder.rate_scale,
+                    "timesteps": cfg.encoder.timesteps,
+                    "seed": cfg.seed,
+                    "keys": "one generator per presentation, keyed by (seed, stream, traversal, place_id)",
+                    "preprocess": cfg.to_dict()["preprocess"],
+                },
+                "lava": "lava.proc.io.source.RingBuffer(data=spikes (784, steps)) or any 1-bit spike source",
+            },
+            {
+                "name": "exc",
+                "kind": "LIF",
+                "size": n,
+                "lava": "lava.proc.lif.process.LIF, run with select_tag='fixed_pt'",
+                "du": DU_NO_CURRENT_MEMORY,
+                "dv": model.decay_dv,
+                "vth": "exc_vth",
+                "vth_uniform": uniform,
+                "bias_mant": "exc_bias_mant",
+                "bias_exp": 0,
+                "u_v_bits": model.voltage_bits,
+                "vth_shift": model.voltage_shift,
+                "activation_shift": model.voltage_shift,
+                "reset": "v <- 0 for every neuron over threshold",
+            },
+        ],
+        "connections": [
+            {
+                "name": "input_exc",
+                "source": "input",
+                "target": "exc",
+                "lava": "lava.proc.dense.process.Dense",
+                "weights": "input_exc_weights",
+                "layout": "(target, source) = (neurons, inputs)",
+                "num_weight_bits": num_weight_bits,
+                "weight_exp": weight_exp,
+                "sign_mode": "EXCITATORY",
+                "sign_mode_value": SIGN_MODE_EXCITATORY,
+                "mantissa_encoding": f"w = q << {-weight_exp}; a = (sum w) >> {-weight_exp} = sum q exactly",
+                "current_bound": bound,
+                "u_wrap_possible": bound >= U_WRAP_CURRENT,
+            }
+        ],
+        "wta": {
+            "enabled": cfg.network.wta,
+            "rule": (
+                "per step, of the exc neurons that spiked in Lava (all candidates, all reset), emit only the one "
+                "with the largest a_j * m_j, ties to the lowest index; a_j = sum_i q_ij s_i of the same step"
+            ),
+            "score_multiplier": "wta_score_multiplier",
+            "in_lava": "not expressible with Dense/LIF: add a process that reads exc.s_out and a copy of the "
+            "Dense activation and forwards one spike (see docs/targets.md)",
+        },
+        "readout": {
+            "calibration": "calibration (neurons, places): S^R of the deployed network",
+            "reference_place_ids": "reference_place_ids",
+            "gamma": cfg.assignment.gamma,
+        },
+        "arithmetic": model.header()["arithmetic"],
+        "fixed_point_model": model.header(),
+        "netx": {"file": NETX_NAME if uniform else None, "reason": None if uniform else "per-neuron thresholds"},
+    }
+    return LoihiDescription(header=header, arrays=arrays)
+
+
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def write_loihi(model: FixedPointModel, out_dir: str | Path, *, source_sha256: str | None = None) -> dict[str, Path]:
+    """Write network.json, network.npz and (uniform thresholds) network.net into ``out_dir``.
+
+    The arrays go first and the header, which names their sha256, last: a reader never sees
+    a header pointing at arrays that are not there yet.
+    """
+    out_dir = Path(out_dir)
+    desc = describe(model, source_sha256=source_sha256)
+    blob = npz_bytes(desc.arrays)
+    desc.header["arrays"] = {"file": ARRAYS_NAME, "sha256": sha256_bytes(blob)}
+    written = {"arrays": atomic_write_bytes(out_dir / ARRAYS_NAME, blob)}
+    if desc.header["netx"]["file"]:
+        written["netx"] = write_netx(model, out_dir / NETX_NAME)
+    written["header"] = atomic_write_text(out_dir / HEADER_NAME, json.dumps(desc.header, indent=2, sort_keys=True))
+    return written
+
+
+def write_netx(model: FixedPointModel, path: str | Path) -> Path:
+    """lava-dl netx HDF5: ``layer/0`` a dense layer with a CUBA neuron, raw integer weights.
+
+    netx maps CUBA to Lava's LIF with du = iDecay - 1 and dv = vDecay, vth = vThMant, and
+    re-derives num_weight_bits / weight_exp from the weights itself (exact for these
+    non-negative integers).
+    """
+    import h5py
+
+    if not np.all(model.threshold == model.threshold[0]):
+        raise OptionError("netx holds one vThMant per layer; this model has per-neuron thresholds")
+
+    def fill(handle) -> None:
+        with h5py.File(handle, "w") as f:
+            layer = f.create_group("layer").create_group("0")
+            layer.create_dataset("type", data=np.bytes_("dense"))
+            layer.create_dataset("shape", data=np.array([model.n_neurons], dtype=np.int64))
+            layer.create_dataset("weight", data=model.weight_mantissa.T.astype(np.float32))
+            neuron = layer.create_group("neuron")
+            neuron.create_dataset("type", data=np.bytes_("CUBA"))
+            neuron.create_dataset("iDecay", data=np.int64(DU_NO_CURRENT_MEMORY + 1))
+            neuron.create_dataset("vDecay", data=np.int64(model.decay_dv))
+            neuron.create_dataset("vThMant", data=np.int64(model.threshold[0]))
+            neuron.create_dataset("refDelay", data=np.int64(1))
+            neuron.create_dataset("gradedSpike", data=np.bool_(False))
+
+    buffer = io.BytesIO()
+    fill(buffer)
+    return atomic_write(path, lambda handle: handle.write(buffer.getvalue()))
+
+
+def header_path(path: str | Path) -> Path:
+    path = Path(path)
+    return path / HEADER_NAME if path.is_dir() else path
+
+
+def read_loihi(path: str | Path) -> LoihiDescription:
+    """Read and check a description (its folder or its network.json); defects are ModelFileErrors."""
+    head = header_path(path)
+    if not head.is_file():
+        raise ModelFileError("no Loihi description here (network.json missing)", head)
+    try:
+        header = json.loads(head.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"the description header is not valid JSON (truncated or corrupt: {exc})", head) from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn Loihi description (format {header.get('format') if isinstance(header, dict) else None!r})", head)
+    if header.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported Loihi description version {header.get('format_version')!r}", head)
+    arrays_path = head.parent / str(header.get("arrays", {}).get("file", ARRAYS_NAME))
+    if not arrays_path.is_file():
+        raise ModelFileError("the arrays file named by the header is missing", arrays_path)
+    blob = arrays_path.read_bytes()
+    if sha256_bytes(blob) != header["arrays"].get("sha256"):
+        raise ModelFileError("the arrays file does not match the sha256 in network.json (truncated or replaced)", arrays_path)
+    try:
+        with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except (ValueError, OSError, EOFError, KeyError) as exc:
+        raise ModelFileError(f"unreadable arrays ({exc})", arrays_path) from None
+    missing = sorted(set(ARRAY_NAMES) - set(arrays))
+    if missing:
+        raise ModelFileError(f"the arrays file lacks {missing}", arrays_path)
+    return LoihiDescription(header=header, arrays=arrays)
+
+
+def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi description>") -> FixedPointModel:
+    """Rebuild the fixed-point model from the Lava parameters (the round trip of the export)."""
+    path = Path(path)
+    try:
+        fixed = desc.header["fixed_point_model"]
+        conn = desc.header["connections"][0]
+        exc = desc.header["populations"][1]
+        model = FixedPointModel(
+            bits=int(conn["num_weight_bits"]),
+            weight_mantissa=mantissas_from_lava(desc.arrays["input_exc_weights"], int(conn["weight_exp"])),
+            scale_multiplier=desc.arrays["wta_score_multiplier"].astype(np.int32),
+            scale_exponent=int(fixed["scale_exponent"]),
+            threshold=desc.arrays["exc_vth"].astype(np.int32),
+            decay_dv=int(exc["dv"]),
+            config=Config.from_dict(fixed["config"]),
+            calibration=desc.arrays["calibration"].astype(np.int64),
+            float_calibration=desc.arrays["float_calibration"].astype(np.int64),
+            reference_place_ids=desc.arrays["reference_place_ids"].astype(np.int64),
+            reference_traversals=list(fixed["reference_traversals"]),
+            quantisation=dict(fixed["quantisation"]),
+            source_sha256=str(fixed["source_sha256"]),
+            data=dict(fixed.get("data", {})),
+            voltage_shift=int(exc["vth_shift"]),
+            voltage_bits=int(exc["u_v_bits"]),
+            version=str(fixed.get("package_version", "unknown")),
+        )
+    except (KeyError, IndexError, TypeError, ValueError, VprError) as exc_:
+        raise ModelFileError(f"incomplete Loihi description ({type(exc_).__name__}: {exc_})", path) from None
+    if int(exc["du"]) != DU_NO_CURRENT_MEMORY or (1 << DECAY_BITS) <= model.decay_dv:
+        raise ModelFileError("du must be 4095 and dv a 12-bit decay", path)
+    validate(model, path)
+    return model
+
+
+def read_loihi_model(path: str | Path) -> FixedPointModel:
+    """read_loihi + description_to_model."""
+    return description_to_model(read_loihi(path), header_path(path))

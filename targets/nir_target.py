@@ -1,0 +1,443 @@
+"""NIR export and import of the network, built as a ``nir.NIRGraph`` directly.
+
+Graph (node names are fixed; edges (src, dst)):
+
+    input --> linear --> lif --> output          Input(inputs), Linear(weight[neurons, inputs]),
+                          ^  |                   LIF(tau, r, v_leak=0, v_threshold per neuron, v_reset=0)
+                          +--wta <--+            Linear "wta" [neurons, neurons]: the WTA placeholder
+
+Parameters, with dt = DT_SECONDS (the value snnTorch uses) stated in the metadata:
+
+    tau = dt / (1 - beta),  r = 1 / (1 - beta),  v_leak = 0,  v_reset = 0
+    forward Euler at dt:    v <- v + dt/tau ((v_leak - v) + r I) = beta v + I      (exactly the network)
+    beta = 1 (no leak):     an IF node (r = 1) instead of a LIF
+
+Float checkpoint: the Linear holds the float32 weights w_ij and the LIF the float32
+thresholds theta_j. Fixed-point model: the Linear holds the integer mantissas q_ij and the
+LIF the integer threshold mantissas theta_int_j, with beta = (4096 - dv) / 4096; every
+neuron's voltage then lives in its own mantissa units (the Loihi voltage divided by
+2**voltage_shift), and the per-neuron scales m_j 2**e, which only the WTA comparison
+needs, are in the metadata. Hard WTA has no NIR primitive: the recurrent ``wta``
+Linear carries -inhibition (1 - I) (0 by default) and the metadata states the rule:
+every neuron over threshold resets to 0, and of those only the one with the largest
+a_j m_j (float: I_j) emits a spike. A consumer that ignores the metadata therefore emits
+every candidate, a superset of the network's spikes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export import __version__
+from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from vprsnn_export.checkpoint import FORMAT_VERSION as CHECKPOINT_FORMAT_VERSION
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.config import Config
+from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.fileio import atomic_write_bytes
+
+FORMAT = "vprsnn-nir"
+FORMAT_VERSION = 1
+DT_SECONDS = 1e-4
+NODES = ("input", "linear", "lif", "wta", "output")
+PLAIN_EDGES = [("input", "linear"), ("linear", "lif"), ("lif", "output")]
+EDGES = PLAIN_EDGES + [("lif", "wta"), ("wta", "lif")]
+
+Source = Checkpoint | FixedPointModel
+
+
+def effective_beta(source: Source) -> float:
+    """Float: the config's beta. Fixed point: (4096 - dv) / 4096, what the integer decay multiplies by."""
+    if isinstance(source, FixedPointModel):
+        return ((1 << DECAY_BITS) - source.decay_dv) / (1 << DECAY_BITS)
+    return float(source.config.network.beta)
+
+
+def lif_node(beta: float, thresholds: np.ndarray, dt: float):
+    """LIF with tau = dt / (1 - beta), r = 1 / (1 - beta); an IF (r = 1) when beta = 1."""
+    import nir
+
+    n = thresholds.shape[0]
+    zeros = np.zeros(n, dtype=np.float64)
+    if beta >= 1.0:
+        return nir.IF(r=np.ones(n), v_threshold=thresholds, v_reset=zeros)
+    return nir.LIF(
+        tau=np.full(n, dt / (1.0 - beta)),
+        r=np.full(n, 1.0 / (1.0 - beta)),
+        v_leak=zeros,
+        v_threshold=thresholds,
+        v_reset=zeros.copy(),
+    )
+
+
+def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
+    """The checkpoint's own JSON header (the fields ``save_checkpoint`` writes)."""
+    return {
+        "format": CHECKPOINT_FORMAT,
+        "format_version": CHECKPOINT_FORMAT_VERSION,
+        "package_version": ckpt.version,
+        "config": ckpt.config.to_dict(),
+        "seed": ckpt.config.seed,
+        "reference_traversals": list(ckpt.reference_traversals),
+        "data": ckpt.data,
+        "history": ckpt.history,
+    }
+
+
+def check_checkpoint(ckpt: Checkpoint) -> None:
+    """Shapes agree with the config and values are finite: what a writer must refuse otherwise."""
+    net = ckpt.config.network
+    if ckpt.weights.shape != (net.n_inputs, net.n_neurons) or ckpt.thresholds.shape != (net.n_neurons,):
+        raise OptionError(
+            f"checkpoint arrays {ckpt.weights.shape} / {ckpt.thresholds.shape} do not match its config "
+            f"({net.n_inputs} inputs, {net.n_neurons} neurons)"
+        )
+    if not (np.all(np.isfinite(ckpt.weights)) and np.all(np.isfinite(ckpt.thresholds))):
+        raise OptionError("checkpoint weights or thresholds contain NaN or infinite values")
+
+
+def wta_rule(source: Source) -> str:
+    if not source.config.network.wta:
+        return "off: every neuron over threshold spikes"
+    score = "a_j * m_j (integer current times the neuron's scale multiplier)" if isinstance(source, FixedPointModel) else "I_j"
+    return (
+        f"hard WTA: of the neurons with v_j > v_threshold_j at a step, only the one with the largest {score} "
+        "spikes (ties: lowest index); every one of them resets to v_reset = 0; nothing else is inhibited"
+    )
+
+
+def graph_metadata(source: Source, source_sha256: str | None, inhibition: float | None, dt: float) -> dict[str, Any]:
+    """Human-readable facts plus the source's full JSON header for an exact rebuild."""
+    cfg = source.config
+    beta = effective_beta(source)
+    fixed = isinstance(source, FixedPointModel)
+    meta: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "package_version": __version__,
+        "kind": "fixed-point" if fixed else "float",
+        "header_json": json.dumps(source.header() if fixed else checkpoint_header(source), sort_keys=True),
+        "source_sha256": source_sha256 or (source.source_sha256 if fixed else "unknown"),
+        "dt": dt,
+        "beta": beta,
+        "tau_rule": "tau = dt / (1 - beta), r = 1 / (1 - beta): forward Euler at dt gives v <- beta v + I",
+        "other_dt": "a consumer stepping at dt' computes v <- (1 - k (1 - beta)) v + k I with k = dt'/dt (Euler)",
+        "timesteps": cfg.encoder.timesteps,
+        "encoder": f"s_i[t] ~ Bernoulli(clip({cfg.encoder.rate_scale} * pixel_i, 0, 1)), t = 0..{cfg.encoder.timesteps - 1}",
+        "seed": cfg.seed,
+        "state": "v = 0 at the start of every presentation" if cfg.network.state_isolation else "v carried across presentations",
+        "spike_rule": "spike when v > v_threshold, checked after the update of the same step",
+        "reset": "v <- v_reset = 0 for every neuron over threshold, whether or not it wins the WTA",
+        "wta": "on" if cfg.network.wta else "off",
+        "wta_rule": wta_rule(source),
+        "wta_node": (
+            "none (left out on request)"
+            if inhibition is None
+            else "wta: recurrent Linear holding -wta_inhibition (1 - I); not the WTA rule itself"
+        ),
+        "wta_inhibition": 0.0 if inhibition is None else float(inhibition),
+        "wta_score_multiplier": (
+            source.scale_multiplier.astype(np.int64) if fixed else np.ones(cfg.network.n_neurons, dtype=np.int64)
+        ),
+        "calibration": source.calibration.astype(np.int64),
+        "reference_place_ids": source.reference_place_ids.astype(np.int64),
+    }
+    if fixed:
+        meta.update(
+            bits=source.bits,
+            scale_exponent=source.scale_exponent,
+            decay_dv=source.decay_dv,
+            voltage_shift=source.voltage_shift,
+            voltage_bits=source.voltage_bits,
+            units=(
+                "linear.weight = q_ij (float weight ~ q_ij m_j 2**scale_exponent); lif.v_threshold = theta_int_j; "
+                "v is the 24-bit Loihi voltage / 2**voltage_shift; the integer decay rounds toward zero and "
+                "the voltage saturates at +-(2**23 - 1), which a float consumer does not do"
+            ),
+            float_calibration=source.float_calibration.astype(np.int64),
+        )
+    return meta
+
+
+def build_graph(
+    source: Source,
+    *,
+    source_sha256: str | None = None,
+    wta_inhibition: float = 0.0,
+    wta_node: bool = True,
+    dt: float = DT_SECONDS,
+):
+    """The ``nir.NIRGraph`` of a float checkpoint or a fixed-point model (see the module docstring).
+
+    ``wta_node=False`` leaves the recurrent ``wta`` Linear out (the metadata still states the
+    rule): snnTorch's importer routes a recurrent subgraph's input through its recurrent Linear.
+    """
+    import nir
+
+    if wta_inhibition < 0 or not np.isfinite(wta_inhibition):
+        raise OptionError(f"wta_inhibition must be a finite value >= 0, got {wta_inhibition}")
+    if isinstance(source, FixedPointModel):
+        validate(source, Path("<fixed-point model>"))
+        weight = source.weight_mantissa.T.astype(np.float32)
+        thresholds = source.threshold.astype(np.float64)
+    elif isinstance(source, Checkpoint):
+        check_checkpoint(source)
+        weight = np.ascontiguousarray(source.weights.T.astype(np.float32))
+        thresholds = source.thresholds.astype(np.float32)
+    else:
+        raise OptionError(f"cannot export a {type(source).__name__} to NIR")
+    n_out, n_in = weight.shape
+    inhibition = (-wta_inhibition * (1.0 - np.eye(n_out))).astype(np.float32)
+    nodes = {
+        "input": nir.Input(input_type=np.array([n_in])),
+        "linear": nir.Linear(weight=weight),
+        "lif": lif_node(effective_beta(source), thresholds, dt),
+        "output": nir.Output(output_type=np.array([n_out])),
+    }
+    if wta_node:
+        nodes["wta"] = nir.Linear(weight=inhibition)
+    metadata = graph_metadata(source, source_sha256, wta_inhibition if wta_node else None, dt)
+    return nir.NIRGraph(nodes=nodes, edges=list(EDGES if wta_node else PLAIN_EDGES), metadata=metadata)
+
+
+def write_nir(
+    source: Source,
+    path: str | Path,
+    *,
+    source_sha256: str | None = None,
+    wta_inhibition: float = 0.0,
+    wta_node: bool = True,
+    dt: float = DT_SECONDS,
+) -> Path:
+    """Build the graph, serialise it with ``nir.write`` into memory, write it atomically."""
+    import nir
+
+    graph = build_graph(source, source_sha256=source_sha256, wta_inhibition=wta_inhibition, wta_node=wta_node, dt=dt)
+    buffer = io.BytesIO()
+    nir.write(buffer, graph)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def load_graph(path: str | Path):
+    """``nir.read`` with every failure turned into a ModelFileError naming the file."""
+    import nir
+
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError("no such NIR file", path)
+    try:
+        return nir.read(path)
+    except Exception as exc:  # h5py raises OSError, nir KeyError/ValueError/AssertionError on damage
+        raise ModelFileError(f"not a readable NIR file (truncated or corrupt: {type(exc).__name__}: {exc})", path) from None
+
+
+def read_nir(path: str | Path) -> Source:
+    """Rebuild the exported network: a Checkpoint (float) or a FixedPointModel (fixed point).
+
+    Weights and thresholds come from the graph's nodes; the rest (config, decay, scales,
+    calibration) from its metadata. Any missing or inconsistent piece is a ModelFileError.
+    """
+    path = Path(path)
+    graph = load_graph(path)
+    try:
+        return graph_to_source(graph, path)
+    except ModelFileError:
+        raise
+    except (KeyError, TypeError, ValueError, AttributeError, VprError) as exc:
+        raise ModelFileError(f"not a vprsnn NIR export ({type(exc).__name__}: {exc})", path) from None
+
+
+def graph_to_source(graph, path: Path) -> Source:
+    import nir
+
+    meta = graph.metadata
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
+    if int(meta.get("format_version", -1)) != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
+    edges = sorted(map(tuple, graph.edges))
+    expected = EDGES if "wta" in graph.nodes else PLAIN_EDGES
+    missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
+    if missing or edges != sorted(expected):
+        raise ModelFileError(f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path)
+    linear, lif = graph.nodes["linear"], graph.nodes["lif"]
+    if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
+        raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
+    header = json.loads(str(meta["header_json"]))
+    weight = np.asarray(linear.weight).T
+    thresholds = np.asarray(lif.v_threshold)
+    if str(meta["kind"]) == "fixed-point":
+        model = fixed_point_from_graph(header, meta, weight, thresholds, path)
+        check_dynamics(lif, effective_beta(model), float(meta["dt"]), path)
+        return model
+    ckpt = checkpoint_from_graph(header, meta, weight, thresholds, path)
+    check_dynamics(lif, effective_beta(ckpt), float(meta["dt"]), path)
+    return ckpt
+
+
+def check_dynamics(lif, beta: float, dt: float, path: Path) -> None:
+    """The node's tau and r must be the ones this beta and dt give (so node and metadata agree)."""
+    import nir
+
+    if isinstance(lif, nir.IF):
+        if beta < 1.0:
+            raise ModelFileError(f"an IF node but beta = {beta} < 1 in the metadata", path)
+        return
+    expect_tau, expect_r = dt / (1.0 - beta), 1.0 / (1.0 - beta)
+    if not (np.allclose(lif.tau, expect_tau, rtol=1e-9) and np.allclose(lif.r, expect_r, rtol=1e-9)):
+        raise ModelFileError(f"the LIF node's tau/r disagree with beta = {beta} and dt = {dt} in the metadata", path)
+    if np.any(np.asarray(lif.v_reset) != 0) or np.any(np.asarray(lif.v_leak) != 0):
+        raise ModelFileError("the LIF node must have v_reset = 0 and v_leak = 0", path)
+
+
+def integral(array: np.ndarray, name: str, path: Path) -> np.ndarray:
+    if not np.all(np.isfinite(array)) or np.any(array != np.round(array)):
+        raise ModelFileError(f"{name} must hold integers in a fixed-point export", path)
+    return np.round(array).astype(np.int32)
+
+
+def fixed_point_from_graph(header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path) -> FixedPointModel:
+    model = FixedPointModel(
+        bits=int(header["bits"]),
+        weight_mantissa=integral(weight, "linear.weight", path),
+        scale_multiplier=np.asarray(meta["wta_score_multiplier"]).astype(np.int32),
+        scale_exponent=int(header["scale_exponent"]),
+        threshold=integral(thresholds, "lif.v_threshold", path),
+        decay_dv=int(header["decay_dv"]),
+        config=Config.from_dict(header["config"]),
+        calibration=np.asarray(meta["calibration"]).astype(np.int64),
+        float_calibration=np.asarray(meta["float_calibration"]).astype(np.int64),
+        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
+        reference_traversals=list(header["reference_traversals"]),
+        quantisation=dict(header["quantisation"]),
+        source_sha256=str(header["source_sha256"]),
+        data=dict(header.get("data", {})),
+        voltage_shift=int(header["voltage_shift"]),
+        voltage_bits=int(header["voltage_bits"]),
+        version=str(header.get("package_version", "unknown")),
+    )
+    validate(model, path)
+    return model
+
+
+def checkpoint_from_graph(header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path) -> Checkpoint:
+    if header.get("format") != CHECKPOINT_FORMAT:
+        raise ModelFileError(f"the embedded header is not a checkpoint header ({header.get('format')!r})", path)
+    ckpt = Checkpoint(
+        config=Config.from_dict(header["config"]),
+        weights=np.ascontiguousarray(weight.astype(np.float32)),
+        thresholds=thresholds.astype(np.float32),
+        calibration=np.asarray(meta["calibration"]).astype(np.int64),
+        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
+        reference_traversals=list(header["reference_traversals"]),
+        data=dict(header.get("data", {})),
+        history=list(header.get("history", [])),
+        version=str(header.get("package_version", "unknown")),
+    )
+    try:
+        check_checkpoint(ckpt)
+    except OptionError as exc:
+        raise ModelFileError(str(exc), path) from None
+    if ckpt.calibration.shape != (ckpt.config.network.n_neurons, ckpt.reference_place_ids.shape[0]):
+        raise ModelFileError("calibration does not match the neurons and reference places", path)
+    return ckpt
+
+
+class EulerLIF(torch.nn.Module):
+    """NIR's LIF (or IF) as written in the file, stepped by forward Euler at ``dt``: no metadata used.
+
+        v <- v + dt/tau ((v_leak - v) + r I)      (IF: v <- v + r I)
+        z = v > v_threshold;  v <- v_reset where z
+    """
+
+    def __init__(self, node, dt: float) -> None:
+        import nir
+
+        super().__init__()
+        n = np.asarray(node.v_threshold).shape
+        leaky = isinstance(node, nir.LIF)
+        gain = dt / np.asarray(node.tau, dtype=np.float64) if leaky else np.zeros(n)
+        drive = gain * np.asarray(node.r, dtype=np.float64) if leaky else np.asarray(node.r, dtype=np.float64)
+        self.register_buffer("gain", torch.as_tensor(gain))
+        self.register_buffer("drive", torch.as_tensor(drive))
+        self.register_buffer("v_leak", torch.as_tensor(np.asarray(getattr(node, "v_leak", np.zeros(n)), dtype=np.float64)))
+        self.register_buffer("v_threshold", torch.as_tensor(np.asarray(node.v_threshold, dtype=np.float64)))
+        self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
+
+    def forward(self, x: torch.Tensor, state: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        v = torch.zeros_like(x) if state is None else state
+        v = v + self.gain * (self.v_leak - v) + self.drive * x
+        z = v > self.v_threshold
+        return z.to(x.dtype), torch.where(z, self.v_reset, v)
+
+
+def generic_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS) -> torch.Tensor:
+    """Run a NIR graph through nirtorch's generic interpreter with NIR's own LIF equations.
+
+    This is what a consumer that reads only the nodes (no metadata) computes: float32,
+    forward Euler at ``dt``, every neuron over threshold spikes. Returns (N, T, neurons) bool.
+    """
+    import nir
+    import nirtorch
+
+    node_map = {nir.LIF: lambda node: EulerLIF(node, dt), nir.IF: lambda node: EulerLIF(node, dt)}
+    module = nirtorch.nir_to_torch(graph, node_map)
+    return step_module(module, spikes)
+
+
+def step_module(module, spikes: torch.Tensor) -> torch.Tensor:
+    """Feed (N, T, inputs) one step at a time to a stateful torch module returning (z, state)."""
+    n, timesteps, _ = spikes.shape
+    state = None
+    outputs = []
+    with torch.no_grad():
+        for t in range(timesteps):
+            z, state = module(spikes[:, t].to(torch.float32), state)
+            outputs.append(z.detach().to(torch.bool))
+    return torch.stack(outputs, dim=1)
+
+
+def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
+    """Run a NIR graph through snnTorch's importer (``snntorch.import_from_nir``), stepped per t.
+
+    snnTorch's importer asserts one threshold for all neurons; it raises for files with
+    per-neuron thresholds (quantise with threshold folding to get a single threshold).
+    """
+    import contextlib
+    import copy
+
+    from snntorch.import_nir import import_from_nir
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        module = import_from_nir(copy.deepcopy(graph))
+    return step_module(module, spikes)
+
+
+def spike_agreement(reference: torch.Tensor, consumer: torch.Tensor) -> dict[str, float]:
+    """How a consumer's raster (N, T, neurons) relates to the network's.
+
+    recall: share of the network's spikes the consumer also emits; precision: share of the
+    consumer's spikes that are the network's; exact_steps: share of (presentation, step)
+    with identical spike vectors; top1: share of presentations whose most-spiking neuron
+    (argmax of counts, lowest index on ties) is the same.
+    """
+    ref, out = reference.to(torch.bool), consumer.to(torch.bool)
+    both = int((ref & out).sum())
+    n_ref, n_out = int(ref.sum()), int(out.sum())
+    top_ref = ref.sum(dim=1).argmax(dim=1)
+    top_out = out.sum(dim=1).argmax(dim=1)
+    return {
+        "recall": both / n_ref if n_ref else 1.0,
+        "precision": both / n_out if n_out else 1.0,
+        "exact_steps": float((ref == out).all(dim=2).float().mean()),
+        "top1_neuron": float((top_ref == top_out).float().mean()),
+        "network_spikes": n_ref,
+        "consumer_spikes": n_out,
+    }

@@ -1,0 +1,350 @@
+"""The integer inference of a fixed-point model as an ONNX graph, and a runner on onnxruntime.
+
+Graph inputs and outputs:
+
+    spikes       [T, batch, inputs]  uint8 (0/1)
+    counts       [batch, neurons]    int64   output spike counts
+    saturations  [batch]             int64   voltage clips to +-(2**23 - 1)
+    wprob        [batch, places]     float64 W+Prob distribution P(l | Q)   (optional)
+    raster       [T, batch, neurons] bool    output spikes per step           (optional)
+
+Computation (every operation integer; the contract of :mod:`export.model`):
+
+    A[t, n, j] = MatMulInteger(s[t, n, :], q[:, j])          uint8 x uint8 -> int32, exact
+    Scan over t with state (V, counts, saturations), V int64 starting at 0 per presentation:
+        V   = Div(V (4096 - dv), 4096)                         int64 Div truncates toward zero
+        Vn  = V + A[t] * 2**voltage_shift
+        V   = Clip(Vn, -(2**23 - 1), 2**23 - 1);  saturations += #(Vn != V)
+        C   = V > theta << voltage_shift
+        WTA on:  w = ArgMax(Where(C, A[t] m, -1)) (first index on ties); S = (j == w) and C
+        WTA off: S = C
+        V   = Where(C, 0, V);  counts += S
+
+int64 carries the voltage path: V (4096 - dv) reaches 2**35, beyond int32. The W+Prob
+head is eq. 9-13 of the readout on float64 (:mod:`runtime.assignment`) with the model's
+own calibration S^R folded into constant matrices.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+from onnx import TensorProto, helper, numpy_helper
+
+from vprsnn_export.errors import ModelFileError, OptionError
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.runtime.assignment import weighted_matrix
+
+IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
+OPSET = 21
+DOMAIN = "vprsnn-export"
+INPUT = "spikes"
+OUTPUTS = ("counts", "saturations", "wprob", "raster")
+
+
+@dataclass
+class OnnxRun:
+    """What one onnxruntime call returned, in the project's layout (presentations first)."""
+
+    counts: np.ndarray  # (N, neurons) int64
+    saturations: np.ndarray  # (N,) int64
+    wprob: np.ndarray | None  # (N, places) float64
+    raster: np.ndarray | None  # (N, T, neurons) bool
+    seconds: float  # wall time of the session.run calls
+
+
+def const(name: str, value: np.ndarray) -> TensorProto:
+    return numpy_helper.from_array(np.asarray(value), name=name)
+
+
+def check_exportable(model: FixedPointModel) -> None:
+    """The graph implements state isolation (V = 0 at t = 0 of every presentation) and 8-bit-or-less mantissas."""
+    validate(model, Path("<fixed-point model>"))
+    if not model.config.network.state_isolation:
+        raise OptionError(
+            "the ONNX graph zeroes the voltage at the start of every presentation; "
+            "this model was built with state isolation off, which the ONNX target does not express"
+        )
+    if model.bits > 8:
+        raise OptionError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
+
+
+def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
+    """One time step: (V, counts, saturations, A[t]) -> (V', counts', saturations' [, S])."""
+    n = model.n_neurons
+    shift = 1 << model.voltage_shift
+    limit = model.voltage_limit
+    keep = (1 << DECAY_BITS) - model.decay_dv
+    inits = [
+        const("keep", np.int64(keep)),
+        const("unity", np.int64(1 << DECAY_BITS)),
+        const("shift", np.int64(shift)),
+        const("vmin", np.int64(-limit)),
+        const("vmax", np.int64(limit)),
+        const("vth", model.threshold.astype(np.int64) << model.voltage_shift),
+        const("zero", np.int64(0)),
+        const("axis1", np.array([1], dtype=np.int64)),
+    ]
+    nodes = [
+        helper.make_node("Cast", ["a_t"], ["a"], to=TensorProto.INT64),
+        helper.make_node("Mul", ["v_in", "keep"], ["v_keep"]),
+        helper.make_node("Div", ["v_keep", "unity"], ["v_decayed"]),
+        helper.make_node("Mul", ["a", "shift"], ["a_shifted"]),
+        helper.make_node("Add", ["v_decayed", "a_shifted"], ["v_raw"]),
+        helper.make_node("Clip", ["v_raw", "vmin", "vmax"], ["v_clip"]),
+        helper.make_node("Equal", ["v_raw", "v_clip"], ["unclipped"]),
+        helper.make_node("Not", ["unclipped"], ["clipped"]),
+        helper.make_node("Cast", ["clipped"], ["clipped_i"], to=TensorProto.INT64),
+        helper.make_node("ReduceSum", ["clipped_i", "axis1"], ["clips"], keepdims=0),
+        helper.make_node("Add", ["sat_in", "clips"], ["sat_out"]),
+        helper.make_node("Greater", ["v_clip", "vth"], ["cand"]),
+        helper.make_node("Where", ["cand", "zero", "v_clip"], ["v_out"]),
+    ]
+    if model.config.network.wta:
+        inits += [
+            const("minus_one", np.int64(-1)),
+            const("multiplier", model.scale_multiplier.astype(np.int64)),
+            const("neuron_index", np.arange(n, dtype=np.int64)[None, :]),
+        ]
+        nodes += [
+            helper.make_node("Mul", ["a", "multiplier"], ["score"]),
+            helper.make_node("Where", ["cand", "score", "minus_one"], ["masked"]),
+            helper.make_node("ArgMax", ["masked"], ["winner"], axis=1, keepdims=1, select_last_index=0),
+            helper.make_node("Equal", ["neuron_index", "winner"], ["is_winner"]),
+            helper.make_node("And", ["is_winner", "cand"], ["fired"]),
+        ]
+    else:
+        nodes.append(helper.make_node("Identity", ["cand"], ["fired"]))
+    nodes += [
+        helper.make_node("Cast", ["fired"], ["fired_i"], to=TensorProto.INT64),
+        helper.make_node("Add", ["counts_in", "fired_i"], ["counts_out"]),
+    ]
+    outputs = [
+        helper.make_tensor_value_info("v_out", TensorProto.INT64, ["batch", n]),
+        helper.make_tensor_value_info("counts_out", TensorProto.INT64, ["batch", n]),
+        helper.make_tensor_value_info("sat_out", TensorProto.INT64, ["batch"]),
+    ]
+    if with_raster:
+        nodes.append(helper.make_node("Identity", ["fired"], ["fired_out"]))
+        outputs.append(helper.make_tensor_value_info("fired_out", TensorProto.BOOL, ["batch", n]))
+    inputs = [
+        helper.make_tensor_value_info("v_in", TensorProto.INT64, ["batch", n]),
+        helper.make_tensor_value_info("counts_in", TensorProto.INT64, ["batch", n]),
+        helper.make_tensor_value_info("sat_in", TensorProto.INT64, ["batch"]),
+        helper.make_tensor_value_info("a_t", TensorProto.INT32, ["batch", n]),
+    ]
+    return helper.make_graph(nodes, "lif_wta_step", inputs, outputs, inits)
+
+
+def currents_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """A[T, batch, neurons] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q); initial state zeros."""
+    inits = [
+        const("weight_mantissa", model.weight_mantissa.astype(np.uint8)),
+        const("flat_shape", np.array([-1, model.n_inputs], dtype=np.int64)),
+        const("neurons", np.array([model.n_neurons], dtype=np.int64)),
+        const("first_two", np.array([0], dtype=np.int64)),
+        const("two", np.array([2], dtype=np.int64)),
+        const("one", np.array([1], dtype=np.int64)),
+    ]
+    nodes = [
+        helper.make_node("Shape", [INPUT], ["spike_shape"]),
+        helper.make_node("Slice", ["spike_shape", "first_two", "two"], ["time_batch"]),
+        helper.make_node("Slice", ["spike_shape", "one", "two"], ["batch"]),
+        helper.make_node("Reshape", [INPUT, "flat_shape"], ["flat_spikes"]),
+        helper.make_node("MatMulInteger", ["flat_spikes", "weight_mantissa"], ["flat_currents"]),
+        helper.make_node("Concat", ["time_batch", "neurons"], ["current_shape"], axis=0),
+        helper.make_node("Reshape", ["flat_currents", "current_shape"], ["currents"]),
+        helper.make_node("Concat", ["batch", "neurons"], ["state_shape"], axis=0),
+        helper.make_node(
+            "ConstantOfShape", ["state_shape"], ["v0"], value=numpy_helper.from_array(np.zeros(1, dtype=np.int64))
+        ),
+        helper.make_node(
+            "ConstantOfShape", ["batch"], ["sat0"], value=numpy_helper.from_array(np.zeros(1, dtype=np.int64))
+        ),
+    ]
+    return nodes, inits
+
+
+def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
+
+        scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
+        P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
+    """
+    sr = model.calibration.astype(np.float64)
+    colsum = sr.sum(axis=0)
+    n_places = sr.shape[1]
+    inits = [
+        const("s_double_prime", weighted_matrix(sr, model.config.assignment.gamma)),
+        const("s_r", sr),
+        const("inv_colsum", np.where(colsum > 0, 1.0 / np.where(colsum > 0, colsum, 1.0), 0.0)[None, :]),
+        const("f_zero", np.float64(0.0)),
+        const("f_one", np.float64(1.0)),
+        const("uniform", np.float64(1.0 / n_places)),
+        const("i_zero", np.int64(0)),
+    ]
+    nodes = [
+        helper.make_node("Cast", ["counts"], ["sq"], to=TensorProto.DOUBLE),
+        helper.make_node("MatMul", ["sq", "s_double_prime"], ["raw"]),
+        helper.make_node("Greater", ["counts", "i_zero"], ["active_b"]),
+        helper.make_node("Cast", ["active_b"], ["active"], to=TensorProto.DOUBLE),
+        helper.make_node("MatMul", ["active", "s_r"], ["covered"]),
+        helper.make_node("Mul", ["covered", "inv_colsum"], ["penalty"]),
+        helper.make_node("Mul", ["raw", "penalty"], ["scores"]),
+        helper.make_node("ReduceMin", ["scores", "axis1_outer"], ["lo"], keepdims=1),
+        helper.make_node("ReduceMax", ["scores", "axis1_outer"], ["hi"], keepdims=1),
+        helper.make_node("Sub", ["hi", "lo"], ["span"]),
+        helper.make_node("Greater", ["span", "f_zero"], ["spread"]),
+        helper.make_node("Where", ["spread", "span", "f_one"], ["span_safe"]),
+        helper.make_node("Sub", ["scores", "lo"], ["shifted"]),
+        helper.make_node("Div", ["shifted", "span_safe"], ["norm"]),
+        helper.make_node("ReduceSum", ["norm", "axis1_outer"], ["total"], keepdims=1),
+        helper.make_node("Greater", ["total", "f_zero"], ["positive"]),
+        helper.make_node("Where", ["positive", "total", "f_one"], ["total_safe"]),
+        helper.make_node("Div", ["norm", "total_safe"], ["dist"]),
+        helper.make_node("Where", ["spread", "dist", "uniform"], ["wprob"]),
+    ]
+    return nodes, inits
+
+
+def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: bool = False) -> onnx.ModelProto:
+    """The ONNX model of ``model``'s integer inference (see the module docstring)."""
+    check_exportable(model)
+    n = model.n_neurons
+    nodes, inits = currents_nodes(model)
+    inits.append(const("axis1_outer", np.array([1], dtype=np.int64)))
+    scan_outputs = ["v_final", "counts", "saturations"] + (["raster"] if with_raster else [])
+    nodes.append(
+        helper.make_node(
+            "Scan",
+            ["v0", "v0", "sat0", "currents"],
+            scan_outputs,
+            body=step_body(model, with_raster),
+            num_scan_inputs=1,
+        )
+    )
+    outputs = [
+        helper.make_tensor_value_info("counts", TensorProto.INT64, ["batch", n]),
+        helper.make_tensor_value_info("saturations", TensorProto.INT64, ["batch"]),
+    ]
+    if with_wprob:
+        head, head_inits = wprob_nodes(model)
+        nodes += head
+        inits += head_inits
+        outputs.append(helper.make_tensor_value_info("wprob", TensorProto.DOUBLE, ["batch", model.calibration.shape[1]]))
+    if with_raster:
+        outputs.append(helper.make_tensor_value_info("raster", TensorProto.BOOL, ["T", "batch", n]))
+    graph = helper.make_graph(
+        nodes,
+        "vprsnn_integer_inference",
+        [helper.make_tensor_value_info(INPUT, TensorProto.UINT8, ["T", "batch", model.n_inputs])],
+        outputs,
+        inits,
+    )
+    onnx_model = helper.make_model(
+        graph,
+        opset_imports=[helper.make_opsetid("", OPSET)],
+        ir_version=IR_VERSION,
+        producer_name="vprsnn-export",
+        doc_string=__doc__,
+    )
+    onnx_model.domain = DOMAIN
+    helper.set_model_props(onnx_model, metadata_props(model))
+    onnx.checker.check_model(onnx_model, full_check=True)
+    return onnx_model
+
+
+def metadata_props(model: FixedPointModel) -> dict[str, str]:
+    """Key facts as ONNX metadata_props (strings): widths, scales, encoder, T, source hash."""
+    cfg = model.config
+    return {
+        "vprsnn.format": "vprsnn-onnx/1",
+        "vprsnn.bits": str(model.bits),
+        "vprsnn.decay_dv": str(model.decay_dv),
+        "vprsnn.voltage_shift": str(model.voltage_shift),
+        "vprsnn.voltage_bits": str(model.voltage_bits),
+        "vprsnn.scale_exponent": str(model.scale_exponent),
+        "vprsnn.wta": "on" if cfg.network.wta else "off",
+        "vprsnn.timesteps": str(cfg.encoder.timesteps),
+        "vprsnn.encoder": f"Bernoulli(clip({cfg.encoder.rate_scale} * pixel, 0, 1)), seed {cfg.seed}",
+        "vprsnn.source_sha256": model.source_sha256,
+        "vprsnn.gamma": repr(cfg.assignment.gamma),
+    }
+
+
+def write_onnx(model: FixedPointModel, path: str | Path, *, with_wprob: bool = True, with_raster: bool = False) -> Path:
+    """Build, check and write the graph atomically."""
+    data = build_onnx(model, with_wprob=with_wprob, with_raster=with_raster).SerializeToString()
+    return atomic_write_bytes(path, data)
+
+
+def read_onnx(path: str | Path) -> onnx.ModelProto:
+    """Load and check an exported graph; a missing, truncated or foreign file is a ModelFileError."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError("no such ONNX file", path)
+    try:
+        loaded = onnx.load(str(path))
+        onnx.checker.check_model(loaded)
+    except Exception as exc:  # onnx raises DecodeError, ValidationError, ... on a damaged file
+        raise ModelFileError(f"not a readable ONNX model (truncated or corrupt: {type(exc).__name__}: {exc})", path) from None
+    props = {p.key: p.value for p in loaded.metadata_props}
+    if props.get("vprsnn.format") != "vprsnn-onnx/1":
+        raise ModelFileError("not an ONNX graph written by vprsnn-export (metadata vprsnn.format missing)", path)
+    return loaded
+
+
+def session(path: str | Path, threads: int | None = None):
+    """An onnxruntime CPU session on a checked file."""
+    import onnxruntime as ort
+
+    loaded = read_onnx(path)
+    options = ort.SessionOptions()
+    if threads is not None:
+        options.intra_op_num_threads = threads
+    try:
+        return ort.InferenceSession(loaded.SerializeToString(), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime's own Fail / InvalidGraph
+        raise ModelFileError(f"onnxruntime cannot load this graph ({exc})", path) from None
+
+
+def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> OnnxRun:
+    """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs]."""
+    array = np.asarray(spikes.numpy() if isinstance(spikes, torch.Tensor) else spikes)
+    if array.ndim != 3 or array.dtype not in (np.uint8, np.bool_):
+        raise ValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
+    names = [o.name for o in sess.get_outputs()]
+    pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
+    seconds = 0.0
+    for start in range(0, array.shape[0], batch):
+        chunk = np.ascontiguousarray(array[start : start + batch].astype(np.uint8).transpose(1, 0, 2))
+        began = time.perf_counter()
+        values = sess.run(None, {INPUT: chunk})
+        seconds += time.perf_counter() - began
+        for name, value in zip(names, values):
+            pieces[name].append(value)
+    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
+    raster = joined.get("raster")
+    return OnnxRun(
+        counts=joined["counts"],
+        saturations=joined["saturations"],
+        wprob=joined.get("wprob"),
+        raster=None if raster is None else raster.transpose(1, 0, 2),
+        seconds=seconds,
+    )
+
+
+def run_onnx_outputs(path: str | Path, spikes: torch.Tensor | np.ndarray, *, batch: int = 128, threads: int | None = None) -> OnnxRun:
+    """Every output of an exported graph for spikes (N, T, inputs)."""
+    return run_session(session(path, threads), spikes, batch)
+
+
+def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
+    """Output spike counts (N, neurons) int64 of an exported graph on onnxruntime (CPU)."""
+    return run_onnx_outputs(path, spikes).counts
