@@ -51,6 +51,7 @@ class IntegerRun:
     raster: torch.Tensor | None  # (N, T, neurons) bool, when recorded
     final_voltage: torch.Tensor  # (N, neurons) int64: V after each presentation's last step
     saturations: int  # voltage clips to +-(2**23 - 1), counted over all presentations
+    max_current: int = 0  # largest a_j[t] seen (unshifted): Loihi's 24-bit u holds a << 6 while a < 2**17
 
     @property
     def mean_candidates(self) -> float:
@@ -79,6 +80,34 @@ def matmul_dtype(model: FixedPointModel, device: torch.device) -> torch.dtype:
     return torch.float64
 
 
+@dataclass(frozen=True)
+class PreparedModel:
+    """The model's integers as tensors on one device, in the form the loop uses."""
+
+    weights: torch.Tensor  # (inputs, neurons) q_ij << shift, float32 or float64 (exact, see matmul_dtype)
+    threshold: torch.Tensor  # (neurons,) int64 theta_j << shift
+    multipliers: torch.Tensor | None  # (neurons,) int64 m_j; None when all equal (the WTA then compares a_j)
+    keep: int  # 4096 - dv
+    limit: int  # 2**23 - 1
+    shift: int
+    wta: bool
+
+
+def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
+    multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
+    return PreparedModel(
+        weights=torch.as_tensor(
+            model.weight_mantissa.astype(np.int64) << model.voltage_shift, dtype=matmul_dtype(model, device), device=device
+        ),
+        threshold=torch.as_tensor(model.threshold.astype(np.int64) << model.voltage_shift, device=device),
+        multipliers=None if bool((multipliers == multipliers[0]).all()) else multipliers,
+        keep=(1 << DECAY_BITS) - model.decay_dv,
+        limit=model.voltage_limit,
+        shift=model.voltage_shift,
+        wta=model.config.network.wta,
+    )
+
+
 @dataclass
 class IntegerNetwork:
     """A fixed-point model prepared for the fast simulator on one device.
@@ -89,28 +118,17 @@ class IntegerNetwork:
     model: FixedPointModel
     device: torch.device | None = None
     saturations: int = 0
-    _prepared: dict = field(default_factory=dict, init=False, repr=False)
+    prepared: PreparedModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
-        model, device = self.model, self.device
-        dtype = matmul_dtype(model, device)
-        multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
-        self._prepared = {
-            "weights": torch.as_tensor(
-                model.weight_mantissa.astype(np.int64) << model.voltage_shift, dtype=dtype, device=device
-            ),
-            "threshold": torch.as_tensor(model.threshold.astype(np.int64) << model.voltage_shift, device=device),
-            "multipliers": None if bool((multipliers == multipliers[0]).all()) else multipliers,
-            "keep": (1 << DECAY_BITS) - model.decay_dv,
-            "limit": model.voltage_limit,
-        }
+        self.prepared = prepare(self.model, self.device)
 
     def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> IntegerRun:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
-        run = simulate_prepared(self._prepared, spikes, self.model.config.network.wta, isolation, record, self.device)
+        run = run_prepared(self.prepared, spikes, isolation=isolation, record=record)
         self.saturations += run.saturations
         return run
 
@@ -152,84 +170,96 @@ def shifted_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tenso
     return torch.matmul(dense.view(timesteps * n, n_inputs), weights).view(timesteps, n, -1).to(torch.int32)
 
 
-def simulate_prepared(
-    prep: dict, spikes: torch.Tensor, wta: bool, isolation: bool, record: bool, device: torch.device
-) -> IntegerRun:
+@dataclass
+class ChunkRun:
+    """What :func:`recur` returns for one chunk (laid out time-major)."""
+
+    voltage: torch.Tensor  # (B, neurons) int64 after the last step
+    counts: torch.Tensor  # (B, neurons) int64
+    candidates: torch.Tensor  # (T, B) int32
+    raster: torch.Tensor | None  # (T, B, neurons) bool
+    saturations: int
+    max_current: int  # shifted
+
+
+def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool) -> IntegerRun:
+    """Chunks of QUERY_CHUNK presentations in parallel (isolation), or one presentation at a time carrying V."""
     n, timesteps, _ = spikes.shape
-    n_neurons = prep["threshold"].shape[0]
+    n_neurons = prep.threshold.shape[0]
+    device = prep.threshold.device
     counts = torch.zeros((n, n_neurons), dtype=torch.int64)
     n_candidates = torch.zeros((n, timesteps), dtype=torch.int32)
     raster = torch.zeros((n, timesteps, n_neurons), dtype=torch.bool) if record else None
     final_voltage = torch.zeros((n, n_neurons), dtype=torch.int64)
-    saturations = 0
+    saturations = max_current = 0
     voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)
     chunk = QUERY_CHUNK if isolation else 1
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
-        currents = shifted_currents(spikes[start:stop], prep["weights"])
         if isolation:
             voltage = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
-        voltage, step = recur(prep, currents, voltage, wta, record)
-        counts[start:stop] = step["counts"].cpu()
-        n_candidates[start:stop] = step["candidates"].T.cpu()
+        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), voltage, record)
+        voltage = step.voltage
+        counts[start:stop] = step.counts.cpu()
+        n_candidates[start:stop] = step.candidates.T.cpu()
         final_voltage[start:stop] = voltage.cpu()
-        saturations += step["saturations"]
+        saturations += step.saturations
+        max_current = max(max_current, step.max_current >> prep.shift)
         if raster is not None:
-            raster[start:stop] = step["raster"].transpose(0, 1).cpu()
-    return IntegerRun(counts, n_candidates, raster, final_voltage, saturations)
+            raster[start:stop] = step.raster.transpose(0, 1).cpu()
+    return IntegerRun(counts, n_candidates, raster, final_voltage, saturations, max_current)
 
 
-def recur(prep: dict, currents: torch.Tensor, voltage: torch.Tensor, wta: bool, record: bool) -> tuple[torch.Tensor, dict]:
-    """The loop over t for currents (T, B, neurons) int32 from the given voltage (B, neurons) int64.
+def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:
+    """The loop over t for shifted currents (T, B, neurons) int32, starting from voltage (B, neurons) int64.
 
-    Returns the final voltage and {counts (B, neurons), candidates (T, B), raster (T, B, neurons) | None, saturations}.
+    Per step (see the module docstring): V = ((V keep) >> 12) + A[t]; clip and count
+    if possible; C = V > thr; WTA winner = first argmax of (a m if in C else -1),
+    fired iff that maximum is >= 0; V[C] = 0. Winners are gathered after the loop.
     """
     timesteps, batch, n_neurons = currents.shape
     device = currents.device
-    threshold, keep, limit, multipliers = prep["threshold"], prep["keep"], prep["limit"], prep["multipliers"]
-    may_saturate = bool((currents.amax(dim=(0, 1)).to(torch.int64) + threshold > limit).any())
+    threshold, limit, multipliers = prep.threshold, prep.limit, prep.multipliers
+    peak = currents.amax(dim=(0, 1)).to(torch.int64) if timesteps and batch else torch.zeros_like(threshold)
+    may_saturate = bool((peak + threshold > limit).any())
     voltage = voltage.clone()
     candidates = torch.empty((batch, n_neurons), dtype=torch.bool, device=device)
     n_candidates = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
     score_dtype = torch.int32 if multipliers is None else torch.int64
     minus_one = torch.tensor(-1, dtype=score_dtype, device=device)
     score = torch.empty((batch, n_neurons), dtype=score_dtype, device=device)
-    best = torch.empty((timesteps, batch), dtype=score_dtype, device=device)
-    winner = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
+    best: list[torch.Tensor] = []
+    winner: list[torch.Tensor] = []
     counts = torch.zeros((batch, n_neurons), dtype=torch.int64, device=device)
     raster = torch.zeros((timesteps, batch, n_neurons), dtype=torch.bool, device=device) if record else None
     saturations = torch.zeros((), dtype=torch.int64, device=device)
     for t in range(timesteps):
         current = currents[t]
-        voltage.mul_(keep).bitwise_right_shift_(DECAY_BITS).add_(current)
+        voltage.mul_(prep.keep).bitwise_right_shift_(DECAY_BITS).add_(current)
         if may_saturate:
-            over = voltage > limit
-            saturations += over.sum()
+            saturations += (voltage > limit).sum()
             voltage.clamp_(max=limit)
         torch.gt(voltage, threshold, out=candidates)
         torch.sum(candidates, dim=1, out=n_candidates[t])
-        if wta:
+        if prep.wta:
             if multipliers is None:
                 torch.where(candidates, current, minus_one, out=score)
             else:
                 torch.where(candidates, torch.mul(current, multipliers, out=score), minus_one, out=score)
-            torch.max(score, dim=1, out=(best[t], winner[t]))
+            value, index = score.max(dim=1)
+            best.append(value)
+            winner.append(index)
         else:
             counts.add_(candidates)
             if raster is not None:
                 raster[t] = candidates
         voltage.masked_fill_(candidates, 0)
-    if wta:
-        fired = best >= 0
-        counts.scatter_add_(1, winner.T, fired.T.to(torch.int64))
+    if prep.wta and timesteps:
+        fired, winners = torch.stack(best) >= 0, torch.stack(winner)
+        counts.scatter_add_(1, winners.T, fired.T.to(torch.int64))
         if raster is not None:
-            raster.scatter_(2, winner.unsqueeze(2), fired.unsqueeze(2))
-    return voltage, {
-        "counts": counts,
-        "candidates": n_candidates.to(torch.int32),
-        "raster": raster,
-        "saturations": int(saturations),
-    }
+            raster.scatter_(2, winners.unsqueeze(2), fired.unsqueeze(2))
+    return ChunkRun(voltage, counts, n_candidates.to(torch.int32), raster, int(saturations), int(peak.max()))
 
 
 def step_agreement(raster_a: torch.Tensor, raster_b: torch.Tensor) -> dict[str, float]:

@@ -21,7 +21,12 @@ needs, are in the metadata. Hard WTA has no NIR primitive: the recurrent ``wta``
 Linear carries -inhibition (1 - I) (0 by default) and the metadata states the rule:
 every neuron over threshold resets to 0, and of those only the one with the largest
 a_j m_j (float: I_j) emits a spike. A consumer that ignores the metadata therefore emits
-every candidate, a superset of the network's spikes.
+every candidate, a superset of the network's spikes. ``wta_node=False`` leaves the
+``wta`` node out for importers that mishandle recurrent subgraphs (snnTorch 1.0).
+
+Alongside: :func:`generic_consumer_raster` runs a file through nirtorch with NIR's own
+LIF equations and :func:`snntorch_consumer_raster` through snnTorch's importer, so the
+agreement of a metadata-blind consumer can be measured (:func:`spike_agreement`).
 """
 
 from __future__ import annotations

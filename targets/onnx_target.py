@@ -188,6 +188,7 @@ def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Tens
         const("f_one", np.float64(1.0)),
         const("uniform", np.float64(1.0 / n_places)),
         const("i_zero", np.int64(0)),
+        const("axis1_outer", np.array([1], dtype=np.int64)),
     ]
     nodes = [
         helper.make_node("Cast", ["counts"], ["sq"], to=TensorProto.DOUBLE),
@@ -218,7 +219,6 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
     check_exportable(model)
     n = model.n_neurons
     nodes, inits = currents_nodes(model)
-    inits.append(const("axis1_outer", np.array([1], dtype=np.int64)))
     scan_outputs = ["v_final", "counts", "saturations"] + (["raster"] if with_raster else [])
     nodes.append(
         helper.make_node(

@@ -29,6 +29,15 @@ from vprsnn_export.trainer.stdp import initial_weights
 SMALL = {"network.n_neurons": 12, "encoder.timesteps": 24}
 
 
+@pytest.fixture(autouse=True)
+def one_thread():
+    """Small tensors: one intra-op thread avoids oversubscribing the shared cores."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def stdp_like_weights(n_inputs: int = 784, n_neurons: int = 12, seed: int = 0) -> np.ndarray:
     """Non-negative, column-normalised, skewed (a few large weights per column), like trained STDP weights."""
     rng = np.random.default_rng(seed)

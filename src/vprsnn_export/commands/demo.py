@@ -1,63 +1,140 @@
-"""`vprsnn-export demo`: the main job on the embedded synthetic route, no download needed."""
+"""`vprsnn-export demo`: the whole chain on the embedded synthetic route, no download needed.
+
+train -> quantise (8, 4, 2 bits, per-neuron scales, deployed calibration) -> export (NIR,
+Loihi-style, ONNX) and read every file back -> verify against float -> report.
+
+The paper's full configuration (T = 300, 60 epochs) takes several minutes per network
+on two CPU cores, so the demo trains with the smaller *demo profile* below; it is
+written into the checkpoint's config (and so into every model and the report) and
+printed at the start. The verification is exact across implementations whatever the
+profile; only the accuracy of the network depends on it.
+
+Exit code: 0 when the chain ran and every cross-implementation check is exact (a bit
+width that misses its accuracy tolerance is a finding the report shows, not an error);
+1 when an exported file or the reference stepper disagrees with the integer simulator.
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
-from ..checkpoint import save_checkpoint
+from ..checkpoint import checkpoint_sha256, save_checkpoint
 from ..config import Config
 from ..dataset import load_dataset
 from ..device import resolve_device
-from ..fileio import atomic_write_text
+from ..errors import EXIT_CHECK_FAILED
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
 
 DEMO_DATA = "synthetic"
 DEMO_REFERENCE = "summer"
 DEMO_QUERY = "winter"
 DEMO_KS = (1, 3, 5)
+DEMO_BITS = (8, 4, 2)
+#: The demo profile: the paper's configuration with a shorter window and fewer epochs.
+DEMO_PROFILE = {"encoder.timesteps": 150, "train.epochs": 20}
+#: --quick (tests): a tiny network on a short route.
+QUICK_PROFILE = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 48}
+QUICK_PLACES = 16
+SUMMARY_COLUMNS = (
+    ("bits", "bits"),
+    ("verdict", "verdict"),
+    ("exports", "NIR / Loihi / ONNX read back"),
+    ("accuracy", "acc W+Prob k=1 %"),
+    ("r_at_100p", "R@100P W+Prob k=5 %"),
+    ("delta", "Δ vs float (pts)"),
+    ("winner", "same winner %"),
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("demo", help="train and evaluate on the embedded synthetic route")
+    parser = subparsers.add_parser(
+        "demo", help="train, quantise, export, verify and report on the embedded synthetic route"
+    )
     parser.add_argument("--out", default="vprsnn-demo", help="output folder (default: ./vprsnn-demo)")
     parser.add_argument("--seed", type=int, default=Config().seed, help="seed")
+    parser.add_argument("--quick", action="store_true", help=argparse.SUPPRESS)  # tiny run for the tests
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
-def demo_config(seed: int) -> Config:
-    """The paper's configuration; only the seed is chosen here."""
-    return Config().replace(seed=seed)
+def demo_config(seed: int, quick: bool = False) -> Config:
+    """The paper's configuration with the demo profile (or the test profile) applied."""
+    return Config().replace(**{**(QUICK_PROFILE if quick else DEMO_PROFILE), "seed": seed})
+
+
+def summary_rows(run_result: dict) -> list[dict]:
+    top = max(DEMO_KS)
+    rows = []
+    for result in run_result["bits"]:
+        metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
+        cross = result["cross_implementation"]
+        targets = [t for t in ("nir", "loihi", "onnx") if t in cross["files"]]
+        wprob, aggregated = metrics[("wprob", 1)], metrics[("wprob", top)]
+        rows.append({
+            "bits": result["bits"],
+            "verdict": "PASS" if result["passed"] else "FAIL",
+            "exports": ("exact" if cross["passed"] else f"{cross['n_failed']} DIFFER") + f" ({len(targets)} targets)",
+            "accuracy": f"{100 * wprob['accuracy']:.1f}",
+            "r_at_100p": f"{100 * aggregated['r_at_100p']:.1f}",
+            "delta": f"{100 * aggregated['delta']['r_at_100p']:+.1f}",
+            "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
+        })
+    return rows
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..runtime.evaluation import ReadoutOptions, evaluate_float
+    from ..runtime.evaluation import ReadoutOptions
+    from ..runtime.report import write_report
+    from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    cfg = demo_config(args.seed)
+    cfg = demo_config(args.seed, args.quick)
     device = resolve_device(args.device)
     progress = not args.quiet
     started = time.perf_counter()
-    dataset = load_dataset(DEMO_DATA, [DEMO_REFERENCE, DEMO_QUERY], cfg.preprocess, progress=progress)
-    say = (lambda msg: print(msg, file=sys.stderr)) if progress else (lambda msg: None)
-    say(f"[demo] synthetic route: {len(dataset.place_ids)} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}")
+    data = f"{DEMO_DATA}:{QUICK_PLACES}" if args.quick else DEMO_DATA
+    profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
+
+    def say(message: str) -> None:
+        if progress:
+            print(f"[demo {time.perf_counter() - started:5.1f} s] {message}", file=sys.stderr)
+
+    dataset = load_dataset(data, [DEMO_REFERENCE, DEMO_QUERY], cfg.preprocess, progress=progress)
+    say(f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}")
+    say("profile: " + ", ".join(f"{k} = {v}" for k, v in profile.items())
+        + f" (the paper: encoder.timesteps = {Config().encoder.timesteps}, train.epochs = {Config().train.epochs}); "
+        "written into the checkpoint's config")
     ckpt = train_and_calibrate(dataset, [DEMO_REFERENCE], cfg, device=device, progress=progress,
                                selection={"subset": None, "places": None})
     ckpt_path = save_checkpoint(out / "float.npz", ckpt)
-    say(f"[demo] trained {cfg.train.epochs} epochs in {time.perf_counter() - started:.1f} s -> {ckpt_path}")
-    options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=DEMO_KS)
-    result = evaluate_float(
-        ckpt, dataset.traversal(DEMO_QUERY), dataset.place_ids, DEMO_QUERY, options, device=device,
-        reference_images={DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)},
+    say(f"1/4 trained {cfg.train.epochs} epochs -> {ckpt_path}")
+    options = VerifyOptions(readout=ReadoutOptions(gamma=cfg.assignment.gamma, ks=DEMO_KS), bits=DEMO_BITS)
+    say(f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits (per-neuron, deployed calibration) and exporting "
+        "NIR, Loihi-style and ONNX; every file is read back and run")
+    result = verify_checkpoint(
+        ckpt, checkpoint_sha256(ckpt_path), dataset.traversal(DEMO_QUERY), dataset.place_ids, DEMO_QUERY, options,
+        reference_images={DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)}, export_dir=out / "deploy",
+        device=device, progress=progress, label="demo",
     )
-    payload = {"config": cfg.to_dict(), "results": result["rows"], "spike_stats": result["spike_stats"]}
-    atomic_write_text(out / "evaluation.json", json.dumps(payload, indent=2))
-    print(format_table(result["rows"], RESULT_COLUMNS))
-    print(f"\nwrote {out / 'evaluation.json'} in {time.perf_counter() - started:.1f} s")
-    return 0
+    result["checkpoint"] = str(ckpt_path)
+    say(f"3/4 verified against float on the same {result['n_queries']} query presentations")
+    settings = {**options.to_dict(), "query": DEMO_QUERY, "data": data, "subset": None, "places": None, "seeds": None,
+                "checkpoints": [str(ckpt_path)], "device": args.device, "demo_profile": profile}
+    command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (["--quick"] if args.quick else [])
+    report = build_report([result], settings, command=command, seconds=time.perf_counter() - started)
+    written = write_report(report, out / "report")
+    say(f"4/4 report written ({written['json']})")
+    print("float network (" + ", ".join(f"{k} = {v}" for k, v in profile.items()) + "):")
+    print(format_table(result["float"]["metrics"], RESULT_COLUMNS))
+    print("\nquantised and deployed vs float (tolerances: docs/verify.md):")
+    print(format_table(summary_rows(result), SUMMARY_COLUMNS))
+    exact = all(r["cross_implementation"]["passed"] for r in result["bits"])
+    print(f"\nexports: {out / 'deploy'}   cross-implementation: {'all exact' if exact else 'DIFFERENCES FOUND'}   "
+          f"time: {time.perf_counter() - started:.0f} s")
+    print(f"report: {written['html'].resolve()}")
+    return 0 if exact else EXIT_CHECK_FAILED

@@ -7,7 +7,6 @@ import importlib
 import json
 import pkgutil
 import shlex
-import sys
 from pathlib import Path
 
 from .. import experiments
@@ -68,15 +67,13 @@ def run(args: argparse.Namespace) -> int:
     module = modules[args.name]
     settings = settings_from_args(args)
     results = module.run(settings)
-    command = "vprsnn-export " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = "vprsnn-export " + " ".join(shlex.quote(a) for a in args.argv)
     results["command"] = command
     out = Path(args.out)
     stem = f"{args.name}_quick" if args.quick else args.name
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / f"{stem}.json", json.dumps(results, indent=1, default=float))
-    body = module.render(results, out)
-    if args.quick:
-        body = body.replace(f"]({args.name}", f"]({stem}")
+    body = module.render(results, out, stem)
     prov = results["provenance"]
     header = (
         f"# Experiment: {args.name}\n\n{module.DESCRIPTION}.\n\n"

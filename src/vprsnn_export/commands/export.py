@@ -106,7 +106,7 @@ def integer_model(source, bits: int | None, digest: str, targets: tuple[str, ...
     if bits is None:
         raise OptionError(
             f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
-            "--per-neuron --out DIR` and export the model it writes, or add --quantize 8 here"
+            "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
         )
     return quantize_checkpoint(source, digest, check_bits(bits), per_neuron=True, scale_method="max")
 
@@ -246,23 +246,34 @@ def check_loihi(folder: Path, model, spikes: torch.Tensor) -> list[dict]:
                 "the Lava run itself: tests/targets/lava_conformance (Python 3.10)")]
 
 
-def run(args: argparse.Namespace) -> int:
-    targets = parse_targets(args.to)
-    source = load_model(args.model)
-    digest = sha256_file(args.model)
-    model = integer_model(source, args.quantize, digest, targets)
-    out = Path(args.out)
-    written = export_all(source, model, targets, out, digest, args.nir_inhibition, not args.nir_no_wta_node)
-    notes = consumer_statements(source, model, targets, not args.nir_no_wta_node, args.nir_inhibition)
+def export_and_check(
+    source,
+    model,
+    targets: tuple[str, ...],
+    out: Path,
+    *,
+    digest: str,
+    model_path: str = "",
+    inhibition: float = 0.0,
+    wta_node: bool = True,
+    spikes: torch.Tensor | None = None,
+    spikes_label: str = "",
+) -> dict[str, Any]:
+    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
+
+    ``source`` is the Checkpoint or FixedPointModel for NIR, ``model`` the fixed-point model for
+    the integer targets (``integer_model``). This is the whole command without argument parsing,
+    for callers such as ``demo``.
+    """
+    written = export_all(source, model, targets, out, digest, inhibition, wta_node)
     manifest: dict[str, Any] = {
-        "model": str(args.model),
+        "model": model_path,
         "model_sha256": digest,
         "kind": "float checkpoint" if isinstance(source, Checkpoint) else "fixed-point model",
         "files": {t: [{"path": str(p), "sha256": sha256_file(p)} for p in paths] for t, paths in written.items()},
-        "consumers": notes,
+        "consumers": consumer_statements(source, model, targets, wta_node, inhibition),
     }
-    if args.check:
-        spikes, described = check_spikes(args, source)
+    if spikes is not None:
         rows = []
         if "nir" in written:
             rows += check_nir(written["nir"][0], source, spikes)
@@ -270,19 +281,32 @@ def run(args: argparse.Namespace) -> int:
             rows += check_onnx(written["onnx"][0], model, spikes)
         if "loihi" in written:
             rows += check_loihi(out / LOIHI_DIR, model, spikes)
-        manifest["checks"] = {"spikes": described, "rows": rows}
+        manifest["checks"] = {"spikes": spikes_label, "rows": rows, "passed": all(r["result"] != "FAILED" for r in rows)}
     atomic_write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2))
+    return manifest
+
+
+def run(args: argparse.Namespace) -> int:
+    targets = parse_targets(args.to)
+    source = load_model(args.model)
+    digest = sha256_file(args.model)
+    model = integer_model(source, args.quantize, digest, targets)
+    out = Path(args.out)
+    spikes, label = check_spikes(args, source) if args.check else (None, "")
+    manifest = export_and_check(
+        source, model, targets, out, digest=digest, model_path=str(args.model), inhibition=args.nir_inhibition,
+        wta_node=not args.nir_no_wta_node, spikes=spikes, spikes_label=label,
+    )
     if args.json:
         print_json(manifest)
     else:
-        for target, paths in written.items():
-            print(f"{target}: {', '.join(str(p) for p in paths)}")
-            if target in notes:
-                print(f"  {notes[target]}")
+        for target, files in manifest["files"].items():
+            print(f"{target}: {', '.join(f['path'] for f in files)}")
+            if target in manifest["consumers"]:
+                print(f"  {manifest['consumers'][target]}")
         if args.check:
-            print(f"\nchecks on {manifest['checks']['spikes']}:")
+            print(f"\nchecks on {label}:")
             print(format_table(manifest["checks"]["rows"], CHECK_COLUMNS))
         if not args.quiet:
             print(f"\nwrote {out / MANIFEST_NAME}", file=sys.stderr)
-    failed = args.check and any(r["result"] == "FAILED" for r in manifest["checks"]["rows"])
-    return 1 if failed else 0
+    return 0 if not args.check or manifest["checks"]["passed"] else 1

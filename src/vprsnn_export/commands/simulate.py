@@ -70,6 +70,7 @@ def evaluate_fixed_point(
         "rows": rows,
         "spike_stats": spike_statistics(run.candidates_per_step.numpy(), counts),
         "saturations": run.saturations,
+        "max_current": run.max_current,
         "query_counts": counts,
     }
     if compare:
@@ -109,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
             "bits": model.bits,
             "quantisation": model.quantisation,
             "saturations": result["saturations"],
+            "max_current": result["max_current"],
             "results": result["rows"],
             "spike_stats": result["spike_stats"],
         }

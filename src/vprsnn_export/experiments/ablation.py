@@ -39,5 +39,5 @@ def run(settings: Settings) -> dict:
             "per_seed": per_seed, "provenance": provenance(settings, started)}
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     return rows_table(results["summary"], ("variant", "strategy", "k")) + "\n"

@@ -37,7 +37,7 @@ def run(settings: Settings) -> dict:
             "provenance": provenance(settings, started)}
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     summary = results["summary"]
     series = {}
     for rule in RULES:
@@ -45,6 +45,6 @@ def render(results: dict, out_dir: Path) -> str:
         for metric, label in (("r_at_100p", "R@100P"), ("accuracy", "accuracy")):
             series[f"{rule} rule {label}"] = ([100 * r[metric]["mean"] for r in rows],
                                               [100 * r[metric]["std"] for r in rows])
-    line_plot(out_dir / f"{NAME}.png", list(KS), series, xlabel="k (frames)", ylabel="%",
+    line_plot(out_dir / f"{stem}.png", list(KS), series, xlabel="k (frames)", ylabel="%",
               title="Sequence aggregation (W+Prob), consecutive places")
-    return rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({NAME}.png)\n"
+    return rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({stem}.png)\n"

@@ -47,7 +47,7 @@ def run(settings: Settings) -> dict:
     }
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     parts = []
     for key, title in (("subset", "100-place subset (spread along the route), k = 1"),
                        ("consecutive", f"consecutive places ({results['provenance']['settings']['consecutive']}), "

@@ -35,8 +35,8 @@ class Settings:
     @classmethod
     def quick_settings(cls, **changes) -> "Settings":
         base = dict(
-            quick=True, data="synthetic:40", subset=None, consecutive="0:40", seeds=(1, 2),
-            overrides={"encoder.timesteps": 60, "train.epochs": 3, "network.n_neurons": 100},
+            quick=True, data="synthetic:24", subset=None, consecutive="0:24", seeds=(1, 2),
+            overrides={"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 64},
         )
         base.update(changes)
         return cls(**base)
@@ -74,7 +74,11 @@ def pct(summary: dict) -> str:
     return f"{100 * summary['mean']:.1f} ± {100 * summary['std']:.1f}"
 
 
-CACHE = Path.home() / ".cache" / "vprsnn-export" / "checkpoints"
+def cache_dir() -> Path:
+    """Where experiments cache trained checkpoints: $VPRSNN_CACHE, else ~/.cache/vprsnn-export/checkpoints."""
+    import os
+
+    return Path(os.environ.get("VPRSNN_CACHE", Path.home() / ".cache" / "vprsnn-export" / "checkpoints"))
 
 
 def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_key: str):
@@ -94,7 +98,7 @@ def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection
         "config": cfg.to_dict(), "manifest": data.manifest_sha256, "places": data.place_ids.tolist(),
         "reference": settings.reference, "version": __version__,
     }, sort_keys=True)
-    path = CACHE / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    path = cache_dir() / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
     if path.exists():
         return load_checkpoint(path)
     ckpt = train_and_calibrate(data, [settings.reference], cfg, device=resolve_device(settings.device),

@@ -66,7 +66,7 @@ def run(settings: Settings) -> dict:
             "per_seed": per_seed, "velocity_grid": list(VELOCITY_GRID), "provenance": provenance(settings, started)}
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     return (rows_table(results["summary"], ("condition", "velocity")) +
             f"\n\nEstimated velocity: searched per window over {results['velocity_grid'][0]} .. "
             f"{results['velocity_grid'][-1]} places/frame in steps of 0.05 (keeps the best-scoring window).\n")

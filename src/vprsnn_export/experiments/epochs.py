@@ -64,7 +64,7 @@ def run(settings: Settings) -> dict:
     return {"experiment": NAME, "curve": curve, "per_seed": per_seed, "provenance": provenance(settings, started)}
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     curve = results["curve"]
     epochs = [c["epoch"] for c in curve]
     series = {
@@ -77,7 +77,7 @@ def render(results: dict, out_dir: Path) -> str:
             ("Standard k=1 accuracy", "standard_k1_accuracy"),
         )
     }
-    line_plot(out_dir / "epochs.png", epochs, series, xlabel="training epochs", ylabel="%", log_x=True,
+    line_plot(out_dir / f"{stem}.png", epochs, series, xlabel="training epochs", ylabel="%", log_x=True,
               title="Accuracy and R@100P vs epochs (summer -> winter, 100 places)")
     lines = [
         "| epochs | W+Prob k=1 acc % | W+Prob k=1 R@100P % | W+Prob k=5 acc % | W+Prob k=5 R@100P % | Standard k=1 acc % | s/epoch |",
@@ -88,4 +88,4 @@ def render(results: dict, out_dir: Path) -> str:
             "wprob_k1_accuracy", "wprob_k1_r_at_100p", "wprob_k5_accuracy", "wprob_k5_r_at_100p",
             "standard_k1_accuracy")]
         lines.append(f"| {c['epoch']} | " + " | ".join(cells) + f" | {c['seconds_per_epoch']['mean']:.2f} |")
-    return "\n".join(lines) + "\n\n![accuracy vs epochs](epochs.png)\n"
+    return "\n".join(lines) + f"\n\n![accuracy vs epochs]({stem}.png)\n"

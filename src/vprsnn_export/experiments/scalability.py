@@ -17,7 +17,7 @@ DESCRIPTION = "AUC-PR and accuracy (W+Prob, k=1) vs N in {25, 50, 100, 200, 400}
 FULL_SIZES = (25, 50, 100, 200, 400)
 FULL_STARTS = (200, 1000, 1800)
 QUICK_SIZES = (10, 20)
-QUICK_STARTS = (0, 20)
+QUICK_STARTS = (0, 4)
 
 
 def run(settings: Settings) -> dict:
@@ -43,12 +43,12 @@ def run(settings: Settings) -> dict:
     return {"experiment": NAME, "seed": seed, "points": points, "provenance": provenance(settings, started)}
 
 
-def render(results: dict, out_dir: Path) -> str:
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     points = results["points"]
     x = [p["n_places"] for p in points]
     series = {label: ([100 * p[key]["mean"] for p in points], [100 * p[key]["std"] for p in points])
               for label, key in (("AUC-PR", "auc_pr"), ("accuracy", "accuracy"), ("R@100P", "r_at_100p"))}
-    line_plot(out_dir / f"{NAME}.png", x, series, xlabel="reference places N", ylabel="% (W+Prob, k=1)",
+    line_plot(out_dir / f"{stem}.png", x, series, xlabel="reference places N", ylabel="% (W+Prob, k=1)",
               title="Scalability: sliding windows of consecutive places", log_x=True)
     lines = ["| N | windows | AUC-PR % | accuracy % | R@100P % |", "|---:|---:|---:|---:|---:|"]
     for p in points:
@@ -56,4 +56,4 @@ def render(results: dict, out_dir: Path) -> str:
                      + " | ".join(f"{100 * p[k]['mean']:.1f} ± {100 * p[k]['std']:.1f}"
                                   for k in ("auc_pr", "accuracy", "r_at_100p")) + " |")
     return "\n".join(lines) + f"\n\nOne network (seed {results['seed']}) per window; ± is over windows "\
-        f"(starts {', '.join(str(w['start']) for w in points[0]['windows'])}).\n\n![scalability]({NAME}.png)\n"
+        f"(starts {', '.join(str(w['start']) for w in points[0]['windows'])}).\n\n![scalability]({stem}.png)\n"

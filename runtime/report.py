@@ -1,0 +1,572 @@
+"""report.json -> report.md and a self-contained report.html; several reports -> one, as mean ± std.
+
+The report is built from the JSON alone (nothing is re-run), so ``vprsnn-export report``
+can rebuild it anywhere. The document is a list of blocks (headings, paragraphs,
+tables, figures) rendered twice: Markdown, whose figures are PNG files in ``plots/``
+beside it, and HTML, whose figures are base64 PNGs inline (matplotlib Agg, no external
+asset of any kind).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from vprsnn_export.errors import VprError  # noqa: E402
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
+
+from .verify import METRICS, SCHEMA, TOLERANCE_MEANING, build_report, summarise_runs  # noqa: E402
+
+REPORT_JSON = "report.json"
+REPORT_MD = "report.md"
+REPORT_HTML = "report.html"
+PLOTS_DIR = "plots"
+METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
+STRATEGY_TITLES = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob"}
+
+
+class ReportError(VprError):
+    """A missing or malformed report.json."""
+
+
+# ---------------------------------------------------------------------------- reading and combining
+
+
+def report_path(path: str | Path) -> Path:
+    """A run folder (holding report.json) or the report.json itself."""
+    path = Path(path)
+    return path / REPORT_JSON if path.is_dir() else path
+
+
+def load_report(path: str | Path) -> dict[str, Any]:
+    file = report_path(path)
+    if not file.is_file():
+        raise ReportError(f"no {REPORT_JSON} here (give a folder written by verify, or its {REPORT_JSON})", file)
+    try:
+        report = json.loads(file.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ReportError(f"not valid JSON ({exc})", file) from None
+    if not isinstance(report, dict) or report.get("schema") != SCHEMA:
+        found = report.get("schema") if isinstance(report, dict) else type(report).__name__
+        raise ReportError(f"not a verify report (schema {found!r}, expected {SCHEMA!r})", file)
+    if not isinstance(report.get("runs"), list) or not report["runs"]:
+        raise ReportError("the report holds no runs", file)
+    return report
+
+
+def combine_reports(reports: Sequence[Mapping[str, Any]], sources: Sequence[str] | None = None) -> dict[str, Any]:
+    """One report holding every run of ``reports``; the summary becomes mean ± std over all of them.
+
+    Settings come from the first report; keys on which the others differ are listed
+    under ``settings_differ`` (and shown in the report).
+    """
+    if not reports:
+        raise ReportError("no reports to combine")
+    if len(reports) == 1:
+        combined = dict(reports[0])
+        combined["summary"] = summarise_runs(combined["runs"])
+        return combined
+    runs = [run for report in reports for run in report["runs"]]
+    settings = dict(reports[0]["settings"])
+    differ = sorted({key for report in reports[1:] for key in set(settings) | set(report["settings"])
+                     if report["settings"].get(key) != settings.get(key)})
+    combined = build_report(runs, settings, command=None)
+    combined["combined_from"] = list(sources or [])
+    combined["commands"] = [report.get("command") for report in reports]
+    combined["settings_differ"] = differ
+    combined["seconds"] = sum(float(report.get("seconds") or 0) for report in reports)
+    return combined
+
+
+# ---------------------------------------------------------------------------- blocks
+
+
+@dataclass
+class Block:
+    kind: str  # h1, h2, h3, p, table, figure, pre
+    text: str = ""
+    headers: Sequence[str] = ()
+    rows: Sequence[Sequence[str]] = ()
+    image: bytes = b""
+    name: str = ""
+    status: Sequence[str | None] = ()  # per table row: "pass", "fail" or None (HTML colours)
+    title: str = ""  # figures: the heading above the image (``text`` is the caption)
+
+
+def pct(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{100 * value:.{digits}f}"
+
+
+def signed_pct(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{100 * value:+.{digits}f}"
+
+
+def ms(summary: Mapping[str, Any] | None, *, percent: bool = True, signed: bool = False, digits: int = 1) -> str:
+    """A mean ± std cell (just the mean for a single run)."""
+    if not summary or summary.get("mean") is None:
+        return "-"
+    scale = 100.0 if percent else 1.0
+    mean = f"{scale * summary['mean']:{'+' if signed else ''}.{digits}f}"
+    return mean if summary["n"] <= 1 else f"{mean} ± {scale * summary['std']:.{digits}f}"
+
+
+def row_label(strategy: str, k: int) -> str:
+    return f"{STRATEGY_TITLES.get(strategy, strategy)} k={k}"
+
+
+def verdict(passed: bool) -> str:
+    return "PASS" if passed else "FAIL"
+
+
+def blocks_of(report: Mapping[str, Any]) -> list[Block]:
+    """The whole document, format-neutral."""
+    summary = report["summary"]
+    runs = report["runs"]
+    settings = report.get("settings", {})
+    n_runs = len(runs)
+    first = runs[0]
+    ks = sorted({int(row["k"]) for row in first["float"]["metrics"]})
+    top_k = max(ks)
+    blocks: list[Block] = [Block("h1", "vprsnn-export verification report")]
+    blocks.append(Block("p", (
+        f"**Verdict: {verdict(report['passed'])}** — {sum(r['passed'] for r in runs)} of {n_runs} network(s) pass every "
+        f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries; "
+        f"{'mean ± std over ' + str(n_runs) + ' independently trained networks' if n_runs > 1 else 'one network'}. "
+        f"Generated {report.get('created', '?')}"
+        + (f" in {report['seconds']:.0f} s" if report.get("seconds") else "") + "."
+    )))
+    if report.get("settings_differ"):
+        blocks.append(Block("p", "Combined reports whose settings differ in: " + ", ".join(report["settings_differ"])
+                            + " (settings shown are the first report's)."))
+    blocks += verdict_blocks(report, top_k)
+    blocks += metric_blocks(summary, ks)
+    blocks.append(Block("figure", title="Metrics vs weight bit width", image=plot_metrics(summary, ks), name="metrics_vs_bits.png",
+                        text="Each metric vs bit width; the float network's value is the dashed line of the same colour"
+                             + (" (mean ± std over networks)." if n_runs > 1 else ".")))
+    blocks.append(Block("figure", title="Precision-recall curves", image=plot_pr(first), name="pr_curves.png",
+                        text=f"W+Prob at k=1 and k={top_k}, float (black) vs each bit width"
+                             + (f"; network {first.get('label') or 1} of {n_runs}." if n_runs > 1 else ".")))
+    blocks += spike_blocks(summary)
+    blocks.append(Block("figure", title="Spike-count agreement", image=plot_spikes(report), name="spike_agreement.png",
+                        text="Left: fraction of time steps with the float winner, top-1 agreement and mean per-query "
+                             "spike-count correlation vs bit width. Right: distribution of the per-query correlation "
+                             "of the float and quantised spike-count vectors (all networks pooled)."))
+    blocks += decision_blocks(summary, ks)
+    blocks += cross_blocks(report)
+    blocks += quantisation_blocks(first)
+    blocks.append(Block("figure", title="Weight histograms", image=plot_weights(first), name="weight_histograms.png",
+                        text="Float weights divided by their scale range "
+                             f"({first['float']['weights']['normalised_by']}), and the share of weights on each "
+                             "quantised level q / (2^b - 1)."))
+    blocks += tolerance_blocks(report)
+    blocks += provenance_blocks(report)
+    return blocks
+
+
+def verdict_blocks(report: Mapping[str, Any], top_k: int) -> list[Block]:
+    summary = report["summary"]
+    tolerances = report.get("settings", {}).get("tolerances", {})
+    rows, status = [], []
+    for bits in summary["bits"]:
+        metrics = {(r["strategy"], r["k"]): r for r in bits["metrics"]}
+        worst_acc = min((metrics[(s, 1)]["delta"]["accuracy"]["mean"] for s in STRATEGY_TITLES if (s, 1) in metrics),
+                        default=None)
+        top = metrics.get(("wprob", top_k))
+        ok = bits["n_passed"] == bits["n_runs"]
+        rows.append([
+            f"{bits['bits']}", f"{verdict(ok)} ({bits['n_passed']}/{bits['n_runs']})",
+            f"{bits['cross_implementation_passed']}/{bits['n_runs']} exact",
+            signed_pct(worst_acc), ms(top["delta"]["r_at_100p"], signed=True) if top else "-",
+            ms(top["r_at_100p"]) if top else "-", ms(bits["winner_agreement"]), ms(bits["saturations"], percent=False, digits=0),
+        ])
+        status.append("pass" if ok else "fail")
+    limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
+    return [
+        Block("h2", "Pass / fail per bit width"),
+        Block("table", headers=["bits", "verdict (networks)", "cross-implementation", "worst accuracy Δ k=1 (pts)",
+                                f"R@100P Δ W+Prob k={top_k} (pts)", f"R@100P W+Prob k={top_k} %", "same winner %",
+                                "saturations"], rows=rows, status=status),
+        Block("p", f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
+                   "Δ = quantised - float, in percentage points; negative is worse."),
+    ]
+
+
+def metric_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
+    blocks = [Block("h2", "Metric level")]
+    float_rows = {(r["strategy"], r["k"]): r for r in summary["float"]}
+    labels = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
+    for metric in METRICS:
+        headers = ["readout", "float %"] + [f"{b['bits']}-bit % (Δ)" for b in summary["bits"]]
+        rows = []
+        for key in labels:
+            if key not in float_rows:
+                continue
+            cells = [row_label(*key), ms(float_rows[key][metric])]
+            for bits in summary["bits"]:
+                row = next((r for r in bits["metrics"] if (r["strategy"], r["k"]) == key), None)
+                cells.append("-" if row is None else f"{ms(row[metric])} ({ms(row['delta'][metric], signed=True)})")
+            rows.append(cells)
+        blocks += [Block("h3", METRIC_TITLES[metric]), Block("table", headers=headers, rows=rows)]
+    return blocks
+
+
+def spike_blocks(summary: Mapping[str, Any]) -> list[Block]:
+    rows = [[f"{b['bits']}", ms(b["winner_agreement"], digits=2), ms(b["count_correlation"], percent=False, digits=3),
+             ms(b["spike_ratio"], percent=False, digits=3), ms(b["saturations"], percent=False, digits=0)]
+            for b in summary["bits"]]
+    return [
+        Block("h2", "Spike level"),
+        Block("p", "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
+                   "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
+                   "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries."),
+        Block("table", headers=["bits", "same winner %", "count correlation", "spike ratio", "saturations"], rows=rows),
+    ]
+
+
+def decision_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
+    agg_ks = [k for k in ks if k > 1]
+    headers = ["bits"] + [f"top-1 {STRATEGY_TITLES[s]} %" for s in STRATEGY_TITLES] + ["W+Prob TV distance"] + \
+              [f"agreement k={k} %" for k in agg_ks]
+    rows = []
+    for b in summary["bits"]:
+        rows.append([f"{b['bits']}"] + [ms(b["top1_agreement"][s]) for s in STRATEGY_TITLES] +
+                    [ms(b["wprob_tv_mean"], percent=False, digits=3)] +
+                    [ms(b["aggregated_agreement"].get(str(k))) for k in agg_ks])
+    return [
+        Block("h2", "Decision level"),
+        Block("p", "Top-1 agreement: share of queries where the quantised network picks the same place as the float "
+                   "one (or both reject). TV distance: mean total variation between the float and quantised W+Prob "
+                   "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
+                   "sequence aggregation."),
+        Block("table", headers=headers, rows=rows),
+    ]
+
+
+def cross_blocks(report: Mapping[str, Any]) -> list[Block]:
+    runs = report["runs"]
+    rows, status, failures = [], [], []
+    for index, run in enumerate(runs):
+        for result in run["bits"]:
+            cross = result["cross_implementation"]
+            kinds = sorted({c["check"].split(":")[0] for c in cross["checks"]})
+            rows.append([run.get("label") or str(index + 1), f"{result['bits']}",
+                         f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}", verdict(cross["passed"]),
+                         str(cross["reference_queries"]), "; ".join(kinds) +
+                         ("; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.get("skipped", {}).items())
+                          if cross.get("skipped") else "")])
+            status.append("pass" if cross["passed"] else "fail")
+            failures += [[run.get("label") or str(index + 1), f"{result['bits']}", c["check"], c["detail"]]
+                         for c in cross["checks"] if not c["equal"]]
+    blocks = [
+        Block("h2", "Cross-implementation (exact)"),
+        Block("p", "Integer simulator vs ONNX on onnxruntime vs the NIR and Loihi-style files read back and re-run vs "
+                   "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
+                   "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
+                   "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
+                   "difference fails."),
+        Block("table", headers=["network", "bits", "identical", "verdict", "reference-stepper queries", "implementations"],
+              rows=rows, status=status),
+    ]
+    if failures:
+        blocks += [Block("h3", "Differences found"),
+                   Block("table", headers=["network", "bits", "check", "detail"], rows=failures,
+                         status=["fail"] * len(failures))]
+    return blocks
+
+
+def quantisation_blocks(run: Mapping[str, Any]) -> list[Block]:
+    rows = []
+    for result in run["bits"]:
+        q = result["quantisation"]
+        rows.append([f"{result['bits']}", ("per-neuron" if q.get("per_neuron") else "per-tensor") + f", {q.get('scale_method')}",
+                     f"{q.get('weight_relative_rmse', 0):.4f}", str(q.get("weights_clipped")),
+                     f"{100 * q.get('threshold_max_relative_error', 0):.3f}",
+                     f"{100 * result['weight_levels']['zero_fraction']:.1f}", str(q.get("max_current")),
+                     str(q.get("calibration")), str(q.get("calibration_saturations"))])
+    return [
+        Block("h2", "Quantisation"),
+        Block("table", headers=["bits", "scales", "weight rel. RMSE", "clipped weights", "max threshold error %",
+                                "weights at 0 %", "max current", "calibration", "calibration saturations"], rows=rows),
+    ]
+
+
+def tolerance_blocks(report: Mapping[str, Any]) -> list[Block]:
+    rows, status = [], []
+    for index, run in enumerate(report["runs"]):
+        for result in run["bits"]:
+            for check in result["tolerance_checks"]:
+                percent = check["check"] not in ("saturations",)
+                value = f"{100 * check['value']:.2f}" if percent else str(check["value"])
+                applied = check.get("applied_limit", check["limit"])
+                limit = f"{100 * applied:.2f}" if percent else f"{applied:g}"
+                if applied != check["limit"]:
+                    limit += f" (1 query; set {100 * check['limit']:.2f})"
+                rows.append([run.get("label") or str(index + 1), f"{result['bits']}", check["what"], value, limit,
+                             verdict(check["passed"])])
+                status.append("pass" if check["passed"] else "fail")
+    meaning = "; ".join(f"{k}: {TOLERANCE_MEANING[k]}" for k in TOLERANCE_MEANING)
+    return [
+        Block("h2", "Tolerance checks"),
+        Block("p", "Values and limits in percentage points (drops) or percent (agreements). A metric moves in steps of "
+                   "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
+                   f"Keys — {meaning}."),
+        Block("table", headers=["network", "bits", "check", "value", "limit", "verdict"], rows=rows, status=status),
+    ]
+
+
+def provenance_blocks(report: Mapping[str, Any]) -> list[Block]:
+    rows = []
+    for index, run in enumerate(report["runs"]):
+        data = run.get("checkpoint_data", {})
+        rows.append([run.get("label") or str(index + 1), str(run.get("seed")), str(run.get("checkpoint_sha256", ""))[:16],
+                     str(data.get("source")), f"{run['n_queries']}", str(run.get("export_dir") or "-")])
+    command = report.get("command")
+    commands = report.get("commands")
+    text = " ".join(command) if command else "\n".join(" ".join(c) for c in commands or [] if c) or "-"
+    return [
+        Block("h2", "Networks"),
+        Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),
+        Block("h2", "Provenance"),
+        Block("pre", "command: " + text),
+        Block("pre", "settings = " + json.dumps(report.get("settings", {}), indent=2, sort_keys=True)),
+        Block("pre", "config (first network) = " + json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True)),
+        Block("pre", "versions = " + json.dumps(report.get("versions", {}), indent=2, sort_keys=True)),
+    ]
+
+
+# ---------------------------------------------------------------------------- plots
+
+
+def png(fig) -> bytes:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def _series(summary: Mapping[str, Any], key: tuple[str, int], metric: str) -> tuple[list[int], list[float], list[float]]:
+    xs, means, stds = [], [], []
+    for bits in summary["bits"]:
+        row = next((r for r in bits["metrics"] if (r["strategy"], r["k"]) == key), None)
+        if row is not None and row[metric]["mean"] is not None:
+            xs.append(bits["bits"])
+            means.append(100 * row[metric]["mean"])
+            stds.append(100 * row[metric]["std"])
+    return xs, means, stds
+
+
+def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
+    keys = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
+    float_rows = {(r["strategy"], r["k"]): r for r in summary["float"]}
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "osD^vP*X"
+    bits = sorted({b["bits"] for b in summary["bits"]})
+    for ax, metric in zip(axes.ravel(), METRICS):
+        for index, key in enumerate(keys):
+            colour = colours[index % len(colours)]
+            xs, means, stds = _series(summary, key, metric)
+            if xs:
+                ax.errorbar(xs, means, yerr=stds, marker=markers[index % len(markers)], capsize=3, color=colour,
+                            label=row_label(*key), markersize=8 - index, alpha=0.9)
+            if key in float_rows:
+                ax.axhline(100 * float_rows[key][metric]["mean"], color=colour, linestyle="--", linewidth=1)
+        ax.set_title(METRIC_TITLES[metric])
+        ax.set_ylabel("%")
+        ax.grid(alpha=0.3)
+        ax.set_xticks(bits)
+        ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
+    for ax in axes[1]:
+        ax.set_xlabel("weight bits (dashed: float)")
+    axes[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    return png(fig)
+
+
+def plot_pr(run: Mapping[str, Any]) -> bytes:
+    names = list(run["float"]["pr_curves"])
+    fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), squeeze=False)
+    cmap = plt.get_cmap("viridis")
+    n = max(len(run["bits"]) - 1, 1)
+    for ax, name in zip(axes[0], names):
+        curve = run["float"]["pr_curves"][name]
+        ax.step(curve["recall"], curve["precision"], where="post", color="black", linewidth=2, label="float")
+        for index, result in enumerate(run["bits"]):
+            if name in result["pr_curves"]:
+                c = result["pr_curves"][name]
+                ax.step(c["recall"], c["precision"], where="post", color=cmap(index / n), label=f"{result['bits']}-bit")
+        ax.set_xlim(0, 1.02)
+        ax.set_ylim(0, 1.05)
+        ax.set_xlabel("recall")
+        ax.set_ylabel("precision")
+        ax.set_title(name.replace("wprob", "W+Prob"))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="lower left")
+    return png(fig)
+
+
+def plot_weights(run: Mapping[str, Any]) -> bytes:
+    """Per bit width: the share of weights on each level q / L (bars) over the float weights' histogram
+    rescaled to the same units (share per interval of width 1 / L, line)."""
+    results = run["bits"]
+    fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
+    hist = run["float"]["weights"]
+    edges = np.asarray(hist["edges"])
+    counts = np.asarray(hist["counts"], dtype=np.float64)
+    density = counts / max(counts.sum(), 1) / np.diff(edges)
+    centres = (edges[:-1] + edges[1:]) / 2
+    for ax, result in zip(axes[0], results):
+        levels = result["weight_levels"]
+        top = levels["levels"]
+        share = np.asarray(levels["counts"], dtype=np.float64) / max(sum(levels["counts"]), 1)
+        ax.bar(np.arange(top + 1) / top, share, width=0.85 / top, color="tab:orange", alpha=0.85, label=f"{result['bits']}-bit levels")
+        ax.plot(centres, density / top, color="tab:blue", linewidth=1.2, label="float")
+        ax.set_title(f"{result['bits']}-bit: {100 * levels['zero_fraction']:.1f} % of weights at 0", fontsize=9)
+        ax.set_xlabel("weight / scale range")
+        ax.set_xlim(-0.08, 1.08)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=8)
+    axes[0, 0].set_ylabel("share of weights")
+    axes[0, 0].legend(fontsize=7)
+    return png(fig)
+
+
+def plot_spikes(report: Mapping[str, Any]) -> bytes:
+    summary = report["summary"]
+    bits = [b["bits"] for b in summary["bits"]]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    for label, values in (
+        ("same winner per step", [b["winner_agreement"] for b in summary["bits"]]),
+        ("top-1 agreement W+Prob k=1", [b["top1_agreement"]["wprob"] for b in summary["bits"]]),
+        ("mean count correlation", [b["count_correlation"] for b in summary["bits"]]),
+    ):
+        left.errorbar(bits, [100 * v["mean"] for v in values], yerr=[100 * v["std"] for v in values], marker="o",
+                      capsize=3, label=label)
+    left.set_xticks(sorted(bits))
+    left.set_xlim(max(bits) + 0.5, min(bits) - 0.5)
+    left.set_xlabel("weight bits")
+    left.set_ylabel("%")
+    left.set_ylim(0, 102)
+    left.grid(alpha=0.3)
+    left.legend(fontsize=8, loc="lower left")
+    pooled = []
+    for b in bits:
+        values = [c for run in report["runs"] for r in run["bits"] if r["bits"] == b
+                  for c in r["spike_level"]["count_correlation"]]
+        pooled.append(values)
+    right.boxplot(pooled)
+    right.set_xticks(range(1, len(bits) + 1), [str(b) for b in bits])
+    right.set_xlabel("weight bits")
+    right.set_ylabel("per-query spike-count correlation")
+    right.set_ylim(-0.05, 1.05)
+    right.grid(alpha=0.3)
+    return png(fig)
+
+
+# ---------------------------------------------------------------------------- rendering
+
+
+def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
+    lines: list[str] = []
+    for block in blocks:
+        if block.kind == "h1":
+            lines += [f"# {block.text}", ""]
+        elif block.kind == "h2":
+            lines += [f"## {block.text}", ""]
+        elif block.kind == "h3":
+            lines += [f"### {block.text}", ""]
+        elif block.kind == "p":
+            lines += [block.text, ""]
+        elif block.kind == "pre":
+            lines += ["```", block.text, "```", ""]
+        elif block.kind == "table":
+            lines.append("| " + " | ".join(block.headers) + " |")
+            lines.append("|" + "---|" * len(block.headers))
+            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in block.rows]
+            lines.append("")
+        elif block.kind == "figure":
+            lines += [f"### {block.title}", "", f"![{block.title}]({plots_dir}/{block.name})", "", f"*{block.text}*", ""]
+    return "\n".join(lines)
+
+
+CSS = """
+body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 2em auto; max-width: 1150px;
+       color: #1d1d1f; line-height: 1.45; padding: 0 1em; }
+h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { margin-top: 1.8em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th { background: #f0f0f3; }
+td:first-child, th:first-child { text-align: left; }
+tr.pass td { background: #eaf7ea; }
+tr.fail td { background: #fbe3e3; }
+figure { margin: 1em 0; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 13px; color: #555; }
+pre { background: #f6f6f8; padding: .6em; overflow-x: auto; font-size: 12px; }
+.verdict-pass { color: #17701f; } .verdict-fail { color: #b00020; }
+"""
+
+
+def _html_inline(text: str) -> str:
+    escaped = html.escape(text)
+    parts = escaped.split("**")
+    out = []
+    for index, part in enumerate(parts):
+        out.append(f"<strong>{part}</strong>" if index % 2 else part)
+    return "".join(out).replace("<strong>Verdict: PASS</strong>", '<strong class="verdict-pass">Verdict: PASS</strong>') \
+        .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
+
+
+def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verification report") -> str:
+    body: list[str] = []
+    for block in blocks:
+        if block.kind in ("h1", "h2", "h3"):
+            body.append(f"<{block.kind}>{html.escape(block.text)}</{block.kind}>")
+        elif block.kind == "p":
+            body.append(f"<p>{_html_inline(block.text)}</p>")
+        elif block.kind == "pre":
+            body.append(f"<pre>{html.escape(block.text)}</pre>")
+        elif block.kind == "table":
+            head = "".join(f"<th>{html.escape(str(h))}</th>" for h in block.headers)
+            rows = []
+            for index, row in enumerate(block.rows):
+                status = block.status[index] if index < len(block.status) else None
+                cls = f' class="{status}"' if status else ""
+                rows.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>")
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
+        elif block.kind == "figure":
+            data = base64.b64encode(block.image).decode("ascii")
+            body.append(f"<h3>{html.escape(block.title)}</h3>"
+                        f'<figure><img alt="{html.escape(block.title)}" src="data:image/png;base64,{data}">'
+                        f"<figcaption>{html.escape(block.text)}</figcaption></figure>")
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+            f"<style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
+def write_report(report: Mapping[str, Any], out_dir: str | Path, *, write_json: bool = True) -> dict[str, Path]:
+    """Write report.json (optionally), report.md with plots/*.png, and the self-contained report.html."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    if write_json:
+        written["json"] = atomic_write_text(out / REPORT_JSON, json.dumps(report, indent=1, sort_keys=False) + "\n")
+    blocks = blocks_of(report)
+    for block in blocks:
+        if block.kind == "figure":
+            atomic_write_bytes(out / PLOTS_DIR / block.name, block.image)
+    written["md"] = atomic_write_text(out / REPORT_MD, render_markdown(blocks))
+    written["html"] = atomic_write_text(out / REPORT_HTML, render_html(blocks))
+    return written

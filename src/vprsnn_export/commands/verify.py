@@ -1,0 +1,272 @@
+"""`vprsnn-export verify`: quantise, export and run every implementation; judge each bit width against float.
+
+Exit codes: 0 when every requested check passes at every bit width (and for every
+network), 1 when a check fails, 2 on bad input (files, options, data).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..dataset import Dataset, load_dataset
+from ..device import resolve_device
+from ..errors import EXIT_CHECK_FAILED, OptionError
+from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, parse_velocity_grid, print_json
+
+DEFAULT_BITS = "8,6,4,3,2"
+TABLE_COLUMNS = (
+    ("network", "network"),
+    ("bits", "bits"),
+    ("verdict", "verdict"),
+    ("cross", "cross-impl."),
+    ("accuracy", "worst acc. Δ k=1"),
+    ("r_at_100p", "R@100P Δ"),
+    ("winner", "same winner %"),
+    ("saturations", "saturations"),
+)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "verify",
+        help="quantise and export at several bit widths; check every implementation against the float network",
+        description="For each bit width: quantise, run the integer simulator, the ONNX graph, the NIR and Loihi-style "
+        "files read back and the reference stepper on the float network's very input spikes; compare exactly across "
+        "implementations and within tolerances against float; write report.json, report.md and report.html. "
+        "Exit 0: every check passed; 1: a check failed; 2: bad input.",
+    )
+    parser.add_argument("checkpoints", nargs="+", metavar="CKPT", help="float checkpoint(s) written by train")
+    parser.add_argument("--bits", default=DEFAULT_BITS, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS})")
+    parser.add_argument("--query", required=True, help="query traversal name")
+    add_data_options(parser, data_required=False)
+    readout = parser.add_argument_group("readout")
+    readout.add_argument("--k", default="1,3,5", help="sequence lengths (default 1,3,5); W+Prob aggregated for k > 1")
+    readout.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
+    readout.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
+    readout.add_argument("--velocity-search", metavar="LO:HI:STEP", help="estimate the velocity per window over this grid")
+    readout.add_argument("--gt-tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n, default 0)")
+    checks = parser.add_argument_group("checks")
+    checks.add_argument(
+        "--tolerance",
+        metavar="KEY=VALUE,...",
+        help="override tolerances, e.g. r_at_100p=0.01,accuracy=0.02,auc_pr=0.02 (fractions; 'off' disables); "
+        "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations (docs/verify.md)",
+    )
+    checks.add_argument("--reference-queries", type=int, default=3,
+                        help="queries also run on the slow reference stepper (default 3; 0 = none)")
+    checks.add_argument("--targets", default="onnx,nir,loihi", help="exported targets to read back and run (default all; or none)")
+    quant = parser.add_argument_group("quantisation")
+    quant.add_argument("--per-tensor", action="store_true", help="one weight scale for all neurons (default: per neuron)")
+    quant.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice (default max)")
+    quant.add_argument("--reuse-float-calibration", action="store_true",
+                       help="read the quantised networks out with the float S^R instead of re-measuring it")
+    parser.add_argument("--seeds", type=int, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std")
+    parser.add_argument("--report", required=True, metavar="DIR", help="folder for report.json, report.md, report.html")
+    parser.add_argument("--json", action="store_true", help="print the verdict and summary as JSON instead of a table")
+    add_runtime_options(parser)
+    parser.set_defaults(handler=run)
+
+
+def verify_options(args: argparse.Namespace, gamma: float):
+    """The VerifyOptions of the command line (every option validated; OptionError otherwise)."""
+    from ..export.model import check_bits
+    from ..runtime.evaluation import ReadoutOptions
+    from ..runtime.verify import VerifyOptions, parse_targets, parse_tolerances
+
+    bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
+    if args.reference_queries < 0:
+        raise OptionError(f"--reference-queries must be >= 0, got {args.reference_queries}")
+    if args.gt_tolerance < 0:
+        raise OptionError(f"--gt-tolerance must be >= 0, got {args.gt_tolerance}")
+    readout = ReadoutOptions(
+        gamma=gamma,
+        ks=parse_int_list(args.k, "--k"),
+        rule=args.rule,
+        velocity=args.velocity,
+        velocity_candidates=parse_velocity_grid(args.velocity_search),
+        tolerance=args.gt_tolerance,
+    )
+    return VerifyOptions(
+        readout=readout,
+        bits=bits,
+        per_neuron=not args.per_tensor,
+        scale_method=args.scale,
+        calibration="float" if args.reuse_float_calibration else "deployed",
+        reference_queries=args.reference_queries,
+        targets=parse_targets(args.targets),
+        tolerances=parse_tolerances(args.tolerance),
+    )
+
+
+def selection(args: argparse.Namespace, ckpt) -> tuple[str, str | None, str | None]:
+    """(data source, subset, places): the options given here, else the checkpoint's own."""
+    subset, places = args.subset, args.places
+    if subset is None and places is None:
+        subset, places = ckpt.data.get("subset"), ckpt.data.get("places")
+    source = args.data or ckpt.data.get("source")
+    if not source:
+        raise OptionError("the checkpoint names no data source: give --data")
+    return str(source), subset, places
+
+
+def load_for(ckpt, query: str, source: str, subset: str | None, places: str | None, progress: bool,
+             cache: dict) -> tuple[Dataset, dict[str, np.ndarray]]:
+    """The query data set and the reference images of the checkpoint's reference places (for calibration)."""
+    traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
+    key = (source, subset, places, tuple(traversals))
+    if key not in cache:
+        cache[key] = load_dataset(source, traversals, ckpt.config.preprocess, subset=subset, places=places,
+                                  progress=progress)
+    dataset = cache[key]
+    if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
+        return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
+    # the queries are not the reference places: load the reference places on their own
+    with tempfile.TemporaryDirectory(prefix="vprsnn-verify-") as folder:
+        listing = Path(folder) / "reference_places.csv"
+        listing.write_text("place_id\n" + "\n".join(str(int(p)) for p in ckpt.reference_place_ids) + "\n")
+        reference = load_dataset(source, ckpt.reference_traversals, ckpt.config.preprocess, subset=listing,
+                                 progress=progress)
+    return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
+
+
+def train_seeds(template, n_seeds: int, dataset: Dataset, source: str, subset: str | None, places: str | None,
+                out: Path, device_name: str, progress: bool) -> list[tuple[str, object, Path]]:
+    """Train seeds 1..N with the template's config on its reference traversals (cached by the experiments' key)."""
+    from ..experiments.common import Settings, trained_checkpoint
+    from ..trainer.pipeline import train_and_calibrate
+
+    key = "subset" if subset else ("consecutive" if places else "all")
+    networks = []
+    for seed in range(1, n_seeds + 1):
+        cfg = template.config.replace(seed=seed)
+        if len(template.reference_traversals) == 1:
+            settings = Settings(reference=template.reference_traversals[0], device=device_name, progress=progress)
+            ckpt = trained_checkpoint(settings, dataset, cfg, key)
+        else:
+            ckpt = train_and_calibrate(dataset, template.reference_traversals, cfg, device=resolve_device(device_name),
+                                       progress=progress)
+        ckpt = dataclasses.replace(ckpt, data={**ckpt.data, "source": source, "subset": subset, "places": places})
+        path = save_checkpoint(out / "checkpoints" / f"seed{seed}.npz", ckpt)
+        networks.append((f"seed {seed}", ckpt, path))
+    return networks
+
+
+def settings_of(args: argparse.Namespace, options, source: str, subset, places) -> dict:
+    return {
+        **options.to_dict(),
+        "query": args.query,
+        "data": source,
+        "subset": subset,
+        "places": places,
+        "seeds": args.seeds,
+        "checkpoints": list(args.checkpoints),
+        "device": args.device,
+    }
+
+
+def command_line(args: argparse.Namespace) -> list[str]:
+    """The command as given (rebuilt from the parsed options, for the report)."""
+    line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", args.k]
+    for flag, value in (("--data", args.data), ("--subset", args.subset), ("--places", args.places),
+                        ("--tolerance", args.tolerance), ("--seeds", args.seeds), ("--velocity-search", args.velocity_search)):
+        if value is not None:
+            line += [flag, str(value)]
+    if args.rule != "product":
+        line += ["--rule", args.rule]
+    if args.velocity != 1.0:
+        line += ["--velocity", str(args.velocity)]
+    if args.gt_tolerance:
+        line += ["--gt-tolerance", str(args.gt_tolerance)]
+    if args.per_tensor:
+        line.append("--per-tensor")
+    if args.scale != "max":
+        line += ["--scale", args.scale]
+    if args.reuse_float_calibration:
+        line.append("--reuse-float-calibration")
+    if args.reference_queries != 3:
+        line += ["--reference-queries", str(args.reference_queries)]
+    if args.targets != "onnx,nir,loihi":
+        line += ["--targets", args.targets]
+    return line + ["--report", args.report]
+
+
+def folder_name(label: str, index: int) -> str:
+    """A file-system-safe folder for one network's exports: its label, else its position."""
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label).strip("._")
+    return f"{index + 1:02d}-{safe}" if safe else f"{index + 1:02d}"
+
+
+def verdict_rows(report: dict) -> list[dict]:
+    """One row per network and bit width for the terminal table."""
+    rows = []
+    for index, run in enumerate(report["runs"]):
+        top = max(int(r["k"]) for r in run["float"]["metrics"])
+        for result in run["bits"]:
+            metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
+            worst = min(metrics[(s, 1)]["delta"]["accuracy"] for s in ("standard", "weighted", "wprob"))
+            cross = result["cross_implementation"]
+            rows.append({
+                "network": run.get("label") or str(index + 1),
+                "bits": result["bits"],
+                "verdict": "PASS" if result["passed"] else "FAIL",
+                "cross": f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
+                "accuracy": f"{100 * worst:+.1f}",
+                "r_at_100p": f"{100 * metrics[('wprob', top)]['delta']['r_at_100p']:+.1f} (k={top})",
+                "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
+                "saturations": result["spike_level"]["saturations"],
+            })
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..runtime.report import write_report
+    from ..runtime.verify import build_report, verify_checkpoint
+
+    started = time.perf_counter()
+    progress = not args.quiet
+    if args.seeds is not None and (args.seeds < 1 or len(args.checkpoints) != 1):
+        raise OptionError("--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)")
+    device = resolve_device(args.device)
+    out = Path(args.report)
+    templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
+    options = verify_options(args, templates[0][1].config.assignment.gamma)
+    source, subset, places = selection(args, templates[0][1])
+    cache: dict = {}
+    if args.seeds is not None:
+        template = templates[0][1]
+        dataset, _ = load_for(template, args.query, source, subset, places, progress, cache)  # training places
+        networks = train_seeds(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
+    else:
+        labels = [stem for stem, _, _ in templates]
+        networks = [(stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
+                    for i, (stem, ckpt, path) in enumerate(templates)]
+    runs = []
+    for index, (label, ckpt, path) in enumerate(networks):
+        src, sub, plc = selection(args, ckpt)
+        dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
+        gamma_options = dataclasses.replace(options, readout=dataclasses.replace(options.readout, gamma=ckpt.config.assignment.gamma))
+        runs.append(verify_checkpoint(
+            ckpt, checkpoint_sha256(path), dataset.traversal(args.query), dataset.place_ids, args.query, gamma_options,
+            reference_images=None if options.calibration == "float" else reference_images,
+            export_dir=out / "exports" / folder_name(label, index), device=device, progress=progress, label=label,
+        ))
+        runs[-1]["checkpoint"] = str(path)
+    report = build_report(runs, settings_of(args, options, source, subset, places), command=command_line(args),
+                          seconds=time.perf_counter() - started)
+    written = write_report(report, out)
+    if args.json:
+        print_json({"passed": report["passed"], "report": {k: str(v) for k, v in written.items()},
+                    "summary": report["summary"]})
+    else:
+        print(format_table(verdict_rows(report), TABLE_COLUMNS))
+        print(f"\n{'PASS' if report['passed'] else 'FAIL'}: {sum(r['passed'] for r in runs)} of {len(runs)} network(s) "
+              f"pass every check; report: {written['html']}")
+    return 0 if report["passed"] else EXIT_CHECK_FAILED

@@ -1,0 +1,118 @@
+"""Latency, throughput, training time, aggregation overhead, FLOPs and peak memory, measured side by side."""
+
+from __future__ import annotations
+
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from vprsnn_export.device import resolve_device
+from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.runtime.aggregation import aggregate
+from vprsnn_export.runtime.assignment import strategy_scores
+from vprsnn_export.runtime.inference import FloatNetwork, query_spikes
+from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
+from vprsnn_export.trainer.train import Presentation, train_network
+
+from .common import Settings, load, provenance, trained_checkpoint
+
+NAME = "timing"
+DESCRIPTION = ("queries/s of the float path, the integer simulator and onnxruntime at T=150 and 300, batch 1 and "
+               "batch 100; per-query latency; training s/epoch; aggregation overhead; FLOPs per query; peak memory")
+
+
+def best_seconds(fn, repeats: int) -> float:
+    best = float("inf")
+    for _ in range(repeats):
+        started = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - started)
+    return best
+
+
+def flops_per_query(timesteps: int, n_inputs: int, n_neurons: int) -> dict:
+    """Dense: 2 T n_in n_exc for the currents + ~6 T n_exc for decay, threshold, WTA and reset."""
+    currents = 2 * timesteps * n_inputs * n_neurons
+    return {"currents": currents, "neuron_updates": 6 * timesteps * n_neurons, "total": currents + 6 * timesteps * n_neurons}
+
+
+def run(settings: Settings) -> dict:
+    started = time.perf_counter()
+    device = resolve_device(settings.device)
+    repeats = 1 if settings.quick else 3
+    seed = settings.seeds[0]
+    rows = []
+    for timesteps in (150, 300):
+        cfg = settings.config(seed, **{"encoder.timesteps": timesteps})
+        data = load(settings, "consecutive", cfg)
+        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+        spikes = query_spikes(data.traversal(settings.query), data.place_ids, settings.query, cfg)
+        float_net = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, device)
+        model = quantize_checkpoint(ckpt, "timing", 8, True, "max")
+        int_net = IntegerNetwork(model, device=device)
+        with tempfile.TemporaryDirectory() as tmp:
+            onnx_path = write_onnx(model, Path(tmp) / "model.onnx", with_wprob=False)
+            sess = session(onnx_path)
+            for batch in (1, len(spikes)):
+                part = spikes[:batch]
+                times = {
+                    "float": best_seconds(lambda: float_net.run(part), repeats),
+                    "integer": best_seconds(lambda: int_net.run(part), repeats),
+                    "onnxruntime": best_seconds(lambda: run_session(sess, part, batch=batch), repeats),
+                }
+                for path, seconds in times.items():
+                    rows.append({"T": timesteps, "batch": batch, "path": path, "queries_per_s": batch / seconds,
+                                 "ms_per_query": 1000 * seconds / batch,
+                                 "ratio_to_float": times["float"] / seconds})
+    cfg = settings.config(seed)
+    data = load(settings, "consecutive", cfg)
+    one_epoch = cfg.replace(**{"train.epochs": 1})
+    images = data.traversal(settings.reference)
+    pres = [Presentation(settings.reference, int(p)) for p in data.place_ids]
+    train_s = best_seconds(lambda: train_network(images, pres, one_epoch, device=device, progress=False), repeats)
+    ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+    wprob = strategy_scores(ckpt.calibration.astype(float), np.ones((len(images), cfg.network.n_neurons)), "wprob",
+                            cfg.assignment.gamma)
+    agg_s = best_seconds(lambda: aggregate(wprob, 5, 1.0), repeats)
+    single = wprob[:5]
+    agg_one_s = best_seconds(lambda: aggregate(single, 5, 1.0), max(repeats, 20))
+    return {
+        "experiment": NAME,
+        "device": str(device),
+        "throughput": rows,
+        "training_seconds_per_epoch": train_s,
+        "training_images": len(images),
+        "training_timesteps": cfg.encoder.timesteps,
+        "aggregation_ms_per_query_batched": 1000 * agg_s / len(images),
+        "aggregation_ms_one_window": 1000 * agg_one_s,
+        "flops_per_query": {t: flops_per_query(t, cfg.network.n_inputs, cfg.network.n_neurons) for t in (150, 300)},
+        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "provenance": provenance(settings, started),
+    }
+
+
+def table(results: dict) -> str:
+    lines = ["| T | batch | path | queries/s | ms/query | ratio to float |", "|---:|---:|---|---:|---:|---:|"]
+    for r in results["throughput"]:
+        lines.append(f"| {r['T']} | {r['batch']} | {r['path']} | {r['queries_per_s']:.1f} | {r['ms_per_query']:.2f} |"
+                     f" {r['ratio_to_float']:.2f} |")
+    return "\n".join(lines)
+
+
+def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
+    flops = results["flops_per_query"]
+    return (
+        f"{table(results)}\n\n"
+        f"* training: {results['training_seconds_per_epoch']:.2f} s per epoch ({results['training_images']} images, "
+        f"T={results['training_timesteps']}, batch 64) on {results['device']}\n"
+        f"* sequence aggregation (k=5, product rule): {results['aggregation_ms_per_query_batched']:.3f} ms per query "
+        f"batched, {results['aggregation_ms_one_window']:.3f} ms for one 5-frame window alone\n"
+        f"* dense FLOPs per query: {flops[150]['total'] / 1e6:.0f} M at T=150, {flops[300]['total'] / 1e6:.0f} M at "
+        f"T=300 (2 T 784 N_exc for the currents + ~6 T N_exc for the neuron updates)\n"
+        f"* peak resident memory of the whole run: {results['peak_rss_mib']:.0f} MiB\n"
+    )

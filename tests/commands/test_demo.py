@@ -1,0 +1,31 @@
+"""`vprsnn-export demo`: the whole chain (train, quantise, export, verify, report), tiny with --quick."""
+
+import json
+
+from vprsnn_export.cli import main
+from vprsnn_export.export.model import load_fixed_point
+from vprsnn_export.targets.loihi_target import read_loihi_model
+from vprsnn_export.targets.nir_target import read_nir
+from vprsnn_export.targets.onnx_target import read_onnx
+
+
+def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--quick", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out.strip().splitlines()
+    assert printed[-1].startswith("report: ") and printed[-1].endswith("report.html")
+    assert any("PASS" in line or "FAIL" in line for line in printed)
+    assert (out / "float.npz").is_file()
+    for bits in (8, 4, 2):
+        folder = out / "deploy" / f"{bits}bit"
+        model = load_fixed_point(folder / "model.npz")
+        assert model.bits == bits and model.quantisation["per_neuron"]
+        assert read_nir(folder / "model.nir").bits == bits
+        assert read_loihi_model(folder / "loihi").bits == bits
+        read_onnx(folder / "model.onnx")
+    report = json.loads((out / "report" / "report.json").read_text())
+    assert [r["bits"] for r in report["runs"][0]["bits"]] == [8, 4, 2]
+    assert all(r["cross_implementation"]["passed"] for r in report["runs"][0]["bits"])
+    assert report["settings"]["demo_profile"]["train.epochs"] == 2
+    assert report["runs"][0]["config"]["train"]["epochs"] == 2  # the profile is in the checkpoint's config
+    assert (out / "report" / "report.html").is_file() and (out / "report" / "report.md").is_file()

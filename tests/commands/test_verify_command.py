@@ -1,0 +1,110 @@
+"""`vprsnn-export verify` through the CLI: exit codes 0 / 1 / 2, report.json schema, --seeds."""
+
+import json
+
+import pytest
+
+import vprsnn_export.experiments.common as experiments_common
+from vprsnn_export.cli import main
+from vprsnn_export.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+
+TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
+LENIENT = "accuracy=1,r_at_100p=1"
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    path = tmp_path_factory.mktemp("verify-cli") / "net.npz"
+    assert main(["train", "--data", "synthetic:20", "--reference", "summer", "--out", str(path), "--quiet", *TINY]) == 0
+    return path
+
+
+def verify(checkpoint, report, *extra):
+    return main(["verify", str(checkpoint), "--query", "winter", "--k", "1,3", "--report", str(report),
+                 "--reference-queries", "1", "--quiet", *extra])
+
+
+@pytest.fixture(scope="module")
+def passed(checkpoint, tmp_path_factory):
+    report = tmp_path_factory.mktemp("passed")
+    code = verify(checkpoint, report, "--bits", "8,3", "--tolerance", LENIENT)
+    return code, report
+
+
+def test_lenient_tolerances_pass_with_exit_0(passed):
+    code, report = passed
+    assert code == 0
+    for name in ("report.json", "report.md", "report.html"):
+        assert (report / name).is_file()
+
+
+def test_report_json_schema(passed, checkpoint):
+    _, report = passed
+    data = json.loads((report / "report.json").read_text())
+    assert data["schema"] == "vprsnn-verify-report/1" and data["passed"] is True
+    assert set(data) >= {"created", "command", "versions", "settings", "runs", "summary"}
+    assert data["settings"]["bits"] == [8, 3] and data["settings"]["tolerances"]["accuracy"] == 1.0
+    assert data["settings"]["per_neuron"] is True and data["settings"]["query"] == "winter"
+    assert data["command"][:3] == ["vprsnn-export", "verify", str(checkpoint)]
+    assert {"torch", "numpy", "onnx", "onnxruntime", "nir"} <= set(data["versions"])
+    (run,) = data["runs"]
+    assert run["config"]["encoder"]["timesteps"] == 40 and run["checkpoint"] == str(checkpoint)
+    assert [r["bits"] for r in run["bits"]] == [8, 3]
+    for result in run["bits"]:
+        cross = result["cross_implementation"]
+        assert cross["passed"] and cross["reference_queries"] == 1
+        assert set(cross["files"]) == {"onnx", "nir", "loihi", "model"}
+        assert all(c["equal"] for c in cross["checks"])
+    assert [b["bits"] for b in data["summary"]["bits"]] == [8, 3]
+
+
+def test_impossible_tolerance_exits_1(checkpoint, tmp_path, capsys):
+    assert verify(checkpoint, tmp_path, "--bits", "2", "--tolerance", "winner_agreement=1.0", "--targets", "none") \
+        == EXIT_CHECK_FAILED
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "report.html" in out
+    data = json.loads((tmp_path / "report.json").read_text())
+    checks = data["runs"][0]["bits"][0]["tolerance_checks"]
+    assert any(c["check"] == "winner_agreement" and not c["passed"] for c in checks)
+
+
+@pytest.mark.parametrize("extra", [
+    ["--bits", "9"],
+    ["--bits", "1,8"],
+    ["--bits", "eight"],
+    ["--tolerance", "speed=1"],
+    ["--tolerance", "accuracy=-1"],
+    ["--targets", "tflite"],
+    ["--k", "0"],
+    ["--reference-queries", "-1"],
+    ["--query", "autumn"],
+])
+def test_bad_input_exits_2(checkpoint, tmp_path, extra):
+    assert verify(checkpoint, tmp_path, *extra) == EXIT_BAD_INPUT
+
+
+def test_missing_checkpoint_and_bad_seed_use_exit_2(checkpoint, tmp_path):
+    assert verify(tmp_path / "absent.npz", tmp_path) == EXIT_BAD_INPUT
+    assert main(["verify", str(checkpoint), str(checkpoint), "--seeds", "2", "--query", "winter", "--report",
+                 str(tmp_path), "--quiet"]) == EXIT_BAD_INPUT
+
+
+def test_json_output(checkpoint, tmp_path, capsys):
+    assert verify(checkpoint, tmp_path, "--bits", "8", "--tolerance", LENIENT, "--targets", "none", "--json") == 0
+    payload = json.loads(capsys.readouterr().out)
+    assert payload["passed"] is True and payload["report"]["html"].endswith("report.html")
+    assert payload["summary"]["bits"][0]["bits"] == 8
+
+
+def test_seeds_train_independent_networks(checkpoint, tmp_path, monkeypatch):
+    monkeypatch.setattr(experiments_common, "CACHE", tmp_path / "cache")
+    report = tmp_path / "seeds"
+    code = verify(checkpoint, report, "--bits", "8", "--seeds", "2", "--tolerance", LENIENT, "--targets", "onnx")
+    assert code == 0
+    data = json.loads((report / "report.json").read_text())
+    assert [run["seed"] for run in data["runs"]] == [1, 2]
+    assert data["runs"][0]["checkpoint_sha256"] != data["runs"][1]["checkpoint_sha256"]
+    assert data["summary"]["n_runs"] == 2 and data["summary"]["bits"][0]["metrics"][0]["accuracy"]["n"] == 2
+    assert (report / "checkpoints" / "seed1.npz").is_file() and (report / "checkpoints" / "seed2.npz").is_file()
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == 2
+    assert "±" in (report / "report.md").read_text()

@@ -1,0 +1,234 @@
+"""Loihi-style description: Lava-convention parameters, round trip, malformed files, and the run in Lava itself."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from vprsnn_export.config import Config
+from vprsnn_export.errors import ModelFileError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.targets.intsim import simulate
+from vprsnn_export.targets.loihi_target import (
+    ARRAYS_NAME,
+    HEADER_NAME,
+    NETX_NAME,
+    describe,
+    lava_weights,
+    read_loihi,
+    read_loihi_model,
+    write_loihi,
+)
+
+HERE = Path(__file__).resolve().parent
+RUN_LAVA = HERE / "lava_conformance" / "run_lava.py"
+NORDLAND = HERE.parents[1].parent / "shared/data/nordland_64x32_summer_winter"
+LAVA_VENV = Path(os.environ.get("VPRSNN_LAVA_VENV", Path.home() / ".cache/vprsnn-export/lava-venv"))
+PYTHON310 = [Path.home() / ".pyenv/versions/3.10.13/bin/python", shutil.which("python3.10")]
+
+
+def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, uniform=False, p=0.3, dv=205) -> FixedPointModel:
+    """Random mantissas; thresholds 1.5-4 times each neuron's expected current (input rate p), so neurons integrate."""
+    side = int(round(n_inputs**0.5))
+    cfg = Config().replace(**{
+        "preprocess.image_size": side, "preprocess.patch_size": 1, "network.n_inputs": n_inputs,
+        "network.n_neurons": n_neurons, "network.wta": wta, "encoder.timesteps": 30,
+    })
+    q = rng.integers(0, 2**bits, (n_inputs, n_neurons)).astype(np.int32)
+    expected = np.maximum(p * q.sum(axis=0), 1.0)
+    threshold = np.full(n_neurons, int(2.5 * expected.mean())) if uniform else np.round(expected * rng.uniform(1.5, 4, n_neurons))
+    return FixedPointModel(
+        bits=bits,
+        weight_mantissa=q,
+        scale_multiplier=rng.integers(1, 2**16, n_neurons).astype(np.int32),
+        scale_exponent=-20,
+        threshold=np.clip(threshold, 1, 2**17 - 1).astype(np.int32),
+        decay_dv=dv,
+        config=cfg,
+        calibration=rng.integers(0, 4, (n_neurons, 3)).astype(np.int64),
+        float_calibration=rng.integers(0, 4, (n_neurons, 3)).astype(np.int64),
+        reference_place_ids=np.arange(3, dtype=np.int64),
+        reference_traversals=["summer"],
+        quantisation={"per_neuron": True},
+        source_sha256="0" * 64,
+    )
+
+
+def random_spikes(seed: int, n: int, timesteps: int, n_inputs: int, p: float = 0.3) -> torch.Tensor:
+    generator = torch.Generator().manual_seed(seed)
+    return (torch.rand((n, timesteps, n_inputs), generator=generator) < p).to(torch.uint8)
+
+
+@pytest.mark.parametrize("bits", [2, 4, 8])
+def test_lava_weight_encoding_recovers_the_exact_currents(bits):
+    rng = np.random.default_rng(bits)
+    model = make_model(rng, bits=bits)
+    weights, num_weight_bits, weight_exp = lava_weights(model)
+    assert weights.shape == (6, 16) and weights.max() <= 255 and weights.min() >= 0
+    assert num_weight_bits == bits and weight_exp == -(8 - bits)
+    spikes = rng.integers(0, 2, (50, 16))
+    # Lava's Dense: truncate to num_weight_bits (no-op: low bits are zero), sum, shift by weight_exp
+    truncated = (weights >> (8 - num_weight_bits)) << (8 - num_weight_bits)
+    assert np.array_equal(truncated, weights)
+    lava_currents = (spikes @ truncated.T) >> -weight_exp
+    assert np.array_equal(lava_currents, spikes @ model.weight_mantissa)
+
+
+def test_header_names_every_lava_parameter():
+    model = make_model(np.random.default_rng(1), bits=4)
+    desc = describe(model)
+    exc = desc.header["populations"][1]
+    conn = desc.header["connections"][0]
+    assert (exc["du"], exc["dv"], exc["vth_shift"], exc["bias_exp"]) == (4095, 205, 6, 0)
+    assert np.array_equal(desc.arrays[exc["vth"]], model.threshold)
+    assert conn["sign_mode"] == "EXCITATORY" and conn["num_weight_bits"] == 4 and conn["weight_exp"] == -4
+    assert desc.header["wta"]["enabled"] and np.array_equal(desc.arrays["wta_score_multiplier"], model.scale_multiplier)
+    assert desc.header["populations"][0]["encoder"]["timesteps"] == 30
+    assert not conn["u_wrap_possible"]
+
+
+@pytest.mark.parametrize("bits", [2, 8])
+def test_round_trip_rebuilds_the_model_exactly(tmp_path, bits):
+    model = make_model(np.random.default_rng(bits), bits=bits)
+    write_loihi(model, tmp_path / "d", source_sha256="ef" * 32)
+    rebuilt = read_loihi_model(tmp_path / "d")
+    for f in dataclasses.fields(model):
+        a, b = getattr(model, f.name), getattr(rebuilt, f.name)
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b, f.name
+    assert read_loihi(tmp_path / "d" / HEADER_NAME).header["source_sha256"] == "ef" * 32
+    spikes = random_spikes(bits, 4, 30, 16)
+    assert torch.equal(simulate(model, spikes, record=True).raster, simulate(rebuilt, spikes, record=True).raster)
+
+
+def test_netx_file_only_for_a_single_threshold(tmp_path):
+    per_neuron = write_loihi(make_model(np.random.default_rng(2)), tmp_path / "a")
+    assert "netx" not in per_neuron and not (tmp_path / "a" / NETX_NAME).exists()
+    assert read_loihi(tmp_path / "a").header["netx"]["reason"] == "per-neuron thresholds"
+    model = make_model(np.random.default_rng(3), uniform=True, bits=4)
+    written = write_loihi(model, tmp_path / "b")
+    with h5py.File(written["netx"], "r") as f:
+        layer = f["layer/0"]
+        assert layer["type"][()] == b"dense" and list(layer["shape"][()]) == [6]
+        assert np.array_equal(layer["weight"][()], model.weight_mantissa.T)
+        neuron = layer["neuron"]
+        assert neuron["type"][()] == b"CUBA" and neuron["iDecay"][()] == 4096 and neuron["vDecay"][()] == 205
+        assert neuron["vThMant"][()] == model.threshold[0]
+
+
+def test_reader_rejects_missing_corrupt_and_mismatched_files(tmp_path):
+    with pytest.raises(ModelFileError, match="network.json missing"):
+        read_loihi(tmp_path)
+    write_loihi(make_model(np.random.default_rng(4)), tmp_path / "d")
+    header = tmp_path / "d" / HEADER_NAME
+    arrays = tmp_path / "d" / ARRAYS_NAME
+    good_header, good_arrays = header.read_bytes(), arrays.read_bytes()
+    header.write_bytes(good_header[: len(good_header) // 2])
+    with pytest.raises(ModelFileError, match="not valid JSON"):
+        read_loihi(tmp_path / "d")
+    header.write_bytes(good_header)
+    arrays.write_bytes(good_arrays[:100])
+    with pytest.raises(ModelFileError, match="sha256"):
+        read_loihi(tmp_path / "d")
+    arrays.unlink()
+    with pytest.raises(ModelFileError, match="missing"):
+        read_loihi(tmp_path / "d")
+    arrays.write_bytes(good_arrays)
+    meta = json.loads(good_header)
+    meta["format"] = "something-else"
+    header.write_text(json.dumps(meta))
+    with pytest.raises(ModelFileError, match="not a vprsnn Loihi description"):
+        read_loihi(tmp_path / "d")
+
+
+def test_writer_validates_before_writing(tmp_path):
+    model = make_model(np.random.default_rng(5))
+    bad = dataclasses.replace(model, threshold=np.full(6, 2**17, dtype=np.int32))
+    with pytest.raises(ModelFileError, match="threshold"):
+        write_loihi(bad, tmp_path / "d")
+    assert not (tmp_path / "d").exists()
+
+
+# --- the conformance run in Lava (lava-nc 0.10, Python 3.10) --------------------------------------------
+
+
+def lava_python() -> Path:
+    """The Lava venv's interpreter, building the venv on first use; skip with the reason when impossible."""
+    python = LAVA_VENV / "bin" / "python"
+    if python.exists() and subprocess.run([python, "-c", "import lava.proc.lif.process"], capture_output=True).returncode == 0:
+        return python
+    base = next((Path(p) for p in PYTHON310 if p and Path(p).exists()), None)
+    if base is None:
+        pytest.skip("lava-nc 0.10 needs Python 3.10 and none was found (pyenv 3.10.13 or python3.10 on PATH)")
+    LAVA_VENV.parent.mkdir(parents=True, exist_ok=True)
+    steps = [[str(base), "-m", "venv", str(LAVA_VENV)], [str(python), "-m", "pip", "install", "-q", "lava-nc==0.10.*"]]
+    for step in steps:
+        done = subprocess.run(step, capture_output=True, text=True, timeout=1800)
+        if done.returncode != 0:
+            pytest.skip(f"could not build the Lava venv ({' '.join(step[-2:])}): {done.stderr.strip()[-400:]}")
+    return python
+
+
+def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path) -> torch.Tensor:
+    np.save(tmp_path / "spikes.npy", spikes.numpy())
+    done = subprocess.run([str(python), str(RUN_LAVA), str(folder), str(tmp_path / "spikes.npy"), str(tmp_path / "raster.npy")],
+                          capture_output=True, text=True, timeout=1800)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return torch.from_numpy(np.load(tmp_path / "raster.npy").astype(bool))
+
+
+def wta_select(candidates: torch.Tensor, spikes: torch.Tensor, model: FixedPointModel) -> torch.Tensor:
+    """What a Lava user adds for hard WTA: of each step's candidates keep the largest a_j m_j (lowest index on ties)."""
+    currents = spikes.to(torch.int64) @ torch.as_tensor(model.weight_mantissa, dtype=torch.int64)
+    score = torch.where(candidates, currents * torch.as_tensor(model.scale_multiplier, dtype=torch.int64), -1)
+    winner = score.argmax(dim=2, keepdim=True)
+    return torch.zeros_like(candidates).scatter_(2, winner, candidates.any(dim=2, keepdim=True))
+
+
+def assert_lava_conforms(model: FixedPointModel, spikes: torch.Tensor, tmp_path: Path, python: Path) -> int:
+    write_loihi(model, tmp_path / "desc")
+    lava = run_in_lava(python, tmp_path / "desc", spikes, tmp_path)
+    wta_off = dataclasses.replace(model, config=model.config.replace(**{"network.wta": False}))
+    expected = simulate(wta_off, spikes, record=True).raster
+    assert torch.equal(lava, expected), f"{int((lava != expected).sum())} of {lava.numel()} spikes differ"
+    with_wta = dataclasses.replace(model, config=model.config.replace(**{"network.wta": True}))
+    assert torch.equal(wta_select(lava, spikes, model), simulate(with_wta, spikes, record=True).raster)
+    return int(lava.sum())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bits", [8, 4, 2])
+def test_lava_runs_the_description_spike_for_spike(tmp_path, bits):
+    """Full size (784 x 400), per-neuron thresholds, WTA off in Lava, against the integer simulator."""
+    python = lava_python()
+    model = make_model(np.random.default_rng(bits), n_inputs=784, n_neurons=400, bits=bits, p=0.12)
+    spikes = random_spikes(bits, 3, 60, 784, p=0.12)
+    assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
+def test_lava_on_real_nordland_queries(tmp_path):
+    """A short training on the real subset, quantised per neuron at 8 bits; 4 winter queries at the config's T."""
+    from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.runtime.inference import query_spikes
+    from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+    python = lava_python()
+    cfg = Config().replace(**{"train.epochs": 3, "seed": 1})
+    subset = NORDLAND / "subset_100_places.csv"
+    dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=subset)
+    ckpt = train_and_calibrate(dataset, ["summer"], cfg, device=torch.device("cpu"), progress=False,
+                               selection={"subset": str(subset), "places": None})
+    model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+    spikes = query_spikes(dataset.traversal("winter")[:4], dataset.place_ids[:4], "winter", cfg)
+    assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
