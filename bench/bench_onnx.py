@@ -11,6 +11,7 @@ from the model's own data source (or --data), else synthetic ones. Each backend 
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -94,7 +95,10 @@ def main() -> int:
     parser.add_argument("--queries", type=int, default=100)
     parser.add_argument("--threads", default="1,2", help="onnxruntime intra-op thread counts")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--torch-threads", type=int, help="torch intra-op threads for the simulator (default: torch's)")
     args = parser.parse_args()
+    if args.torch_threads:
+        torch.set_num_threads(args.torch_threads)
     source = load_model(args.model)
     if isinstance(source, Checkpoint):
         digest = sha256_file(args.model)
@@ -107,7 +111,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as folder:
         for model in models:
             rows += bench_model(model, spikes, threads, args.repeat, Path(folder))
-    print(f"{described}, torch threads {torch.get_num_threads()}")
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    print(f"{described}; torch threads {torch.get_num_threads()}; {os.cpu_count()} CPUs, load average {load}")
     print(format_table(rows, COLUMNS))
     return 0
 

@@ -13,6 +13,7 @@ import base64
 import html
 import io
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,15 +103,11 @@ class Block:
     image: bytes = b""
     name: str = ""
     status: Sequence[str | None] = ()  # per table row: "pass", "fail" or None (HTML colours)
-    title: str = ""  # figures: the heading above the image (``text`` is the caption)
-
-
-def pct(value: float | None, digits: int = 1) -> str:
-    return "-" if value is None else f"{100 * value:.{digits}f}"
+    title: str = ""  # figures: the heading above the image (``text`` is the caption); pre: a collapsed summary
 
 
 def signed_pct(value: float | None, digits: int = 1) -> str:
-    return "-" if value is None else f"{100 * value:+.{digits}f}"
+    return "-" if value is None else f"{round(100 * value, digits) + 0.0:+.{digits}f}"
 
 
 def ms(summary: Mapping[str, Any] | None, *, percent: bool = True, signed: bool = False, digits: int = 1) -> str:
@@ -118,8 +115,17 @@ def ms(summary: Mapping[str, Any] | None, *, percent: bool = True, signed: bool 
     if not summary or summary.get("mean") is None:
         return "-"
     scale = 100.0 if percent else 1.0
-    mean = f"{scale * summary['mean']:{'+' if signed else ''}.{digits}f}"
+    value = round(scale * summary["mean"], digits) + 0.0  # no "-0.0"
+    mean = f"{value:{'+' if signed else ''}.{digits}f}"
     return mean if summary["n"] <= 1 else f"{mean} ± {scale * summary['std']:.{digits}f}"
+
+
+def data_note(settings: Mapping[str, Any]) -> str:
+    """" from DATA (selection)" when the settings name the data."""
+    if not settings.get("data"):
+        return ""
+    selection = settings.get("subset") or (f"places {settings['places']}" if settings.get("places") else "all places")
+    return f" from {settings['data']} ({selection})"
 
 
 def row_label(strategy: str, k: int) -> str:
@@ -142,7 +148,8 @@ def blocks_of(report: Mapping[str, Any]) -> list[Block]:
     blocks: list[Block] = [Block("h1", "vprsnn-export verification report")]
     blocks.append(Block("p", (
         f"**Verdict: {verdict(report['passed'])}** — {sum(r['passed'] for r in runs)} of {n_runs} network(s) pass every "
-        f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries; "
+        f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries"
+        f"{data_note(settings)}; "
         f"{'mean ± std over ' + str(n_runs) + ' independently trained networks' if n_runs > 1 else 'one network'}. "
         f"Generated {report.get('created', '?')}"
         + (f" in {report['seconds']:.0f} s" if report.get("seconds") else "") + "."
@@ -340,9 +347,10 @@ def provenance_blocks(report: Mapping[str, Any]) -> list[Block]:
         Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),
         Block("h2", "Provenance"),
         Block("pre", "command: " + text),
-        Block("pre", "settings = " + json.dumps(report.get("settings", {}), indent=2, sort_keys=True)),
-        Block("pre", "config (first network) = " + json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True)),
-        Block("pre", "versions = " + json.dumps(report.get("versions", {}), indent=2, sort_keys=True)),
+        Block("pre", json.dumps(report.get("settings", {}), indent=2, sort_keys=True), title="settings"),
+        Block("pre", json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True),
+              title="config (first network)"),
+        Block("pre", json.dumps(report.get("versions", {}), indent=2, sort_keys=True), title="versions"),
     ]
 
 
@@ -390,8 +398,9 @@ def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
         ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
     for ax in axes[1]:
         ax.set_xlabel("weight bits (dashed: float)")
-    axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
     return png(fig)
 
 
@@ -490,7 +499,7 @@ def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
         elif block.kind == "p":
             lines += [block.text, ""]
         elif block.kind == "pre":
-            lines += ["```", block.text, "```", ""]
+            lines += ([f"{block.title}:", ""] if block.title else []) + ["```", block.text, "```", ""]
         elif block.kind == "table":
             lines.append("| " + " | ".join(block.headers) + " |")
             lines.append("|" + "---|" * len(block.headers))
@@ -509,7 +518,8 @@ h2 { margin-top: 1.8em; border-bottom: 1px solid #ccc; }
 table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f0f0f3; }
-td:first-child, th:first-child { text-align: left; }
+td:first-child, th:first-child, td.t { text-align: left; }
+details { margin: .4em 0; } summary { cursor: pointer; color: #333; }
 tr.pass td { background: #eaf7ea; }
 tr.fail td { background: #fbe3e3; }
 figure { margin: 1em 0; }
@@ -530,6 +540,16 @@ def _html_inline(text: str) -> str:
         .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
 
 
+NUMERIC = re.compile(r"^[-+]?[\d.]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?$")
+
+
+def _cell(value: object) -> str:
+    """A table cell: numbers right-aligned, text left-aligned."""
+    text = str(value)
+    cls = "" if NUMERIC.match(text) or text in ("-", "PASS", "FAIL") else ' class="t"'
+    return f"<td{cls}>{html.escape(text)}</td>"
+
+
 def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verification report") -> str:
     body: list[str] = []
     for block in blocks:
@@ -537,6 +557,8 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
             body.append(f"<{block.kind}>{html.escape(block.text)}</{block.kind}>")
         elif block.kind == "p":
             body.append(f"<p>{_html_inline(block.text)}</p>")
+        elif block.kind == "pre" and block.title:
+            body.append(f"<details><summary>{html.escape(block.title)}</summary><pre>{html.escape(block.text)}</pre></details>")
         elif block.kind == "pre":
             body.append(f"<pre>{html.escape(block.text)}</pre>")
         elif block.kind == "table":
@@ -545,7 +567,7 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
             for index, row in enumerate(block.rows):
                 status = block.status[index] if index < len(block.status) else None
                 cls = f' class="{status}"' if status else ""
-                rows.append(f"<tr{cls}>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in row) + "</tr>")
+                rows.append(f"<tr{cls}>" + "".join(_cell(c) for c in row) + "</tr>")
             body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
         elif block.kind == "figure":
             data = base64.b64encode(block.image).decode("ascii")

@@ -4,7 +4,7 @@ Graph (node names are fixed; edges (src, dst)):
 
     input --> linear --> lif --> output          Input(inputs), Linear(weight[neurons, inputs]),
                           ^  |                   LIF(tau, r, v_leak=0, v_threshold per neuron, v_reset=0)
-                          +--wta <--+            Linear "wta" [neurons, neurons]: the WTA placeholder
+                          +--wta <--+            Linear "wta" [neurons, neurons]: lateral inhibition
 
 Parameters, with dt = DT_SECONDS (the value snnTorch uses) stated in the metadata:
 
@@ -17,12 +17,16 @@ thresholds theta_j. Fixed-point model: the Linear holds the integer mantissas q_
 LIF the integer threshold mantissas theta_int_j, with beta = (4096 - dv) / 4096; every
 neuron's voltage then lives in its own mantissa units (the Loihi voltage divided by
 2**voltage_shift), and the per-neuron scales m_j 2**e, which only the WTA comparison
-needs, are in the metadata. Hard WTA has no NIR primitive: the recurrent ``wta``
-Linear carries -inhibition (1 - I) (0 by default) and the metadata states the rule:
-every neuron over threshold resets to 0, and of those only the one with the largest
-a_j m_j (float: I_j) emits a spike. A consumer that ignores the metadata therefore emits
-every candidate, a superset of the network's spikes. ``wta_node=False`` leaves the
-``wta`` node out for importers that mishandle recurrent subgraphs (snnTorch 1.0).
+needs, are in the metadata. Hard WTA has no NIR primitive: the metadata states the rule
+(every neuron over threshold resets to 0, and of those only the one with the largest
+a_j m_j, float: I_j, emits a spike), and the recurrent ``wta`` Linear approximates it for
+consumers that ignore the metadata, as lateral inhibition one step late:
+
+    W_wta[j, i] = -k v_threshold_j  (i != j),  k = WTA_INHIBITION = 1 by default
+
+With k = 0 such a consumer computes the WTA-off network (every candidate spikes, a
+superset of the network's spikes). ``wta_node=False`` leaves the node out for importers
+that mishandle recurrent graphs (snnTorch 1.0, Norse 1.1).
 
 Alongside: :func:`generic_consumer_raster` runs a file through nirtorch with NIR's own
 LIF equations and :func:`snntorch_consumer_raster` through snnTorch's importer, so the
@@ -51,6 +55,7 @@ from vprsnn_export.fileio import atomic_write_bytes
 FORMAT = "vprsnn-nir"
 FORMAT_VERSION = 1
 DT_SECONDS = 1e-4
+WTA_INHIBITION = 1.0  # measured best for a metadata-blind consumer on the Nordland subset (docs/targets.md)
 NODES = ("input", "linear", "lif", "wta", "output")
 PLAIN_EDGES = [("input", "linear"), ("linear", "lif"), ("lif", "output")]
 EDGES = PLAIN_EDGES + [("lif", "wta"), ("wta", "lif")]
@@ -145,7 +150,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_node": (
             "none (left out on request)"
             if inhibition is None
-            else "wta: recurrent Linear holding -wta_inhibition (1 - I); not the WTA rule itself"
+            else "wta: recurrent Linear W[j, i] = -wta_inhibition * v_threshold_j (i != j): lateral inhibition, one step late; not the WTA rule itself"
         ),
         "wta_inhibition": 0.0 if inhibition is None else float(inhibition),
         "wta_score_multiplier": (
@@ -171,11 +176,21 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
     return meta
 
 
+def inhibition_weights(thresholds: np.ndarray, strength: float) -> np.ndarray:
+    """W_inh[j, i] = -strength * v_threshold_j for i != j, 0 on the diagonal (float32).
+
+    Each other neuron's spike at step t - 1 lowers neuron j's input at step t by ``strength``
+    of j's own threshold, so the strength means the same in float and mantissa units.
+    """
+    n = thresholds.shape[0]
+    return (-strength * np.asarray(thresholds, dtype=np.float64)[:, None] * (1.0 - np.eye(n))).astype(np.float32)
+
+
 def build_graph(
     source: Source,
     *,
     source_sha256: str | None = None,
-    wta_inhibition: float = 0.0,
+    wta_inhibition: float = WTA_INHIBITION,
     wta_node: bool = True,
     dt: float = DT_SECONDS,
 ):
@@ -199,7 +214,7 @@ def build_graph(
     else:
         raise OptionError(f"cannot export a {type(source).__name__} to NIR")
     n_out, n_in = weight.shape
-    inhibition = (-wta_inhibition * (1.0 - np.eye(n_out))).astype(np.float32)
+    inhibition = inhibition_weights(thresholds, wta_inhibition)
     nodes = {
         "input": nir.Input(input_type=np.array([n_in])),
         "linear": nir.Linear(weight=weight),
@@ -217,7 +232,7 @@ def write_nir(
     path: str | Path,
     *,
     source_sha256: str | None = None,
-    wta_inhibition: float = 0.0,
+    wta_inhibition: float = WTA_INHIBITION,
     wta_node: bool = True,
     dt: float = DT_SECONDS,
 ) -> Path:
@@ -423,6 +438,40 @@ def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
     with contextlib.redirect_stdout(io.StringIO()):
         module = import_from_nir(copy.deepcopy(graph))
     return step_module(module, spikes)
+
+
+def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS) -> torch.Tensor:
+    """Run a NIR graph through Norse's importer (``norse.torch.from_nir``, an optional package) at ``dt``.
+
+    Norse 1.1 ignores the LIF's r (it integrates v <- v + dt/tau (v_leak - v + I)). Its graph
+    executor returns the output of the last node it runs, which is ``wta`` when that node is
+    present, so the spikes are read from the executor's cache of the ``lif`` node instead.
+    """
+    import logging
+
+    try:
+        import norse.torch as norse_torch
+    except ImportError:
+        raise OptionError("the Norse consumer needs the norse package (pip install norse)") from None
+    logging.getLogger().disabled = True
+    try:
+        module = norse_torch.from_nir(graph, dt=dt)
+    finally:
+        logging.getLogger().disabled = False
+    state = None
+    outputs = []
+    with torch.no_grad():
+        for t in range(spikes.shape[1]):
+            _, state = module(spikes[:, t].to(torch.float32), state)
+            outputs.append(state.cache["lif"].detach().to(torch.bool))
+    return torch.stack(outputs, dim=1)
+
+
+CONSUMERS = {
+    "nirtorch": generic_consumer_raster,
+    "snntorch": lambda graph, spikes: snntorch_consumer_raster(graph, spikes),
+    "norse": norse_consumer_raster,
+}
 
 
 def spike_agreement(reference: torch.Tensor, consumer: torch.Tensor) -> dict[str, float]:

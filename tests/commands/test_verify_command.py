@@ -4,7 +4,6 @@ import json
 
 import pytest
 
-import vprsnn_export.experiments.common as experiments_common
 from vprsnn_export.cli import main
 from vprsnn_export.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
 
@@ -97,7 +96,7 @@ def test_json_output(checkpoint, tmp_path, capsys):
 
 
 def test_seeds_train_independent_networks(checkpoint, tmp_path, monkeypatch):
-    monkeypatch.setattr(experiments_common, "CACHE", tmp_path / "cache")
+    monkeypatch.setenv("VPRSNN_CACHE", str(tmp_path / "cache"))
     report = tmp_path / "seeds"
     code = verify(checkpoint, report, "--bits", "8", "--seeds", "2", "--tolerance", LENIENT, "--targets", "onnx")
     assert code == 0

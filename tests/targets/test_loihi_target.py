@@ -214,21 +214,34 @@ def test_lava_runs_the_description_spike_for_spike(tmp_path, bits):
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
-def test_lava_on_real_nordland_queries(tmp_path):
-    """A short training on the real subset, quantised per neuron at 8 bits; 4 winter queries at the config's T."""
+def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
+    """VPRSNN_LAVA_MODEL (a fixed-point model file) when set, else a 3-epoch network quantised at 8 bits per neuron;
+    with the spike trains of its first ``n`` winter queries."""
     from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.export.model import load_fixed_point
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.runtime.inference import query_spikes
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
-    python = lava_python()
-    cfg = Config().replace(**{"train.epochs": 3, "seed": 1})
+    given = os.environ.get("VPRSNN_LAVA_MODEL")
+    model = load_fixed_point(given) if given else None
+    cfg = model.config if model else Config().replace(**{"train.epochs": 3, "seed": 1})
     subset = NORDLAND / "subset_100_places.csv"
     dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=subset)
-    ckpt = train_and_calibrate(dataset, ["summer"], cfg, device=torch.device("cpu"), progress=False,
-                               selection={"subset": str(subset), "places": None})
-    model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
-    spikes = query_spikes(dataset.traversal("winter")[:4], dataset.place_ids[:4], "winter", cfg)
+    if model is None:
+        ckpt = train_and_calibrate(dataset, ["summer"], cfg, device=torch.device("cpu"), progress=False,
+                                   selection={"subset": str(subset), "places": None})
+        model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+    return model, query_spikes(dataset.traversal("winter")[:n], dataset.place_ids[:n], "winter", cfg)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
+def test_lava_on_real_nordland_queries(tmp_path):
+    """Real winter queries at the model's T through Lava (WTA off) against the integer simulator.
+
+    VPRSNN_LAVA_MODEL=path runs a given fixed-point model, VPRSNN_LAVA_QUERIES=n sets the number of queries (4).
+    """
+    python = lava_python()
+    model, spikes = real_model_and_queries(int(os.environ.get("VPRSNN_LAVA_QUERIES", "4")))
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0

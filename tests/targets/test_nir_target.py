@@ -127,7 +127,8 @@ def test_nir_read_sees_the_documented_graph(tmp_path):
     assert np.array_equal(lif.v_threshold, model.threshold) and not np.any(lif.v_reset)
     assert ("lif", "wta") in graph.edges and ("wta", "lif") in graph.edges
     wta = graph.nodes["wta"].weight
-    assert np.all(np.diag(wta) == 0) and np.all(wta[~np.eye(6, dtype=bool)] == -0.5)
+    expected = -0.5 * model.threshold[:, None] * (1 - np.eye(6))
+    assert np.array_equal(wta, expected.astype(np.float32))
     meta = graph.metadata
     assert meta["dt"] == DT_SECONDS and meta["bits"] == 8 and meta["timesteps"] == 20 and meta["wta"] == "on"
     assert "largest a_j * m_j" in meta["wta_rule"] and np.array_equal(meta["wta_score_multiplier"], model.scale_multiplier)
@@ -142,9 +143,9 @@ def test_no_leak_becomes_an_if_node(tmp_path):
 
 
 def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path):
-    """Exact float sums (dyadic values): nirtorch with NIR's LIF equals the WTA-off network spike for spike."""
+    """Inhibition 0 and exact float sums (dyadic values): nirtorch with NIR's LIF equals the WTA-off network."""
     ckpt = make_checkpoint(np.random.default_rng(5), dyadic=True)
-    graph = nir.read(write_nir(ckpt, tmp_path / "d.nir"))
+    graph = nir.read(write_nir(ckpt, tmp_path / "d.nir", wta_inhibition=0.0))
     spikes = random_spikes(5)
     consumer = generic_consumer_raster(graph, spikes)
     assert torch.equal(consumer, float_raster(ckpt, spikes, wta=False))
@@ -155,7 +156,7 @@ def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path):
 def test_generic_consumer_on_a_fixed_point_file_is_close_to_the_integer_network(tmp_path):
     model = make_model(np.random.default_rng(6), bits=4)
     spikes = random_spikes(6)
-    consumer = generic_consumer_raster(nir.read(write_nir(model, tmp_path / "m.nir")), spikes)
+    consumer = generic_consumer_raster(nir.read(write_nir(model, tmp_path / "m.nir", wta_inhibition=0.0)), spikes)
     agreement = spike_agreement(int_raster(model, spikes, wta=False), consumer)
     assert agreement["recall"] > 0.9 and agreement["precision"] > 0.9  # float vs round-toward-zero decay
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +58,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--tolerance",
         metavar="KEY=VALUE,...",
         help="override tolerances, e.g. r_at_100p=0.01,accuracy=0.02,auc_pr=0.02 (fractions; 'off' disables); "
-        "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations (docs/verify.md)",
+        "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations, query_slack "
+        "(docs/verify.md)",
     )
     checks.add_argument("--reference-queries", type=int, default=3,
                         help="queries also run on the slow reference stepper (default 3; 0 = none)")
@@ -137,14 +138,17 @@ def load_for(ckpt, query: str, source: str, subset: str | None, places: str | No
     return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
 
 
-def train_seeds(template, n_seeds: int, dataset: Dataset, source: str, subset: str | None, places: str | None,
-                out: Path, device_name: str, progress: bool) -> list[tuple[str, object, Path]]:
-    """Train seeds 1..N with the template's config on its reference traversals (cached by the experiments' key)."""
+def seed_networks(template, n_seeds: int, dataset: Dataset, source: str, subset: str | None, places: str | None,
+                  out: Path, device_name: str, progress: bool) -> Iterator[tuple[str, object, Path]]:
+    """Seeds 1..N trained with the template's config on its reference traversals, one at a time.
+
+    Training goes through the experiments' checkpoint cache (same key), so a network the
+    experiments already trained is reused; each is also written to DIR/checkpoints/seedN.npz.
+    """
     from ..experiments.common import Settings, trained_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
     key = "subset" if subset else ("consecutive" if places else "all")
-    networks = []
     for seed in range(1, n_seeds + 1):
         cfg = template.config.replace(seed=seed)
         if len(template.reference_traversals) == 1:
@@ -155,8 +159,7 @@ def train_seeds(template, n_seeds: int, dataset: Dataset, source: str, subset: s
                                        progress=progress)
         ckpt = dataclasses.replace(ckpt, data={**ckpt.data, "source": source, "subset": subset, "places": places})
         path = save_checkpoint(out / "checkpoints" / f"seed{seed}.npz", ckpt)
-        networks.append((f"seed {seed}", ckpt, path))
-    return networks
+        yield f"seed {seed}", ckpt, path
 
 
 def settings_of(args: argparse.Namespace, options, source: str, subset, places) -> dict:
@@ -173,7 +176,9 @@ def settings_of(args: argparse.Namespace, options, source: str, subset, places) 
 
 
 def command_line(args: argparse.Namespace) -> list[str]:
-    """The command as given (rebuilt from the parsed options, for the report)."""
+    """The command as given (the CLI's argv; rebuilt from the parsed options when absent)."""
+    if getattr(args, "argv", None):
+        return ["vprsnn-export", *args.argv]
     line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", args.k]
     for flag, value in (("--data", args.data), ("--subset", args.subset), ("--places", args.places),
                         ("--tolerance", args.tolerance), ("--seeds", args.seeds), ("--velocity-search", args.velocity_search)):
@@ -243,11 +248,12 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds is not None:
         template = templates[0][1]
         dataset, _ = load_for(template, args.query, source, subset, places, progress, cache)  # training places
-        networks = train_seeds(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
+        networks = seed_networks(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
     else:
         labels = [stem for stem, _, _ in templates]
         networks = [(stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
                     for i, (stem, ckpt, path) in enumerate(templates)]
+    settings = settings_of(args, options, source, subset, places)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = selection(args, ckpt)
@@ -259,9 +265,8 @@ def run(args: argparse.Namespace) -> int:
             export_dir=out / "exports" / folder_name(label, index), device=device, progress=progress, label=label,
         ))
         runs[-1]["checkpoint"] = str(path)
-    report = build_report(runs, settings_of(args, options, source, subset, places), command=command_line(args),
-                          seconds=time.perf_counter() - started)
-    written = write_report(report, out)
+        report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
+        written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     if args.json:
         print_json({"passed": report["passed"], "report": {k: str(v) for k, v in written.items()},
                     "summary": report["summary"]})

@@ -15,7 +15,7 @@ from .plots import line_plot
 NAME = "scalability"
 DESCRIPTION = "AUC-PR and accuracy (W+Prob, k=1) vs N in {25, 50, 100, 200, 400}, windows of consecutive places"
 FULL_SIZES = (25, 50, 100, 200, 400)
-FULL_STARTS = (200, 1000, 1800)
+FULL_STARTS = (500, 1500)
 QUICK_SIZES = (10, 20)
 QUICK_STARTS = (0, 4)
 
