@@ -47,7 +47,8 @@ def spikes_for(model, args: argparse.Namespace) -> tuple[torch.Tensor, str]:
     cfg = model.config
     if args.query:
         source = args.data or model.data["source"]
-        dataset = load_dataset(source, [args.query], cfg.preprocess, subset=model.data.get("subset"), places=model.data.get("places"))
+        selection = {"subset": model.data.get("subset"), "places": model.data.get("places")}
+        dataset = load_dataset(source, [args.query], cfg.preprocess, **selection)
         images, ids = dataset.traversal(args.query)[: args.queries], dataset.place_ids[: args.queries]
         return query_spikes(images, ids, args.query, cfg), f"{len(ids)} '{args.query}' queries"
     rng = np.random.default_rng(cfg.seed)

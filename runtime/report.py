@@ -540,7 +540,7 @@ def _html_inline(text: str) -> str:
         .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
 
 
-NUMERIC = re.compile(r"^[-+]?[\d.]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?$")
+NUMERIC = re.compile(r"^[-+]?[\d./]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?( exact)?$")
 
 
 def _cell(value: object) -> str:

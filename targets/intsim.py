@@ -6,8 +6,9 @@ Per chunk of presentations (state isolation) or per presentation (one stream):
    One float32 matmul computes them exactly: every term is a non-negative integer
    multiple of 2**shift and every partial sum is bounded by the total
    n_inputs (2**bits - 1) 2**shift (784 * 255 * 64 < 2**24), so no rounding can
-   occur. The bound is checked from the model; above 2**24 the matmul runs in
-   float64 (exact below 2**53). The result is cast to int32.
+   occur. The bound is checked from the model; above 2**24, and always on CUDA (where
+   float32 matmuls may run in TF32), the matmul runs in float64 (exact below 2**53).
+   The result is cast to int32.
 2. The recurrence over t: one Python loop of T steps, each a handful of int64 tensor
    ops over (presentations, neurons):
 

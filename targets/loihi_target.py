@@ -253,7 +253,8 @@ def read_loihi(path: str | Path) -> LoihiDescription:
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"the description header is not valid JSON (truncated or corrupt: {exc})", head) from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn Loihi description (format {header.get('format') if isinstance(header, dict) else None!r})", head)
+        found = header.get("format") if isinstance(header, dict) else None
+        raise ModelFileError(f"not a vprsnn Loihi description (format {found!r})", head)
     if header.get("format_version") != FORMAT_VERSION:
         raise ModelFileError(f"unsupported Loihi description version {header.get('format_version')!r}", head)
     arrays_path = head.parent / str(header.get("arrays", {}).get("file", ARRAYS_NAME))

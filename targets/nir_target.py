@@ -150,7 +150,8 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_node": (
             "none (left out on request)"
             if inhibition is None
-            else "wta: recurrent Linear W[j, i] = -wta_inhibition * v_threshold_j (i != j): lateral inhibition, one step late; not the WTA rule itself"
+            else "wta: recurrent Linear W[j, i] = -wta_inhibition * v_threshold_j (i != j): "
+            "lateral inhibition, one step late; not the WTA rule itself"
         ),
         "wta_inhibition": 0.0 if inhibition is None else float(inhibition),
         "wta_score_multiplier": (

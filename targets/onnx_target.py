@@ -340,7 +340,9 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
     )
 
 
-def run_onnx_outputs(path: str | Path, spikes: torch.Tensor | np.ndarray, *, batch: int = 128, threads: int | None = None) -> OnnxRun:
+def run_onnx_outputs(
+    path: str | Path, spikes: torch.Tensor | np.ndarray, *, batch: int = 128, threads: int | None = None
+) -> OnnxRun:
     """Every output of an exported graph for spikes (N, T, inputs)."""
     return run_session(session(path, threads), spikes, batch)
 

@@ -91,13 +91,13 @@ def assert_identical(model: FixedPointModel, spikes: np.ndarray) -> tuple:
     return fast, slow
 
 
-@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(cases())
 def test_fast_simulator_equals_reference_on_random_models(case):
     assert_identical(*case)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(cases(saturating=True))
 def test_saturation_events_are_counted_identically(case):
     fast, _ = assert_identical(*case)

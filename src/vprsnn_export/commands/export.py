@@ -159,7 +159,9 @@ def consumer_statements(source, model, targets: tuple[str, ...], wta_node: bool,
     return notes
 
 
-def export_all(source, model, targets: tuple[str, ...], out: Path, digest: str, inhibition: float, wta_node: bool) -> dict[str, list[Path]]:
+def export_all(
+    source, model, targets: tuple[str, ...], out: Path, digest: str, inhibition: float, wta_node: bool
+) -> dict[str, list[Path]]:
     from ..targets.loihi_target import write_loihi
     from ..targets.nir_target import write_nir
     from ..targets.onnx_target import write_onnx
@@ -235,7 +237,8 @@ def check_nir(path: Path, source, spikes: torch.Tensor, consumer_name: str = "ni
         row("nir", f"{consumer_name} (no metadata) vs network", None,
             f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, "
             f"{consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1]):.1f} spikes/step"),
-        row("nir", f"{consumer_name} top-1 place (W+Prob) == network's", None, f"{float(np.mean(places == consumer_places)):.3f}"),
+        row("nir", f"{consumer_name} top-1 place (W+Prob) == network's", None,
+            f"{float(np.mean(places == consumer_places)):.3f}"),
     ]
 
 
