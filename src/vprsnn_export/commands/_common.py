@@ -24,6 +24,16 @@ def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) ->
     selection.add_argument("--places", help="START:COUNT[:STRIDE] consecutive place ids")
 
 
+def add_query_options(parser: argparse.ArgumentParser) -> None:
+    """Data, --query, readout and the spillover switch: what evaluate and simulate share."""
+    add_data_options(parser, data_required=False)
+    parser.add_argument("--query", required=True, help="query traversal name")
+    add_readout_options(parser)
+    parser.add_argument(
+        "--no-state-isolation", action="store_true", help="carry neuron state across queries (spillover ablation)"
+    )
+
+
 def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -13,8 +13,7 @@ from ..device import resolve_device
 from ..errors import OptionError
 from ._common import (
     RESULT_COLUMNS,
-    add_data_options,
-    add_readout_options,
+    add_query_options,
     add_runtime_options,
     format_table,
     parse_int_list,
@@ -26,12 +25,7 @@ from ._common import (
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("evaluate", help="evaluate a float checkpoint on a query traversal")
     parser.add_argument("checkpoint", help="checkpoint written by train")
-    add_data_options(parser, data_required=False)
-    parser.add_argument("--query", required=True, help="query traversal name")
-    add_readout_options(parser)
-    parser.add_argument(
-        "--no-state-isolation", action="store_true", help="carry neuron state across queries (spillover ablation)"
-    )
+    add_query_options(parser)
     parser.add_argument("--baseline", action="store_true", help="add the no-learning SAD baseline rows")
     add_runtime_options(parser)
     parser.set_defaults(handler=run)

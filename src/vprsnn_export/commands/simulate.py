@@ -11,7 +11,7 @@ import numpy as np
 from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import OptionError
-from ._common import RESULT_COLUMNS, add_data_options, add_readout_options, add_runtime_options, format_table, print_json
+from ._common import RESULT_COLUMNS, add_query_options, add_runtime_options, format_table, print_json
 from .evaluate import load_query_data, readout_options
 
 if TYPE_CHECKING:
@@ -23,12 +23,7 @@ CALIBRATIONS = ("deployed", "float")
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("simulate", help="run a fixed-point model on the integer simulator")
     parser.add_argument("model", help="fixed-point model written by quantize")
-    add_data_options(parser, data_required=False)
-    parser.add_argument("--query", required=True, help="query traversal name")
-    add_readout_options(parser)
-    parser.add_argument(
-        "--no-state-isolation", action="store_true", help="carry neuron state across queries (spillover ablation)"
-    )
+    add_query_options(parser)
     parser.add_argument(
         "--compare",
         metavar="CHECKPOINT",

@@ -8,7 +8,7 @@ from pathlib import Path
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 
-from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
 
 NAME = "aggregation"
@@ -20,10 +20,7 @@ RULES = ("product", "sum")
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
-    for seed in settings.seeds:
-        cfg = settings.config(seed)
-        data = load(settings, "consecutive", cfg)
-        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+    for seed, cfg, data, ckpt in consecutive_networks(settings):
         counts = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
                                 ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
         rows = []

@@ -130,3 +130,11 @@ def rows_table(summary: list[dict], keys: tuple[str, ...] = ("strategy", "k")) -
         cells = [str(row[k]) for k in keys] + [pct(row[m]) for m in METRICS] + [str(row["accuracy"]["n"])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def consecutive_networks(settings: Settings):
+    """For each seed: (seed, config, the consecutive-places data, its trained checkpoint)."""
+    for seed in settings.seeds:
+        cfg = settings.config(seed)
+        data = load(settings, "consecutive", cfg)
+        yield seed, cfg, data, trained_checkpoint(settings, data, cfg, "consecutive")

@@ -12,7 +12,7 @@ from vprsnn_export.runtime.aggregation import aggregate, estimate_velocity
 from vprsnn_export.runtime.assignment import strategy_scores
 from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
 
-from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 
 NAME = "envelope"
 DESCRIPTION = ("W+Prob k=5 product rule under velocity mismatch, dropped frames, reversal and route deviations, "
@@ -44,10 +44,7 @@ def conditions(n: int, rng: np.random.Generator) -> list[tuple[str, np.ndarray, 
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
-    for seed in settings.seeds:
-        cfg = settings.config(seed)
-        data = load(settings, "consecutive", cfg)
-        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+    for seed, cfg, data, ckpt in consecutive_networks(settings):
         counts = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
                                 ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
         wprob = strategy_scores(ckpt.calibration.astype(float), counts["query_counts"].astype(float), "wprob",

@@ -11,7 +11,7 @@ from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, rea
 from vprsnn_export.runtime.inference import query_spikes
 from vprsnn_export.targets.intsim import IntegerNetwork
 
-from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
 
 NAME = "quantisation"
@@ -25,10 +25,7 @@ def run(settings: Settings) -> dict:
     started = time.perf_counter()
     device = resolve_device(settings.device)
     per_seed = []
-    for seed in settings.seeds:
-        cfg = settings.config(seed)
-        data = load(settings, "consecutive", cfg)
-        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+    for seed, cfg, data, ckpt in consecutive_networks(settings):
         options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 5))
         query = data.traversal(settings.query)
         float_rows = evaluate_float(ckpt, query, data.place_ids, settings.query, options, device=device)["rows"]

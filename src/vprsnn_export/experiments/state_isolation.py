@@ -8,7 +8,7 @@ from pathlib import Path
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
 
-from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 
 NAME = "state_isolation"
 DESCRIPTION = ("query-state isolation vs spillover on the same trained networks (calibration as deployed, "
@@ -18,10 +18,7 @@ DESCRIPTION = ("query-state isolation vs spillover on the same trained networks 
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
-    for seed in settings.seeds:
-        cfg = settings.config(seed)
-        data = load(settings, "consecutive", cfg)
-        ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
+    for seed, cfg, data, ckpt in consecutive_networks(settings):
         rows = []
         for state, isolation in (("isolated", True), ("spillover", False)):
             result = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,

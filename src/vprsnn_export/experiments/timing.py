@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.export.quantize import quantize_checkpoint
