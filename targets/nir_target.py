@@ -45,7 +45,7 @@ import torch
 
 from vprsnn_export import __version__
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.checkpoint import FORMAT_VERSION as CHECKPOINT_FORMAT_VERSION
+from vprsnn_export.checkpoint import checkpoint_header
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError, OptionError, VprError
@@ -85,20 +85,6 @@ def lif_node(beta: float, thresholds: np.ndarray, dt: float):
         v_threshold=thresholds,
         v_reset=zeros.copy(),
     )
-
-
-def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
-    """The checkpoint's own JSON header (the fields ``save_checkpoint`` writes)."""
-    return {
-        "format": CHECKPOINT_FORMAT,
-        "format_version": CHECKPOINT_FORMAT_VERSION,
-        "package_version": ckpt.version,
-        "config": ckpt.config.to_dict(),
-        "seed": ckpt.config.seed,
-        "reference_traversals": list(ckpt.reference_traversals),
-        "data": ckpt.data,
-        "history": ckpt.history,
-    }
 
 
 def check_checkpoint(ckpt: Checkpoint) -> None:

@@ -38,9 +38,9 @@ class Checkpoint:
     version: str = __version__
 
 
-def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
-    _validate(ckpt, Path(path))
-    meta = {
+def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
+    """The JSON header of a checkpoint file (also embedded in exported NIR graphs)."""
+    return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "package_version": ckpt.version,
@@ -50,6 +50,11 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
         "data": ckpt.data,
         "history": ckpt.history,
     }
+
+
+def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
+    _validate(ckpt, Path(path))
+    meta = checkpoint_header(ckpt)
     arrays = {
         "weights": ckpt.weights.astype(np.float32),
         "thresholds": ckpt.thresholds.astype(np.float32),
