@@ -56,14 +56,21 @@ def main() -> None:
     args = parser.parse_args()
     data = args.data if Path(args.data).exists() else "synthetic:100"
     cfg = Config()
-    dataset = load_dataset(data, ["summer", "winter"], cfg.preprocess, places=f"0:{args.queries}" if data.startswith("synthetic") else f"1000:{args.queries}")
+    dataset = load_dataset(
+        data,
+        ["summer", "winter"],
+        cfg.preprocess,
+        places=f"0:{args.queries}" if data.startswith("synthetic") else f"1000:{args.queries}",
+    )
     images = dataset.traversal("summer")
     presentations = [Presentation("summer", int(p)) for p in dataset.place_ids]
     rows = []
     for timesteps in (150, 300):
         run_cfg = cfg.replace(**{"encoder.timesteps": timesteps, "train.epochs": 1})
-        train_s, trained = best_of(args.repeats, lambda: train_network(
-            images, presentations, run_cfg, device=torch.device("cpu"), progress=False))
+        train_s, trained = best_of(
+            args.repeats,
+            lambda: train_network(images, presentations, run_cfg, device=torch.device("cpu"), progress=False),
+        )
         spikes = query_spikes(dataset.traversal("winter"), dataset.place_ids, "winter", run_cfg)
         w, th = trained.weights, trained.thresholds
         fast_s, fast = best_of(args.repeats, lambda: run_network(spikes, w, th, beta=cfg.network.beta).counts)
@@ -76,7 +83,9 @@ def main() -> None:
     print(f"data: {data}; torch {torch.__version__}, {torch.get_num_threads()} threads, CPU")
     print(f"{'T':>4} {'train s/epoch':>14} {'batched q/s':>12} {'ms/query':>9} {'ref loop q/s':>13} {'ratio':>7}")
     for timesteps, n, train_s, fast_qps, ref_qps, ratio in rows:
-        print(f"{timesteps:>4} {train_s:>14.2f} {fast_qps:>12.1f} {1000 / fast_qps:>9.2f} {ref_qps:>13.1f} {ratio:>6.1f}x")
+        print(
+            f"{timesteps:>4} {train_s:>14.2f} {fast_qps:>12.1f} {1000 / fast_qps:>9.2f} {ref_qps:>13.1f} {ratio:>6.1f}x"
+        )
     print(f"(training: {len(images)} images, batch {cfg.train.batch_size}; inference: {args.queries} queries batched)")
 
 

@@ -74,8 +74,10 @@ def main() -> None:
         scheme: IntegerNetwork(quantize_checkpoint(ckpt, digest, args.bits, scheme == "per-neuron", "max"), device)
         for scheme in ("per-tensor", "per-neuron")
     }
-    print(f"queries: {len(place_ids)} from the {source}; {torch.get_num_threads()} torch threads; "
-          f"{args.bits}-bit models; best of {args.repeats}\n")
+    print(
+        f"queries: {len(place_ids)} from the {source}; {torch.get_num_threads()} torch threads; "
+        f"{args.bits}-bit models; best of {args.repeats}\n"
+    )
     header = "| T | float q/s | integer per-tensor q/s | ratio | integer per-neuron q/s | ratio |"
     print(header)
     print("|---|---|---|---|---|---|")

@@ -70,11 +70,19 @@ def bench_model(model, spikes: torch.Tensor, threads: list[int], repeat: int, fo
     rows = []
 
     def add(backend: str, thread_count: int | str, seconds: float, identical: str) -> None:
-        rows.append({
-            "backend": backend, "bits": model.bits, "threads": thread_count, "queries": n, "timesteps": timesteps,
-            "seconds": f"{seconds:.3f}", "ms_per_query": f"{1000 * seconds / n:.2f}", "queries_per_s": f"{n / seconds:.1f}",
-            "identical": identical,
-        })
+        rows.append(
+            {
+                "backend": backend,
+                "bits": model.bits,
+                "threads": thread_count,
+                "queries": n,
+                "timesteps": timesteps,
+                "seconds": f"{seconds:.3f}",
+                "ms_per_query": f"{1000 * seconds / n:.2f}",
+                "queries_per_s": f"{n / seconds:.1f}",
+                "identical": identical,
+            }
+        )
 
     torch_threads = torch.get_num_threads()
     seconds, reference = best_time(lambda: simulate(model, spikes), repeat)
@@ -103,7 +111,10 @@ def main() -> int:
     source = load_model(args.model)
     if isinstance(source, Checkpoint):
         digest = sha256_file(args.model)
-        models = [quantize_checkpoint(source, digest, int(b), per_neuron=True, scale_method="max") for b in args.bits.split(",")]
+        models = [
+            quantize_checkpoint(source, digest, int(b), per_neuron=True, scale_method="max")
+            for b in args.bits.split(",")
+        ]
     else:
         models = [source]
     spikes, described = spikes_for(models[0], args)

@@ -62,16 +62,41 @@ def wprob(rows: list[dict], calibration: str | None = None) -> dict[tuple[str, i
 def seed_results(seed: int, out: Path, bits: str, schemes: list[str]) -> dict:
     ckpt = out / f"seed{seed}.npz"
     if not ckpt.is_file():
-        cli("train", "--data", str(DATA / "places.csv"), "--subset", str(DATA / "subset_100_places.csv"),
-            "--reference", "summer", "--seed", str(seed), "--out", str(ckpt), "--quiet")
+        cli(
+            "train",
+            "--data",
+            str(DATA / "places.csv"),
+            "--subset",
+            str(DATA / "subset_100_places.csv"),
+            "--reference",
+            "summer",
+            "--seed",
+            str(seed),
+            "--out",
+            str(ckpt),
+            "--quiet",
+        )
     result = {"float": json.loads(cli("evaluate", str(ckpt), "--query", "winter", "--k", "1,5", "--json", "--quiet"))}
     models = out / f"seed{seed}_models"
     for scheme in schemes:
-        quantised = json.loads(cli("quantize", str(ckpt), "--bits", bits, *SCHEMES[scheme], "--out", str(models), "--json", "--quiet"))
+        quantised = json.loads(
+            cli("quantize", str(ckpt), "--bits", bits, *SCHEMES[scheme], "--out", str(models), "--json", "--quiet")
+        )
         for entry in quantised["models"]:
-            result[f"{entry['bits']}bit {scheme}"] = json.loads(cli(
-                "simulate", entry["file"], "--query", "winter", "--k", "1,5", "--json", "--quiet", "--compare", str(ckpt)
-            ))
+            result[f"{entry['bits']}bit {scheme}"] = json.loads(
+                cli(
+                    "simulate",
+                    entry["file"],
+                    "--query",
+                    "winter",
+                    "--k",
+                    "1,5",
+                    "--json",
+                    "--quiet",
+                    "--compare",
+                    str(ckpt),
+                )
+            )
     return result
 
 
@@ -80,8 +105,10 @@ def summary(values: list[float]) -> str:
 
 
 def table(results: dict[int, dict], bits: list[int], schemes: list[str]) -> str:
-    head = ("| network | calibration | acc k=1 | R@100P k=1 | acc k=5 | R@100P k=5 | saturations | same spikes as float |\n"
-            "|---|---|---|---|---|---|---|---|")
+    head = (
+        "| network | calibration | acc k=1 | R@100P k=1 | acc k=5 | R@100P k=5 | saturations | same spikes as float |\n"
+        "|---|---|---|---|---|---|---|---|"
+    )
     lines = [head]
     seeds = sorted(results)
     floats = [wprob(results[s]["float"]["results"]) for s in seeds]

@@ -45,7 +45,9 @@ def decay_mantissa(beta: float) -> int:
 
 def check_bits(bits: int) -> int:
     if bits not in SUPPORTED_BITS:
-        raise OptionError(f"unsupported weight bit width {bits}: choose from {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}")
+        raise OptionError(
+            f"unsupported weight bit width {bits}: choose from {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}"
+        )
     return bits
 
 
@@ -115,9 +117,13 @@ class FixedPointModel:
                 "decay": "V <- trunc_toward_zero(V * (4096 - decay_dv) / 4096)",
                 "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), 2**{self.voltage_bits - 1} - 1), clips counted",
                 "candidates": "C = {j : V_j > threshold_j << voltage_shift}",
-                "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index" if self.config.network.wta else "off: every candidate spikes",
+                "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index"
+                if self.config.network.wta
+                else "off: every candidate spikes",
                 "reset": "V_j <- 0 for every j in C",
-                "state": "V zeroed at the start of every presentation" if self.config.network.state_isolation else "V carried across presentations",
+                "state": "V zeroed at the start of every presentation"
+                if self.config.network.state_isolation
+                else "V carried across presentations",
                 "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), keyed by (seed, stream, traversal, place_id)",
             },
         }
@@ -143,7 +149,14 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
         raise ModelFileError(f"not a vprsnn fixed-point model (format {meta.get('format')!r})", path)
     if meta.get("format_version") != FORMAT_VERSION:
         raise ModelFileError(f"unsupported fixed-point format version {meta.get('format_version')!r}", path)
-    needed = {"weight_mantissa", "scale_multiplier", "threshold", "calibration", "float_calibration", "reference_place_ids"}
+    needed = {
+        "weight_mantissa",
+        "scale_multiplier",
+        "threshold",
+        "calibration",
+        "float_calibration",
+        "reference_place_ids",
+    }
     if needed - set(arrays):
         raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
     try:

@@ -119,7 +119,9 @@ def integer_thresholds(thresholds: np.ndarray, scales: np.ndarray) -> np.ndarray
     return np.clip(round_half_up(thresholds / scales), 1, (1 << THRESHOLD_BITS) - 1).astype(np.int32)
 
 
-def shared_threshold(weights: np.ndarray, thresholds: np.ndarray, bits: int, method: str, per_neuron_scales: np.ndarray) -> int:
+def shared_threshold(
+    weights: np.ndarray, thresholds: np.ndarray, bits: int, method: str, per_neuron_scales: np.ndarray
+) -> int:
     """The one integer threshold Theta of threshold folding (s_j = theta_j / Theta).
 
     max: Theta = floor(min_j theta_j / s*_j), so s_j >= s*_j and no weight clips.
@@ -162,7 +164,9 @@ def quantise_arrays(
     actual = np.ldexp(multipliers.astype(np.float64), exponent)
     mantissas = quantise_mantissas(weights, actual, bits)
     integer_theta = (
-        np.full(thresholds.shape, theta_shared, dtype=np.int32) if fold_thresholds else integer_thresholds(thresholds, actual)
+        np.full(thresholds.shape, theta_shared, dtype=np.int32)
+        if fold_thresholds
+        else integer_thresholds(thresholds, actual)
     )
     report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits)
     report.update(
@@ -180,7 +184,12 @@ def quantise_arrays(
 
 
 def error_report(
-    weights: np.ndarray, thresholds: np.ndarray, mantissas: np.ndarray, scales: np.ndarray, theta_int: np.ndarray, bits: int
+    weights: np.ndarray,
+    thresholds: np.ndarray,
+    mantissas: np.ndarray,
+    scales: np.ndarray,
+    theta_int: np.ndarray,
+    bits: int,
 ) -> dict[str, Any]:
     """How far the fixed-point network is from the float one (all plain JSON numbers).
 
@@ -198,7 +207,9 @@ def error_report(
         "threshold_max_relative_error": float(
             np.max(np.abs(theta_int * scales - thresholds) / np.maximum(np.abs(thresholds), 1e-12))
         ),
-        "thresholds_clipped": int(np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))),
+        "thresholds_clipped": int(
+            np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))
+        ),
         "max_current": int(mantissas.astype(np.int64).sum(axis=0).max()),
     }
 
@@ -216,7 +227,12 @@ def quantize_checkpoint(
     ``calibration`` is a copy of the float S^R until :func:`recalibrate` replaces it.
     """
     arrays = quantise_arrays(
-        ckpt.weights, ckpt.thresholds, bits, per_neuron=per_neuron, scale_method=scale_method, fold_thresholds=fold_thresholds
+        ckpt.weights,
+        ckpt.thresholds,
+        bits,
+        per_neuron=per_neuron,
+        scale_method=scale_method,
+        fold_thresholds=fold_thresholds,
     )
     report = dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
     return FixedPointModel(

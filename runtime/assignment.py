@@ -49,9 +49,7 @@ def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sr_ = _counts("sr", sr)
     sq_ = _counts("sq", sq)
     if sq_.shape[1] != sr_.shape[0]:
-        raise ValueError(
-            f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons"
-        )
+        raise ValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
     return sr_, sq_
 
 
@@ -231,9 +229,7 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     return pred, conf
 
 
-def strategy_scores(
-    sr: np.ndarray, sq: np.ndarray, strategy: str, gamma: float | None = None
-) -> np.ndarray:
+def strategy_scores(sr: np.ndarray, sq: np.ndarray, strategy: str, gamma: float | None = None) -> np.ndarray:
     """Scores (standard, weighted) or distribution (wprob), shape ``(n_queries, n_places)``.
 
     .. math::

@@ -41,9 +41,7 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     ref = _images("reference", reference)
     qry = _images("queries", queries)
     if ref.shape[1] != qry.shape[1]:
-        raise ValueError(
-            f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}"
-        )
+        raise ValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
     n_q, n_p = qry.shape[0], ref.shape[0]
     out = np.empty((n_q, n_p), dtype=np.float64)
     per_query = max(1, n_p * ref.shape[1])

@@ -122,7 +122,9 @@ def evaluate_float(
     from .inference import FloatNetwork, query_spikes
 
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
-    run = network.run(query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation)
+    run = network.run(
+        query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
+    )
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     rows = readout_rows(ckpt.calibration, counts, reference_ids, query_place_ids, options)

@@ -28,7 +28,9 @@ class FloatNetwork:
     cfg: Config
 
     @classmethod
-    def from_arrays(cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device) -> "FloatNetwork":
+    def from_arrays(
+        cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device
+    ) -> FloatNetwork:
         return cls(
             torch.as_tensor(weights, dtype=torch.float32).to(device),
             torch.as_tensor(thresholds, dtype=torch.float32).to(device),

@@ -64,9 +64,7 @@ def is_correct(
         pred = np.asarray(pred_place_ids)
     true = np.asarray(true_place_ids)
     if pred.ndim != 1 or pred.shape != true.shape:
-        raise ValueError(
-            f"pred_place_ids {pred.shape} and true_place_ids {true.shape} must be 1-D of equal length"
-        )
+        raise ValueError(f"pred_place_ids {pred.shape} and true_place_ids {true.shape} must be 1-D of equal length")
     if matched is not None:
         m = np.asarray(matched)
         if m.dtype != np.bool_ or m.shape != pred.shape:
@@ -80,9 +78,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
     c = np.asarray(correct)
     conf = np.asarray(confidence, dtype=np.float64)
     if c.ndim != 1 or conf.shape != c.shape:
-        raise ValueError(
-            f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length"
-        )
+        raise ValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
     if c.shape[0] == 0:
         raise ValueError("no queries: precision and recall are undefined")
     if c.dtype != np.bool_:
@@ -94,9 +90,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
     return c, conf
 
 
-def _operating_points(
-    correct: np.ndarray, confidence: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c, conf = _check(correct, confidence)
     order = np.argsort(-conf, kind="stable")
@@ -107,9 +101,7 @@ def _operating_points(
     return tp_cum[ends], ends + 1, conf_sorted[ends].copy(), int(c.shape[0])
 
 
-def pr_curve(
-    correct: np.ndarray, confidence: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pr_curve(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact precision-recall operating points, one per distinct confidence value.
 
     Sort queries by confidence, descending. For each distinct value tau_k

@@ -81,8 +81,14 @@ def combine_reports(reports: Sequence[Mapping[str, Any]], sources: Sequence[str]
         return combined
     runs = [run for report in reports for run in report["runs"]]
     settings = dict(reports[0]["settings"])
-    differ = sorted({key for report in reports[1:] for key in set(settings) | set(report["settings"])
-                     if report["settings"].get(key) != settings.get(key)})
+    differ = sorted(
+        {
+            key
+            for report in reports[1:]
+            for key in set(settings) | set(report["settings"])
+            if report["settings"].get(key) != settings.get(key)
+        }
+    )
     combined = build_report(runs, settings, command=None)
     combined["combined_from"] = list(sources or [])
     combined["commands"] = [report.get("command") for report in reports]
@@ -121,7 +127,7 @@ def ms(summary: Mapping[str, Any] | None, *, percent: bool = True, signed: bool 
 
 
 def data_note(settings: Mapping[str, Any]) -> str:
-    """" from DATA (selection)" when the settings name the data."""
+    """ " from DATA (selection)" when the settings name the data."""
     if not settings.get("data"):
         return ""
     selection = settings.get("subset") or (f"places {settings['places']}" if settings.get("places") else "all places")
@@ -146,37 +152,77 @@ def blocks_of(report: Mapping[str, Any]) -> list[Block]:
     ks = sorted({int(row["k"]) for row in first["float"]["metrics"]})
     top_k = max(ks)
     blocks: list[Block] = [Block("h1", "vprsnn-export verification report")]
-    blocks.append(Block("p", (
-        f"**Verdict: {verdict(report['passed'])}** — {sum(r['passed'] for r in runs)} of {n_runs} network(s) pass every "
-        f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries"
-        f"{data_note(settings)}; "
-        f"{'mean ± std over ' + str(n_runs) + ' independently trained networks' if n_runs > 1 else 'one network'}. "
-        f"Generated {report.get('created', '?')}"
-        + (f" in {report['seconds']:.0f} s" if report.get("seconds") else "") + "."
-    )))
+    blocks.append(
+        Block(
+            "p",
+            (
+                f"**Verdict: {verdict(report['passed'])}** — {sum(r['passed'] for r in runs)} of {n_runs} network(s) pass every "
+                f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries"
+                f"{data_note(settings)}; "
+                f"{'mean ± std over ' + str(n_runs) + ' independently trained networks' if n_runs > 1 else 'one network'}. "
+                f"Generated {report.get('created', '?')}"
+                + (f" in {report['seconds']:.0f} s" if report.get("seconds") else "")
+                + "."
+            ),
+        )
+    )
     if report.get("settings_differ"):
-        blocks.append(Block("p", "Combined reports whose settings differ in: " + ", ".join(report["settings_differ"])
-                            + " (settings shown are the first report's)."))
+        blocks.append(
+            Block(
+                "p",
+                "Combined reports whose settings differ in: "
+                + ", ".join(report["settings_differ"])
+                + " (settings shown are the first report's).",
+            )
+        )
     blocks += verdict_blocks(report, top_k)
     blocks += metric_blocks(summary, ks)
-    blocks.append(Block("figure", title="Metrics vs weight bit width", image=plot_metrics(summary, ks), name="metrics_vs_bits.png",
-                        text="Each metric vs bit width; the float network's value is the dashed line of the same colour"
-                             + (" (mean ± std over networks)." if n_runs > 1 else ".")))
-    blocks.append(Block("figure", title="Precision-recall curves", image=plot_pr(first), name="pr_curves.png",
-                        text=f"W+Prob at k=1 and k={top_k}, float (black) vs each bit width"
-                             + (f"; network {first.get('label') or 1} of {n_runs}." if n_runs > 1 else ".")))
+    blocks.append(
+        Block(
+            "figure",
+            title="Metrics vs weight bit width",
+            image=plot_metrics(summary, ks),
+            name="metrics_vs_bits.png",
+            text="Each metric vs bit width; the float network's value is the dashed line of the same colour"
+            + (" (mean ± std over networks)." if n_runs > 1 else "."),
+        )
+    )
+    blocks.append(
+        Block(
+            "figure",
+            title="Precision-recall curves",
+            image=plot_pr(first),
+            name="pr_curves.png",
+            text=f"W+Prob at k=1 and k={top_k}, float (black) vs each bit width"
+            + (f"; network {first.get('label') or 1} of {n_runs}." if n_runs > 1 else "."),
+        )
+    )
     blocks += spike_blocks(summary)
-    blocks.append(Block("figure", title="Spike-count agreement", image=plot_spikes(report), name="spike_agreement.png",
-                        text="Left: fraction of time steps with the float winner, top-1 agreement and mean per-query "
-                             "spike-count correlation vs bit width. Right: distribution of the per-query correlation "
-                             "of the float and quantised spike-count vectors (all networks pooled)."))
+    blocks.append(
+        Block(
+            "figure",
+            title="Spike-count agreement",
+            image=plot_spikes(report),
+            name="spike_agreement.png",
+            text="Left: fraction of time steps with the float winner, top-1 agreement and mean per-query "
+            "spike-count correlation vs bit width. Right: distribution of the per-query correlation "
+            "of the float and quantised spike-count vectors (all networks pooled).",
+        )
+    )
     blocks += decision_blocks(summary, ks)
     blocks += cross_blocks(report)
     blocks += quantisation_blocks(first)
-    blocks.append(Block("figure", title="Weight histograms", image=plot_weights(first), name="weight_histograms.png",
-                        text="Float weights divided by their scale range "
-                             f"({first['float']['weights']['normalised_by']}), and the share of weights on each "
-                             "quantised level q / (2^b - 1)."))
+    blocks.append(
+        Block(
+            "figure",
+            title="Weight histograms",
+            image=plot_weights(first),
+            name="weight_histograms.png",
+            text="Float weights divided by their scale range "
+            f"({first['float']['weights']['normalised_by']}), and the share of weights on each "
+            "quantised level q / (2^b - 1).",
+        )
+    )
     blocks += tolerance_blocks(report)
     blocks += provenance_blocks(report)
     return blocks
@@ -188,25 +234,47 @@ def verdict_blocks(report: Mapping[str, Any], top_k: int) -> list[Block]:
     rows, status = [], []
     for bits in summary["bits"]:
         metrics = {(r["strategy"], r["k"]): r for r in bits["metrics"]}
-        worst_acc = min((metrics[(s, 1)]["delta"]["accuracy"]["mean"] for s in STRATEGY_TITLES if (s, 1) in metrics),
-                        default=None)
+        worst_acc = min(
+            (metrics[(s, 1)]["delta"]["accuracy"]["mean"] for s in STRATEGY_TITLES if (s, 1) in metrics), default=None
+        )
         top = metrics.get(("wprob", top_k))
         ok = bits["n_passed"] == bits["n_runs"]
-        rows.append([
-            f"{bits['bits']}", f"{verdict(ok)} ({bits['n_passed']}/{bits['n_runs']})",
-            f"{bits['cross_implementation_passed']}/{bits['n_runs']} exact",
-            signed_pct(worst_acc), ms(top["delta"]["r_at_100p"], signed=True) if top else "-",
-            ms(top["r_at_100p"]) if top else "-", ms(bits["winner_agreement"]), ms(bits["saturations"], percent=False, digits=0),
-        ])
+        rows.append(
+            [
+                f"{bits['bits']}",
+                f"{verdict(ok)} ({bits['n_passed']}/{bits['n_runs']})",
+                f"{bits['cross_implementation_passed']}/{bits['n_runs']} exact",
+                signed_pct(worst_acc),
+                ms(top["delta"]["r_at_100p"], signed=True) if top else "-",
+                ms(top["r_at_100p"]) if top else "-",
+                ms(bits["winner_agreement"]),
+                ms(bits["saturations"], percent=False, digits=0),
+            ]
+        )
         status.append("pass" if ok else "fail")
     limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
     return [
         Block("h2", "Pass / fail per bit width"),
-        Block("table", headers=["bits", "verdict (networks)", "cross-implementation", "worst accuracy Δ k=1 (pts)",
-                                f"R@100P Δ W+Prob k={top_k} (pts)", f"R@100P W+Prob k={top_k} %", "same winner %",
-                                "saturations"], rows=rows, status=status),
-        Block("p", f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
-                   "Δ = quantised - float, in percentage points; negative is worse."),
+        Block(
+            "table",
+            headers=[
+                "bits",
+                "verdict (networks)",
+                "cross-implementation",
+                "worst accuracy Δ k=1 (pts)",
+                f"R@100P Δ W+Prob k={top_k} (pts)",
+                f"R@100P W+Prob k={top_k} %",
+                "same winner %",
+                "saturations",
+            ],
+            rows=rows,
+            status=status,
+        ),
+        Block(
+            "p",
+            f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
+            "Δ = quantised - float, in percentage points; negative is worse.",
+        ),
     ]
 
 
@@ -230,33 +298,53 @@ def metric_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
 
 
 def spike_blocks(summary: Mapping[str, Any]) -> list[Block]:
-    rows = [[f"{b['bits']}", ms(b["winner_agreement"], digits=2), ms(b["count_correlation"], percent=False, digits=3),
-             ms(b["spike_ratio"], percent=False, digits=3), ms(b["saturations"], percent=False, digits=0)]
-            for b in summary["bits"]]
+    rows = [
+        [
+            f"{b['bits']}",
+            ms(b["winner_agreement"], digits=2),
+            ms(b["count_correlation"], percent=False, digits=3),
+            ms(b["spike_ratio"], percent=False, digits=3),
+            ms(b["saturations"], percent=False, digits=0),
+        ]
+        for b in summary["bits"]
+    ]
     return [
         Block("h2", "Spike level"),
-        Block("p", "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
-                   "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
-                   "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries."),
+        Block(
+            "p",
+            "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
+            "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
+            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries.",
+        ),
         Block("table", headers=["bits", "same winner %", "count correlation", "spike ratio", "saturations"], rows=rows),
     ]
 
 
 def decision_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
     agg_ks = [k for k in ks if k > 1]
-    headers = ["bits"] + [f"top-1 {STRATEGY_TITLES[s]} %" for s in STRATEGY_TITLES] + ["W+Prob TV distance"] + \
-              [f"agreement k={k} %" for k in agg_ks]
+    headers = (
+        ["bits"]
+        + [f"top-1 {STRATEGY_TITLES[s]} %" for s in STRATEGY_TITLES]
+        + ["W+Prob TV distance"]
+        + [f"agreement k={k} %" for k in agg_ks]
+    )
     rows = []
     for b in summary["bits"]:
-        rows.append([f"{b['bits']}"] + [ms(b["top1_agreement"][s]) for s in STRATEGY_TITLES] +
-                    [ms(b["wprob_tv_mean"], percent=False, digits=3)] +
-                    [ms(b["aggregated_agreement"].get(str(k))) for k in agg_ks])
+        rows.append(
+            [f"{b['bits']}"]
+            + [ms(b["top1_agreement"][s]) for s in STRATEGY_TITLES]
+            + [ms(b["wprob_tv_mean"], percent=False, digits=3)]
+            + [ms(b["aggregated_agreement"].get(str(k))) for k in agg_ks]
+        )
     return [
         Block("h2", "Decision level"),
-        Block("p", "Top-1 agreement: share of queries where the quantised network picks the same place as the float "
-                   "one (or both reject). TV distance: mean total variation between the float and quantised W+Prob "
-                   "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
-                   "sequence aggregation."),
+        Block(
+            "p",
+            "Top-1 agreement: share of queries where the quantised network picks the same place as the float "
+            "one (or both reject). TV distance: mean total variation between the float and quantised W+Prob "
+            "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
+            "sequence aggregation.",
+        ),
         Block("table", headers=headers, rows=rows),
     ]
 
@@ -268,28 +356,51 @@ def cross_blocks(report: Mapping[str, Any]) -> list[Block]:
         for result in run["bits"]:
             cross = result["cross_implementation"]
             kinds = sorted({c["check"].split(":")[0] for c in cross["checks"]})
-            rows.append([run.get("label") or str(index + 1), f"{result['bits']}",
-                         f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}", verdict(cross["passed"]),
-                         str(cross["reference_queries"]), "; ".join(kinds) +
-                         ("; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.get("skipped", {}).items())
-                          if cross.get("skipped") else "")])
+            rows.append(
+                [
+                    run.get("label") or str(index + 1),
+                    f"{result['bits']}",
+                    f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
+                    verdict(cross["passed"]),
+                    str(cross["reference_queries"]),
+                    "; ".join(kinds)
+                    + (
+                        "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.get("skipped", {}).items())
+                        if cross.get("skipped")
+                        else ""
+                    ),
+                ]
+            )
             status.append("pass" if cross["passed"] else "fail")
-            failures += [[run.get("label") or str(index + 1), f"{result['bits']}", c["check"], c["detail"]]
-                         for c in cross["checks"] if not c["equal"]]
+            failures += [
+                [run.get("label") or str(index + 1), f"{result['bits']}", c["check"], c["detail"]]
+                for c in cross["checks"]
+                if not c["equal"]
+            ]
     blocks = [
         Block("h2", "Cross-implementation (exact)"),
-        Block("p", "Integer simulator vs ONNX on onnxruntime vs the NIR and Loihi-style files read back and re-run vs "
-                   "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
-                   "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
-                   "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
-                   "difference fails."),
-        Block("table", headers=["network", "bits", "identical", "verdict", "reference-stepper queries", "implementations"],
-              rows=rows, status=status),
+        Block(
+            "p",
+            "Integer simulator vs ONNX on onnxruntime vs the NIR and Loihi-style files read back and re-run vs "
+            "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
+            "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
+            "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
+            "difference fails.",
+        ),
+        Block(
+            "table",
+            headers=["network", "bits", "identical", "verdict", "reference-stepper queries", "implementations"],
+            rows=rows,
+            status=status,
+        ),
     ]
     if failures:
-        blocks += [Block("h3", "Differences found"),
-                   Block("table", headers=["network", "bits", "check", "detail"], rows=failures,
-                         status=["fail"] * len(failures))]
+        blocks += [
+            Block("h3", "Differences found"),
+            Block(
+                "table", headers=["network", "bits", "check", "detail"], rows=failures, status=["fail"] * len(failures)
+            ),
+        ]
     return blocks
 
 
@@ -297,15 +408,36 @@ def quantisation_blocks(run: Mapping[str, Any]) -> list[Block]:
     rows = []
     for result in run["bits"]:
         q = result["quantisation"]
-        rows.append([f"{result['bits']}", ("per-neuron" if q.get("per_neuron") else "per-tensor") + f", {q.get('scale_method')}",
-                     f"{q.get('weight_relative_rmse', 0):.4f}", str(q.get("weights_clipped")),
-                     f"{100 * q.get('threshold_max_relative_error', 0):.3f}",
-                     f"{100 * result['weight_levels']['zero_fraction']:.1f}", str(q.get("max_current")),
-                     str(q.get("calibration")), str(q.get("calibration_saturations"))])
+        rows.append(
+            [
+                f"{result['bits']}",
+                ("per-neuron" if q.get("per_neuron") else "per-tensor") + f", {q.get('scale_method')}",
+                f"{q.get('weight_relative_rmse', 0):.4f}",
+                str(q.get("weights_clipped")),
+                f"{100 * q.get('threshold_max_relative_error', 0):.3f}",
+                f"{100 * result['weight_levels']['zero_fraction']:.1f}",
+                str(q.get("max_current")),
+                str(q.get("calibration")),
+                str(q.get("calibration_saturations")),
+            ]
+        )
     return [
         Block("h2", "Quantisation"),
-        Block("table", headers=["bits", "scales", "weight rel. RMSE", "clipped weights", "max threshold error %",
-                                "weights at 0 %", "max current", "calibration", "calibration saturations"], rows=rows),
+        Block(
+            "table",
+            headers=[
+                "bits",
+                "scales",
+                "weight rel. RMSE",
+                "clipped weights",
+                "max threshold error %",
+                "weights at 0 %",
+                "max current",
+                "calibration",
+                "calibration saturations",
+            ],
+            rows=rows,
+        ),
     ]
 
 
@@ -320,15 +452,26 @@ def tolerance_blocks(report: Mapping[str, Any]) -> list[Block]:
                 limit = f"{100 * applied:.2f}" if percent else f"{applied:g}"
                 if applied != check["limit"]:
                     limit += f" (1 query; set {100 * check['limit']:.2f})"
-                rows.append([run.get("label") or str(index + 1), f"{result['bits']}", check["what"], value, limit,
-                             verdict(check["passed"])])
+                rows.append(
+                    [
+                        run.get("label") or str(index + 1),
+                        f"{result['bits']}",
+                        check["what"],
+                        value,
+                        limit,
+                        verdict(check["passed"]),
+                    ]
+                )
                 status.append("pass" if check["passed"] else "fail")
     meaning = "; ".join(f"{k}: {TOLERANCE_MEANING[k]}" for k in TOLERANCE_MEANING)
     return [
         Block("h2", "Tolerance checks"),
-        Block("p", "Values and limits in percentage points (drops) or percent (agreements). A metric moves in steps of "
-                   "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
-                   f"Keys — {meaning}."),
+        Block(
+            "p",
+            "Values and limits in percentage points (drops) or percent (agreements). A metric moves in steps of "
+            "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
+            f"Keys — {meaning}.",
+        ),
         Block("table", headers=["network", "bits", "check", "value", "limit", "verdict"], rows=rows, status=status),
     ]
 
@@ -337,8 +480,16 @@ def provenance_blocks(report: Mapping[str, Any]) -> list[Block]:
     rows = []
     for index, run in enumerate(report["runs"]):
         data = run.get("checkpoint_data", {})
-        rows.append([run.get("label") or str(index + 1), str(run.get("seed")), str(run.get("checkpoint_sha256", ""))[:16],
-                     str(data.get("source")), f"{run['n_queries']}", str(run.get("export_dir") or "-")])
+        rows.append(
+            [
+                run.get("label") or str(index + 1),
+                str(run.get("seed")),
+                str(run.get("checkpoint_sha256", ""))[:16],
+                str(data.get("source")),
+                f"{run['n_queries']}",
+                str(run.get("export_dir") or "-"),
+            ]
+        )
     command = report.get("command")
     commands = report.get("commands")
     text = " ".join(command) if command else "\n".join(" ".join(c) for c in commands or [] if c) or "-"
@@ -348,8 +499,11 @@ def provenance_blocks(report: Mapping[str, Any]) -> list[Block]:
         Block("h2", "Provenance"),
         Block("pre", "command: " + text),
         Block("pre", json.dumps(report.get("settings", {}), indent=2, sort_keys=True), title="settings"),
-        Block("pre", json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True),
-              title="config (first network)"),
+        Block(
+            "pre",
+            json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True),
+            title="config (first network)",
+        ),
         Block("pre", json.dumps(report.get("versions", {}), indent=2, sort_keys=True), title="versions"),
     ]
 
@@ -364,7 +518,9 @@ def png(fig) -> bytes:
     return buffer.getvalue()
 
 
-def _series(summary: Mapping[str, Any], key: tuple[str, int], metric: str) -> tuple[list[int], list[float], list[float]]:
+def _series(
+    summary: Mapping[str, Any], key: tuple[str, int], metric: str
+) -> tuple[list[int], list[float], list[float]]:
     xs, means, stds = [], [], []
     for bits in summary["bits"]:
         row = next((r for r in bits["metrics"] if (r["strategy"], r["k"]) == key), None)
@@ -387,8 +543,17 @@ def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
             colour = colours[index % len(colours)]
             xs, means, stds = _series(summary, key, metric)
             if xs:
-                ax.errorbar(xs, means, yerr=stds, marker=markers[index % len(markers)], capsize=3, color=colour,
-                            label=row_label(*key), markersize=8 - index, alpha=0.9)
+                ax.errorbar(
+                    xs,
+                    means,
+                    yerr=stds,
+                    marker=markers[index % len(markers)],
+                    capsize=3,
+                    color=colour,
+                    label=row_label(*key),
+                    markersize=8 - index,
+                    alpha=0.9,
+                )
             if key in float_rows:
                 ax.axhline(100 * float_rows[key][metric]["mean"], color=colour, linestyle="--", linewidth=1)
         ax.set_title(METRIC_TITLES[metric])
@@ -440,7 +605,14 @@ def plot_weights(run: Mapping[str, Any]) -> bytes:
         levels = result["weight_levels"]
         top = levels["levels"]
         share = np.asarray(levels["counts"], dtype=np.float64) / max(sum(levels["counts"]), 1)
-        ax.bar(np.arange(top + 1) / top, share, width=0.85 / top, color="tab:orange", alpha=0.85, label=f"{result['bits']}-bit levels")
+        ax.bar(
+            np.arange(top + 1) / top,
+            share,
+            width=0.85 / top,
+            color="tab:orange",
+            alpha=0.85,
+            label=f"{result['bits']}-bit levels",
+        )
         ax.plot(centres, density / top, color="tab:blue", linewidth=1.2, label="float")
         ax.set_title(f"{result['bits']}-bit: {100 * levels['zero_fraction']:.1f} % of weights at 0", fontsize=9)
         ax.set_xlabel("weight / scale range")
@@ -461,8 +633,14 @@ def plot_spikes(report: Mapping[str, Any]) -> bytes:
         ("top-1 agreement W+Prob k=1", [b["top1_agreement"]["wprob"] for b in summary["bits"]]),
         ("mean count correlation", [b["count_correlation"] for b in summary["bits"]]),
     ):
-        left.errorbar(bits, [100 * v["mean"] for v in values], yerr=[100 * v["std"] for v in values], marker="o",
-                      capsize=3, label=label)
+        left.errorbar(
+            bits,
+            [100 * v["mean"] for v in values],
+            yerr=[100 * v["std"] for v in values],
+            marker="o",
+            capsize=3,
+            label=label,
+        )
     left.set_xticks(sorted(bits))
     left.set_xlim(max(bits) + 0.5, min(bits) - 0.5)
     left.set_xlabel("weight bits")
@@ -472,8 +650,13 @@ def plot_spikes(report: Mapping[str, Any]) -> bytes:
     left.legend(fontsize=8, loc="lower left")
     pooled = []
     for b in bits:
-        values = [c for run in report["runs"] for r in run["bits"] if r["bits"] == b
-                  for c in r["spike_level"]["count_correlation"]]
+        values = [
+            c
+            for run in report["runs"]
+            for r in run["bits"]
+            if r["bits"] == b
+            for c in r["spike_level"]["count_correlation"]
+        ]
         pooled.append(values)
     right.boxplot(pooled)
     right.set_xticks(range(1, len(bits) + 1), [str(b) for b in bits])
@@ -506,7 +689,14 @@ def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
             lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in block.rows]
             lines.append("")
         elif block.kind == "figure":
-            lines += [f"### {block.title}", "", f"![{block.title}]({plots_dir}/{block.name})", "", f"*{block.text}*", ""]
+            lines += [
+                f"### {block.title}",
+                "",
+                f"![{block.title}]({plots_dir}/{block.name})",
+                "",
+                f"*{block.text}*",
+                "",
+            ]
     return "\n".join(lines)
 
 
@@ -536,8 +726,11 @@ def _html_inline(text: str) -> str:
     out = []
     for index, part in enumerate(parts):
         out.append(f"<strong>{part}</strong>" if index % 2 else part)
-    return "".join(out).replace("<strong>Verdict: PASS</strong>", '<strong class="verdict-pass">Verdict: PASS</strong>') \
+    return (
+        "".join(out)
+        .replace("<strong>Verdict: PASS</strong>", '<strong class="verdict-pass">Verdict: PASS</strong>')
         .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
+    )
 
 
 NUMERIC = re.compile(r"^[-+]?[\d./]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?( exact)?$")
@@ -558,7 +751,9 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
         elif block.kind == "p":
             body.append(f"<p>{_html_inline(block.text)}</p>")
         elif block.kind == "pre" and block.title:
-            body.append(f"<details><summary>{html.escape(block.title)}</summary><pre>{html.escape(block.text)}</pre></details>")
+            body.append(
+                f"<details><summary>{html.escape(block.title)}</summary><pre>{html.escape(block.text)}</pre></details>"
+            )
         elif block.kind == "pre":
             body.append(f"<pre>{html.escape(block.text)}</pre>")
         elif block.kind == "table":
@@ -571,11 +766,15 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
             body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
         elif block.kind == "figure":
             data = base64.b64encode(block.image).decode("ascii")
-            body.append(f"<h3>{html.escape(block.title)}</h3>"
-                        f'<figure><img alt="{html.escape(block.title)}" src="data:image/png;base64,{data}">'
-                        f"<figcaption>{html.escape(block.text)}</figcaption></figure>")
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
-            f"<style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+            body.append(
+                f"<h3>{html.escape(block.title)}</h3>"
+                f'<figure><img alt="{html.escape(block.title)}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{html.escape(block.text)}</figcaption></figure>"
+            )
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+        f"<style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
 
 
 def write_report(report: Mapping[str, Any], out_dir: str | Path, *, write_json: bool = True) -> dict[str, Path]:

@@ -137,8 +137,14 @@ def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> di
     a_arr, b_arr = _numpy(a), _numpy(b)
     result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": "exact"}
     if a_arr.shape != b_arr.shape:
-        return {**result, "equal": False, "n_elements": int(a_arr.size), "n_differences": None,
-                "first_difference": None, "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}"}
+        return {
+            **result,
+            "equal": False,
+            "n_elements": int(a_arr.size),
+            "n_differences": None,
+            "first_difference": None,
+            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
+        }
     differ = a_arr != b_arr
     n_diff = int(np.count_nonzero(differ))
     first = [int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape)] if n_diff else None
@@ -147,25 +153,42 @@ def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> di
     else:
         where = tuple(first) if first else ()
         detail = f"{n_diff} of {a_arr.size} values differ; first at {list(where)}: {a_arr[where]!r} vs {b_arr[where]!r}"
-    return {**result, "equal": n_diff == 0, "n_elements": int(a_arr.size), "n_differences": n_diff,
-            "first_difference": first, "detail": detail}
+    return {
+        **result,
+        "equal": n_diff == 0,
+        "n_elements": int(a_arr.size),
+        "n_differences": n_diff,
+        "first_difference": first,
+        "detail": detail,
+    }
 
 
-def distribution_comparison(check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray,
-                            limit: float = WPROB_ROUNDING) -> dict[str, Any]:
+def distribution_comparison(
+    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
+) -> dict[str, Any]:
     """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
     a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": f"decisions exact, |diff| <= {limit:g}"}
     if a_arr.shape != b_arr.shape:
-        return {**result, "equal": False, "max_abs_difference": None, "n_differences": None,
-                "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}"}
+        return {
+            **result,
+            "equal": False,
+            "max_abs_difference": None,
+            "n_differences": None,
+            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
+        }
     pred_a, _ = decide(a_arr, "wprob")
     pred_b, _ = decide(b_arr, "wprob")
     n_decisions = int(np.count_nonzero(pred_a != pred_b))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
     equal = n_decisions == 0 and largest <= limit
-    return {**result, "equal": bool(equal), "max_abs_difference": largest, "n_differences": n_decisions,
-            "detail": f"{n_decisions} decisions differ; max |diff| {largest:.2e}"}
+    return {
+        **result,
+        "equal": bool(equal),
+        "max_abs_difference": largest,
+        "n_differences": n_decisions,
+        "detail": f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
+    }
 
 
 def compare_outputs(prefix: str, a_name: str, a: Mapping[str, Any], b_name: str, b: Mapping[str, Any]) -> list[dict]:
@@ -182,18 +205,32 @@ def compare_models(prefix: str, a_name: str, a, b_name: str, b) -> list[dict]:
     ]
     scalars_a = [a.bits, a.scale_exponent, a.decay_dv, a.voltage_shift, a.voltage_bits]
     scalars_b = [b.bits, b.scale_exponent, b.decay_dv, b.voltage_shift, b.voltage_bits]
-    checks.append(exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b))
+    checks.append(
+        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
+    )
     same_config = a.config.to_dict() == b.config.to_dict()
-    checks.append({"check": f"{prefix}: config", "a": a_name, "b": b_name, "kind": "exact", "equal": same_config,
-                   "n_differences": 0 if same_config else 1, "detail": "identical" if same_config else "configs differ"})
+    checks.append(
+        {
+            "check": f"{prefix}: config",
+            "a": a_name,
+            "b": b_name,
+            "kind": "exact",
+            "equal": same_config,
+            "n_differences": 0 if same_config else 1,
+            "detail": "identical" if same_config else "configs differ",
+        }
+    )
     return checks
 
 
 def integer_outputs(run, n: int | None = None) -> dict[str, np.ndarray | int]:
     """An IntegerRun (or ReferenceRun) as plain arrays, optionally the first n presentations only."""
     take = slice(None) if n is None else slice(0, n)
-    out: dict[str, Any] = {"counts": _numpy(run.counts)[take], "candidates": _numpy(run.candidates_per_step)[take],
-                           "saturations": int(run.saturations)}
+    out: dict[str, Any] = {
+        "counts": _numpy(run.counts)[take],
+        "candidates": _numpy(run.candidates_per_step)[take],
+        "saturations": int(run.saturations),
+    }
     if run.raster is not None:
         out["raster"] = _numpy(run.raster)[take].astype(bool)
     if run.final_voltage is not None:
@@ -225,10 +262,14 @@ def cross_implementation(
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
     if n_ref:
         # the simulator's own rows of these queries; their saturations need a run of their own (the run counts a total)
-        head = {**integer_outputs(int_run, n_ref), "saturations": IntegerNetwork(model, device).run(spikes[:n_ref]).saturations}
+        head = {
+            **integer_outputs(int_run, n_ref),
+            "saturations": IntegerNetwork(model, device).run(spikes[:n_ref]).saturations,
+        }
         oracle = reference_run(model, spikes[:n_ref].numpy())
-        checks += compare_outputs("reference stepper", "integer simulator", head, "reference stepper",
-                                  integer_outputs(oracle))
+        checks += compare_outputs(
+            "reference stepper", "integer simulator", head, "reference stepper", integer_outputs(oracle)
+        )
     if "onnx" in targets:
         checks += _onnx_checks(model, spikes, base, folder, files, skipped)
     if "nir" in targets:
@@ -267,7 +308,9 @@ def _onnx_checks(model, spikes, base: dict, folder: Path, files: dict, skipped: 
     onnx = {"raster": out.raster.astype(bool), "counts": out.counts, "saturations": int(out.saturations.sum())}
     checks = compare_outputs("ONNX (onnxruntime)", "integer simulator", base, "onnxruntime", onnx)
     expected = strategy_scores(model.calibration, base["counts"], "wprob", model.config.assignment.gamma)
-    checks.append(distribution_comparison("ONNX (onnxruntime): W+Prob head", "readout", expected, "onnxruntime", out.wprob))
+    checks.append(
+        distribution_comparison("ONNX (onnxruntime): W+Prob head", "readout", expected, "onnxruntime", out.wprob)
+    )
     return checks
 
 
@@ -276,8 +319,9 @@ def _round_trip(label: str, model, rebuilt, spikes, base: dict, device) -> list[
 
     checks = compare_models(f"{label} read back", "written model", model, "read back", rebuilt)
     run = IntegerNetwork(rebuilt, device).run(spikes, record=True)
-    checks += compare_outputs(f"{label} read back", "integer simulator", base, f"{label} model on the simulator",
-                              integer_outputs(run))
+    checks += compare_outputs(
+        f"{label} read back", "integer simulator", base, f"{label} model on the simulator", integer_outputs(run)
+    )
     return checks
 
 
@@ -300,8 +344,13 @@ def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.n
     return np.where(~defined & identical, 1.0, corr)
 
 
-def spike_level(float_raster: torch.Tensor, int_raster: torch.Tensor, float_counts: np.ndarray,
-                int_counts: np.ndarray, saturations: int) -> dict[str, Any]:
+def spike_level(
+    float_raster: torch.Tensor,
+    int_raster: torch.Tensor,
+    float_counts: np.ndarray,
+    int_counts: np.ndarray,
+    saturations: int,
+) -> dict[str, Any]:
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
     from vprsnn_export.targets.intsim import step_agreement
 
@@ -339,8 +388,12 @@ def top1_agreement(scores_a: np.ndarray, scores_b: np.ndarray, strategy: str) ->
     return float(np.mean(decide(scores_a, strategy)[0] == decide(scores_b, strategy)[0]))
 
 
-def decision_level(float_scores: Mapping[str, np.ndarray], int_scores: Mapping[str, np.ndarray],
-                   float_aggregated: Mapping[int, np.ndarray], int_aggregated: Mapping[int, np.ndarray]) -> dict[str, Any]:
+def decision_level(
+    float_scores: Mapping[str, np.ndarray],
+    int_scores: Mapping[str, np.ndarray],
+    float_aggregated: Mapping[int, np.ndarray],
+    int_aggregated: Mapping[int, np.ndarray],
+) -> dict[str, Any]:
     """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
     tv = tv_distance(float_scores["wprob"], int_scores["wprob"])
     return {
@@ -370,16 +423,23 @@ def metric_deltas(float_rows: Sequence[dict], rows: Sequence[dict]) -> list[dict
     out = []
     for row in rows:
         base = reference[(row["strategy"], row["k"])]
-        out.append({
-            **row,
-            "float": {m: base[m] for m in METRICS},
-            "delta": {m: row[m] - base[m] for m in METRICS},
-        })
+        out.append(
+            {
+                **row,
+                "float": {m: base[m] for m in METRICS},
+                "delta": {m: row[m] - base[m] for m in METRICS},
+            }
+        )
     return out
 
 
-def pr_points(distribution: np.ndarray, strategy: str, reference_place_ids: np.ndarray,
-              query_place_ids: np.ndarray, tolerance: int) -> dict[str, list[float]]:
+def pr_points(
+    distribution: np.ndarray,
+    strategy: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    tolerance: int,
+) -> dict[str, list[float]]:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)
     matched = predicted >= 0
@@ -389,8 +449,9 @@ def pr_points(distribution: np.ndarray, strategy: str, reference_place_ids: np.n
     return {"precision": [round(float(p), 6) for p in precision], "recall": [round(float(r), 6) for r in recall]}
 
 
-def curves(scores: Mapping[str, np.ndarray], agg: Mapping[int, np.ndarray], reference_ids, query_ids,
-           options: ReadoutOptions) -> dict[str, dict]:
+def curves(
+    scores: Mapping[str, np.ndarray], agg: Mapping[int, np.ndarray], reference_ids, query_ids, options: ReadoutOptions
+) -> dict[str, dict]:
     """PR curves of W+Prob at k=1 and at the largest k."""
     out = {"wprob k=1": pr_points(scores["wprob"], "wprob", reference_ids, query_ids, options.tolerance)}
     top = max(options.ks)
@@ -406,8 +467,13 @@ def _row(rows: Sequence[dict], strategy: str, k: int) -> dict:
     return next(r for r in rows if r["strategy"] == strategy and r["k"] == k)
 
 
-def tolerance_checks(rows: Sequence[dict], spike: Mapping[str, Any], decision: Mapping[str, Any],
-                     tolerances: Mapping[str, float | None], ks: Sequence[int]) -> list[dict]:
+def tolerance_checks(
+    rows: Sequence[dict],
+    spike: Mapping[str, Any],
+    decision: Mapping[str, Any],
+    tolerances: Mapping[str, float | None],
+    ks: Sequence[int],
+) -> list[dict]:
     """Each enabled tolerance as {check, what, value, limit, passed}; ``rows`` come from :func:`metric_deltas`.
 
     Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
@@ -425,8 +491,16 @@ def tolerance_checks(rows: Sequence[dict], spike: Mapping[str, Any], decision: M
         value = 0.0 - row["delta"][metric]
         limit = tolerances[name]
         applied = max(limit, slack)
-        checks.append({"check": name, "what": f"{metric} drop, {strategy} k={k}", "value": value, "limit": limit,
-                       "applied_limit": applied, "passed": bool(value <= applied + 1e-12)})
+        checks.append(
+            {
+                "check": name,
+                "what": f"{metric} drop, {strategy} k={k}",
+                "value": value,
+                "limit": limit,
+                "applied_limit": applied,
+                "passed": bool(value <= applied + 1e-12),
+            }
+        )
 
     if tolerances.get("accuracy") is not None:
         for strategy in STRATEGIES:
@@ -440,16 +514,40 @@ def tolerance_checks(rows: Sequence[dict], spike: Mapping[str, Any], decision: M
         drop("auc_pr", "wprob", top, "auc_pr")
     if tolerances.get("winner_agreement") is not None:
         value, limit = spike["winner_agreement"], tolerances["winner_agreement"]
-        checks.append({"check": "winner_agreement", "what": "steps with the float winner", "value": value,
-                       "limit": limit, "applied_limit": limit, "passed": bool(value >= limit)})
+        checks.append(
+            {
+                "check": "winner_agreement",
+                "what": "steps with the float winner",
+                "value": value,
+                "limit": limit,
+                "applied_limit": limit,
+                "passed": bool(value >= limit),
+            }
+        )
     if tolerances.get("top1_agreement") is not None:
         value, limit = decision["top1_agreement"]["wprob"], tolerances["top1_agreement"]
-        checks.append({"check": "top1_agreement", "what": "W+Prob k=1 top-1 agreement", "value": value,
-                       "limit": limit, "applied_limit": limit, "passed": bool(value >= limit)})
+        checks.append(
+            {
+                "check": "top1_agreement",
+                "what": "W+Prob k=1 top-1 agreement",
+                "value": value,
+                "limit": limit,
+                "applied_limit": limit,
+                "passed": bool(value >= limit),
+            }
+        )
     if tolerances.get("saturations") is not None:
         value, limit = spike["saturations"], tolerances["saturations"]
-        checks.append({"check": "saturations", "what": "saturation events on the queries", "value": value,
-                       "limit": limit, "applied_limit": limit, "passed": bool(value <= limit)})
+        checks.append(
+            {
+                "check": "saturations",
+                "what": "saturation events on the queries",
+                "value": value,
+                "limit": limit,
+                "applied_limit": limit,
+                "passed": bool(value <= limit),
+            }
+        )
     return checks
 
 
@@ -462,16 +560,22 @@ def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 6
     top = w.max(axis=0, keepdims=True) if per_neuron else np.array([[w.max()]])
     ratio = w / np.where(top > 0, top, 1.0)
     counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
-    return {"normalised_by": "per-neuron maximum" if per_neuron else "global maximum",
-            "counts": [int(c) for c in counts], "edges": [round(float(e), 6) for e in edges]}
+    return {
+        "normalised_by": "per-neuron maximum" if per_neuron else "global maximum",
+        "counts": [int(c) for c in counts],
+        "edges": [round(float(e), 6) for e in edges],
+    }
 
 
 def level_histogram(model) -> dict[str, Any]:
     """How many weights sit on each mantissa level 0 .. 2**bits - 1."""
     levels = (1 << model.bits) - 1
     counts = np.bincount(np.asarray(model.weight_mantissa).ravel().astype(np.int64), minlength=levels + 1)
-    return {"levels": levels, "counts": [int(c) for c in counts[: levels + 1]],
-            "zero_fraction": float(counts[0] / max(counts.sum(), 1))}
+    return {
+        "levels": levels,
+        "counts": [int(c) for c in counts[: levels + 1]],
+        "zero_fraction": float(counts[0] / max(counts.sum(), 1)),
+    }
 
 
 # ---------------------------------------------------------------------------- orchestration
@@ -522,16 +626,27 @@ def verify_checkpoint(
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary else export_dir)
     results = []
-    stages = tqdm(total=len(bits_list) * 4, desc=f"verify {label or ''}".strip(), unit="stage", file=sys.stderr,
-                  disable=not progress, leave=False)
+    stages = tqdm(
+        total=len(bits_list) * 4,
+        desc=f"verify {label or ''}".strip(),
+        unit="stage",
+        file=sys.stderr,
+        disable=not progress,
+        leave=False,
+    )
     try:
         for bits in bits_list:
             clock = time.perf_counter()
             seconds: dict[str, float] = {}
             stages.set_postfix(bits=bits, stage="quantise")
             model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options.per_neuron, options.scale_method)
-            model = recalibrate(model, dict(reference_images or {}), ref_ids,
-                                reuse_float_calibration=options.calibration == "float", device=device)
+            model = recalibrate(
+                model,
+                dict(reference_images or {}),
+                ref_ids,
+                reuse_float_calibration=options.calibration == "float",
+                device=device,
+            )
             folder = root / f"{bits}bit"
             model_path = save_fixed_point(folder / "model.npz", model)
             seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
@@ -542,33 +657,45 @@ def verify_checkpoint(
             seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="targets")
-            cross = cross_implementation(model, spikes, int_run, folder=folder, targets=options.targets,
-                                         reference_queries=options.reference_queries, device=device)
+            cross = cross_implementation(
+                model,
+                spikes,
+                int_run,
+                folder=folder,
+                targets=options.targets,
+                reference_queries=options.reference_queries,
+                device=device,
+            )
             cross["files"]["model"] = [str(model_path)]
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            rows = metric_deltas(float_rows, readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout))
+            rows = metric_deltas(
+                float_rows, readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout)
+            )
             scores, agg = readout_scores(model.calibration, int_counts, readout)
             spike = spike_level(float_run.raster, int_run.raster, float_counts, int_counts, int_run.saturations)
             spike["calibration_saturations"] = model.quantisation.get("calibration_saturations")
-            decision = decision_level(float_scores, scores, {k: float_agg[k] for k in readout.ks},
-                                      {k: agg[k] for k in readout.ks})
+            decision = decision_level(
+                float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
+            )
             checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks)
             seconds["readout"] = time.perf_counter() - clock
-            results.append({
-                "bits": bits,
-                "quantisation": model.quantisation,
-                "cross_implementation": cross,
-                "spike_level": spike,
-                "decision_level": decision,
-                "metrics": rows,
-                "tolerance_checks": checks,
-                "pr_curves": curves(scores, agg, ref_ids, query_place_ids, readout),
-                "weight_levels": level_histogram(model),
-                "passed": bool(cross["passed"] and all(c["passed"] for c in checks)),
-                "seconds": {k: round(v, 3) for k, v in seconds.items()},
-            })
+            results.append(
+                {
+                    "bits": bits,
+                    "quantisation": model.quantisation,
+                    "cross_implementation": cross,
+                    "spike_level": spike,
+                    "decision_level": decision,
+                    "metrics": rows,
+                    "tolerance_checks": checks,
+                    "pr_curves": curves(scores, agg, ref_ids, query_place_ids, readout),
+                    "weight_levels": level_histogram(model),
+                    "passed": bool(cross["passed"] and all(c["passed"] for c in checks)),
+                    "seconds": {k: round(v, 3) for k, v in seconds.items()},
+                }
+            )
             stages.update(1)
     finally:
         stages.close()
@@ -604,7 +731,11 @@ def mean_std(values: Sequence[float]) -> dict[str, float]:
     array = np.asarray([v for v in values if v is not None], dtype=np.float64)
     if not array.size:
         return {"mean": None, "std": None, "n": 0}
-    return {"mean": float(array.mean()), "std": float(array.std(ddof=1)) if array.size > 1 else 0.0, "n": int(array.size)}
+    return {
+        "mean": float(array.mean()),
+        "std": float(array.std(ddof=1)) if array.size > 1 else 0.0,
+        "n": int(array.size),
+    }
 
 
 def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -613,8 +744,10 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     for run in runs:
         for row in run["float"]["metrics"]:
             float_groups.setdefault((row["strategy"], row["k"]), []).append(row)
-    float_rows = [{"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]) for m in METRICS}}
-                  for (s, k), rows in float_groups.items()]
+    float_rows = [
+        {"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]) for m in METRICS}}
+        for (s, k), rows in float_groups.items()
+    ]
     per_bits: dict[int, list[dict]] = {}
     for run in runs:
         for result in run["bits"]:
@@ -626,28 +759,43 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         for result in results:
             for row in result["metrics"]:
                 groups.setdefault((row["strategy"], row["k"]), []).append(row)
-        rows = [{"strategy": s, "k": k, **{m: mean_std([r[m] for r in rs]) for m in METRICS},
-                 "delta": {m: mean_std([r["delta"][m] for r in rs]) for m in METRICS}}
-                for (s, k), rs in groups.items()]
+        rows = [
+            {
+                "strategy": s,
+                "k": k,
+                **{m: mean_std([r[m] for r in rs]) for m in METRICS},
+                "delta": {m: mean_std([r["delta"][m] for r in rs]) for m in METRICS},
+            }
+            for (s, k), rs in groups.items()
+        ]
         ks = sorted({int(k) for r in results for k in r["decision_level"]["aggregated_agreement"]})
-        bits_summary.append({
-            "bits": bits,
-            "n_runs": len(results),
-            "n_passed": sum(bool(r["passed"]) for r in results),
-            "cross_implementation_passed": sum(bool(r["cross_implementation"]["passed"]) for r in results),
-            "metrics": rows,
-            "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]),
-            "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]),
-            "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]),
-            "saturations": mean_std([r["spike_level"]["saturations"] for r in results]),
-            "top1_agreement": {s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]) for s in STRATEGIES},
-            "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]),
-            "aggregated_agreement": {
-                str(k): mean_std([r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results]) for k in ks
-            },
-        })
-    return {"n_runs": len(runs), "float": float_rows, "bits": bits_summary,
-            "passed": all(bool(r["passed"]) for r in runs)}
+        bits_summary.append(
+            {
+                "bits": bits,
+                "n_runs": len(results),
+                "n_passed": sum(bool(r["passed"]) for r in results),
+                "cross_implementation_passed": sum(bool(r["cross_implementation"]["passed"]) for r in results),
+                "metrics": rows,
+                "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]),
+                "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]),
+                "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]),
+                "saturations": mean_std([r["spike_level"]["saturations"] for r in results]),
+                "top1_agreement": {
+                    s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]) for s in STRATEGIES
+                },
+                "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]),
+                "aggregated_agreement": {
+                    str(k): mean_std([r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results])
+                    for k in ks
+                },
+            }
+        )
+    return {
+        "n_runs": len(runs),
+        "float": float_rows,
+        "bits": bits_summary,
+        "passed": all(bool(r["passed"]) for r in runs),
+    }
 
 
 def versions() -> dict[str, str]:
@@ -656,8 +804,12 @@ def versions() -> dict[str, str]:
 
     from vprsnn_export import __version__
 
-    out = {"vprsnn-export": __version__, "python": platform.python_version(), "platform": platform.platform(),
-           "machine": f"{platform.machine()}, {torch.get_num_threads()} torch threads"}
+    out = {
+        "vprsnn-export": __version__,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "machine": f"{platform.machine()}, {torch.get_num_threads()} torch threads",
+    }
     for name in ("torch", "numpy", "onnx", "onnxruntime", "nir", "h5py", "matplotlib"):
         try:
             out[name] = md.version(name)
@@ -666,14 +818,19 @@ def versions() -> dict[str, str]:
     return out
 
 
-def build_report(runs: Sequence[Mapping[str, Any]], settings: Mapping[str, Any], *, command: Sequence[str] | None = None,
-                 seconds: float | None = None) -> dict[str, Any]:
+def build_report(
+    runs: Sequence[Mapping[str, Any]],
+    settings: Mapping[str, Any],
+    *,
+    command: Sequence[str] | None = None,
+    seconds: float | None = None,
+) -> dict[str, Any]:
     """The whole report.json: settings, versions, every run, the summary and the verdict."""
     import datetime
 
     return {
         "schema": SCHEMA,
-        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "command": list(command) if command is not None else None,
         "seconds": None if seconds is None else round(float(seconds), 1),
         "versions": versions(),
@@ -691,8 +848,23 @@ def _numpy(value: Any) -> np.ndarray:
 
 
 __all__ = [
-    "DEFAULT_TOLERANCES", "SCHEMA", "VerifyOptions", "build_report", "compare_models", "compare_outputs",
-    "count_correlations", "cross_implementation", "decision_level", "distribution_comparison",
-    "exact_comparison", "metric_deltas", "parse_tolerances", "spike_level", "summarise_runs", "tolerance_checks",
-    "top1_agreement", "tv_distance", "verify_checkpoint",
+    "DEFAULT_TOLERANCES",
+    "SCHEMA",
+    "VerifyOptions",
+    "build_report",
+    "compare_models",
+    "compare_outputs",
+    "count_correlations",
+    "cross_implementation",
+    "decision_level",
+    "distribution_comparison",
+    "exact_comparison",
+    "metric_deltas",
+    "parse_tolerances",
+    "spike_level",
+    "summarise_runs",
+    "tolerance_checks",
+    "top1_agreement",
+    "tv_distance",
+    "verify_checkpoint",
 ]

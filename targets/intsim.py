@@ -98,7 +98,9 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
-            model.weight_mantissa.astype(np.int64) << model.voltage_shift, dtype=matmul_dtype(model, device), device=device
+            model.weight_mantissa.astype(np.int64) << model.voltage_shift,
+            dtype=matmul_dtype(model, device),
+            device=device,
         ),
         threshold=torch.as_tensor(model.threshold.astype(np.int64) << model.voltage_shift, device=device),
         multipliers=None if bool((multipliers == multipliers[0]).all()) else multipliers,

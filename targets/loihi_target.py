@@ -262,7 +262,9 @@ def read_loihi(path: str | Path) -> LoihiDescription:
         raise ModelFileError("the arrays file named by the header is missing", arrays_path)
     blob = arrays_path.read_bytes()
     if sha256_bytes(blob) != header["arrays"].get("sha256"):
-        raise ModelFileError("the arrays file does not match the sha256 in network.json (truncated or replaced)", arrays_path)
+        raise ModelFileError(
+            "the arrays file does not match the sha256 in network.json (truncated or replaced)", arrays_path
+        )
     try:
         with np.load(io.BytesIO(blob), allow_pickle=False) as npz:
             arrays = {name: npz[name] for name in npz.files}

@@ -45,8 +45,7 @@ import torch
 
 from vprsnn_export import __version__
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.checkpoint import checkpoint_header
-from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.checkpoint import Checkpoint, checkpoint_header
 from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError, OptionError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
@@ -102,7 +101,11 @@ def check_checkpoint(ckpt: Checkpoint) -> None:
 def wta_rule(source: Source) -> str:
     if not source.config.network.wta:
         return "off: every neuron over threshold spikes"
-    score = "a_j * m_j (integer current times the neuron's scale multiplier)" if isinstance(source, FixedPointModel) else "I_j"
+    score = (
+        "a_j * m_j (integer current times the neuron's scale multiplier)"
+        if isinstance(source, FixedPointModel)
+        else "I_j"
+    )
     return (
         f"hard WTA: of the neurons with v_j > v_threshold_j at a step, only the one with the largest {score} "
         "spikes (ties: lowest index); every one of them resets to v_reset = 0; nothing else is inhibited"
@@ -128,7 +131,9 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "timesteps": cfg.encoder.timesteps,
         "encoder": f"s_i[t] ~ Bernoulli(clip({cfg.encoder.rate_scale} * pixel_i, 0, 1)), t = 0..{cfg.encoder.timesteps - 1}",
         "seed": cfg.seed,
-        "state": "v = 0 at the start of every presentation" if cfg.network.state_isolation else "v carried across presentations",
+        "state": "v = 0 at the start of every presentation"
+        if cfg.network.state_isolation
+        else "v carried across presentations",
         "spike_rule": "spike when v > v_threshold, checked after the update of the same step",
         "reset": "v <- v_reset = 0 for every neuron over threshold, whether or not it wins the WTA",
         "wta": "on" if cfg.network.wta else "off",
@@ -242,7 +247,9 @@ def load_graph(path: str | Path):
     try:
         return nir.read(path)
     except Exception as exc:  # h5py raises OSError, nir KeyError/ValueError/AssertionError on damage
-        raise ModelFileError(f"not a readable NIR file (truncated or corrupt: {type(exc).__name__}: {exc})", path) from None
+        raise ModelFileError(
+            f"not a readable NIR file (truncated or corrupt: {type(exc).__name__}: {exc})", path
+        ) from None
 
 
 def read_nir(path: str | Path) -> Source:
@@ -273,7 +280,9 @@ def graph_to_source(graph, path: Path) -> Source:
     expected = EDGES if "wta" in graph.nodes else PLAIN_EDGES
     missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
     if missing or edges != sorted(expected):
-        raise ModelFileError(f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path)
+        raise ModelFileError(
+            f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
+        )
     linear, lif = graph.nodes["linear"], graph.nodes["lif"]
     if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
         raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
@@ -310,7 +319,9 @@ def integral(array: np.ndarray, name: str, path: Path) -> np.ndarray:
     return np.round(array).astype(np.int32)
 
 
-def fixed_point_from_graph(header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path) -> FixedPointModel:
+def fixed_point_from_graph(
+    header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path
+) -> FixedPointModel:
     model = FixedPointModel(
         bits=int(header["bits"]),
         weight_mantissa=integral(weight, "linear.weight", path),
@@ -334,7 +345,9 @@ def fixed_point_from_graph(header: dict, meta: dict, weight: np.ndarray, thresho
     return model
 
 
-def checkpoint_from_graph(header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path) -> Checkpoint:
+def checkpoint_from_graph(
+    header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path
+) -> Checkpoint:
     if header.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"the embedded header is not a checkpoint header ({header.get('format')!r})", path)
     ckpt = Checkpoint(
@@ -360,8 +373,8 @@ def checkpoint_from_graph(header: dict, meta: dict, weight: np.ndarray, threshol
 class EulerLIF(torch.nn.Module):
     """NIR's LIF (or IF) as written in the file, stepped by forward Euler at ``dt``: no metadata used.
 
-        v <- v + dt/tau ((v_leak - v) + r I)      (IF: v <- v + r I)
-        z = v > v_threshold;  v <- v_reset where z
+    v <- v + dt/tau ((v_leak - v) + r I)      (IF: v <- v + r I)
+    z = v > v_threshold;  v <- v_reset where z
     """
 
     def __init__(self, node, dt: float) -> None:
@@ -374,7 +387,9 @@ class EulerLIF(torch.nn.Module):
         drive = gain * np.asarray(node.r, dtype=np.float64) if leaky else np.asarray(node.r, dtype=np.float64)
         self.register_buffer("gain", torch.as_tensor(gain))
         self.register_buffer("drive", torch.as_tensor(drive))
-        self.register_buffer("v_leak", torch.as_tensor(np.asarray(getattr(node, "v_leak", np.zeros(n)), dtype=np.float64)))
+        self.register_buffer(
+            "v_leak", torch.as_tensor(np.asarray(getattr(node, "v_leak", np.zeros(n)), dtype=np.float64))
+        )
         self.register_buffer("v_threshold", torch.as_tensor(np.asarray(node.v_threshold, dtype=np.float64)))
         self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
 

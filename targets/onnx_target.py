@@ -174,8 +174,8 @@ def currents_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[T
 def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
 
-        scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
-        P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
+    scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
+    P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
     """
     sr = model.calibration.astype(np.float64)
     colsum = sr.sum(axis=0)
@@ -237,7 +237,9 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
         head, head_inits = wprob_nodes(model)
         nodes += head
         inits += head_inits
-        outputs.append(helper.make_tensor_value_info("wprob", TensorProto.DOUBLE, ["batch", model.calibration.shape[1]]))
+        outputs.append(
+            helper.make_tensor_value_info("wprob", TensorProto.DOUBLE, ["batch", model.calibration.shape[1]])
+        )
     if with_raster:
         outputs.append(helper.make_tensor_value_info("raster", TensorProto.BOOL, ["T", "batch", n]))
     graph = helper.make_graph(
@@ -293,7 +295,9 @@ def read_onnx(path: str | Path) -> onnx.ModelProto:
         loaded = onnx.load(str(path))
         onnx.checker.check_model(loaded)
     except Exception as exc:  # onnx raises DecodeError, ValidationError, ... on a damaged file
-        raise ModelFileError(f"not a readable ONNX model (truncated or corrupt: {type(exc).__name__}: {exc})", path) from None
+        raise ModelFileError(
+            f"not a readable ONNX model (truncated or corrupt: {type(exc).__name__}: {exc})", path
+        ) from None
     props = {p.key: p.value for p in loaded.metadata_props}
     if props.get("vprsnn.format") != "vprsnn-onnx/1":
         raise ModelFileError("not an ONNX graph written by vprsnn-export (metadata vprsnn.format missing)", path)

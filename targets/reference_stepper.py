@@ -49,7 +49,11 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
         if isolation:
             v = [0] * model.n_neurons
         for t in range(timesteps):
-            a = [int(x) for x in q[spikes[p, t] != 0].sum(axis=0, dtype=np.int64)] if spikes[p, t].any() else [0] * len(m)
+            a = (
+                [int(x) for x in q[spikes[p, t] != 0].sum(axis=0, dtype=np.int64)]
+                if spikes[p, t].any()
+                else [0] * len(m)
+            )
             for j in neurons:
                 v[j] = trunc_div(v[j] * keep, 4096) + (a[j] << model.voltage_shift)
                 if v[j] > limit or v[j] < -limit:

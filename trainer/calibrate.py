@@ -16,9 +16,7 @@ CountRunner = Callable[[torch.Tensor], torch.Tensor]
 """Any network implementation: spikes (N, T, inputs) uint8 -> output spike counts (N, neurons)."""
 
 
-def calibration_spikes(
-    images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config
-) -> torch.Tensor:
+def calibration_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
     """The calibration presentations of one reference traversal (identical for every backend)."""
     return encode_presentations(
         images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_CALIBRATE, traversal=traversal

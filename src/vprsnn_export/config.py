@@ -107,11 +107,11 @@ class Config:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "Config":
+    def from_dict(cls, data: dict[str, Any]) -> Config:
         """Rebuild a Config; unknown keys are an error, missing keys take the defaults."""
         return _build(cls, data, "config")
 
-    def replace(self, **dotted: Any) -> "Config":
+    def replace(self, **dotted: Any) -> Config:
         """Copy with overrides given as dotted names: ``cfg.replace(**{"encoder.timesteps": 150})``."""
         data = self.to_dict()
         for name, value in dotted.items():

@@ -53,7 +53,9 @@ class Dataset:
     def traversal(self, name: str) -> np.ndarray:
         """The ``(N, image_size**2)`` images of traversal ``name``; DataError listing the loaded ones if absent."""
         if name not in self.images:
-            raise DataError(f"traversal {name!r} is not loaded from {self.source}; available: {', '.join(self.images) or 'none'}")
+            raise DataError(
+                f"traversal {name!r} is not loaded from {self.source}; available: {', '.join(self.images) or 'none'}"
+            )
         return self.images[name]
 
 
@@ -121,10 +123,14 @@ def load_dataset(
             f"traversal column(s) {', '.join(repr(m) for m in missing)} not in the manifest; its columns are: {', '.join(manifest.columns)}",
             manifest.path,
         )
-    selected = _select(np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path))
+    selected = _select(
+        np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
+    )
     cells = {name: _image_paths(manifest, name, selected) for name in names}
     images: dict[str, np.ndarray] = {}
-    with tqdm(total=len(selected) * len(names), desc="decoding images", unit="img", file=sys.stderr, disable=not progress) as bar:
+    with tqdm(
+        total=len(selected) * len(names), desc="decoding images", unit="img", file=sys.stderr, disable=not progress
+    ) as bar:
         for name in names:
             images[name] = _decode(cells[name], cfg, bar)
     return Dataset(source=str(data), manifest_sha256=manifest.sha256, place_ids=selected, images=images)
@@ -143,7 +149,9 @@ def read_manifest(data: str | Path) -> Manifest:
     raw = path.read_bytes()
     columns, records = _read_csv(raw, path, "place manifest")
     if PLACE_ID not in columns:
-        raise DataError(f"the place manifest has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path)
+        raise DataError(
+            f"the place manifest has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
+        )
     rows: dict[int, tuple[int, dict[str, str]]] = {}
     for line, record in records:
         place = _place_id(record.get(PLACE_ID), line, path)
@@ -162,7 +170,9 @@ def read_subset(path: str | Path) -> np.ndarray:
         raise DataError("no such subset file (a CSV with a place_id column)", path)
     columns, records = _read_csv(path.read_bytes(), path, "subset file")
     if PLACE_ID not in columns:
-        raise DataError(f"the subset file has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path)
+        raise DataError(
+            f"the subset file has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
+        )
     ids: list[int] = []
     lines: dict[int, int] = {}
     for line, record in records:
@@ -267,7 +277,12 @@ def _decode(paths: list[tuple[Path, str]], cfg: PreprocessConfig, bar: tqdm) -> 
 
 
 def _load_synthetic(
-    source: str, n_places: int, names: tuple[str, ...], cfg: PreprocessConfig, subset: str | Path | None, places: str | None
+    source: str,
+    n_places: int,
+    names: tuple[str, ...],
+    cfg: PreprocessConfig,
+    subset: str | Path | None,
+    places: str | None,
 ) -> Dataset:
     missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]
     if missing:
@@ -278,4 +293,9 @@ def _load_synthetic(
     selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
     route = synthetic_route(n_places, names)
     images = {name: preprocess_images(route[name][selected], cfg) for name in names}
-    return Dataset(source=source, manifest_sha256=synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS), place_ids=selected, images=images)
+    return Dataset(
+        source=source,
+        manifest_sha256=synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS),
+        place_ids=selected,
+        images=images,
+    )

@@ -62,10 +62,54 @@ class Season:
 
 
 SEASONS: dict[str, Season] = {
-    "summer": Season(code=0, blob_spread=0.0, snow=0.0, gain=1.0, offset=0.0, gamma=1.0, contrast=1.0, foliage=0.0, noise=0.0, shift=0),
-    "winter": Season(code=1, blob_spread=0.6, snow=0.55, gain=0.95, offset=0.05, gamma=0.8, contrast=0.8, foliage=0.06, noise=0.05, shift=2),
-    "spring": Season(code=2, blob_spread=0.4, snow=0.0, gain=1.0, offset=0.02, gamma=0.9, contrast=0.9, foliage=0.06, noise=0.04, shift=2),
-    "fall": Season(code=3, blob_spread=0.5, snow=0.0, gain=0.85, offset=0.0, gamma=1.2, contrast=1.1, foliage=0.08, noise=0.045, shift=2),
+    "summer": Season(
+        code=0,
+        blob_spread=0.0,
+        snow=0.0,
+        gain=1.0,
+        offset=0.0,
+        gamma=1.0,
+        contrast=1.0,
+        foliage=0.0,
+        noise=0.0,
+        shift=0,
+    ),
+    "winter": Season(
+        code=1,
+        blob_spread=0.6,
+        snow=0.55,
+        gain=0.95,
+        offset=0.05,
+        gamma=0.8,
+        contrast=0.8,
+        foliage=0.06,
+        noise=0.05,
+        shift=2,
+    ),
+    "spring": Season(
+        code=2,
+        blob_spread=0.4,
+        snow=0.0,
+        gain=1.0,
+        offset=0.02,
+        gamma=0.9,
+        contrast=0.9,
+        foliage=0.06,
+        noise=0.04,
+        shift=2,
+    ),
+    "fall": Season(
+        code=3,
+        blob_spread=0.5,
+        snow=0.0,
+        gain=0.85,
+        offset=0.0,
+        gamma=1.2,
+        contrast=1.1,
+        foliage=0.08,
+        noise=0.045,
+        shift=2,
+    ),
 }
 SYNTHETIC_TRAVERSALS = tuple(SEASONS)
 
@@ -75,13 +119,17 @@ _SEASON_STREAM = 100
 _IMAGE_STREAM = 1000
 
 
-def synthetic_fingerprint(n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0) -> str:
+def synthetic_fingerprint(
+    n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0
+) -> str:
     """sha256 hex of ``"vprsnn-synthetic-route|v=<VERSION>|places=<N>|traversals=<a,b>|seed=<seed>"``."""
     canonical = f"vprsnn-synthetic-route|v={SYNTHETIC_VERSION}|places={int(n_places)}|traversals={','.join(traversals)}|seed={int(seed)}"
     return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
-def synthetic_route(n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0) -> dict[str, np.ndarray]:
+def synthetic_route(
+    n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0
+) -> dict[str, np.ndarray]:
     """Render ``n_places`` places of every traversal: name -> ``(n_places, 32, 64)`` uint8 images."""
     _check_arguments(n_places, traversals, seed)
     width = (n_places - 1) * STRIDE + IMAGE_WIDTH + 2 * _PAD
@@ -126,7 +174,9 @@ def _knot_chunks(width: int, spacing: int) -> int:
 def _knots_1d(seed: int, stream: int, spacing: int, width: int, scale: float) -> np.ndarray:
     """Smooth 1-D noise: N(0, scale) knots every ``spacing`` px, smoothstep-interpolated, sampled at x = 0..width-1."""
     per_chunk = _CHUNK // spacing
-    knots = np.concatenate([_chunk_rng(seed, stream, c).normal(0.0, scale, per_chunk) for c in range(_knot_chunks(width, spacing))])
+    knots = np.concatenate(
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, per_chunk) for c in range(_knot_chunks(width, spacing))]
+    )
     x = np.arange(width) / spacing
     left = np.floor(x).astype(np.int64)
     t = _smoothstep(x - left)
@@ -138,7 +188,10 @@ def _knots_2d(seed: int, stream: int, spacing: tuple[int, int], width: int, scal
     sy, sx = spacing
     rows = _HEIGHT // sy + 2
     per_chunk = _CHUNK // sx
-    knots = np.concatenate([_chunk_rng(seed, stream, c).normal(0.0, scale, (rows, per_chunk)) for c in range(_knot_chunks(width, sx))], axis=1)
+    knots = np.concatenate(
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, (rows, per_chunk)) for c in range(_knot_chunks(width, sx))],
+        axis=1,
+    )
     y = np.arange(_HEIGHT) / sy
     x = np.arange(width) / sx
     top, left = np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
@@ -154,8 +207,19 @@ def _render_base(width: int, seed: int) -> _Base:
     skyline = np.clip(skyline, _PAD + 4, _HEIGHT - 10)
     ground = y >= skyline[None, :]
     sky = 0.85 - 0.2 * (y / _HEIGHT) + _knots_2d(seed, _SKY, (12, 64), width, 0.06)
-    terrain = 0.3 + 0.2 * (y / _HEIGHT) + _knots_2d(seed, _TERRAIN, (6, 8), width, 0.1) + _knots_2d(seed, _TEXTURE, (3, 3), width, 0.06)
-    return _Base(sky=sky, terrain=terrain, ground=ground, blobs=_draw_blobs(width, seed), structures=_draw_structures(width, seed))
+    terrain = (
+        0.3
+        + 0.2 * (y / _HEIGHT)
+        + _knots_2d(seed, _TERRAIN, (6, 8), width, 0.1)
+        + _knots_2d(seed, _TEXTURE, (3, 3), width, 0.06)
+    )
+    return _Base(
+        sky=sky,
+        terrain=terrain,
+        ground=ground,
+        blobs=_draw_blobs(width, seed),
+        structures=_draw_structures(width, seed),
+    )
 
 
 def _draw_blobs(width: int, seed: int) -> tuple[tuple[float, float, float, float, float, int], ...]:
@@ -208,7 +272,11 @@ def _render_traversal(base: _Base, season: Season, n_places: int, seed: int) -> 
         chunk = int(cx // _CHUNK)
         if chunk not in multipliers:
             rng = _chunk_rng(seed, _SEASON_STREAM + season.code, chunk)
-            multipliers[chunk] = rng.normal(1.0, season.blob_spread, _BLOBS_PER_CHUNK) if season.blob_spread else np.ones(_BLOBS_PER_CHUNK)
+            multipliers[chunk] = (
+                rng.normal(1.0, season.blob_spread, _BLOBS_PER_CHUNK)
+                if season.blob_spread
+                else np.ones(_BLOBS_PER_CHUNK)
+            )
         x0, x1 = max(int(cx - 3 * sx), 0), min(int(cx + 3 * sx) + 1, width)
         if x0 >= x1:
             continue

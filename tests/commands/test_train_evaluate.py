@@ -14,8 +14,21 @@ SMALL = ["--timesteps", "100", "--epochs", "8", "--neurons", "100"]
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     out = tmp_path_factory.mktemp("e2e") / "net.npz"
-    code = main(["train", "--data", "synthetic:40", "--reference", "summer", "--seed", "3", "--out", str(out),
-                 "--quiet", *SMALL])
+    code = main(
+        [
+            "train",
+            "--data",
+            "synthetic:40",
+            "--reference",
+            "summer",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+            "--quiet",
+            *SMALL,
+        ]
+    )
     assert code == 0
     return out
 
@@ -46,8 +59,24 @@ def test_evaluate_json_beats_chance_by_a_wide_margin(trained, capsys):
 
 def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
     again = tmp_path / "again.npz"
-    assert main(["train", "--data", "synthetic:40", "--reference", "summer", "--seed", "3", "--out", str(again),
-                 "--quiet", *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--data",
+                "synthetic:40",
+                "--reference",
+                "summer",
+                "--seed",
+                "3",
+                "--out",
+                str(again),
+                "--quiet",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     np.testing.assert_array_equal(load_checkpoint(again).weights, load_checkpoint(trained).weights)
     np.testing.assert_array_equal(load_checkpoint(again).calibration, load_checkpoint(trained).calibration)
 
@@ -65,8 +94,10 @@ def test_evaluate_table_output(trained, capsys):
         (["train", "--data", "nowhere/places.csv", "--reference", "summer", "--out", "x.npz"], "nowhere"),
         (["train", "--data", "synthetic:10", "--reference", "autumn", "--out", "x.npz"], "autumn"),
         (["train", "--data", "synthetic:10", "--reference", "summer", "--places", "50:5", "--out", "x.npz"], "50"),
-        (["train", "--data", "synthetic:10", "--reference", "summer", "--set", "encoder.nope=1", "--out", "x.npz"],
-         "encoder.nope"),
+        (
+            ["train", "--data", "synthetic:10", "--reference", "summer", "--set", "encoder.nope=1", "--out", "x.npz"],
+            "encoder.nope",
+        ),
         (["evaluate", "CKPT", "--query", "winter", "--k", "0"], "--k"),
     ],
 )

@@ -19,8 +19,22 @@ def checkpoint(tmp_path_factory):
 
 
 def verify(checkpoint, report, *extra):
-    return main(["verify", str(checkpoint), "--query", "winter", "--k", "1,3", "--report", str(report),
-                 "--reference-queries", "1", "--quiet", *extra])
+    return main(
+        [
+            "verify",
+            str(checkpoint),
+            "--query",
+            "winter",
+            "--k",
+            "1,3",
+            "--report",
+            str(report),
+            "--reference-queries",
+            "1",
+            "--quiet",
+            *extra,
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +72,10 @@ def test_report_json_schema(passed, checkpoint):
 
 
 def test_impossible_tolerance_exits_1(checkpoint, tmp_path, capsys):
-    assert verify(checkpoint, tmp_path, "--bits", "2", "--tolerance", "winner_agreement=1.0", "--targets", "none") \
+    assert (
+        verify(checkpoint, tmp_path, "--bits", "2", "--tolerance", "winner_agreement=1.0", "--targets", "none")
         == EXIT_CHECK_FAILED
+    )
     out = capsys.readouterr().out
     assert "FAIL" in out and "report.html" in out
     data = json.loads((tmp_path / "report.json").read_text())
@@ -67,25 +83,43 @@ def test_impossible_tolerance_exits_1(checkpoint, tmp_path, capsys):
     assert any(c["check"] == "winner_agreement" and not c["passed"] for c in checks)
 
 
-@pytest.mark.parametrize("extra", [
-    ["--bits", "9"],
-    ["--bits", "1,8"],
-    ["--bits", "eight"],
-    ["--tolerance", "speed=1"],
-    ["--tolerance", "accuracy=-1"],
-    ["--targets", "tflite"],
-    ["--k", "0"],
-    ["--reference-queries", "-1"],
-    ["--query", "autumn"],
-])
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--bits", "9"],
+        ["--bits", "1,8"],
+        ["--bits", "eight"],
+        ["--tolerance", "speed=1"],
+        ["--tolerance", "accuracy=-1"],
+        ["--targets", "tflite"],
+        ["--k", "0"],
+        ["--reference-queries", "-1"],
+        ["--query", "autumn"],
+    ],
+)
 def test_bad_input_exits_2(checkpoint, tmp_path, extra):
     assert verify(checkpoint, tmp_path, *extra) == EXIT_BAD_INPUT
 
 
 def test_missing_checkpoint_and_bad_seed_use_exit_2(checkpoint, tmp_path):
     assert verify(tmp_path / "absent.npz", tmp_path) == EXIT_BAD_INPUT
-    assert main(["verify", str(checkpoint), str(checkpoint), "--seeds", "2", "--query", "winter", "--report",
-                 str(tmp_path), "--quiet"]) == EXIT_BAD_INPUT
+    assert (
+        main(
+            [
+                "verify",
+                str(checkpoint),
+                str(checkpoint),
+                "--seeds",
+                "2",
+                "--query",
+                "winter",
+                "--report",
+                str(tmp_path),
+                "--quiet",
+            ]
+        )
+        == EXIT_BAD_INPUT
+    )
 
 
 def test_json_output(checkpoint, tmp_path, capsys):

@@ -61,11 +61,23 @@ def test_invalid_contents_are_rejected_on_save_and_load(tmp_path, mutate, messag
     with pytest.raises(ModelFileError, match=message):
         save_checkpoint(tmp_path / "bad.npz", bad)
     good = _ckpt()
-    meta = {"format": "vprsnn-checkpoint", "format_version": 1, "config": good.config.to_dict(),
-            "reference_traversals": ["summer"], "data": {}}
-    write_container(tmp_path / "bad.npz", meta, {
-        "weights": bad.weights, "thresholds": bad.thresholds,
-        "calibration": bad.calibration, "reference_place_ids": bad.reference_place_ids})
+    meta = {
+        "format": "vprsnn-checkpoint",
+        "format_version": 1,
+        "config": good.config.to_dict(),
+        "reference_traversals": ["summer"],
+        "data": {},
+    }
+    write_container(
+        tmp_path / "bad.npz",
+        meta,
+        {
+            "weights": bad.weights,
+            "thresholds": bad.thresholds,
+            "calibration": bad.calibration,
+            "reference_place_ids": bad.reference_place_ids,
+        },
+    )
     with pytest.raises(ModelFileError, match=message):
         load_checkpoint(tmp_path / "bad.npz")
 

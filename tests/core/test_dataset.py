@@ -76,7 +76,11 @@ def test_folder_means_its_places_csv(data_dir: Path) -> None:
 
 
 def test_manifest_order_is_kept(data_dir: Path) -> None:
-    _write_csv(data_dir / "shuffled.csv", ["place_id", "summer"], [[13, "summer/13.png"], [11, "summer/11.png"], [12, "summer/12.png"]])
+    _write_csv(
+        data_dir / "shuffled.csv",
+        ["place_id", "summer"],
+        [[13, "summer/13.png"], [11, "summer/11.png"], [12, "summer/12.png"]],
+    )
     data = load_dataset(data_dir / "shuffled.csv", ["summer"], CFG)
     assert data.place_ids.tolist() == [13, 11, 12]
     assert np.array_equal(data.traversal("summer"), _expected(data_dir, "summer", [13, 11, 12]))
@@ -105,7 +109,9 @@ def test_progress_bar_goes_to_stderr(data_dir: Path, capsys: pytest.CaptureFixtu
 def test_patch_norm_off(data_dir: Path) -> None:
     data = load_dataset(data_dir, ["summer"], PreprocessConfig(patch_norm=False), places="10:1")
     grey = cv2.imread(str(data_dir / "summer" / "10.png"), cv2.IMREAD_GRAYSCALE)
-    assert np.array_equal(data.traversal("summer")[0], cv2.resize(grey, (28, 28), interpolation=cv2.INTER_AREA).ravel() / np.float32(255))
+    assert np.array_equal(
+        data.traversal("summer")[0], cv2.resize(grey, (28, 28), interpolation=cv2.INTER_AREA).ravel() / np.float32(255)
+    )
 
 
 @pytest.mark.parametrize(("spec", "expected"), [("0:5", (0, 5, 1)), ("3:4:10", (3, 4, 10)), (" 7:1 ", (7, 1, 1))])
@@ -137,7 +143,10 @@ def test_synthetic_size_and_selection(tmp_path: Path) -> None:
     assert np.array_equal(data.traversal("fall"), preprocess_images(route["fall"][[5, 15, 25]], CFG))
     subset = _write_csv(tmp_path / "subset.csv", ["place_id"], [[29], [0]])
     assert load_dataset("synthetic:30", ["fall"], CFG, subset=subset).place_ids.tolist() == [29, 0]
-    assert load_dataset("synthetic:30", ["summer"], CFG).manifest_sha256 == load_dataset("synthetic:30", ["fall"], CFG).manifest_sha256
+    assert (
+        load_dataset("synthetic:30", ["summer"], CFG).manifest_sha256
+        == load_dataset("synthetic:30", ["fall"], CFG).manifest_sha256
+    )
 
 
 def test_synthetic_errors() -> None:
@@ -190,14 +199,20 @@ def test_bad_traversal_names(data_dir: Path) -> None:
 
 
 def test_duplicate_place_id(data_dir: Path) -> None:
-    manifest = _write_csv(data_dir / "dup.csv", ["place_id", "summer"], [[10, "summer/10.png"], [11, "summer/11.png"], [10, "summer/12.png"]])
+    manifest = _write_csv(
+        data_dir / "dup.csv",
+        ["place_id", "summer"],
+        [[10, "summer/10.png"], [11, "summer/11.png"], [10, "summer/12.png"]],
+    )
     message = _error(DataError, manifest, ["summer"], CFG)
     assert "dup.csv" in message and "duplicate place_id 10" in message and "lines 2 and 4" in message
 
 
 @pytest.mark.parametrize("value", ["x7", "1.5", ""])
 def test_non_integer_place_id(data_dir: Path, value: str) -> None:
-    manifest = _write_csv(data_dir / "bad.csv", ["place_id", "summer"], [[10, "summer/10.png"], [value, "summer/11.png"]])
+    manifest = _write_csv(
+        data_dir / "bad.csv", ["place_id", "summer"], [[10, "summer/10.png"], [value, "summer/11.png"]]
+    )
     message = _error(DataError, manifest, ["summer"], CFG)
     assert "bad.csv" in message and "line 3" in message and "not an integer" in message
 
@@ -242,7 +257,11 @@ def test_corrupt_image(data_dir: Path) -> None:
 
 
 def test_empty_traversal_cell(data_dir: Path) -> None:
-    manifest = _write_csv(data_dir / "holes.csv", ["place_id", "summer", "winter"], [[10, "summer/10.png", "winter/10.png"], [11, "summer/11.png", ""]])
+    manifest = _write_csv(
+        data_dir / "holes.csv",
+        ["place_id", "summer", "winter"],
+        [[10, "summer/10.png", "winter/10.png"], [11, "summer/11.png", ""]],
+    )
     message = _error(DataError, manifest, TRAVERSALS, CFG)
     assert "holes.csv" in message and "'winter'" in message and "place_id 11" in message
     assert load_dataset(manifest, ["summer"], CFG).n_places == 2
@@ -257,7 +276,9 @@ def test_missing_loaded_traversal(data_dir: Path) -> None:
 # --- real data ---------------------------------------------------------------------------------
 
 
-@pytest.mark.skipif(not (NORDLAND / "places.csv").is_file(), reason=f"Nordland data not found at {NORDLAND} (see docs/data.md)")
+@pytest.mark.skipif(
+    not (NORDLAND / "places.csv").is_file(), reason=f"Nordland data not found at {NORDLAND} (see docs/data.md)"
+)
 def test_real_nordland_five_places() -> None:
     data = load_dataset(NORDLAND, TRAVERSALS, CFG, places="1000:5")
     assert data.place_ids.tolist() == [1000, 1001, 1002, 1003, 1004]

@@ -80,7 +80,9 @@ def test_matches_per_patch_loop() -> None:
 
 def test_resize_is_inter_area() -> None:
     big = np.kron(np.arange(16, dtype=np.uint8).reshape(4, 4) * 10, np.ones((14, 14), np.uint8))
-    assert np.array_equal(resize_image(big, 28), np.kron(np.arange(16, dtype=np.uint8).reshape(4, 4) * 10, np.ones((7, 7), np.uint8)))
+    assert np.array_equal(
+        resize_image(big, 28), np.kron(np.arange(16, dtype=np.uint8).reshape(4, 4) * 10, np.ones((7, 7), np.uint8))
+    )
     grey = np.random.default_rng(2).integers(0, 256, (32, 64), dtype=np.uint8)
     assert np.array_equal(resize_image(grey, 28), cv2.resize(grey, (28, 28), interpolation=cv2.INTER_AREA))
 

@@ -22,8 +22,17 @@ def private_cache(tmp_path_factory, monkeypatch):
 
 
 def test_every_paper_experiment_is_listed():
-    assert {"assignment", "ablation", "state_isolation", "aggregation", "envelope", "scalability",
-            "quantisation", "timing", "epochs"} <= set(NAMES)
+    assert {
+        "assignment",
+        "ablation",
+        "state_isolation",
+        "aggregation",
+        "envelope",
+        "scalability",
+        "quantisation",
+        "timing",
+        "epochs",
+    } <= set(NAMES)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -49,9 +49,24 @@ def resave(path, tmp_path, *, meta=None, **arrays):
 def test_round_trip_keeps_every_array_and_field(tmp_path):
     model = small_model(fold=True)
     loaded = load_fixed_point(save_fixed_point(tmp_path / "m.npz", model))
-    for name in ("weight_mantissa", "scale_multiplier", "threshold", "calibration", "float_calibration", "reference_place_ids"):
+    for name in (
+        "weight_mantissa",
+        "scale_multiplier",
+        "threshold",
+        "calibration",
+        "float_calibration",
+        "reference_place_ids",
+    ):
         assert np.array_equal(getattr(loaded, name), getattr(model, name)), name
-    for name in ("bits", "scale_exponent", "decay_dv", "source_sha256", "reference_traversals", "voltage_shift", "voltage_bits"):
+    for name in (
+        "bits",
+        "scale_exponent",
+        "decay_dv",
+        "source_sha256",
+        "reference_traversals",
+        "voltage_shift",
+        "voltage_bits",
+    ):
         assert getattr(loaded, name) == getattr(model, name), name
     assert loaded.config == model.config
     assert loaded.quantisation == model.quantisation

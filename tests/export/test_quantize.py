@@ -60,7 +60,9 @@ def test_max_per_neuron_uses_the_full_unsigned_range_without_clipping(bits):
 
 
 def test_two_bits_are_four_unsigned_levels():
-    q = quantise_arrays(stdp_like_weights(), thresholds(), 2, per_neuron=True, scale_method="max", fold_thresholds=False)
+    q = quantise_arrays(
+        stdp_like_weights(), thresholds(), 2, per_neuron=True, scale_method="max", fold_thresholds=False
+    )
     assert set(np.unique(q.weight_mantissa).tolist()) == {0, 1, 2, 3}
 
 
@@ -116,11 +118,17 @@ def test_threshold_folding_gives_one_integer_threshold_and_keeps_float_threshold
 
 def test_folding_needs_per_neuron_scales_and_methods_are_checked():
     with pytest.raises(OptionError, match="per-neuron"):
-        quantise_arrays(stdp_like_weights(), thresholds(), 4, per_neuron=False, scale_method="max", fold_thresholds=True)
+        quantise_arrays(
+            stdp_like_weights(), thresholds(), 4, per_neuron=False, scale_method="max", fold_thresholds=True
+        )
     with pytest.raises(OptionError, match="unknown scale method"):
-        quantise_arrays(stdp_like_weights(), thresholds(), 4, per_neuron=True, scale_method="p99", fold_thresholds=False)
+        quantise_arrays(
+            stdp_like_weights(), thresholds(), 4, per_neuron=True, scale_method="p99", fold_thresholds=False
+        )
     with pytest.raises(OptionError, match="unsupported weight bit width"):
-        quantise_arrays(stdp_like_weights(), thresholds(), 1, per_neuron=True, scale_method="max", fold_thresholds=False)
+        quantise_arrays(
+            stdp_like_weights(), thresholds(), 1, per_neuron=True, scale_method="max", fold_thresholds=False
+        )
 
 
 def test_a_dead_neuron_gets_a_representable_threshold():
@@ -146,7 +154,12 @@ def small_checkpoint(n_places: int = 6) -> tuple[Checkpoint, dict]:
         calibration=calibrate(network.counts, reference, data.place_ids, cfg),
         reference_place_ids=data.place_ids,
         reference_traversals=["summer"],
-        data={"source": f"synthetic:{n_places}", "manifest_sha256": data.manifest_sha256, "subset": None, "places": None},
+        data={
+            "source": f"synthetic:{n_places}",
+            "manifest_sha256": data.manifest_sha256,
+            "subset": None,
+            "places": None,
+        },
     )
     return ckpt, reference
 
@@ -162,7 +175,9 @@ def test_quantize_checkpoint_then_recalibrate_on_the_integer_simulator():
     assert deployed.calibration.shape == ckpt.calibration.shape and deployed.calibration.sum() > 0
     assert np.array_equal(deployed.float_calibration, ckpt.calibration)
     reused = recalibrate(model, {}, ckpt.reference_place_ids, reuse_float_calibration=True)
-    assert np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation["calibration"] == "float (reused)"
+    assert (
+        np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation["calibration"] == "float (reused)"
+    )
     with pytest.raises(OptionError, match="reference places"):
         recalibrate(model, reference, ckpt.reference_place_ids[::-1])
 
@@ -171,18 +186,40 @@ def test_quantize_and_simulate_commands(tmp_path, capsys):
     ckpt, _ = small_checkpoint()
     source = save_checkpoint(tmp_path / "float.npz", ckpt)
     out = tmp_path / "models"
-    assert main(["quantize", str(source), "--bits", "8,3", "--per-neuron", "--scale", "mse", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(["quantize", str(source), "--bits", "8,3", "--per-neuron", "--scale", "mse", "--out", str(out), "--quiet"])
+        == 0
+    )
     table = capsys.readouterr().out
     assert "per-neuron" in table and "cal. saturations" in table
     names = sorted(p.name for p in out.iterdir())
     assert names == ["model_3bit_per-neuron_mse.npz", "model_8bit_per-neuron_mse.npz"]
     model_path = out / "model_8bit_per-neuron_mse.npz"
     assert load_fixed_point(model_path).quantisation["calibration"].startswith("deployed")
-    assert main(["simulate", str(model_path), "--query", "winter", "--k", "1,3", "--json", "--compare", str(source), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(model_path),
+                "--query",
+                "winter",
+                "--k",
+                "1,3",
+                "--json",
+                "--compare",
+                str(source),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     result = json.loads(capsys.readouterr().out)
     assert result["bits"] == 8 and result["saturations"] == 0
     assert {(r["calibration"], r["strategy"], r["k"]) for r in result["results"]} >= {
-        ("deployed", "wprob", 1), ("deployed", "wprob", 3), ("float", "wprob", 1), ("float", "standard", 1)
+        ("deployed", "wprob", 1),
+        ("deployed", "wprob", 3),
+        ("float", "wprob", 1),
+        ("float", "standard", 1),
     }
     assert {"accuracy", "r_at_100p", "auc_pr", "n_queries"} <= set(result["results"][0])
     assert result["winner_agreement"]["all_steps"] > 0.9
@@ -200,9 +237,25 @@ def test_command_errors_are_clear(tmp_path, capsys):
     assert "unsupported weight bit width 1" in capsys.readouterr().err
     assert main(["quantize", str(source), "--fold-thresholds", "--out", str(tmp_path / "m")]) == 2
     assert "--fold-thresholds needs --per-neuron" in capsys.readouterr().err
-    assert main(["quantize", str(source), "--bits", "4", "--reuse-float-calibration", "--out", str(tmp_path / "m"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "quantize",
+                str(source),
+                "--bits",
+                "4",
+                "--reuse-float-calibration",
+                "--out",
+                str(tmp_path / "m"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    other = save_checkpoint(tmp_path / "other.npz", ckpt.__class__(**{**ckpt.__dict__, "thresholds": ckpt.thresholds + 1}))
+    other = save_checkpoint(
+        tmp_path / "other.npz", ckpt.__class__(**{**ckpt.__dict__, "thresholds": ckpt.thresholds + 1})
+    )
     model = tmp_path / "m" / "model_4bit_per-tensor_max.npz"
     assert main(["simulate", str(model), "--query", "winter", "--compare", str(other)]) == 2
     assert "not the checkpoint this model was quantised from" in capsys.readouterr().err

@@ -109,9 +109,7 @@ def test_share_confidence_and_decide_standard_weighted() -> None:
 def test_strategy_scores_dispatch() -> None:
     sq = np.array([[1, 0, 2], [0, 0, 0]], dtype=float)
     np.testing.assert_array_equal(strategy_scores(SR, sq, "standard"), standard_scores(SR, sq))
-    np.testing.assert_array_equal(
-        strategy_scores(SR, sq, "weighted", 0.5), weighted_scores(SR, sq, 0.5)
-    )
+    np.testing.assert_array_equal(strategy_scores(SR, sq, "weighted", 0.5), weighted_scores(SR, sq, 0.5))
     dist = strategy_scores(SR, sq, "wprob", 0.5)
     np.testing.assert_array_equal(dist, wprob_distribution(weighted_scores(SR, sq, 0.5)))
     assert STRATEGIES == ("standard", "weighted", "wprob")

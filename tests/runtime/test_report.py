@@ -27,14 +27,45 @@ from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_che
 def report(tmp_path_factory):
     folder = tmp_path_factory.mktemp("report")
     path = folder / "net.npz"
-    assert main(["train", "--data", "synthetic:16", "--reference", "summer", "--out", str(path), "--quiet",
-                 "--timesteps", "30", "--epochs", "1", "--neurons", "32"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--data",
+                "synthetic:16",
+                "--reference",
+                "summer",
+                "--out",
+                str(path),
+                "--quiet",
+                "--timesteps",
+                "30",
+                "--epochs",
+                "1",
+                "--neurons",
+                "32",
+            ]
+        )
+        == 0
+    )
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:16", ["summer", "winter"], ckpt.config.preprocess)
-    options = VerifyOptions(readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)), bits=(6, 3),
-                            targets=("onnx",), reference_queries=1)
-    run = verify_checkpoint(ckpt, checkpoint_sha256(path), data.traversal("winter"), data.place_ids, "winter", options,
-                            reference_images={"summer": data.traversal("summer")}, label="seed 42")
+    options = VerifyOptions(
+        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        bits=(6, 3),
+        targets=("onnx",),
+        reference_queries=1,
+    )
+    run = verify_checkpoint(
+        ckpt,
+        checkpoint_sha256(path),
+        data.traversal("winter"),
+        data.place_ids,
+        "winter",
+        options,
+        reference_images={"summer": data.traversal("summer")},
+        label="seed 42",
+    )
     return build_report([run], {**options.to_dict(), "query": "winter"}, command=["vprsnn-export", "verify", str(path)])
 
 
@@ -43,8 +74,16 @@ def test_writes_json_markdown_and_self_contained_html(report, tmp_path):
     assert set(written) == {"json", "md", "html"}
     assert json.loads((tmp_path / REPORT_JSON).read_text()) == json.loads(json.dumps(report))
     md = (tmp_path / REPORT_MD).read_text()
-    for heading in ("Pass / fail per bit width", "Metric level", "Spike level", "Decision level",
-                    "Cross-implementation (exact)", "Quantisation", "Tolerance checks", "Provenance"):
+    for heading in (
+        "Pass / fail per bit width",
+        "Metric level",
+        "Spike level",
+        "Decision level",
+        "Cross-implementation (exact)",
+        "Quantisation",
+        "Tolerance checks",
+        "Provenance",
+    ):
         assert f"## {heading}" in md
     for image in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md):
         assert (tmp_path / image).is_file()
@@ -87,8 +126,19 @@ def test_combining_runs_gives_mean_and_std(report, tmp_path):
 def test_report_command_combines_folders(report, tmp_path):
     write_report(report, tmp_path / "a")
     write_report(report, tmp_path / "b")
-    assert main(["report", str(tmp_path / "a"), str(tmp_path / "b" / REPORT_JSON), "--out", str(tmp_path / "both"),
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                str(tmp_path / "a"),
+                str(tmp_path / "b" / REPORT_JSON),
+                "--out",
+                str(tmp_path / "both"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert len(load_report(tmp_path / "both")["runs"]) == 2
     assert main(["report", str(tmp_path / "a"), str(tmp_path / "b"), "--quiet"]) == EXIT_BAD_INPUT  # needs --out
 

@@ -48,11 +48,20 @@ def tiny(tmp_path_factory):
 @pytest.fixture(scope="module")
 def verified(tiny, tmp_path_factory):
     path, ckpt, data = tiny
-    options = VerifyOptions(readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)), bits=(8, 2),
-                            reference_queries=2)
-    run = verify_checkpoint(ckpt, checkpoint_sha256(path), data.traversal("winter"), data.place_ids, "winter", options,
-                            reference_images={"summer": data.traversal("summer")},
-                            export_dir=tmp_path_factory.mktemp("exports"), label="tiny")
+    options = VerifyOptions(
+        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)), bits=(8, 2), reference_queries=2
+    )
+    run = verify_checkpoint(
+        ckpt,
+        checkpoint_sha256(path),
+        data.traversal("winter"),
+        data.place_ids,
+        "winter",
+        options,
+        reference_images={"summer": data.traversal("summer")},
+        export_dir=tmp_path_factory.mktemp("exports"),
+        label="tiny",
+    )
     return run
 
 
@@ -117,8 +126,11 @@ def test_tv_distance_and_top1_agreement():
 
 def _rows(float_values, quant_values, n=50):
     def rows(values):
-        return [{"strategy": s, "k": k, "accuracy": v, "p_at_100r": v, "r_at_100p": v, "auc_pr": v, "n_queries": n}
-                for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values)]
+        return [
+            {"strategy": s, "k": k, "accuracy": v, "p_at_100r": v, "r_at_100p": v, "auc_pr": v, "n_queries": n}
+            for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values)
+        ]
+
     return metric_deltas(rows(float_values), rows(quant_values))
 
 
@@ -131,17 +143,25 @@ def test_tolerance_checks_bound_drops_only():
     verdicts = {c["what"]: c["passed"] for c in worse}
     assert verdicts["accuracy drop, standard k=1"] is True  # 1 point <= 2 points
     assert verdicts["r_at_100p drop, wprob k=5"] is False  # 2 points > 1 point
-    strict = tolerance_checks(_rows([0.5] * 4, [0.5] * 4), spike, decision,
-                              parse_tolerances("winner_agreement=0.95,top1_agreement=0.8,saturations=0"), (1, 5))
-    assert {c["check"]: c["passed"] for c in strict if c["check"] in ("winner_agreement", "top1_agreement", "saturations")} == {
-        "winner_agreement": False, "top1_agreement": True, "saturations": True}
+    strict = tolerance_checks(
+        _rows([0.5] * 4, [0.5] * 4),
+        spike,
+        decision,
+        parse_tolerances("winner_agreement=0.95,top1_agreement=0.8,saturations=0"),
+        (1, 5),
+    )
+    assert {
+        c["check"]: c["passed"] for c in strict if c["check"] in ("winner_agreement", "top1_agreement", "saturations")
+    } == {"winner_agreement": False, "top1_agreement": True, "saturations": True}
 
 
 def test_query_slack_allows_one_query_of_a_short_route():
     rows = _rows([0.5, 0.5, 0.5, 0.8], [0.5, 0.5, 0.5, 0.8 - 1 / 30], n=30)
     spike, decision = {"winner_agreement": 1.0, "saturations": 0}, {"top1_agreement": {"wprob": 1.0}}
     one = {c["what"]: c for c in tolerance_checks(rows, spike, decision, parse_tolerances(None), (1, 5))}
-    assert one["r_at_100p drop, wprob k=5"]["passed"] and one["r_at_100p drop, wprob k=5"]["applied_limit"] == pytest.approx(1 / 30)
+    assert one["r_at_100p drop, wprob k=5"]["passed"] and one["r_at_100p drop, wprob k=5"][
+        "applied_limit"
+    ] == pytest.approx(1 / 30)
     none = {c["what"]: c for c in tolerance_checks(rows, spike, decision, parse_tolerances("query_slack=0"), (1, 5))}
     assert not none["r_at_100p drop, wprob k=5"]["passed"]
 
@@ -160,7 +180,9 @@ def model_and_spikes(tiny):
 def test_cross_implementation_is_exact(model_and_spikes, tmp_path):
     model, spikes = model_and_spikes
     run = IntegerNetwork(model).run(spikes, record=True)
-    cross = cross_implementation(model, spikes, run, folder=tmp_path, targets=("onnx", "nir", "loihi"), reference_queries=2)
+    cross = cross_implementation(
+        model, spikes, run, folder=tmp_path, targets=("onnx", "nir", "loihi"), reference_queries=2
+    )
     assert cross["passed"] and cross["n_failed"] == 0 and cross["reference_queries"] == 2
     names = {c["check"].split(":")[0] for c in cross["checks"]}
     assert names == {"reference stepper", "ONNX (onnxruntime)", "NIR read back", "Loihi read back"}
@@ -207,10 +229,23 @@ def test_verify_checkpoint_schema(verified, tiny):
     assert [r["bits"] for r in run["bits"]] == [8, 2]
     assert run["n_queries"] == 20 and run["label"] == "tiny"
     assert {(r["strategy"], r["k"]) for r in run["float"]["metrics"]} == {
-        ("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 3)}
+        ("standard", 1),
+        ("weighted", 1),
+        ("wprob", 1),
+        ("wprob", 3),
+    }
     for result in run["bits"]:
-        assert set(result) >= {"quantisation", "cross_implementation", "spike_level", "decision_level", "metrics",
-                               "tolerance_checks", "pr_curves", "weight_levels", "passed"}
+        assert set(result) >= {
+            "quantisation",
+            "cross_implementation",
+            "spike_level",
+            "decision_level",
+            "metrics",
+            "tolerance_checks",
+            "pr_curves",
+            "weight_levels",
+            "passed",
+        }
         assert result["cross_implementation"]["passed"], result["cross_implementation"]["checks"]
         spike = result["spike_level"]
         assert 0 <= spike["winner_agreement"] <= 1 and len(spike["count_correlation"]) == 20
@@ -230,13 +265,25 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
     from vprsnn_export.runtime.evaluation import evaluate_float
 
     path, ckpt, data = tiny
-    options = VerifyOptions(readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)), bits=(8,),
-                            targets=(), reference_queries=0)
-    again = verify_checkpoint(ckpt, checkpoint_sha256(path), data.traversal("winter"), data.place_ids, "winter", options,
-                              reference_images={"summer": data.traversal("summer")})
+    options = VerifyOptions(
+        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        bits=(8,),
+        targets=(),
+        reference_queries=0,
+    )
+    again = verify_checkpoint(
+        ckpt,
+        checkpoint_sha256(path),
+        data.traversal("winter"),
+        data.place_ids,
+        "winter",
+        options,
+        reference_images={"summer": data.traversal("summer")},
+    )
     assert again["bits"][0]["metrics"] == verified["bits"][0]["metrics"]
-    evaluated = evaluate_float(ckpt, data.traversal("winter"), data.place_ids, "winter", options.readout,
-                               device=torch.device("cpu"))
+    evaluated = evaluate_float(
+        ckpt, data.traversal("winter"), data.place_ids, "winter", options.readout, device=torch.device("cpu")
+    )
     assert again["float"]["metrics"] == evaluated["rows"]
 
 

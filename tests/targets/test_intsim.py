@@ -32,14 +32,22 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def make_model(q, m, threshold, dv, bits, *, wta=True, isolation=True, per_neuron=True, timesteps=20) -> FixedPointModel:
+def make_model(
+    q, m, threshold, dv, bits, *, wta=True, isolation=True, per_neuron=True, timesteps=20
+) -> FixedPointModel:
     n_inputs, n_neurons = q.shape
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(**{
-        "preprocess.image_size": side, "preprocess.patch_size": 1, "network.n_inputs": n_inputs,
-        "network.n_neurons": n_neurons, "network.wta": wta, "network.state_isolation": isolation,
-        "encoder.timesteps": timesteps,
-    })
+    cfg = Config().replace(
+        **{
+            "preprocess.image_size": side,
+            "preprocess.patch_size": 1,
+            "network.n_inputs": n_inputs,
+            "network.n_neurons": n_neurons,
+            "network.wta": wta,
+            "network.state_isolation": isolation,
+            "encoder.timesteps": timesteps,
+        }
+    )
     return FixedPointModel(
         bits=bits,
         weight_mantissa=np.asarray(q, dtype=np.int32),
@@ -74,7 +82,9 @@ def cases(draw, saturating: bool = False):
     else:
         threshold = rng.integers(1, draw(st.sampled_from([8, 300, 2**17])), n_neurons)
         dv = draw(st.integers(0, 4095))
-    model = make_model(q, m, threshold, dv, bits, wta=draw(st.booleans()), isolation=draw(st.booleans()), per_neuron=per_neuron)
+    model = make_model(
+        q, m, threshold, dv, bits, wta=draw(st.booleans()), isolation=draw(st.booleans()), per_neuron=per_neuron
+    )
     shape = (draw(st.integers(1, 3)), draw(st.integers(35, 50) if saturating else st.integers(1, 12)), side * side)
     spikes = (rng.random(shape) < draw(st.floats(0.6, 1.0) if saturating else st.floats(0.05, 0.95))).astype(np.uint8)
     return model, spikes
@@ -120,7 +130,10 @@ def test_ties_go_to_the_lowest_index_and_the_wta_compares_a_times_m():
     assert run.raster[0, :, 0].all() and not run.raster[0, :, 1:].any()
     q = np.array([[3, 1]] * 4)  # a = (12, 4)
     weighted = make_model(q, [1, 4], [1, 1], 0, 2)  # a m = (12, 16): neuron 1 wins despite the smaller current
-    assert simulate(weighted, torch.ones((1, 1, 4), dtype=torch.uint8), record=True).raster[0, 0].tolist() == [False, True]
+    assert simulate(weighted, torch.ones((1, 1, 4), dtype=torch.uint8), record=True).raster[0, 0].tolist() == [
+        False,
+        True,
+    ]
     assert_identical(weighted, np.ones((1, 5, 4), dtype=np.uint8))
 
 
@@ -174,12 +187,16 @@ def test_step_agreement():
 
 
 def test_eight_bit_per_neuron_model_reproduces_the_float_winners():
-    cfg = Config().replace(**{"network.n_neurons": 32, "encoder.timesteps": 60, "train.epochs": 3, "train.batch_size": 8})
+    cfg = Config().replace(
+        **{"network.n_neurons": 32, "encoder.timesteps": 60, "train.epochs": 3, "train.batch_size": 8}
+    )
     data = load_dataset("synthetic:16", ["summer", "winter"], cfg.preprocess)
     ckpt = train_and_calibrate(data, ["summer"], cfg, device=torch.device("cpu"), progress=False)
     model = quantize_checkpoint(ckpt, "0" * 64, 8, True, "max")
     spikes = query_spikes(data.traversal("winter"), data.place_ids, "winter", cfg)
-    float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu")).run(spikes, record=True)
+    float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu")).run(
+        spikes, record=True
+    )
     integer_run = simulate(model, spikes, record=True)
     agreement = step_agreement(float_run.raster, integer_run.raster)
     assert agreement["n_active_steps"] > 0.5 * agreement["n_steps"]
@@ -191,7 +208,9 @@ def test_fast_equals_reference_on_the_real_nordland_subset():
     if not (NORDLAND / "subset_100_places.csv").is_file():
         pytest.skip(f"the Nordland subset is not at {NORDLAND}")
     cfg = Config().replace(**{"train.epochs": 3})
-    data = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=NORDLAND / "subset_100_places.csv")
+    data = load_dataset(
+        NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=NORDLAND / "subset_100_places.csv"
+    )
     ckpt = train_and_calibrate(data, ["summer"], cfg, device=torch.device("cpu"), progress=False)
     spikes = query_spikes(data.traversal("winter")[:3], data.place_ids[:3], "winter", cfg)
     for bits in (8, 4, 2):

@@ -39,13 +39,23 @@ PYTHON310 = [Path.home() / ".pyenv/versions/3.10.13/bin/python", shutil.which("p
 def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, uniform=False, p=0.3, dv=205) -> FixedPointModel:
     """Random mantissas; thresholds 1.5-4 times each neuron's expected current (input rate p), so neurons integrate."""
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(**{
-        "preprocess.image_size": side, "preprocess.patch_size": 1, "network.n_inputs": n_inputs,
-        "network.n_neurons": n_neurons, "network.wta": wta, "encoder.timesteps": 30,
-    })
+    cfg = Config().replace(
+        **{
+            "preprocess.image_size": side,
+            "preprocess.patch_size": 1,
+            "network.n_inputs": n_inputs,
+            "network.n_neurons": n_neurons,
+            "network.wta": wta,
+            "encoder.timesteps": 30,
+        }
+    )
     q = rng.integers(0, 2**bits, (n_inputs, n_neurons)).astype(np.int32)
     expected = np.maximum(p * q.sum(axis=0), 1.0)
-    threshold = np.full(n_neurons, int(2.5 * expected.mean())) if uniform else np.round(expected * rng.uniform(1.5, 4, n_neurons))
+    threshold = (
+        np.full(n_neurons, int(2.5 * expected.mean()))
+        if uniform
+        else np.round(expected * rng.uniform(1.5, 4, n_neurons))
+    )
     return FixedPointModel(
         bits=bits,
         weight_mantissa=q,
@@ -163,7 +173,10 @@ def test_writer_validates_before_writing(tmp_path):
 def lava_python() -> Path:
     """The Lava venv's interpreter, building the venv on first use; skip with the reason when impossible."""
     python = LAVA_VENV / "bin" / "python"
-    if python.exists() and subprocess.run([python, "-c", "import lava.proc.lif.process"], capture_output=True).returncode == 0:
+    if (
+        python.exists()
+        and subprocess.run([python, "-c", "import lava.proc.lif.process"], capture_output=True).returncode == 0
+    ):
         return python
     base = next((Path(p) for p in PYTHON310 if p and Path(p).exists()), None)
     if base is None:
@@ -179,8 +192,12 @@ def lava_python() -> Path:
 
 def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path) -> torch.Tensor:
     np.save(tmp_path / "spikes.npy", spikes.numpy())
-    done = subprocess.run([str(python), str(RUN_LAVA), str(folder), str(tmp_path / "spikes.npy"), str(tmp_path / "raster.npy")],
-                          capture_output=True, text=True, timeout=1800)
+    done = subprocess.run(
+        [str(python), str(RUN_LAVA), str(folder), str(tmp_path / "spikes.npy"), str(tmp_path / "raster.npy")],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     return torch.from_numpy(np.load(tmp_path / "raster.npy").astype(bool))
 
@@ -229,8 +246,14 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
     subset = NORDLAND / "subset_100_places.csv"
     dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=subset)
     if model is None:
-        ckpt = train_and_calibrate(dataset, ["summer"], cfg, device=torch.device("cpu"), progress=False,
-                                   selection={"subset": str(subset), "places": None})
+        ckpt = train_and_calibrate(
+            dataset,
+            ["summer"],
+            cfg,
+            device=torch.device("cpu"),
+            progress=False,
+            selection={"subset": str(subset), "places": None},
+        )
         model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
     return model, query_spikes(dataset.traversal("winter")[:n], dataset.place_ids[:n], "winter", cfg)
 

@@ -32,10 +32,16 @@ NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64
 
 def small_config(n_inputs: int = 16, n_neurons: int = 6, **overrides) -> Config:
     side = int(round(n_inputs**0.5))
-    return Config().replace(**{
-        "preprocess.image_size": side, "preprocess.patch_size": 1, "network.n_inputs": n_inputs,
-        "network.n_neurons": n_neurons, "encoder.timesteps": 20, **overrides,
-    })
+    return Config().replace(
+        **{
+            "preprocess.image_size": side,
+            "preprocess.patch_size": 1,
+            "network.n_inputs": n_inputs,
+            "network.n_neurons": n_neurons,
+            "encoder.timesteps": 20,
+            **overrides,
+        }
+    )
 
 
 def make_model(rng, *, bits=8, wta=True, dv=205, uniform=False, n_inputs=16, n_neurons=6) -> FixedPointModel:
@@ -83,7 +89,11 @@ def random_spikes(seed: int, n: int = 5, timesteps: int = 25, n_inputs: int = 16
 
 def float_raster(ckpt: Checkpoint, spikes: torch.Tensor, wta: bool | None = None) -> torch.Tensor:
     cfg = ckpt.config if wta is None else ckpt.config.replace(**{"network.wta": wta})
-    return FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu")).run(spikes, record=True).raster
+    return (
+        FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu"))
+        .run(spikes, record=True)
+        .raster
+    )
 
 
 def int_raster(model: FixedPointModel, spikes: torch.Tensor, wta: bool | None = None) -> torch.Tensor:
@@ -131,7 +141,9 @@ def test_nir_read_sees_the_documented_graph(tmp_path):
     assert np.array_equal(wta, expected.astype(np.float32))
     meta = graph.metadata
     assert meta["dt"] == DT_SECONDS and meta["bits"] == 8 and meta["timesteps"] == 20 and meta["wta"] == "on"
-    assert "largest a_j * m_j" in meta["wta_rule"] and np.array_equal(meta["wta_score_multiplier"], model.scale_multiplier)
+    assert "largest a_j * m_j" in meta["wta_rule"] and np.array_equal(
+        meta["wta_score_multiplier"], model.scale_multiplier
+    )
 
 
 def test_no_leak_becomes_an_if_node(tmp_path):

@@ -25,14 +25,31 @@ from vprsnn_export.targets.onnx_target import IR_VERSION, build_onnx, read_onnx,
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 
 
-def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, isolation=True, thresholds=(50, 600), dv=205,
-               multipliers=(1, 2**16), places=4) -> FixedPointModel:
+def make_model(
+    rng,
+    *,
+    n_inputs=16,
+    n_neurons=6,
+    bits=8,
+    wta=True,
+    isolation=True,
+    thresholds=(50, 600),
+    dv=205,
+    multipliers=(1, 2**16),
+    places=4,
+) -> FixedPointModel:
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(**{
-        "preprocess.image_size": side, "preprocess.patch_size": 1, "network.n_inputs": n_inputs,
-        "network.n_neurons": n_neurons, "network.wta": wta, "network.state_isolation": isolation,
-        "encoder.timesteps": 20,
-    })
+    cfg = Config().replace(
+        **{
+            "preprocess.image_size": side,
+            "preprocess.patch_size": 1,
+            "network.n_inputs": n_inputs,
+            "network.n_neurons": n_neurons,
+            "network.wta": wta,
+            "network.state_isolation": isolation,
+            "encoder.timesteps": 20,
+        }
+    )
     return FixedPointModel(
         bits=bits,
         weight_mantissa=rng.integers(0, 2**bits, (n_inputs, n_neurons)).astype(np.int32),
@@ -92,12 +109,19 @@ def test_wta_ties_go_to_the_lowest_index(tmp_path):
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(seed=st.integers(0, 2**32 - 1), bits=st.integers(2, 8), wta=st.booleans(), dv=st.integers(0, 4095),
-       n_neurons=st.integers(1, 7), small_multipliers=st.booleans())
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    bits=st.integers(2, 8),
+    wta=st.booleans(),
+    dv=st.integers(0, 4095),
+    n_neurons=st.integers(1, 7),
+    small_multipliers=st.booleans(),
+)
 def test_property_onnx_equals_simulator(tmp_path, seed, bits, wta, dv, n_neurons, small_multipliers):
     rng = np.random.default_rng(seed)
-    model = make_model(rng, n_neurons=n_neurons, bits=bits, wta=wta, dv=dv,
-                       multipliers=(1, 3) if small_multipliers else (1, 2**16))
+    model = make_model(
+        rng, n_neurons=n_neurons, bits=bits, wta=wta, dv=dv, multipliers=(1, 3) if small_multipliers else (1, 2**16)
+    )
     assert_identical(model, random_spikes(seed % 1000, 4, 15, 16, p=float(rng.uniform(0.05, 0.9))), tmp_path / "p.onnx")
 
 
@@ -136,10 +160,15 @@ def test_reader_rejects_missing_truncated_and_foreign_files(tmp_path):
     with pytest.raises(ModelFileError, match="truncated.onnx"):
         run_onnx(truncated, random_spikes(0, 1, 5, 16))
     foreign = onnx.helper.make_model(
-        onnx.helper.make_graph([onnx.helper.make_node("Identity", ["x"], ["y"])], "g",
-                               [onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, [1])],
-                               [onnx.helper.make_tensor_value_info("y", onnx.TensorProto.FLOAT, [1])]),
-        ir_version=10, opset_imports=[onnx.helper.make_opsetid("", 21)])
+        onnx.helper.make_graph(
+            [onnx.helper.make_node("Identity", ["x"], ["y"])],
+            "g",
+            [onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, [1])],
+            [onnx.helper.make_tensor_value_info("y", onnx.TensorProto.FLOAT, [1])],
+        ),
+        ir_version=10,
+        opset_imports=[onnx.helper.make_opsetid("", 21)],
+    )
     onnx.save(foreign, str(tmp_path / "foreign.onnx"))
     with pytest.raises(ModelFileError, match="not an ONNX graph written by vprsnn-export"):
         read_onnx(tmp_path / "foreign.onnx")
@@ -161,8 +190,21 @@ def small_checkpoint(model: FixedPointModel) -> Checkpoint:
 def test_export_command_writes_checks_and_states_consumers(tmp_path, capsys):
     model = make_model(np.random.default_rng(9), n_inputs=64, n_neurons=10, bits=4)
     save_fixed_point(tmp_path / "fp.npz", model)
-    code = main(["export", str(tmp_path / "fp.npz"), "--to", "nir,loihi,onnx", "--out", str(tmp_path / "out"),
-                 "--check", "--check-samples", "4", "--quiet", "--json"])
+    code = main(
+        [
+            "export",
+            str(tmp_path / "fp.npz"),
+            "--to",
+            "nir,loihi,onnx",
+            "--out",
+            str(tmp_path / "out"),
+            "--check",
+            "--check-samples",
+            "4",
+            "--quiet",
+            "--json",
+        ]
+    )
     assert code == 0
     manifest = json.loads((tmp_path / "out" / "export.json").read_text())
     assert set(manifest["files"]) == {"nir", "loihi", "onnx"} and set(manifest["consumers"]) == {"nir", "loihi", "onnx"}
@@ -177,8 +219,25 @@ def test_export_command_float_checkpoint_needs_quantisation_for_integer_targets(
     assert main(["export", str(tmp_path / "ck.npz"), "--out", str(tmp_path / "a"), "--quiet"]) == 2
     assert "quantize" in capsys.readouterr().err
     assert main(["export", str(tmp_path / "ck.npz"), "--to", "nir", "--out", str(tmp_path / "b"), "--quiet"]) == 0
-    assert main(["export", str(tmp_path / "ck.npz"), "--quantize", "8", "--to", "onnx", "--out", str(tmp_path / "c"),
-                 "--check", "--check-samples", "3", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "export",
+                str(tmp_path / "ck.npz"),
+                "--quantize",
+                "8",
+                "--to",
+                "onnx",
+                "--out",
+                str(tmp_path / "c"),
+                "--check",
+                "--check-samples",
+                "3",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     assert main(["export", str(tmp_path / "junk.npz"), "--out", str(tmp_path / "d"), "--quiet"]) == 2
     assert "junk.npz" in capsys.readouterr().err
@@ -194,10 +253,17 @@ def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     cfg = Config().replace(**{"train.epochs": 3, "seed": 1})
-    dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess,
-                           subset=NORDLAND / "subset_100_places.csv")
-    ckpt = train_and_calibrate(dataset, ["summer"], cfg, device=torch.device("cpu"), progress=False,
-                               selection={"subset": str(NORDLAND / "subset_100_places.csv"), "places": None})
+    dataset = load_dataset(
+        NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=NORDLAND / "subset_100_places.csv"
+    )
+    ckpt = train_and_calibrate(
+        dataset,
+        ["summer"],
+        cfg,
+        device=torch.device("cpu"),
+        progress=False,
+        selection={"subset": str(NORDLAND / "subset_100_places.csv"), "places": None},
+    )
     spikes = query_spikes(dataset.traversal("winter"), dataset.place_ids, "winter", cfg)
     for bits in (8, 4, 2):
         model = quantize_checkpoint(ckpt, "0" * 64, bits, per_neuron=True, scale_method="max")

@@ -19,9 +19,7 @@ def test_stdp_delta_by_hand():
     post = torch.tensor([[1.0, 0.0]])  # neuron 0 fired
     dw = stdp_delta(w, x, s, y, post, cfg)
     # potentiation only in column 0: A+ (1 - w_i0) x_i ; depression only in row 0: A- w_0j y_j
-    expected = torch.tensor(
-        [[0.1 * 0.5 * 1.0 - 0.01 * 0.5 * 0.0, 0.0 - 0.01 * 1.0 * 4.0], [0.1 * 1.0 * 2.0, 0.0]]
-    )
+    expected = torch.tensor([[0.1 * 0.5 * 1.0 - 0.01 * 0.5 * 0.0, 0.0 - 0.01 * 1.0 * 4.0], [0.1 * 1.0 * 2.0, 0.0]])
     assert torch.allclose(dw, expected)
 
 

@@ -2,9 +2,9 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
+from vprsnn_export.runtime.inference import FloatNetwork
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.train import Presentation, train_network
-from vprsnn_export.runtime.inference import FloatNetwork
 
 SMALL = {"network.n_neurons": 16, "encoder.timesteps": 20, "train.epochs": 2, "train.batch_size": 4}
 

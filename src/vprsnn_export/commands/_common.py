@@ -79,13 +79,22 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Config:
     """The base config (defaults) with every override given on the command line applied."""
     overrides: dict[str, Any] = {}
-    for name, key in (("seed", "seed"), ("epochs", "train.epochs"), ("timesteps", "encoder.timesteps"),
-                      ("neurons", "network.n_neurons")):
+    for name, key in (
+        ("seed", "seed"),
+        ("epochs", "train.epochs"),
+        ("timesteps", "encoder.timesteps"),
+        ("neurons", "network.n_neurons"),
+    ):
         value = getattr(args, name, None)
         if value is not None:
             overrides[key] = value
-    for key in ("network.wta", "homeostasis.enabled", "preprocess.patch_norm", "stdp.weight_norm",
-                "network.state_isolation"):
+    for key in (
+        "network.wta",
+        "homeostasis.enabled",
+        "preprocess.patch_norm",
+        "stdp.weight_norm",
+        "network.state_isolation",
+    ):
         if getattr(args, key, None) is False:
             overrides[key] = False
     for item in getattr(args, "set", []):

@@ -67,11 +67,15 @@ def demo_config(seed: int, quick: bool = False) -> Config:
 def profile_text(profile: dict) -> str:
     if not profile:
         cfg = Config()
-        return (f"the paper's configuration: T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, "
-                f"{cfg.network.n_neurons} neurons")
-    return ("profile " + ", ".join(f"{k} = {v}" for k, v in profile.items()) + " (the paper: encoder.timesteps = "
-            f"{Config().encoder.timesteps}, train.epochs = {Config().train.epochs}, network.n_neurons = "
-            f"{Config().network.n_neurons}; written into the checkpoint's config)")
+        return (
+            f"the paper's configuration: T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, "
+            f"{cfg.network.n_neurons} neurons"
+        )
+    return (
+        "profile " + ", ".join(f"{k} = {v}" for k, v in profile.items()) + " (the paper: encoder.timesteps = "
+        f"{Config().encoder.timesteps}, train.epochs = {Config().train.epochs}, network.n_neurons = "
+        f"{Config().network.n_neurons}; written into the checkpoint's config)"
+    )
 
 
 def summary_rows(run_result: dict) -> list[dict]:
@@ -82,15 +86,18 @@ def summary_rows(run_result: dict) -> list[dict]:
         cross = result["cross_implementation"]
         targets = [t for t in ("nir", "loihi", "onnx") if t in cross["files"]]
         wprob, aggregated = metrics[("wprob", 1)], metrics[("wprob", top)]
-        rows.append({
-            "bits": result["bits"],
-            "verdict": "PASS" if result["passed"] else "FAIL",
-            "exports": ("exact" if cross["passed"] else f"{cross['n_failed']} DIFFER") + f" ({len(targets)} targets)",
-            "accuracy": f"{100 * wprob['accuracy']:.1f}",
-            "r_at_100p": f"{100 * aggregated['r_at_100p']:.1f}",
-            "delta": f"{100 * aggregated['delta']['r_at_100p']:+.1f}",
-            "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
-        })
+        rows.append(
+            {
+                "bits": result["bits"],
+                "verdict": "PASS" if result["passed"] else "FAIL",
+                "exports": ("exact" if cross["passed"] else f"{cross['n_failed']} DIFFER")
+                + f" ({len(targets)} targets)",
+                "accuracy": f"{100 * wprob['accuracy']:.1f}",
+                "r_at_100p": f"{100 * aggregated['r_at_100p']:.1f}",
+                "delta": f"{100 * aggregated['delta']['r_at_100p']:+.1f}",
+                "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
+            }
+        )
     return rows
 
 
@@ -99,7 +106,6 @@ def run(args: argparse.Namespace) -> int:
     from ..runtime.report import write_report
     from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
-
     from .verify import limit_cpu_threads
 
     out = Path(args.out)
@@ -117,26 +123,50 @@ def run(args: argparse.Namespace) -> int:
             print(f"[demo {time.perf_counter() - started:5.1f} s] {message}", file=sys.stderr)
 
     dataset = load_dataset(data, [DEMO_REFERENCE, DEMO_QUERY], cfg.preprocess, progress=progress)
-    say(f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}; "
-        f"{threads} CPU thread(s) (OMP_NUM_THREADS to change)")
+    say(
+        f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}; "
+        f"{threads} CPU thread(s) (OMP_NUM_THREADS to change)"
+    )
     say(profile_text(profile))
-    ckpt = train_and_calibrate(dataset, [DEMO_REFERENCE], cfg, device=device, progress=progress,
-                               selection={"subset": None, "places": None})
+    ckpt = train_and_calibrate(
+        dataset, [DEMO_REFERENCE], cfg, device=device, progress=progress, selection={"subset": None, "places": None}
+    )
     ckpt_path = save_checkpoint(out / "float.npz", ckpt)
     say(f"1/4 trained {cfg.train.epochs} epochs -> {ckpt_path}")
     options = VerifyOptions(readout=ReadoutOptions(gamma=cfg.assignment.gamma, ks=DEMO_KS), bits=DEMO_BITS)
-    say(f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits (per-neuron, deployed calibration) and exporting "
-        "NIR, Loihi-style and ONNX; every file is read back and run")
+    say(
+        f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits (per-neuron, deployed calibration) and exporting "
+        "NIR, Loihi-style and ONNX; every file is read back and run"
+    )
     result = verify_checkpoint(
-        ckpt, checkpoint_sha256(ckpt_path), dataset.traversal(DEMO_QUERY), dataset.place_ids, DEMO_QUERY, options,
-        reference_images={DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)}, export_dir=out / "deploy",
-        device=device, progress=progress, label="demo",
+        ckpt,
+        checkpoint_sha256(ckpt_path),
+        dataset.traversal(DEMO_QUERY),
+        dataset.place_ids,
+        DEMO_QUERY,
+        options,
+        reference_images={DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)},
+        export_dir=out / "deploy",
+        device=device,
+        progress=progress,
+        label="demo",
     )
     result["checkpoint"] = str(ckpt_path)
     say(f"3/4 verified against float on the same {result['n_queries']} query presentations")
-    settings = {**options.to_dict(), "query": DEMO_QUERY, "data": data, "subset": None, "places": None, "seeds": None,
-                "checkpoints": [str(ckpt_path)], "device": args.device, "demo_profile": profile}
-    command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (["--quick"] if args.quick else [])
+    settings = {
+        **options.to_dict(),
+        "query": DEMO_QUERY,
+        "data": data,
+        "subset": None,
+        "places": None,
+        "seeds": None,
+        "checkpoints": [str(ckpt_path)],
+        "device": args.device,
+        "demo_profile": profile,
+    }
+    command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (
+        ["--quick"] if args.quick else []
+    )
     report = build_report([result], settings, command=command, seconds=time.perf_counter() - started)
     written = write_report(report, out / "report")
     say(f"4/4 report written ({written['json']})")
@@ -145,7 +175,9 @@ def run(args: argparse.Namespace) -> int:
     print("\nquantised and deployed vs float (tolerances: docs/verify.md):")
     print(format_table(summary_rows(result), SUMMARY_COLUMNS))
     exact = all(r["cross_implementation"]["passed"] for r in result["bits"])
-    print(f"\nexports: {out / 'deploy'}   cross-implementation: {'all exact' if exact else 'DIFFERENCES FOUND'}   "
-          f"time: {time.perf_counter() - started:.0f} s")
+    print(
+        f"\nexports: {out / 'deploy'}   cross-implementation: {'all exact' if exact else 'DIFFERENCES FOUND'}   "
+        f"time: {time.perf_counter() - started:.0f} s"
+    )
     print(f"report: {written['html'].resolve()}")
     return 0 if exact else EXIT_CHECK_FAILED

@@ -79,13 +79,15 @@ def run(args: argparse.Namespace) -> int:
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
     )
     if args.json:
-        print_json({
-            "config": ckpt.config.to_dict(),
-            "checkpoint": str(args.checkpoint),
-            "query": args.query,
-            "results": result["rows"],
-            "spike_stats": result["spike_stats"],
-        })
+        print_json(
+            {
+                "config": ckpt.config.to_dict(),
+                "checkpoint": str(args.checkpoint),
+                "query": args.query,
+                "results": result["rows"],
+                "spike_stats": result["spike_stats"],
+            }
+        )
     else:
         print(format_table(result["rows"], RESULT_COLUMNS))
         stats = result["spike_stats"]

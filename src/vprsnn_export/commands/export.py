@@ -62,7 +62,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="leave the recurrent WTA Linear out of the NIR graph (snnTorch and Norse mishandle recurrent graphs)",
     )
-    parser.add_argument("--check", action="store_true", help="read every file back and run it beside the project's simulators")
+    parser.add_argument(
+        "--check", action="store_true", help="read every file back and run it beside the project's simulators"
+    )
     parser.add_argument(
         "--nir-consumer",
         choices=("nirtorch", "snntorch", "norse"),
@@ -70,7 +72,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --check: the metadata-blind NIR consumer to measure (norse: optional package)",
     )
     parser.add_argument("--query", help="with --check: query traversal to present (default: synthetic spike trains)")
-    parser.add_argument("--check-samples", type=int, default=16, help="with --check: presentations to run (0 = all queries)")
+    parser.add_argument(
+        "--check-samples", type=int, default=16, help="with --check: presentations to run (0 = all queries)"
+    )
     add_data_options(parser, data_required=False)
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
     add_runtime_options(parser)
@@ -142,8 +146,12 @@ def consumer_statements(source, model, targets: tuple[str, ...], wta_node: bool,
             f"threshold spiking (no WTA) {inhibit}. At dt = 1e-4 s Euler gives "
             "v <- beta v + I; Norse ignores r (input scaled by 1 - beta); snnTorch's importer needs one threshold "
             f"for all neurons ({'met' if uniform else 'not met by this model'})"
-            + ("" if not wta_node else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
-               "the wta node's output instead of the spikes (--nir-no-wta-node avoids both)")
+            + (
+                ""
+                if not wta_node
+                else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
+                "the wta node's output instead of the spikes (--nir-no-wta-node avoids both)"
+            )
             + "."
         )
     if "onnx" in targets and model is not None:
@@ -168,7 +176,9 @@ def export_all(
 
     written: dict[str, list[Path]] = {}
     if "nir" in targets:
-        written["nir"] = [write_nir(source, out / NIR_NAME, source_sha256=digest, wta_inhibition=inhibition, wta_node=wta_node)]
+        written["nir"] = [
+            write_nir(source, out / NIR_NAME, source_sha256=digest, wta_inhibition=inhibition, wta_node=wta_node)
+        ]
     if "onnx" in targets:
         written["onnx"] = [write_onnx(model, out / ONNX_NAME)]
     if "loihi" in targets:
@@ -203,12 +213,19 @@ def reference_run(source, spikes: torch.Tensor, wta: bool):
 
     cfg = source.config.replace(**{"network.wta": wta})
     if isinstance(source, Checkpoint):
-        return FloatNetwork.from_arrays(source.weights, source.thresholds, cfg, torch.device("cpu")).run(spikes, record=True)
+        return FloatNetwork.from_arrays(source.weights, source.thresholds, cfg, torch.device("cpu")).run(
+            spikes, record=True
+        )
     return simulate(dataclasses.replace(source, config=cfg), spikes, record=True)
 
 
 def row(target: str, check: str, ok: bool | None, detail: str) -> dict[str, Any]:
-    return {"target": target, "check": check, "result": "-" if ok is None else ("ok" if ok else "FAILED"), "detail": detail}
+    return {
+        "target": target,
+        "check": check,
+        "result": "-" if ok is None else ("ok" if ok else "FAILED"),
+        "detail": detail,
+    }
 
 
 def decided_places(source, counts: np.ndarray) -> np.ndarray:
@@ -227,18 +244,28 @@ def check_nir(path: Path, source, spikes: torch.Tensor, consumer_name: str = "ni
     try:
         consumer = CONSUMERS[consumer_name](load_graph(path), spikes)
     except AssertionError as exc:  # snnTorch's importer asserts on what it cannot express
-        return [row("nir", "read_nir rebuild: identical raster", same, "project importer + simulator"),
-                row("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
+        return [
+            row("nir", "read_nir rebuild: identical raster", same, "project importer + simulator"),
+            row("nir", f"{consumer_name} loads the file", None, f"refused: {exc}"),
+        ]
     agreement = spike_agreement(network, consumer)
     places = decided_places(source, network.sum(dim=1).numpy())
     consumer_places = decided_places(source, consumer.sum(dim=1).numpy())
     return [
         row("nir", "read_nir rebuild: identical raster", same, "project importer + simulator"),
-        row("nir", f"{consumer_name} (no metadata) vs network", None,
+        row(
+            "nir",
+            f"{consumer_name} (no metadata) vs network",
+            None,
             f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, "
-            f"{consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1]):.1f} spikes/step"),
-        row("nir", f"{consumer_name} top-1 place (W+Prob) == network's", None,
-            f"{float(np.mean(places == consumer_places)):.3f}"),
+            f"{consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1]):.1f} spikes/step",
+        ),
+        row(
+            "nir",
+            f"{consumer_name} top-1 place (W+Prob) == network's",
+            None,
+            f"{float(np.mean(places == consumer_places)):.3f}",
+        ),
     ]
 
 
@@ -266,8 +293,14 @@ def check_loihi(folder: Path, model, spikes: torch.Tensor) -> list[dict]:
 
     rebuilt = read_loihi_model(folder)
     same = torch.equal(simulate(model, spikes, record=True).raster, simulate(rebuilt, spikes, record=True).raster)
-    return [row("loihi", "description rebuilds the model: identical raster", same,
-                "the Lava run itself: tests/targets/lava_conformance (Python 3.10)")]
+    return [
+        row(
+            "loihi",
+            "description rebuilds the model: identical raster",
+            same,
+            "the Lava run itself: tests/targets/lava_conformance (Python 3.10)",
+        )
+    ]
 
 
 def export_and_check(
@@ -306,7 +339,11 @@ def export_and_check(
             rows += check_onnx(written["onnx"][0], model, spikes)
         if "loihi" in written:
             rows += check_loihi(out / LOIHI_DIR, model, spikes)
-        manifest["checks"] = {"spikes": spikes_label, "rows": rows, "passed": all(r["result"] != "FAILED" for r in rows)}
+        manifest["checks"] = {
+            "spikes": spikes_label,
+            "rows": rows,
+            "passed": all(r["result"] != "FAILED" for r in rows),
+        }
     atomic_write_text(out / MANIFEST_NAME, json.dumps(manifest, indent=2))
     return manifest
 
@@ -319,8 +356,17 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     spikes, label = check_spikes(args, source) if args.check else (None, "")
     manifest = export_and_check(
-        source, model, targets, out, digest=digest, model_path=str(args.model), inhibition=args.nir_inhibition,
-        wta_node=not args.nir_no_wta_node, spikes=spikes, spikes_label=label, nir_consumer=args.nir_consumer,
+        source,
+        model,
+        targets,
+        out,
+        digest=digest,
+        model_path=str(args.model),
+        inhibition=args.nir_inhibition,
+        wta_node=not args.nir_no_wta_node,
+        spikes=spikes,
+        spikes_label=label,
+        nir_consumer=args.nir_consumer,
     )
     if args.json:
         print_json(manifest)

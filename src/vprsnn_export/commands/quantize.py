@@ -79,14 +79,21 @@ def run(args: argparse.Namespace) -> int:
             reuse_float_calibration=args.reuse_float_calibration,
             device=device,
         )
-        path = save_fixed_point(Path(args.out) / model_filename(bits, args.per_neuron, args.scale, args.fold_thresholds), model)
+        path = save_fixed_point(
+            Path(args.out) / model_filename(bits, args.per_neuron, args.scale, args.fold_thresholds), model
+        )
         report = model.quantisation
-        rows.append({
-            **report,
-            "scheme": ("per-neuron" if report["per_neuron"] else "per-tensor") + (" folded" if report["threshold_folding"] else ""),
-            "calibration_saturations": "-" if report["calibration_saturations"] is None else report["calibration_saturations"],
-            "file": str(path),
-        })
+        rows.append(
+            {
+                **report,
+                "scheme": ("per-neuron" if report["per_neuron"] else "per-tensor")
+                + (" folded" if report["threshold_folding"] else ""),
+                "calibration_saturations": "-"
+                if report["calibration_saturations"] is None
+                else report["calibration_saturations"],
+                "file": str(path),
+            }
+        )
     if args.json:
         print_json({"checkpoint": str(args.checkpoint), "source_sha256": digest, "models": rows})
     else:

@@ -34,12 +34,17 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("combining several reports needs --out DIR")
     out = Path(args.out) if args.out else report_path(args.runs[0]).parent
     combined = combine_reports(reports, sources)
-    rewrite_json = len(reports) > 1 or (args.out is not None and out.resolve() != report_path(args.runs[0]).parent.resolve())
+    rewrite_json = len(reports) > 1 or (
+        args.out is not None and out.resolve() != report_path(args.runs[0]).parent.resolve()
+    )
     written = write_report(combined, out, write_json=rewrite_json)
     if not args.quiet:
         n_runs = len(combined["runs"])
-        print(f"{'PASS' if combined['passed'] else 'FAIL'}: {sum(r['passed'] for r in combined['runs'])} of {n_runs} "
-              f"network(s) pass every check", file=sys.stderr)
+        print(
+            f"{'PASS' if combined['passed'] else 'FAIL'}: {sum(r['passed'] for r in combined['runs'])} of {n_runs} "
+            f"network(s) pass every check",
+            file=sys.stderr,
+        )
         for kind, path in written.items():
             print(f"{kind}: {path}")
     return 0

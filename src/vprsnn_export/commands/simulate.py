@@ -82,7 +82,9 @@ def run(args: argparse.Namespace) -> int:
     float_checkpoint = None
     if args.compare:
         if checkpoint_sha256(args.compare) != model.source_sha256:
-            raise OptionError(f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)")
+            raise OptionError(
+                f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
+            )
         float_checkpoint = load_checkpoint(args.compare)
     options = readout_options(args, model.config.assignment.gamma)
     dataset = load_query_data(args, model, [args.query])

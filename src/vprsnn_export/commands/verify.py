@@ -19,7 +19,14 @@ from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, OptionError
-from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, parse_velocity_grid, print_json
+from ._common import (
+    add_data_options,
+    add_runtime_options,
+    format_table,
+    parse_int_list,
+    parse_velocity_grid,
+    print_json,
+)
 
 DEFAULT_BITS = "8,6,4,3,2"
 TABLE_COLUMNS = (
@@ -51,8 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     readout.add_argument("--k", default="1,3,5", help="sequence lengths (default 1,3,5); W+Prob aggregated for k > 1")
     readout.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
     readout.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
-    readout.add_argument("--velocity-search", metavar="LO:HI:STEP", help="estimate the velocity per window over this grid")
-    readout.add_argument("--gt-tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n, default 0)")
+    readout.add_argument(
+        "--velocity-search", metavar="LO:HI:STEP", help="estimate the velocity per window over this grid"
+    )
+    readout.add_argument(
+        "--gt-tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n, default 0)"
+    )
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
@@ -61,15 +72,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations, query_slack "
         "(docs/verify.md)",
     )
-    checks.add_argument("--reference-queries", type=int, default=3,
-                        help="queries also run on the slow reference stepper (default 3; 0 = none)")
-    checks.add_argument("--targets", default="onnx,nir,loihi", help="exported targets to read back and run (default all; or none)")
+    checks.add_argument(
+        "--reference-queries",
+        type=int,
+        default=3,
+        help="queries also run on the slow reference stepper (default 3; 0 = none)",
+    )
+    checks.add_argument(
+        "--targets", default="onnx,nir,loihi", help="exported targets to read back and run (default all; or none)"
+    )
     quant = parser.add_argument_group("quantisation")
-    quant.add_argument("--per-tensor", action="store_true", help="one weight scale for all neurons (default: per neuron)")
+    quant.add_argument(
+        "--per-tensor", action="store_true", help="one weight scale for all neurons (default: per neuron)"
+    )
     quant.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice (default max)")
-    quant.add_argument("--reuse-float-calibration", action="store_true",
-                       help="read the quantised networks out with the float S^R instead of re-measuring it")
-    parser.add_argument("--seeds", type=int, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std")
+    quant.add_argument(
+        "--reuse-float-calibration",
+        action="store_true",
+        help="read the quantised networks out with the float S^R instead of re-measuring it",
+    )
+    parser.add_argument(
+        "--seeds", type=int, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std"
+    )
     parser.add_argument("--report", required=True, metavar="DIR", help="folder for report.json, report.md, report.html")
     parser.add_argument("--json", action="store_true", help="print the verdict and summary as JSON instead of a table")
     add_runtime_options(parser)
@@ -135,14 +159,16 @@ def selection(args: argparse.Namespace, ckpt) -> tuple[str, str | None, str | No
     return str(source), subset, places
 
 
-def load_for(ckpt, query: str, source: str, subset: str | None, places: str | None, progress: bool,
-             cache: dict) -> tuple[Dataset, dict[str, np.ndarray]]:
+def load_for(
+    ckpt, query: str, source: str, subset: str | None, places: str | None, progress: bool, cache: dict
+) -> tuple[Dataset, dict[str, np.ndarray]]:
     """The query data set and the reference images of the checkpoint's reference places (for calibration)."""
     traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
     key = (source, subset, places, tuple(traversals))
     if key not in cache:
-        cache[key] = load_dataset(source, traversals, ckpt.config.preprocess, subset=subset, places=places,
-                                  progress=progress)
+        cache[key] = load_dataset(
+            source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
+        )
     dataset = cache[key]
     if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
@@ -150,13 +176,23 @@ def load_for(ckpt, query: str, source: str, subset: str | None, places: str | No
     with tempfile.TemporaryDirectory(prefix="vprsnn-verify-") as folder:
         listing = Path(folder) / "reference_places.csv"
         listing.write_text("place_id\n" + "\n".join(str(int(p)) for p in ckpt.reference_place_ids) + "\n")
-        reference = load_dataset(source, ckpt.reference_traversals, ckpt.config.preprocess, subset=listing,
-                                 progress=progress)
+        reference = load_dataset(
+            source, ckpt.reference_traversals, ckpt.config.preprocess, subset=listing, progress=progress
+        )
     return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
 
 
-def seed_networks(template, n_seeds: int, dataset: Dataset, source: str, subset: str | None, places: str | None,
-                  out: Path, device_name: str, progress: bool) -> Iterator[tuple[str, object, Path]]:
+def seed_networks(
+    template,
+    n_seeds: int,
+    dataset: Dataset,
+    source: str,
+    subset: str | None,
+    places: str | None,
+    out: Path,
+    device_name: str,
+    progress: bool,
+) -> Iterator[tuple[str, object, Path]]:
     """Seeds 1..N trained with the template's config on its reference traversals, one at a time.
 
     Training goes through the experiments' checkpoint cache (same key), so a network the
@@ -172,8 +208,9 @@ def seed_networks(template, n_seeds: int, dataset: Dataset, source: str, subset:
             settings = Settings(reference=template.reference_traversals[0], device=device_name, progress=progress)
             ckpt = trained_checkpoint(settings, dataset, cfg, key)
         else:
-            ckpt = train_and_calibrate(dataset, template.reference_traversals, cfg, device=resolve_device(device_name),
-                                       progress=progress)
+            ckpt = train_and_calibrate(
+                dataset, template.reference_traversals, cfg, device=resolve_device(device_name), progress=progress
+            )
         ckpt = dataclasses.replace(ckpt, data={**ckpt.data, "source": source, "subset": subset, "places": places})
         path = save_checkpoint(out / "checkpoints" / f"seed{seed}.npz", ckpt)
         yield f"seed {seed}", ckpt, path
@@ -197,8 +234,14 @@ def command_line(args: argparse.Namespace) -> list[str]:
     if getattr(args, "argv", None):
         return ["vprsnn-export", *args.argv]
     line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", args.k]
-    for flag, value in (("--data", args.data), ("--subset", args.subset), ("--places", args.places),
-                        ("--tolerance", args.tolerance), ("--seeds", args.seeds), ("--velocity-search", args.velocity_search)):
+    for flag, value in (
+        ("--data", args.data),
+        ("--subset", args.subset),
+        ("--places", args.places),
+        ("--tolerance", args.tolerance),
+        ("--seeds", args.seeds),
+        ("--velocity-search", args.velocity_search),
+    ):
         if value is not None:
             line += [flag, str(value)]
     if args.rule != "product":
@@ -235,16 +278,18 @@ def verdict_rows(report: dict) -> list[dict]:
             metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
             worst = min(metrics[(s, 1)]["delta"]["accuracy"] for s in ("standard", "weighted", "wprob"))
             cross = result["cross_implementation"]
-            rows.append({
-                "network": run.get("label") or str(index + 1),
-                "bits": result["bits"],
-                "verdict": "PASS" if result["passed"] else "FAIL",
-                "cross": f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
-                "accuracy": f"{100 * worst:+.1f}",
-                "r_at_100p": f"{100 * metrics[('wprob', top)]['delta']['r_at_100p']:+.1f} (k={top})",
-                "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
-                "saturations": result["spike_level"]["saturations"],
-            })
+            rows.append(
+                {
+                    "network": run.get("label") or str(index + 1),
+                    "bits": result["bits"],
+                    "verdict": "PASS" if result["passed"] else "FAIL",
+                    "cross": f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
+                    "accuracy": f"{100 * worst:+.1f}",
+                    "r_at_100p": f"{100 * metrics[('wprob', top)]['delta']['r_at_100p']:+.1f} (k={top})",
+                    "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
+                    "saturations": result["spike_level"]["saturations"],
+                }
+            )
     return rows
 
 
@@ -269,27 +314,48 @@ def run(args: argparse.Namespace) -> int:
         networks = seed_networks(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
     else:
         labels = [stem for stem, _, _ in templates]
-        networks = [(stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
-                    for i, (stem, ckpt, path) in enumerate(templates)]
+        networks = [
+            (stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
+            for i, (stem, ckpt, path) in enumerate(templates)
+        ]
     settings = settings_of(args, options, source, subset, places)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = selection(args, ckpt)
         dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
-        gamma_options = dataclasses.replace(options, readout=dataclasses.replace(options.readout, gamma=ckpt.config.assignment.gamma))
-        runs.append(verify_checkpoint(
-            ckpt, checkpoint_sha256(path), dataset.traversal(args.query), dataset.place_ids, args.query, gamma_options,
-            reference_images=None if options.calibration == "float" else reference_images,
-            export_dir=out / "exports" / folder_name(label, index), device=device, progress=progress, label=label,
-        ))
+        gamma_options = dataclasses.replace(
+            options, readout=dataclasses.replace(options.readout, gamma=ckpt.config.assignment.gamma)
+        )
+        runs.append(
+            verify_checkpoint(
+                ckpt,
+                checkpoint_sha256(path),
+                dataset.traversal(args.query),
+                dataset.place_ids,
+                args.query,
+                gamma_options,
+                reference_images=None if options.calibration == "float" else reference_images,
+                export_dir=out / "exports" / folder_name(label, index),
+                device=device,
+                progress=progress,
+                label=label,
+            )
+        )
         runs[-1]["checkpoint"] = str(path)
         report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     if args.json:
-        print_json({"passed": report["passed"], "report": {k: str(v) for k, v in written.items()},
-                    "summary": report["summary"]})
+        print_json(
+            {
+                "passed": report["passed"],
+                "report": {k: str(v) for k, v in written.items()},
+                "summary": report["summary"],
+            }
+        )
     else:
         print(format_table(verdict_rows(report), TABLE_COLUMNS))
-        print(f"\n{'PASS' if report['passed'] else 'FAIL'}: {sum(r['passed'] for r in runs)} of {len(runs)} network(s) "
-              f"pass every check; report: {written['html']}")
+        print(
+            f"\n{'PASS' if report['passed'] else 'FAIL'}: {sum(r['passed'] for r in runs)} of {len(runs)} network(s) "
+            f"pass every check; report: {written['html']}"
+        )
     return 0 if report["passed"] else EXIT_CHECK_FAILED

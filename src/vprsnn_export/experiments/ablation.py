@@ -30,13 +30,26 @@ def run(settings: Settings) -> dict:
             cfg = settings.config(seed, **change)
             data = load(settings, "subset", cfg)
             ckpt = trained_checkpoint(settings, data, cfg, "subset")
-            result = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
-                                    ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
-            rows += [dict(r, variant=variant, seed=seed, **result["spike_stats"])
-                     for r in result["rows"] if r["strategy"] == "wprob"]
+            result = evaluate_float(
+                ckpt,
+                data.traversal(settings.query),
+                data.place_ids,
+                settings.query,
+                ReadoutOptions(gamma=cfg.assignment.gamma),
+                device=resolve_device(settings.device),
+            )
+            rows += [
+                dict(r, variant=variant, seed=seed, **result["spike_stats"])
+                for r in result["rows"]
+                if r["strategy"] == "wprob"
+            ]
         per_seed.append(rows)
-    return {"experiment": NAME, "summary": summarise_rows(per_seed, ("variant", "strategy", "k")),
-            "per_seed": per_seed, "provenance": provenance(settings, started)}
+    return {
+        "experiment": NAME,
+        "summary": summarise_rows(per_seed, ("variant", "strategy", "k")),
+        "per_seed": per_seed,
+        "provenance": provenance(settings, started),
+    }
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:

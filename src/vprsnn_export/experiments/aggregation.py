@@ -21,17 +21,31 @@ def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
     for seed, cfg, data, ckpt in consecutive_networks(settings):
-        counts = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
-                                ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
+        counts = evaluate_float(
+            ckpt,
+            data.traversal(settings.query),
+            data.place_ids,
+            settings.query,
+            ReadoutOptions(gamma=cfg.assignment.gamma),
+            device=resolve_device(settings.device),
+        )
         rows = []
         for rule in RULES:
             options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, rule=rule)
-            rows += [dict(r, rule=rule, seed=seed) for r in readout_rows(
-                ckpt.calibration, counts["query_counts"], ckpt.reference_place_ids, data.place_ids, options)
-                if r["strategy"] == "wprob"]
+            rows += [
+                dict(r, rule=rule, seed=seed)
+                for r in readout_rows(
+                    ckpt.calibration, counts["query_counts"], ckpt.reference_place_ids, data.place_ids, options
+                )
+                if r["strategy"] == "wprob"
+            ]
         per_seed.append(rows)
-    return {"experiment": NAME, "summary": summarise_rows(per_seed, ("rule", "k")), "per_seed": per_seed,
-            "provenance": provenance(settings, started)}
+    return {
+        "experiment": NAME,
+        "summary": summarise_rows(per_seed, ("rule", "k")),
+        "per_seed": per_seed,
+        "provenance": provenance(settings, started),
+    }
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
@@ -40,8 +54,16 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     for rule in RULES:
         rows = [r for r in summary if r["rule"] == rule]
         for metric, label in (("r_at_100p", "R@100P"), ("accuracy", "accuracy")):
-            series[f"{rule} rule {label}"] = ([100 * r[metric]["mean"] for r in rows],
-                                              [100 * r[metric]["std"] for r in rows])
-    line_plot(out_dir / f"{stem}.png", list(KS), series, xlabel="k (frames)", ylabel="%",
-              title="Sequence aggregation (W+Prob), consecutive places")
+            series[f"{rule} rule {label}"] = (
+                [100 * r[metric]["mean"] for r in rows],
+                [100 * r[metric]["std"] for r in rows],
+            )
+    line_plot(
+        out_dir / f"{stem}.png",
+        list(KS),
+        series,
+        xlabel="k (frames)",
+        ylabel="%",
+        title="Sequence aggregation (W+Prob), consecutive places",
+    )
     return rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({stem}.png)\n"

@@ -11,8 +11,10 @@ from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
 from .common import Settings, load, mean_std, provenance, rows_table, summarise_rows, trained_checkpoint
 
 NAME = "assignment"
-DESCRIPTION = ("assignment strategies on the 100-place subset (k=1) and W+Prob k=1,3,5 on 100 consecutive places, "
-               "beside the no-learning SAD baseline, mean ± std over seeds")
+DESCRIPTION = (
+    "assignment strategies on the 100-place subset (k=1) and W+Prob k=1,3,5 on 100 consecutive places, "
+    "beside the no-learning SAD baseline, mean ± std over seeds"
+)
 KS = (1, 3, 5)
 
 
@@ -23,8 +25,12 @@ def evaluate_selection(settings: Settings, selection: str, ks: tuple[int, ...]) 
         data = load(settings, selection, cfg)
         ckpt = trained_checkpoint(settings, data, cfg, selection)
         result = evaluate_float(
-            ckpt, data.traversal(settings.query), data.place_ids, settings.query,
-            ReadoutOptions(gamma=cfg.assignment.gamma, ks=ks), device=resolve_device(settings.device),
+            ckpt,
+            data.traversal(settings.query),
+            data.place_ids,
+            settings.query,
+            ReadoutOptions(gamma=cfg.assignment.gamma, ks=ks),
+            device=resolve_device(settings.device),
             reference_images={settings.reference: data.traversal(settings.reference)},
         )
         per_seed.append([dict(r, seed=seed) for r in result["rows"]])
@@ -49,9 +55,13 @@ def run(settings: Settings) -> dict:
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     parts = []
-    for key, title in (("subset", "100-place subset (spread along the route), k = 1"),
-                       ("consecutive", f"consecutive places ({results['provenance']['settings']['consecutive']}), "
-                                       "W+Prob aggregated over k frames")):
+    for key, title in (
+        ("subset", "100-place subset (spread along the route), k = 1"),
+        (
+            "consecutive",
+            f"consecutive places ({results['provenance']['settings']['consecutive']}), W+Prob aggregated over k frames",
+        ),
+    ):
         block = results[key]
         stats = block["spike_stats"]
         parts.append(
@@ -60,6 +70,8 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             f"steps with more than one candidate: {100 * stats['multi_candidate_step_fraction']['mean']:.1f} %; "
             f"spikes per query: {stats['mean_spikes_per_query']['mean']:.1f}.\n"
         )
-    parts.append("Strategy `sad` is the no-learning baseline: sum of absolute differences between the same "
-                 "patch-normalised images, read out through the W+Prob transformation (docs/readout.md).\n")
+    parts.append(
+        "Strategy `sad` is the no-learning baseline: sum of absolute differences between the same "
+        "patch-normalised images, read out through the W+Prob transformation (docs/readout.md).\n"
+    )
     return "\n".join(parts)

@@ -33,9 +33,13 @@ class Settings:
     overrides: dict = field(default_factory=dict)  # dotted config overrides
 
     @classmethod
-    def quick_settings(cls, **changes) -> "Settings":
+    def quick_settings(cls, **changes) -> Settings:
         base = dict(
-            quick=True, data="synthetic:24", subset=None, consecutive="0:24", seeds=(1, 2),
+            quick=True,
+            data="synthetic:24",
+            subset=None,
+            consecutive="0:24",
+            seeds=(1, 2),
             overrides={"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 64},
         )
         base.update(changes)
@@ -94,15 +98,27 @@ def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection
     from vprsnn_export.device import resolve_device
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
-    key = json.dumps({
-        "config": cfg.to_dict(), "manifest": data.manifest_sha256, "places": data.place_ids.tolist(),
-        "reference": settings.reference, "version": __version__,
-    }, sort_keys=True)
+    key = json.dumps(
+        {
+            "config": cfg.to_dict(),
+            "manifest": data.manifest_sha256,
+            "places": data.place_ids.tolist(),
+            "reference": settings.reference,
+            "version": __version__,
+        },
+        sort_keys=True,
+    )
     path = cache_dir() / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
     if path.exists():
         return load_checkpoint(path)
-    ckpt = train_and_calibrate(data, [settings.reference], cfg, device=resolve_device(settings.device),
-                               progress=settings.progress, selection={"subset": None, "places": None})
+    ckpt = train_and_calibrate(
+        data,
+        [settings.reference],
+        cfg,
+        device=resolve_device(settings.device),
+        progress=settings.progress,
+        selection={"subset": None, "places": None},
+    )
     save_checkpoint(path, ckpt)
     return ckpt
 
@@ -117,7 +133,11 @@ def summarise_rows(per_seed_rows: list[list[dict]], keys: tuple[str, ...] = ("st
         for row in rows:
             groups.setdefault(tuple(row[k] for k in keys), []).append(row)
     return [
-        {**dict(zip(keys, group)), **{m: mean_std(r[m] for r in rows) for m in METRICS}, "n_queries": rows[0]["n_queries"]}
+        {
+            **dict(zip(keys, group)),
+            **{m: mean_std(r[m] for r in rows) for m in METRICS},
+            "n_queries": rows[0]["n_queries"],
+        }
         for group, rows in groups.items()
     ]
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
 from vprsnn_export.runtime.inference import FloatNetwork
@@ -36,15 +35,21 @@ def run(settings: Settings) -> dict:
                 return None
             network = FloatNetwork(weights, theta, cfg)
             rows = calibrate_and_evaluate(
-                network, reference, data.place_ids, data.traversal(settings.query), data.place_ids,
-                settings.query, options,
+                network,
+                reference,
+                data.place_ids,
+                data.traversal(settings.query),
+                data.place_ids,
+                settings.query,
+                options,
             )
             return {"rows": rows}
 
         images = data.traversal(settings.reference)
         presentations = [Presentation(settings.reference, int(p)) for p in data.place_ids]
-        trained = train_network(images, presentations, cfg, device=device, progress=settings.progress,
-                                on_epoch=on_epoch)
+        trained = train_network(
+            images, presentations, cfg, device=device, progress=settings.progress, on_epoch=on_epoch
+        )
         per_seed.append({"seed": seed, "history": trained.history})
     curve = []
     for mark in marks:
@@ -76,15 +81,29 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             ("Standard k=1 accuracy", "standard_k1_accuracy"),
         )
     }
-    line_plot(out_dir / f"{stem}.png", epochs, series, xlabel="training epochs", ylabel="%", log_x=True,
-              title="Accuracy and R@100P vs epochs (summer -> winter, 100 places)")
+    line_plot(
+        out_dir / f"{stem}.png",
+        epochs,
+        series,
+        xlabel="training epochs",
+        ylabel="%",
+        log_x=True,
+        title="Accuracy and R@100P vs epochs (summer -> winter, 100 places)",
+    )
     lines = [
         "| epochs | W+Prob k=1 acc % | W+Prob k=1 R@100P % | W+Prob k=5 acc % | W+Prob k=5 R@100P % | Standard k=1 acc % | s/epoch |",
         "|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in curve:
-        cells = [f"{100 * c[k]['mean']:.1f} ± {100 * c[k]['std']:.1f}" for k in (
-            "wprob_k1_accuracy", "wprob_k1_r_at_100p", "wprob_k5_accuracy", "wprob_k5_r_at_100p",
-            "standard_k1_accuracy")]
+        cells = [
+            f"{100 * c[k]['mean']:.1f} ± {100 * c[k]['std']:.1f}"
+            for k in (
+                "wprob_k1_accuracy",
+                "wprob_k1_r_at_100p",
+                "wprob_k5_accuracy",
+                "wprob_k5_r_at_100p",
+                "standard_k1_accuracy",
+            )
+        ]
         lines.append(f"| {c['epoch']} | " + " | ".join(cells) + f" | {c['seconds_per_epoch']['mean']:.2f} |")
     return "\n".join(lines) + f"\n\n![accuracy vs epochs]({stem}.png)\n"

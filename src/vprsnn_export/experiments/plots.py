@@ -20,8 +20,17 @@ def save_figure(fig, path: Path) -> Path:
     return atomic_write_bytes(path, buffer.getvalue())
 
 
-def line_plot(path: Path, x, series: dict, *, xlabel: str, ylabel: str, title: str, log_x: bool = False,
-              baselines: dict | None = None) -> Path:
+def line_plot(
+    path: Path,
+    x,
+    series: dict,
+    *,
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    log_x: bool = False,
+    baselines: dict | None = None,
+) -> Path:
     """One line with error bars per series: series[label] = (means, stds)."""
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for label, (mean, std) in series.items():

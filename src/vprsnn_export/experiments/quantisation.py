@@ -15,8 +15,10 @@ from .common import Settings, consecutive_networks, provenance, rows_table, summ
 from .plots import line_plot
 
 NAME = "quantisation"
-DESCRIPTION = ("accuracy and R@100P (all strategies k=1, W+Prob k=5) vs weight bits 8..2, per-tensor vs "
-               "per-neuron scales (max-abs), deployed recalibration on the integer simulator, 100 consecutive places")
+DESCRIPTION = (
+    "accuracy and R@100P (all strategies k=1, W+Prob k=5) vs weight bits 8..2, per-tensor vs "
+    "per-neuron scales (max-abs), deployed recalibration on the integer simulator, 100 consecutive places"
+)
 BITS = (8, 6, 4, 3, 2)
 SCALINGS = {"per-neuron": True, "per-tensor": False}
 
@@ -38,19 +40,28 @@ def run(settings: Settings) -> dict:
                 model = recalibrate(model, reference, data.place_ids, device=device)
                 network = IntegerNetwork(model, device=device)
                 run_ = network.run(spikes)
-                quant_rows = readout_rows(model.calibration, run_.counts.numpy(), model.reference_place_ids,
-                                          data.place_ids, options)
-                rows += [dict(r, bits=str(bits), scaling=scaling, seed=seed, saturations=run_.saturations)
-                         for r in quant_rows]
+                quant_rows = readout_rows(
+                    model.calibration, run_.counts.numpy(), model.reference_place_ids, data.place_ids, options
+                )
+                rows += [
+                    dict(r, bits=str(bits), scaling=scaling, seed=seed, saturations=run_.saturations)
+                    for r in quant_rows
+                ]
         per_seed.append(rows)
-    return {"experiment": NAME, "summary": summarise_rows(per_seed, ("scaling", "bits", "strategy", "k")),
-            "per_seed": per_seed, "provenance": provenance(settings, started)}
+    return {
+        "experiment": NAME,
+        "summary": summarise_rows(per_seed, ("scaling", "bits", "strategy", "k")),
+        "per_seed": per_seed,
+        "provenance": provenance(settings, started),
+    }
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     summary = results["summary"]
+
     def pick(scaling, strategy, k):
         return {r["bits"]: r for r in summary if r["scaling"] == scaling and r["strategy"] == strategy and r["k"] == k}
+
     float_k = {k: pick("float", "wprob", k)["float"] for k in (1, 5)}
     series, baselines = {}, {}
     for k in (1, 5):
@@ -58,11 +69,19 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             baselines[f"float W+Prob k={k} {label}"] = 100 * float_k[k][metric]["mean"]
             for scaling in SCALINGS:
                 rows = pick(scaling, "wprob", k)
-                series[f"{scaling} k={k} {label}"] = ([100 * rows[str(b)][metric]["mean"] for b in BITS],
-                                                      [100 * rows[str(b)][metric]["std"] for b in BITS])
-    line_plot(out_dir / f"{stem}.png", list(BITS), series, xlabel="weight bits", ylabel="% (W+Prob)",
-              title="Quantisation: W+Prob vs weight bits (dashed: float)", baselines=baselines)
+                series[f"{scaling} k={k} {label}"] = (
+                    [100 * rows[str(b)][metric]["mean"] for b in BITS],
+                    [100 * rows[str(b)][metric]["std"] for b in BITS],
+                )
+    line_plot(
+        out_dir / f"{stem}.png",
+        list(BITS),
+        series,
+        xlabel="weight bits",
+        ylabel="% (W+Prob)",
+        title="Quantisation: W+Prob vs weight bits (dashed: float)",
+        baselines=baselines,
+    )
     table = rows_table([r for r in summary if r["strategy"] == "wprob"], ("scaling", "bits", "strategy", "k"))
     full = rows_table([r for r in summary if r["strategy"] != "wprob"], ("scaling", "bits", "strategy", "k"))
-    return (f"## W+Prob\n\n{table}\n\n![quantisation]({stem}.png)\n\n"
-            f"## Standard and Weighted, k = 1\n\n{full}\n")
+    return f"## W+Prob\n\n{table}\n\n![quantisation]({stem}.png)\n\n## Standard and Weighted, k = 1\n\n{full}\n"

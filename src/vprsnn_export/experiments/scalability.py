@@ -29,31 +29,58 @@ def run(settings: Settings) -> dict:
         windows = []
         for start in starts:
             cfg = settings.config(seed)
-            data = load_dataset(settings.data, [settings.reference, settings.query], cfg.preprocess,
-                                places=f"{start}:{n}")
+            data = load_dataset(
+                settings.data, [settings.reference, settings.query], cfg.preprocess, places=f"{start}:{n}"
+            )
             ckpt = trained_checkpoint(settings, data, cfg, f"window{start}-{n}")
-            result = evaluate_float(ckpt, data.traversal(settings.query), data.place_ids, settings.query,
-                                    ReadoutOptions(gamma=cfg.assignment.gamma), device=resolve_device(settings.device))
+            result = evaluate_float(
+                ckpt,
+                data.traversal(settings.query),
+                data.place_ids,
+                settings.query,
+                ReadoutOptions(gamma=cfg.assignment.gamma),
+                device=resolve_device(settings.device),
+            )
             row = next(r for r in result["rows"] if r["strategy"] == "wprob")
             windows.append({"start": start, **row})
-        points.append({"n_places": n, "windows": windows,
-                       "auc_pr": mean_std(w["auc_pr"] for w in windows),
-                       "accuracy": mean_std(w["accuracy"] for w in windows),
-                       "r_at_100p": mean_std(w["r_at_100p"] for w in windows)})
+        points.append(
+            {
+                "n_places": n,
+                "windows": windows,
+                "auc_pr": mean_std(w["auc_pr"] for w in windows),
+                "accuracy": mean_std(w["accuracy"] for w in windows),
+                "r_at_100p": mean_std(w["r_at_100p"] for w in windows),
+            }
+        )
     return {"experiment": NAME, "seed": seed, "points": points, "provenance": provenance(settings, started)}
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     points = results["points"]
     x = [p["n_places"] for p in points]
-    series = {label: ([100 * p[key]["mean"] for p in points], [100 * p[key]["std"] for p in points])
-              for label, key in (("AUC-PR", "auc_pr"), ("accuracy", "accuracy"), ("R@100P", "r_at_100p"))}
-    line_plot(out_dir / f"{stem}.png", x, series, xlabel="reference places N", ylabel="% (W+Prob, k=1)",
-              title="Scalability: sliding windows of consecutive places", log_x=True)
+    series = {
+        label: ([100 * p[key]["mean"] for p in points], [100 * p[key]["std"] for p in points])
+        for label, key in (("AUC-PR", "auc_pr"), ("accuracy", "accuracy"), ("R@100P", "r_at_100p"))
+    }
+    line_plot(
+        out_dir / f"{stem}.png",
+        x,
+        series,
+        xlabel="reference places N",
+        ylabel="% (W+Prob, k=1)",
+        title="Scalability: sliding windows of consecutive places",
+        log_x=True,
+    )
     lines = ["| N | windows | AUC-PR % | accuracy % | R@100P % |", "|---:|---:|---:|---:|---:|"]
     for p in points:
-        lines.append(f"| {p['n_places']} | {len(p['windows'])} | "
-                     + " | ".join(f"{100 * p[k]['mean']:.1f} ± {100 * p[k]['std']:.1f}"
-                                  for k in ("auc_pr", "accuracy", "r_at_100p")) + " |")
-    return "\n".join(lines) + f"\n\nOne network (seed {results['seed']}) per window; ± is over windows "\
+        lines.append(
+            f"| {p['n_places']} | {len(p['windows'])} | "
+            + " | ".join(
+                f"{100 * p[k]['mean']:.1f} ± {100 * p[k]['std']:.1f}" for k in ("auc_pr", "accuracy", "r_at_100p")
+            )
+            + " |"
+        )
+    return (
+        "\n".join(lines) + f"\n\nOne network (seed {results['seed']}) per window; ± is over windows "
         f"(starts {', '.join(str(w['start']) for w in points[0]['windows'])}).\n\n![scalability]({stem}.png)\n"
+    )

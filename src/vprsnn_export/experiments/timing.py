@@ -21,8 +21,10 @@ from vprsnn_export.trainer.train import Presentation, train_network
 from .common import Settings, load, provenance, trained_checkpoint
 
 NAME = "timing"
-DESCRIPTION = ("queries/s of the float path, the integer simulator and onnxruntime at T=150 and 300, batch 1 and "
-               "batch 100; per-query latency; training s/epoch; aggregation overhead; FLOPs per query; peak memory")
+DESCRIPTION = (
+    "queries/s of the float path, the integer simulator and onnxruntime at T=150 and 300, batch 1 and "
+    "batch 100; per-query latency; training s/epoch; aggregation overhead; FLOPs per query; peak memory"
+)
 
 
 def best_seconds(fn, repeats: int) -> float:
@@ -37,7 +39,11 @@ def best_seconds(fn, repeats: int) -> float:
 def flops_per_query(timesteps: int, n_inputs: int, n_neurons: int) -> dict:
     """Dense: 2 T n_in n_exc for the currents + ~6 T n_exc for decay, threshold, WTA and reset."""
     currents = 2 * timesteps * n_inputs * n_neurons
-    return {"currents": currents, "neuron_updates": 6 * timesteps * n_neurons, "total": currents + 6 * timesteps * n_neurons}
+    return {
+        "currents": currents,
+        "neuron_updates": 6 * timesteps * n_neurons,
+        "total": currents + 6 * timesteps * n_neurons,
+    }
 
 
 def run(settings: Settings) -> dict:
@@ -65,9 +71,16 @@ def run(settings: Settings) -> dict:
                     "onnxruntime": best_seconds(lambda: run_session(sess, part, batch=batch), repeats),
                 }
                 for path, seconds in times.items():
-                    rows.append({"T": timesteps, "batch": batch, "path": path, "queries_per_s": batch / seconds,
-                                 "ms_per_query": 1000 * seconds / batch,
-                                 "ratio_to_float": times["float"] / seconds})
+                    rows.append(
+                        {
+                            "T": timesteps,
+                            "batch": batch,
+                            "path": path,
+                            "queries_per_s": batch / seconds,
+                            "ms_per_query": 1000 * seconds / batch,
+                            "ratio_to_float": times["float"] / seconds,
+                        }
+                    )
     cfg = settings.config(seed)
     data = load(settings, "consecutive", cfg)
     one_epoch = cfg.replace(**{"train.epochs": 1})
@@ -75,8 +88,9 @@ def run(settings: Settings) -> dict:
     pres = [Presentation(settings.reference, int(p)) for p in data.place_ids]
     train_s = best_seconds(lambda: train_network(images, pres, one_epoch, device=device, progress=False), repeats)
     ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
-    wprob = strategy_scores(ckpt.calibration.astype(float), np.ones((len(images), cfg.network.n_neurons)), "wprob",
-                            cfg.assignment.gamma)
+    wprob = strategy_scores(
+        ckpt.calibration.astype(float), np.ones((len(images), cfg.network.n_neurons)), "wprob", cfg.assignment.gamma
+    )
     agg_s = best_seconds(lambda: aggregate(wprob, 5, 1.0), repeats)
     single = wprob[:5]
     agg_one_s = best_seconds(lambda: aggregate(single, 5, 1.0), max(repeats, 20))
@@ -98,8 +112,10 @@ def run(settings: Settings) -> dict:
 def table(results: dict) -> str:
     lines = ["| T | batch | path | queries/s | ms/query | ratio to float |", "|---:|---:|---|---:|---:|---:|"]
     for r in results["throughput"]:
-        lines.append(f"| {r['T']} | {r['batch']} | {r['path']} | {r['queries_per_s']:.1f} | {r['ms_per_query']:.2f} |"
-                     f" {r['ratio_to_float']:.2f} |")
+        lines.append(
+            f"| {r['T']} | {r['batch']} | {r['path']} | {r['queries_per_s']:.1f} | {r['ms_per_query']:.2f} |"
+            f" {r['ratio_to_float']:.2f} |"
+        )
     return "\n".join(lines)
 
 
