@@ -20,7 +20,7 @@ import torch
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.dynamics import run_network, wta_step
-from vprsnn_export.runtime.inference import query_spikes
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.trainer.train import Presentation, train_network
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")

@@ -23,10 +23,9 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.commands._common import format_table
 from vprsnn_export.commands.export import load_model
 from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import encode
+from vprsnn_export.encoding import encode, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.fileio import sha256_file
-from vprsnn_export.runtime.inference import query_spikes
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
 

@@ -23,10 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export import __version__
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.fileio import read_container, write_container
+from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-fixed-point"
 FORMAT_VERSION = 1
@@ -45,7 +45,7 @@ def decay_mantissa(beta: float) -> int:
 
 def check_bits(bits: int) -> int:
     if bits not in SUPPORTED_BITS:
-        raise OptionError(
+        raise InvalidValueError(
             f"unsupported weight bit width {bits}: choose from {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}"
         )
     return bits

@@ -20,16 +20,13 @@ population. Everything is derived from the checkpoint; nothing is tuned by hand.
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import torch
 
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.errors import OptionError
+from vprsnn_export.errors import InvalidValueError
 
 from .model import MULTIPLIER_BITS, THRESHOLD_BITS, FixedPointModel, check_bits, decay_mantissa
 
@@ -92,7 +89,7 @@ def desired_scales(weights: np.ndarray, bits: int, method: str, per_neuron: bool
     per-tensor scale so that its threshold still has a representable mantissa.
     """
     if method not in SCALE_METHODS:
-        raise OptionError(f"unknown scale method {method!r}: choose from {', '.join(SCALE_METHODS)}")
+        raise InvalidValueError(f"unknown scale method {method!r}: choose from {', '.join(SCALE_METHODS)}")
     choose = max_abs_scales if method == "max" else mse_scales
     n_neurons = weights.shape[1]
     whole = float(choose(weights.reshape(-1, 1), bits)[0])
@@ -150,11 +147,11 @@ def quantise_arrays(
     """Float weights (inputs, neurons) and thresholds (neurons,) -> mantissas, scales, integer thresholds."""
     check_bits(bits)
     if fold_thresholds and not per_neuron:
-        raise OptionError("threshold folding needs per-neuron scales (--per-neuron)")
+        raise InvalidValueError("threshold folding needs per-neuron scales (--per-neuron)")
     weights = np.asarray(weights, dtype=np.float64)
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if fold_thresholds and np.any(thresholds <= 0):
-        raise OptionError("threshold folding needs positive float thresholds")
+        raise InvalidValueError("threshold folding needs positive float thresholds")
     scales = desired_scales(weights, bits, scale_method, per_neuron)
     theta_shared = None
     if fold_thresholds:
@@ -251,36 +248,3 @@ def quantize_checkpoint(
         source_sha256=ckpt_sha256,
         data=dict(ckpt.data),
     )
-
-
-def recalibrate(
-    model: FixedPointModel,
-    reference_images: Mapping[str, np.ndarray],
-    place_ids: np.ndarray,
-    *,
-    reuse_float_calibration: bool = False,
-    device: torch.device | None = None,
-) -> FixedPointModel:
-    """S^R of the deployed network: the reference presentations run on the integer simulator.
-
-    With ``reuse_float_calibration`` the float S^R is kept instead (no simulation).
-    The saturation events counted during calibration go into the quantisation report.
-    """
-    from vprsnn_export.targets.intsim import IntegerNetwork
-    from vprsnn_export.trainer.calibrate import calibrate
-
-    if reuse_float_calibration:
-        report = dict(model.quantisation, calibration="float (reused)", calibration_saturations=None)
-        return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
-    if not np.array_equal(np.asarray(place_ids), model.reference_place_ids):
-        raise OptionError("calibration needs the checkpoint's reference places, in the same order")
-    missing = [name for name in model.reference_traversals if name not in reference_images]
-    if missing:
-        raise OptionError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
-    network = IntegerNetwork(model, device=device)
-    images = {name: reference_images[name] for name in model.reference_traversals}
-    calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
-    report = dict(
-        model.quantisation, calibration="deployed (integer simulator)", calibration_saturations=network.saturations
-    )
-    return dataclasses.replace(model, calibration=calibration, quantisation=report)

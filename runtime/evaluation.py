@@ -7,9 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .aggregation import aggregate, estimate_velocity
-from .assignment import STRATEGIES, decide, strategy_scores
-from .metrics import is_correct, pr_metrics
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
+from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
+from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
+from vprsnn_export.readout.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout.metrics import is_correct, pr_metrics
+from vprsnn_export.trainer.calibrate import calibrate
 
 
 @dataclass(frozen=True)
@@ -118,8 +122,6 @@ def evaluate_float(
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
     the no-learning SAD baseline is added as rows with strategy "sad".
     """
-    from .baseline import sad_distances, sad_distribution
-    from .inference import FloatNetwork, query_spikes
 
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     run = network.run(
@@ -149,9 +151,6 @@ def calibrate_and_evaluate(
     options: ReadoutOptions,
 ) -> list[dict]:
     """Calibrate any network (``network.counts(spikes)``, ``network.cfg``) and read out the queries."""
-    from vprsnn_export.trainer.calibrate import calibrate
-
-    from .inference import query_spikes
 
     calibration = calibrate(network.counts, reference_images, reference_place_ids, network.cfg)
     counts = network.counts(query_spikes(query_images, query_place_ids, query_traversal, network.cfg)).numpy()

@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.errors import OptionError
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
+from vprsnn_export.readout.metrics import is_correct, pr_curve
 
-from .assignment import STRATEGIES, decide, strategy_scores
 from .evaluation import ReadoutOptions, aggregated, readout_rows
-from .metrics import is_correct, pr_curve
 
 SCHEMA = "vprsnn-verify-report/1"
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
@@ -79,7 +79,7 @@ OFF = ("off", "none", "")
 
 
 def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
-    """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; OptionError on anything else."""
+    """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else."""
     tolerances = dict(DEFAULT_TOLERANCES if base is None else base)
     for item in (text or "").split(","):
         if not item.strip():
@@ -87,7 +87,7 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
         key, sep, raw = item.partition("=")
         key, raw = key.strip(), raw.strip().lower()
         if not sep or key not in DEFAULT_TOLERANCES:
-            raise OptionError(
+            raise InvalidValueError(
                 f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} (VALUE a number or off), got {item!r}"
             )
         if raw in OFF:
@@ -96,9 +96,9 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
         try:
             value = float(raw)
         except ValueError:
-            raise OptionError(f"--tolerance {key}: expected a number or off, got {raw!r}") from None
+            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw!r}") from None
         if not np.isfinite(value) or value < 0:
-            raise OptionError(f"--tolerance {key}: expected a finite number >= 0, got {raw!r}")
+            raise InvalidValueError(f"--tolerance {key}: expected a finite number >= 0, got {raw!r}")
         tolerances[key] = value
     return tolerances
 
@@ -125,7 +125,7 @@ class VerifyOptions:
 def parse_targets(raw: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
     if any(n not in TARGETS and n != "none" for n in names):
-        raise OptionError(f"--targets expects some of {', '.join(TARGETS)} (or none), got {raw!r}")
+        raise InvalidValueError(f"--targets expects some of {', '.join(TARGETS)} (or none), got {raw!r}")
     return tuple(n for n in names if n != "none")
 
 
@@ -300,7 +300,7 @@ def _onnx_checks(model, spikes, base: dict, folder: Path, files: dict, skipped: 
 
     try:
         path = write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)
-    except OptionError as exc:  # e.g. state isolation off: the graph cannot express it
+    except InvalidValueError as exc:  # e.g. state isolation off: the graph cannot express it
         skipped["onnx"] = str(exc)
         return []
     files["onnx"] = [str(path)]
@@ -603,18 +603,19 @@ def verify_checkpoint(
     """
     from tqdm import tqdm
 
+    from vprsnn_export.dynamics import FloatNetwork
+    from vprsnn_export.encoding import query_spikes
     from vprsnn_export.export.model import check_bits, save_fixed_point
-    from vprsnn_export.export.quantize import quantize_checkpoint, recalibrate
+    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.runtime.deployment import recalibrate
     from vprsnn_export.targets.intsim import IntegerNetwork
-
-    from .inference import FloatNetwork, query_spikes
 
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
     if options.calibration not in ("deployed", "float"):
-        raise OptionError(f"calibration must be deployed or float, got {options.calibration!r}")
+        raise InvalidValueError(f"calibration must be deployed or float, got {options.calibration!r}")
     if options.calibration == "deployed" and reference_images is None:
-        raise OptionError("the deployed calibration needs the reference images")
+        raise InvalidValueError("the deployed calibration needs the reference images")
     readout = options.readout
     query_place_ids = np.asarray(query_place_ids, dtype=np.int64)
     spikes = query_spikes(query_images, query_place_ids, query_traversal, ckpt.config)
@@ -802,7 +803,7 @@ def versions() -> dict[str, str]:
     """Package and library versions recorded in every report."""
     import importlib.metadata as md
 
-    from vprsnn_export import __version__
+    from vprsnn_export.version import __version__
 
     out = {
         "vprsnn-export": __version__,

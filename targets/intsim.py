@@ -37,30 +37,11 @@ import numpy as np
 import torch
 
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
+from vprsnn_export.runs import SpikeRun
 
 QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
 FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
 FLOAT64_EXACT = 1 << 53
-
-
-@dataclass
-class IntegerRun:
-    """The outcome of presenting N spike trains to the integer network."""
-
-    counts: torch.Tensor  # (N, neurons) int64 output spike counts
-    candidates_per_step: torch.Tensor  # (N, T) int32 |C[t]|
-    raster: torch.Tensor | None  # (N, T, neurons) bool, when recorded
-    final_voltage: torch.Tensor  # (N, neurons) int64: V after each presentation's last step
-    saturations: int  # voltage clips to +-(2**23 - 1), counted over all presentations
-    max_current: int = 0  # largest a_j[t] seen (unshifted): Loihi's 24-bit u holds a << 6 while a < 2**17
-
-    @property
-    def mean_candidates(self) -> float:
-        return float(self.candidates_per_step.float().mean())
-
-    @property
-    def multi_candidate_fraction(self) -> float:
-        return float((self.candidates_per_step > 1).float().mean())
 
 
 def current_bound(model: FixedPointModel) -> int:
@@ -121,13 +102,14 @@ class IntegerNetwork:
     model: FixedPointModel
     device: torch.device | None = None
     saturations: int = 0
+    name: str = "integer simulator"
     prepared: PreparedModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
         self.prepared = prepare(self.model, self.device)
 
-    def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> IntegerRun:
+    def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> SpikeRun:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
@@ -147,7 +129,7 @@ def simulate(
     record: bool = False,
     state_isolation: bool | None = None,
     device: torch.device | None = None,
-) -> IntegerRun:
+) -> SpikeRun:
     """Run the fixed-point model on spike trains (N, T, inputs) uint8."""
     return IntegerNetwork(model, device).run(spikes, record=record, state_isolation=state_isolation)
 
@@ -185,7 +167,7 @@ class ChunkRun:
     max_current: int  # shifted
 
 
-def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool) -> IntegerRun:
+def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool) -> SpikeRun:
     """Chunks of QUERY_CHUNK presentations in parallel (isolation), or one presentation at a time carrying V."""
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
@@ -210,7 +192,14 @@ def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, 
         max_current = max(max_current, step.max_current >> prep.shift)
         if raster is not None:
             raster[start:stop] = step.raster.transpose(0, 1).cpu()
-    return IntegerRun(counts, n_candidates, raster, final_voltage, saturations, max_current)
+    return SpikeRun(
+        counts=counts,
+        candidates_per_step=n_candidates,
+        raster=raster,
+        final_voltage=final_voltage,
+        saturations=saturations,
+        max_current=max_current,
+    )
 
 
 def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:

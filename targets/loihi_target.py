@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export import __version__
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, sha256_bytes
+from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-loihi"
 FORMAT_VERSION = 1
@@ -83,7 +83,9 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
     """The Lava-convention description of ``model`` (see the module docstring)."""
     validate(model, Path("<fixed-point model>"))
     if model.bits > LAVA_WEIGHT_BITS:
-        raise OptionError(f"Lava's Dense holds {LAVA_WEIGHT_BITS}-bit weights; {model.bits}-bit mantissas do not fit")
+        raise InvalidValueError(
+            f"Lava's Dense holds {LAVA_WEIGHT_BITS}-bit weights; {model.bits}-bit mantissas do not fit"
+        )
     weights, num_weight_bits, weight_exp = lava_weights(model)
     cfg = model.config
     n_in, n = model.n_inputs, model.n_neurons
@@ -217,7 +219,7 @@ def write_netx(model: FixedPointModel, path: str | Path) -> Path:
     import h5py
 
     if not np.all(model.threshold == model.threshold[0]):
-        raise OptionError("netx holds one vThMant per layer; this model has per-neuron thresholds")
+        raise InvalidValueError("netx holds one vThMant per layer; this model has per-neuron thresholds")
 
     def fill(handle) -> None:
         with h5py.File(handle, "w") as f:

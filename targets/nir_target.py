@@ -43,13 +43,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export import __version__
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, checkpoint_header
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError, VprError
+from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-nir"
 FORMAT_VERSION = 1
@@ -90,12 +90,12 @@ def check_checkpoint(ckpt: Checkpoint) -> None:
     """Shapes agree with the config and values are finite: what a writer must refuse otherwise."""
     net = ckpt.config.network
     if ckpt.weights.shape != (net.n_inputs, net.n_neurons) or ckpt.thresholds.shape != (net.n_neurons,):
-        raise OptionError(
+        raise InvalidValueError(
             f"checkpoint arrays {ckpt.weights.shape} / {ckpt.thresholds.shape} do not match its config "
             f"({net.n_inputs} inputs, {net.n_neurons} neurons)"
         )
     if not (np.all(np.isfinite(ckpt.weights)) and np.all(np.isfinite(ckpt.thresholds))):
-        raise OptionError("checkpoint weights or thresholds contain NaN or infinite values")
+        raise InvalidValueError("checkpoint weights or thresholds contain NaN or infinite values")
 
 
 def wta_rule(source: Source) -> str:
@@ -194,7 +194,7 @@ def build_graph(
     import nir
 
     if wta_inhibition < 0 or not np.isfinite(wta_inhibition):
-        raise OptionError(f"wta_inhibition must be a finite value >= 0, got {wta_inhibition}")
+        raise InvalidValueError(f"wta_inhibition must be a finite value >= 0, got {wta_inhibition}")
     if isinstance(source, FixedPointModel):
         validate(source, Path("<fixed-point model>"))
         weight = source.weight_mantissa.T.astype(np.float32)
@@ -204,7 +204,7 @@ def build_graph(
         weight = np.ascontiguousarray(source.weights.T.astype(np.float32))
         thresholds = source.thresholds.astype(np.float32)
     else:
-        raise OptionError(f"cannot export a {type(source).__name__} to NIR")
+        raise InvalidValueError(f"cannot export a {type(source).__name__} to NIR")
     n_out, n_in = weight.shape
     inhibition = inhibition_weights(thresholds, wta_inhibition)
     nodes = {
@@ -363,7 +363,7 @@ def checkpoint_from_graph(
     )
     try:
         check_checkpoint(ckpt)
-    except OptionError as exc:
+    except InvalidValueError as exc:
         raise ModelFileError(str(exc), path) from None
     if ckpt.calibration.shape != (ckpt.config.network.n_neurons, ckpt.reference_place_ids.shape[0]):
         raise ModelFileError("calibration does not match the neurons and reference places", path)
@@ -454,7 +454,7 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     try:
         import norse.torch as norse_torch
     except ImportError:
-        raise OptionError("the Norse consumer needs the norse package (pip install norse)") from None
+        raise InvalidValueError("the Norse consumer needs the norse package (pip install norse)") from None
     logging.getLogger().disabled = True
     try:
         module = norse_torch.from_nir(graph, dt=dt)

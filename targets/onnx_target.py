@@ -36,10 +36,10 @@ import onnx
 import torch
 from onnx import TensorProto, helper, numpy_helper
 
-from vprsnn_export.errors import ModelFileError, OptionError
+from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
-from vprsnn_export.runtime.assignment import weighted_matrix
+from vprsnn_export.readout.assignment import weighted_matrix
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
@@ -67,12 +67,12 @@ def check_exportable(model: FixedPointModel) -> None:
     """The graph implements state isolation (V = 0 at t = 0 of every presentation) and 8-bit-or-less mantissas."""
     validate(model, Path("<fixed-point model>"))
     if not model.config.network.state_isolation:
-        raise OptionError(
+        raise InvalidValueError(
             "the ONNX graph zeroes the voltage at the start of every presentation; "
             "this model was built with state isolation off, which the ONNX target does not express"
         )
     if model.bits > 8:
-        raise OptionError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
+        raise InvalidValueError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
 
 
 def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:

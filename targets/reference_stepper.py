@@ -11,20 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
 from vprsnn_export.export.model import FixedPointModel
-
-
-@dataclass
-class ReferenceRun:
-    raster: np.ndarray  # (N, T, neurons) bool
-    final_voltage: np.ndarray  # (N, neurons) int64
-    candidates_per_step: np.ndarray  # (N, T) int64
-    saturations: int
-
-    @property
-    def counts(self) -> np.ndarray:
-        return self.raster.sum(axis=1, dtype=np.int64)
+from vprsnn_export.runs import SpikeRun
 
 
 def trunc_div(x: int, d: int) -> int:
@@ -32,7 +22,7 @@ def trunc_div(x: int, d: int) -> int:
     return -(-x // d) if x < 0 else x // d
 
 
-def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation: bool | None = None) -> ReferenceRun:
+def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation: bool | None = None) -> SpikeRun:
     isolation = model.config.network.state_isolation if state_isolation is None else state_isolation
     spikes = np.asarray(spikes)
     n, timesteps, _ = spikes.shape
@@ -72,4 +62,21 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
             for j in candidates:
                 v[j] = 0
         final[p] = v
-    return ReferenceRun(raster, final, n_candidates, saturations)
+    return SpikeRun(
+        counts=torch.from_numpy(raster.sum(axis=1, dtype=np.int64)),
+        candidates_per_step=torch.from_numpy(n_candidates.astype(np.int32)),
+        raster=torch.from_numpy(raster),
+        final_voltage=torch.from_numpy(final),
+        saturations=saturations,
+    )
+
+
+@dataclass
+class ReferenceStepper:
+    """The slow oracle as a :class:`~vprsnn_export.runs.Backend` (always records: it is one loop either way)."""
+
+    model: FixedPointModel
+    name: str = "reference stepper"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        return reference_run(self.model, np.asarray(spikes))

@@ -8,19 +8,10 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding import encode_presentations
-
-STREAM_CALIBRATE = "calibrate"
+from vprsnn_export.encoding import calibration_spikes
 
 CountRunner = Callable[[torch.Tensor], torch.Tensor]
 """Any network implementation: spikes (N, T, inputs) uint8 -> output spike counts (N, neurons)."""
-
-
-def calibration_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
-    """The calibration presentations of one reference traversal (identical for every backend)."""
-    return encode_presentations(
-        images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_CALIBRATE, traversal=traversal
-    )
 
 
 def calibrate(

@@ -10,7 +10,7 @@ import torch
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
-from vprsnn_export.runtime.inference import FloatNetwork
+from vprsnn_export.dynamics import FloatNetwork
 
 from .calibrate import calibrate
 from .train import Presentation, train_network

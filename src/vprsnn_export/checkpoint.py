@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
 from .config import Config
 from .errors import ModelFileError, VprError
 from .fileio import read_container, sha256_file, write_container
+from .version import __version__
 
 FORMAT = "vprsnn-checkpoint"
 FORMAT_VERSION = 1

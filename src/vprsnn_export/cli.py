@@ -8,8 +8,9 @@ import pkgutil
 import sys
 from collections.abc import Sequence
 
-from . import __version__, commands
+from . import commands
 from .errors import VprError
+from .version import __version__
 
 
 def build_parser() -> argparse.ArgumentParser:

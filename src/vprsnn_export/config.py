@@ -11,7 +11,7 @@ import dataclasses
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
-from .errors import OptionError
+from .errors import InvalidValueError
 
 
 @dataclass(frozen=True)
@@ -93,15 +93,15 @@ class Config:
     def __post_init__(self) -> None:
         side = self.preprocess.image_size
         if side % self.preprocess.patch_size:
-            raise OptionError(f"image_size {side} is not a multiple of patch_size {self.preprocess.patch_size}")
+            raise InvalidValueError(f"image_size {side} is not a multiple of patch_size {self.preprocess.patch_size}")
         if self.network.n_inputs != side * side:
-            raise OptionError(f"n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}")
+            raise InvalidValueError(f"n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}")
         if self.encoder.timesteps < 1:
-            raise OptionError(f"timesteps must be >= 1, got {self.encoder.timesteps}")
+            raise InvalidValueError(f"timesteps must be >= 1, got {self.encoder.timesteps}")
         if self.train.batch_size < 1 or self.train.epochs < 0:
-            raise OptionError("batch_size must be >= 1 and epochs >= 0")
+            raise InvalidValueError("batch_size must be >= 1 and epochs >= 0")
         if not 0.0 < self.network.beta <= 1.0:
-            raise OptionError(f"beta must lie in (0, 1], got {self.network.beta}")
+            raise InvalidValueError(f"beta must lie in (0, 1], got {self.network.beta}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -119,21 +119,21 @@ class Config:
             target = data
             for part in filter(None, section.split(".")):
                 if part not in target or not isinstance(target[part], dict):
-                    raise OptionError(f"unknown config section {name!r}")
+                    raise InvalidValueError(f"unknown config section {name!r}")
                 target = target[part]
             if key not in target:
-                raise OptionError(f"unknown config key {name!r}")
+                raise InvalidValueError(f"unknown config key {name!r}")
             target[key] = value
         return Config.from_dict(data)
 
 
 def _build(cls: type, data: dict[str, Any], where: str) -> Any:
     if not isinstance(data, dict):
-        raise OptionError(f"{where}: expected a mapping, got {type(data).__name__}")
+        raise InvalidValueError(f"{where}: expected a mapping, got {type(data).__name__}")
     known = {f.name: f for f in fields(cls)}
     unknown = set(data) - set(known)
     if unknown:
-        raise OptionError(f"{where}: unknown keys {sorted(unknown)}")
+        raise InvalidValueError(f"{where}: unknown keys {sorted(unknown)}")
     kwargs: dict[str, Any] = {}
     for name, value in data.items():
         default = getattr(cls(), name) if name in known else None
@@ -148,14 +148,14 @@ def _coerce(value: Any, kind: type, where: str) -> Any:
     if kind is bool:
         if isinstance(value, bool):
             return value
-        raise OptionError(f"{where}: expected true/false, got {value!r}")
+        raise InvalidValueError(f"{where}: expected true/false, got {value!r}")
     if kind is int:
         if isinstance(value, bool) or not float(value).is_integer():
-            raise OptionError(f"{where}: expected an integer, got {value!r}")
+            raise InvalidValueError(f"{where}: expected an integer, got {value!r}")
         return int(value)
     if kind is float:
         try:
             return float(value)
         except (TypeError, ValueError):
-            raise OptionError(f"{where}: expected a number, got {value!r}") from None
+            raise InvalidValueError(f"{where}: expected a number, got {value!r}") from None
     return value

@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .config import PreprocessConfig
-from .errors import DataError, OptionError
+from .errors import DataError, InvalidValueError
 from .fileio import sha256_bytes
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
@@ -72,19 +72,19 @@ class Manifest:
 def parse_places(spec: str) -> tuple[int, int, int]:
     """``"START:COUNT[:STRIDE]"`` -> ``(start, count, stride)``: place ids ``start + k * stride``, k = 0..count-1.
 
-    START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an OptionError.
+    START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an InvalidValueError.
     """
     parts = str(spec).strip().split(":")
     usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
     if len(parts) not in (2, 3):
-        raise OptionError(usage)
+        raise InvalidValueError(usage)
     try:
         values = [int(part) for part in parts]
     except ValueError:
-        raise OptionError(usage) from None
+        raise InvalidValueError(usage) from None
     start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
     if start < 0 or count < 1 or stride < 1:
-        raise OptionError(usage)
+        raise InvalidValueError(usage)
     return start, count, stride
 
 
@@ -96,7 +96,9 @@ def parse_synthetic(data: str) -> int | None:
         return None
     text = data[len(SYNTHETIC) + 1 :]
     if not text.isdigit() or int(text) < 1:
-        raise OptionError(f"--data {data!r}: expected synthetic or synthetic:N with a positive number of places N")
+        raise InvalidValueError(
+            f"--data {data!r}: expected synthetic or synthetic:N with a positive number of places N"
+        )
     return int(text)
 
 
@@ -109,10 +111,10 @@ def load_dataset(
     places: str | None = None,
     progress: bool = False,
 ) -> Dataset:
-    """Load, select, decode and preprocess; every expected problem is a DataError/OptionError naming the file."""
+    """Load, select, decode and preprocess; every expected problem is a DataError/InvalidValueError naming the file."""
     names = _check_traversals(traversals)
     if subset is not None and places is not None:
-        raise OptionError("give either --subset or --places, not both")
+        raise InvalidValueError("give either --subset or --places, not both")
     n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
     if n_synthetic is not None:
         return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
@@ -191,9 +193,9 @@ def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
         traversals = (traversals,)
     names = tuple(dict.fromkeys(str(name).strip() for name in traversals))
     if not names or "" in names:
-        raise OptionError(f"expected one or more traversal names, got {list(traversals)!r}")
+        raise InvalidValueError(f"expected one or more traversal names, got {list(traversals)!r}")
     if PLACE_ID in names:
-        raise OptionError(f"{PLACE_ID!r} is the place id column, not a traversal")
+        raise InvalidValueError(f"{PLACE_ID!r} is the place id column, not a traversal")
     return names
 
 

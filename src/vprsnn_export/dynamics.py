@@ -20,27 +20,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
+from .config import Config
+from .runs import SpikeRun
+
 QUERY_CHUNK = 128  # presentations per matmul chunk: bounds the (chunk, T, neurons) current tensor
-
-
-@dataclass
-class NetworkRun:
-    """The outcome of presenting N spike trains to the network."""
-
-    counts: torch.Tensor  # (N, neurons) int64 output spike counts
-    candidates_per_step: torch.Tensor  # (N, T) int32 |C[t]|
-    raster: torch.Tensor | None = None  # (N, T, neurons) bool, when recorded
-    final_voltage: torch.Tensor | None = None  # (N, neurons) V after the last step
-
-    @property
-    def mean_candidates(self) -> float:
-        return float(self.candidates_per_step.float().mean())
-
-    @property
-    def multi_candidate_fraction(self) -> float:
-        return float((self.candidates_per_step > 1).float().mean())
 
 
 def wta_step(
@@ -75,7 +61,7 @@ def run_network(
     wta: bool = True,
     state_isolation: bool = True,
     record: bool = False,
-) -> NetworkRun:
+) -> SpikeRun:
     """Present N spike trains (N, T, inputs) to the network with plasticity off.
 
     The spikes may live on the CPU; they are moved to ``weights.device`` chunk by chunk.
@@ -109,20 +95,56 @@ def run_network(
         final_voltage[start:stop] = voltage.cpu()
         if raster is not None:
             raster[start:stop] = chunk_raster.cpu()
-    return NetworkRun(counts, n_candidates, raster, final_voltage)
+    return SpikeRun(counts, n_candidates, raster, final_voltage)
 
 
 def _run_sequential(
     spikes: torch.Tensor, weights: torch.Tensor, theta: torch.Tensor, *, beta: float, wta: bool, record: bool
-) -> NetworkRun:
+) -> SpikeRun:
     """State isolation off: all presentations form one stream, in order (the spillover ablation)."""
     n_presentations, timesteps, n_inputs = spikes.shape
     stream = spikes.reshape(1, n_presentations * timesteps, n_inputs)
     whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True)
     raster = whole.raster.reshape(n_presentations, timesteps, -1)
-    return NetworkRun(
+    return SpikeRun(
         counts=raster.sum(dim=1, dtype=torch.int64),
         candidates_per_step=whole.candidates_per_step.reshape(n_presentations, timesteps),
         raster=raster if record else None,
         final_voltage=None,
     )
+
+
+@dataclass
+class FloatNetwork:
+    """The float reference network: float32 weights and thresholds on a device (a :class:`~vprsnn_export.runs.Backend`)."""
+
+    weights: torch.Tensor
+    thresholds: torch.Tensor
+    cfg: Config
+    name: str = "float"
+
+    @classmethod
+    def from_arrays(
+        cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device
+    ) -> FloatNetwork:
+        return cls(
+            torch.as_tensor(weights, dtype=torch.float32).to(device),
+            torch.as_tensor(thresholds, dtype=torch.float32).to(device),
+            cfg,
+        )
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> SpikeRun:
+        isolation = self.cfg.network.state_isolation if state_isolation is None else state_isolation
+        return run_network(
+            spikes,
+            self.weights,
+            self.thresholds,
+            beta=self.cfg.network.beta,
+            wta=self.cfg.network.wta,
+            state_isolation=isolation,
+            record=record,
+        )
+
+    def counts(self, spikes: torch.Tensor) -> torch.Tensor:
+        """Output spike counts (N, neurons): the ``run_counts`` callable of calibration."""
+        return self.run(spikes).counts

@@ -18,7 +18,10 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .config import EncoderConfig
+from .config import Config, EncoderConfig
+
+STREAM_QUERY = "query"
+STREAM_CALIBRATE = "calibrate"
 
 
 def presentation_seed(seed: int, stream: str, traversal: str, place_id: int, epoch: int = 0) -> int:
@@ -72,3 +75,15 @@ def encode_presentations(
 ) -> torch.Tensor:
     """Encode a traversal's images under their presentation keys (see module docstring)."""
     return encode(images, presentation_seeds(seed, stream, traversal, place_ids, epoch), cfg)
+
+
+def query_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
+    """The query presentations (N, T, inputs) uint8; every backend is fed exactly these."""
+    return encode_presentations(images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_QUERY, traversal=traversal)
+
+
+def calibration_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
+    """The calibration presentations of one reference traversal (identical for every backend)."""
+    return encode_presentations(
+        images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_CALIBRATE, traversal=traversal
+    )

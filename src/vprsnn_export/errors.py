@@ -29,5 +29,8 @@ class ModelFileError(VprError):
     """A missing, truncated or invalid checkpoint, fixed-point model or exported file."""
 
 
-class OptionError(VprError):
-    """A command-line option with an unsupported value."""
+class InvalidValueError(VprError):
+    """An unsupported value: a command-line option, a library argument or a config setting.
+
+    The message names what was given (the option, argument or config key) and what is allowed.
+    """

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from .config import PreprocessConfig
-from .errors import DataError, OptionError
+from .errors import DataError, InvalidValueError
 
 
 def read_grey_image(path: Path, context: str = "") -> np.ndarray:
@@ -58,7 +58,7 @@ def patch_normalise(resized: np.ndarray, patch_size: int) -> np.ndarray:
     """
     n, height, width = resized.shape
     if height % patch_size or width % patch_size:
-        raise OptionError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")
+        raise InvalidValueError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")
     rows, cols = height // patch_size, width // patch_size
     patches = resized.astype(np.float32).reshape(n, rows, patch_size, cols, patch_size)
     low = patches.min(axis=(2, 4), keepdims=True)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import OptionError
+from .errors import InvalidValueError
 
 SYNTHETIC_VERSION = 1
 IMAGE_HEIGHT = 32
@@ -139,12 +139,14 @@ def synthetic_route(
 
 def _check_arguments(n_places: int, traversals: tuple[str, ...], seed: int) -> None:
     if isinstance(n_places, bool) or not isinstance(n_places, (int, np.integer)) or n_places < 1:
-        raise OptionError(f"the synthetic route needs a positive number of places, got {n_places!r}")
+        raise InvalidValueError(f"the synthetic route needs a positive number of places, got {n_places!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise OptionError(f"the synthetic route seed must be a non-negative integer, got {seed!r}")
+        raise InvalidValueError(f"the synthetic route seed must be a non-negative integer, got {seed!r}")
     unknown = [name for name in traversals if name not in SEASONS]
     if unknown or not traversals:
-        raise OptionError(f"unknown synthetic traversal(s) {unknown}; available: {', '.join(SYNTHETIC_TRAVERSALS)}")
+        raise InvalidValueError(
+            f"unknown synthetic traversal(s) {unknown}; available: {', '.join(SYNTHETIC_TRAVERSALS)}"
+        )
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ import pytest
 
 from vprsnn_export.config import PreprocessConfig
 from vprsnn_export.dataset import Dataset, load_dataset, parse_places
-from vprsnn_export.errors import DataError, OptionError
+from vprsnn_export.errors import DataError, InvalidValueError
 from vprsnn_export.preprocess import preprocess_images
 from vprsnn_export.synthetic import synthetic_fingerprint, synthetic_route
 
@@ -121,7 +121,7 @@ def test_parse_places(spec: str, expected: tuple[int, int, int]) -> None:
 
 @pytest.mark.parametrize("spec", ["", "5", "a:b", "1:0", "-1:3", "1:2:0", "1:2:-1", "1:2:3:4", "1.5:2"])
 def test_parse_places_rejects(spec: str) -> None:
-    with pytest.raises(OptionError, match="START:COUNT"):
+    with pytest.raises(InvalidValueError, match="START:COUNT"):
         parse_places(spec)
 
 
@@ -152,8 +152,8 @@ def test_synthetic_size_and_selection(tmp_path: Path) -> None:
 def test_synthetic_errors() -> None:
     assert "autumn" in _error(DataError, "synthetic", ["summer", "autumn"], CFG)
     assert "summer, winter" in _error(DataError, "synthetic", ["autumn"], CFG)
-    assert "synthetic:0" in _error(OptionError, "synthetic:0", TRAVERSALS, CFG)
-    assert "synthetic:x" in _error(OptionError, "synthetic:x", TRAVERSALS, CFG)
+    assert "synthetic:0" in _error(InvalidValueError, "synthetic:0", TRAVERSALS, CFG)
+    assert "synthetic:x" in _error(InvalidValueError, "synthetic:x", TRAVERSALS, CFG)
     assert "ids 0..59" in _error(DataError, "synthetic", TRAVERSALS, CFG, places="58:3")
 
 
@@ -193,8 +193,8 @@ def test_traversal_column_absent(data_dir: Path) -> None:
 
 
 def test_bad_traversal_names(data_dir: Path) -> None:
-    assert "place_id" in _error(OptionError, data_dir, ["place_id", "summer"], CFG)
-    assert "traversal" in _error(OptionError, data_dir, [], CFG)
+    assert "place_id" in _error(InvalidValueError, data_dir, ["place_id", "summer"], CFG)
+    assert "traversal" in _error(InvalidValueError, data_dir, [], CFG)
     assert load_dataset(data_dir, ["summer", "summer"], CFG).traversals == ("summer",)
 
 
@@ -240,7 +240,7 @@ def test_subset_errors(data_dir: Path, tmp_path: Path) -> None:
 
 def test_subset_and_places_together(data_dir: Path, tmp_path: Path) -> None:
     subset = _write_csv(tmp_path / "s.csv", ["place_id"], [[12]])
-    assert "--subset" in _error(OptionError, data_dir, TRAVERSALS, CFG, subset=subset, places="10:2")
+    assert "--subset" in _error(InvalidValueError, data_dir, TRAVERSALS, CFG, subset=subset, places="10:2")
 
 
 def test_missing_image(data_dir: Path) -> None:

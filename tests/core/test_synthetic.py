@@ -9,7 +9,7 @@ import pytest
 
 from vprsnn_export import synthetic
 from vprsnn_export.config import PreprocessConfig
-from vprsnn_export.errors import OptionError
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.preprocess import preprocess_images
 from vprsnn_export.synthetic import SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
@@ -86,5 +86,5 @@ def test_fingerprint_includes_version(monkeypatch: pytest.MonkeyPatch) -> None:
 
 @pytest.mark.parametrize("kwargs", [{"n_places": 0}, {"traversals": ("autumn",)}, {"traversals": ()}, {"seed": -1}])
 def test_bad_arguments(kwargs: dict) -> None:
-    with pytest.raises(OptionError):
+    with pytest.raises(InvalidValueError):
         synthetic_route(**kwargs)

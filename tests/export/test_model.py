@@ -9,7 +9,7 @@ import pytest
 
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError
+from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import (
     FORMAT_VERSION,
     check_bits,
@@ -84,7 +84,7 @@ def test_header_describes_widths_rounding_scales_and_encoder(tmp_path):
 
 @pytest.mark.parametrize("bits", [1, 9, 16])
 def test_unsupported_bit_width_is_an_option_error(bits):
-    with pytest.raises(OptionError, match="unsupported weight bit width"):
+    with pytest.raises(InvalidValueError, match="unsupported weight bit width"):
         check_bits(bits)
 
 

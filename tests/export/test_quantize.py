@@ -12,17 +12,17 @@ from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
-from vprsnn_export.errors import OptionError
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.export.quantize import (
     column_sse,
     desired_scales,
     quantise_arrays,
     quantize_checkpoint,
-    recalibrate,
     split_scales,
 )
-from vprsnn_export.runtime.inference import FloatNetwork
+from vprsnn_export.runtime.deployment import recalibrate
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.stdp import initial_weights
 
@@ -117,15 +117,15 @@ def test_threshold_folding_gives_one_integer_threshold_and_keeps_float_threshold
 
 
 def test_folding_needs_per_neuron_scales_and_methods_are_checked():
-    with pytest.raises(OptionError, match="per-neuron"):
+    with pytest.raises(InvalidValueError, match="per-neuron"):
         quantise_arrays(
             stdp_like_weights(), thresholds(), 4, per_neuron=False, scale_method="max", fold_thresholds=True
         )
-    with pytest.raises(OptionError, match="unknown scale method"):
+    with pytest.raises(InvalidValueError, match="unknown scale method"):
         quantise_arrays(
             stdp_like_weights(), thresholds(), 4, per_neuron=True, scale_method="p99", fold_thresholds=False
         )
-    with pytest.raises(OptionError, match="unsupported weight bit width"):
+    with pytest.raises(InvalidValueError, match="unsupported weight bit width"):
         quantise_arrays(
             stdp_like_weights(), thresholds(), 1, per_neuron=True, scale_method="max", fold_thresholds=False
         )
@@ -178,7 +178,7 @@ def test_quantize_checkpoint_then_recalibrate_on_the_integer_simulator():
     assert (
         np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation["calibration"] == "float (reused)"
     )
-    with pytest.raises(OptionError, match="reference places"):
+    with pytest.raises(InvalidValueError, match="reference places"):
         recalibrate(model, reference, ckpt.reference_place_ids[::-1])
 
 

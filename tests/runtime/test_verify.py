@@ -10,10 +10,10 @@ import torch
 from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.dataset import load_dataset
-from vprsnn_export.errors import EXIT_BAD_INPUT, OptionError
+from vprsnn_export.encoding import query_spikes
+from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runtime.evaluation import ReadoutOptions
-from vprsnn_export.runtime.inference import query_spikes
 from vprsnn_export.runtime.verify import (
     DEFAULT_TOLERANCES,
     SCHEMA,
@@ -77,7 +77,7 @@ def test_tolerances_default_override_and_off():
 
 @pytest.mark.parametrize("bad", ["nonsense=1", "accuracy", "accuracy=abc", "accuracy=-0.1", "r_at_100p=nan"])
 def test_bad_tolerances_are_option_errors(bad):
-    with pytest.raises(OptionError) as info:
+    with pytest.raises(InvalidValueError) as info:
         parse_tolerances(bad)
     assert info.value.exit_code == EXIT_BAD_INPUT
 

@@ -235,9 +235,9 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
     """VPRSNN_LAVA_MODEL (a fixed-point model file) when set, else a 3-epoch network quantised at 8 bits per neuron;
     with the spike trains of its first ``n`` winter queries."""
     from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.encoding import query_spikes
     from vprsnn_export.export.model import load_fixed_point
     from vprsnn_export.export.quantize import quantize_checkpoint
-    from vprsnn_export.runtime.inference import query_spikes
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     given = os.environ.get("VPRSNN_LAVA_MODEL")

@@ -13,9 +13,9 @@ import torch
 
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.runtime.inference import FloatNetwork
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_target import (
     DT_SECONDS,
@@ -186,9 +186,9 @@ def test_writer_validates_its_input(tmp_path):
     with pytest.raises(ModelFileError, match="weight_mantissa"):
         write_nir(dataclasses.replace(model, weight_mantissa=model.weight_mantissa + 300), tmp_path / "x.nir")
     ckpt = make_checkpoint(np.random.default_rng(8))
-    with pytest.raises(OptionError, match="NaN"):
+    with pytest.raises(InvalidValueError, match="NaN"):
         write_nir(dataclasses.replace(ckpt, thresholds=np.full(6, np.nan, dtype=np.float32)), tmp_path / "x.nir")
-    with pytest.raises(OptionError, match="wta_inhibition"):
+    with pytest.raises(InvalidValueError, match="wta_inhibition"):
         build_graph(model, wta_inhibition=-1.0)
     assert list(tmp_path.iterdir()) == []
 

@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, OptionError
+from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
-from vprsnn_export.runtime.assignment import strategy_scores
+from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_target import IR_VERSION, build_onnx, read_onnx, run_onnx, run_onnx_outputs, write_onnx
 
@@ -146,7 +146,7 @@ def test_writer_refuses_invalid_models_and_writes_nothing(tmp_path):
     with pytest.raises(ModelFileError, match="threshold"):
         write_onnx(bad, tmp_path / "bad.onnx")
     spill = dataclasses.replace(model, config=model.config.replace(**{"network.state_isolation": False}))
-    with pytest.raises(OptionError, match="state isolation"):
+    with pytest.raises(InvalidValueError, match="state isolation"):
         build_onnx(spill)
     assert list(tmp_path.iterdir()) == []
 
@@ -248,8 +248,8 @@ def test_export_command_float_checkpoint_needs_quantisation_for_integer_targets(
 def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     """A short training on the real subset, quantised at 8, 4 and 2 bits: ONNX == integer simulator on every query."""
     from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.encoding import query_spikes
     from vprsnn_export.export.quantize import quantize_checkpoint
-    from vprsnn_export.runtime.inference import query_spikes
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     cfg = Config().replace(**{"train.epochs": 3, "seed": 1})

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..config import Config
-from ..errors import OptionError
+from ..errors import InvalidValueError
 
 
 def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) -> None:
@@ -100,7 +100,7 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
     for item in getattr(args, "set", []):
         key, sep, raw = item.partition("=")
         if not sep:
-            raise OptionError(f"--set expects KEY=VALUE, got {item!r}")
+            raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = _parse_value(raw.strip())
     return (base or Config()).replace(**overrides)
 
@@ -116,16 +116,16 @@ def parse_int_list(raw: str, option: str) -> tuple[int, ...]:
     try:
         values = tuple(int(v) for v in raw.split(",") if v.strip())
     except ValueError:
-        raise OptionError(f"{option} expects comma-separated integers, got {raw!r}") from None
+        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}") from None
     if not values or min(values) < 1:
-        raise OptionError(f"{option} expects positive integers, got {raw!r}")
+        raise InvalidValueError(f"{option} expects positive integers, got {raw!r}")
     return values
 
 
 def parse_names(raw: str, option: str) -> list[str]:
     names = [v.strip() for v in raw.split(",") if v.strip()]
     if not names:
-        raise OptionError(f"{option} needs at least one traversal name")
+        raise InvalidValueError(f"{option} needs at least one traversal name")
     return names
 
 
@@ -135,9 +135,9 @@ def parse_velocity_grid(raw: str | None) -> tuple[float, ...] | None:
     try:
         lo, hi, step = (float(v) for v in raw.split(":"))
     except ValueError:
-        raise OptionError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
+        raise InvalidValueError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
     if step <= 0 or hi < lo:
-        raise OptionError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
+        raise InvalidValueError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
     count = int(round((hi - lo) / step)) + 1
     return tuple(round(lo + i * step, 10) for i in range(count))
 

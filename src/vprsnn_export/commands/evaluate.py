@@ -10,7 +10,7 @@ import numpy as np
 from ..checkpoint import load_checkpoint
 from ..dataset import load_dataset
 from ..device import resolve_device
-from ..errors import OptionError
+from ..errors import InvalidValueError
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = load_query_data(args, ckpt, traversals)
     if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
-        raise OptionError("--baseline needs the query places to be the checkpoint's reference places")
+        raise InvalidValueError("--baseline needs the query places to be the checkpoint's reference places")
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),

@@ -10,7 +10,7 @@ import shlex
 from pathlib import Path
 
 from .. import experiments
-from ..errors import OptionError
+from ..errors import InvalidValueError
 from ..fileio import atomic_write_text
 
 HELPER_MODULES = {"common", "plots"}
@@ -46,7 +46,7 @@ def settings_from_args(args: argparse.Namespace):
     for item in args.set:
         key, sep, raw = item.partition("=")
         if not sep:
-            raise OptionError(f"--set expects KEY=VALUE, got {item!r}")
+            raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = _parse_value(raw.strip())
     extra = {"overrides": overrides}
     if args.data:
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:14s} {module.DESCRIPTION}")
         return 0
     if args.name not in modules:
-        raise OptionError(f"unknown experiment {args.name!r}; choose from {', '.join(modules)}")
+        raise InvalidValueError(f"unknown experiment {args.name!r}; choose from {', '.join(modules)}")
     module = modules[args.name]
     settings = settings_from_args(args)
     results = module.run(settings)

@@ -25,7 +25,7 @@ import torch
 
 from ..checkpoint import FORMAT as CHECKPOINT_FORMAT
 from ..checkpoint import Checkpoint, load_checkpoint
-from ..errors import ModelFileError, OptionError
+from ..errors import InvalidValueError, ModelFileError
 from ..fileio import atomic_write_text, read_container, sha256_file
 from ..targets.nir_target import WTA_INHIBITION
 from ._common import add_data_options, add_runtime_options, format_table, print_json
@@ -85,7 +85,7 @@ def parse_targets(raw: str) -> tuple[str, ...]:
     names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
     unknown = [n for n in names if n not in TARGETS]
     if not names or unknown:
-        raise OptionError(f"--to expects some of {', '.join(TARGETS)}, got {raw!r}")
+        raise InvalidValueError(f"--to expects some of {', '.join(TARGETS)}, got {raw!r}")
     return names
 
 
@@ -110,13 +110,13 @@ def integer_model(source, bits: int | None, digest: str, targets: tuple[str, ...
 
     if isinstance(source, FixedPointModel):
         if bits is not None:
-            raise OptionError("--quantize applies to float checkpoints; this is already a fixed-point model")
+            raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")
         return source
     wanted = [t for t in targets if t in INTEGER_TARGETS]
     if not wanted:
         return None
     if bits is None:
-        raise OptionError(
+        raise InvalidValueError(
             f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
             "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
         )
@@ -188,8 +188,7 @@ def export_all(
 
 def check_spikes(args: argparse.Namespace, source) -> tuple[torch.Tensor, str]:
     """Query presentations of --query (real data), else synthetic Bernoulli trains of random images."""
-    from ..encoding import encode
-    from ..runtime.inference import query_spikes
+    from ..encoding import encode, query_spikes
     from .evaluate import load_query_data
 
     cfg = source.config
@@ -208,7 +207,7 @@ def check_spikes(args: argparse.Namespace, source) -> tuple[torch.Tensor, str]:
 
 def reference_run(source, spikes: torch.Tensor, wta: bool):
     """The project's own raster for the source (float network or integer simulator)."""
-    from ..runtime.inference import FloatNetwork
+    from ..dynamics import FloatNetwork
     from ..targets.intsim import simulate
 
     cfg = source.config.replace(**{"network.wta": wta})
@@ -230,7 +229,7 @@ def row(target: str, check: str, ok: bool | None, detail: str) -> dict[str, Any]
 
 def decided_places(source, counts: np.ndarray) -> np.ndarray:
     """W+Prob decision (k = 1) of each presentation with the source's own calibration."""
-    from ..runtime.assignment import decide, strategy_scores
+    from ..readout.assignment import decide, strategy_scores
 
     return decide(strategy_scores(source.calibration, counts, "wprob", source.config.assignment.gamma), "wprob")[0]
 
@@ -270,7 +269,7 @@ def check_nir(path: Path, source, spikes: torch.Tensor, consumer_name: str = "ni
 
 
 def check_onnx(path: Path, model, spikes: torch.Tensor) -> list[dict]:
-    from ..runtime.assignment import strategy_scores
+    from ..readout.assignment import strategy_scores
     from ..targets.intsim import simulate
     from ..targets.onnx_target import run_onnx_outputs
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
-from ..errors import OptionError
+from ..errors import InvalidValueError
 from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json
 from .evaluate import load_query_data
 
@@ -56,11 +56,12 @@ def model_filename(bits: int, per_neuron: bool, scale_method: str, fold_threshol
 
 def run(args: argparse.Namespace) -> int:
     from ..export.model import check_bits, save_fixed_point
-    from ..export.quantize import quantize_checkpoint, recalibrate
+    from ..export.quantize import quantize_checkpoint
+    from ..runtime.deployment import recalibrate
 
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
     if args.fold_thresholds and not args.per_neuron:
-        raise OptionError("--fold-thresholds needs --per-neuron")
+        raise InvalidValueError("--fold-thresholds needs --per-neuron")
     ckpt = load_checkpoint(args.checkpoint)
     digest = checkpoint_sha256(args.checkpoint)
     device = resolve_device(args.device)

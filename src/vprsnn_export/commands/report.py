@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import OptionError
+from ..errors import InvalidValueError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,10 +28,10 @@ def run(args: argparse.Namespace) -> int:
 
     sources = [str(report_path(p)) for p in args.runs]
     if len(set(sources)) != len(sources):
-        raise OptionError("the same report is named twice")
+        raise InvalidValueError("the same report is named twice")
     reports = [load_report(p) for p in args.runs]
     if len(reports) > 1 and not args.out:
-        raise OptionError("combining several reports needs --out DIR")
+        raise InvalidValueError("combining several reports needs --out DIR")
     out = Path(args.out) if args.out else report_path(args.runs[0]).parent
     combined = combine_reports(reports, sources)
     rewrite_json = len(reports) > 1 or (

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
-from ..errors import OptionError
+from ..errors import InvalidValueError
 from ._common import RESULT_COLUMNS, add_query_options, add_runtime_options, format_table, print_json
 from .evaluate import load_query_data, readout_options
 
@@ -49,8 +49,9 @@ def evaluate_fixed_point(
     With ``float_checkpoint`` the float network runs on the same spike trains and the
     per-step agreement of the two rasters is added as ``winner_agreement``.
     """
+    from ..dynamics import FloatNetwork
+    from ..encoding import query_spikes
     from ..runtime.evaluation import readout_rows, spike_statistics
-    from ..runtime.inference import FloatNetwork, query_spikes
     from ..targets.intsim import IntegerNetwork, step_agreement
 
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     float_checkpoint = None
     if args.compare:
         if checkpoint_sha256(args.compare) != model.source_sha256:
-            raise OptionError(
+            raise InvalidValueError(
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
         float_checkpoint = load_checkpoint(args.compare)

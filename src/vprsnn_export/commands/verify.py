@@ -18,7 +18,7 @@ import numpy as np
 from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
-from ..errors import EXIT_CHECK_FAILED, OptionError
+from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ._common import (
     add_data_options,
     add_runtime_options,
@@ -118,16 +118,16 @@ def limit_cpu_threads() -> int:
 
 
 def verify_options(args: argparse.Namespace, gamma: float):
-    """The VerifyOptions of the command line (every option validated; OptionError otherwise)."""
+    """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
     from ..export.model import check_bits
     from ..runtime.evaluation import ReadoutOptions
     from ..runtime.verify import VerifyOptions, parse_targets, parse_tolerances
 
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
-        raise OptionError(f"--reference-queries must be >= 0, got {args.reference_queries}")
+        raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
     if args.gt_tolerance < 0:
-        raise OptionError(f"--gt-tolerance must be >= 0, got {args.gt_tolerance}")
+        raise InvalidValueError(f"--gt-tolerance must be >= 0, got {args.gt_tolerance}")
     readout = ReadoutOptions(
         gamma=gamma,
         ks=parse_int_list(args.k, "--k"),
@@ -155,7 +155,7 @@ def selection(args: argparse.Namespace, ckpt) -> tuple[str, str | None, str | No
         subset, places = ckpt.data.get("subset"), ckpt.data.get("places")
     source = args.data or ckpt.data.get("source")
     if not source:
-        raise OptionError("the checkpoint names no data source: give --data")
+        raise InvalidValueError("the checkpoint names no data source: give --data")
     return str(source), subset, places
 
 
@@ -301,7 +301,9 @@ def run(args: argparse.Namespace) -> int:
     progress = not args.quiet
     limit_cpu_threads()
     if args.seeds is not None and (args.seeds < 1 or len(args.checkpoints) != 1):
-        raise OptionError("--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)")
+        raise InvalidValueError(
+            "--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)"
+        )
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]

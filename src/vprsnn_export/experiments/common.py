@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 import platform
 import time
 from dataclasses import asdict, dataclass, field
@@ -10,9 +13,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vprsnn_export import __version__
+from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset, load_dataset
+from vprsnn_export.device import resolve_device
+from vprsnn_export.trainer.pipeline import train_and_calibrate
+from vprsnn_export.version import __version__
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to the repository root, where experiments run
 
@@ -80,7 +86,6 @@ def pct(summary: dict) -> str:
 
 def cache_dir() -> Path:
     """Where experiments cache trained checkpoints: $VPRSNN_CACHE, else ~/.cache/vprsnn-export/checkpoints."""
-    import os
 
     return Path(os.environ.get("VPRSNN_CACHE", Path.home() / ".cache" / "vprsnn-export" / "checkpoints"))
 
@@ -91,12 +96,6 @@ def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection
     Training is deterministic, so a checkpoint is cached under a hash of everything
     that determines it (config, data manifest hash, selected places, reference, version).
     """
-    import hashlib
-    import json
-
-    from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
-    from vprsnn_export.device import resolve_device
-    from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     key = json.dumps(
         {

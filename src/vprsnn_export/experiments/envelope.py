@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.runtime.aggregation import aggregate, estimate_velocity
-from vprsnn_export.runtime.assignment import strategy_scores
+from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
+from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows

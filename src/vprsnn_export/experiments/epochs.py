@@ -6,8 +6,8 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
+from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
-from vprsnn_export.runtime.inference import FloatNetwork
 from vprsnn_export.trainer.train import Presentation, train_network
 
 from .common import Settings, load, mean_std, provenance

@@ -6,9 +6,10 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.export.quantize import quantize_checkpoint, recalibrate
+from vprsnn_export.encoding import query_spikes
+from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.runtime.deployment import recalibrate
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
-from vprsnn_export.runtime.inference import query_spikes
 from vprsnn_export.targets.intsim import IntegerNetwork
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows

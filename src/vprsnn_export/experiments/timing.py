@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.device import resolve_device
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.runtime.aggregation import aggregate
-from vprsnn_export.runtime.assignment import strategy_scores
-from vprsnn_export.runtime.inference import FloatNetwork, query_spikes
+from vprsnn_export.readout.aggregation import aggregate
+from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
 from vprsnn_export.trainer.train import Presentation, train_network

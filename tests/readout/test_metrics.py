@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.runtime.metrics import is_correct, pr_curve, pr_metrics, predicted_place_ids
+from vprsnn_export.readout.metrics import is_correct, pr_curve, pr_metrics, predicted_place_ids
 
 CONF = np.array([0.9, 0.8, 0.8, 0.5, 0.3])
 CORRECT = np.array([1, 1, 0, 1, 0], dtype=bool)

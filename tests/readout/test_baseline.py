@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vprsnn_export.runtime import baseline
-from vprsnn_export.runtime.aggregation import aggregate
-from vprsnn_export.runtime.assignment import NO_MATCH, decide
-from vprsnn_export.runtime.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout import baseline
+from vprsnn_export.readout.aggregation import aggregate
+from vprsnn_export.readout.assignment import NO_MATCH, decide
+from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 
 
 def test_sad_distances_hand_and_brute_force(monkeypatch: pytest.MonkeyPatch) -> None:

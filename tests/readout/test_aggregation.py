@@ -7,8 +7,8 @@ import inspect
 import numpy as np
 import pytest
 
-from vprsnn_export.runtime import aggregation
-from vprsnn_export.runtime.aggregation import aggregate, estimate_velocity, shift_window
+from vprsnn_export.readout import aggregation
+from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, shift_window
 
 
 def _diagonal(

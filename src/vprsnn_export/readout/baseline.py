@@ -3,8 +3,8 @@
 The same preprocessed (e.g. patch-normalised, flattened) images that the
 network sees are compared pixel by pixel with every reference image. The
 distances are turned into the same kind of per-query distribution as W+Prob,
-so :func:`vprsnn_export.runtime.assignment.decide` (strategy ``"wprob"``) and
-:func:`vprsnn_export.runtime.aggregation.aggregate` serve the baseline
+so :func:`vprsnn_export.readout.assignment.decide` (strategy ``"wprob"``) and
+:func:`vprsnn_export.readout.aggregation.aggregate` serve the baseline
 unchanged, and the baseline is scored with exactly the same metrics.
 """
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vprsnn_export.runtime.assignment import (
+from vprsnn_export.readout.assignment import (
     NO_MATCH,
     STRATEGIES,
     decide,

@@ -1,0 +1,121 @@
+"""The folders depend on each other in one direction only (docs/architecture.md).
+
+Every ``import`` of a ``vprsnn_export`` module, at module top or inside a function, must
+point to the same layer or an earlier one; and first-party imports sit at module top.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Layers in dependency order: a module may import from its own layer or an earlier one.
+LAYERS = ("core", "trainer", "export", "targets", "runtime", "experiments", "api", "commands")
+
+#: Where each subpackage's files live (setuptools package-dir in pyproject.toml).
+FOLDERS = {
+    "vprsnn_export": ROOT / "src" / "vprsnn_export",
+    "vprsnn_export.trainer": ROOT / "trainer",
+    "vprsnn_export.export": ROOT / "export",
+    "vprsnn_export.targets": ROOT / "targets",
+    "vprsnn_export.runtime": ROOT / "runtime",
+}
+
+
+def layer_of(module: str) -> str:
+    """The layer of a dotted module name inside the package."""
+    parts = module.split(".")
+    if module in ("vprsnn_export", "vprsnn_export.api"):
+        return "api"
+    if len(parts) > 1 and parts[1] in ("trainer", "export", "targets", "runtime", "experiments"):
+        return parts[1]
+    if len(parts) > 1 and parts[1] in ("commands", "cli", "__main__"):
+        return "commands"
+    return "core"
+
+
+def package_modules() -> dict[str, Path]:
+    """Every module of the package with its file."""
+    modules: dict[str, Path] = {}
+    for package, folder in FOLDERS.items():
+        for path in sorted(folder.rglob("*.py")):
+            relative = path.relative_to(folder).with_suffix("")
+            if package == "vprsnn_export" and relative.parts[0] in ("trainer", "export", "targets", "runtime"):
+                continue
+            parts = [p for p in relative.parts if p != "__init__"]
+            modules[".".join([package, *parts])] = path
+    return modules
+
+
+def imports_of(module: str, path: Path) -> list[tuple[str, int, bool]]:
+    """(imported module, line, at module top) for every first-party import of a file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    is_package = path.name == "__init__.py"
+    found: list[tuple[str, int, bool]] = []
+    top_level = {id(node) for node in tree.body}
+    for node in ast.walk(tree):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base if is_package else base[:-1]
+                base = base[: len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            names = [target]
+            if node.module is None or target in ("vprsnn_export",):
+                names = [
+                    f"{target}.{alias.name}" if f"{target}.{alias.name}" in MODULES else target for alias in node.names
+                ]
+        at_top = id(node) in top_level or _inside_type_checking(tree, node)
+        found += [(name, node.lineno, at_top) for name in names if name.split(".")[0] == "vprsnn_export"]
+    return found
+
+
+def _inside_type_checking(tree: ast.Module, node: ast.AST) -> bool:
+    for block in tree.body:
+        if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test):
+            if any(child is node for child in ast.walk(block)):
+                return True
+    return False
+
+
+MODULES = package_modules()
+
+
+def test_the_package_has_the_expected_modules():
+    assert "vprsnn_export.config" in MODULES and "vprsnn_export.targets.intsim" in MODULES
+    assert {layer_of(m) for m in MODULES} == set(LAYERS)
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_no_import_points_to_a_later_layer(module: str):
+    rank = LAYERS.index(layer_of(module))
+    back_edges = [
+        f"line {line}: {target} ({layer_of(target)})"
+        for target, line, _ in imports_of(module, MODULES[module])
+        if LAYERS.index(layer_of(target)) > rank
+    ]
+    assert not back_edges, f"{module} ({layer_of(module)}) imports from a later layer: {back_edges}"
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_first_party_imports_are_at_module_top(module: str):
+    inside = [f"line {line}: {target}" for target, line, top in imports_of(module, MODULES[module]) if not top]
+    assert not inside, f"{module} imports inside functions: {inside}"
+
+
+def test_a_back_edge_is_detected(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text("from vprsnn_export.runtime.verify import verify_checkpoint\n")
+    assert [(t, top) for t, _, top in imports_of("vprsnn_export.trainer.bad", bad)] == [
+        ("vprsnn_export.runtime.verify", True)
+    ]
+    assert LAYERS.index(layer_of("vprsnn_export.runtime.verify")) > LAYERS.index("trainer")
