@@ -1,0 +1,1 @@
+"""The paper's readout: neuron assignment (Standard, Weighted, W+Prob), exact metrics, sequence aggregation, the SAD baseline."""
