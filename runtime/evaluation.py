@@ -2,23 +2,32 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
+import torch
 
+from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
+from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
-from vprsnn_export.readout.metrics import is_correct, pr_metrics
+from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 
 
 @dataclass(frozen=True)
 class ReadoutOptions:
-    """How decisions are read out and scored (the CLI's --k, --rule, --velocity, --tolerance)."""
+    """How decisions are read out and scored (the CLI's --k, --rule, --velocity, --match-window).
+
+    ``tolerance`` is the ground-truth window in places: a prediction within +-tolerance of the
+    true place counts as correct (0 = exact match).
+    """
 
     gamma: float
     ks: tuple[int, ...] = (1,)
@@ -37,9 +46,7 @@ def decision_metrics(
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
     predicted, confidence = decide(distribution, strategy)
-    matched = predicted >= 0
-    predicted_ids = np.where(matched, reference_place_ids[np.maximum(predicted, 0)], -1)
-    correct = is_correct(predicted_ids, query_place_ids, tolerance) & matched
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
     return pr_metrics(correct, confidence)
 
 
@@ -95,34 +102,69 @@ def baseline_rows(
     return rows
 
 
-def spike_statistics(candidates_per_step: np.ndarray, counts: np.ndarray) -> dict:
-    """How the WTA is exercised: mean |C[t]|, fraction of steps with |C[t]| > 1, spikes per query."""
+@dataclass(frozen=True)
+class SpikeStatistics:
+    """How the WTA is exercised on the queries: mean |C[t]|, steps with |C[t]| > 1 or 0, spikes per query."""
+
+    mean_candidates_per_step: float
+    multi_candidate_step_fraction: float
+    quiet_step_fraction: float
+    mean_spikes_per_query: float
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def spike_statistics(candidates_per_step: np.ndarray, counts: np.ndarray) -> SpikeStatistics:
+    """Statistics of one run: candidates per step (N, T) and spike counts (N, neurons)."""
     candidates = np.asarray(candidates_per_step)
-    return {
-        "mean_candidates_per_step": float(candidates.mean()),
-        "multi_candidate_step_fraction": float((candidates > 1).mean()),
-        "quiet_step_fraction": float((candidates == 0).mean()),
-        "mean_spikes_per_query": float(np.asarray(counts).sum(axis=1).mean()),
-    }
+    return SpikeStatistics(
+        mean_candidates_per_step=float(candidates.mean()),
+        multi_candidate_step_fraction=float((candidates > 1).mean()),
+        quiet_step_fraction=float((candidates == 0).mean()),
+        mean_spikes_per_query=float(np.asarray(counts).sum(axis=1).mean()),
+    )
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One network evaluated on one query traversal.
+
+    ``rows`` are result rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries}
+    (plus ``calibration`` for a fixed-point model: its deployed and its float S^R).
+    """
+
+    rows: list[dict[str, Any]]
+    spike_stats: SpikeStatistics
+    query_counts: np.ndarray  # (Q, neurons) int64
+    saturations: int = 0
+    max_current: int = 0
+    winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON of `evaluate --json` / `simulate --json` (without the spike counts)."""
+        out: dict[str, Any] = {"results": self.rows, "spike_stats": self.spike_stats.to_dict()}
+        if self.winner_agreement is not None:
+            out["winner_agreement"] = self.winner_agreement
+        return out
 
 
 def evaluate_float(
-    ckpt,
+    ckpt: Checkpoint,
     query_images: np.ndarray,
     query_place_ids: np.ndarray,
     traversal: str,
     options: ReadoutOptions,
     *,
-    device,
+    device: torch.device,
     state_isolation: bool | None = None,
-    reference_images: dict[str, np.ndarray] | None = None,
-) -> dict:
+    reference_images: Mapping[str, np.ndarray] | None = None,
+) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
     the no-learning SAD baseline is added as rows with strategy "sad".
     """
-
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     run = network.run(
         query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
@@ -134,11 +176,53 @@ def evaluate_float(
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
         rows += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
-    return {
-        "rows": rows,
-        "spike_stats": spike_statistics(run.candidates_per_step.numpy(), counts),
-        "query_counts": counts,
-    }
+    candidates = run.candidates_per_step
+    assert candidates is not None  # the float network always reports them
+    return Evaluation(rows=rows, spike_stats=spike_statistics(candidates.numpy(), counts), query_counts=counts)
+
+
+CALIBRATIONS = ("deployed", "float")
+
+
+def evaluate_fixed_point(
+    model: FixedPointModel,
+    query_images: np.ndarray,
+    query_place_ids: np.ndarray,
+    traversal: str,
+    options: ReadoutOptions,
+    *,
+    device: torch.device,
+    state_isolation: bool | None = None,
+    float_checkpoint: Checkpoint | None = None,
+) -> Evaluation:
+    """The integer simulator on one query traversal, read out with both calibrations (deployed and float S^R).
+
+    With ``float_checkpoint`` the float network runs on the same spike trains and the
+    per-step agreement of the two rasters is added as ``winner_agreement``.
+    """
+    spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
+    compare = float_checkpoint is not None
+    run = IntegerNetwork(model, device).run(spikes, record=compare, state_isolation=state_isolation)
+    counts = run.counts.numpy()
+    rows = []
+    for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
+        for row in readout_rows(calibration, counts, model.reference_place_ids, query_place_ids, options):
+            rows.append({"calibration": name, **row})
+    agreement = None
+    if float_checkpoint is not None and run.raster is not None:
+        network = FloatNetwork.from_arrays(float_checkpoint.weights, float_checkpoint.thresholds, model.config, device)
+        float_run = network.run(spikes, record=True, state_isolation=state_isolation)
+        assert float_run.raster is not None
+        agreement = step_agreement(float_run.raster, run.raster)
+    assert run.candidates_per_step is not None
+    return Evaluation(
+        rows=rows,
+        spike_stats=spike_statistics(run.candidates_per_step.numpy(), counts),
+        query_counts=counts,
+        saturations=run.saturations,
+        max_current=run.max_current,
+        winner_agreement=agreement,
+    )
 
 
 def calibrate_and_evaluate(

@@ -27,6 +27,8 @@ pass/fail per bit width. Every function below is pure apart from :func:`verify_c
 from __future__ import annotations
 
 import dataclasses
+import datetime
+import importlib.metadata as md
 import platform
 import sys
 import tempfile
@@ -38,17 +40,25 @@ from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import check_bits, save_fixed_point
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
-from vprsnn_export.readout.metrics import is_correct, pr_curve
+from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.stats import mean_std
+from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
+from vprsnn_export.version import __version__
 
+from .conformance import check_conformance
+from .deployment import deploy
 from .evaluation import ReadoutOptions, aggregated, readout_rows
+from .exporting import TARGETS, write_targets
 
 SCHEMA = "vprsnn-verify-report/1"
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
-TARGETS = ("onnx", "nir", "loihi")
-WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
 
 #: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).
 DEFAULT_TOLERANCES: dict[str, float | None] = {
@@ -122,209 +132,6 @@ class VerifyOptions:
         return data
 
 
-def parse_targets(raw: str) -> tuple[str, ...]:
-    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
-    if any(n not in TARGETS and n != "none" for n in names):
-        raise InvalidValueError(f"--targets expects some of {', '.join(TARGETS)} (or none), got {raw!r}")
-    return tuple(n for n in names if n != "none")
-
-
-# ---------------------------------------------------------------------------- cross-implementation
-
-
-def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> dict[str, Any]:
-    """Bit-for-bit equality of two arrays (or integers): any difference fails."""
-    a_arr, b_arr = _numpy(a), _numpy(b)
-    result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": "exact"}
-    if a_arr.shape != b_arr.shape:
-        return {
-            **result,
-            "equal": False,
-            "n_elements": int(a_arr.size),
-            "n_differences": None,
-            "first_difference": None,
-            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
-        }
-    differ = a_arr != b_arr
-    n_diff = int(np.count_nonzero(differ))
-    first = [int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape)] if n_diff else None
-    if n_diff == 0:
-        detail = f"identical ({a_arr.size} values)"
-    else:
-        where = tuple(first) if first else ()
-        detail = f"{n_diff} of {a_arr.size} values differ; first at {list(where)}: {a_arr[where]!r} vs {b_arr[where]!r}"
-    return {
-        **result,
-        "equal": n_diff == 0,
-        "n_elements": int(a_arr.size),
-        "n_differences": n_diff,
-        "first_difference": first,
-        "detail": detail,
-    }
-
-
-def distribution_comparison(
-    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
-) -> dict[str, Any]:
-    """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
-    a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": f"decisions exact, |diff| <= {limit:g}"}
-    if a_arr.shape != b_arr.shape:
-        return {
-            **result,
-            "equal": False,
-            "max_abs_difference": None,
-            "n_differences": None,
-            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
-        }
-    pred_a, _ = decide(a_arr, "wprob")
-    pred_b, _ = decide(b_arr, "wprob")
-    n_decisions = int(np.count_nonzero(pred_a != pred_b))
-    largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
-    equal = n_decisions == 0 and largest <= limit
-    return {
-        **result,
-        "equal": bool(equal),
-        "max_abs_difference": largest,
-        "n_differences": n_decisions,
-        "detail": f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
-    }
-
-
-def compare_outputs(prefix: str, a_name: str, a: Mapping[str, Any], b_name: str, b: Mapping[str, Any]) -> list[dict]:
-    """Exact comparisons of every output two implementations both produced (raster, counts, ...)."""
-    keys = [k for k in ("raster", "counts", "candidates", "final_voltage", "saturations") if k in a and k in b]
-    return [exact_comparison(f"{prefix}: {key}", a_name, a[key], b_name, b[key]) for key in keys]
-
-
-def compare_models(prefix: str, a_name: str, a, b_name: str, b) -> list[dict]:
-    """A fixed-point model read back from a file against the one written: every integer and the config."""
-    checks = [
-        exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
-    ]
-    scalars_a = [a.bits, a.scale_exponent, a.decay_dv, a.voltage_shift, a.voltage_bits]
-    scalars_b = [b.bits, b.scale_exponent, b.decay_dv, b.voltage_shift, b.voltage_bits]
-    checks.append(
-        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
-    )
-    same_config = a.config.to_dict() == b.config.to_dict()
-    checks.append(
-        {
-            "check": f"{prefix}: config",
-            "a": a_name,
-            "b": b_name,
-            "kind": "exact",
-            "equal": same_config,
-            "n_differences": 0 if same_config else 1,
-            "detail": "identical" if same_config else "configs differ",
-        }
-    )
-    return checks
-
-
-def integer_outputs(run, n: int | None = None) -> dict[str, np.ndarray | int]:
-    """An IntegerRun (or ReferenceRun) as plain arrays, optionally the first n presentations only."""
-    take = slice(None) if n is None else slice(0, n)
-    out: dict[str, Any] = {
-        "counts": _numpy(run.counts)[take],
-        "candidates": _numpy(run.candidates_per_step)[take],
-        "saturations": int(run.saturations),
-    }
-    if run.raster is not None:
-        out["raster"] = _numpy(run.raster)[take].astype(bool)
-    if run.final_voltage is not None:
-        out["final_voltage"] = _numpy(run.final_voltage)[take].astype(np.int64)
-    return out
-
-
-def cross_implementation(
-    model,
-    spikes: torch.Tensor,
-    int_run,
-    *,
-    folder: Path,
-    targets: Sequence[str],
-    reference_queries: int,
-    device: torch.device | None = None,
-) -> dict[str, Any]:
-    """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
-
-    ``int_run`` is the integer simulator's recorded run of ``spikes`` (the baseline).
-    """
-    from vprsnn_export.targets.intsim import IntegerNetwork
-    from vprsnn_export.targets.reference_stepper import reference_run
-
-    checks: list[dict] = []
-    skipped: dict[str, str] = {}
-    files: dict[str, list[str]] = {}
-    base = integer_outputs(int_run)
-    n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
-    if n_ref:
-        # the simulator's own rows of these queries; their saturations need a run of their own (the run counts a total)
-        head = {
-            **integer_outputs(int_run, n_ref),
-            "saturations": IntegerNetwork(model, device).run(spikes[:n_ref]).saturations,
-        }
-        oracle = reference_run(model, spikes[:n_ref].numpy())
-        checks += compare_outputs(
-            "reference stepper", "integer simulator", head, "reference stepper", integer_outputs(oracle)
-        )
-    if "onnx" in targets:
-        checks += _onnx_checks(model, spikes, base, folder, files, skipped)
-    if "nir" in targets:
-        from vprsnn_export.targets.nir_target import read_nir, write_nir
-
-        path = write_nir(model, folder / "model.nir", source_sha256=model.source_sha256)
-        files["nir"] = [str(path)]
-        checks += _round_trip("NIR", model, read_nir(path), spikes, base, device)
-    if "loihi" in targets:
-        from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
-
-        written = write_loihi(model, folder / "loihi", source_sha256=model.source_sha256)
-        files["loihi"] = [str(p) for p in written.values()]
-        checks += _round_trip("Loihi", model, read_loihi_model(folder / "loihi"), spikes, base, device)
-    return {
-        "checks": checks,
-        "passed": all(c["equal"] for c in checks),
-        "n_checks": len(checks),
-        "n_failed": sum(not c["equal"] for c in checks),
-        "reference_queries": n_ref,
-        "skipped": skipped,
-        "files": files,
-    }
-
-
-def _onnx_checks(model, spikes, base: dict, folder: Path, files: dict, skipped: dict) -> list[dict]:
-    from vprsnn_export.targets.onnx_target import run_onnx_outputs, write_onnx
-
-    try:
-        path = write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)
-    except InvalidValueError as exc:  # e.g. state isolation off: the graph cannot express it
-        skipped["onnx"] = str(exc)
-        return []
-    files["onnx"] = [str(path)]
-    out = run_onnx_outputs(path, spikes)
-    onnx = {"raster": out.raster.astype(bool), "counts": out.counts, "saturations": int(out.saturations.sum())}
-    checks = compare_outputs("ONNX (onnxruntime)", "integer simulator", base, "onnxruntime", onnx)
-    expected = strategy_scores(model.calibration, base["counts"], "wprob", model.config.assignment.gamma)
-    checks.append(
-        distribution_comparison("ONNX (onnxruntime): W+Prob head", "readout", expected, "onnxruntime", out.wprob)
-    )
-    return checks
-
-
-def _round_trip(label: str, model, rebuilt, spikes, base: dict, device) -> list[dict]:
-    from vprsnn_export.targets.intsim import IntegerNetwork
-
-    checks = compare_models(f"{label} read back", "written model", model, "read back", rebuilt)
-    run = IntegerNetwork(rebuilt, device).run(spikes, record=True)
-    checks += compare_outputs(
-        f"{label} read back", "integer simulator", base, f"{label} model on the simulator", integer_outputs(run)
-    )
-    return checks
-
-
 # ---------------------------------------------------------------------------- spike level
 
 
@@ -352,8 +159,6 @@ def spike_level(
     saturations: int,
 ) -> dict[str, Any]:
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
-    from vprsnn_export.targets.intsim import step_agreement
-
     agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
     corr = count_correlations(float_counts, int_counts)
     float_total = np.asarray(float_counts).sum(axis=1)
@@ -442,9 +247,7 @@ def pr_points(
 ) -> dict[str, list[float]]:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)
-    matched = predicted >= 0
-    ids = np.where(matched, np.asarray(reference_place_ids)[np.maximum(predicted, 0)], -1)
-    correct = is_correct(ids, query_place_ids, tolerance) & matched
+    correct = is_correct(predicted_place_ids(predicted, np.asarray(reference_place_ids)), query_place_ids, tolerance)
     precision, recall, _ = pr_curve(correct, confidence)
     return {"precision": [round(float(p), 6) for p in precision], "recall": [round(float(r), 6) for r in recall]}
 
@@ -601,15 +404,6 @@ def verify_checkpoint(
     order) are needed for the deployed calibration; ``export_dir`` receives each bit
     width's fixed-point model and exported files (a temporary folder when None).
     """
-    from tqdm import tqdm
-
-    from vprsnn_export.dynamics import FloatNetwork
-    from vprsnn_export.encoding import query_spikes
-    from vprsnn_export.export.model import check_bits, save_fixed_point
-    from vprsnn_export.export.quantize import quantize_checkpoint
-    from vprsnn_export.runtime.deployment import recalibrate
-    from vprsnn_export.targets.intsim import IntegerNetwork
-
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
     if options.calibration not in ("deployed", "float"):
@@ -640,12 +434,14 @@ def verify_checkpoint(
             clock = time.perf_counter()
             seconds: dict[str, float] = {}
             stages.set_postfix(bits=bits, stage="quantise")
-            model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options.per_neuron, options.scale_method)
-            model = recalibrate(
-                model,
-                dict(reference_images or {}),
-                ref_ids,
-                reuse_float_calibration=options.calibration == "float",
+            model = deploy(
+                ckpt,
+                ckpt_sha256,
+                bits,
+                per_neuron=options.per_neuron,
+                scale_method=options.scale_method,
+                calibration=options.calibration,
+                reference_images=reference_images,
                 device=device,
             )
             folder = root / f"{bits}bit"
@@ -658,15 +454,18 @@ def verify_checkpoint(
             seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="targets")
-            cross = cross_implementation(
+            written, skipped = write_targets(
+                model, model, options.targets, folder, digest=model.source_sha256, onnx_raster=True
+            )
+            cross = check_conformance(
                 model,
                 spikes,
                 int_run,
-                folder=folder,
-                targets=options.targets,
+                written,
                 reference_queries=options.reference_queries,
+                skipped=skipped,
                 device=device,
-            )
+            ).to_dict()
             cross["files"]["model"] = [str(model_path)]
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
@@ -727,18 +526,6 @@ def verify_checkpoint(
 # ---------------------------------------------------------------------------- the report
 
 
-def mean_std(values: Sequence[float]) -> dict[str, float]:
-    """Mean, sample standard deviation (0 for one value) and count."""
-    array = np.asarray([v for v in values if v is not None], dtype=np.float64)
-    if not array.size:
-        return {"mean": None, "std": None, "n": 0}
-    return {
-        "mean": float(array.mean()),
-        "std": float(array.std(ddof=1)) if array.size > 1 else 0.0,
-        "n": int(array.size),
-    }
-
-
 def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
     float_groups: dict[tuple, list[dict]] = {}
@@ -746,7 +533,7 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         for row in run["float"]["metrics"]:
             float_groups.setdefault((row["strategy"], row["k"]), []).append(row)
     float_rows = [
-        {"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]) for m in METRICS}}
+        {"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]).to_dict() for m in METRICS}}
         for (s, k), rows in float_groups.items()
     ]
     per_bits: dict[int, list[dict]] = {}
@@ -764,8 +551,8 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             {
                 "strategy": s,
                 "k": k,
-                **{m: mean_std([r[m] for r in rs]) for m in METRICS},
-                "delta": {m: mean_std([r["delta"][m] for r in rs]) for m in METRICS},
+                **{m: mean_std([r[m] for r in rs]).to_dict() for m in METRICS},
+                "delta": {m: mean_std([r["delta"][m] for r in rs]).to_dict() for m in METRICS},
             }
             for (s, k), rs in groups.items()
         ]
@@ -777,16 +564,19 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                 "n_passed": sum(bool(r["passed"]) for r in results),
                 "cross_implementation_passed": sum(bool(r["cross_implementation"]["passed"]) for r in results),
                 "metrics": rows,
-                "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]),
-                "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]),
-                "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]),
-                "saturations": mean_std([r["spike_level"]["saturations"] for r in results]),
+                "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]).to_dict(),
+                "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]).to_dict(),
+                "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]).to_dict(),
+                "saturations": mean_std([r["spike_level"]["saturations"] for r in results]).to_dict(),
                 "top1_agreement": {
-                    s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]) for s in STRATEGIES
+                    s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]).to_dict()
+                    for s in STRATEGIES
                 },
-                "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]),
+                "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]).to_dict(),
                 "aggregated_agreement": {
-                    str(k): mean_std([r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results])
+                    str(k): mean_std(
+                        [r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results]
+                    ).to_dict()
                     for k in ks
                 },
             }
@@ -801,10 +591,6 @@ def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
 def versions() -> dict[str, str]:
     """Package and library versions recorded in every report."""
-    import importlib.metadata as md
-
-    from vprsnn_export.version import __version__
-
     out = {
         "vprsnn-export": __version__,
         "python": platform.python_version(),
@@ -827,8 +613,6 @@ def build_report(
     seconds: float | None = None,
 ) -> dict[str, Any]:
     """The whole report.json: settings, versions, every run, the summary and the verdict."""
-    import datetime
-
     return {
         "schema": SCHEMA,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
@@ -842,24 +626,13 @@ def build_report(
     }
 
 
-def _numpy(value: Any) -> np.ndarray:
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)
-
-
 __all__ = [
     "DEFAULT_TOLERANCES",
     "SCHEMA",
     "VerifyOptions",
     "build_report",
-    "compare_models",
-    "compare_outputs",
     "count_correlations",
-    "cross_implementation",
     "decision_level",
-    "distribution_comparison",
-    "exact_comparison",
     "metric_deltas",
     "parse_tolerances",
     "spike_level",

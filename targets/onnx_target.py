@@ -40,6 +40,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
 from vprsnn_export.readout.assignment import weighted_matrix
+from vprsnn_export.runs import SpikeRun
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
@@ -349,6 +350,28 @@ def run_onnx_outputs(
 ) -> OnnxRun:
     """Every output of an exported graph for spikes (N, T, inputs)."""
     return run_session(session(path, threads), spikes, batch)
+
+
+@dataclass
+class OnnxBackend:
+    """onnxruntime on an exported graph, as a :class:`~vprsnn_export.runs.Backend`.
+
+    The raster comes back when the graph was written with ``with_raster=True`` (verify
+    writes it so), the W+Prob distribution when it has the readout head.
+    """
+
+    path: Path
+    threads: int | None = None
+    name: str = "onnxruntime"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        out = run_onnx_outputs(self.path, spikes, threads=self.threads)
+        return SpikeRun(
+            counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
+            raster=None if out.raster is None or not record else torch.from_numpy(out.raster.astype(bool)),
+            saturations=int(out.saturations.sum()),
+            wprob=out.wprob,
+        )
 
 
 def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:

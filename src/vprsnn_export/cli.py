@@ -5,16 +5,45 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import re
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from . import commands
-from .errors import VprError
+from .errors import EXIT_BAD_INPUT, VprError
+from .threads import set_threads
 from .version import __version__
+
+NEGATIVE_VALUE = re.compile(r"^-\.?\d")  # "-2:2:0.1", "-0.5": a value, not an option
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``error: <problem>`` and exit code 2, no usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        print(f"error: {self.prog}: {message}", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--opt -2:2:0.1`` -> ``--opt=-2:2:0.1``: argparse would read a value starting with '-' as an option."""
+    out: list[str] = []
+    index = 0
+    while index < len(argv):
+        token = argv[index]
+        following = argv[index + 1] if index + 1 < len(argv) else None
+        if token.startswith("--") and "=" not in token and following is not None and NEGATIVE_VALUE.match(following):
+            out.append(f"{token}={following}")
+            index += 2
+            continue
+        out.append(token)
+        index += 1
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="vprsnn-export",
         description="STDP place-recognition SNNs: train, quantise, export, verify.",
     )
@@ -29,9 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_negative_values(argv))
     args.argv = argv
     try:
+        args.threads = set_threads(getattr(args, "threads", None))
         return int(args.handler(args) or 0)
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)

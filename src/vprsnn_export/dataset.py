@@ -14,8 +14,8 @@ from __future__ import annotations
 import csv
 import io
 import sys
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,8 @@ from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerpri
 PLACE_ID = "place_id"
 MANIFEST_NAME = "places.csv"
 SYNTHETIC = "synthetic"
+Selection = str | Path | Sequence[int] | np.ndarray | None
+"""A subset CSV (a ``place_id`` column, in order), the place ids themselves, or None for every place."""
 NORDLAND_HINT = "the Nordland data lives under ../shared/data/nordland_64x32_summer_winter (relative to the repository)"
 
 
@@ -102,12 +104,57 @@ def parse_synthetic(data: str) -> int | None:
     return int(text)
 
 
+def selection_record(subset: str | Path | None, places: str | None) -> dict[str, str | None]:
+    """The place selection as a checkpoint stores it: an absolute subset path (so the checkpoint can be
+    used from another directory) or a START:COUNT[:STRIDE] spec."""
+    return {"subset": str(Path(subset).resolve()) if subset else None, "places": places}
+
+
+def load_selection(
+    data: Mapping[str, object],
+    traversals: Sequence[str],
+    cfg: PreprocessConfig,
+    *,
+    source: str | Path | None = None,
+    subset: str | Path | None = None,
+    places: str | None = None,
+    progress: bool = False,
+) -> Dataset:
+    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here.
+
+    ``source``/``subset``/``places`` override the record; without a subset or places, the
+    record's own selection is used.
+    """
+    if subset is None and places is None:
+        subset = _optional_str(data.get("subset"))
+        places = _optional_str(data.get("places"))
+    chosen = source if source is not None else _optional_str(data.get("source"))
+    if chosen is None:
+        raise DataError("no data source: give --data (the checkpoint records none)")
+    return load_dataset(chosen, traversals, cfg, subset=subset, places=places, progress=progress)
+
+
+def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
+    """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
+    wanted = np.asarray(place_ids, dtype=np.int64)
+    position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
+    missing = [int(pid) for pid in wanted if int(pid) not in position]
+    if missing:
+        raise DataError(f"place id(s) {missing[:5]} are not in {dataset.source}")
+    rows = np.asarray([position[int(pid)] for pid in wanted], dtype=np.int64)
+    return replace(dataset, place_ids=wanted, images={name: array[rows] for name, array in dataset.images.items()})
+
+
+def _optional_str(value: object) -> str | None:
+    return None if value is None else str(value)
+
+
 def load_dataset(
     data: str | Path,
     traversals: Sequence[str],
     cfg: PreprocessConfig,
     *,
-    subset: str | Path | None = None,
+    subset: Selection = None,
     places: str | None = None,
     progress: bool = False,
 ) -> Dataset:
@@ -231,11 +278,14 @@ def _place_id(value: str | None, line: int, path: Path) -> int:
         raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
 
 
-def _select(available: np.ndarray, subset: str | Path | None, places: str | None, source: str) -> np.ndarray:
+def _select(available: np.ndarray, subset: Selection, places: str | None, source: str) -> np.ndarray:
     """Selected place ids in selection order; every one must be in ``available``."""
-    if subset is not None:
+    if isinstance(subset, str | Path):
         selected = read_subset(subset)
         where = f"subset file {subset}"
+    elif subset is not None:
+        selected = np.asarray(subset, dtype=np.int64).reshape(-1)
+        where = "the given place ids"
     elif places is not None:
         start, count, stride = parse_places(places)
         selected = start + stride * np.arange(count, dtype=np.int64)
@@ -283,7 +333,7 @@ def _load_synthetic(
     n_places: int,
     names: tuple[str, ...],
     cfg: PreprocessConfig,
-    subset: str | Path | None,
+    subset: Selection,
     places: str | None,
 ) -> Dataset:
     missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]

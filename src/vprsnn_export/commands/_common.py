@@ -8,8 +8,10 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from ..config import Config
+from ..config import Config, PreprocessConfig
+from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
+from ..runtime.evaluation import ReadoutOptions
 
 
 def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) -> None:
@@ -36,6 +38,14 @@ def add_query_options(parser: argparse.ArgumentParser) -> None:
 
 def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        metavar="N",
+        help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
+        "slow a shared machine down 10-20x)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -49,7 +59,14 @@ def add_readout_options(parser: argparse.ArgumentParser) -> None:
         metavar="LO:HI:STEP",
         help="estimate the velocity per window over this grid instead of using --velocity",
     )
-    group.add_argument("--tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n)")
+    group.add_argument(
+        "--match-window",
+        type=int,
+        default=0,
+        metavar="N",
+        help="a prediction within +-N places of the truth is correct",
+    )
+    group.add_argument("--tolerance", dest="renamed_tolerance", help=argparse.SUPPRESS)
     group.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
@@ -101,11 +118,12 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
         key, sep, raw = item.partition("=")
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
-        overrides[key.strip()] = _parse_value(raw.strip())
+        overrides[key.strip()] = parse_value(raw.strip())
     return (base or Config()).replace(**overrides)
 
 
-def _parse_value(raw: str) -> Any:
+def parse_value(raw: str) -> Any:
+    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string."""
     try:
         return json.loads(raw)
     except json.JSONDecodeError:
@@ -175,3 +193,37 @@ RESULT_COLUMNS = (
     ("auc_pr", "AUC-PR %"),
     ("n_queries", "queries"),
 )
+
+
+def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
+    """The readout options of evaluate/simulate/export --check from their arguments."""
+    if getattr(args, "renamed_tolerance", None) is not None:
+        raise InvalidValueError(
+            "--tolerance: renamed to --match-window (the ground-truth window in places); "
+            "verify's --tolerance sets pass/fail limits"
+        )
+    if args.match_window < 0:
+        raise InvalidValueError(f"--match-window expects an integer >= 0, got {args.match_window}")
+    return ReadoutOptions(
+        gamma=gamma,
+        ks=parse_int_list(args.k, "--k"),
+        rule=args.rule,
+        velocity=args.velocity,
+        velocity_candidates=parse_velocity_grid(args.velocity_search),
+        tolerance=args.match_window,
+    )
+
+
+def query_data(
+    args: argparse.Namespace, record: dict[str, Any], preprocess: PreprocessConfig, traversals: list[str]
+) -> Dataset:
+    """The data set named by --data/--subset/--places, else the one a checkpoint or model records."""
+    return load_selection(
+        record,
+        traversals,
+        preprocess,
+        source=args.data,
+        subset=args.subset,
+        places=args.places,
+        progress=not args.quiet,
+    )

@@ -5,7 +5,7 @@ Loihi-style, ONNX) and read every file back -> verify against float -> report.
 
 The demo trains the paper's configuration (T = 300, 60 epochs, 400 neurons): about a
 minute on one CPU core. Torch is limited to one CPU thread unless OMP_NUM_THREADS is
-set (see ``commands.verify.limit_cpu_threads``). ``--quick`` (for the tests) applies a
+set (see :mod:`vprsnn_export.threads`). ``--quick`` (for the tests) applies a
 tiny profile, which is written into the checkpoint's config and printed.
 
 Exit code: 0 when the chain ran and every cross-implementation check is exact (a bit
@@ -25,6 +25,10 @@ from ..config import Config
 from ..dataset import load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
+from ..runtime.evaluation import ReadoutOptions
+from ..runtime.report import write_report
+from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
 
 DEMO_DATA = "synthetic"
@@ -102,15 +106,9 @@ def summary_rows(run_result: dict) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..runtime.evaluation import ReadoutOptions
-    from ..runtime.report import write_report
-    from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
-    from ..trainer.pipeline import train_and_calibrate
-    from .verify import limit_cpu_threads
-
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    threads = limit_cpu_threads()
+    threads = args.threads
     cfg = demo_config(args.seed, args.quick)
     device = resolve_device(args.device)
     progress = not args.quiet
@@ -125,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = load_dataset(data, [DEMO_REFERENCE, DEMO_QUERY], cfg.preprocess, progress=progress)
     say(
         f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}; "
-        f"{threads} CPU thread(s) (OMP_NUM_THREADS to change)"
+        f"{threads} CPU thread(s) (--threads N to change)"
     )
     say(profile_text(profile))
     ckpt = train_and_calibrate(

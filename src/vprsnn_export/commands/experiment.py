@@ -7,11 +7,14 @@ import importlib
 import json
 import pkgutil
 import shlex
+from dataclasses import replace
 from pathlib import Path
 
 from .. import experiments
 from ..errors import InvalidValueError
+from ..experiments.common import Settings
 from ..fileio import atomic_write_text
+from ._common import parse_value
 
 HELPER_MODULES = {"common", "plots"}
 
@@ -34,10 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def settings_from_args(args: argparse.Namespace):
-    from ..experiments.common import Settings
-    from ._common import _parse_value
-
+def settings_from_args(args: argparse.Namespace) -> Settings:
     changes: dict = {"device": args.device, "progress": not args.quiet}
     if args.seeds:
         changes["seeds"] = tuple(range(1, args.seeds + 1))
@@ -47,12 +47,10 @@ def settings_from_args(args: argparse.Namespace):
         key, sep, raw = item.partition("=")
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
-        overrides[key.strip()] = _parse_value(raw.strip())
+        overrides[key.strip()] = parse_value(raw.strip())
     extra = {"overrides": overrides}
     if args.data:
         extra.update(data=args.data, subset=None)
-    from dataclasses import replace
-
     return replace(settings, **extra)
 
 

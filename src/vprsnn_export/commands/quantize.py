@@ -6,11 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json
-from .evaluate import load_query_data
+from ..export.model import check_bits, save_fixed_point
+from ..runtime.deployment import deploy
+from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json, query_data
 
 TABLE_COLUMNS = (
     ("bits", "bits"),
@@ -55,29 +58,29 @@ def model_filename(bits: int, per_neuron: bool, scale_method: str, fold_threshol
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..export.model import check_bits, save_fixed_point
-    from ..export.quantize import quantize_checkpoint
-    from ..runtime.deployment import recalibrate
-
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
     if args.fold_thresholds and not args.per_neuron:
         raise InvalidValueError("--fold-thresholds needs --per-neuron")
     ckpt = load_checkpoint(args.checkpoint)
     digest = checkpoint_sha256(args.checkpoint)
     device = resolve_device(args.device)
-    reference_images, place_ids = None, ckpt.reference_place_ids
+    reference_images = None
     if not args.reuse_float_calibration:
-        dataset = load_query_data(args, ckpt, list(ckpt.reference_traversals))
+        dataset = query_data(args, ckpt.data, ckpt.config.preprocess, list(ckpt.reference_traversals))
+        if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
+            raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
-        place_ids = dataset.place_ids
     rows = []
     for bits in bit_widths:
-        model = quantize_checkpoint(ckpt, digest, bits, args.per_neuron, args.scale, args.fold_thresholds)
-        model = recalibrate(
-            model,
-            reference_images or {},
-            place_ids,
-            reuse_float_calibration=args.reuse_float_calibration,
+        model = deploy(
+            ckpt,
+            digest,
+            bits,
+            per_neuron=args.per_neuron,
+            scale_method=args.scale,
+            fold_thresholds=args.fold_thresholds,
+            calibration="float" if args.reuse_float_calibration else "deployed",
+            reference_images=reference_images,
             device=device,
         )
         path = save_fixed_point(

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InvalidValueError
+from ..runtime.report import combine_reports, load_report, report_path, write_report
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,8 +25,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..runtime.report import combine_reports, load_report, report_path, write_report
-
     sources = [str(report_path(p)) for p in args.runs]
     if len(set(sources)) != len(sources):
         raise InvalidValueError("the same report is named twice")

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 from ..checkpoint import save_checkpoint
-from ..dataset import load_dataset
+from ..dataset import load_dataset, selection_record
 from ..device import resolve_device
+from ..trainer.pipeline import train_and_calibrate
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
 
 
@@ -23,17 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def selection_of(args: argparse.Namespace) -> dict:
-    """The place selection as stored in checkpoints: an absolute subset path or a places spec."""
-    return {
-        "subset": str(Path(args.subset).resolve()) if args.subset else None,
-        "places": args.places,
-    }
-
-
 def run(args: argparse.Namespace) -> int:
-    from ..trainer.pipeline import train_and_calibrate
-
     cfg = config_from_args(args)
     references = parse_names(args.reference, "--reference")
     device = resolve_device(args.device)
@@ -42,7 +32,12 @@ def run(args: argparse.Namespace) -> int:
     )
     started = time.perf_counter()
     ckpt = train_and_calibrate(
-        dataset, references, cfg, device=device, progress=not args.quiet, selection=selection_of(args)
+        dataset,
+        references,
+        cfg,
+        device=device,
+        progress=not args.quiet,
+        selection=selection_record(args.subset, args.places),
     )
     path = save_checkpoint(args.out, ckpt)
     if not args.quiet:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,6 +18,13 @@ from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
+from ..experiments.common import Settings, trained_checkpoint
+from ..export.model import check_bits
+from ..runtime.evaluation import ReadoutOptions
+from ..runtime.exporting import parse_targets
+from ..runtime.report import write_report
+from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
+from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     add_data_options,
     add_runtime_options,
@@ -62,8 +68,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--velocity-search", metavar="LO:HI:STEP", help="estimate the velocity per window over this grid"
     )
     readout.add_argument(
-        "--gt-tolerance", type=int, default=0, help="ground-truth tolerance in places (+-n, default 0)"
+        "--match-window", type=int, default=0, metavar="N", help="a prediction within +-N places is correct (default 0)"
     )
+    readout.add_argument("--gt-tolerance", dest="renamed_gt_tolerance", help=argparse.SUPPRESS)
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
@@ -100,41 +107,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def limit_cpu_threads() -> int:
-    """One torch CPU thread unless OMP_NUM_THREADS says otherwise; returns the thread count in use.
-
-    The simulators step through time with thousands of small tensor operations. With two
-    or more intra-op threads every one of them is an OpenMP parallel region, and on a
-    machine where anything else runs the threads spin waiting for each other: measured
-    here, the demo took 358 s of CPU with torch's default of 2 threads and 15 s with 1.
-    """
-    import os
-
-    import torch
-
-    if "OMP_NUM_THREADS" not in os.environ:
-        torch.set_num_threads(1)
-    return torch.get_num_threads()
-
-
-def verify_options(args: argparse.Namespace, gamma: float):
+def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
-    from ..export.model import check_bits
-    from ..runtime.evaluation import ReadoutOptions
-    from ..runtime.verify import VerifyOptions, parse_targets, parse_tolerances
-
+    if args.renamed_gt_tolerance is not None:
+        raise InvalidValueError("--gt-tolerance: renamed to --match-window (the ground-truth window in places)")
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
-    if args.gt_tolerance < 0:
-        raise InvalidValueError(f"--gt-tolerance must be >= 0, got {args.gt_tolerance}")
+    if args.match_window < 0:
+        raise InvalidValueError(f"--match-window must be >= 0, got {args.match_window}")
     readout = ReadoutOptions(
         gamma=gamma,
         ks=parse_int_list(args.k, "--k"),
         rule=args.rule,
         velocity=args.velocity,
         velocity_candidates=parse_velocity_grid(args.velocity_search),
-        tolerance=args.gt_tolerance,
+        tolerance=args.match_window,
     )
     return VerifyOptions(
         readout=readout,
@@ -143,7 +131,7 @@ def verify_options(args: argparse.Namespace, gamma: float):
         scale_method=args.scale,
         calibration="float" if args.reuse_float_calibration else "deployed",
         reference_queries=args.reference_queries,
-        targets=parse_targets(args.targets),
+        targets=parse_targets(args.targets, "--targets", allow_none=True),
         tolerances=parse_tolerances(args.tolerance),
     )
 
@@ -173,12 +161,9 @@ def load_for(
     if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
     # the queries are not the reference places: load the reference places on their own
-    with tempfile.TemporaryDirectory(prefix="vprsnn-verify-") as folder:
-        listing = Path(folder) / "reference_places.csv"
-        listing.write_text("place_id\n" + "\n".join(str(int(p)) for p in ckpt.reference_place_ids) + "\n")
-        reference = load_dataset(
-            source, ckpt.reference_traversals, ckpt.config.preprocess, subset=listing, progress=progress
-        )
+    reference = load_dataset(
+        source, ckpt.reference_traversals, ckpt.config.preprocess, subset=ckpt.reference_place_ids, progress=progress
+    )
     return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
 
 
@@ -198,9 +183,6 @@ def seed_networks(
     Training goes through the experiments' checkpoint cache (same key), so a network the
     experiments already trained is reused; each is also written to DIR/checkpoints/seedN.npz.
     """
-    from ..experiments.common import Settings, trained_checkpoint
-    from ..trainer.pipeline import train_and_calibrate
-
     key = "subset" if subset else ("consecutive" if places else "all")
     for seed in range(1, n_seeds + 1):
         cfg = template.config.replace(seed=seed)
@@ -248,8 +230,8 @@ def command_line(args: argparse.Namespace) -> list[str]:
         line += ["--rule", args.rule]
     if args.velocity != 1.0:
         line += ["--velocity", str(args.velocity)]
-    if args.gt_tolerance:
-        line += ["--gt-tolerance", str(args.gt_tolerance)]
+    if args.match_window:
+        line += ["--match-window", str(args.match_window)]
     if args.per_tensor:
         line.append("--per-tensor")
     if args.scale != "max":
@@ -294,12 +276,8 @@ def verdict_rows(report: dict) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..runtime.report import write_report
-    from ..runtime.verify import build_report, verify_checkpoint
-
     started = time.perf_counter()
     progress = not args.quiet
-    limit_cpu_threads()
     if args.seeds is not None and (args.seeds < 1 or len(args.checkpoints) != 1):
         raise InvalidValueError(
             "--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)"

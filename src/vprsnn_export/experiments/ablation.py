@@ -39,8 +39,8 @@ def run(settings: Settings) -> dict:
                 device=resolve_device(settings.device),
             )
             rows += [
-                dict(r, variant=variant, seed=seed, **result["spike_stats"])
-                for r in result["rows"]
+                dict(r, variant=variant, seed=seed, **result.spike_stats.to_dict())
+                for r in result.rows
                 if r["strategy"] == "wprob"
             ]
         per_seed.append(rows)

@@ -35,7 +35,7 @@ def run(settings: Settings) -> dict:
             rows += [
                 dict(r, rule=rule, seed=seed)
                 for r in readout_rows(
-                    ckpt.calibration, counts["query_counts"], ckpt.reference_place_ids, data.place_ids, options
+                    ckpt.calibration, counts.query_counts, ckpt.reference_place_ids, data.place_ids, options
                 )
                 if r["strategy"] == "wprob"
             ]

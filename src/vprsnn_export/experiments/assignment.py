@@ -7,8 +7,9 @@ from pathlib import Path
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.stats import mean_std
 
-from .common import Settings, load, mean_std, provenance, rows_table, summarise_rows, trained_checkpoint
+from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
 
 NAME = "assignment"
 DESCRIPTION = (
@@ -33,12 +34,12 @@ def evaluate_selection(settings: Settings, selection: str, ks: tuple[int, ...]) 
             device=resolve_device(settings.device),
             reference_images={settings.reference: data.traversal(settings.reference)},
         )
-        per_seed.append([dict(r, seed=seed) for r in result["rows"]])
-        stats.append(result["spike_stats"])
+        per_seed.append([dict(r, seed=seed) for r in result.rows])
+        stats.append(result.spike_stats.to_dict())
     return {
         "summary": summarise_rows(per_seed),
         "per_seed": per_seed,
-        "spike_stats": {key: mean_std(s[key] for s in stats) for key in stats[0]},
+        "spike_stats": {key: mean_std(s[key] for s in stats).to_dict() for key in stats[0]},
         "n_places": int(len(data.place_ids)),
     }
 

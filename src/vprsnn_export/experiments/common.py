@@ -10,13 +10,13 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.device import resolve_device
+from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
 
@@ -61,11 +61,6 @@ def load(settings: Settings, selection: str, cfg: Config) -> Dataset:
     if selection == "subset" and settings.subset:
         return load_dataset(settings.data, traversals, cfg.preprocess, subset=settings.subset)
     return load_dataset(settings.data, traversals, cfg.preprocess, places=settings.consecutive)
-
-
-def mean_std(values) -> dict:
-    array = np.asarray(list(values), dtype=np.float64)
-    return {"mean": float(array.mean()), "std": float(array.std(ddof=1)) if len(array) > 1 else 0.0, "n": len(array)}
 
 
 def provenance(settings: Settings, started: float) -> dict:
@@ -134,7 +129,7 @@ def summarise_rows(per_seed_rows: list[list[dict]], keys: tuple[str, ...] = ("st
     return [
         {
             **dict(zip(keys, group)),
-            **{m: mean_std(r[m] for r in rows) for m in METRICS},
+            **{m: mean_std(r[m] for r in rows).to_dict() for m in METRICS},
             "n_queries": rows[0]["n_queries"],
         }
         for group, rows in groups.items()

@@ -56,7 +56,7 @@ def run(settings: Settings) -> dict:
             device=resolve_device(settings.device),
         )
         wprob = strategy_scores(
-            ckpt.calibration.astype(float), counts["query_counts"].astype(float), "wprob", cfg.assignment.gamma
+            ckpt.calibration.astype(float), counts.query_counts.astype(float), "wprob", cfg.assignment.gamma
         )
         rows = []
         rng = np.random.default_rng(seed)

@@ -8,9 +8,10 @@ from pathlib import Path
 from vprsnn_export.device import resolve_device
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
+from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.train import Presentation, train_network
 
-from .common import Settings, load, mean_std, provenance
+from .common import Settings, load, provenance
 from .plots import line_plot
 
 NAME = "epochs"
@@ -62,8 +63,8 @@ def run(settings: Settings) -> dict:
                     for row in seed["history"][mark - 1]["rows"]
                     if row["strategy"] == strategy and row["k"] == k
                 ]
-                entry[f"{strategy}_k{k}_{metric}"] = mean_std(values)
-        entry["seconds_per_epoch"] = mean_std(s["history"][mark - 1]["seconds"] for s in per_seed)
+                entry[f"{strategy}_k{k}_{metric}"] = mean_std(values).to_dict()
+        entry["seconds_per_epoch"] = mean_std(s["history"][mark - 1]["seconds"] for s in per_seed).to_dict()
         curve.append(entry)
     return {"experiment": NAME, "curve": curve, "per_seed": per_seed, "provenance": provenance(settings, started)}
 

@@ -6,11 +6,8 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.encoding import query_spikes
-from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.runtime.deployment import recalibrate
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
-from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_fixed_point, evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
@@ -31,22 +28,25 @@ def run(settings: Settings) -> dict:
     for seed, cfg, data, ckpt in consecutive_networks(settings):
         options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 5))
         query = data.traversal(settings.query)
-        float_rows = evaluate_float(ckpt, query, data.place_ids, settings.query, options, device=device)["rows"]
+        float_rows = evaluate_float(ckpt, query, data.place_ids, settings.query, options, device=device).rows
         rows = [dict(r, bits="float", scaling="float", seed=seed, saturations=0) for r in float_rows]
-        spikes = query_spikes(query, data.place_ids, settings.query, cfg)
         reference = {settings.reference: data.traversal(settings.reference)}
         for scaling, per_neuron in SCALINGS.items():
             for bits in BITS:
-                model = quantize_checkpoint(ckpt, "experiment", bits, per_neuron, "max")
-                model = recalibrate(model, reference, data.place_ids, device=device)
-                network = IntegerNetwork(model, device=device)
-                run_ = network.run(spikes)
-                quant_rows = readout_rows(
-                    model.calibration, run_.counts.numpy(), model.reference_place_ids, data.place_ids, options
+                model = deploy(
+                    ckpt, "experiment", bits, per_neuron=per_neuron, reference_images=reference, device=device
                 )
+                result = evaluate_fixed_point(model, query, data.place_ids, settings.query, options, device=device)
                 rows += [
-                    dict(r, bits=str(bits), scaling=scaling, seed=seed, saturations=run_.saturations)
-                    for r in quant_rows
+                    dict(
+                        row_without_calibration(r),
+                        bits=str(bits),
+                        scaling=scaling,
+                        seed=seed,
+                        saturations=result.saturations,
+                    )
+                    for r in result.rows
+                    if r["calibration"] == "deployed"
                 ]
         per_seed.append(rows)
     return {
@@ -55,6 +55,10 @@ def run(settings: Settings) -> dict:
         "per_seed": per_seed,
         "provenance": provenance(settings, started),
     }
+
+
+def row_without_calibration(row: dict) -> dict:
+    return {key: value for key, value in row.items() if key != "calibration"}
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:

@@ -8,8 +8,9 @@ from pathlib import Path
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.stats import mean_std
 
-from .common import Settings, mean_std, provenance, trained_checkpoint
+from .common import Settings, provenance, trained_checkpoint
 from .plots import line_plot
 
 NAME = "scalability"
@@ -41,15 +42,15 @@ def run(settings: Settings) -> dict:
                 ReadoutOptions(gamma=cfg.assignment.gamma),
                 device=resolve_device(settings.device),
             )
-            row = next(r for r in result["rows"] if r["strategy"] == "wprob")
+            row = next(r for r in result.rows if r["strategy"] == "wprob")
             windows.append({"start": start, **row})
         points.append(
             {
                 "n_places": n,
                 "windows": windows,
-                "auc_pr": mean_std(w["auc_pr"] for w in windows),
-                "accuracy": mean_std(w["accuracy"] for w in windows),
-                "r_at_100p": mean_std(w["r_at_100p"] for w in windows),
+                "auc_pr": mean_std(w["auc_pr"] for w in windows).to_dict(),
+                "accuracy": mean_std(w["accuracy"] for w in windows).to_dict(),
+                "r_at_100p": mean_std(w["r_at_100p"] for w in windows).to_dict(),
             }
         )
     return {"experiment": NAME, "seed": seed, "points": points, "provenance": provenance(settings, started)}

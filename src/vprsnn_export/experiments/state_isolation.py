@@ -32,7 +32,7 @@ def run(settings: Settings) -> dict:
                 device=resolve_device(settings.device),
                 state_isolation=isolation,
             )
-            rows += [dict(r, state=state, seed=seed) for r in result["rows"]]
+            rows += [dict(r, state=state, seed=seed) for r in result.rows]
         per_seed.append(rows)
     return {
         "experiment": NAME,
