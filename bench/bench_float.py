@@ -82,7 +82,7 @@ def main() -> None:
         rows.append((timesteps, len(images), train_s, fast_qps, ref_qps, fast_qps / ref_qps))
     print(f"data: {data}; torch {torch.__version__}, {torch.get_num_threads()} threads, CPU")
     print(f"{'T':>4} {'train s/epoch':>14} {'batched q/s':>12} {'ms/query':>9} {'ref loop q/s':>13} {'ratio':>7}")
-    for timesteps, n, train_s, fast_qps, ref_qps, ratio in rows:
+    for timesteps, _n, train_s, fast_qps, ref_qps, ratio in rows:
         print(
             f"{timesteps:>4} {train_s:>14.2f} {fast_qps:>12.1f} {1000 / fast_qps:>9.2f} {ref_qps:>13.1f} {ratio:>6.1f}x"
         )

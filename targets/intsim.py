@@ -190,7 +190,7 @@ def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, 
         final_voltage[start:stop] = voltage.cpu()
         saturations += step.saturations
         max_current = max(max_current, step.max_current >> prep.shift)
-        if raster is not None:
+        if raster is not None and step.raster is not None:
             raster[start:stop] = step.raster.transpose(0, 1).cpu()
     return SpikeRun(
         counts=counts,

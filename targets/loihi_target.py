@@ -188,7 +188,8 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
 
 def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, **arrays)
+    members: dict[str, Any] = dict(arrays)
+    np.savez_compressed(buffer, **members)
     return buffer.getvalue()
 
 

@@ -116,14 +116,19 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
     """Human-readable facts plus the source's full JSON header for an exact rebuild."""
     cfg = source.config
     beta = effective_beta(source)
-    fixed = isinstance(source, FixedPointModel)
+    if isinstance(source, FixedPointModel):
+        kind, header, recorded_sha256 = "fixed-point", source.header(), source.source_sha256
+        multipliers = source.scale_multiplier.astype(np.int64)
+    else:
+        kind, header, recorded_sha256 = "float", checkpoint_header(source), "unknown"
+        multipliers = np.ones(cfg.network.n_neurons, dtype=np.int64)
     meta: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "kind": "fixed-point" if fixed else "float",
-        "header_json": json.dumps(source.header() if fixed else checkpoint_header(source), sort_keys=True),
-        "source_sha256": source_sha256 or (source.source_sha256 if fixed else "unknown"),
+        "kind": kind,
+        "header_json": json.dumps(header, sort_keys=True),
+        "source_sha256": source_sha256 or recorded_sha256,
         "dt": dt,
         "beta": beta,
         "tau_rule": "tau = dt / (1 - beta), r = 1 / (1 - beta): forward Euler at dt gives v <- beta v + I",
@@ -145,13 +150,11 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
             "lateral inhibition, one step late; not the WTA rule itself"
         ),
         "wta_inhibition": 0.0 if inhibition is None else float(inhibition),
-        "wta_score_multiplier": (
-            source.scale_multiplier.astype(np.int64) if fixed else np.ones(cfg.network.n_neurons, dtype=np.int64)
-        ),
+        "wta_score_multiplier": multipliers,
         "calibration": source.calibration.astype(np.int64),
         "reference_place_ids": source.reference_place_ids.astype(np.int64),
     }
-    if fixed:
+    if isinstance(source, FixedPointModel):
         meta.update(
             bits=source.bits,
             scale_exponent=source.scale_exponent,
@@ -392,6 +395,12 @@ class EulerLIF(torch.nn.Module):
         )
         self.register_buffer("v_threshold", torch.as_tensor(np.asarray(node.v_threshold, dtype=np.float64)))
         self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
+
+    gain: torch.Tensor
+    drive: torch.Tensor
+    v_leak: torch.Tensor
+    v_threshold: torch.Tensor
+    v_reset: torch.Tensor
 
     def forward(self, x: torch.Tensor, state: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         v = torch.zeros_like(x) if state is None else state

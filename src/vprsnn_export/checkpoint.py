@@ -55,7 +55,7 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     _validate(ckpt, Path(path))
     meta = checkpoint_header(ckpt)
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "weights": ckpt.weights.astype(np.float32),
         "thresholds": ckpt.thresholds.astype(np.float32),
         "calibration": ckpt.calibration.astype(np.int64),

@@ -265,7 +265,7 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[
         for cells in reader:
             if not any(cell.strip() for cell in cells):
                 continue
-            records.append((reader.line_num, {name: cell.strip() for name, cell in zip(columns, cells)}))
+            records.append((reader.line_num, {name: cell.strip() for name, cell in zip(columns, cells, strict=False)}))
     except csv.Error as exc:
         raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
     return columns, records

@@ -93,7 +93,7 @@ def run_network(
         counts[start:stop] = chunk_counts.cpu()
         n_candidates[start:stop] = chunk_candidates.cpu()
         final_voltage[start:stop] = voltage.cpu()
-        if raster is not None:
+        if raster is not None and chunk_raster is not None:
             raster[start:stop] = chunk_raster.cpu()
     return SpikeRun(counts, n_candidates, raster, final_voltage)
 
@@ -105,6 +105,7 @@ def _run_sequential(
     n_presentations, timesteps, n_inputs = spikes.shape
     stream = spikes.reshape(1, n_presentations * timesteps, n_inputs)
     whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True)
+    assert whole.raster is not None and whole.candidates_per_step is not None  # recorded above
     raster = whole.raster.reshape(n_presentations, timesteps, -1)
     return SpikeRun(
         counts=raster.sum(dim=1, dtype=torch.int64),

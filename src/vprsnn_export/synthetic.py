@@ -225,7 +225,7 @@ def _render_base(width: int, seed: int) -> _Base:
 
 
 def _draw_blobs(width: int, seed: int) -> tuple[tuple[float, float, float, float, float, int], ...]:
-    blobs = []
+    blobs: list[tuple[float, float, float, float, float, int]] = []
     for chunk in range(width // _CHUNK + 2):
         rng = _chunk_rng(seed, _BLOBS, chunk)
         cx = rng.uniform(0, _CHUNK, _BLOBS_PER_CHUNK) + chunk * _CHUNK
@@ -233,7 +233,7 @@ def _draw_blobs(width: int, seed: int) -> tuple[tuple[float, float, float, float
         sx = rng.uniform(1.5, 6.0, _BLOBS_PER_CHUNK)
         sy = rng.uniform(1.0, 4.0, _BLOBS_PER_CHUNK)
         amplitude = rng.uniform(-0.3, 0.3, _BLOBS_PER_CHUNK)
-        blobs.extend(zip(cy, cx, sy, sx, amplitude, range(_BLOBS_PER_CHUNK)))
+        blobs.extend(zip(cy, cx, sy, sx, amplitude, range(_BLOBS_PER_CHUNK), strict=True))
     return tuple(blobs)
 
 

@@ -28,18 +28,18 @@ def _weighted_loops(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
     n, p = sr.shape
     s2 = np.zeros((n, p))
     for i in range(n):
-        omega = sum(1 for l in range(p) if sr[i, l] > 0)
+        omega = sum(1 for place in range(p) if sr[i, place] > 0)
         total = sr[i].sum()
-        for l in range(p):
-            s1 = sr[i, l] / omega if omega > gamma * p else sr[i, l]
-            s2[i, l] = s1 * sr[i, l] / total if total > 0 else 0.0
+        for place in range(p):
+            s1 = sr[i, place] / omega if omega > gamma * p else sr[i, place]
+            s2[i, place] = s1 * sr[i, place] / total if total > 0 else 0.0
     out = np.zeros((sq.shape[0], p))
     for q in range(sq.shape[0]):
-        for l in range(p):
-            raw = sum(sq[q, i] * s2[i, l] for i in range(n))
-            col = sr[:, l].sum()
-            act = sum(sr[m, l] for m in range(n) if sq[q, m] > 0)
-            out[q, l] = raw * (act / col) if col > 0 else 0.0
+        for place in range(p):
+            raw = sum(sq[q, i] * s2[i, place] for i in range(n))
+            col = sr[:, place].sum()
+            act = sum(sr[m, place] for m in range(n) if sq[q, m] > 0)
+            out[q, place] = raw * (act / col) if col > 0 else 0.0
     return out
 
 

@@ -97,7 +97,7 @@ def _rows(float_values, quant_values, n=50):
     def rows(values):
         return [
             {"strategy": s, "k": k, "accuracy": v, "p_at_100r": v, "r_at_100p": v, "auc_pr": v, "n_queries": n}
-            for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values)
+            for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values, strict=True)
         ]
 
     return metric_deltas(rows(float_values), rows(quant_values))

@@ -178,7 +178,7 @@ def format_table(rows: Sequence[dict], columns: Sequence[tuple[str, str]]) -> st
                 line.append(str(value))
         cells.append(line)
     widths = [max(len(r[i]) for r in cells) for i in range(len(columns))]
-    out = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
+    out = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     out.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(out)
 

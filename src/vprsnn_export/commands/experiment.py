@@ -9,6 +9,7 @@ import pkgutil
 import shlex
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from .. import experiments
 from ..errors import InvalidValueError
@@ -38,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
-    changes: dict = {"device": args.device, "progress": not args.quiet}
+    changes: dict[str, Any] = {"device": args.device, "progress": not args.quiet}
     if args.seeds:
         changes["seeds"] = tuple(range(1, args.seeds + 1))
     settings = Settings.quick_settings(**changes) if args.quick else Settings(**changes)
@@ -48,7 +49,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = parse_value(raw.strip())
-    extra = {"overrides": overrides}
+    extra: dict[str, Any] = {"overrides": overrides}
     if args.data:
         extra.update(data=args.data, subset=None)
     return replace(settings, **extra)

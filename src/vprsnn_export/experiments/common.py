@@ -7,8 +7,9 @@ import json
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -39,8 +40,9 @@ class Settings:
     overrides: dict = field(default_factory=dict)  # dotted config overrides
 
     @classmethod
-    def quick_settings(cls, **changes) -> Settings:
-        base = dict(
+    def quick_settings(cls, **changes: Any) -> Settings:
+        """The tiny synthetic size the test suite runs (``--quick``), with ``changes`` applied."""
+        quick = cls(
             quick=True,
             data="synthetic:24",
             subset=None,
@@ -48,8 +50,7 @@ class Settings:
             seeds=(1, 2),
             overrides={"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 64},
         )
-        base.update(changes)
-        return cls(**base)
+        return replace(quick, **changes)
 
     def config(self, seed: int, **extra) -> Config:
         return Config().replace(**{**self.overrides, "seed": seed, **extra})
@@ -128,7 +129,7 @@ def summarise_rows(per_seed_rows: list[list[dict]], keys: tuple[str, ...] = ("st
             groups.setdefault(tuple(row[k] for k in keys), []).append(row)
     return [
         {
-            **dict(zip(keys, group)),
+            **dict(zip(keys, group, strict=True)),
             **{m: mean_std(r[m] for r in rows).to_dict() for m in METRICS},
             "n_queries": rows[0]["n_queries"],
         }

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.dynamics import FloatNetwork
@@ -24,7 +25,7 @@ def run(settings: Settings) -> dict:
     started = time.perf_counter()
     marks = QUICK_EPOCHS if settings.quick else FULL_EPOCHS
     device = resolve_device(settings.device)
-    per_seed = []
+    per_seed: list[dict[str, Any]] = []
     for seed in settings.seeds:
         cfg = settings.config(seed, **{"train.epochs": max(marks)})
         data = load(settings, "subset", cfg)
@@ -54,7 +55,7 @@ def run(settings: Settings) -> dict:
         per_seed.append({"seed": seed, "history": trained.history})
     curve = []
     for mark in marks:
-        entry = {"epoch": mark}
+        entry: dict[str, Any] = {"epoch": mark}
         for strategy, k in (("standard", 1), ("wprob", 1), ("wprob", 5)):
             for metric in ("accuracy", "r_at_100p"):
                 values = [
