@@ -130,6 +130,7 @@ class FixedPointModel:
 
 
 def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
+    """Validate and write a fixed-point model atomically (integer arrays + JSON header); returns the path."""
     validate(model, Path(path))
     arrays = {
         "weight_mantissa": model.weight_mantissa.astype(np.int32),
@@ -143,6 +144,7 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
 
 
 def load_fixed_point(path: str | Path) -> FixedPointModel:
+    """Read and validate a fixed-point model; ModelFileError names the file and the problem."""
     path = Path(path)
     meta, arrays = read_container(path, "fixed-point model")
     if meta.get("format") != FORMAT:

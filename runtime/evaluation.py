@@ -156,7 +156,7 @@ def evaluate_float(
     traversal: str,
     options: ReadoutOptions,
     *,
-    device: torch.device,
+    device: torch.device | None = None,
     state_isolation: bool | None = None,
     reference_images: Mapping[str, np.ndarray] | None = None,
 ) -> Evaluation:
@@ -165,6 +165,7 @@ def evaluate_float(
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
     the no-learning SAD baseline is added as rows with strategy "sad".
     """
+    device = torch.device("cpu") if device is None else device
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     run = network.run(
         query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
@@ -191,7 +192,7 @@ def evaluate_fixed_point(
     traversal: str,
     options: ReadoutOptions,
     *,
-    device: torch.device,
+    device: torch.device | None = None,
     state_isolation: bool | None = None,
     float_checkpoint: Checkpoint | None = None,
 ) -> Evaluation:
@@ -200,6 +201,7 @@ def evaluate_fixed_point(
     With ``float_checkpoint`` the float network runs on the same spike trains and the
     per-step agreement of the two rasters is added as ``winner_agreement``.
     """
+    device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None
     run = IntegerNetwork(model, device).run(spikes, record=compare, state_isolation=state_isolation)

@@ -264,6 +264,12 @@ class ExportResult:
     def passed(self) -> bool:
         return self.checks is None or all(row.result != "FAILED" for row in self.checks)
 
+    def written(self, target: str) -> Path:
+        """The (first) file written for ``target``: ``result.written("onnx")``."""
+        if target not in self.files:
+            raise InvalidValueError(f"no {target} file was written (targets: {', '.join(self.files) or 'none'})")
+        return Path(self.files[target][0]["path"])
+
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "model": self.model,

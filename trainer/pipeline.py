@@ -21,11 +21,12 @@ def train_and_calibrate(
     references: Sequence[str],
     cfg: Config,
     *,
-    device: torch.device,
+    device: torch.device | None = None,
     progress: bool = True,
     selection: dict | None = None,
 ) -> Checkpoint:
-    """Train on every image of the reference traversals, calibrate S^R, return the checkpoint."""
+    """Train on every image of the reference traversals, calibrate S^R, return the checkpoint (CPU by default)."""
+    device = torch.device("cpu") if device is None else device
     images = np.concatenate([dataset.traversal(name) for name in references])
     presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]
     trained = train_network(images, presentations, cfg, device=device, progress=progress)

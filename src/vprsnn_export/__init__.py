@@ -1,8 +1,31 @@
-"""vprsnn-export: STDP place-recognition SNNs from training to fixed-point deployment."""
+"""vprsnn-export: STDP place-recognition SNNs from training to fixed-point deployment.
 
-from importlib.metadata import PackageNotFoundError, version
+``import vprsnn_export as vx`` gives the public API (:mod:`vprsnn_export.api`, listed in
+``__all__``). Its names load on first use, so importing one submodule (the command line,
+a test) does not import onnx, nir and matplotlib.
+"""
 
-try:
-    __version__ = version("vprsnn-export")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0.0.0+unknown"
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from .version import __version__ as __version__
+
+if TYPE_CHECKING:
+    from .api import *  # noqa: F403
+
+_API = "vprsnn_export.api"
+
+
+def __getattr__(name: str) -> Any:
+    api = importlib.import_module(_API)
+    if name == "__all__":  # `from vprsnn_export import *`
+        return list(api.__all__)
+    if name in api.__all__:
+        return getattr(api, name)
+    raise AttributeError(f"module 'vprsnn_export' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(importlib.import_module(_API).__all__))

@@ -53,6 +53,7 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
 
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
+    """Validate and write a checkpoint atomically (npz arrays + JSON header with the whole config); returns the path."""
     _validate(ckpt, Path(path))
     meta = checkpoint_header(ckpt)
     arrays: dict[str, np.ndarray] = {
@@ -65,6 +66,7 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
 
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
+    """Read and validate a checkpoint (shapes, dtypes, finiteness, config); ModelFileError names the file and the problem."""
     path = Path(path)
     meta, arrays = read_container(path, "checkpoint")
     if meta.get("format") != FORMAT:
@@ -94,6 +96,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
 
 
 def checkpoint_sha256(path: str | Path) -> str:
+    """sha256 of the checkpoint file's bytes: the identity every model, export and report derived from it records."""
     return sha256_file(path)
 
 

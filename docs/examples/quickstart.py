@@ -1,0 +1,26 @@
+"""The README's whole chain as a library: train -> evaluate -> quantise -> export -> run every backend -> verify.
+
+Run it from any folder (it writes deploy/ and report/ there): ``python docs/examples/quickstart.py``.
+"""
+
+import vprsnn_export as vx
+
+vx.set_threads(1)
+cfg = vx.Config().replace(**{"encoder.timesteps": 60, "train.epochs": 4, "network.n_neurons": 64})
+data = vx.load_dataset("synthetic:24", ["summer", "winter"], cfg.preprocess)
+ckpt = vx.train_and_calibrate(data, ["summer"], cfg, progress=False)
+readout = vx.ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 3))
+winter, places, reference = data.traversal("winter"), data.place_ids, {"summer": data.traversal("summer")}
+print(vx.evaluate_float(ckpt, winter, places, "winter", readout).rows)
+
+model = vx.deploy(ckpt, "quickstart", 4, reference_images=reference)
+exported = vx.export_network(model, model, ("nir", "onnx", "loihi"), "deploy", digest="quickstart")
+spikes = vx.query_spikes(winter, places, "winter", cfg)
+backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(exported.written("onnx"))]
+counts = {backend.name: backend.run(spikes[:3]).counts for backend in backends}
+print({name: int(c.sum()) for name, c in counts.items()})
+
+options = vx.VerifyOptions(readout, bits=(8, 4))
+run = vx.verify_checkpoint(ckpt, "quickstart", winter, places, "winter", options, reference_images=reference)
+vx.write_report(vx.build_report([run], {"example": "quickstart"}), "report")
+print("verdict:", "PASS" if run["passed"] else "FAIL")

@@ -1,0 +1,104 @@
+"""The public API: everything a notebook needs, importable as ``import vprsnn_export as vx``.
+
+The chain of the command line, as library calls (docs/examples/quickstart.py runs it):
+
+    data = vx.load_dataset("synthetic:24", ["summer", "winter"], vx.Config().preprocess)
+    ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
+    vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
+    model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
+    vx.export_network(model, model, ("nir", "onnx", "loihi"), "deploy/", digest=sha)
+    backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
+    run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
+"""
+
+from __future__ import annotations
+
+from .checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from .config import Config
+from .dataset import Dataset, load_dataset, select_places
+from .dynamics import FloatNetwork
+from .encoding import calibration_spikes, query_spikes
+from .errors import DataError, InvalidValueError, ModelFileError, VprError
+from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
+from .export.quantize import quantize_checkpoint
+from .readout.aggregation import aggregate, estimate_velocity
+from .readout.assignment import decide, strategy_scores
+from .readout.baseline import sad_distances, sad_distribution
+from .readout.metrics import pr_metrics
+from .runs import Backend, SpikeRun
+from .runtime.conformance import Conformance, check_conformance
+from .runtime.deployment import deploy, recalibrate
+from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
+from .runtime.exporting import ExportResult, export_network, load_network
+from .runtime.report import write_report
+from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from .targets.intsim import IntegerNetwork
+from .targets.loihi_target import read_loihi_model, write_loihi
+from .targets.nir_target import read_nir, write_nir
+from .targets.onnx_target import OnnxBackend, write_onnx
+from .targets.reference_stepper import ReferenceStepper
+from .threads import set_threads
+from .trainer.calibrate import calibrate
+from .trainer.pipeline import train_and_calibrate
+from .trainer.train import train_network
+from .version import __version__
+
+__all__ = [
+    "Backend",
+    "Checkpoint",
+    "Config",
+    "Conformance",
+    "DataError",
+    "Dataset",
+    "Evaluation",
+    "ExportResult",
+    "FixedPointModel",
+    "FloatNetwork",
+    "IntegerNetwork",
+    "InvalidValueError",
+    "ModelFileError",
+    "OnnxBackend",
+    "ReadoutOptions",
+    "ReferenceStepper",
+    "SpikeRun",
+    "VerifyOptions",
+    "VprError",
+    "__version__",
+    "aggregate",
+    "build_report",
+    "calibrate",
+    "calibration_spikes",
+    "check_conformance",
+    "checkpoint_sha256",
+    "decide",
+    "deploy",
+    "estimate_velocity",
+    "evaluate_fixed_point",
+    "evaluate_float",
+    "export_network",
+    "load_checkpoint",
+    "load_dataset",
+    "load_fixed_point",
+    "load_network",
+    "pr_metrics",
+    "quantize_checkpoint",
+    "query_spikes",
+    "read_loihi_model",
+    "read_nir",
+    "readout_rows",
+    "recalibrate",
+    "sad_distances",
+    "sad_distribution",
+    "save_checkpoint",
+    "save_fixed_point",
+    "select_places",
+    "set_threads",
+    "strategy_scores",
+    "train_and_calibrate",
+    "train_network",
+    "verify_checkpoint",
+    "write_loihi",
+    "write_nir",
+    "write_onnx",
+    "write_report",
+]
