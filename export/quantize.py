@@ -28,7 +28,14 @@ import numpy as np
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 
-from .model import MULTIPLIER_BITS, THRESHOLD_BITS, FixedPointModel, check_bits, decay_mantissa
+from .model import (
+    MULTIPLIER_BITS,
+    THRESHOLD_BITS,
+    FixedPointModel,
+    QuantisationReport,
+    check_bits,
+    decay_mantissa,
+)
 
 SCALE_METHODS = ("max", "mse")
 MSE_GRID = np.linspace(0.2, 1.0, 81)  # fractions of the max-abs scale searched by the `mse` method
@@ -231,7 +238,9 @@ def quantize_checkpoint(
         scale_method=scale_method,
         fold_thresholds=fold_thresholds,
     )
-    report = dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
+    report = QuantisationReport.from_dict(
+        dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
+    )
     return FixedPointModel(
         bits=bits,
         weight_mantissa=arrays.weight_mantissa,

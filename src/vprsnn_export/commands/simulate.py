@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
             "source_sha256": model.source_sha256,
             "query": args.query,
             "bits": model.bits,
-            "quantisation": model.quantisation,
+            "quantisation": model.quantisation.to_dict(),
             "saturations": result["saturations"],
             "max_current": result["max_current"],
             "results": result["rows"],
