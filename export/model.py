@@ -174,7 +174,8 @@ class FixedPointModel:
                 "threshold": f"unsigned {THRESHOLD_BITS}-bit vth mantissa, compared as vth << voltage_shift",
                 "current": "a_j[t] = sum_i q_ij s_i[t] (exact integer)",
                 "decay": "V <- trunc_toward_zero(V * (4096 - decay_dv) / 4096)",
-                "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), 2**{self.voltage_bits - 1} - 1), clips counted",
+                "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), "
+                f"2**{self.voltage_bits - 1} - 1), clips counted",
                 "candidates": "C = {j : V_j > threshold_j << voltage_shift}",
                 "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index"
                 if self.config.network.wta
@@ -183,14 +184,15 @@ class FixedPointModel:
                 "state": "V zeroed at the start of every presentation"
                 if self.config.network.state_isolation
                 else "V carried across presentations",
-                "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), keyed by (seed, stream, traversal, place_id)",
+                "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), "
+                "keyed by (seed, stream, traversal, place_id)",
             },
         }
 
 
 def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
     validate(model, Path(path))
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "weight_mantissa": model.weight_mantissa.astype(np.int32),
         "scale_multiplier": model.scale_multiplier.astype(np.int32),
         "threshold": model.threshold.astype(np.int32),

@@ -108,7 +108,9 @@ def desired_scales(weights: np.ndarray, bits: int, method: str, per_neuron: bool
 
 
 def split_scales(scales: np.ndarray) -> tuple[np.ndarray, int]:
-    """s_j ~= m_j 2**e: e = floor(log2 max_j s_j) - (MULTIPLIER_BITS - 1), m_j = clip(floor(s_j 2**-e + 1/2), 1, 2**16 - 1).
+    """s_j ~= m_j 2**e, one exponent for all neurons:
+
+        e = floor(log2 max_j s_j) - (MULTIPLIER_BITS - 1),   m_j = clip(floor(s_j 2**-e + 1/2), 1, 2**16 - 1)
 
     The largest multiplier lands in [2**15, 2**16 - 1], so every m_j keeps as many
     significant bits as the ratio max_k s_k / s_j allows.

@@ -90,7 +90,9 @@ class MetricRow:
 
     def with_float(self, base: MetricRow) -> MetricRow:
         """This row with the float row's values and the differences (this - float)."""
-        return MetricRow(self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values))
+        return MetricRow(
+            self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
+        )
 
     def to_dict(self) -> dict[str, Any]:
         data: dict[str, Any] = {"strategy": self.strategy, "k": self.k, **self.values.to_dict()}

@@ -1,10 +1,11 @@
 """Does the deployed network still recognise places like the float one? The checks of `vprsnn-export verify`.
 
-For one float checkpoint and each weight bit width, the network is quantised, every
+For one float checkpoint and each weight bit width, the network is deployed
+(:func:`runtime.deployment.deploy`: quantised and calibrated), every
 integer implementation runs on the very spike tensor the float network sees
 (:func:`runtime.inference.query_spikes`), and four families of checks compare them:
 
-* **cross-implementation** (exact): the integer simulator, the ONNX graph on
+* **cross-implementation** (exact; :mod:`runtime.conformance`): the integer simulator, the ONNX graph on
   onnxruntime, the NIR and Loihi-style files read back, and the slow reference
   stepper (first few queries) must produce identical rasters, counts, candidate
   counts, final voltages and saturation counts. Integer outputs are compared bit for
@@ -21,34 +22,60 @@ integer implementation runs on the very spike tensor the float network sees
 
 Tolerances (docs/verify.md) turn the metric, spike and decision differences into
 pass/fail per bit width. Every function below is pure apart from :func:`verify_checkpoint`
-(which writes the exported files) and returns plain JSON values.
+(which writes the exported files); results are the typed objects of :mod:`runtime.results`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import platform
 import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel, check_bits, save_fixed_point
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
-from vprsnn_export.readout.metrics import is_correct, pr_curve
+from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.stats import mean_std
+from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
+from vprsnn_export.version import __version__
 
+from .conformance import TARGETS, cross_implementation
+from .deployment import CALIBRATIONS, deploy
 from .evaluation import ReadoutOptions, aggregated, readout_rows
-
-SCHEMA = "vprsnn-verify-report/1"
-METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
-TARGETS = ("onnx", "nir", "loihi")
-WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
+from .results import (
+    METRICS,
+    SCHEMA,
+    BitsResult,
+    BitsSummary,
+    DecisionLevel,
+    FloatResult,
+    LevelHistogram,
+    MetricRow,
+    PrCurve,
+    RunSummary,
+    SpikeLevel,
+    SummaryRow,
+    ToleranceCheck,
+    VerifiedRun,
+    VerifyReport,
+    WeightHistogram,
+    find_row,
+)
 
 #: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).
 DEFAULT_TOLERANCES: dict[str, float | None] = {
@@ -88,7 +115,8 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
         key, raw = key.strip(), raw.strip().lower()
         if not sep or key not in DEFAULT_TOLERANCES:
             raise InvalidValueError(
-                f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} (VALUE a number or off), got {item!r}"
+                f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
+                f"(VALUE a number or off), got {item!r}"
             )
         if raw in OFF:
             tolerances[key] = None
@@ -114,215 +142,12 @@ class VerifyOptions:
     calibration: str = "deployed"  # "deployed": S^R re-measured on the integer simulator; "float": reused
     reference_queries: int = 3  # presentations run on the slow reference stepper
     targets: tuple[str, ...] = TARGETS
-    tolerances: dict = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
+    tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
         data["readout"] = dataclasses.asdict(self.readout)
         return data
-
-
-def parse_targets(raw: str) -> tuple[str, ...]:
-    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
-    if any(n not in TARGETS and n != "none" for n in names):
-        raise InvalidValueError(f"--targets expects some of {', '.join(TARGETS)} (or none), got {raw!r}")
-    return tuple(n for n in names if n != "none")
-
-
-# ---------------------------------------------------------------------------- cross-implementation
-
-
-def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> dict[str, Any]:
-    """Bit-for-bit equality of two arrays (or integers): any difference fails."""
-    a_arr, b_arr = _numpy(a), _numpy(b)
-    result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": "exact"}
-    if a_arr.shape != b_arr.shape:
-        return {
-            **result,
-            "equal": False,
-            "n_elements": int(a_arr.size),
-            "n_differences": None,
-            "first_difference": None,
-            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
-        }
-    differ = a_arr != b_arr
-    n_diff = int(np.count_nonzero(differ))
-    first = [int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape)] if n_diff else None
-    if n_diff == 0:
-        detail = f"identical ({a_arr.size} values)"
-    else:
-        where = tuple(first) if first else ()
-        detail = f"{n_diff} of {a_arr.size} values differ; first at {list(where)}: {a_arr[where]!r} vs {b_arr[where]!r}"
-    return {
-        **result,
-        "equal": n_diff == 0,
-        "n_elements": int(a_arr.size),
-        "n_differences": n_diff,
-        "first_difference": first,
-        "detail": detail,
-    }
-
-
-def distribution_comparison(
-    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
-) -> dict[str, Any]:
-    """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
-    a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    result: dict[str, Any] = {"check": check, "a": a_name, "b": b_name, "kind": f"decisions exact, |diff| <= {limit:g}"}
-    if a_arr.shape != b_arr.shape:
-        return {
-            **result,
-            "equal": False,
-            "max_abs_difference": None,
-            "n_differences": None,
-            "detail": f"shapes differ: {a_arr.shape} vs {b_arr.shape}",
-        }
-    pred_a, _ = decide(a_arr, "wprob")
-    pred_b, _ = decide(b_arr, "wprob")
-    n_decisions = int(np.count_nonzero(pred_a != pred_b))
-    largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
-    equal = n_decisions == 0 and largest <= limit
-    return {
-        **result,
-        "equal": bool(equal),
-        "max_abs_difference": largest,
-        "n_differences": n_decisions,
-        "detail": f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
-    }
-
-
-def compare_outputs(prefix: str, a_name: str, a: Mapping[str, Any], b_name: str, b: Mapping[str, Any]) -> list[dict]:
-    """Exact comparisons of every output two implementations both produced (raster, counts, ...)."""
-    keys = [k for k in ("raster", "counts", "candidates", "final_voltage", "saturations") if k in a and k in b]
-    return [exact_comparison(f"{prefix}: {key}", a_name, a[key], b_name, b[key]) for key in keys]
-
-
-def compare_models(prefix: str, a_name: str, a, b_name: str, b) -> list[dict]:
-    """A fixed-point model read back from a file against the one written: every integer and the config."""
-    checks = [
-        exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
-    ]
-    scalars_a = [a.bits, a.scale_exponent, a.decay_dv, a.voltage_shift, a.voltage_bits]
-    scalars_b = [b.bits, b.scale_exponent, b.decay_dv, b.voltage_shift, b.voltage_bits]
-    checks.append(
-        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
-    )
-    same_config = a.config.to_dict() == b.config.to_dict()
-    checks.append(
-        {
-            "check": f"{prefix}: config",
-            "a": a_name,
-            "b": b_name,
-            "kind": "exact",
-            "equal": same_config,
-            "n_differences": 0 if same_config else 1,
-            "detail": "identical" if same_config else "configs differ",
-        }
-    )
-    return checks
-
-
-def integer_outputs(run, n: int | None = None) -> dict[str, np.ndarray | int]:
-    """An IntegerRun (or ReferenceRun) as plain arrays, optionally the first n presentations only."""
-    take = slice(None) if n is None else slice(0, n)
-    out: dict[str, Any] = {
-        "counts": _numpy(run.counts)[take],
-        "candidates": _numpy(run.candidates_per_step)[take],
-        "saturations": int(run.saturations),
-    }
-    if run.raster is not None:
-        out["raster"] = _numpy(run.raster)[take].astype(bool)
-    if run.final_voltage is not None:
-        out["final_voltage"] = _numpy(run.final_voltage)[take].astype(np.int64)
-    return out
-
-
-def cross_implementation(
-    model,
-    spikes: torch.Tensor,
-    int_run,
-    *,
-    folder: Path,
-    targets: Sequence[str],
-    reference_queries: int,
-    device: torch.device | None = None,
-) -> dict[str, Any]:
-    """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
-
-    ``int_run`` is the integer simulator's recorded run of ``spikes`` (the baseline).
-    """
-    from vprsnn_export.targets.intsim import IntegerNetwork
-    from vprsnn_export.targets.reference_stepper import reference_run
-
-    checks: list[dict] = []
-    skipped: dict[str, str] = {}
-    files: dict[str, list[str]] = {}
-    base = integer_outputs(int_run)
-    n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
-    if n_ref:
-        # the simulator's own rows of these queries; their saturations need a run of their own (the run counts a total)
-        head = {
-            **integer_outputs(int_run, n_ref),
-            "saturations": IntegerNetwork(model, device).run(spikes[:n_ref]).saturations,
-        }
-        oracle = reference_run(model, spikes[:n_ref].numpy())
-        checks += compare_outputs(
-            "reference stepper", "integer simulator", head, "reference stepper", integer_outputs(oracle)
-        )
-    if "onnx" in targets:
-        checks += _onnx_checks(model, spikes, base, folder, files, skipped)
-    if "nir" in targets:
-        from vprsnn_export.targets.nir_target import read_nir, write_nir
-
-        path = write_nir(model, folder / "model.nir", source_sha256=model.source_sha256)
-        files["nir"] = [str(path)]
-        checks += _round_trip("NIR", model, read_nir(path), spikes, base, device)
-    if "loihi" in targets:
-        from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
-
-        written = write_loihi(model, folder / "loihi", source_sha256=model.source_sha256)
-        files["loihi"] = [str(p) for p in written.values()]
-        checks += _round_trip("Loihi", model, read_loihi_model(folder / "loihi"), spikes, base, device)
-    return {
-        "checks": checks,
-        "passed": all(c["equal"] for c in checks),
-        "n_checks": len(checks),
-        "n_failed": sum(not c["equal"] for c in checks),
-        "reference_queries": n_ref,
-        "skipped": skipped,
-        "files": files,
-    }
-
-
-def _onnx_checks(model, spikes, base: dict, folder: Path, files: dict, skipped: dict) -> list[dict]:
-    from vprsnn_export.targets.onnx_target import run_onnx_outputs, write_onnx
-
-    try:
-        path = write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)
-    except InvalidValueError as exc:  # e.g. state isolation off: the graph cannot express it
-        skipped["onnx"] = str(exc)
-        return []
-    files["onnx"] = [str(path)]
-    out = run_onnx_outputs(path, spikes)
-    onnx = {"raster": out.raster.astype(bool), "counts": out.counts, "saturations": int(out.saturations.sum())}
-    checks = compare_outputs("ONNX (onnxruntime)", "integer simulator", base, "onnxruntime", onnx)
-    expected = strategy_scores(model.calibration, base["counts"], "wprob", model.config.assignment.gamma)
-    checks.append(
-        distribution_comparison("ONNX (onnxruntime): W+Prob head", "readout", expected, "onnxruntime", out.wprob)
-    )
-    return checks
-
-
-def _round_trip(label: str, model, rebuilt, spikes, base: dict, device) -> list[dict]:
-    from vprsnn_export.targets.intsim import IntegerNetwork
-
-    checks = compare_models(f"{label} read back", "written model", model, "read back", rebuilt)
-    run = IntegerNetwork(rebuilt, device).run(spikes, record=True)
-    checks += compare_outputs(
-        f"{label} read back", "integer simulator", base, f"{label} model on the simulator", integer_outputs(run)
-    )
-    return checks
 
 
 # ---------------------------------------------------------------------------- spike level
@@ -350,29 +175,29 @@ def spike_level(
     float_counts: np.ndarray,
     int_counts: np.ndarray,
     saturations: int,
-) -> dict[str, Any]:
+    calibration_saturations: int | None = None,
+) -> SpikeLevel:
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
-    from vprsnn_export.targets.intsim import step_agreement
-
     agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
     corr = count_correlations(float_counts, int_counts)
     float_total = np.asarray(float_counts).sum(axis=1)
     int_total = np.asarray(int_counts).sum(axis=1)
-    return {
-        "winner_agreement": agreement["all_steps"],
-        "winner_agreement_active": agreement["active_steps"],
-        "n_steps": agreement["n_steps"],
-        "n_active_steps": agreement["n_active_steps"],
-        "count_correlation_mean": float(corr.mean()),
-        "count_correlation_min": float(corr.min()),
-        "count_correlation": [round(float(c), 6) for c in corr],
-        "total_spikes_float": int(float_total.sum()),
-        "total_spikes": int(int_total.sum()),
-        "spike_ratio": float(int_total.sum() / float_total.sum()) if float_total.sum() else None,
-        "spikes_per_query_float": [int(v) for v in float_total],
-        "spikes_per_query": [int(v) for v in int_total],
-        "saturations": int(saturations),
-    }
+    return SpikeLevel(
+        winner_agreement=agreement["all_steps"],
+        winner_agreement_active=agreement["active_steps"],
+        n_steps=int(agreement["n_steps"]),
+        n_active_steps=int(agreement["n_active_steps"]),
+        count_correlation_mean=float(corr.mean()),
+        count_correlation_min=float(corr.min()),
+        count_correlation=tuple(round(float(c), 6) for c in corr),
+        total_spikes_float=int(float_total.sum()),
+        total_spikes=int(int_total.sum()),
+        spike_ratio=float(int_total.sum() / float_total.sum()) if float_total.sum() else None,
+        spikes_per_query_float=tuple(int(v) for v in float_total),
+        spikes_per_query=tuple(int(v) for v in int_total),
+        saturations=int(saturations),
+        calibration_saturations=calibration_saturations,
+    )
 
 
 # ---------------------------------------------------------------------------- decision level
@@ -393,18 +218,18 @@ def decision_level(
     int_scores: Mapping[str, np.ndarray],
     float_aggregated: Mapping[int, np.ndarray],
     int_aggregated: Mapping[int, np.ndarray],
-) -> dict[str, Any]:
+) -> DecisionLevel:
     """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
     tv = tv_distance(float_scores["wprob"], int_scores["wprob"])
-    return {
-        "top1_agreement": {s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
-        "wprob_tv_mean": float(tv.mean()),
-        "wprob_tv_max": float(tv.max()),
-        "wprob_tv": [round(float(v), 6) for v in tv],
-        "aggregated_agreement": {
-            str(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
+    return DecisionLevel(
+        top1_agreement={s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
+        wprob_tv_mean=float(tv.mean()),
+        wprob_tv_max=float(tv.max()),
+        wprob_tv=tuple(round(float(v), 6) for v in tv),
+        aggregated_agreement={
+            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
         },
-    }
+    )
 
 
 # ---------------------------------------------------------------------------- metric level
@@ -417,20 +242,15 @@ def readout_scores(calibration: np.ndarray, counts: np.ndarray, options: Readout
     return scores, agg
 
 
-def metric_deltas(float_rows: Sequence[dict], rows: Sequence[dict]) -> list[dict]:
+def metric_rows(rows: Sequence[Mapping[str, Any]]) -> tuple[MetricRow, ...]:
+    """The typed rows of :func:`runtime.evaluation.readout_rows`."""
+    return tuple(MetricRow.from_dict(row) for row in rows)
+
+
+def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
     """Each quantised row with its float value and the difference (quantised - float) of every metric."""
-    reference = {(r["strategy"], r["k"]): r for r in float_rows}
-    out = []
-    for row in rows:
-        base = reference[(row["strategy"], row["k"])]
-        out.append(
-            {
-                **row,
-                "float": {m: base[m] for m in METRICS},
-                "delta": {m: row[m] - base[m] for m in METRICS},
-            }
-        )
-    return out
+    reference = {(r.strategy, r.k): r for r in float_rows}
+    return tuple(row.with_float(reference[(row.strategy, row.k)]) for row in rows)
 
 
 def pr_points(
@@ -439,19 +259,22 @@ def pr_points(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     tolerance: int,
-) -> dict[str, list[float]]:
+) -> PrCurve:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)
-    matched = predicted >= 0
-    ids = np.where(matched, np.asarray(reference_place_ids)[np.maximum(predicted, 0)], -1)
-    correct = is_correct(ids, query_place_ids, tolerance) & matched
+    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
+    correct = is_correct(ids, query_place_ids, tolerance)
     precision, recall, _ = pr_curve(correct, confidence)
-    return {"precision": [round(float(p), 6) for p in precision], "recall": [round(float(r), 6) for r in recall]}
+    return PrCurve(tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall))
 
 
 def curves(
-    scores: Mapping[str, np.ndarray], agg: Mapping[int, np.ndarray], reference_ids, query_ids, options: ReadoutOptions
-) -> dict[str, dict]:
+    scores: Mapping[str, np.ndarray],
+    agg: Mapping[int, np.ndarray],
+    reference_ids: np.ndarray,
+    query_ids: np.ndarray,
+    options: ReadoutOptions,
+) -> dict[str, PrCurve]:
     """PR curves of W+Prob at k=1 and at the largest k."""
     out = {"wprob k=1": pr_points(scores["wprob"], "wprob", reference_ids, query_ids, options.tolerance)}
     top = max(options.ks)
@@ -463,18 +286,14 @@ def curves(
 # ---------------------------------------------------------------------------- tolerances
 
 
-def _row(rows: Sequence[dict], strategy: str, k: int) -> dict:
-    return next(r for r in rows if r["strategy"] == strategy and r["k"] == k)
-
-
 def tolerance_checks(
-    rows: Sequence[dict],
-    spike: Mapping[str, Any],
-    decision: Mapping[str, Any],
+    rows: Sequence[MetricRow],
+    spike: SpikeLevel,
+    decision: DecisionLevel,
     tolerances: Mapping[str, float | None],
     ks: Sequence[int],
-) -> list[dict]:
-    """Each enabled tolerance as {check, what, value, limit, passed}; ``rows`` come from :func:`metric_deltas`.
+) -> list[ToleranceCheck]:
+    """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
 
     Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
     network that does better than float never fails. A metric moves in steps of 1/Q (one
@@ -482,25 +301,26 @@ def tolerance_checks(
     "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
     """
     top = max(ks)
-    checks = []
-    n_queries = int(rows[0]["n_queries"]) if rows else 1
+    checks: list[ToleranceCheck] = []
+    n_queries = rows[0].n_queries if rows else 1
     slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
 
     def drop(name: str, strategy: str, k: int, metric: str) -> None:
-        row = _row(rows, strategy, k)
-        value = 0.0 - row["delta"][metric]
+        row = find_row(rows, strategy, k)
         limit = tolerances[name]
+        if row is None or row.delta is None or limit is None:
+            raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {name} tolerance")
+        value = 0.0 - row.delta.get(metric)
         applied = max(limit, slack)
-        checks.append(
-            {
-                "check": name,
-                "what": f"{metric} drop, {strategy} k={k}",
-                "value": value,
-                "limit": limit,
-                "applied_limit": applied,
-                "passed": bool(value <= applied + 1e-12),
-            }
-        )
+        what = f"{metric} drop, {strategy} k={k}"
+        checks.append(ToleranceCheck(name, what, value, limit, applied, bool(value <= applied + 1e-12)))
+
+    def bound(name: str, what: str, value: float, at_least: bool) -> None:
+        limit = tolerances[name]
+        if limit is None:
+            return
+        passed = value >= limit if at_least else value <= limit
+        checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
 
     if tolerances.get("accuracy") is not None:
         for strategy in STRATEGIES:
@@ -512,77 +332,40 @@ def tolerance_checks(
         drop("r_at_100p", "wprob", top, "r_at_100p")
     if tolerances.get("auc_pr") is not None:
         drop("auc_pr", "wprob", top, "auc_pr")
-    if tolerances.get("winner_agreement") is not None:
-        value, limit = spike["winner_agreement"], tolerances["winner_agreement"]
-        checks.append(
-            {
-                "check": "winner_agreement",
-                "what": "steps with the float winner",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value >= limit),
-            }
-        )
-    if tolerances.get("top1_agreement") is not None:
-        value, limit = decision["top1_agreement"]["wprob"], tolerances["top1_agreement"]
-        checks.append(
-            {
-                "check": "top1_agreement",
-                "what": "W+Prob k=1 top-1 agreement",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value >= limit),
-            }
-        )
-    if tolerances.get("saturations") is not None:
-        value, limit = spike["saturations"], tolerances["saturations"]
-        checks.append(
-            {
-                "check": "saturations",
-                "what": "saturation events on the queries",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value <= limit),
-            }
-        )
+    bound("winner_agreement", "steps with the float winner", spike.winner_agreement, True)
+    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement["wprob"], True)
+    bound("saturations", "saturation events on the queries", spike.saturations, False)
     return checks
 
 
 # ---------------------------------------------------------------------------- weights
 
 
-def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> dict[str, Any]:
+def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> WeightHistogram:
     """Histogram of the float weights divided by their scale range (per-neuron or global maximum)."""
     w = np.asarray(float_weights, dtype=np.float64)
     top = w.max(axis=0, keepdims=True) if per_neuron else np.array([[w.max()]])
     ratio = w / np.where(top > 0, top, 1.0)
     counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
-    return {
-        "normalised_by": "per-neuron maximum" if per_neuron else "global maximum",
-        "counts": [int(c) for c in counts],
-        "edges": [round(float(e), 6) for e in edges],
-    }
+    return WeightHistogram(
+        "per-neuron maximum" if per_neuron else "global maximum",
+        tuple(int(c) for c in counts),
+        tuple(round(float(e), 6) for e in edges),
+    )
 
 
-def level_histogram(model) -> dict[str, Any]:
+def level_histogram(model: FixedPointModel) -> LevelHistogram:
     """How many weights sit on each mantissa level 0 .. 2**bits - 1."""
     levels = (1 << model.bits) - 1
     counts = np.bincount(np.asarray(model.weight_mantissa).ravel().astype(np.int64), minlength=levels + 1)
-    return {
-        "levels": levels,
-        "counts": [int(c) for c in counts[: levels + 1]],
-        "zero_fraction": float(counts[0] / max(counts.sum(), 1)),
-    }
+    return LevelHistogram(levels, tuple(int(c) for c in counts[: levels + 1]), float(counts[0] / max(counts.sum(), 1)))
 
 
 # ---------------------------------------------------------------------------- orchestration
 
 
 def verify_checkpoint(
-    ckpt,
+    ckpt: Checkpoint,
     ckpt_sha256: str,
     query_images: np.ndarray,
     query_place_ids: np.ndarray,
@@ -594,25 +377,18 @@ def verify_checkpoint(
     device: torch.device | None = None,
     progress: bool = False,
     label: str | None = None,
-) -> dict[str, Any]:
-    """Quantise ``ckpt`` at every bit width and run every check; a JSON-ready dict (one report run).
+    checkpoint: str | None = None,
+) -> VerifiedRun:
+    """Quantise ``ckpt`` at every bit width and run every check: one verified run of the report.
 
     ``reference_images`` (the checkpoint's reference traversals, in its reference place
     order) are needed for the deployed calibration; ``export_dir`` receives each bit
     width's fixed-point model and exported files (a temporary folder when None).
+    ``checkpoint`` names the checkpoint's file in the result.
     """
-    from tqdm import tqdm
-
-    from vprsnn_export.dynamics import FloatNetwork
-    from vprsnn_export.encoding import query_spikes
-    from vprsnn_export.export.model import check_bits, save_fixed_point
-    from vprsnn_export.export.quantize import quantize_checkpoint
-    from vprsnn_export.runtime.deployment import recalibrate
-    from vprsnn_export.targets.intsim import IntegerNetwork
-
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
-    if options.calibration not in ("deployed", "float"):
+    if options.calibration not in CALIBRATIONS:
         raise InvalidValueError(f"calibration must be deployed or float, got {options.calibration!r}")
     if options.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
@@ -622,11 +398,11 @@ def verify_checkpoint(
     float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device).run(spikes, record=True)
     float_counts = float_run.counts.numpy()
     ref_ids = ckpt.reference_place_ids
-    float_rows = readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout)
+    float_rows = metric_rows(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout))
     float_scores, float_agg = readout_scores(ckpt.calibration, float_counts, readout)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
-    root = Path(temporary.name if temporary else export_dir)
-    results = []
+    root = Path(temporary.name if temporary is not None else str(export_dir))
+    results: list[BitsResult] = []
     stages = tqdm(
         total=len(bits_list) * 4,
         desc=f"verify {label or ''}".strip(),
@@ -640,12 +416,14 @@ def verify_checkpoint(
             clock = time.perf_counter()
             seconds: dict[str, float] = {}
             stages.set_postfix(bits=bits, stage="quantise")
-            model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options.per_neuron, options.scale_method)
-            model = recalibrate(
-                model,
-                dict(reference_images or {}),
-                ref_ids,
-                reuse_float_calibration=options.calibration == "float",
+            model = deploy(
+                ckpt,
+                ckpt_sha256,
+                bits,
+                per_neuron=options.per_neuron,
+                scale_method=options.scale_method,
+                calibration=options.calibration,
+                reference_images=reference_images,
                 device=device,
             )
             folder = root / f"{bits}bit"
@@ -666,145 +444,125 @@ def verify_checkpoint(
                 targets=options.targets,
                 reference_queries=options.reference_queries,
                 device=device,
-            )
-            cross["files"]["model"] = [str(model_path)]
+            ).with_files("model", [str(model_path)])
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            rows = metric_deltas(
-                float_rows, readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout)
-            )
+            int_rows = metric_rows(readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout))
+            rows = metric_deltas(float_rows, int_rows)
             scores, agg = readout_scores(model.calibration, int_counts, readout)
-            spike = spike_level(float_run.raster, int_run.raster, float_counts, int_counts, int_run.saturations)
-            spike["calibration_saturations"] = model.quantisation.get("calibration_saturations")
+            if float_run.raster is None or int_run.raster is None:
+                raise InvalidValueError("verify needs the recorded rasters of both networks")
+            spike = spike_level(
+                float_run.raster,
+                int_run.raster,
+                float_counts,
+                int_counts,
+                int_run.saturations,
+                model.quantisation.calibration_saturations,
+            )
             decision = decision_level(
                 float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
             )
             checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks)
             seconds["readout"] = time.perf_counter() - clock
             results.append(
-                {
-                    "bits": bits,
-                    "quantisation": model.quantisation,
-                    "cross_implementation": cross,
-                    "spike_level": spike,
-                    "decision_level": decision,
-                    "metrics": rows,
-                    "tolerance_checks": checks,
-                    "pr_curves": curves(scores, agg, ref_ids, query_place_ids, readout),
-                    "weight_levels": level_histogram(model),
-                    "passed": bool(cross["passed"] and all(c["passed"] for c in checks)),
-                    "seconds": {k: round(v, 3) for k, v in seconds.items()},
-                }
+                BitsResult(
+                    bits=bits,
+                    quantisation=model.quantisation,
+                    cross_implementation=cross,
+                    spike_level=spike,
+                    decision_level=decision,
+                    metrics=rows,
+                    tolerance_checks=tuple(checks),
+                    pr_curves=curves(scores, agg, ref_ids, query_place_ids, readout),
+                    weight_levels=level_histogram(model),
+                    passed=bool(cross.passed and all(c.passed for c in checks)),
+                    seconds={k: round(v, 3) for k, v in seconds.items()},
+                )
             )
             stages.update(1)
     finally:
         stages.close()
         if temporary is not None:
             temporary.cleanup()
-    return {
-        "label": label,
-        "seed": ckpt.config.seed,
-        "config": ckpt.config.to_dict(),
-        "checkpoint_sha256": ckpt_sha256,
-        "checkpoint_data": ckpt.data,
-        "query": query_traversal,
-        "n_queries": int(len(query_place_ids)),
-        "query_place_ids": [int(p) for p in query_place_ids],
-        "reference_place_ids": [int(p) for p in ref_ids],
-        "export_dir": None if temporary else str(root),
-        "float": {
-            "metrics": float_rows,
-            "total_spikes": int(float_counts.sum()),
-            "pr_curves": curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
-            "weights": weight_histograms(ckpt.weights, options.per_neuron),
-        },
-        "bits": results,
-        "passed": all(r["passed"] for r in results),
-    }
+    return VerifiedRun(
+        label=label,
+        seed=ckpt.config.seed,
+        config=ckpt.config.to_dict(),
+        checkpoint_sha256=ckpt_sha256,
+        checkpoint_data=dict(ckpt.data),
+        query=query_traversal,
+        n_queries=int(len(query_place_ids)),
+        query_place_ids=tuple(int(p) for p in query_place_ids),
+        reference_place_ids=tuple(int(p) for p in ref_ids),
+        export_dir=None if temporary is not None else str(root),
+        float=FloatResult(
+            metrics=float_rows,
+            total_spikes=int(float_counts.sum()),
+            pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
+            weights=weight_histograms(ckpt.weights, options.per_neuron),
+        ),
+        bits=tuple(results),
+        checkpoint=checkpoint,
+    )
 
 
 # ---------------------------------------------------------------------------- the report
 
 
-def mean_std(values: Sequence[float]) -> dict[str, float]:
-    """Mean, sample standard deviation (0 for one value) and count."""
-    array = np.asarray([v for v in values if v is not None], dtype=np.float64)
-    if not array.size:
-        return {"mean": None, "std": None, "n": 0}
-    return {
-        "mean": float(array.mean()),
-        "std": float(array.std(ddof=1)) if array.size > 1 else 0.0,
-        "n": int(array.size),
-    }
-
-
-def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
-    float_groups: dict[tuple, list[dict]] = {}
-    for run in runs:
-        for row in run["float"]["metrics"]:
-            float_groups.setdefault((row["strategy"], row["k"]), []).append(row)
-    float_rows = [
-        {"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]) for m in METRICS}}
-        for (s, k), rows in float_groups.items()
-    ]
-    per_bits: dict[int, list[dict]] = {}
-    for run in runs:
-        for result in run["bits"]:
-            per_bits.setdefault(int(result["bits"]), []).append(result)
-    bits_summary = []
-    for bits in sorted(per_bits, reverse=True):
-        results = per_bits[bits]
-        groups: dict[tuple, list[dict]] = {}
-        for result in results:
-            for row in result["metrics"]:
-                groups.setdefault((row["strategy"], row["k"]), []).append(row)
-        rows = [
-            {
-                "strategy": s,
-                "k": k,
-                **{m: mean_std([r[m] for r in rs]) for m in METRICS},
-                "delta": {m: mean_std([r["delta"][m] for r in rs]) for m in METRICS},
-            }
-            for (s, k), rs in groups.items()
-        ]
-        ks = sorted({int(k) for r in results for k in r["decision_level"]["aggregated_agreement"]})
-        bits_summary.append(
-            {
-                "bits": bits,
-                "n_runs": len(results),
-                "n_passed": sum(bool(r["passed"]) for r in results),
-                "cross_implementation_passed": sum(bool(r["cross_implementation"]["passed"]) for r in results),
-                "metrics": rows,
-                "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]),
-                "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]),
-                "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]),
-                "saturations": mean_std([r["spike_level"]["saturations"] for r in results]),
-                "top1_agreement": {
-                    s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]) for s in STRATEGIES
-                },
-                "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]),
-                "aggregated_agreement": {
-                    str(k): mean_std([r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results])
-                    for k in ks
-                },
-            }
+def summary_rows(rows_per_run: Sequence[Sequence[MetricRow]], with_delta: bool) -> tuple[SummaryRow, ...]:
+    """Mean ± std of each (strategy, k) row over runs, in the order the rows first appear."""
+    groups: dict[tuple[str, int], list[MetricRow]] = {}
+    for rows in rows_per_run:
+        for row in rows:
+            groups.setdefault((row.strategy, row.k), []).append(row)
+    return tuple(
+        SummaryRow(
+            strategy,
+            k,
+            {m: mean_std(r.values.get(m) for r in rows) for m in METRICS},
+            {m: mean_std(r.delta.get(m) if r.delta else None for r in rows) for m in METRICS} if with_delta else None,
         )
-    return {
-        "n_runs": len(runs),
-        "float": float_rows,
-        "bits": bits_summary,
-        "passed": all(bool(r["passed"]) for r in runs),
-    }
+        for (strategy, k), rows in groups.items()
+    )
+
+
+def summarise_bits(bits: int, results: Sequence[BitsResult]) -> BitsSummary:
+    """Mean ± std over networks of every measurement at one bit width."""
+    ks = sorted({k for r in results for k in r.decision_level.aggregated_agreement})
+    return BitsSummary(
+        bits=bits,
+        n_runs=len(results),
+        n_passed=sum(r.passed for r in results),
+        cross_implementation_passed=sum(r.cross_implementation.passed for r in results),
+        metrics=summary_rows([r.metrics for r in results], with_delta=True),
+        winner_agreement=mean_std(r.spike_level.winner_agreement for r in results),
+        count_correlation=mean_std(r.spike_level.count_correlation_mean for r in results),
+        spike_ratio=mean_std(r.spike_level.spike_ratio for r in results),
+        saturations=mean_std(r.spike_level.saturations for r in results),
+        top1_agreement={s: mean_std(r.decision_level.top1_agreement[s] for r in results) for s in STRATEGIES},
+        wprob_tv_mean=mean_std(r.decision_level.wprob_tv_mean for r in results),
+        aggregated_agreement={k: mean_std(r.decision_level.aggregated_agreement.get(k) for r in results) for k in ks},
+    )
+
+
+def summarise_runs(runs: Sequence[VerifiedRun]) -> RunSummary:
+    """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
+    per_bits: dict[int, list[BitsResult]] = {}
+    for run in runs:
+        for result in run.bits:
+            per_bits.setdefault(result.bits, []).append(result)
+    return RunSummary(
+        n_runs=len(runs),
+        float=summary_rows([run.float.metrics for run in runs], with_delta=False),
+        bits=tuple(summarise_bits(bits, per_bits[bits]) for bits in sorted(per_bits, reverse=True)),
+        passed=all(run.passed for run in runs),
+    )
 
 
 def versions() -> dict[str, str]:
     """Package and library versions recorded in every report."""
-    import importlib.metadata as md
-
-    from vprsnn_export.version import __version__
-
     out = {
         "vprsnn-export": __version__,
         "python": platform.python_version(),
@@ -813,59 +571,50 @@ def versions() -> dict[str, str]:
     }
     for name in ("torch", "numpy", "onnx", "onnxruntime", "nir", "h5py", "matplotlib"):
         try:
-            out[name] = md.version(name)
-        except md.PackageNotFoundError:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
             out[name] = "absent"
     return out
 
 
 def build_report(
-    runs: Sequence[Mapping[str, Any]],
+    runs: Sequence[VerifiedRun],
     settings: Mapping[str, Any],
     *,
     command: Sequence[str] | None = None,
     seconds: float | None = None,
-) -> dict[str, Any]:
-    """The whole report.json: settings, versions, every run, the summary and the verdict."""
-    import datetime
-
-    return {
-        "schema": SCHEMA,
-        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "command": list(command) if command is not None else None,
-        "seconds": None if seconds is None else round(float(seconds), 1),
-        "versions": versions(),
-        "settings": dict(settings),
-        "runs": list(runs),
-        "summary": summarise_runs(runs),
-        "passed": all(bool(r["passed"]) for r in runs),
-    }
-
-
-def _numpy(value: Any) -> np.ndarray:
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)
+) -> VerifyReport:
+    """The whole report: settings, versions, every run, the summary and the verdict."""
+    return VerifyReport(
+        created=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        command=None if command is None else tuple(command),
+        seconds=None if seconds is None else round(float(seconds), 1),
+        versions=versions(),
+        settings=dict(settings),
+        runs=tuple(runs),
+        summary=summarise_runs(runs),
+    )
 
 
 __all__ = [
     "DEFAULT_TOLERANCES",
+    "METRICS",
     "SCHEMA",
     "VerifyOptions",
     "build_report",
-    "compare_models",
-    "compare_outputs",
     "count_correlations",
-    "cross_implementation",
     "decision_level",
-    "distribution_comparison",
-    "exact_comparison",
+    "level_histogram",
     "metric_deltas",
+    "metric_rows",
     "parse_tolerances",
+    "pr_points",
     "spike_level",
     "summarise_runs",
     "tolerance_checks",
     "top1_agreement",
     "tv_distance",
     "verify_checkpoint",
+    "versions",
+    "weight_histograms",
 ]

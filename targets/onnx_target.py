@@ -40,6 +40,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
 from vprsnn_export.readout.assignment import weighted_matrix
+from vprsnn_export.runs import SpikeRun
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
@@ -59,7 +60,7 @@ class OnnxRun:
     seconds: float  # wall time of the session.run calls
 
 
-def const(name: str, value: np.ndarray) -> TensorProto:
+def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
     return numpy_helper.from_array(np.asarray(value), name=name)
 
 
@@ -331,7 +332,7 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         began = time.perf_counter()
         values = sess.run(None, {INPUT: chunk})
         seconds += time.perf_counter() - began
-        for name, value in zip(names, values):
+        for name, value in zip(names, values, strict=True):
             pieces[name].append(value)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
     raster = joined.get("raster")
@@ -354,3 +355,27 @@ def run_onnx_outputs(
 def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
     """Output spike counts (N, neurons) int64 of an exported graph on onnxruntime (CPU)."""
     return run_onnx_outputs(path, spikes).counts
+
+
+@dataclass
+class OnnxBackend:
+    """An exported graph on onnxruntime as a :class:`~vprsnn_export.runs.Backend`.
+
+    The run carries the counts, the total saturations, the W+Prob distribution when the
+    graph has that head, and the raster when it has that output (``record`` cannot add
+    an output the graph lacks).
+    """
+
+    path: Path
+    threads: int | None = None
+    batch: int = 128
+    name: str = "onnxruntime"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        out = run_onnx_outputs(self.path, spikes, batch=self.batch, threads=self.threads)
+        return SpikeRun(
+            counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
+            raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),
+            saturations=int(out.saturations.sum()),
+            wprob=out.wprob,
+        )

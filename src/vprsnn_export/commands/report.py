@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import InvalidValueError
+from ..runtime.report import combine_reports, load_report, report_path, write_report
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,8 +25,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..runtime.report import combine_reports, load_report, report_path, write_report
-
     sources = [str(report_path(p)) for p in args.runs]
     if len(set(sources)) != len(sources):
         raise InvalidValueError("the same report is named twice")
@@ -39,10 +38,9 @@ def run(args: argparse.Namespace) -> int:
     )
     written = write_report(combined, out, write_json=rewrite_json)
     if not args.quiet:
-        n_runs = len(combined["runs"])
+        n_runs = len(combined.runs)
         print(
-            f"{'PASS' if combined['passed'] else 'FAIL'}: {sum(r['passed'] for r in combined['runs'])} of {n_runs} "
-            f"network(s) pass every check",
+            f"{'PASS' if combined.passed else 'FAIL'}: {combined.n_passed} of {n_runs} network(s) pass every check",
             file=sys.stderr,
         )
         for kind, path in written.items():

@@ -10,15 +10,24 @@ import argparse
 import dataclasses
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 
-from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
+from ..experiments.common import Settings, trained_checkpoint
+from ..export.model import check_bits
+from ..runtime.conformance import parse_targets
+from ..runtime.evaluation import ReadoutOptions
+from ..runtime.report import write_report
+from ..runtime.results import MetricRow, VerifyReport
+from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
+from ..threads import set_threads
+from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     add_data_options,
     add_runtime_options,
@@ -100,29 +109,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def limit_cpu_threads() -> int:
-    """One torch CPU thread unless OMP_NUM_THREADS says otherwise; returns the thread count in use.
-
-    The simulators step through time with thousands of small tensor operations. With two
-    or more intra-op threads every one of them is an OpenMP parallel region, and on a
-    machine where anything else runs the threads spin waiting for each other: measured
-    here, the demo took 358 s of CPU with torch's default of 2 threads and 15 s with 1.
-    """
-    import os
-
-    import torch
-
-    if "OMP_NUM_THREADS" not in os.environ:
-        torch.set_num_threads(1)
-    return torch.get_num_threads()
-
-
-def verify_options(args: argparse.Namespace, gamma: float):
+def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
-    from ..export.model import check_bits
-    from ..runtime.evaluation import ReadoutOptions
-    from ..runtime.verify import VerifyOptions, parse_targets, parse_tolerances
-
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
@@ -183,7 +171,7 @@ def load_for(
 
 
 def seed_networks(
-    template,
+    template: Checkpoint,
     n_seeds: int,
     dataset: Dataset,
     source: str,
@@ -192,15 +180,12 @@ def seed_networks(
     out: Path,
     device_name: str,
     progress: bool,
-) -> Iterator[tuple[str, object, Path]]:
+) -> Iterator[tuple[str, Checkpoint, Path]]:
     """Seeds 1..N trained with the template's config on its reference traversals, one at a time.
 
     Training goes through the experiments' checkpoint cache (same key), so a network the
     experiments already trained is reused; each is also written to DIR/checkpoints/seedN.npz.
     """
-    from ..experiments.common import Settings, trained_checkpoint
-    from ..trainer.pipeline import train_and_calibrate
-
     key = "subset" if subset else ("consecutive" if places else "all")
     for seed in range(1, n_seeds + 1):
         cfg = template.config.replace(seed=seed)
@@ -216,7 +201,9 @@ def seed_networks(
         yield f"seed {seed}", ckpt, path
 
 
-def settings_of(args: argparse.Namespace, options, source: str, subset, places) -> dict:
+def settings_of(
+    args: argparse.Namespace, options: VerifyOptions, source: str, subset: str | None, places: str | None
+) -> dict:
     return {
         **options.to_dict(),
         "query": args.query,
@@ -269,37 +256,37 @@ def folder_name(label: str, index: int) -> str:
     return f"{index + 1:02d}-{safe}" if safe else f"{index + 1:02d}"
 
 
-def verdict_rows(report: dict) -> list[dict]:
+def verdict_rows(report: VerifyReport) -> list[dict]:
     """One row per network and bit width for the terminal table."""
     rows = []
-    for index, run in enumerate(report["runs"]):
-        top = max(int(r["k"]) for r in run["float"]["metrics"])
-        for result in run["bits"]:
-            metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
-            worst = min(metrics[(s, 1)]["delta"]["accuracy"] for s in ("standard", "weighted", "wprob"))
-            cross = result["cross_implementation"]
+    for index, run in enumerate(report.runs):
+        top = max(run.ks)
+        for result in run.bits:
+            worst = min(_delta(result.row(s, 1), "accuracy") for s in ("standard", "weighted", "wprob"))
+            cross = result.cross_implementation
             rows.append(
                 {
-                    "network": run.get("label") or str(index + 1),
-                    "bits": result["bits"],
-                    "verdict": "PASS" if result["passed"] else "FAIL",
-                    "cross": f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
+                    "network": run.label or str(index + 1),
+                    "bits": result.bits,
+                    "verdict": "PASS" if result.passed else "FAIL",
+                    "cross": f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
                     "accuracy": f"{100 * worst:+.1f}",
-                    "r_at_100p": f"{100 * metrics[('wprob', top)]['delta']['r_at_100p']:+.1f} (k={top})",
-                    "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
-                    "saturations": result["spike_level"]["saturations"],
+                    "r_at_100p": f"{100 * _delta(result.row('wprob', top), 'r_at_100p'):+.1f} (k={top})",
+                    "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
+                    "saturations": result.spike_level.saturations,
                 }
             )
     return rows
 
 
-def run(args: argparse.Namespace) -> int:
-    from ..runtime.report import write_report
-    from ..runtime.verify import build_report, verify_checkpoint
+def _delta(row: MetricRow, metric: str) -> float:
+    return 0.0 if row.delta is None else row.delta.get(metric)
 
+
+def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     progress = not args.quiet
-    limit_cpu_threads()
+    set_threads()
     if args.seeds is not None and (args.seeds < 1 or len(args.checkpoints) != 1):
         raise InvalidValueError(
             "--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)"
@@ -310,6 +297,7 @@ def run(args: argparse.Namespace) -> int:
     options = verify_options(args, templates[0][1].config.assignment.gamma)
     source, subset, places = selection(args, templates[0][1])
     cache: dict = {}
+    networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
         template = templates[0][1]
         dataset, _ = load_for(template, args.query, source, subset, places, progress, cache)  # training places
@@ -341,23 +329,23 @@ def run(args: argparse.Namespace) -> int:
                 device=device,
                 progress=progress,
                 label=label,
+                checkpoint=str(path),
             )
         )
-        runs[-1]["checkpoint"] = str(path)
         report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     if args.json:
         print_json(
             {
-                "passed": report["passed"],
+                "passed": report.passed,
                 "report": {k: str(v) for k, v in written.items()},
-                "summary": report["summary"],
+                "summary": report.summary.to_dict(),
             }
         )
     else:
         print(format_table(verdict_rows(report), TABLE_COLUMNS))
         print(
-            f"\n{'PASS' if report['passed'] else 'FAIL'}: {sum(r['passed'] for r in runs)} of {len(runs)} network(s) "
+            f"\n{'PASS' if report.passed else 'FAIL'}: {report.n_passed} of {len(runs)} network(s) "
             f"pass every check; report: {written['html']}"
         )
-    return 0 if report["passed"] else EXIT_CHECK_FAILED
+    return 0 if report.passed else EXIT_CHECK_FAILED

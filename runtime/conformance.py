@@ -1,0 +1,348 @@
+"""Cross-implementation conformance: every backend of one network must compute what the baseline computes.
+
+The baseline is the integer simulator (a fixed-point model) or the float network (a
+float checkpoint exported to NIR). Each *contender* is another backend on the same
+spike tensor: the slow reference stepper (first few presentations), the ONNX graph on
+onnxruntime, the NIR file read back and the Loihi-style files read back, each run on
+the simulator. Every :class:`~vprsnn_export.runs.SpikeRun` field both sides report is
+compared exactly (raster, counts, candidates per step, final voltages, saturations);
+a W+Prob head (float64 arithmetic in another summation order) must give identical
+decisions and differ from the readout by at most ``WPROB_ROUNDING``. A model read back
+from a file is also compared with the one written, integer by integer.
+
+Used by `verify` (every bit width) and by `export --check` (the files it wrote).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.readout.assignment import decide, strategy_scores
+from vprsnn_export.runs import Backend, SpikeRun
+from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
+from vprsnn_export.targets.nir_target import read_nir, write_nir
+from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
+from vprsnn_export.targets.reference_stepper import ReferenceStepper
+
+from .results import Comparison, ConformanceResult
+
+TARGETS = ("onnx", "nir", "loihi")
+WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
+#: The SpikeRun fields compared exactly, and the name each has in the check's label.
+RUN_FIELDS = {
+    "raster": "raster",
+    "counts": "counts",
+    "candidates_per_step": "candidates",
+    "final_voltage": "final_voltage",
+    "saturations": "saturations",
+}
+#: The label of each target's checks.
+TARGET_LABELS = {"onnx": "ONNX (onnxruntime)", "nir": "NIR read back", "loihi": "Loihi read back"}
+
+
+def parse_targets(raw: str, option: str = "--targets", *, allow_none: bool = True) -> tuple[str, ...]:
+    """``"onnx,nir"`` -> ("onnx", "nir"); "none" (when allowed) gives (); InvalidValueError on anything else."""
+    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
+    unknown = [n for n in names if n not in TARGETS and not (allow_none and n == "none")]
+    if unknown or (not allow_none and not names):
+        allowed = ", ".join(TARGETS) + (" (or none)" if allow_none else "")
+        raise InvalidValueError(f"{option} expects some of {allowed}, got {raw!r}")
+    return tuple(n for n in names if n != "none")
+
+
+# ---------------------------------------------------------------------------- comparisons
+
+
+def as_array(value: Any) -> np.ndarray:
+    """A tensor, array or number as a numpy array."""
+    if isinstance(value, torch.Tensor):
+        return value.detach().cpu().numpy()
+    return np.asarray(value)
+
+
+def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Comparison:
+    """Bit-for-bit equality of two arrays (or integers): any difference fails."""
+    a_arr, b_arr = as_array(a), as_array(b)
+    if a_arr.shape != b_arr.shape:
+        return Comparison(
+            check, a_name, b_name, "exact", False, f"shapes differ: {a_arr.shape} vs {b_arr.shape}", None, a_arr.size
+        )
+    differ = a_arr != b_arr
+    n_diff = int(np.count_nonzero(differ))
+    if n_diff == 0:
+        return Comparison(check, a_name, b_name, "exact", True, f"identical ({a_arr.size} values)", 0, a_arr.size)
+    first = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape))
+    detail = f"{n_diff} of {a_arr.size} values differ; first at {list(first)}: {a_arr[first]!r} vs {b_arr[first]!r}"
+    return Comparison(check, a_name, b_name, "exact", False, detail, n_diff, int(a_arr.size), first)
+
+
+def distribution_comparison(
+    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
+) -> Comparison:
+    """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
+    a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    kind = f"decisions exact, |diff| <= {limit:g}"
+    if a_arr.shape != b_arr.shape:
+        detail = f"shapes differ: {a_arr.shape} vs {b_arr.shape}"
+        return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
+    n_decisions = int(np.count_nonzero(decide(a_arr, "wprob")[0] != decide(b_arr, "wprob")[0]))
+    largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
+    return Comparison(
+        check,
+        a_name,
+        b_name,
+        kind,
+        n_decisions == 0 and largest <= limit,
+        f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
+        n_decisions,
+        max_abs_difference=largest,
+        family="distribution",
+    )
+
+
+def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun) -> list[Comparison]:
+    """Exact comparisons of every SpikeRun field both runs report; the W+Prob distributions within rounding."""
+    checks = [
+        exact_comparison(f"{prefix}: {label}", a_name, getattr(a, name), b_name, getattr(b, name))
+        for name, label in RUN_FIELDS.items()
+        if getattr(a, name) is not None and getattr(b, name) is not None
+    ]
+    if a.wprob is not None and b.wprob is not None:
+        checks.append(distribution_comparison(f"{prefix}: W+Prob head", "readout", a.wprob, b_name, b.wprob))
+    return checks
+
+
+def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b: FixedPointModel) -> list[Comparison]:
+    """A fixed-point model read back from a file against the one written: every integer and the config."""
+    checks = [
+        exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
+        for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
+    ]
+    scalars_a = [a.bits, a.scale_exponent, a.decay_dv, a.voltage_shift, a.voltage_bits]
+    scalars_b = [b.bits, b.scale_exponent, b.decay_dv, b.voltage_shift, b.voltage_bits]
+    checks.append(
+        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
+    )
+    same = a.config.to_dict() == b.config.to_dict()
+    detail = "identical" if same else "configs differ"
+    checks.append(
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, 0 if same else 1, family="config")
+    )
+    return checks
+
+
+# ---------------------------------------------------------------------------- backends
+
+
+Source = Checkpoint | FixedPointModel
+
+
+def backend_of(source: Source, device: torch.device | None = None) -> Backend:
+    """The project's own simulator of a network: the float network or the integer simulator."""
+    if isinstance(source, FixedPointModel):
+        return IntegerNetwork(source, device)
+    return FloatNetwork.from_arrays(source.weights, source.thresholds, source.config, device or torch.device("cpu"))
+
+
+def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
+    """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration."""
+
+    def readout(counts: np.ndarray) -> np.ndarray:
+        return strategy_scores(source.calibration, counts, "wprob", source.config.assignment.gamma)
+
+    return readout
+
+
+@dataclass(frozen=True)
+class Contender:
+    """A backend checked against the baseline, under the label its checks carry.
+
+    ``n_queries`` limits it to the first presentations (the slow reference stepper);
+    ``written``/``read_back`` are the model written to a file and the one read back
+    from it, compared integer by integer before the read-back model is run.
+    """
+
+    target: str  # "reference", "onnx", "nir", "loihi"
+    label: str
+    backend: Backend
+    n_queries: int | None = None
+    written: FixedPointModel | None = None
+    read_back: FixedPointModel | None = None
+
+
+def read_back(target: str, path: Path, written: Source | None, device: torch.device | None = None) -> Contender:
+    """The contender of one exported file: read it back and run it (onnxruntime runs the graph itself)."""
+    label = TARGET_LABELS[target]
+    if target == "onnx":
+        return Contender(target, label, OnnxBackend(Path(path)))
+    rebuilt: Source = read_nir(path) if target == "nir" else read_loihi_model(path)
+    backend = backend_of(rebuilt, device)
+    runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
+    backend = _Renamed(backend, f"{'NIR' if target == 'nir' else 'Loihi'} model on the {runs_on}")
+    pair = isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel)
+    return Contender(
+        target,
+        label,
+        backend,
+        written=written if pair and isinstance(written, FixedPointModel) else None,
+        read_back=rebuilt if pair and isinstance(rebuilt, FixedPointModel) else None,
+    )
+
+
+@dataclass(frozen=True)
+class _Renamed:
+    """A backend under another name (the read-back models run on the project's simulators)."""
+
+    inner: Backend
+    name: str
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        return self.inner.run(spikes, record=record)
+
+
+def compare_backends(
+    baseline: Backend,
+    contenders: Sequence[Contender],
+    spikes: torch.Tensor,
+    *,
+    baseline_run: SpikeRun | None = None,
+    wprob: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[Comparison]:
+    """Run every contender on ``spikes`` (or its first n) and compare it with the baseline's run of the same.
+
+    ``baseline_run`` is the baseline's recorded run of all of ``spikes`` when already made;
+    ``wprob`` maps counts to the W+Prob distribution a contender's head must reproduce.
+    """
+    full = baseline.run(spikes, record=True) if baseline_run is None else baseline_run
+    checks: list[Comparison] = []
+    for contender in contenders:
+        if contender.written is not None and contender.read_back is not None:
+            checks += compare_models(
+                contender.label, "written model", contender.written, "read back", contender.read_back
+            )
+        n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
+        if n == 0:
+            continue
+        # the first n rows of the baseline's run; saturations are a total, so the head needs a run of its own
+        base = (
+            full
+            if n == spikes.shape[0]
+            else dataclasses.replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
+        )
+        run = contender.backend.run(spikes[:n], record=True)
+        if run.wprob is not None and base.wprob is None and wprob is not None:
+            base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))
+        checks += compare_runs(contender.label, baseline.name, base, contender.backend.name, run)
+    return checks
+
+
+def write_targets(
+    model: FixedPointModel, folder: Path, targets: Sequence[str]
+) -> tuple[dict[str, list[Path]], dict[str, str]]:
+    """Write each target of ``model`` into ``folder`` (ONNX with its W+Prob head and raster).
+
+    Returns (files per target, targets skipped with the reason: e.g. ONNX cannot express
+    a network without state isolation).
+    """
+    files: dict[str, list[Path]] = {}
+    skipped: dict[str, str] = {}
+    if "onnx" in targets:
+        try:
+            files["onnx"] = [write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)]
+        except InvalidValueError as exc:
+            skipped["onnx"] = str(exc)
+    if "nir" in targets:
+        files["nir"] = [write_nir(model, folder / "model.nir", source_sha256=model.source_sha256)]
+    if "loihi" in targets:
+        files["loihi"] = list(write_loihi(model, folder / "loihi", source_sha256=model.source_sha256).values())
+    return files, skipped
+
+
+def target_path(target: str, paths: Sequence[Path]) -> Path:
+    """What a target's reader takes: the file (ONNX, NIR) or the folder of the Loihi-style files."""
+    return Path(paths[0]).parent if target == "loihi" else Path(paths[0])
+
+
+def cross_implementation(
+    model: FixedPointModel,
+    spikes: torch.Tensor,
+    int_run: SpikeRun | None = None,
+    *,
+    folder: Path,
+    targets: Sequence[str] = TARGETS,
+    reference_queries: int = 3,
+    device: torch.device | None = None,
+    extra: Sequence[Contender] = (),
+) -> ConformanceResult:
+    """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
+
+    The baseline is the integer simulator (``int_run``: its recorded run of ``spikes``,
+    when already made); the reference stepper runs the first ``reference_queries``
+    presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
+    """
+    files, skipped = write_targets(model, Path(folder), targets)
+    n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
+    contenders: list[Contender] = []
+    if n_ref:
+        contenders.append(Contender("reference", "reference stepper", ReferenceStepper(model), n_queries=n_ref))
+    contenders += [read_back(t, target_path(t, files[t]), model, device) for t in TARGETS if t in files]
+    contenders += list(extra)
+    checks = compare_backends(
+        IntegerNetwork(model, device), contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model)
+    )
+    return ConformanceResult(
+        comparisons=tuple(checks),
+        reference_queries=n_ref,
+        skipped=skipped,
+        files={t: tuple(str(p) for p in paths) for t, paths in files.items()},
+    )
+
+
+def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
+    """Table rows {target, check, result, detail} of comparisons (the target is the label before ':')."""
+    names = {v: k for k, v in (labels or TARGET_LABELS).items()}
+    rows = []
+    for check in checks:
+        prefix, _, what = check.check.partition(": ")
+        rows.append(
+            {
+                "target": names.get(prefix, prefix),
+                "check": what or prefix,
+                "result": "ok" if check.equal else "FAILED",
+                "detail": check.detail,
+            }
+        )
+    return rows
+
+
+__all__ = [
+    "RUN_FIELDS",
+    "TARGETS",
+    "WPROB_ROUNDING",
+    "Contender",
+    "backend_of",
+    "compare_backends",
+    "compare_models",
+    "compare_runs",
+    "conformance_rows",
+    "cross_implementation",
+    "distribution_comparison",
+    "exact_comparison",
+    "parse_targets",
+    "read_back",
+    "target_path",
+    "write_targets",
+    "wprob_readout",
+]

@@ -1,0 +1,438 @@
+"""`vprsnn-export export` as a library: read a model, write NIR / Loihi-style / ONNX, check the files.
+
+A model file is a float checkpoint (``train``) or a fixed-point model (``quantize``),
+told apart by its container's ``format`` field (:func:`load_source`). NIR takes either;
+the Loihi description and ONNX are integer targets and need a fixed-point model, which
+a float checkpoint gets only on request (:func:`integer_model`: per-neuron max-abs
+scales, the float calibration kept). :func:`check_exports` reads every written file
+back and runs it beside the project's own simulators with the conformance harness of
+:mod:`runtime.conformance` (exact), plus the measured agreement of a metadata-blind NIR
+consumer (a measurement, not a check).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
+from vprsnn_export.dataset import load_dataset
+from vprsnn_export.encoding import encode, query_spikes
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
+from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
+from vprsnn_export.fileio import atomic_write_text, read_container, sha256_file
+from vprsnn_export.readout.assignment import decide, strategy_scores
+from vprsnn_export.targets.loihi_target import write_loihi
+from vprsnn_export.targets.nir_target import CONSUMERS, WTA_INHIBITION, load_graph, spike_agreement, write_nir
+from vprsnn_export.targets.onnx_target import write_onnx
+
+from .conformance import (
+    Contender,
+    backend_of,
+    compare_backends,
+    conformance_rows,
+    read_back,
+    target_path,
+    wprob_readout,
+)
+from .deployment import deploy
+from .results import Comparison
+
+EXPORT_TARGETS = ("nir", "loihi", "onnx")
+INTEGER_TARGETS = ("loihi", "onnx")
+NIR_NAME = "model.nir"
+ONNX_NAME = "model.onnx"
+LOIHI_DIR = "loihi"
+MANIFEST_NAME = "export.json"
+
+
+@dataclass(frozen=True)
+class ExportSource:
+    """A model file read for export: exactly one of a float checkpoint and a fixed-point model."""
+
+    path: Path
+    sha256: str
+    checkpoint: Checkpoint | None = None
+    fixed_point: FixedPointModel | None = None
+
+    def __post_init__(self) -> None:
+        if (self.checkpoint is None) == (self.fixed_point is None):
+            raise ValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
+
+    @property
+    def network(self) -> Checkpoint | FixedPointModel:
+        """What NIR exports and what the project's own simulator runs."""
+        return self.checkpoint if self.checkpoint is not None else self._fixed()
+
+    @property
+    def is_float(self) -> bool:
+        return self.checkpoint is not None
+
+    @property
+    def kind(self) -> str:
+        return "float checkpoint" if self.is_float else "fixed-point model"
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        """The thresholds as stored (float for a checkpoint, integer mantissas for a fixed-point model)."""
+        return self.checkpoint.thresholds if self.checkpoint is not None else self._fixed().threshold
+
+    def _fixed(self) -> FixedPointModel:
+        if self.fixed_point is None:
+            raise ValueError("not a fixed-point model")
+        return self.fixed_point
+
+
+def load_source(path: str | Path) -> ExportSource:
+    """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
+    path = Path(path)
+    meta, _ = read_container(path, "model")
+    kind = meta.get("format")
+    if kind == CHECKPOINT_FORMAT:
+        return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))
+    if kind == FIXED_FORMAT:
+        return ExportSource(path, sha256_file(path), fixed_point=load_fixed_point(path))
+    raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
+
+
+def parse_export_targets(raw: str) -> tuple[str, ...]:
+    """``--to``: some of nir, loihi, onnx (at least one); InvalidValueError otherwise."""
+    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
+    if not names or any(n not in EXPORT_TARGETS for n in names):
+        raise InvalidValueError(f"--to expects some of {', '.join(EXPORT_TARGETS)}, got {raw!r}")
+    return names
+
+
+def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
+    """The fixed-point model the integer targets get, or None when none is asked for.
+
+    A float checkpoint is quantised only when ``bits`` is given (per-neuron max-abs
+    scales, the float calibration kept): :func:`runtime.deployment.deploy`.
+    """
+    if source.fixed_point is not None:
+        if bits is not None:
+            raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")
+        return source.fixed_point
+    wanted = [t for t in targets if t in INTEGER_TARGETS]
+    if not wanted or source.checkpoint is None:
+        return None
+    if bits is None:
+        raise InvalidValueError(
+            f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
+            "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
+        )
+    return deploy(source.checkpoint, source.sha256, check_bits(bits), calibration="float")
+
+
+def consumer_statements(
+    source: ExportSource, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
+) -> dict[str, str]:
+    """What each consumer of each written file computes, in one sentence or three."""
+    thresholds = source.thresholds
+    uniform = bool(np.all(thresholds == thresholds[0]))
+    notes: dict[str, str] = {}
+    if "nir" in targets:
+        arithmetic = (
+            "the float network's own arithmetic"
+            if source.is_float
+            else "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
+        )
+        inhibit = (
+            f"plus lateral inhibition ({inhibition} of its threshold per other spike, one step later)"
+            if wta_node and inhibition > 0
+            else "with no inhibition"
+        )
+        notes["nir"] = (
+            "vprsnn-export's read_nir rebuilds the network exactly (WTA from the metadata). A consumer that reads "
+            f"only the nodes (nirtorch with NIR's LIF, snnTorch, Norse) computes {arithmetic}, every neuron over "
+            f"threshold spiking (no WTA) {inhibit}. At dt = 1e-4 s Euler gives "
+            "v <- beta v + I; Norse ignores r (input scaled by 1 - beta); snnTorch's importer needs one threshold "
+            f"for all neurons ({'met' if uniform else 'not met by this model'})"
+            + (
+                ""
+                if not wta_node
+                else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
+                "the wta node's output instead of the spikes (--nir-no-wta-node avoids both)"
+            )
+            + "."
+        )
+    if "onnx" in targets and model is not None:
+        notes["onnx"] = (
+            "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
+            "distribution, identical to the integer simulator."
+        )
+    if "loihi" in targets and model is not None:
+        notes["loihi"] = (
+            "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
+            "a_j < 2**17; the hard WTA is a rule in network.json that a Lava user adds after the LIF population."
+        )
+    return notes
+
+
+def export_all(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    targets: Sequence[str],
+    out: Path,
+    *,
+    inhibition: float = WTA_INHIBITION,
+    wta_node: bool = True,
+) -> dict[str, list[Path]]:
+    """Write each target into ``out``: NIR of the source, ONNX and Loihi-style files of the fixed-point model."""
+    written: dict[str, list[Path]] = {}
+    integer = [t for t in targets if t in INTEGER_TARGETS]
+    if integer and model is None:
+        raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
+    if "nir" in targets:
+        written["nir"] = [
+            write_nir(
+                source.network,
+                out / NIR_NAME,
+                source_sha256=source.sha256,
+                wta_inhibition=inhibition,
+                wta_node=wta_node,
+            )
+        ]
+    if "onnx" in targets and model is not None:
+        written["onnx"] = [write_onnx(model, out / ONNX_NAME)]
+    if "loihi" in targets and model is not None:
+        written["loihi"] = list(write_loihi(model, out / LOIHI_DIR, source_sha256=source.sha256).values())
+    return written
+
+
+# ---------------------------------------------------------------------------- checks
+
+
+@dataclass(frozen=True)
+class CheckRow:
+    """One line of the check table: an exact check (``ok`` True/False) or a measurement (``ok`` None)."""
+
+    target: str
+    check: str
+    ok: bool | None
+    detail: str
+
+    @property
+    def result(self) -> str:
+        return "-" if self.ok is None else ("ok" if self.ok else "FAILED")
+
+    def to_dict(self) -> dict[str, str]:
+        return {"target": self.target, "check": self.check, "result": self.result, "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class ExportChecks:
+    """Every written file read back and run: the exact comparisons and the measurements."""
+
+    spikes: str  # what was presented
+    comparisons: tuple[Comparison, ...]
+    measurements: tuple[CheckRow, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        return all(c.equal for c in self.comparisons)
+
+    @property
+    def rows(self) -> list[CheckRow]:
+        exact = [
+            CheckRow(r["target"], r["check"], r["result"] == "ok", r["detail"])
+            for r in conformance_rows(self.comparisons)
+        ]
+        return exact + list(self.measurements)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
+
+
+def check_presentations(
+    source: ExportSource,
+    query: str | None,
+    *,
+    data: str | None = None,
+    subset: str | None = None,
+    places: str | None = None,
+    samples: int = 16,
+    progress: bool = False,
+) -> tuple[torch.Tensor, str]:
+    """Query presentations of ``query`` (real data; the model's own data selection unless given),
+    else ``samples`` synthetic Bernoulli trains of random images."""
+    network = source.network
+    cfg = network.config
+    if query:
+        if subset is None and places is None:
+            subset, places = network.data.get("subset"), network.data.get("places")
+        origin = data or network.data.get("source")
+        if not origin:
+            raise InvalidValueError("the model names no data source: give --data")
+        dataset = load_dataset(origin, [query], cfg.preprocess, subset=subset, places=places, progress=progress)
+        images, ids = dataset.traversal(query), dataset.place_ids
+        if samples > 0:
+            images, ids = images[:samples], ids[:samples]
+        return query_spikes(images, ids, query, cfg), f"{len(ids)} '{query}' queries from {dataset.source}"
+    n = samples if samples > 0 else 16
+    rng = np.random.default_rng(cfg.seed)
+    spikes = encode(rng.random((n, cfg.network.n_inputs)).astype(np.float32), list(range(n)), cfg.encoder)
+    return spikes, f"{n} synthetic presentations (uniform random pixels)"
+
+
+def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
+    """W+Prob decision (k = 1) of each presentation with the network's own calibration."""
+    return decide(strategy_scores(network.calibration, counts, "wprob", network.config.assignment.gamma), "wprob")[0]
+
+
+def nir_consumer_rows(
+    path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
+) -> list[CheckRow]:
+    """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
+    try:
+        consumer = CONSUMERS[consumer_name](load_graph(path), spikes)
+    except AssertionError as exc:  # snnTorch's importer asserts on what it cannot express
+        return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
+    agreement = spike_agreement(raster, consumer)
+    places = decided_places(network, raster.sum(dim=1).numpy())
+    consumer_places = decided_places(network, consumer.sum(dim=1).numpy())
+    rate = consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1])
+    return [
+        CheckRow(
+            "nir",
+            f"{consumer_name} (no metadata) vs network",
+            None,
+            f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {rate:.1f} spikes/step",
+        ),
+        CheckRow(
+            "nir",
+            f"{consumer_name} top-1 place (W+Prob) == network's",
+            None,
+            f"{float(np.mean(places == consumer_places)):.3f}",
+        ),
+    ]
+
+
+def check_exports(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    written: Mapping[str, Sequence[Path]],
+    spikes: torch.Tensor,
+    *,
+    spikes_label: str = "",
+    nir_consumer: str = "nirtorch",
+    device: torch.device | None = None,
+) -> ExportChecks:
+    """Read every written file back and run it against the project's simulator of what it was written from."""
+    comparisons: list[Comparison] = []
+    measurements: list[CheckRow] = []
+    if "nir" in written:
+        network = source.network
+        baseline = backend_of(network, device)
+        base_run = baseline.run(spikes, record=True)
+        path = target_path("nir", written["nir"])
+        contender = read_back("nir", path, network, device)
+        comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
+        if base_run.raster is not None:
+            measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
+    integer = [t for t in ("onnx", "loihi") if t in written]
+    if integer and model is not None:
+        contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
+        comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+    return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))
+
+
+# ---------------------------------------------------------------------------- the whole export
+
+
+@dataclass(frozen=True)
+class WrittenFile:
+    path: Path
+    sha256: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"path": str(self.path), "sha256": self.sha256}
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What `export` wrote (export.json): the model, every file with its hash, the consumers, the checks."""
+
+    model: str
+    model_sha256: str
+    kind: str
+    files: Mapping[str, tuple[WrittenFile, ...]]
+    consumers: Mapping[str, str]
+    checks: ExportChecks | None = None
+
+    @property
+    def passed(self) -> bool:
+        return self.checks is None or self.checks.passed
+
+    def to_dict(self) -> dict[str, Any]:
+        data: dict[str, Any] = {
+            "model": self.model,
+            "model_sha256": self.model_sha256,
+            "kind": self.kind,
+            "files": {t: [f.to_dict() for f in files] for t, files in self.files.items()},
+            "consumers": dict(self.consumers),
+        }
+        if self.checks is not None:
+            data["checks"] = self.checks.to_dict()
+        return data
+
+
+def export_and_check(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    targets: Sequence[str],
+    out: Path,
+    *,
+    inhibition: float = WTA_INHIBITION,
+    wta_node: bool = True,
+    spikes: torch.Tensor | None = None,
+    spikes_label: str = "",
+    nir_consumer: str = "nirtorch",
+    device: torch.device | None = None,
+) -> ExportResult:
+    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content."""
+    out = Path(out)
+    written = export_all(source, model, targets, out, inhibition=inhibition, wta_node=wta_node)
+    checks = None
+    if spikes is not None:
+        checks = check_exports(
+            source, model, written, spikes, spikes_label=spikes_label, nir_consumer=nir_consumer, device=device
+        )
+    result = ExportResult(
+        model=str(source.path),
+        model_sha256=source.sha256,
+        kind=source.kind,
+        files={t: tuple(WrittenFile(p, sha256_file(p)) for p in paths) for t, paths in written.items()},
+        consumers=consumer_statements(source, model, targets, wta_node, inhibition),
+        checks=checks,
+    )
+    atomic_write_text(out / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+    return result
+
+
+__all__ = [
+    "EXPORT_TARGETS",
+    "INTEGER_TARGETS",
+    "MANIFEST_NAME",
+    "CheckRow",
+    "ExportChecks",
+    "ExportResult",
+    "ExportSource",
+    "WrittenFile",
+    "check_exports",
+    "check_presentations",
+    "consumer_statements",
+    "export_all",
+    "export_and_check",
+    "integer_model",
+    "load_source",
+    "parse_export_targets",
+]
