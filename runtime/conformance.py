@@ -319,7 +319,7 @@ def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | N
         rows.append(
             {
                 "target": names.get(prefix, prefix),
-                "check": what or prefix,
+                "check": f"{what or prefix}: {check.a} vs {check.b}",
                 "result": "ok" if check.equal else "FAILED",
                 "detail": check.detail,
             }

@@ -175,9 +175,7 @@ def test_quantize_checkpoint_then_recalibrate_on_the_integer_simulator():
     assert deployed.calibration.shape == ckpt.calibration.shape and deployed.calibration.sum() > 0
     assert np.array_equal(deployed.float_calibration, ckpt.calibration)
     reused = recalibrate(model, {}, ckpt.reference_place_ids, reuse_float_calibration=True)
-    assert (
-        np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation.calibration == "float (reused)"
-    )
+    assert np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation.calibration == "float (reused)"
     with pytest.raises(InvalidValueError, match="reference places"):
         recalibrate(model, reference, ckpt.reference_place_ids[::-1])
 

@@ -13,7 +13,7 @@ from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.runtime.evaluation import ReadoutOptions
+from vprsnn_export.runs import SpikeRun
 from vprsnn_export.runtime import conformance
 from vprsnn_export.runtime.conformance import (
     Contender,
@@ -21,6 +21,7 @@ from vprsnn_export.runtime.conformance import (
     distribution_comparison,
     exact_comparison,
 )
+from vprsnn_export.runtime.evaluation import ReadoutOptions
 from vprsnn_export.runtime.results import (
     SCHEMA,
     ConformanceResult,
@@ -43,7 +44,6 @@ from vprsnn_export.runtime.verify import (
     tv_distance,
     verify_checkpoint,
 )
-from vprsnn_export.runs import SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
@@ -142,7 +142,7 @@ def _rows(float_values, quant_values, n=50):
     def rows(values):
         return [
             {"strategy": s, "k": k, "accuracy": v, "p_at_100r": v, "r_at_100p": v, "auc_pr": v, "n_queries": n}
-            for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values)
+            for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values, strict=True)
         ]
 
     typed = [MetricRow.from_dict(r) for r in rows(float_values)], [MetricRow.from_dict(r) for r in rows(quant_values)]
@@ -171,9 +171,11 @@ def test_tolerance_checks_bound_drops_only():
         parse_tolerances("winner_agreement=0.95,top1_agreement=0.8,saturations=0"),
         (1, 5),
     )
-    assert {
-        c.check: c.passed for c in strict if c.check in ("winner_agreement", "top1_agreement", "saturations")
-    } == {"winner_agreement": False, "top1_agreement": True, "saturations": True}
+    assert {c.check: c.passed for c in strict if c.check in ("winner_agreement", "top1_agreement", "saturations")} == {
+        "winner_agreement": False,
+        "top1_agreement": True,
+        "saturations": True,
+    }
 
 
 def test_query_slack_allows_one_query_of_a_short_route():
