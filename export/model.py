@@ -17,7 +17,8 @@ scale and comparing currents across neurons (the WTA) uses a_j m_j.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +52,60 @@ def check_bits(bits: int) -> int:
     return bits
 
 
+@dataclass(frozen=True)
+class QuantisationReport:
+    """How a fixed-point model was quantised and calibrated, and how far it is from the float network.
+
+    The ``quantisation`` object of the model's JSON header. Every field is optional (None
+    when not recorded), so headers written by older versions, which may lack some, load;
+    keys this version does not know are kept in ``extra`` and written back unchanged.
+    """
+
+    bits: int | None = None
+    per_neuron: bool | None = None
+    scale_method: str | None = None
+    threshold_folding: bool | None = None
+    shared_threshold: int | None = None
+    rounding: str | None = None
+    scale_exponent: int | None = None
+    scale_multiplier_range: tuple[int, int] | None = None
+    threshold_range: tuple[int, int] | None = None
+    weight_max_abs_error: float | None = None
+    weight_rmse: float | None = None
+    weight_relative_rmse: float | None = None
+    weights_clipped: int | None = None
+    threshold_max_relative_error: float | None = None
+    thresholds_clipped: int | None = None
+    max_current: int | None = None  # max_j sum_i q_ij: the largest possible a_j
+    calibration: str | None = None  # how S^R was obtained ("deployed (integer simulator)", "float (reused)", ...)
+    calibration_saturations: int | None = None  # voltage clips while re-measuring S^R (None: not re-measured)
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The header's JSON object: the recorded fields (None ones included) and the extra keys."""
+        data: dict[str, Any] = {}
+        for item in fields(self):
+            if item.name == "extra":
+                continue
+            value = getattr(self, item.name)
+            data[item.name] = list(value) if isinstance(value, tuple) else value
+        return {**data, **self.extra}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> QuantisationReport:
+        """The report of a header's ``quantisation`` object (a TypeError when it is not an object)."""
+        if not isinstance(data, Mapping):
+            raise TypeError(f"quantisation must be a JSON object, got {type(data).__name__}")
+        known = {item.name for item in fields(cls)} - {"extra"}
+        values: dict[str, Any] = {name: data[name] for name in known if name in data}
+        for name in ("scale_multiplier_range", "threshold_range"):
+            if values.get(name) is not None:
+                low, high = values[name]
+                values[name] = (int(low), int(high))
+        extra = {key: value for key, value in data.items() if key not in known}
+        return cls(**values, extra=extra)
+
+
 @dataclass
 class FixedPointModel:
     """A quantised network, self-describing (every width, rounding and scale is in here)."""
@@ -66,12 +121,16 @@ class FixedPointModel:
     float_calibration: np.ndarray  # (neurons, places) int64: S^R of the float source network
     reference_place_ids: np.ndarray  # (places,) int64
     reference_traversals: list[str]
-    quantisation: dict[str, Any]  # per_neuron, scale_method, threshold_folding, errors...
+    quantisation: QuantisationReport  # per_neuron, scale_method, threshold_folding, errors, calibration
     source_sha256: str  # sha256 of the float checkpoint file
     data: dict[str, Any] = field(default_factory=dict)
     voltage_shift: int = VOLTAGE_SHIFT
     voltage_bits: int = VOLTAGE_BITS
     version: str = __version__
+
+    def __post_init__(self) -> None:
+        if isinstance(self.quantisation, Mapping):  # a header's JSON object (callers written before the type)
+            self.quantisation = QuantisationReport.from_dict(self.quantisation)
 
     @property
     def n_inputs(self) -> int:
@@ -105,7 +164,7 @@ class FixedPointModel:
             "decay_dv": self.decay_dv,
             "voltage_shift": self.voltage_shift,
             "voltage_bits": self.voltage_bits,
-            "quantisation": self.quantisation,
+            "quantisation": self.quantisation.to_dict(),
             "config": self.config.to_dict(),
             "reference_traversals": self.reference_traversals,
             "data": self.data,
@@ -115,7 +174,8 @@ class FixedPointModel:
                 "threshold": f"unsigned {THRESHOLD_BITS}-bit vth mantissa, compared as vth << voltage_shift",
                 "current": "a_j[t] = sum_i q_ij s_i[t] (exact integer)",
                 "decay": "V <- trunc_toward_zero(V * (4096 - decay_dv) / 4096)",
-                "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), 2**{self.voltage_bits - 1} - 1), clips counted",
+                "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), "
+                f"2**{self.voltage_bits - 1} - 1), clips counted",
                 "candidates": "C = {j : V_j > threshold_j << voltage_shift}",
                 "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index"
                 if self.config.network.wta
@@ -124,7 +184,8 @@ class FixedPointModel:
                 "state": "V zeroed at the start of every presentation"
                 if self.config.network.state_isolation
                 else "V carried across presentations",
-                "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), keyed by (seed, stream, traversal, place_id)",
+                "encoder": "s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), "
+                "keyed by (seed, stream, traversal, place_id)",
             },
         }
 
@@ -132,7 +193,7 @@ class FixedPointModel:
 def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
     """Validate and write a fixed-point model atomically (integer arrays + JSON header); returns the path."""
     validate(model, Path(path))
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "weight_mantissa": model.weight_mantissa.astype(np.int32),
         "scale_multiplier": model.scale_multiplier.astype(np.int32),
         "threshold": model.threshold.astype(np.int32),
@@ -174,7 +235,7 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
             float_calibration=arrays["float_calibration"],
             reference_place_ids=arrays["reference_place_ids"],
             reference_traversals=list(meta["reference_traversals"]),
-            quantisation=dict(meta["quantisation"]),
+            quantisation=QuantisationReport.from_dict(meta["quantisation"]),
             source_sha256=str(meta["source_sha256"]),
             data=dict(meta.get("data", {})),
             voltage_shift=int(meta["voltage_shift"]),
@@ -216,9 +277,9 @@ def validate(model: FixedPointModel, path: Path) -> None:
         array = getattr(model, name)
         if array.size and (array.min() < low or array.max() > high):
             fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")
-    if model.quantisation.get("per_neuron") is False and np.unique(model.scale_multiplier).size > 1:
+    if model.quantisation.per_neuron is False and np.unique(model.scale_multiplier).size > 1:
         fail("per-tensor model with unequal scale multipliers")
-    if model.quantisation.get("threshold_folding") and np.unique(model.threshold).size > 1:
+    if model.quantisation.threshold_folding and np.unique(model.threshold).size > 1:
         fail("threshold-folded model with unequal integer thresholds")
     if not 0 <= model.decay_dv < (1 << DECAY_BITS):
         fail(f"decay_dv {model.decay_dv} does not fit {DECAY_BITS} bits")

@@ -28,7 +28,14 @@ import numpy as np
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 
-from .model import MULTIPLIER_BITS, THRESHOLD_BITS, FixedPointModel, check_bits, decay_mantissa
+from .model import (
+    MULTIPLIER_BITS,
+    THRESHOLD_BITS,
+    FixedPointModel,
+    QuantisationReport,
+    check_bits,
+    decay_mantissa,
+)
 
 SCALE_METHODS = ("max", "mse")
 MSE_GRID = np.linspace(0.2, 1.0, 81)  # fractions of the max-abs scale searched by the `mse` method
@@ -101,7 +108,9 @@ def desired_scales(weights: np.ndarray, bits: int, method: str, per_neuron: bool
 
 
 def split_scales(scales: np.ndarray) -> tuple[np.ndarray, int]:
-    """s_j ~= m_j 2**e: e = floor(log2 max_j s_j) - (MULTIPLIER_BITS - 1), m_j = clip(floor(s_j 2**-e + 1/2), 1, 2**16 - 1).
+    """s_j ~= m_j 2**e, one exponent for all neurons:
+
+        e = floor(log2 max_j s_j) - (MULTIPLIER_BITS - 1),   m_j = clip(floor(s_j 2**-e + 1/2), 1, 2**16 - 1)
 
     The largest multiplier lands in [2**15, 2**16 - 1], so every m_j keeps as many
     significant bits as the ratio max_k s_k / s_j allows.
@@ -231,7 +240,9 @@ def quantize_checkpoint(
         scale_method=scale_method,
         fold_thresholds=fold_thresholds,
     )
-    report = dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
+    report = QuantisationReport.from_dict(
+        dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
+    )
     return FixedPointModel(
         bits=bits,
         weight_mantissa=arrays.weight_mantissa,

@@ -1,129 +1,72 @@
-"""Do the deployment files compute the same network? Backends compared field by field on the same spikes.
+"""Cross-implementation conformance: every backend of one network must compute what the baseline computes.
 
-Every implementation of a fixed-point model (the integer simulator, its slow reference
-stepper, onnxruntime on the ONNX graph, the NIR and Loihi-style files read back and run
-on the simulator) is a :class:`~vprsnn_export.runs.Backend` returning a
-:class:`~vprsnn_export.runs.SpikeRun`. One baseline run is compared with every other
-backend's run of the very same spike tensor, exactly: every field both runs report
-(raster, counts, candidates per step, final voltages, saturations) must be identical,
-and a W+Prob distribution computed by the backend itself (the ONNX head, float64 in
-another summation order) must give identical decisions and differ by at most
-``WPROB_ROUNDING``. `verify` and `export --check` both use this module.
+The baseline is the integer simulator (a fixed-point model) or the float network (a
+float checkpoint exported to NIR). Each *contender* is another backend on the same
+spike tensor: the slow reference stepper (first few presentations), the ONNX graph on
+onnxruntime, the NIR file read back and the Loihi-style files read back, each run on
+the simulator. Every :class:`~vprsnn_export.runs.SpikeRun` field both sides report is
+compared exactly (raster, counts, candidates per step, final voltages, saturations);
+a W+Prob head (float64 arithmetic in another summation order) must give identical
+decisions and differ from the readout by at most ``WPROB_ROUNDING``. A model read back
+from a file is also compared with the one written, integer by integer.
+
+Used by `verify` (every bit width) and by `export --check` (the files it wrote).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.assignment import decide, strategy_scores
 from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.loihi_target import read_loihi_model
-from vprsnn_export.targets.nir_target import read_nir
-from vprsnn_export.targets.onnx_target import OnnxBackend
+from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
+from vprsnn_export.targets.nir_target import read_nir, write_nir
+from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 
-WPROB_ROUNDING = 1e-12  # largest |P_backend - P_readout| allowed for a float64 W+Prob head
+from .results import Comparison, ConformanceResult
 
-#: The SpikeRun fields compared exactly, with the names the reports use.
-RUN_FIELDS = (
-    ("raster", "raster"),
-    ("counts", "counts"),
-    ("candidates_per_step", "candidates"),
-    ("final_voltage", "final_voltage"),
-    ("saturations", "saturations"),
-)
-
-
-@dataclass(frozen=True)
-class Comparison:
-    """One check of one quantity between two implementations ``a`` and ``b``."""
-
-    check: str
-    a: str
-    b: str
-    kind: str
-    equal: bool
-    detail: str
-    n_elements: int | None = None
-    n_differences: int | None = None
-    first_difference: list[int] | None = None
-    max_abs_difference: float | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"check": self.check, "a": self.a, "b": self.b, "kind": self.kind, "equal": self.equal}
-        if self.max_abs_difference is not None or self.kind != "exact":
-            out["max_abs_difference"] = self.max_abs_difference
-        else:
-            out["n_elements"] = self.n_elements
-            out["first_difference"] = self.first_difference
-        out["n_differences"] = self.n_differences
-        out["detail"] = self.detail
-        return out
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Comparison:
-        return cls(
-            check=str(data["check"]),
-            a=str(data["a"]),
-            b=str(data["b"]),
-            kind=str(data["kind"]),
-            equal=bool(data["equal"]),
-            detail=str(data.get("detail", "")),
-            n_elements=data.get("n_elements"),
-            n_differences=data.get("n_differences"),
-            first_difference=data.get("first_difference"),
-            max_abs_difference=data.get("max_abs_difference"),
-        )
+TARGETS = ("onnx", "nir", "loihi")
+WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
+#: The SpikeRun fields compared exactly, and the name each has in the check's label.
+RUN_FIELDS = {
+    "raster": "raster",
+    "counts": "counts",
+    "candidates_per_step": "candidates",
+    "final_voltage": "final_voltage",
+    "saturations": "saturations",
+}
+#: The label of each target's checks.
+TARGET_LABELS = {"onnx": "ONNX (onnxruntime)", "nir": "NIR read back", "loihi": "Loihi read back"}
 
 
-@dataclass(frozen=True)
-class Conformance:
-    """Every comparison of one model's backends, the files they read and what could not run."""
-
-    comparisons: tuple[Comparison, ...]
-    reference_queries: int = 0
-    skipped: dict[str, str] = field(default_factory=dict)
-    files: dict[str, list[str]] = field(default_factory=dict)
-
-    @property
-    def passed(self) -> bool:
-        return all(c.equal for c in self.comparisons)
-
-    @property
-    def n_failed(self) -> int:
-        return sum(not c.equal for c in self.comparisons)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "checks": [c.to_dict() for c in self.comparisons],
-            "passed": self.passed,
-            "n_checks": len(self.comparisons),
-            "n_failed": self.n_failed,
-            "reference_queries": self.reference_queries,
-            "skipped": dict(self.skipped),
-            "files": {k: list(v) for k, v in self.files.items()},
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> Conformance:
-        return cls(
-            comparisons=tuple(Comparison.from_dict(c) for c in data.get("checks", [])),
-            reference_queries=int(data.get("reference_queries", 0)),
-            skipped=dict(data.get("skipped", {})),
-            files={k: list(v) for k, v in data.get("files", {}).items()},
-        )
+def parse_targets(raw: str, option: str = "--targets", *, allow_none: bool = True) -> tuple[str, ...]:
+    """``"onnx,nir"`` -> ("onnx", "nir"); "none" (when allowed) gives (); InvalidValueError on anything else."""
+    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
+    unknown = [n for n in names if n not in TARGETS and not (allow_none and n == "none")]
+    if unknown or (not allow_none and not names):
+        allowed = ", ".join(TARGETS) + (" (or none)" if allow_none else "")
+        raise InvalidValueError(f"{option} expects some of {allowed}, got {raw!r}")
+    return tuple(n for n in names if n != "none")
 
 
-def as_numpy(value: Any) -> np.ndarray:
-    """A tensor, array or scalar as a numpy array (on the CPU)."""
+# ---------------------------------------------------------------------------- comparisons
+
+
+def as_array(value: Any) -> np.ndarray:
+    """A tensor, array or number as a numpy array."""
     if isinstance(value, torch.Tensor):
         return value.detach().cpu().numpy()
     return np.asarray(value)
@@ -131,19 +74,18 @@ def as_numpy(value: Any) -> np.ndarray:
 
 def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Comparison:
     """Bit-for-bit equality of two arrays (or integers): any difference fails."""
-    a_arr, b_arr = as_numpy(a), as_numpy(b)
+    a_arr, b_arr = as_array(a), as_array(b)
     if a_arr.shape != b_arr.shape:
         return Comparison(
-            check, a_name, b_name, "exact", False, f"shapes differ: {a_arr.shape} vs {b_arr.shape}", int(a_arr.size)
+            check, a_name, b_name, "exact", False, f"shapes differ: {a_arr.shape} vs {b_arr.shape}", None, a_arr.size
         )
     differ = a_arr != b_arr
     n_diff = int(np.count_nonzero(differ))
     if n_diff == 0:
-        return Comparison(check, a_name, b_name, "exact", True, f"identical ({a_arr.size} values)", int(a_arr.size), 0)
-    first = [int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape)]
-    where = tuple(first)
-    detail = f"{n_diff} of {a_arr.size} values differ; first at {first}: {a_arr[where]!r} vs {b_arr[where]!r}"
-    return Comparison(check, a_name, b_name, "exact", False, detail, int(a_arr.size), n_diff, first)
+        return Comparison(check, a_name, b_name, "exact", True, f"identical ({a_arr.size} values)", 0, a_arr.size)
+    first = tuple(int(i) for i in np.unravel_index(int(np.flatnonzero(differ)[0]), differ.shape))
+    detail = f"{n_diff} of {a_arr.size} values differ; first at {list(first)}: {a_arr[first]!r} vs {b_arr[first]!r}"
+    return Comparison(check, a_name, b_name, "exact", False, detail, n_diff, int(a_arr.size), first)
 
 
 def distribution_comparison(
@@ -153,7 +95,8 @@ def distribution_comparison(
     a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     kind = f"decisions exact, |diff| <= {limit:g}"
     if a_arr.shape != b_arr.shape:
-        return Comparison(check, a_name, b_name, kind, False, f"shapes differ: {a_arr.shape} vs {b_arr.shape}")
+        detail = f"shapes differ: {a_arr.shape} vs {b_arr.shape}"
+        return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
     n_decisions = int(np.count_nonzero(decide(a_arr, "wprob")[0] != decide(b_arr, "wprob")[0]))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
     return Comparison(
@@ -161,23 +104,23 @@ def distribution_comparison(
         a_name,
         b_name,
         kind,
-        bool(n_decisions == 0 and largest <= limit),
+        n_decisions == 0 and largest <= limit,
         f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
-        n_differences=n_decisions,
+        n_decisions,
         max_abs_difference=largest,
+        family="distribution",
     )
 
 
 def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun) -> list[Comparison]:
-    """Exact comparisons of every SpikeRun field both runs report (rasters as booleans)."""
-    checks = []
-    for attribute, label in RUN_FIELDS:
-        left, right = getattr(a, attribute), getattr(b, attribute)
-        if left is None or right is None:
-            continue
-        if attribute == "raster":
-            left, right = as_numpy(left).astype(bool), as_numpy(right).astype(bool)
-        checks.append(exact_comparison(f"{prefix}: {label}", a_name, left, b_name, right))
+    """Exact comparisons of every SpikeRun field both runs report; the W+Prob distributions within rounding."""
+    checks = [
+        exact_comparison(f"{prefix}: {label}", a_name, getattr(a, name), b_name, getattr(b, name))
+        for name, label in RUN_FIELDS.items()
+        if getattr(a, name) is not None and getattr(b, name) is not None
+    ]
+    if a.wprob is not None and b.wprob is not None:
+        checks.append(distribution_comparison(f"{prefix}: W+Prob head", "readout", a.wprob, b_name, b.wprob))
     return checks
 
 
@@ -193,96 +136,213 @@ def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b:
         exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
     )
     same = a.config.to_dict() == b.config.to_dict()
+    detail = "identical" if same else "configs differ"
     checks.append(
-        Comparison(
-            f"{prefix}: config",
-            a_name,
-            b_name,
-            "exact",
-            same,
-            "identical" if same else "configs differ",
-            1,
-            int(not same),
-        )
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, 0 if same else 1, family="config")
     )
     return checks
 
 
+# ---------------------------------------------------------------------------- backends
+
+
+Source = Checkpoint | FixedPointModel
+
+
+def backend_of(source: Source, device: torch.device | None = None) -> Backend:
+    """The project's own simulator of a network: the float network or the integer simulator."""
+    if isinstance(source, FixedPointModel):
+        return IntegerNetwork(source, device)
+    return FloatNetwork.from_arrays(source.weights, source.thresholds, source.config, device or torch.device("cpu"))
+
+
+def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
+    """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration."""
+
+    def readout(counts: np.ndarray) -> np.ndarray:
+        return strategy_scores(source.calibration, counts, "wprob", source.config.assignment.gamma)
+
+    return readout
+
+
 @dataclass(frozen=True)
-class ReadBack:
-    """A deployment file read back: the model it describes, run on the integer simulator."""
+class Contender:
+    """A backend checked against the baseline, under the label its checks carry.
 
-    label: str  # "NIR", "Loihi"
-    model: FixedPointModel
+    ``n_queries`` limits it to the first presentations (the slow reference stepper);
+    ``written``/``read_back`` are the model written to a file and the one read back
+    from it, compared integer by integer before the read-back model is run.
+    """
+
+    target: str  # "reference", "onnx", "nir", "loihi"
+    label: str
     backend: Backend
+    n_queries: int | None = None
+    written: FixedPointModel | None = None
+    read_back: FixedPointModel | None = None
 
 
-def read_back(files: Mapping[str, Sequence[Path]], device: torch.device | None = None) -> list[ReadBack]:
-    """The NIR and Loihi-style files among ``files`` (target -> paths) rebuilt as fixed-point models."""
-    out = []
-    if "nir" in files:
-        nir_model = read_nir(files["nir"][0])
-        if isinstance(nir_model, FixedPointModel):
-            out.append(ReadBack("NIR", nir_model, IntegerNetwork(nir_model, device, name="NIR model on the simulator")))
-    if "loihi" in files:
-        loihi_model = read_loihi_model(Path(files["loihi"][0]).parent)
-        out.append(
-            ReadBack("Loihi", loihi_model, IntegerNetwork(loihi_model, device, name="Loihi model on the simulator"))
+def read_back(target: str, path: Path, written: Source | None, device: torch.device | None = None) -> Contender:
+    """The contender of one exported file: read it back and run it (onnxruntime runs the graph itself)."""
+    label = TARGET_LABELS[target]
+    if target == "onnx":
+        return Contender(target, label, OnnxBackend(Path(path)))
+    rebuilt: Source = read_nir(path) if target == "nir" else read_loihi_model(path)
+    backend = backend_of(rebuilt, device)
+    runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
+    backend = _Renamed(backend, f"{'NIR' if target == 'nir' else 'Loihi'} model on the {runs_on}")
+    pair = isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel)
+    return Contender(
+        target,
+        label,
+        backend,
+        written=written if pair and isinstance(written, FixedPointModel) else None,
+        read_back=rebuilt if pair and isinstance(rebuilt, FixedPointModel) else None,
+    )
+
+
+@dataclass(frozen=True)
+class _Renamed:
+    """A backend under another name (the read-back models run on the project's simulators)."""
+
+    inner: Backend
+    name: str
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        return self.inner.run(spikes, record=record)
+
+
+def compare_backends(
+    baseline: Backend,
+    contenders: Sequence[Contender],
+    spikes: torch.Tensor,
+    *,
+    baseline_run: SpikeRun | None = None,
+    wprob: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> list[Comparison]:
+    """Run every contender on ``spikes`` (or its first n) and compare it with the baseline's run of the same.
+
+    ``baseline_run`` is the baseline's recorded run of all of ``spikes`` when already made;
+    ``wprob`` maps counts to the W+Prob distribution a contender's head must reproduce.
+    """
+    full = baseline.run(spikes, record=True) if baseline_run is None else baseline_run
+    checks: list[Comparison] = []
+    for contender in contenders:
+        if contender.written is not None and contender.read_back is not None:
+            checks += compare_models(
+                contender.label, "written model", contender.written, "read back", contender.read_back
+            )
+        n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
+        if n == 0:
+            continue
+        # the first n rows of the baseline's run; saturations are a total, so the head needs a run of its own
+        base = (
+            full
+            if n == spikes.shape[0]
+            else dataclasses.replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
         )
-    return out
+        run = contender.backend.run(spikes[:n], record=True)
+        if run.wprob is not None and base.wprob is None and wprob is not None:
+            base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))
+        checks += compare_runs(contender.label, baseline.name, base, contender.backend.name, run)
+    return checks
 
 
-def check_conformance(
+def write_targets(
+    model: FixedPointModel, folder: Path, targets: Sequence[str]
+) -> tuple[dict[str, list[Path]], dict[str, str]]:
+    """Write each target of ``model`` into ``folder`` (ONNX with its W+Prob head and raster).
+
+    Returns (files per target, targets skipped with the reason: e.g. ONNX cannot express
+    a network without state isolation).
+    """
+    files: dict[str, list[Path]] = {}
+    skipped: dict[str, str] = {}
+    if "onnx" in targets:
+        try:
+            files["onnx"] = [write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)]
+        except InvalidValueError as exc:
+            skipped["onnx"] = str(exc)
+    if "nir" in targets:
+        files["nir"] = [write_nir(model, folder / "model.nir", source_sha256=model.source_sha256)]
+    if "loihi" in targets:
+        files["loihi"] = list(write_loihi(model, folder / "loihi", source_sha256=model.source_sha256).values())
+    return files, skipped
+
+
+def target_path(target: str, paths: Sequence[Path]) -> Path:
+    """What a target's reader takes: the file (ONNX, NIR) or the folder of the Loihi-style files."""
+    return Path(paths[0]).parent if target == "loihi" else Path(paths[0])
+
+
+def cross_implementation(
     model: FixedPointModel,
     spikes: torch.Tensor,
-    baseline: SpikeRun,
-    files: Mapping[str, Sequence[Path]],
+    int_run: SpikeRun | None = None,
     *,
-    reference_queries: int = 0,
-    skipped: Mapping[str, str] | None = None,
+    folder: Path,
+    targets: Sequence[str] = TARGETS,
+    reference_queries: int = 3,
     device: torch.device | None = None,
-) -> Conformance:
-    """Compare the integer simulator's recorded ``baseline`` run with every other backend, exactly.
+    extra: Sequence[Contender] = (),
+) -> ConformanceResult:
+    """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
 
-    The reference stepper runs the first ``reference_queries`` presentations; onnxruntime
-    runs the ONNX file (counts, saturations, raster when the graph has it, and its W+Prob
-    head against the readout of the baseline counts); NIR and Loihi-style files are read
-    back, compared integer by integer with ``model`` and run on the simulator.
+    The baseline is the integer simulator (``int_run``: its recorded run of ``spikes``,
+    when already made); the reference stepper runs the first ``reference_queries``
+    presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
     """
-    checks: list[Comparison] = []
-    simulator = IntegerNetwork(model, device)
+    files, skipped = write_targets(model, Path(folder), targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
+    contenders: list[Contender] = []
     if n_ref:
-        # the baseline's own rows of these queries; saturations are totals, so they need a run of their own
-        head = replace(baseline.head(n_ref), saturations=simulator.run(spikes[:n_ref]).saturations)
-        oracle = ReferenceStepper(model).run(spikes[:n_ref], record=True)
-        checks += compare_runs("reference stepper", simulator.name, head, "reference stepper", oracle)
-    if "onnx" in files:
-        onnx_backend = OnnxBackend(Path(files["onnx"][0]))
-        onnx_run = onnx_backend.run(spikes, record=True)
-        no_candidates = SpikeRun(counts=baseline.counts, raster=baseline.raster, saturations=baseline.saturations)
-        checks += compare_runs("ONNX (onnxruntime)", simulator.name, no_candidates, onnx_backend.name, onnx_run)
-        if onnx_run.wprob is not None:
-            expected = strategy_scores(
-                model.calibration, as_numpy(baseline.counts), "wprob", model.config.assignment.gamma
-            )
-            checks.append(
-                distribution_comparison(
-                    "ONNX (onnxruntime): W+Prob head", "readout", expected, onnx_backend.name, onnx_run.wprob
-                )
-            )
-    for item in read_back(files, device):
-        checks += compare_models(f"{item.label} read back", "written model", model, "read back", item.model)
-        checks += compare_runs(
-            f"{item.label} read back",
-            simulator.name,
-            baseline,
-            item.backend.name,
-            item.backend.run(spikes, record=True),
-        )
-    return Conformance(
+        contenders.append(Contender("reference", "reference stepper", ReferenceStepper(model), n_queries=n_ref))
+    contenders += [read_back(t, target_path(t, files[t]), model, device) for t in TARGETS if t in files]
+    contenders += list(extra)
+    checks = compare_backends(
+        IntegerNetwork(model, device), contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model)
+    )
+    return ConformanceResult(
         comparisons=tuple(checks),
         reference_queries=n_ref,
-        skipped=dict(skipped or {}),
-        files={target: [str(p) for p in paths] for target, paths in files.items()},
+        skipped=skipped,
+        files={t: tuple(str(p) for p in paths) for t, paths in files.items()},
     )
+
+
+def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
+    """Table rows {target, check, result, detail} of comparisons (the target is the label before ':')."""
+    names = {v: k for k, v in (labels or TARGET_LABELS).items()}
+    rows = []
+    for check in checks:
+        prefix, _, what = check.check.partition(": ")
+        rows.append(
+            {
+                "target": names.get(prefix, prefix),
+                "check": f"{what or prefix}: {check.a} vs {check.b}",
+                "result": "ok" if check.equal else "FAILED",
+                "detail": check.detail,
+            }
+        )
+    return rows
+
+
+__all__ = [
+    "RUN_FIELDS",
+    "TARGETS",
+    "WPROB_ROUNDING",
+    "Contender",
+    "backend_of",
+    "compare_backends",
+    "compare_models",
+    "compare_runs",
+    "conformance_rows",
+    "cross_implementation",
+    "distribution_comparison",
+    "exact_comparison",
+    "parse_targets",
+    "read_back",
+    "target_path",
+    "write_targets",
+    "wprob_readout",
+]

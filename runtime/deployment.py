@@ -38,7 +38,7 @@ def recalibrate(
     The saturation events counted during calibration go into the quantisation report.
     """
     if reuse_float_calibration:
-        report = dict(model.quantisation, calibration="float (reused)", calibration_saturations=None)
+        report = dataclasses.replace(model.quantisation, calibration="float (reused)", calibration_saturations=None)
         return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
     if not np.array_equal(np.asarray(place_ids), model.reference_place_ids):
         raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
@@ -48,7 +48,7 @@ def recalibrate(
     network = IntegerNetwork(model, device=device)
     images = {name: reference_images[name] for name in model.reference_traversals}
     calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
-    report = dict(
+    report = dataclasses.replace(
         model.quantisation, calibration="deployed (integer simulator)", calibration_saturations=network.saturations
     )
     return dataclasses.replace(model, calibration=calibration, quantisation=report)

@@ -1,21 +1,20 @@
-"""Write the deployment files of a network and say what each consumer computes: the library behind `export`.
+"""`vprsnn-export export` as a library: read a model, write NIR / Loihi-style / ONNX, check the files.
 
-The source is a float checkpoint (``train``) or a fixed-point model (``quantize``), told
-apart by the ``format`` field of its container. NIR takes either. The Loihi-style
-description and ONNX are integer targets: they need a fixed-point model, so a float
-checkpoint is quantised on the fly only when asked (per-neuron max-abs scales, float
-calibration kept; `quantize` offers every other choice).
-
-:func:`export_network` writes the files and ``export.json`` (written last: a folder
-whose manifest is missing or names other hashes is not a finished export); with spikes
-it also checks every file read back (:mod:`vprsnn_export.runtime.conformance`).
+A model file is a float checkpoint (``train``) or a fixed-point model (``quantize``),
+told apart by its container's ``format`` field (:func:`load_source`). NIR takes either;
+the Loihi description and ONNX are integer targets and need a fixed-point model, which
+a float checkpoint gets only on request (:func:`integer_model`: per-neuron max-abs
+scales, the float calibration kept). :func:`check_exports` reads every written file
+back and runs it beside the project's own simulators with the conformance harness of
+:mod:`runtime.conformance` (exact), plus the measured agreement of a metadata-blind NIR
+consumer (a measurement, not a check).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,87 +23,134 @@ import torch
 
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
-from vprsnn_export.config import Config
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import encode, query_spikes
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
-from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.fileio import atomic_write_text, read_container, sha256_file
 from vprsnn_export.readout.assignment import decide, strategy_scores
-from vprsnn_export.runs import SpikeRun
-from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.loihi_target import write_loihi
-from vprsnn_export.targets.nir_target import CONSUMERS, WTA_INHIBITION, load_graph, read_nir, spike_agreement, write_nir
+from vprsnn_export.targets.nir_target import CONSUMERS, WTA_INHIBITION, load_graph, spike_agreement, write_nir
 from vprsnn_export.targets.onnx_target import write_onnx
 
-from .conformance import Comparison, check_conformance, compare_runs
+from .conformance import (
+    Contender,
+    backend_of,
+    compare_backends,
+    conformance_rows,
+    read_back,
+    target_path,
+    wprob_readout,
+)
+from .deployment import deploy
+from .results import Comparison
 
-TARGETS = ("nir", "loihi", "onnx")
+EXPORT_TARGETS = ("nir", "loihi", "onnx")
 INTEGER_TARGETS = ("loihi", "onnx")
 NIR_NAME = "model.nir"
 ONNX_NAME = "model.onnx"
 LOIHI_DIR = "loihi"
 MANIFEST_NAME = "export.json"
 
-Network = Checkpoint | FixedPointModel
-"""What can be exported: a float checkpoint or a fixed-point model."""
+
+@dataclass(frozen=True)
+class ExportSource:
+    """A model file read for export: exactly one of a float checkpoint and a fixed-point model."""
+
+    path: Path
+    sha256: str
+    checkpoint: Checkpoint | None = None
+    fixed_point: FixedPointModel | None = None
+
+    def __post_init__(self) -> None:
+        if (self.checkpoint is None) == (self.fixed_point is None):
+            raise ValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
+
+    @classmethod
+    def of(cls, network: Checkpoint | FixedPointModel, sha256: str, path: str | Path = "<in memory>") -> ExportSource:
+        """A network held in memory (``sha256`` names it in the exported files' provenance)."""
+        if isinstance(network, FixedPointModel):
+            return cls(Path(path), sha256, fixed_point=network)
+        return cls(Path(path), sha256, checkpoint=network)
+
+    @property
+    def network(self) -> Checkpoint | FixedPointModel:
+        """What NIR exports and what the project's own simulator runs."""
+        return self.checkpoint if self.checkpoint is not None else self._fixed()
+
+    @property
+    def is_float(self) -> bool:
+        return self.checkpoint is not None
+
+    @property
+    def kind(self) -> str:
+        return "float checkpoint" if self.is_float else "fixed-point model"
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        """The thresholds as stored (float for a checkpoint, integer mantissas for a fixed-point model)."""
+        return self.checkpoint.thresholds if self.checkpoint is not None else self._fixed().threshold
+
+    def _fixed(self) -> FixedPointModel:
+        if self.fixed_point is None:
+            raise ValueError("not a fixed-point model")
+        return self.fixed_point
 
 
-def parse_targets(raw: str, option: str = "--to", *, allow_none: bool = False) -> tuple[str, ...]:
-    """``"nir,onnx"`` -> ("nir", "onnx"); InvalidValueError naming the option on anything else."""
-    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
-    if allow_none and names == ("none",):
-        return ()
-    unknown = [n for n in names if n not in TARGETS]
-    if not names or unknown:
-        extra = " (or none)" if allow_none else ""
-        raise InvalidValueError(f"{option} expects some of {', '.join(TARGETS)}{extra}, got {raw!r}")
-    return names
-
-
-def load_network(path: str | Path) -> Network:
-    """A Checkpoint or a FixedPointModel, chosen by the container's ``format`` field."""
+def load_source(path: str | Path) -> ExportSource:
+    """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
+    path = Path(path)
     meta, _ = read_container(path, "model")
     kind = meta.get("format")
     if kind == CHECKPOINT_FORMAT:
-        return load_checkpoint(path)
+        return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))
     if kind == FIXED_FORMAT:
-        return load_fixed_point(path)
+        return ExportSource(path, sha256_file(path), fixed_point=load_fixed_point(path))
     raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
 
 
-def integer_model(source: Network, bits: int | None, digest: str, targets: Sequence[str]) -> FixedPointModel | None:
-    """The fixed-point model the integer targets get, or None when none is asked for."""
-    if isinstance(source, FixedPointModel):
+def parse_export_targets(raw: str) -> tuple[str, ...]:
+    """``--to``: some of nir, loihi, onnx (at least one); InvalidValueError otherwise."""
+    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
+    if not names or any(n not in EXPORT_TARGETS for n in names):
+        raise InvalidValueError(f"--to expects some of {', '.join(EXPORT_TARGETS)}, got {raw!r}")
+    return names
+
+
+def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
+    """The fixed-point model the integer targets get, or None when none is asked for.
+
+    A float checkpoint is quantised only when ``bits`` is given (per-neuron max-abs
+    scales, the float calibration kept): :func:`runtime.deployment.deploy`.
+    """
+    if source.fixed_point is not None:
         if bits is not None:
             raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")
-        return source
+        return source.fixed_point
     wanted = [t for t in targets if t in INTEGER_TARGETS]
-    if not wanted:
+    if not wanted or source.checkpoint is None:
         return None
     if bits is None:
         raise InvalidValueError(
             f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
             "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
         )
-    return quantize_checkpoint(source, digest, check_bits(bits), per_neuron=True, scale_method="max")
+    return deploy(source.checkpoint, source.sha256, check_bits(bits), calibration="float")
 
 
 def consumer_statements(
-    source: Network, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
+    source: ExportSource, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
 ) -> dict[str, str]:
     """What each consumer of each written file computes, in one sentence or three."""
-    fixed = isinstance(source, FixedPointModel)
-    thresholds = source.threshold if isinstance(source, FixedPointModel) else source.thresholds
+    thresholds = source.thresholds
     uniform = bool(np.all(thresholds == thresholds[0]))
     notes: dict[str, str] = {}
     if "nir" in targets:
         arithmetic = (
-            "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
-            if fixed
-            else "the float network's own arithmetic"
+            "the float network's own arithmetic"
+            if source.is_float
+            else "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
         )
         inhibit = (
             f"plus lateral inhibition ({inhibition} of its threshold per other spike, one step later)"
@@ -138,220 +184,268 @@ def consumer_statements(
     return notes
 
 
-def write_targets(
-    source: Network,
+def export_all(
+    source: ExportSource,
     model: FixedPointModel | None,
     targets: Sequence[str],
     out: Path,
     *,
-    digest: str | None = None,
     inhibition: float = WTA_INHIBITION,
     wta_node: bool = True,
-    onnx_raster: bool = False,
-) -> tuple[dict[str, list[Path]], dict[str, str]]:
-    """Write each target into ``out``: (target -> files written, target -> why it was skipped).
-
-    NIR describes ``source`` (float or fixed point); ONNX and Loihi need ``model``. A target
-    whose format cannot express the model (e.g. ONNX with state isolation off) is skipped
-    with its reason.
-    """
+) -> dict[str, list[Path]]:
+    """Write each target into ``out``: NIR of the source, ONNX and Loihi-style files of the fixed-point model."""
     written: dict[str, list[Path]] = {}
-    skipped: dict[str, str] = {}
+    integer = [t for t in targets if t in INTEGER_TARGETS]
+    if integer and model is None:
+        raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
     if "nir" in targets:
         written["nir"] = [
-            write_nir(source, out / NIR_NAME, source_sha256=digest, wta_inhibition=inhibition, wta_node=wta_node)
+            write_nir(
+                source.network,
+                out / NIR_NAME,
+                source_sha256=source.sha256,
+                wta_inhibition=inhibition,
+                wta_node=wta_node,
+            )
         ]
-    if model is not None and "onnx" in targets:
-        try:
-            written["onnx"] = [write_onnx(model, out / ONNX_NAME, with_wprob=True, with_raster=onnx_raster)]
-        except InvalidValueError as exc:  # the graph cannot express the model (state isolation off)
-            skipped["onnx"] = str(exc)
-    if model is not None and "loihi" in targets:
-        written["loihi"] = list(write_loihi(model, out / LOIHI_DIR, source_sha256=digest).values())
-    return written, skipped
+    if "onnx" in targets and model is not None:
+        written["onnx"] = [write_onnx(model, out / ONNX_NAME)]
+    if "loihi" in targets and model is not None:
+        written["loihi"] = list(write_loihi(model, out / LOIHI_DIR, source_sha256=source.sha256).values())
+    return written
 
 
-def check_spikes(
-    cfg: Config, images: np.ndarray | None, place_ids: np.ndarray | None, query: str | None, limit: int
-) -> tuple[torch.Tensor, str]:
-    """The spikes `export --check` presents: real query presentations, else synthetic trains of random images."""
-    if images is not None and place_ids is not None and query is not None:
-        if limit > 0:
-            images, place_ids = images[:limit], place_ids[:limit]
-        return query_spikes(images, place_ids, query, cfg), f"{len(place_ids)} '{query}' queries"
-    n = limit if limit > 0 else 16
-    rng = np.random.default_rng(cfg.seed)
-    spikes = encode(rng.random((n, cfg.network.n_inputs)).astype(np.float32), list(range(n)), cfg.encoder)
-    return spikes, f"{n} synthetic presentations (uniform random pixels)"
+# ---------------------------------------------------------------------------- checks
 
 
 @dataclass(frozen=True)
 class CheckRow:
-    """One line of the `export --check` table: an exact check (ok / FAILED) or a measurement (-)."""
+    """One line of the check table: an exact check (``ok`` True/False) or a measurement (``ok`` None)."""
 
     target: str
     check: str
-    result: str  # "ok", "FAILED" or "-"
+    ok: bool | None
     detail: str
+
+    @property
+    def result(self) -> str:
+        return "-" if self.ok is None else ("ok" if self.ok else "FAILED")
 
     def to_dict(self) -> dict[str, str]:
         return {"target": self.target, "check": self.check, "result": self.result, "detail": self.detail}
 
 
-def _target_of(check: str) -> str:
-    for prefix, target in (("ONNX", "onnx"), ("NIR", "nir"), ("Loihi", "loihi"), ("reference", "reference")):
-        if check.startswith(prefix):
-            return target
-    return "-"
+@dataclass(frozen=True)
+class ExportChecks:
+    """Every written file read back and run: the exact comparisons and the measurements."""
+
+    spikes: str  # what was presented
+    comparisons: tuple[Comparison, ...]
+    measurements: tuple[CheckRow, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        return all(c.equal for c in self.comparisons)
+
+    @property
+    def rows(self) -> list[CheckRow]:
+        exact = [
+            CheckRow(r["target"], r["check"], r["result"] == "ok", r["detail"])
+            for r in conformance_rows(self.comparisons)
+        ]
+        return exact + list(self.measurements)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
 
 
-def check_rows(comparisons: Sequence[Comparison]) -> list[CheckRow]:
-    """Exact comparisons as table rows."""
-    return [CheckRow(_target_of(c.check), c.check, "ok" if c.equal else "FAILED", c.detail) for c in comparisons]
+def check_presentations(
+    source: ExportSource,
+    query: str | None,
+    *,
+    data: str | None = None,
+    subset: str | None = None,
+    places: str | None = None,
+    samples: int = 16,
+    progress: bool = False,
+) -> tuple[torch.Tensor, str]:
+    """Query presentations of ``query`` (real data; the model's own data selection unless given),
+    else ``samples`` synthetic Bernoulli trains of random images."""
+    network = source.network
+    cfg = network.config
+    if query:
+        if subset is None and places is None:
+            subset, places = network.data.get("subset"), network.data.get("places")
+        origin = data or network.data.get("source")
+        if not origin:
+            raise InvalidValueError("the model names no data source: give --data")
+        dataset = load_dataset(origin, [query], cfg.preprocess, subset=subset, places=places, progress=progress)
+        images, ids = dataset.traversal(query), dataset.place_ids
+        if samples > 0:
+            images, ids = images[:samples], ids[:samples]
+        return query_spikes(images, ids, query, cfg), f"{len(ids)} '{query}' queries from {dataset.source}"
+    n = samples if samples > 0 else 16
+    rng = np.random.default_rng(cfg.seed)
+    spikes = encode(rng.random((n, cfg.network.n_inputs)).astype(np.float32), list(range(n)), cfg.encoder)
+    return spikes, f"{n} synthetic presentations (uniform random pixels)"
 
 
-def _float_run(ckpt: Checkpoint, spikes: torch.Tensor) -> SpikeRun:
-    return FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, torch.device("cpu")).run(
-        spikes, record=True
-    )
+def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
+    """W+Prob decision (k = 1) of each presentation with the network's own calibration."""
+    return decide(strategy_scores(network.calibration, counts, "wprob", network.config.assignment.gamma), "wprob")[0]
 
 
-def _decided_places(calibration: np.ndarray, gamma: float, counts: np.ndarray) -> np.ndarray:
-    return decide(strategy_scores(calibration, counts, "wprob", gamma), "wprob")[0]
-
-
-def consumer_rows(
-    path: Path, source: Network, network: SpikeRun, spikes: torch.Tensor, consumer: str
+def nir_consumer_rows(
+    path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
 ) -> list[CheckRow]:
-    """A metadata-blind NIR consumer (nirtorch, snnTorch, Norse) measured against the network's raster."""
-    assert network.raster is not None
+    """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
     try:
-        raster = CONSUMERS[consumer](load_graph(path), spikes)
+        consumer = CONSUMERS[consumer_name](load_graph(path), spikes)
     except AssertionError as exc:  # snnTorch's importer asserts on what it cannot express
-        return [CheckRow("nir", f"{consumer} loads the file", "-", f"refused: {exc}")]
-    agreement = spike_agreement(network.raster, raster)
-    gamma = source.config.assignment.gamma
-    places = _decided_places(source.calibration, gamma, network.raster.sum(dim=1).numpy())
-    consumer_places = _decided_places(source.calibration, gamma, raster.sum(dim=1).numpy())
-    per_step = raster.sum().item() / max(1, raster.shape[0] * raster.shape[1])
+        return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
+    agreement = spike_agreement(raster, consumer)
+    places = decided_places(network, raster.sum(dim=1).numpy())
+    consumer_places = decided_places(network, consumer.sum(dim=1).numpy())
+    rate = consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1])
     return [
         CheckRow(
             "nir",
-            f"{consumer} (no metadata) vs network",
-            "-",
-            f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {per_step:.1f} spikes/step",
+            f"{consumer_name} (no metadata) vs network",
+            None,
+            f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {rate:.1f} spikes/step",
         ),
         CheckRow(
-            "nir", f"{consumer} top-1 place (W+Prob) == network's", "-", f"{np.mean(places == consumer_places):.3f}"
+            "nir",
+            f"{consumer_name} top-1 place (W+Prob) == network's",
+            None,
+            f"{float(np.mean(places == consumer_places)):.3f}",
         ),
     ]
 
 
+def check_exports(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    written: Mapping[str, Sequence[Path]],
+    spikes: torch.Tensor,
+    *,
+    spikes_label: str = "",
+    nir_consumer: str = "nirtorch",
+    device: torch.device | None = None,
+) -> ExportChecks:
+    """Read every written file back and run it against the project's simulator of what it was written from."""
+    comparisons: list[Comparison] = []
+    measurements: list[CheckRow] = []
+    if "nir" in written:
+        network = source.network
+        baseline = backend_of(network, device)
+        base_run = baseline.run(spikes, record=True)
+        path = target_path("nir", written["nir"])
+        contender = read_back("nir", path, network, device)
+        comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
+        if base_run.raster is not None:
+            measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
+    integer = [t for t in ("onnx", "loihi") if t in written]
+    if integer and model is not None:
+        contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
+        comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+    return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))
+
+
+# ---------------------------------------------------------------------------- the whole export
+
+
+@dataclass(frozen=True)
+class WrittenFile:
+    path: Path
+    sha256: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"path": str(self.path), "sha256": self.sha256}
+
+
 @dataclass(frozen=True)
 class ExportResult:
-    """What `export` wrote (export.json) and, with spikes, how every file read back compares."""
+    """What `export` wrote (export.json): the model, every file with its hash, the consumers, the checks."""
 
     model: str
     model_sha256: str
     kind: str
-    files: dict[str, list[dict[str, str]]]
-    consumers: dict[str, str]
-    skipped: dict[str, str] = field(default_factory=dict)
-    spikes: str | None = None
-    checks: tuple[CheckRow, ...] | None = None
+    files: Mapping[str, tuple[WrittenFile, ...]]
+    consumers: Mapping[str, str]
+    checks: ExportChecks | None = None
 
     @property
     def passed(self) -> bool:
-        return self.checks is None or all(row.result != "FAILED" for row in self.checks)
+        return self.checks is None or self.checks.passed
 
     def written(self, target: str) -> Path:
         """The (first) file written for ``target``: ``result.written("onnx")``."""
         if target not in self.files:
             raise InvalidValueError(f"no {target} file was written (targets: {', '.join(self.files) or 'none'})")
-        return Path(self.files[target][0]["path"])
+        return self.files[target][0].path
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
+        data: dict[str, Any] = {
             "model": self.model,
             "model_sha256": self.model_sha256,
             "kind": self.kind,
-            "files": self.files,
-            "consumers": self.consumers,
+            "files": {t: [f.to_dict() for f in files] for t, files in self.files.items()},
+            "consumers": dict(self.consumers),
         }
-        if self.skipped:
-            out["skipped"] = self.skipped
         if self.checks is not None:
-            out["checks"] = {
-                "spikes": self.spikes,
-                "rows": [row.to_dict() for row in self.checks],
-                "passed": self.passed,
-            }
-        return out
+            data["checks"] = self.checks.to_dict()
+        return data
 
 
-def export_network(
-    source: Network,
+def export_and_check(
+    source: ExportSource,
     model: FixedPointModel | None,
     targets: Sequence[str],
     out: str | Path,
     *,
-    digest: str,
-    model_path: str = "",
     inhibition: float = WTA_INHIBITION,
     wta_node: bool = True,
     spikes: torch.Tensor | None = None,
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",
+    device: torch.device | None = None,
 ) -> ExportResult:
-    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json last.
-
-    ``source`` is what NIR describes, ``model`` the fixed-point model for the integer targets
-    (:func:`integer_model`).
-    """
-    folder = Path(out)
-    written, skipped = write_targets(
-        source, model, targets, folder, digest=digest, inhibition=inhibition, wta_node=wta_node
-    )
-    rows: list[CheckRow] | None = None
+    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content."""
+    out = Path(out)
+    written = export_all(source, model, targets, out, inhibition=inhibition, wta_node=wta_node)
+    checks = None
     if spikes is not None:
-        rows = check_written(source, model, written, spikes, nir_consumer)
+        checks = check_exports(
+            source, model, written, spikes, spikes_label=spikes_label, nir_consumer=nir_consumer, device=device
+        )
     result = ExportResult(
-        model=model_path,
-        model_sha256=digest,
-        kind="float checkpoint" if isinstance(source, Checkpoint) else "fixed-point model",
-        files={t: [{"path": str(p), "sha256": sha256_file(p)} for p in paths] for t, paths in written.items()},
+        model=str(source.path),
+        model_sha256=source.sha256,
+        kind=source.kind,
+        files={t: tuple(WrittenFile(p, sha256_file(p)) for p in paths) for t, paths in written.items()},
         consumers=consumer_statements(source, model, targets, wta_node, inhibition),
-        skipped=skipped,
-        spikes=spikes_label if spikes is not None else None,
-        checks=None if rows is None else tuple(rows),
+        checks=checks,
     )
-    atomic_write_text(folder / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+    atomic_write_text(out / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
     return result
 
 
-def check_written(
-    source: Network,
-    model: FixedPointModel | None,
-    written: Mapping[str, Sequence[Path]],
-    spikes: torch.Tensor,
-    nir_consumer: str,
-) -> list[CheckRow]:
-    """Every written file read back and run on ``spikes``, against the project's own network."""
-    rows: list[CheckRow] = []
-    if isinstance(source, Checkpoint):
-        network = _float_run(source, spikes)
-        if "nir" in written:
-            rebuilt = read_nir(written["nir"][0])
-            assert isinstance(rebuilt, Checkpoint)
-            rows += check_rows(
-                compare_runs("NIR read back", "float network", network, "read_nir rebuild", _float_run(rebuilt, spikes))
-            )
-    if model is not None:
-        baseline = IntegerNetwork(model).run(spikes, record=True)
-        files = {t: list(p) for t, p in written.items() if t != "nir" or isinstance(source, FixedPointModel)}
-        rows += check_rows(check_conformance(model, spikes, baseline, files).comparisons)
-    if isinstance(source, FixedPointModel):
-        network = baseline
-    if "nir" in written:
-        rows += consumer_rows(written["nir"][0], source, network, spikes, nir_consumer)
-    return rows
+__all__ = [
+    "EXPORT_TARGETS",
+    "INTEGER_TARGETS",
+    "MANIFEST_NAME",
+    "CheckRow",
+    "ExportChecks",
+    "ExportResult",
+    "ExportSource",
+    "WrittenFile",
+    "check_exports",
+    "check_presentations",
+    "consumer_statements",
+    "export_all",
+    "export_and_check",
+    "integer_model",
+    "load_source",
+    "parse_export_targets",
+]

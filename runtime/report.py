@@ -10,6 +10,7 @@ asset of any kind).
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import io
 import json
@@ -24,11 +25,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
-from vprsnn_export.errors import VprError  # noqa: E402
 from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
+from vprsnn_export.stats import MeanStd  # noqa: E402
 
-from .verify import METRICS, SCHEMA, TOLERANCE_MEANING, build_report, summarise_runs  # noqa: E402
+from .results import (  # noqa: E402
+    METRICS,
+    ReportError,
+    RunSummary,
+    VerifiedRun,
+    VerifyReport,
+)
+from .verify import TOLERANCE_MEANING, build_report, summarise_runs  # noqa: E402
 
 REPORT_JSON = "report.json"
 REPORT_MD = "report.md"
@@ -36,10 +45,6 @@ REPORT_HTML = "report.html"
 PLOTS_DIR = "plots"
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 STRATEGY_TITLES = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob"}
-
-
-class ReportError(VprError):
-    """A missing or malformed report.json."""
 
 
 # ---------------------------------------------------------------------------- reading and combining
@@ -51,23 +56,19 @@ def report_path(path: str | Path) -> Path:
     return path / REPORT_JSON if path.is_dir() else path
 
 
-def load_report(path: str | Path) -> dict[str, Any]:
+def load_report(path: str | Path) -> VerifyReport:
+    """The report of a report.json (or of the folder holding one); ReportError when it is not one."""
     file = report_path(path)
     if not file.is_file():
         raise ReportError(f"no {REPORT_JSON} here (give a folder written by verify, or its {REPORT_JSON})", file)
     try:
-        report = json.loads(file.read_text(encoding="utf-8"))
+        data = json.loads(file.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ReportError(f"not valid JSON ({exc})", file) from None
-    if not isinstance(report, dict) or report.get("schema") != SCHEMA:
-        found = report.get("schema") if isinstance(report, dict) else type(report).__name__
-        raise ReportError(f"not a verify report (schema {found!r}, expected {SCHEMA!r})", file)
-    if not isinstance(report.get("runs"), list) or not report["runs"]:
-        raise ReportError("the report holds no runs", file)
-    return report
+    return VerifyReport.from_dict(data, str(file))
 
 
-def combine_reports(reports: Sequence[Mapping[str, Any]], sources: Sequence[str] | None = None) -> dict[str, Any]:
+def combine_reports(reports: Sequence[VerifyReport], sources: Sequence[str] | None = None) -> VerifyReport:
     """One report holding every run of ``reports``; the summary becomes mean ± std over all of them.
 
     Settings come from the first report; keys on which the others differ are listed
@@ -76,25 +77,24 @@ def combine_reports(reports: Sequence[Mapping[str, Any]], sources: Sequence[str]
     if not reports:
         raise ReportError("no reports to combine")
     if len(reports) == 1:
-        combined = dict(reports[0])
-        combined["summary"] = summarise_runs(combined["runs"])
-        return combined
-    runs = [run for report in reports for run in report["runs"]]
-    settings = dict(reports[0]["settings"])
+        return dataclasses.replace(reports[0], summary=summarise_runs(reports[0].runs))
+    runs = [run for report in reports for run in report.runs]
+    settings = dict(reports[0].settings)
     differ = sorted(
         {
             key
             for report in reports[1:]
-            for key in set(settings) | set(report["settings"])
-            if report["settings"].get(key) != settings.get(key)
+            for key in set(settings) | set(report.settings)
+            if report.settings.get(key) != settings.get(key)
         }
     )
-    combined = build_report(runs, settings, command=None)
-    combined["combined_from"] = list(sources or [])
-    combined["commands"] = [report.get("command") for report in reports]
-    combined["settings_differ"] = differ
-    combined["seconds"] = sum(float(report.get("seconds") or 0) for report in reports)
-    return combined
+    return dataclasses.replace(
+        build_report(runs, settings, command=None),
+        seconds=sum(float(report.seconds or 0) for report in reports),
+        combined_from=tuple(sources or ()),
+        commands=tuple(report.command for report in reports),
+        settings_differ=tuple(differ),
+    )
 
 
 # ---------------------------------------------------------------------------- blocks
@@ -116,14 +116,14 @@ def signed_pct(value: float | None, digits: int = 1) -> str:
     return "-" if value is None else f"{round(100 * value, digits) + 0.0:+.{digits}f}"
 
 
-def ms(summary: Mapping[str, Any] | None, *, percent: bool = True, signed: bool = False, digits: int = 1) -> str:
+def ms(summary: MeanStd | None, *, percent: bool = True, signed: bool = False, digits: int = 1) -> str:
     """A mean ± std cell (just the mean for a single run)."""
-    if not summary or summary.get("mean") is None:
+    if summary is None or summary.mean is None:
         return "-"
     scale = 100.0 if percent else 1.0
-    value = round(scale * summary["mean"], digits) + 0.0  # no "-0.0"
+    value = round(scale * summary.mean, digits) + 0.0  # no "-0.0"
     mean = f"{value:{'+' if signed else ''}.{digits}f}"
-    return mean if summary["n"] <= 1 else f"{mean} ± {scale * summary['std']:.{digits}f}"
+    return mean if summary.n <= 1 else f"{mean} ± {scale * (summary.std or 0.0):.{digits}f}"
 
 
 def data_note(settings: Mapping[str, Any]) -> str:
@@ -142,36 +142,38 @@ def verdict(passed: bool) -> str:
     return "PASS" if passed else "FAIL"
 
 
-def blocks_of(report: Mapping[str, Any]) -> list[Block]:
+def network_label(run: VerifiedRun, index: int) -> str:
+    return run.label or str(index + 1)
+
+
+def blocks_of(report: VerifyReport) -> list[Block]:
     """The whole document, format-neutral."""
-    summary = report["summary"]
-    runs = report["runs"]
-    settings = report.get("settings", {})
+    summary = report.summary
+    runs = report.runs
     n_runs = len(runs)
     first = runs[0]
-    ks = sorted({int(row["k"]) for row in first["float"]["metrics"]})
+    ks = first.ks
     top_k = max(ks)
+    networks = f"mean ± std over {n_runs} independently trained networks" if n_runs > 1 else "one network"
     blocks: list[Block] = [Block("h1", "vprsnn-export verification report")]
     blocks.append(
         Block(
             "p",
             (
-                f"**Verdict: {verdict(report['passed'])}** — {sum(r['passed'] for r in runs)} of {n_runs} network(s) pass every "
-                f"check at every bit width. Query traversal **{first['query']}**, {first['n_queries']} queries"
-                f"{data_note(settings)}; "
-                f"{'mean ± std over ' + str(n_runs) + ' independently trained networks' if n_runs > 1 else 'one network'}. "
-                f"Generated {report.get('created', '?')}"
-                + (f" in {report['seconds']:.0f} s" if report.get("seconds") else "")
+                f"**Verdict: {verdict(report.passed)}** — {report.n_passed} of {n_runs} network(s) pass every "
+                f"check at every bit width. Query traversal **{first.query}**, {first.n_queries} queries"
+                f"{data_note(report.settings)}; {networks}. Generated {report.created}"
+                + (f" in {report.seconds:.0f} s" if report.seconds else "")
                 + "."
             ),
         )
     )
-    if report.get("settings_differ"):
+    if report.settings_differ:
         blocks.append(
             Block(
                 "p",
                 "Combined reports whose settings differ in: "
-                + ", ".join(report["settings_differ"])
+                + ", ".join(report.settings_differ)
                 + " (settings shown are the first report's).",
             )
         )
@@ -194,7 +196,7 @@ def blocks_of(report: Mapping[str, Any]) -> list[Block]:
             image=plot_pr(first),
             name="pr_curves.png",
             text=f"W+Prob at k=1 and k={top_k}, float (black) vs each bit width"
-            + (f"; network {first.get('label') or 1} of {n_runs}." if n_runs > 1 else "."),
+            + (f"; network {first.label or 1} of {n_runs}." if n_runs > 1 else "."),
         )
     )
     blocks += spike_blocks(summary)
@@ -219,7 +221,7 @@ def blocks_of(report: Mapping[str, Any]) -> list[Block]:
             image=plot_weights(first),
             name="weight_histograms.png",
             text="Float weights divided by their scale range "
-            f"({first['float']['weights']['normalised_by']}), and the share of weights on each "
+            f"({first.float.weights.normalised_by}), and the share of weights on each "
             "quantised level q / (2^b - 1).",
         )
     )
@@ -228,27 +230,32 @@ def blocks_of(report: Mapping[str, Any]) -> list[Block]:
     return blocks
 
 
-def verdict_blocks(report: Mapping[str, Any], top_k: int) -> list[Block]:
-    summary = report["summary"]
-    tolerances = report.get("settings", {}).get("tolerances", {})
+def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
+    tolerances = report.settings.get("tolerances", {})
     rows, status = [], []
-    for bits in summary["bits"]:
-        metrics = {(r["strategy"], r["k"]): r for r in bits["metrics"]}
+    for bits in report.summary.bits:
         worst_acc = min(
-            (metrics[(s, 1)]["delta"]["accuracy"]["mean"] for s in STRATEGY_TITLES if (s, 1) in metrics), default=None
+            (
+                row.delta["accuracy"].mean
+                for s in STRATEGY_TITLES
+                if (row := bits.row(s, 1)) is not None
+                and row.delta is not None
+                and row.delta["accuracy"].mean is not None
+            ),
+            default=None,
         )
-        top = metrics.get(("wprob", top_k))
-        ok = bits["n_passed"] == bits["n_runs"]
+        top = bits.row("wprob", top_k)
+        ok = bits.n_passed == bits.n_runs
         rows.append(
             [
-                f"{bits['bits']}",
-                f"{verdict(ok)} ({bits['n_passed']}/{bits['n_runs']})",
-                f"{bits['cross_implementation_passed']}/{bits['n_runs']} exact",
+                f"{bits.bits}",
+                f"{verdict(ok)} ({bits.n_passed}/{bits.n_runs})",
+                f"{bits.cross_implementation_passed}/{bits.n_runs} exact",
                 signed_pct(worst_acc),
-                ms(top["delta"]["r_at_100p"], signed=True) if top else "-",
-                ms(top["r_at_100p"]) if top else "-",
-                ms(bits["winner_agreement"]),
-                ms(bits["saturations"], percent=False, digits=0),
+                ms(top.delta["r_at_100p"], signed=True) if top and top.delta else "-",
+                ms(top.values["r_at_100p"]) if top else "-",
+                ms(bits.winner_agreement),
+                ms(bits.saturations, percent=False, digits=0),
             ]
         )
         status.append("pass" if ok else "fail")
@@ -278,35 +285,36 @@ def verdict_blocks(report: Mapping[str, Any], top_k: int) -> list[Block]:
     ]
 
 
-def metric_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
+def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     blocks = [Block("h2", "Metric level")]
-    float_rows = {(r["strategy"], r["k"]): r for r in summary["float"]}
+    float_rows = {(r.strategy, r.k): r for r in summary.float}
     labels = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
     for metric in METRICS:
-        headers = ["readout", "float %"] + [f"{b['bits']}-bit % (Δ)" for b in summary["bits"]]
+        headers = ["readout", "float %"] + [f"{b.bits}-bit % (Δ)" for b in summary.bits]
         rows = []
         for key in labels:
             if key not in float_rows:
                 continue
-            cells = [row_label(*key), ms(float_rows[key][metric])]
-            for bits in summary["bits"]:
-                row = next((r for r in bits["metrics"] if (r["strategy"], r["k"]) == key), None)
-                cells.append("-" if row is None else f"{ms(row[metric])} ({ms(row['delta'][metric], signed=True)})")
+            cells = [row_label(*key), ms(float_rows[key].values[metric])]
+            for bits in summary.bits:
+                row = bits.row(*key)
+                delta = "-" if row is None or row.delta is None else ms(row.delta[metric], signed=True)
+                cells.append("-" if row is None else f"{ms(row.values[metric])} ({delta})")
             rows.append(cells)
         blocks += [Block("h3", METRIC_TITLES[metric]), Block("table", headers=headers, rows=rows)]
     return blocks
 
 
-def spike_blocks(summary: Mapping[str, Any]) -> list[Block]:
+def spike_blocks(summary: RunSummary) -> list[Block]:
     rows = [
         [
-            f"{b['bits']}",
-            ms(b["winner_agreement"], digits=2),
-            ms(b["count_correlation"], percent=False, digits=3),
-            ms(b["spike_ratio"], percent=False, digits=3),
-            ms(b["saturations"], percent=False, digits=0),
+            f"{b.bits}",
+            ms(b.winner_agreement, digits=2),
+            ms(b.count_correlation, percent=False, digits=3),
+            ms(b.spike_ratio, percent=False, digits=3),
+            ms(b.saturations, percent=False, digits=0),
         ]
-        for b in summary["bits"]
+        for b in summary.bits
     ]
     return [
         Block("h2", "Spike level"),
@@ -320,7 +328,7 @@ def spike_blocks(summary: Mapping[str, Any]) -> list[Block]:
     ]
 
 
-def decision_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block]:
+def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     agg_ks = [k for k in ks if k > 1]
     headers = (
         ["bits"]
@@ -329,12 +337,12 @@ def decision_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block
         + [f"agreement k={k} %" for k in agg_ks]
     )
     rows = []
-    for b in summary["bits"]:
+    for b in summary.bits:
         rows.append(
-            [f"{b['bits']}"]
-            + [ms(b["top1_agreement"][s]) for s in STRATEGY_TITLES]
-            + [ms(b["wprob_tv_mean"], percent=False, digits=3)]
-            + [ms(b["aggregated_agreement"].get(str(k))) for k in agg_ks]
+            [f"{b.bits}"]
+            + [ms(b.top1_agreement.get(s)) for s in STRATEGY_TITLES]
+            + [ms(b.wprob_tv_mean, percent=False, digits=3)]
+            + [ms(b.aggregated_agreement.get(k)) for k in agg_ks]
         )
     return [
         Block("h2", "Decision level"),
@@ -349,34 +357,25 @@ def decision_blocks(summary: Mapping[str, Any], ks: Sequence[int]) -> list[Block
     ]
 
 
-def cross_blocks(report: Mapping[str, Any]) -> list[Block]:
-    runs = report["runs"]
+def cross_blocks(report: VerifyReport) -> list[Block]:
     rows, status, failures = [], [], []
-    for index, run in enumerate(runs):
-        for result in run["bits"]:
-            cross = result["cross_implementation"]
-            kinds = sorted({c["check"].split(":")[0] for c in cross["checks"]})
+    for index, run in enumerate(report.runs):
+        for result in run.bits:
+            cross = result.cross_implementation
+            kinds = sorted({c.check.split(":")[0] for c in cross.comparisons})
+            skipped = "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.skipped.items()) if cross.skipped else ""
             rows.append(
                 [
-                    run.get("label") or str(index + 1),
-                    f"{result['bits']}",
-                    f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
-                    verdict(cross["passed"]),
-                    str(cross["reference_queries"]),
-                    "; ".join(kinds)
-                    + (
-                        "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.get("skipped", {}).items())
-                        if cross.get("skipped")
-                        else ""
-                    ),
+                    network_label(run, index),
+                    f"{result.bits}",
+                    f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
+                    verdict(cross.passed),
+                    str(cross.reference_queries),
+                    "; ".join(kinds) + skipped,
                 ]
             )
-            status.append("pass" if cross["passed"] else "fail")
-            failures += [
-                [run.get("label") or str(index + 1), f"{result['bits']}", c["check"], c["detail"]]
-                for c in cross["checks"]
-                if not c["equal"]
-            ]
+            status.append("pass" if cross.passed else "fail")
+            failures += [[network_label(run, index), f"{result.bits}", c.check, c.detail] for c in cross.failures]
     blocks = [
         Block("h2", "Cross-implementation (exact)"),
         Block(
@@ -404,21 +403,21 @@ def cross_blocks(report: Mapping[str, Any]) -> list[Block]:
     return blocks
 
 
-def quantisation_blocks(run: Mapping[str, Any]) -> list[Block]:
+def quantisation_blocks(run: VerifiedRun) -> list[Block]:
     rows = []
-    for result in run["bits"]:
-        q = result["quantisation"]
+    for result in run.bits:
+        q = result.quantisation
         rows.append(
             [
-                f"{result['bits']}",
-                ("per-neuron" if q.get("per_neuron") else "per-tensor") + f", {q.get('scale_method')}",
-                f"{q.get('weight_relative_rmse', 0):.4f}",
-                str(q.get("weights_clipped")),
-                f"{100 * q.get('threshold_max_relative_error', 0):.3f}",
-                f"{100 * result['weight_levels']['zero_fraction']:.1f}",
-                str(q.get("max_current")),
-                str(q.get("calibration")),
-                str(q.get("calibration_saturations")),
+                f"{result.bits}",
+                ("per-neuron" if q.per_neuron else "per-tensor") + f", {q.scale_method}",
+                f"{q.weight_relative_rmse or 0:.4f}",
+                str(q.weights_clipped),
+                f"{100 * (q.threshold_max_relative_error or 0):.3f}",
+                f"{100 * result.weight_levels.zero_fraction:.1f}",
+                str(q.max_current),
+                str(q.calibration),
+                str(q.calibration_saturations),
             ]
         )
     return [
@@ -441,28 +440,21 @@ def quantisation_blocks(run: Mapping[str, Any]) -> list[Block]:
     ]
 
 
-def tolerance_blocks(report: Mapping[str, Any]) -> list[Block]:
+def tolerance_blocks(report: VerifyReport) -> list[Block]:
     rows, status = [], []
-    for index, run in enumerate(report["runs"]):
-        for result in run["bits"]:
-            for check in result["tolerance_checks"]:
-                percent = check["check"] not in ("saturations",)
-                value = f"{100 * check['value']:.2f}" if percent else str(check["value"])
-                applied = check.get("applied_limit", check["limit"])
+    for index, run in enumerate(report.runs):
+        for result in run.bits:
+            for check in result.tolerance_checks:
+                percent = check.check not in ("saturations",)
+                value = f"{100 * check.value:.2f}" if percent else str(check.value)
+                applied = check.applied_limit
                 limit = f"{100 * applied:.2f}" if percent else f"{applied:g}"
-                if applied != check["limit"]:
-                    limit += f" (1 query; set {100 * check['limit']:.2f})"
+                if applied != check.limit:
+                    limit += f" (1 query; set {100 * check.limit:.2f})"
                 rows.append(
-                    [
-                        run.get("label") or str(index + 1),
-                        f"{result['bits']}",
-                        check["what"],
-                        value,
-                        limit,
-                        verdict(check["passed"]),
-                    ]
+                    [network_label(run, index), f"{result.bits}", check.what, value, limit, verdict(check.passed)]
                 )
-                status.append("pass" if check["passed"] else "fail")
+                status.append("pass" if check.passed else "fail")
     meaning = "; ".join(f"{k}: {TOLERANCE_MEANING[k]}" for k in TOLERANCE_MEANING)
     return [
         Block("h2", "Tolerance checks"),
@@ -476,69 +468,63 @@ def tolerance_blocks(report: Mapping[str, Any]) -> list[Block]:
     ]
 
 
-def provenance_blocks(report: Mapping[str, Any]) -> list[Block]:
+def provenance_blocks(report: VerifyReport) -> list[Block]:
     rows = []
-    for index, run in enumerate(report["runs"]):
-        data = run.get("checkpoint_data", {})
+    for index, run in enumerate(report.runs):
         rows.append(
             [
-                run.get("label") or str(index + 1),
-                str(run.get("seed")),
-                str(run.get("checkpoint_sha256", ""))[:16],
-                str(data.get("source")),
-                f"{run['n_queries']}",
-                str(run.get("export_dir") or "-"),
+                network_label(run, index),
+                str(run.seed),
+                run.checkpoint_sha256[:16],
+                str(run.checkpoint_data.get("source")),
+                f"{run.n_queries}",
+                str(run.export_dir or "-"),
             ]
         )
-    command = report.get("command")
-    commands = report.get("commands")
-    text = " ".join(command) if command else "\n".join(" ".join(c) for c in commands or [] if c) or "-"
+    if report.command:
+        text = " ".join(report.command)
+    else:
+        text = "\n".join(" ".join(c) for c in report.commands or () if c) or "-"
     return [
         Block("h2", "Networks"),
         Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),
         Block("h2", "Provenance"),
         Block("pre", "command: " + text),
-        Block("pre", json.dumps(report.get("settings", {}), indent=2, sort_keys=True), title="settings"),
-        Block(
-            "pre",
-            json.dumps(report["runs"][0].get("config", {}), indent=2, sort_keys=True),
-            title="config (first network)",
-        ),
-        Block("pre", json.dumps(report.get("versions", {}), indent=2, sort_keys=True), title="versions"),
+        Block("pre", json.dumps(dict(report.settings), indent=2, sort_keys=True), title="settings"),
+        Block("pre", json.dumps(dict(report.runs[0].config), indent=2, sort_keys=True), title="config (first network)"),
+        Block("pre", json.dumps(dict(report.versions), indent=2, sort_keys=True), title="versions"),
     ]
 
 
 # ---------------------------------------------------------------------------- plots
 
 
-def png(fig) -> bytes:
+def png(fig: Figure) -> bytes:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, bbox_inches="tight")
     plt.close(fig)
     return buffer.getvalue()
 
 
-def _series(
-    summary: Mapping[str, Any], key: tuple[str, int], metric: str
-) -> tuple[list[int], list[float], list[float]]:
+def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[list[int], list[float], list[float]]:
     xs, means, stds = [], [], []
-    for bits in summary["bits"]:
-        row = next((r for r in bits["metrics"] if (r["strategy"], r["k"]) == key), None)
-        if row is not None and row[metric]["mean"] is not None:
-            xs.append(bits["bits"])
-            means.append(100 * row[metric]["mean"])
-            stds.append(100 * row[metric]["std"])
+    for bits in summary.bits:
+        row = bits.row(*key)
+        if row is not None and row.values[metric].mean is not None:
+            xs.append(bits.bits)
+            means.append(100 * (row.values[metric].mean or 0.0))
+            stds.append(100 * (row.values[metric].std or 0.0))
     return xs, means, stds
 
 
-def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
+def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
     keys = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
-    float_rows = {(r["strategy"], r["k"]): r for r in summary["float"]}
+    float_rows = {(r.strategy, r.k): r for r in summary.float}
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     markers = "osD^vP*X"
-    bits = sorted({b["bits"] for b in summary["bits"]})
-    for ax, metric in zip(axes.ravel(), METRICS):
+    bits = sorted({b.bits for b in summary.bits})
+    for ax, metric in zip(axes.ravel(), METRICS, strict=True):
         for index, key in enumerate(keys):
             colour = colours[index % len(colours)]
             xs, means, stds = _series(summary, key, metric)
@@ -554,8 +540,9 @@ def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
                     markersize=8 - index,
                     alpha=0.9,
                 )
-            if key in float_rows:
-                ax.axhline(100 * float_rows[key][metric]["mean"], color=colour, linestyle="--", linewidth=1)
+            mean = float_rows[key].values[metric].mean if key in float_rows else None
+            if mean is not None:
+                ax.axhline(100 * mean, color=colour, linestyle="--", linewidth=1)
         ax.set_title(METRIC_TITLES[metric])
         ax.set_ylabel("%")
         ax.grid(alpha=0.3)
@@ -569,18 +556,18 @@ def plot_metrics(summary: Mapping[str, Any], ks: Sequence[int]) -> bytes:
     return png(fig)
 
 
-def plot_pr(run: Mapping[str, Any]) -> bytes:
-    names = list(run["float"]["pr_curves"])
+def plot_pr(run: VerifiedRun) -> bytes:
+    names = list(run.float.pr_curves)
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), squeeze=False)
     cmap = plt.get_cmap("viridis")
-    n = max(len(run["bits"]) - 1, 1)
-    for ax, name in zip(axes[0], names):
-        curve = run["float"]["pr_curves"][name]
-        ax.step(curve["recall"], curve["precision"], where="post", color="black", linewidth=2, label="float")
-        for index, result in enumerate(run["bits"]):
-            if name in result["pr_curves"]:
-                c = result["pr_curves"][name]
-                ax.step(c["recall"], c["precision"], where="post", color=cmap(index / n), label=f"{result['bits']}-bit")
+    n = max(len(run.bits) - 1, 1)
+    for ax, name in zip(axes[0], names, strict=True):
+        curve = run.float.pr_curves[name]
+        ax.step(curve.recall, curve.precision, where="post", color="black", linewidth=2, label="float")
+        for index, result in enumerate(run.bits):
+            if name in result.pr_curves:
+                c = result.pr_curves[name]
+                ax.step(c.recall, c.precision, where="post", color=cmap(index / n), label=f"{result.bits}-bit")
         ax.set_xlim(0, 1.02)
         ax.set_ylim(0, 1.05)
         ax.set_xlabel("recall")
@@ -591,30 +578,30 @@ def plot_pr(run: Mapping[str, Any]) -> bytes:
     return png(fig)
 
 
-def plot_weights(run: Mapping[str, Any]) -> bytes:
+def plot_weights(run: VerifiedRun) -> bytes:
     """Per bit width: the share of weights on each level q / L (bars) over the float weights' histogram
     rescaled to the same units (share per interval of width 1 / L, line)."""
-    results = run["bits"]
+    results = run.bits
     fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
-    hist = run["float"]["weights"]
-    edges = np.asarray(hist["edges"])
-    counts = np.asarray(hist["counts"], dtype=np.float64)
+    hist = run.float.weights
+    edges = np.asarray(hist.edges)
+    counts = np.asarray(hist.counts, dtype=np.float64)
     density = counts / max(counts.sum(), 1) / np.diff(edges)
     centres = (edges[:-1] + edges[1:]) / 2
-    for ax, result in zip(axes[0], results):
-        levels = result["weight_levels"]
-        top = levels["levels"]
-        share = np.asarray(levels["counts"], dtype=np.float64) / max(sum(levels["counts"]), 1)
+    for ax, result in zip(axes[0], results, strict=True):
+        levels = result.weight_levels
+        top = levels.levels
+        share = np.asarray(levels.counts, dtype=np.float64) / max(sum(levels.counts), 1)
         ax.bar(
             np.arange(top + 1) / top,
             share,
             width=0.85 / top,
             color="tab:orange",
             alpha=0.85,
-            label=f"{result['bits']}-bit levels",
+            label=f"{result.bits}-bit levels",
         )
         ax.plot(centres, density / top, color="tab:blue", linewidth=1.2, label="float")
-        ax.set_title(f"{result['bits']}-bit: {100 * levels['zero_fraction']:.1f} % of weights at 0", fontsize=9)
+        ax.set_title(f"{result.bits}-bit: {100 * levels.zero_fraction:.1f} % of weights at 0", fontsize=9)
         ax.set_xlabel("weight / scale range")
         ax.set_xlim(-0.08, 1.08)
         ax.grid(alpha=0.3)
@@ -624,19 +611,20 @@ def plot_weights(run: Mapping[str, Any]) -> bytes:
     return png(fig)
 
 
-def plot_spikes(report: Mapping[str, Any]) -> bytes:
-    summary = report["summary"]
-    bits = [b["bits"] for b in summary["bits"]]
+def plot_spikes(report: VerifyReport) -> bytes:
+    summary = report.summary
+    bits = [b.bits for b in summary.bits]
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
-    for label, values in (
-        ("same winner per step", [b["winner_agreement"] for b in summary["bits"]]),
-        ("top-1 agreement W+Prob k=1", [b["top1_agreement"]["wprob"] for b in summary["bits"]]),
-        ("mean count correlation", [b["count_correlation"] for b in summary["bits"]]),
-    ):
+    series: tuple[tuple[str, list[MeanStd]], ...] = (
+        ("same winner per step", [b.winner_agreement for b in summary.bits]),
+        ("top-1 agreement W+Prob k=1", [b.top1_agreement["wprob"] for b in summary.bits]),
+        ("mean count correlation", [b.count_correlation for b in summary.bits]),
+    )
+    for label, values in series:
         left.errorbar(
             bits,
-            [100 * v["mean"] for v in values],
-            yerr=[100 * v["std"] for v in values],
+            [100 * (v.mean or 0.0) for v in values],
+            yerr=[100 * (v.std or 0.0) for v in values],
             marker="o",
             capsize=3,
             label=label,
@@ -648,16 +636,10 @@ def plot_spikes(report: Mapping[str, Any]) -> bytes:
     left.set_ylim(0, 102)
     left.grid(alpha=0.3)
     left.legend(fontsize=8, loc="lower left")
-    pooled = []
-    for b in bits:
-        values = [
-            c
-            for run in report["runs"]
-            for r in run["bits"]
-            if r["bits"] == b
-            for c in r["spike_level"]["count_correlation"]
-        ]
-        pooled.append(values)
+    pooled = [
+        [c for run in report.runs for r in run.bits if r.bits == b for c in r.spike_level.count_correlation]
+        for b in bits
+    ]
     right.boxplot(pooled)
     right.set_xticks(range(1, len(bits) + 1), [str(b) for b in bits])
     right.set_xlabel("weight bits")
@@ -777,13 +759,15 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
     )
 
 
-def write_report(report: Mapping[str, Any], out_dir: str | Path, *, write_json: bool = True) -> dict[str, Path]:
+def write_report(report: VerifyReport, out_dir: str | Path, *, write_json: bool = True) -> dict[str, Path]:
     """Write report.json (optionally), report.md with plots/*.png, and the self-contained report.html."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
     if write_json:
-        written["json"] = atomic_write_text(out / REPORT_JSON, json.dumps(report, indent=1, sort_keys=False) + "\n")
+        written["json"] = atomic_write_text(
+            out / REPORT_JSON, json.dumps(report.to_dict(), indent=1, sort_keys=False) + "\n"
+        )
     blocks = blocks_of(report)
     for block in blocks:
         if block.kind == "figure":

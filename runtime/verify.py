@@ -1,10 +1,11 @@
 """Does the deployed network still recognise places like the float one? The checks of `vprsnn-export verify`.
 
-For one float checkpoint and each weight bit width, the network is quantised, every
+For one float checkpoint and each weight bit width, the network is deployed
+(:func:`runtime.deployment.deploy`: quantised and calibrated), every
 integer implementation runs on the very spike tensor the float network sees
 (:func:`runtime.inference.query_spikes`), and four families of checks compare them:
 
-* **cross-implementation** (exact): the integer simulator, the ONNX graph on
+* **cross-implementation** (exact; :mod:`runtime.conformance`): the integer simulator, the ONNX graph on
   onnxruntime, the NIR and Loihi-style files read back, and the slow reference
   stepper (first few queries) must produce identical rasters, counts, candidate
   counts, final voltages and saturation counts. Integer outputs are compared bit for
@@ -21,20 +22,20 @@ integer implementation runs on the very spike tensor the float network sees
 
 Tolerances (docs/verify.md) turn the metric, spike and decision differences into
 pass/fail per bit width. Every function below is pure apart from :func:`verify_checkpoint`
-(which writes the exported files) and returns plain JSON values.
+(which writes the exported files); results are the typed objects of :mod:`runtime.results`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime
-import importlib.metadata as md
 import platform
 import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -42,23 +43,39 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import check_bits, save_fixed_point
+from vprsnn_export.export.model import FixedPointModel, check_bits, save_fixed_point
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.stats import mean_std
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.version import __version__
 
-from .conformance import check_conformance
-from .deployment import deploy
+from .conformance import TARGETS, cross_implementation
+from .deployment import CALIBRATIONS, deploy
 from .evaluation import ReadoutOptions, aggregated, readout_rows
-from .exporting import TARGETS, write_targets
-
-SCHEMA = "vprsnn-verify-report/1"
-METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
+from .results import (
+    METRICS,
+    SCHEMA,
+    BitsResult,
+    BitsSummary,
+    DecisionLevel,
+    FloatResult,
+    LevelHistogram,
+    MetricRow,
+    PrCurve,
+    RunSummary,
+    SpikeLevel,
+    SummaryRow,
+    ToleranceCheck,
+    VerifiedRun,
+    VerifyReport,
+    WeightHistogram,
+    find_row,
+)
 
 #: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).
 DEFAULT_TOLERANCES: dict[str, float | None] = {
@@ -98,7 +115,8 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
         key, raw = key.strip(), raw.strip().lower()
         if not sep or key not in DEFAULT_TOLERANCES:
             raise InvalidValueError(
-                f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} (VALUE a number or off), got {item!r}"
+                f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
+                f"(VALUE a number or off), got {item!r}"
             )
         if raw in OFF:
             tolerances[key] = None
@@ -124,7 +142,7 @@ class VerifyOptions:
     calibration: str = "deployed"  # "deployed": S^R re-measured on the integer simulator; "float": reused
     reference_queries: int = 3  # presentations run on the slow reference stepper
     targets: tuple[str, ...] = TARGETS
-    tolerances: dict = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
+    tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -157,27 +175,29 @@ def spike_level(
     float_counts: np.ndarray,
     int_counts: np.ndarray,
     saturations: int,
-) -> dict[str, Any]:
+    calibration_saturations: int | None = None,
+) -> SpikeLevel:
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
     agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
     corr = count_correlations(float_counts, int_counts)
     float_total = np.asarray(float_counts).sum(axis=1)
     int_total = np.asarray(int_counts).sum(axis=1)
-    return {
-        "winner_agreement": agreement["all_steps"],
-        "winner_agreement_active": agreement["active_steps"],
-        "n_steps": agreement["n_steps"],
-        "n_active_steps": agreement["n_active_steps"],
-        "count_correlation_mean": float(corr.mean()),
-        "count_correlation_min": float(corr.min()),
-        "count_correlation": [round(float(c), 6) for c in corr],
-        "total_spikes_float": int(float_total.sum()),
-        "total_spikes": int(int_total.sum()),
-        "spike_ratio": float(int_total.sum() / float_total.sum()) if float_total.sum() else None,
-        "spikes_per_query_float": [int(v) for v in float_total],
-        "spikes_per_query": [int(v) for v in int_total],
-        "saturations": int(saturations),
-    }
+    return SpikeLevel(
+        winner_agreement=agreement["all_steps"],
+        winner_agreement_active=agreement["active_steps"],
+        n_steps=int(agreement["n_steps"]),
+        n_active_steps=int(agreement["n_active_steps"]),
+        count_correlation_mean=float(corr.mean()),
+        count_correlation_min=float(corr.min()),
+        count_correlation=tuple(round(float(c), 6) for c in corr),
+        total_spikes_float=int(float_total.sum()),
+        total_spikes=int(int_total.sum()),
+        spike_ratio=float(int_total.sum() / float_total.sum()) if float_total.sum() else None,
+        spikes_per_query_float=tuple(int(v) for v in float_total),
+        spikes_per_query=tuple(int(v) for v in int_total),
+        saturations=int(saturations),
+        calibration_saturations=calibration_saturations,
+    )
 
 
 # ---------------------------------------------------------------------------- decision level
@@ -198,18 +218,18 @@ def decision_level(
     int_scores: Mapping[str, np.ndarray],
     float_aggregated: Mapping[int, np.ndarray],
     int_aggregated: Mapping[int, np.ndarray],
-) -> dict[str, Any]:
+) -> DecisionLevel:
     """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
     tv = tv_distance(float_scores["wprob"], int_scores["wprob"])
-    return {
-        "top1_agreement": {s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
-        "wprob_tv_mean": float(tv.mean()),
-        "wprob_tv_max": float(tv.max()),
-        "wprob_tv": [round(float(v), 6) for v in tv],
-        "aggregated_agreement": {
-            str(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
+    return DecisionLevel(
+        top1_agreement={s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
+        wprob_tv_mean=float(tv.mean()),
+        wprob_tv_max=float(tv.max()),
+        wprob_tv=tuple(round(float(v), 6) for v in tv),
+        aggregated_agreement={
+            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
         },
-    }
+    )
 
 
 # ---------------------------------------------------------------------------- metric level
@@ -222,20 +242,15 @@ def readout_scores(calibration: np.ndarray, counts: np.ndarray, options: Readout
     return scores, agg
 
 
-def metric_deltas(float_rows: Sequence[dict], rows: Sequence[dict]) -> list[dict]:
+def metric_rows(rows: Sequence[Mapping[str, Any]]) -> tuple[MetricRow, ...]:
+    """The typed rows of :func:`runtime.evaluation.readout_rows`."""
+    return tuple(MetricRow.from_dict(row) for row in rows)
+
+
+def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
     """Each quantised row with its float value and the difference (quantised - float) of every metric."""
-    reference = {(r["strategy"], r["k"]): r for r in float_rows}
-    out = []
-    for row in rows:
-        base = reference[(row["strategy"], row["k"])]
-        out.append(
-            {
-                **row,
-                "float": {m: base[m] for m in METRICS},
-                "delta": {m: row[m] - base[m] for m in METRICS},
-            }
-        )
-    return out
+    reference = {(r.strategy, r.k): r for r in float_rows}
+    return tuple(row.with_float(reference[(row.strategy, row.k)]) for row in rows)
 
 
 def pr_points(
@@ -244,17 +259,22 @@ def pr_points(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     tolerance: int,
-) -> dict[str, list[float]]:
+) -> PrCurve:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)
-    correct = is_correct(predicted_place_ids(predicted, np.asarray(reference_place_ids)), query_place_ids, tolerance)
+    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
+    correct = is_correct(ids, query_place_ids, tolerance)
     precision, recall, _ = pr_curve(correct, confidence)
-    return {"precision": [round(float(p), 6) for p in precision], "recall": [round(float(r), 6) for r in recall]}
+    return PrCurve(tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall))
 
 
 def curves(
-    scores: Mapping[str, np.ndarray], agg: Mapping[int, np.ndarray], reference_ids, query_ids, options: ReadoutOptions
-) -> dict[str, dict]:
+    scores: Mapping[str, np.ndarray],
+    agg: Mapping[int, np.ndarray],
+    reference_ids: np.ndarray,
+    query_ids: np.ndarray,
+    options: ReadoutOptions,
+) -> dict[str, PrCurve]:
     """PR curves of W+Prob at k=1 and at the largest k."""
     out = {"wprob k=1": pr_points(scores["wprob"], "wprob", reference_ids, query_ids, options.tolerance)}
     top = max(options.ks)
@@ -266,18 +286,14 @@ def curves(
 # ---------------------------------------------------------------------------- tolerances
 
 
-def _row(rows: Sequence[dict], strategy: str, k: int) -> dict:
-    return next(r for r in rows if r["strategy"] == strategy and r["k"] == k)
-
-
 def tolerance_checks(
-    rows: Sequence[dict],
-    spike: Mapping[str, Any],
-    decision: Mapping[str, Any],
+    rows: Sequence[MetricRow],
+    spike: SpikeLevel,
+    decision: DecisionLevel,
     tolerances: Mapping[str, float | None],
     ks: Sequence[int],
-) -> list[dict]:
-    """Each enabled tolerance as {check, what, value, limit, passed}; ``rows`` come from :func:`metric_deltas`.
+) -> list[ToleranceCheck]:
+    """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
 
     Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
     network that does better than float never fails. A metric moves in steps of 1/Q (one
@@ -285,25 +301,26 @@ def tolerance_checks(
     "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
     """
     top = max(ks)
-    checks = []
-    n_queries = int(rows[0]["n_queries"]) if rows else 1
+    checks: list[ToleranceCheck] = []
+    n_queries = rows[0].n_queries if rows else 1
     slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
 
     def drop(name: str, strategy: str, k: int, metric: str) -> None:
-        row = _row(rows, strategy, k)
-        value = 0.0 - row["delta"][metric]
+        row = find_row(rows, strategy, k)
         limit = tolerances[name]
+        if row is None or row.delta is None or limit is None:
+            raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {name} tolerance")
+        value = 0.0 - row.delta.get(metric)
         applied = max(limit, slack)
-        checks.append(
-            {
-                "check": name,
-                "what": f"{metric} drop, {strategy} k={k}",
-                "value": value,
-                "limit": limit,
-                "applied_limit": applied,
-                "passed": bool(value <= applied + 1e-12),
-            }
-        )
+        what = f"{metric} drop, {strategy} k={k}"
+        checks.append(ToleranceCheck(name, what, value, limit, applied, bool(value <= applied + 1e-12)))
+
+    def bound(name: str, what: str, value: float, at_least: bool) -> None:
+        limit = tolerances[name]
+        if limit is None:
+            return
+        passed = value >= limit if at_least else value <= limit
+        checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
 
     if tolerances.get("accuracy") is not None:
         for strategy in STRATEGIES:
@@ -315,77 +332,40 @@ def tolerance_checks(
         drop("r_at_100p", "wprob", top, "r_at_100p")
     if tolerances.get("auc_pr") is not None:
         drop("auc_pr", "wprob", top, "auc_pr")
-    if tolerances.get("winner_agreement") is not None:
-        value, limit = spike["winner_agreement"], tolerances["winner_agreement"]
-        checks.append(
-            {
-                "check": "winner_agreement",
-                "what": "steps with the float winner",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value >= limit),
-            }
-        )
-    if tolerances.get("top1_agreement") is not None:
-        value, limit = decision["top1_agreement"]["wprob"], tolerances["top1_agreement"]
-        checks.append(
-            {
-                "check": "top1_agreement",
-                "what": "W+Prob k=1 top-1 agreement",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value >= limit),
-            }
-        )
-    if tolerances.get("saturations") is not None:
-        value, limit = spike["saturations"], tolerances["saturations"]
-        checks.append(
-            {
-                "check": "saturations",
-                "what": "saturation events on the queries",
-                "value": value,
-                "limit": limit,
-                "applied_limit": limit,
-                "passed": bool(value <= limit),
-            }
-        )
+    bound("winner_agreement", "steps with the float winner", spike.winner_agreement, True)
+    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement["wprob"], True)
+    bound("saturations", "saturation events on the queries", spike.saturations, False)
     return checks
 
 
 # ---------------------------------------------------------------------------- weights
 
 
-def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> dict[str, Any]:
+def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> WeightHistogram:
     """Histogram of the float weights divided by their scale range (per-neuron or global maximum)."""
     w = np.asarray(float_weights, dtype=np.float64)
     top = w.max(axis=0, keepdims=True) if per_neuron else np.array([[w.max()]])
     ratio = w / np.where(top > 0, top, 1.0)
     counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
-    return {
-        "normalised_by": "per-neuron maximum" if per_neuron else "global maximum",
-        "counts": [int(c) for c in counts],
-        "edges": [round(float(e), 6) for e in edges],
-    }
+    return WeightHistogram(
+        "per-neuron maximum" if per_neuron else "global maximum",
+        tuple(int(c) for c in counts),
+        tuple(round(float(e), 6) for e in edges),
+    )
 
 
-def level_histogram(model) -> dict[str, Any]:
+def level_histogram(model: FixedPointModel) -> LevelHistogram:
     """How many weights sit on each mantissa level 0 .. 2**bits - 1."""
     levels = (1 << model.bits) - 1
     counts = np.bincount(np.asarray(model.weight_mantissa).ravel().astype(np.int64), minlength=levels + 1)
-    return {
-        "levels": levels,
-        "counts": [int(c) for c in counts[: levels + 1]],
-        "zero_fraction": float(counts[0] / max(counts.sum(), 1)),
-    }
+    return LevelHistogram(levels, tuple(int(c) for c in counts[: levels + 1]), float(counts[0] / max(counts.sum(), 1)))
 
 
 # ---------------------------------------------------------------------------- orchestration
 
 
 def verify_checkpoint(
-    ckpt,
+    ckpt: Checkpoint,
     ckpt_sha256: str,
     query_images: np.ndarray,
     query_place_ids: np.ndarray,
@@ -397,16 +377,18 @@ def verify_checkpoint(
     device: torch.device | None = None,
     progress: bool = False,
     label: str | None = None,
-) -> dict[str, Any]:
-    """Quantise ``ckpt`` at every bit width and run every check; a JSON-ready dict (one report run).
+    checkpoint: str | None = None,
+) -> VerifiedRun:
+    """Quantise ``ckpt`` at every bit width and run every check: one verified run of the report.
 
     ``reference_images`` (the checkpoint's reference traversals, in its reference place
     order) are needed for the deployed calibration; ``export_dir`` receives each bit
     width's fixed-point model and exported files (a temporary folder when None).
+    ``checkpoint`` names the checkpoint's file in the result.
     """
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
-    if options.calibration not in ("deployed", "float"):
+    if options.calibration not in CALIBRATIONS:
         raise InvalidValueError(f"calibration must be deployed or float, got {options.calibration!r}")
     if options.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
@@ -416,11 +398,11 @@ def verify_checkpoint(
     float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device).run(spikes, record=True)
     float_counts = float_run.counts.numpy()
     ref_ids = ckpt.reference_place_ids
-    float_rows = readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout)
+    float_rows = metric_rows(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout))
     float_scores, float_agg = readout_scores(ckpt.calibration, float_counts, readout)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
-    root = Path(temporary.name if temporary else export_dir)
-    results = []
+    root = Path(temporary.name if temporary is not None else str(export_dir))
+    results: list[BitsResult] = []
     stages = tqdm(
         total=len(bits_list) * 4,
         desc=f"verify {label or ''}".strip(),
@@ -454,139 +436,129 @@ def verify_checkpoint(
             seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="targets")
-            written, skipped = write_targets(
-                model, model, options.targets, folder, digest=model.source_sha256, onnx_raster=True
-            )
-            cross = check_conformance(
+            cross = cross_implementation(
                 model,
                 spikes,
                 int_run,
-                written,
+                folder=folder,
+                targets=options.targets,
                 reference_queries=options.reference_queries,
-                skipped=skipped,
                 device=device,
-            ).to_dict()
-            cross["files"]["model"] = [str(model_path)]
+            ).with_files("model", [str(model_path)])
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            rows = metric_deltas(
-                float_rows, readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout)
-            )
+            int_rows = metric_rows(readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout))
+            rows = metric_deltas(float_rows, int_rows)
             scores, agg = readout_scores(model.calibration, int_counts, readout)
-            spike = spike_level(float_run.raster, int_run.raster, float_counts, int_counts, int_run.saturations)
-            spike["calibration_saturations"] = model.quantisation.get("calibration_saturations")
+            if float_run.raster is None or int_run.raster is None:
+                raise InvalidValueError("verify needs the recorded rasters of both networks")
+            spike = spike_level(
+                float_run.raster,
+                int_run.raster,
+                float_counts,
+                int_counts,
+                int_run.saturations,
+                model.quantisation.calibration_saturations,
+            )
             decision = decision_level(
                 float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
             )
             checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks)
             seconds["readout"] = time.perf_counter() - clock
             results.append(
-                {
-                    "bits": bits,
-                    "quantisation": model.quantisation,
-                    "cross_implementation": cross,
-                    "spike_level": spike,
-                    "decision_level": decision,
-                    "metrics": rows,
-                    "tolerance_checks": checks,
-                    "pr_curves": curves(scores, agg, ref_ids, query_place_ids, readout),
-                    "weight_levels": level_histogram(model),
-                    "passed": bool(cross["passed"] and all(c["passed"] for c in checks)),
-                    "seconds": {k: round(v, 3) for k, v in seconds.items()},
-                }
+                BitsResult(
+                    bits=bits,
+                    quantisation=model.quantisation,
+                    cross_implementation=cross,
+                    spike_level=spike,
+                    decision_level=decision,
+                    metrics=rows,
+                    tolerance_checks=tuple(checks),
+                    pr_curves=curves(scores, agg, ref_ids, query_place_ids, readout),
+                    weight_levels=level_histogram(model),
+                    passed=bool(cross.passed and all(c.passed for c in checks)),
+                    seconds={k: round(v, 3) for k, v in seconds.items()},
+                )
             )
             stages.update(1)
     finally:
         stages.close()
         if temporary is not None:
             temporary.cleanup()
-    return {
-        "label": label,
-        "seed": ckpt.config.seed,
-        "config": ckpt.config.to_dict(),
-        "checkpoint_sha256": ckpt_sha256,
-        "checkpoint_data": ckpt.data,
-        "query": query_traversal,
-        "n_queries": int(len(query_place_ids)),
-        "query_place_ids": [int(p) for p in query_place_ids],
-        "reference_place_ids": [int(p) for p in ref_ids],
-        "export_dir": None if temporary else str(root),
-        "float": {
-            "metrics": float_rows,
-            "total_spikes": int(float_counts.sum()),
-            "pr_curves": curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
-            "weights": weight_histograms(ckpt.weights, options.per_neuron),
-        },
-        "bits": results,
-        "passed": all(r["passed"] for r in results),
-    }
+    return VerifiedRun(
+        label=label,
+        seed=ckpt.config.seed,
+        config=ckpt.config.to_dict(),
+        checkpoint_sha256=ckpt_sha256,
+        checkpoint_data=dict(ckpt.data),
+        query=query_traversal,
+        n_queries=int(len(query_place_ids)),
+        query_place_ids=tuple(int(p) for p in query_place_ids),
+        reference_place_ids=tuple(int(p) for p in ref_ids),
+        export_dir=None if temporary is not None else str(root),
+        float=FloatResult(
+            metrics=float_rows,
+            total_spikes=int(float_counts.sum()),
+            pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
+            weights=weight_histograms(ckpt.weights, options.per_neuron),
+        ),
+        bits=tuple(results),
+        checkpoint=checkpoint,
+    )
 
 
 # ---------------------------------------------------------------------------- the report
 
 
-def summarise_runs(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
-    float_groups: dict[tuple, list[dict]] = {}
-    for run in runs:
-        for row in run["float"]["metrics"]:
-            float_groups.setdefault((row["strategy"], row["k"]), []).append(row)
-    float_rows = [
-        {"strategy": s, "k": k, **{m: mean_std([r[m] for r in rows]).to_dict() for m in METRICS}}
-        for (s, k), rows in float_groups.items()
-    ]
-    per_bits: dict[int, list[dict]] = {}
-    for run in runs:
-        for result in run["bits"]:
-            per_bits.setdefault(int(result["bits"]), []).append(result)
-    bits_summary = []
-    for bits in sorted(per_bits, reverse=True):
-        results = per_bits[bits]
-        groups: dict[tuple, list[dict]] = {}
-        for result in results:
-            for row in result["metrics"]:
-                groups.setdefault((row["strategy"], row["k"]), []).append(row)
-        rows = [
-            {
-                "strategy": s,
-                "k": k,
-                **{m: mean_std([r[m] for r in rs]).to_dict() for m in METRICS},
-                "delta": {m: mean_std([r["delta"][m] for r in rs]).to_dict() for m in METRICS},
-            }
-            for (s, k), rs in groups.items()
-        ]
-        ks = sorted({int(k) for r in results for k in r["decision_level"]["aggregated_agreement"]})
-        bits_summary.append(
-            {
-                "bits": bits,
-                "n_runs": len(results),
-                "n_passed": sum(bool(r["passed"]) for r in results),
-                "cross_implementation_passed": sum(bool(r["cross_implementation"]["passed"]) for r in results),
-                "metrics": rows,
-                "winner_agreement": mean_std([r["spike_level"]["winner_agreement"] for r in results]).to_dict(),
-                "count_correlation": mean_std([r["spike_level"]["count_correlation_mean"] for r in results]).to_dict(),
-                "spike_ratio": mean_std([r["spike_level"]["spike_ratio"] for r in results]).to_dict(),
-                "saturations": mean_std([r["spike_level"]["saturations"] for r in results]).to_dict(),
-                "top1_agreement": {
-                    s: mean_std([r["decision_level"]["top1_agreement"][s] for r in results]).to_dict()
-                    for s in STRATEGIES
-                },
-                "wprob_tv_mean": mean_std([r["decision_level"]["wprob_tv_mean"] for r in results]).to_dict(),
-                "aggregated_agreement": {
-                    str(k): mean_std(
-                        [r["decision_level"]["aggregated_agreement"].get(str(k)) for r in results]
-                    ).to_dict()
-                    for k in ks
-                },
-            }
+def summary_rows(rows_per_run: Sequence[Sequence[MetricRow]], with_delta: bool) -> tuple[SummaryRow, ...]:
+    """Mean ± std of each (strategy, k) row over runs, in the order the rows first appear."""
+    groups: dict[tuple[str, int], list[MetricRow]] = {}
+    for rows in rows_per_run:
+        for row in rows:
+            groups.setdefault((row.strategy, row.k), []).append(row)
+    return tuple(
+        SummaryRow(
+            strategy,
+            k,
+            {m: mean_std(r.values.get(m) for r in rows) for m in METRICS},
+            {m: mean_std(r.delta.get(m) if r.delta else None for r in rows) for m in METRICS} if with_delta else None,
         )
-    return {
-        "n_runs": len(runs),
-        "float": float_rows,
-        "bits": bits_summary,
-        "passed": all(bool(r["passed"]) for r in runs),
-    }
+        for (strategy, k), rows in groups.items()
+    )
+
+
+def summarise_bits(bits: int, results: Sequence[BitsResult]) -> BitsSummary:
+    """Mean ± std over networks of every measurement at one bit width."""
+    ks = sorted({k for r in results for k in r.decision_level.aggregated_agreement})
+    return BitsSummary(
+        bits=bits,
+        n_runs=len(results),
+        n_passed=sum(r.passed for r in results),
+        cross_implementation_passed=sum(r.cross_implementation.passed for r in results),
+        metrics=summary_rows([r.metrics for r in results], with_delta=True),
+        winner_agreement=mean_std(r.spike_level.winner_agreement for r in results),
+        count_correlation=mean_std(r.spike_level.count_correlation_mean for r in results),
+        spike_ratio=mean_std(r.spike_level.spike_ratio for r in results),
+        saturations=mean_std(r.spike_level.saturations for r in results),
+        top1_agreement={s: mean_std(r.decision_level.top1_agreement[s] for r in results) for s in STRATEGIES},
+        wprob_tv_mean=mean_std(r.decision_level.wprob_tv_mean for r in results),
+        aggregated_agreement={k: mean_std(r.decision_level.aggregated_agreement.get(k) for r in results) for k in ks},
+    )
+
+
+def summarise_runs(runs: Sequence[VerifiedRun]) -> RunSummary:
+    """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
+    per_bits: dict[int, list[BitsResult]] = {}
+    for run in runs:
+        for result in run.bits:
+            per_bits.setdefault(result.bits, []).append(result)
+    return RunSummary(
+        n_runs=len(runs),
+        float=summary_rows([run.float.metrics for run in runs], with_delta=False),
+        bits=tuple(summarise_bits(bits, per_bits[bits]) for bits in sorted(per_bits, reverse=True)),
+        passed=all(run.passed for run in runs),
+    )
 
 
 def versions() -> dict[str, str]:
@@ -599,46 +571,50 @@ def versions() -> dict[str, str]:
     }
     for name in ("torch", "numpy", "onnx", "onnxruntime", "nir", "h5py", "matplotlib"):
         try:
-            out[name] = md.version(name)
-        except md.PackageNotFoundError:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
             out[name] = "absent"
     return out
 
 
 def build_report(
-    runs: Sequence[Mapping[str, Any]],
+    runs: Sequence[VerifiedRun],
     settings: Mapping[str, Any],
     *,
     command: Sequence[str] | None = None,
     seconds: float | None = None,
-) -> dict[str, Any]:
-    """The whole report.json: settings, versions, every run, the summary and the verdict."""
-    return {
-        "schema": SCHEMA,
-        "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-        "command": list(command) if command is not None else None,
-        "seconds": None if seconds is None else round(float(seconds), 1),
-        "versions": versions(),
-        "settings": dict(settings),
-        "runs": list(runs),
-        "summary": summarise_runs(runs),
-        "passed": all(bool(r["passed"]) for r in runs),
-    }
+) -> VerifyReport:
+    """The whole report: settings, versions, every run, the summary and the verdict."""
+    return VerifyReport(
+        created=datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        command=None if command is None else tuple(command),
+        seconds=None if seconds is None else round(float(seconds), 1),
+        versions=versions(),
+        settings=dict(settings),
+        runs=tuple(runs),
+        summary=summarise_runs(runs),
+    )
 
 
 __all__ = [
     "DEFAULT_TOLERANCES",
+    "METRICS",
     "SCHEMA",
     "VerifyOptions",
     "build_report",
     "count_correlations",
     "decision_level",
+    "level_histogram",
     "metric_deltas",
+    "metric_rows",
     "parse_tolerances",
+    "pr_points",
     "spike_level",
     "summarise_runs",
     "tolerance_checks",
     "top1_agreement",
     "tv_distance",
     "verify_checkpoint",
+    "versions",
+    "weight_histograms",
 ]

@@ -36,7 +36,7 @@ import numpy as np
 
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, sha256_bytes
 from vprsnn_export.version import __version__
 
@@ -298,7 +298,7 @@ def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi desc
             float_calibration=desc.arrays["float_calibration"].astype(np.int64),
             reference_place_ids=desc.arrays["reference_place_ids"].astype(np.int64),
             reference_traversals=list(fixed["reference_traversals"]),
-            quantisation=dict(fixed["quantisation"]),
+            quantisation=QuantisationReport.from_dict(fixed["quantisation"]),
             source_sha256=str(fixed["source_sha256"]),
             data=dict(fixed.get("data", {})),
             voltage_shift=int(exc["vth_shift"]),

@@ -47,7 +47,7 @@ from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, checkpoint_header
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write_bytes
 from vprsnn_export.version import __version__
 
@@ -337,7 +337,7 @@ def fixed_point_from_graph(
         float_calibration=np.asarray(meta["float_calibration"]).astype(np.int64),
         reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
         reference_traversals=list(header["reference_traversals"]),
-        quantisation=dict(header["quantisation"]),
+        quantisation=QuantisationReport.from_dict(header["quantisation"]),
         source_sha256=str(header["source_sha256"]),
         data=dict(header.get("data", {})),
         voltage_shift=int(header["voltage_shift"]),

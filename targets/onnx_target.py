@@ -60,7 +60,7 @@ class OnnxRun:
     seconds: float  # wall time of the session.run calls
 
 
-def const(name: str, value: np.ndarray) -> TensorProto:
+def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
     return numpy_helper.from_array(np.asarray(value), name=name)
 
 
@@ -332,7 +332,7 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         began = time.perf_counter()
         values = sess.run(None, {INPUT: chunk})
         seconds += time.perf_counter() - began
-        for name, value in zip(names, values):
+        for name, value in zip(names, values, strict=True):
             pieces[name].append(value)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
     raster = joined.get("raster")
@@ -352,28 +352,30 @@ def run_onnx_outputs(
     return run_session(session(path, threads), spikes, batch)
 
 
+def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
+    """Output spike counts (N, neurons) int64 of an exported graph on onnxruntime (CPU)."""
+    return run_onnx_outputs(path, spikes).counts
+
+
 @dataclass
 class OnnxBackend:
-    """onnxruntime on an exported graph, as a :class:`~vprsnn_export.runs.Backend`.
+    """An exported graph on onnxruntime as a :class:`~vprsnn_export.runs.Backend`.
 
-    The raster comes back when the graph was written with ``with_raster=True`` (verify
-    writes it so), the W+Prob distribution when it has the readout head.
+    The run carries the counts, the total saturations, the W+Prob distribution when the
+    graph has that head, and the raster when it has that output (``record`` cannot add
+    an output the graph lacks).
     """
 
     path: Path
     threads: int | None = None
+    batch: int = 128
     name: str = "onnxruntime"
 
     def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        out = run_onnx_outputs(self.path, spikes, threads=self.threads)
+        out = run_onnx_outputs(self.path, spikes, batch=self.batch, threads=self.threads)
         return SpikeRun(
             counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
-            raster=None if out.raster is None or not record else torch.from_numpy(out.raster.astype(bool)),
+            raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),
             saturations=int(out.saturations.sum()),
             wprob=out.wprob,
         )
-
-
-def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
-    """Output spike counts (N, neurons) int64 of an exported graph on onnxruntime (CPU)."""
-    return run_onnx_outputs(path, spikes).counts

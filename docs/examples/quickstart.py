@@ -14,7 +14,7 @@ winter, places, reference = data.traversal("winter"), data.place_ids, {"summer":
 print(vx.evaluate_float(ckpt, winter, places, "winter", readout).rows)
 
 model = vx.deploy(ckpt, "quickstart", 4, reference_images=reference)
-exported = vx.export_network(model, model, ("nir", "onnx", "loihi"), "deploy", digest="quickstart")
+exported = vx.export_and_check(vx.ExportSource.of(model, "quickstart"), model, ("nir", "onnx", "loihi"), "deploy")
 spikes = vx.query_spikes(winter, places, "winter", cfg)
 backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(exported.written("onnx"))]
 counts = {backend.name: backend.run(spikes[:3]).counts for backend in backends}
@@ -23,4 +23,4 @@ print({name: int(c.sum()) for name, c in counts.items()})
 options = vx.VerifyOptions(readout, bits=(8, 4))
 run = vx.verify_checkpoint(ckpt, "quickstart", winter, places, "winter", options, reference_images=reference)
 vx.write_report(vx.build_report([run], {"example": "quickstart"}), "report")
-print("verdict:", "PASS" if run["passed"] else "FAIL")
+print("verdict:", "PASS" if run.passed else "FAIL")

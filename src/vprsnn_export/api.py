@@ -6,7 +6,7 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
     model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
-    vx.export_network(model, model, ("nir", "onnx", "loihi"), "deploy/", digest=sha)
+    vx.export_and_check(vx.ExportSource.of(model, sha), model, ("nir", "onnx", "loihi"), "deploy/")
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
     run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
 """
@@ -26,11 +26,12 @@ from .readout.assignment import decide, strategy_scores
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
 from .runs import Backend, SpikeRun
-from .runtime.conformance import Conformance, check_conformance
+from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
-from .runtime.exporting import ExportResult, export_network, load_network
+from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source
 from .runtime.report import write_report
+from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from .targets.intsim import IntegerNetwork
 from .targets.loihi_target import read_loihi_model, write_loihi
@@ -47,11 +48,12 @@ __all__ = [
     "Backend",
     "Checkpoint",
     "Config",
-    "Conformance",
+    "ConformanceResult",
     "DataError",
     "Dataset",
     "Evaluation",
     "ExportResult",
+    "ExportSource",
     "FixedPointModel",
     "FloatNetwork",
     "IntegerNetwork",
@@ -61,25 +63,28 @@ __all__ = [
     "ReadoutOptions",
     "ReferenceStepper",
     "SpikeRun",
+    "VerifiedRun",
     "VerifyOptions",
+    "VerifyReport",
     "VprError",
     "__version__",
     "aggregate",
     "build_report",
     "calibrate",
     "calibration_spikes",
-    "check_conformance",
+    "compare_backends",
+    "cross_implementation",
     "checkpoint_sha256",
     "decide",
     "deploy",
     "estimate_velocity",
     "evaluate_fixed_point",
     "evaluate_float",
-    "export_network",
+    "export_and_check",
     "load_checkpoint",
     "load_dataset",
     "load_fixed_point",
-    "load_network",
+    "load_source",
     "pr_metrics",
     "quantize_checkpoint",
     "query_spikes",

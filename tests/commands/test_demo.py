@@ -19,7 +19,7 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
     for bits in (8, 4, 2):
         folder = out / "deploy" / f"{bits}bit"
         model = load_fixed_point(folder / "model.npz")
-        assert model.bits == bits and model.quantisation["per_neuron"]
+        assert model.bits == bits and model.quantisation.per_neuron
         assert read_nir(folder / "model.nir").bits == bits
         assert read_loihi_model(folder / "loihi").bits == bits
         read_onnx(folder / "model.onnx")

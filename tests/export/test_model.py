@@ -12,6 +12,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import (
     FORMAT_VERSION,
+    QuantisationReport,
     check_bits,
     decay_mantissa,
     load_fixed_point,
@@ -158,3 +159,51 @@ def test_truncated_missing_and_foreign_files(tmp_path):
     del arrays["threshold"]
     with pytest.raises(ModelFileError, match="lacks arrays"):
         load_fixed_point(write_container(tmp_path / "partial.npz", header, arrays))
+
+
+#: The ``quantisation`` object of a header written before QuantisationReport existed (a plain dict).
+OLD_QUANTISATION = {
+    "weight_max_abs_error": 0.0123,
+    "weight_rmse": 0.004,
+    "weight_relative_rmse": 0.02,
+    "weights_clipped": 0,
+    "threshold_max_relative_error": 0.001,
+    "thresholds_clipped": 0,
+    "max_current": 60,
+    "bits": 4,
+    "per_neuron": True,
+    "scale_method": "max",
+    "threshold_folding": False,
+    "shared_threshold": None,
+    "rounding": "round to nearest, ties up: floor(x + 1/2), then clip to the width",
+    "scale_exponent": -20,
+    "scale_multiplier_range": [40000, 65535],
+    "threshold_range": [10, 300],
+    "calibration": "deployed (integer simulator)",
+    "calibration_saturations": 0,
+}
+
+
+def test_quantisation_report_round_trips_and_keeps_unknown_keys():
+    report = QuantisationReport.from_dict(OLD_QUANTISATION)
+    assert report.per_neuron is True and report.scale_multiplier_range == (40000, 65535)
+    assert report.to_dict() == OLD_QUANTISATION
+    assert QuantisationReport.from_dict(report.to_dict()) == report
+    partial = QuantisationReport.from_dict({"per_neuron": False, "made_up_later": [1, 2]})
+    assert partial.bits is None and partial.extra == {"made_up_later": [1, 2]}
+    assert partial.to_dict()["made_up_later"] == [1, 2]
+    with pytest.raises(TypeError):
+        QuantisationReport.from_dict(["not", "an", "object"])
+
+
+def test_model_files_with_an_old_quantisation_header_load(tmp_path):
+    path = save_fixed_point(tmp_path / "m.npz", small_model())
+    old = resave(path, tmp_path, meta={"quantisation": dict(OLD_QUANTISATION)})
+    loaded = load_fixed_point(old)
+    assert isinstance(loaded.quantisation, QuantisationReport)
+    assert loaded.quantisation.calibration == "deployed (integer simulator)" and loaded.quantisation.max_current == 60
+    header, _ = read_container(save_fixed_point(tmp_path / "again.npz", loaded), "fixed-point model")
+    assert header["quantisation"] == OLD_QUANTISATION  # written back unchanged
+    bad = resave(path, tmp_path, meta={"quantisation": "per-neuron"})
+    with pytest.raises(ModelFileError, match="invalid fixed-point header"):
+        load_fixed_point(bad)

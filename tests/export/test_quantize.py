@@ -170,14 +170,12 @@ def test_quantize_checkpoint_then_recalibrate_on_the_integer_simulator():
     assert model.source_sha256 == "cd" * 32 and model.decay_dv == 205
     assert np.array_equal(model.calibration, ckpt.calibration)
     deployed = recalibrate(model, reference, ckpt.reference_place_ids)
-    assert deployed.quantisation["calibration"].startswith("deployed")
-    assert deployed.quantisation["calibration_saturations"] == 0
+    assert deployed.quantisation.calibration.startswith("deployed")
+    assert deployed.quantisation.calibration_saturations == 0
     assert deployed.calibration.shape == ckpt.calibration.shape and deployed.calibration.sum() > 0
     assert np.array_equal(deployed.float_calibration, ckpt.calibration)
     reused = recalibrate(model, {}, ckpt.reference_place_ids, reuse_float_calibration=True)
-    assert (
-        np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation["calibration"] == "float (reused)"
-    )
+    assert np.array_equal(reused.calibration, ckpt.calibration) and reused.quantisation.calibration == "float (reused)"
     with pytest.raises(InvalidValueError, match="reference places"):
         recalibrate(model, reference, ckpt.reference_place_ids[::-1])
 
@@ -195,7 +193,7 @@ def test_quantize_and_simulate_commands(tmp_path, capsys):
     names = sorted(p.name for p in out.iterdir())
     assert names == ["model_3bit_per-neuron_mse.npz", "model_8bit_per-neuron_mse.npz"]
     model_path = out / "model_8bit_per-neuron_mse.npz"
-    assert load_fixed_point(model_path).quantisation["calibration"].startswith("deployed")
+    assert load_fixed_point(model_path).quantisation.calibration.startswith("deployed")
     assert (
         main(
             [

@@ -20,6 +20,7 @@ from vprsnn_export.runtime.report import (
     load_report,
     write_report,
 )
+from vprsnn_export.runtime.results import VerifyReport
 from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
 
 
@@ -72,7 +73,7 @@ def report(tmp_path_factory):
 def test_writes_json_markdown_and_self_contained_html(report, tmp_path):
     written = write_report(report, tmp_path)
     assert set(written) == {"json", "md", "html"}
-    assert json.loads((tmp_path / REPORT_JSON).read_text()) == json.loads(json.dumps(report))
+    assert json.loads((tmp_path / REPORT_JSON).read_text()) == json.loads(json.dumps(report.to_dict()))
     md = (tmp_path / REPORT_MD).read_text()
     for heading in (
         "Pass / fail per bit width",
@@ -103,22 +104,24 @@ def test_report_rebuilds_from_json_alone(report, tmp_path):
     (tmp_path / REPORT_HTML).unlink()
     assert main(["report", str(tmp_path), "--quiet"]) == 0
     assert (tmp_path / REPORT_MD).is_file() and (tmp_path / REPORT_HTML).is_file()
-    assert load_report(tmp_path)["runs"] == json.loads(json.dumps(report["runs"]))
+    assert load_report(tmp_path).runs == report.runs
+    assert load_report(tmp_path).to_dict() == json.loads(json.dumps(report.to_dict()))
 
 
 def test_combining_runs_gives_mean_and_std(report, tmp_path):
-    second = json.loads(json.dumps(report))
+    second = json.loads(json.dumps(report.to_dict()))
     for result in second["runs"][0]["bits"]:  # a second "network" whose 3-bit accuracy is 10 points lower
         for row in result["metrics"]:
             if result["bits"] == 3:
                 row["accuracy"] -= 0.1
                 row["delta"]["accuracy"] -= 0.1
-    combined = combine_reports([report, second], ["a", "b"])
-    assert combined["summary"]["n_runs"] == 2 and combined["combined_from"] == ["a", "b"]
-    by_bits = {b["bits"]: b for b in combined["summary"]["bits"]}
-    acc = by_bits[3]["metrics"][0]["accuracy"]
-    assert acc["n"] == 2 and acc["std"] == pytest.approx(0.1 / 2**0.5)
-    assert by_bits[6]["metrics"][0]["accuracy"]["std"] == 0.0
+    combined = combine_reports([report, VerifyReport.from_dict(second)], ["a", "b"])
+    assert combined.summary.n_runs == 2 and combined.to_dict()["combined_from"] == ["a", "b"]
+    by_bits = {b.bits: b for b in combined.summary.bits}
+    acc = by_bits[3].metrics[0].values["accuracy"]
+    assert acc.n == 2 and acc.std == pytest.approx(0.1 / 2**0.5)
+    assert by_bits[6].metrics[0].values["accuracy"].std == 0.0
+    assert VerifyReport.from_dict(combined.to_dict()) == combined
     write_report(combined, tmp_path)
     assert "±" in (tmp_path / REPORT_MD).read_text()
 
@@ -139,7 +142,7 @@ def test_report_command_combines_folders(report, tmp_path):
         )
         == 0
     )
-    assert len(load_report(tmp_path / "both")["runs"]) == 2
+    assert len(load_report(tmp_path / "both").runs) == 2
     assert main(["report", str(tmp_path / "a"), str(tmp_path / "b"), "--quiet"]) == EXIT_BAD_INPUT  # needs --out
 
 
@@ -151,5 +154,8 @@ def test_bad_report_files(tmp_path):
         load_report(tmp_path)
     (tmp_path / REPORT_JSON).write_text(json.dumps({"schema": "something else"}))
     with pytest.raises(ReportError):
+        load_report(tmp_path)
+    (tmp_path / REPORT_JSON).write_text(json.dumps({"schema": "vprsnn-verify-report/1", "runs": [{"query": "x"}]}))
+    with pytest.raises(ReportError, match="malformed"):
         load_report(tmp_path)
     assert main(["report", str(tmp_path)]) == EXIT_BAD_INPUT

@@ -1,5 +1,6 @@
 """The verification checks: pure functions on small arrays, then the whole run on a tiny trained network."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -9,11 +10,29 @@ import torch
 from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.dataset import load_dataset
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.runs import SpikeRun
+from vprsnn_export.runtime import conformance
+from vprsnn_export.runtime.conformance import (
+    Contender,
+    cross_implementation,
+    distribution_comparison,
+    exact_comparison,
+)
+from vprsnn_export.runtime.evaluation import ReadoutOptions
+from vprsnn_export.runtime.results import (
+    SCHEMA,
+    ConformanceResult,
+    DecisionLevel,
+    MetricRow,
+    SpikeLevel,
+    VerifiedRun,
+    VerifyReport,
+)
 from vprsnn_export.runtime.verify import (
     DEFAULT_TOLERANCES,
-    SCHEMA,
     VerifyOptions,
     build_report,
     count_correlations,
@@ -25,6 +44,7 @@ from vprsnn_export.runtime.verify import (
     tv_distance,
     verify_checkpoint,
 )
+from vprsnn_export.targets.intsim import IntegerNetwork
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
 
@@ -75,6 +95,31 @@ def test_bad_tolerances_are_option_errors(bad):
     assert info.value.exit_code == EXIT_BAD_INPUT
 
 
+# ---------------------------------------------------------------- exact comparisons
+
+
+def test_exact_comparison_passes_identical_and_catches_one_flipped_bit():
+    raster = np.random.default_rng(0).random((3, 10, 5)) > 0.7
+    assert exact_comparison("raster", "a", raster, "b", raster.copy()).equal
+    corrupt = raster.copy()
+    corrupt[2, 7, 4] = ~corrupt[2, 7, 4]
+    result = exact_comparison("raster", "a", raster, "b", torch.as_tensor(corrupt))
+    assert not result.equal and result.n_differences == 1 and result.first_difference == (2, 7, 4)
+    assert result.to_dict()["first_difference"] == [2, 7, 4]
+    assert not exact_comparison("counts", "a", np.zeros((2, 3)), "b", np.zeros((3, 2))).equal
+    assert not exact_comparison("saturations", "a", 0, "b", 1).equal
+
+
+def test_distribution_comparison_allows_rounding_but_not_another_decision():
+    p = np.array([[0.1, 0.6, 0.3], [0.5, 0.25, 0.25]])
+    assert distribution_comparison("w", "a", p, "b", p + 1e-15).equal
+    assert not distribution_comparison("w", "a", p, "b", p + 1e-9).equal  # beyond float64 rounding
+    swapped = p.copy()
+    swapped[0] = [0.1, 0.3, 0.6]
+    result = distribution_comparison("w", "a", p, "b", swapped)
+    assert not result.equal and result.n_differences == 1
+
+
 # ---------------------------------------------------------------- spike and decision level
 
 
@@ -100,16 +145,23 @@ def _rows(float_values, quant_values, n=50):
             for (s, k), v in zip([("standard", 1), ("weighted", 1), ("wprob", 1), ("wprob", 5)], values, strict=True)
         ]
 
-    return metric_deltas(rows(float_values), rows(quant_values))
+    typed = [MetricRow.from_dict(r) for r in rows(float_values)], [MetricRow.from_dict(r) for r in rows(quant_values)]
+    return metric_deltas(*typed)
+
+
+def _levels(winner: float, saturations: int, top1: float) -> tuple[SpikeLevel, DecisionLevel]:
+    spike = SpikeLevel(winner, winner, 10, 10, 1.0, 1.0, (1.0,), 10, 10, 1.0, (10,), (10,), saturations)
+    decision = DecisionLevel({"standard": top1, "weighted": top1, "wprob": top1}, 0.0, 0.0, (0.0,), {1: top1})
+    return spike, decision
 
 
 def test_tolerance_checks_bound_drops_only():
     tol = parse_tolerances("query_slack=0")
-    spike, decision = {"winner_agreement": 0.9, "saturations": 0}, {"top1_agreement": {"wprob": 0.8}}
+    spike, decision = _levels(0.9, 0, 0.8)
     better = tolerance_checks(_rows([0.5] * 4, [0.9] * 4), spike, decision, tol, (1, 5))
-    assert better and all(c["passed"] for c in better)
+    assert better and all(c.passed for c in better)
     worse = tolerance_checks(_rows([0.5, 0.5, 0.5, 0.8], [0.49, 0.5, 0.5, 0.78]), spike, decision, tol, (1, 5))
-    verdicts = {c["what"]: c["passed"] for c in worse}
+    verdicts = {c.what: c.passed for c in worse}
     assert verdicts["accuracy drop, standard k=1"] is True  # 1 point <= 2 points
     assert verdicts["r_at_100p drop, wprob k=5"] is False  # 2 points > 1 point
     strict = tolerance_checks(
@@ -119,31 +171,107 @@ def test_tolerance_checks_bound_drops_only():
         parse_tolerances("winner_agreement=0.95,top1_agreement=0.8,saturations=0"),
         (1, 5),
     )
-    assert {
-        c["check"]: c["passed"] for c in strict if c["check"] in ("winner_agreement", "top1_agreement", "saturations")
-    } == {"winner_agreement": False, "top1_agreement": True, "saturations": True}
+    assert {c.check: c.passed for c in strict if c.check in ("winner_agreement", "top1_agreement", "saturations")} == {
+        "winner_agreement": False,
+        "top1_agreement": True,
+        "saturations": True,
+    }
 
 
 def test_query_slack_allows_one_query_of_a_short_route():
     rows = _rows([0.5, 0.5, 0.5, 0.8], [0.5, 0.5, 0.5, 0.8 - 1 / 30], n=30)
-    spike, decision = {"winner_agreement": 1.0, "saturations": 0}, {"top1_agreement": {"wprob": 1.0}}
-    one = {c["what"]: c for c in tolerance_checks(rows, spike, decision, parse_tolerances(None), (1, 5))}
-    assert one["r_at_100p drop, wprob k=5"]["passed"] and one["r_at_100p drop, wprob k=5"][
-        "applied_limit"
-    ] == pytest.approx(1 / 30)
-    none = {c["what"]: c for c in tolerance_checks(rows, spike, decision, parse_tolerances("query_slack=0"), (1, 5))}
-    assert not none["r_at_100p drop, wprob k=5"]["passed"]
+    spike, decision = _levels(1.0, 0, 1.0)
+    one = {c.what: c for c in tolerance_checks(rows, spike, decision, parse_tolerances(None), (1, 5))}
+    assert one["r_at_100p drop, wprob k=5"].passed
+    assert one["r_at_100p drop, wprob k=5"].applied_limit == pytest.approx(1 / 30)
+    none = {c.what: c for c in tolerance_checks(rows, spike, decision, parse_tolerances("query_slack=0"), (1, 5))}
+    assert not none["r_at_100p drop, wprob k=5"].passed
 
 
 # ---------------------------------------------------------------- cross-implementation on a real model
+
+
+@pytest.fixture(scope="module")
+def model_and_spikes(tiny):
+    path, ckpt, data = tiny
+    model = quantize_checkpoint(ckpt, checkpoint_sha256(path), 4, per_neuron=True, scale_method="max")
+    spikes = query_spikes(data.traversal("winter")[:6], data.place_ids[:6], "winter", ckpt.config)
+    return model, spikes
+
+
+def test_cross_implementation_is_exact(model_and_spikes, tmp_path):
+    model, spikes = model_and_spikes
+    run = IntegerNetwork(model).run(spikes, record=True)
+    cross = cross_implementation(
+        model, spikes, run, folder=tmp_path, targets=("onnx", "nir", "loihi"), reference_queries=2
+    )
+    assert cross.passed and cross.n_failed == 0 and cross.reference_queries == 2
+    names = {c.check.split(":")[0] for c in cross.comparisons}
+    assert names == {"reference stepper", "ONNX (onnxruntime)", "NIR read back", "Loihi read back"}
+    assert (tmp_path / "model.onnx").is_file() and (tmp_path / "model.nir").is_file() and (tmp_path / "loihi").is_dir()
+
+
+def test_cross_implementation_catches_one_corrupted_spike(model_and_spikes, tmp_path):
+    model, spikes = model_and_spikes
+    run = IntegerNetwork(model).run(spikes, record=True)
+    raster = run.raster.clone()
+    raster[1, 5, 0] = ~raster[1, 5, 0]
+    corrupt = dataclasses.replace(run, raster=raster)
+    cross = cross_implementation(model, spikes, corrupt, folder=tmp_path, targets=("onnx", "nir"), reference_queries=2)
+    failed = {c.check for c in cross.failures}
+    assert not cross.passed and cross.n_failed == 3
+    assert failed == {"reference stepper: raster", "ONNX (onnxruntime): raster", "NIR read back: raster"}
+
+
+def test_cross_implementation_catches_a_corrupted_export(model_and_spikes, tmp_path, monkeypatch):
+    model, spikes = model_and_spikes
+    real = conformance.read_nir
+
+    def tampered(path):
+        rebuilt = real(path)
+        mantissa = rebuilt.weight_mantissa.copy()
+        mantissa[mantissa.argmax()] -= 1  # one weight one level lower
+        return dataclasses.replace(rebuilt, weight_mantissa=mantissa)
+
+    monkeypatch.setattr(conformance, "read_nir", tampered)
+    run = IntegerNetwork(model).run(spikes, record=True)
+    cross = cross_implementation(model, spikes, run, folder=tmp_path, targets=("nir",), reference_queries=0)
+    failed = {c.check for c in cross.failures}
+    assert "NIR read back: weight_mantissa" in failed and not cross.passed
+    assert ConformanceResult.from_dict(cross.to_dict()) == cross
+
+
+class Tampered:
+    """A backend that computes the integer network and then moves one spike (and optionally a saturation)."""
+
+    name = "tampered"
+
+    def __init__(self, model, saturations=0):
+        self.inner, self.extra = IntegerNetwork(model), saturations
+
+    def run(self, spikes, *, record=False):
+        run = self.inner.run(spikes, record=True)
+        counts = run.counts.clone()
+        counts[0, 0] += 1
+        return SpikeRun(counts=counts, raster=run.raster, saturations=run.saturations + self.extra)
+
+
+def test_conformance_harness_detects_a_tampered_backend(model_and_spikes, tmp_path):
+    model, spikes = model_and_spikes
+    extra = [Contender("tampered", "tampered", Tampered(model, saturations=1))]
+    cross = cross_implementation(model, spikes, folder=tmp_path, targets=(), reference_queries=0, extra=extra)
+    assert {c.check for c in cross.failures} == {"tampered: counts", "tampered: saturations"}
+    assert {c.check for c in cross.comparisons} == {"tampered: raster", "tampered: counts", "tampered: saturations"}
+    assert not cross.passed and cross.n_checks == 3
 
 
 # ---------------------------------------------------------------- the whole run
 
 
 def test_verify_checkpoint_schema(verified, tiny):
-    run = verified
+    run = verified.to_dict()
     json.dumps(run, allow_nan=False)  # plain JSON, no NaN
+    assert VerifiedRun.from_dict(json.loads(json.dumps(run))) == verified  # the typed run round-trips
     assert [r["bits"] for r in run["bits"]] == [8, 2]
     assert run["n_queries"] == 20 and run["label"] == "tiny"
     assert {(r["strategy"], r["k"]) for r in run["float"]["metrics"]} == {
@@ -165,6 +293,15 @@ def test_verify_checkpoint_schema(verified, tiny):
             "passed",
         }
         assert result["cross_implementation"]["passed"], result["cross_implementation"]["checks"]
+        assert set(result["cross_implementation"]) == {
+            "checks",
+            "passed",
+            "n_checks",
+            "n_failed",
+            "reference_queries",
+            "skipped",
+            "files",
+        }
         spike = result["spike_level"]
         assert 0 <= spike["winner_agreement"] <= 1 and len(spike["count_correlation"]) == 20
         assert spike["saturations"] >= 0 and spike["total_spikes"] == sum(spike["spikes_per_query"])
@@ -180,6 +317,7 @@ def test_verify_checkpoint_schema(verified, tiny):
 
 
 def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny, tmp_path):
+    from vprsnn_export.runtime.evaluation import evaluate_float
 
     path, ckpt, data = tiny
     options = VerifyOptions(
@@ -197,18 +335,20 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
         options,
         reference_images={"summer": data.traversal("summer")},
     )
-    assert again["bits"][0]["metrics"] == verified["bits"][0]["metrics"]
+    assert again.bits[0].metrics == verified.bits[0].metrics
     evaluated = evaluate_float(
         ckpt, data.traversal("winter"), data.place_ids, "winter", options.readout, device=torch.device("cpu")
     )
-    assert again["float"]["metrics"] == evaluated.rows
+    assert [r.to_dict() for r in again.float.metrics] == evaluated.rows
 
 
 def test_build_report_and_summary(verified):
     report = build_report([verified, verified], {"bits": [8, 2]}, command=["vprsnn-export", "verify"], seconds=1.0)
-    assert report["schema"] == SCHEMA and report["versions"]["torch"] == torch.__version__
-    summary = summarise_runs(report["runs"])
-    assert summary["n_runs"] == 2 and [b["bits"] for b in summary["bits"]] == [8, 2]
-    row = summary["bits"][0]["metrics"][0]
-    assert row["accuracy"]["n"] == 2 and row["accuracy"]["std"] == 0.0
-    json.dumps(report, allow_nan=False)
+    data = report.to_dict()
+    assert data["schema"] == SCHEMA and report.versions["torch"] == torch.__version__
+    summary = summarise_runs(report.runs)
+    assert summary.n_runs == 2 and [b.bits for b in summary.bits] == [8, 2]
+    row = summary.bits[0].metrics[0]
+    assert row.values["accuracy"].n == 2 and row.values["accuracy"].std == 0.0
+    json.dumps(data, allow_nan=False)
+    assert VerifyReport.from_dict(json.loads(json.dumps(data))) == report

@@ -19,8 +19,17 @@ from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
 from vprsnn_export.readout.assignment import strategy_scores
+from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.onnx_target import IR_VERSION, build_onnx, read_onnx, run_onnx, run_onnx_outputs, write_onnx
+from vprsnn_export.targets.onnx_target import (
+    IR_VERSION,
+    OnnxBackend,
+    build_onnx,
+    read_onnx,
+    run_onnx,
+    run_onnx_outputs,
+    write_onnx,
+)
 
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 
@@ -81,6 +90,20 @@ def assert_identical(model: FixedPointModel, spikes: torch.Tensor, path: Path) -
     assert int(out.saturations.sum()) == expected.saturations
     wprob = strategy_scores(model.calibration, expected.counts.numpy(), "wprob", model.config.assignment.gamma)
     np.testing.assert_allclose(out.wprob, wprob, rtol=1e-12, atol=1e-15)
+
+
+def test_onnx_backend_returns_a_spike_run(tmp_path):
+    model = make_model(np.random.default_rng(5))
+    spikes = random_spikes(5, 4, 20, 16)
+    backend = OnnxBackend(write_onnx(model, tmp_path / "m.onnx", with_raster=True), batch=3)
+    assert isinstance(backend, Backend) and backend.name == "onnxruntime"
+    run = backend.run(spikes, record=True)
+    expected = simulate(model, spikes, record=True)
+    assert torch.equal(run.counts, expected.counts) and torch.equal(run.raster, expected.raster)
+    assert run.saturations == expected.saturations and run.wprob is not None and run.wprob.shape[0] == 4
+    assert run.candidates_per_step is None and run.final_voltage is None  # the graph has no such outputs
+    bare = OnnxBackend(write_onnx(model, tmp_path / "bare.onnx", with_wprob=False)).run(spikes)
+    assert bare.raster is None and bare.wprob is None and torch.equal(bare.counts, expected.counts)
 
 
 @pytest.mark.parametrize("bits", [2, 4, 8])

@@ -27,6 +27,7 @@ from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
+from ..runtime.results import VerifiedRun
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
@@ -82,24 +83,23 @@ def profile_text(profile: dict) -> str:
     )
 
 
-def summary_rows(run_result: dict) -> list[dict]:
+def summary_rows(run_result: VerifiedRun) -> list[dict]:
     top = max(DEMO_KS)
     rows = []
-    for result in run_result["bits"]:
-        metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
-        cross = result["cross_implementation"]
-        targets = [t for t in ("nir", "loihi", "onnx") if t in cross["files"]]
-        wprob, aggregated = metrics[("wprob", 1)], metrics[("wprob", top)]
+    for result in run_result.bits:
+        cross = result.cross_implementation
+        targets = [t for t in ("nir", "loihi", "onnx") if t in cross.files]
+        wprob, aggregated = result.row("wprob", 1), result.row("wprob", top)
+        delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
         rows.append(
             {
-                "bits": result["bits"],
-                "verdict": "PASS" if result["passed"] else "FAIL",
-                "exports": ("exact" if cross["passed"] else f"{cross['n_failed']} DIFFER")
-                + f" ({len(targets)} targets)",
-                "accuracy": f"{100 * wprob['accuracy']:.1f}",
-                "r_at_100p": f"{100 * aggregated['r_at_100p']:.1f}",
-                "delta": f"{100 * aggregated['delta']['r_at_100p']:+.1f}",
-                "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
+                "bits": result.bits,
+                "verdict": "PASS" if result.passed else "FAIL",
+                "exports": ("exact" if cross.passed else f"{cross.n_failed} DIFFER") + f" ({len(targets)} targets)",
+                "accuracy": f"{100 * wprob.accuracy:.1f}",
+                "r_at_100p": f"{100 * aggregated.r_at_100p:.1f}",
+                "delta": f"{100 * delta:+.1f}",
+                "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
             }
         )
     return rows
@@ -148,9 +148,9 @@ def run(args: argparse.Namespace) -> int:
         device=device,
         progress=progress,
         label="demo",
+        checkpoint=str(ckpt_path),
     )
-    result["checkpoint"] = str(ckpt_path)
-    say(f"3/4 verified against float on the same {result['n_queries']} query presentations")
+    say(f"3/4 verified against float on the same {result.n_queries} query presentations")
     settings = {
         **options.to_dict(),
         "query": DEMO_QUERY,
@@ -169,10 +169,10 @@ def run(args: argparse.Namespace) -> int:
     written = write_report(report, out / "report")
     say(f"4/4 report written ({written['json']})")
     print(f"float network ({profile_text(profile)}):")
-    print(format_table(result["float"]["metrics"], RESULT_COLUMNS))
+    print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
     print("\nquantised and deployed vs float (tolerances: docs/verify.md):")
     print(format_table(summary_rows(result), SUMMARY_COLUMNS))
-    exact = all(r["cross_implementation"]["passed"] for r in result["bits"])
+    exact = all(r.cross_implementation.passed for r in result.bits)
     print(
         f"\nexports: {out / 'deploy'}   cross-implementation: {'all exact' if exact else 'DIFFERENCES FOUND'}   "
         f"time: {time.perf_counter() - started:.0f} s"

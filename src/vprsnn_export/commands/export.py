@@ -17,18 +17,17 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..errors import InvalidValueError
-from ..fileio import sha256_file
+from ..device import resolve_device
 from ..runtime.exporting import (
     MANIFEST_NAME,
-    check_spikes,
-    export_network,
+    check_presentations,
+    export_and_check,
     integer_model,
-    load_network,
-    parse_targets,
+    load_source,
+    parse_export_targets,
 )
 from ..targets.nir_target import WTA_INHIBITION
-from ._common import add_data_options, add_runtime_options, format_table, print_json, query_data
+from ._common import add_data_options, add_runtime_options, format_table, print_json
 
 CHECK_COLUMNS = (("target", "target"), ("check", "check"), ("result", "result"), ("detail", "detail"))
 
@@ -76,45 +75,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    targets = parse_targets(args.to)
-    source = load_network(args.model)
-    digest = sha256_file(args.model)
-    model = integer_model(source, args.quantize, digest, targets)
+    targets = parse_export_targets(args.to)
+    source = load_source(args.model)
+    model = integer_model(source, args.quantize, targets)
     out = Path(args.out)
     spikes, label = None, ""
     if args.check:
-        if args.check_samples < 0:
-            raise InvalidValueError(f"--check-samples expects an integer >= 0, got {args.check_samples}")
-        images = ids = None
-        if args.query:
-            dataset = query_data(args, source.data, source.config.preprocess, [args.query])
-            images, ids = dataset.traversal(args.query), dataset.place_ids
-        spikes, label = check_spikes(source.config, images, ids, args.query, args.check_samples)
-    result = export_network(
+        spikes, label = check_presentations(
+            source,
+            args.query,
+            data=args.data,
+            subset=args.subset,
+            places=args.places,
+            samples=args.check_samples,
+            progress=not args.quiet,
+        )
+    result = export_and_check(
         source,
         model,
         targets,
         out,
-        digest=digest,
-        model_path=str(args.model),
         inhibition=args.nir_inhibition,
         wta_node=not args.nir_no_wta_node,
         spikes=spikes,
         spikes_label=label,
         nir_consumer=args.nir_consumer,
+        device=resolve_device(args.device),
     )
     if args.json:
         print_json(result.to_dict())
     else:
         for target, files in result.files.items():
-            print(f"{target}: {', '.join(f['path'] for f in files)}")
+            print(f"{target}: {', '.join(str(f.path) for f in files)}")
             if target in result.consumers:
                 print(f"  {result.consumers[target]}")
-        for target, reason in result.skipped.items():
-            print(f"{target}: skipped ({reason})")
         if result.checks is not None:
             print(f"\nchecks on {label}:")
-            print(format_table([row.to_dict() for row in result.checks], CHECK_COLUMNS))
+            print(format_table([row.to_dict() for row in result.checks.rows], CHECK_COLUMNS))
         if not args.quiet:
             print(f"\nwrote {out / MANIFEST_NAME}", file=sys.stderr)
     return 0 if result.passed else 1

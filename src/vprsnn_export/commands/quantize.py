@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         path = save_fixed_point(
             Path(args.out) / model_filename(bits, args.per_neuron, args.scale, args.fold_thresholds), model
         )
-        report = model.quantisation
+        report = model.quantisation.to_dict()
         rows.append(
             {
                 **report,

@@ -38,10 +38,9 @@ def run(args: argparse.Namespace) -> int:
     )
     written = write_report(combined, out, write_json=rewrite_json)
     if not args.quiet:
-        n_runs = len(combined["runs"])
+        n_runs = len(combined.runs)
         print(
-            f"{'PASS' if combined['passed'] else 'FAIL'}: {sum(r['passed'] for r in combined['runs'])} of {n_runs} "
-            f"network(s) pass every check",
+            f"{'PASS' if combined.passed else 'FAIL'}: {combined.n_passed} of {n_runs} network(s) pass every check",
             file=sys.stderr,
         )
         for kind, path in written.items():

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
                 "query": args.query,
                 "bits": model.bits,
                 "threads": args.threads,
-                "quantisation": model.quantisation,
+                "quantisation": model.quantisation.to_dict(),
                 "saturations": result.saturations,
                 "max_current": result.max_current,
                 **result.to_dict(),

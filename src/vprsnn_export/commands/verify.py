@@ -9,20 +9,21 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
 
-from ..checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import check_bits
+from ..runtime.conformance import parse_targets
 from ..runtime.evaluation import ReadoutOptions
-from ..runtime.exporting import parse_targets
 from ..runtime.report import write_report
+from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
 from ..trainer.pipeline import train_and_calibrate
 from ._common import (
@@ -131,7 +132,7 @@ def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
         scale_method=args.scale,
         calibration="float" if args.reuse_float_calibration else "deployed",
         reference_queries=args.reference_queries,
-        targets=parse_targets(args.targets, "--targets", allow_none=True),
+        targets=parse_targets(args.targets),
         tolerances=parse_tolerances(args.tolerance),
     )
 
@@ -168,7 +169,7 @@ def load_for(
 
 
 def seed_networks(
-    template,
+    template: Checkpoint,
     n_seeds: int,
     dataset: Dataset,
     source: str,
@@ -177,7 +178,7 @@ def seed_networks(
     out: Path,
     device_name: str,
     progress: bool,
-) -> Iterator[tuple[str, object, Path]]:
+) -> Iterator[tuple[str, Checkpoint, Path]]:
     """Seeds 1..N trained with the template's config on its reference traversals, one at a time.
 
     Training goes through the experiments' checkpoint cache (same key), so a network the
@@ -198,7 +199,9 @@ def seed_networks(
         yield f"seed {seed}", ckpt, path
 
 
-def settings_of(args: argparse.Namespace, options, source: str, subset, places) -> dict:
+def settings_of(
+    args: argparse.Namespace, options: VerifyOptions, source: str, subset: str | None, places: str | None
+) -> dict:
     return {
         **options.to_dict(),
         "query": args.query,
@@ -251,28 +254,31 @@ def folder_name(label: str, index: int) -> str:
     return f"{index + 1:02d}-{safe}" if safe else f"{index + 1:02d}"
 
 
-def verdict_rows(report: dict) -> list[dict]:
+def verdict_rows(report: VerifyReport) -> list[dict]:
     """One row per network and bit width for the terminal table."""
     rows = []
-    for index, run in enumerate(report["runs"]):
-        top = max(int(r["k"]) for r in run["float"]["metrics"])
-        for result in run["bits"]:
-            metrics = {(r["strategy"], r["k"]): r for r in result["metrics"]}
-            worst = min(metrics[(s, 1)]["delta"]["accuracy"] for s in ("standard", "weighted", "wprob"))
-            cross = result["cross_implementation"]
+    for index, run in enumerate(report.runs):
+        top = max(run.ks)
+        for result in run.bits:
+            worst = min(_delta(result.row(s, 1), "accuracy") for s in ("standard", "weighted", "wprob"))
+            cross = result.cross_implementation
             rows.append(
                 {
-                    "network": run.get("label") or str(index + 1),
-                    "bits": result["bits"],
-                    "verdict": "PASS" if result["passed"] else "FAIL",
-                    "cross": f"{cross['n_checks'] - cross['n_failed']}/{cross['n_checks']}",
+                    "network": run.label or str(index + 1),
+                    "bits": result.bits,
+                    "verdict": "PASS" if result.passed else "FAIL",
+                    "cross": f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
                     "accuracy": f"{100 * worst:+.1f}",
-                    "r_at_100p": f"{100 * metrics[('wprob', top)]['delta']['r_at_100p']:+.1f} (k={top})",
-                    "winner": f"{100 * result['spike_level']['winner_agreement']:.1f}",
-                    "saturations": result["spike_level"]["saturations"],
+                    "r_at_100p": f"{100 * _delta(result.row('wprob', top), 'r_at_100p'):+.1f} (k={top})",
+                    "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
+                    "saturations": result.spike_level.saturations,
                 }
             )
     return rows
+
+
+def _delta(row: MetricRow, metric: str) -> float:
+    return 0.0 if row.delta is None else row.delta.get(metric)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -288,6 +294,7 @@ def run(args: argparse.Namespace) -> int:
     options = verify_options(args, templates[0][1].config.assignment.gamma)
     source, subset, places = selection(args, templates[0][1])
     cache: dict = {}
+    networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
         template = templates[0][1]
         dataset, _ = load_for(template, args.query, source, subset, places, progress, cache)  # training places
@@ -319,23 +326,23 @@ def run(args: argparse.Namespace) -> int:
                 device=device,
                 progress=progress,
                 label=label,
+                checkpoint=str(path),
             )
         )
-        runs[-1]["checkpoint"] = str(path)
         report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     if args.json:
         print_json(
             {
-                "passed": report["passed"],
+                "passed": report.passed,
                 "report": {k: str(v) for k, v in written.items()},
-                "summary": report["summary"],
+                "summary": report.summary.to_dict(),
             }
         )
     else:
         print(format_table(verdict_rows(report), TABLE_COLUMNS))
         print(
-            f"\n{'PASS' if report['passed'] else 'FAIL'}: {sum(r['passed'] for r in runs)} of {len(runs)} network(s) "
+            f"\n{'PASS' if report.passed else 'FAIL'}: {report.n_passed} of {len(runs)} network(s) "
             f"pass every check; report: {written['html']}"
         )
-    return 0 if report["passed"] else EXIT_CHECK_FAILED
+    return 0 if report.passed else EXIT_CHECK_FAILED
