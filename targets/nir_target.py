@@ -44,7 +44,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.checkpoint import Checkpoint, checkpoint_header
+from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
@@ -84,18 +84,6 @@ def lif_node(beta: float, thresholds: np.ndarray, dt: float):
         v_threshold=thresholds,
         v_reset=zeros.copy(),
     )
-
-
-def check_checkpoint(ckpt: Checkpoint) -> None:
-    """Shapes agree with the config and values are finite: what a writer must refuse otherwise."""
-    net = ckpt.config.network
-    if ckpt.weights.shape != (net.n_inputs, net.n_neurons) or ckpt.thresholds.shape != (net.n_neurons,):
-        raise InvalidValueError(
-            f"checkpoint arrays {ckpt.weights.shape} / {ckpt.thresholds.shape} do not match its config "
-            f"({net.n_inputs} inputs, {net.n_neurons} neurons)"
-        )
-    if not (np.all(np.isfinite(ckpt.weights)) and np.all(np.isfinite(ckpt.thresholds))):
-        raise InvalidValueError("checkpoint weights or thresholds contain NaN or infinite values")
 
 
 def wta_rule(source: Source) -> str:
@@ -203,7 +191,7 @@ def build_graph(
         weight = source.weight_mantissa.T.astype(np.float32)
         thresholds = source.threshold.astype(np.float64)
     elif isinstance(source, Checkpoint):
-        check_checkpoint(source)
+        validate_checkpoint(source)
         weight = np.ascontiguousarray(source.weights.T.astype(np.float32))
         thresholds = source.thresholds.astype(np.float32)
     else:
@@ -364,12 +352,7 @@ def checkpoint_from_graph(
         history=list(header.get("history", [])),
         version=str(header.get("package_version", "unknown")),
     )
-    try:
-        check_checkpoint(ckpt)
-    except InvalidValueError as exc:
-        raise ModelFileError(str(exc), path) from None
-    if ckpt.calibration.shape != (ckpt.config.network.n_neurons, ckpt.reference_place_ids.shape[0]):
-        raise ModelFileError("calibration does not match the neurons and reference places", path)
+    validate_checkpoint(ckpt, path)
     return ckpt
 
 

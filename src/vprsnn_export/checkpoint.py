@@ -54,7 +54,7 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     """Validate and write a checkpoint atomically (npz arrays + JSON header with the whole config); returns the path."""
-    _validate(ckpt, Path(path))
+    validate_checkpoint(ckpt, path)
     meta = checkpoint_header(ckpt)
     arrays: dict[str, np.ndarray] = {
         "weights": ckpt.weights.astype(np.float32),
@@ -91,7 +91,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         history=list(meta.get("history", [])),
         version=str(meta.get("package_version", "unknown")),
     )
-    _validate(ckpt, path)
+    validate_checkpoint(ckpt, path)
     return ckpt
 
 
@@ -100,8 +100,9 @@ def checkpoint_sha256(path: str | Path) -> str:
     return sha256_file(path)
 
 
-def _validate(ckpt: Checkpoint, path: Path) -> None:
-    """Shapes agree with the config, dtypes are numeric, values finite and in range."""
+def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> None:
+    """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
+    path = Path(path)
     net = ckpt.config.network
     expect = {
         "weights": (net.n_inputs, net.n_neurons),

@@ -186,7 +186,7 @@ def test_writer_validates_its_input(tmp_path):
     with pytest.raises(ModelFileError, match="weight_mantissa"):
         write_nir(dataclasses.replace(model, weight_mantissa=model.weight_mantissa + 300), tmp_path / "x.nir")
     ckpt = make_checkpoint(np.random.default_rng(8))
-    with pytest.raises(InvalidValueError, match="NaN"):
+    with pytest.raises(ModelFileError, match="NaN"):
         write_nir(dataclasses.replace(ckpt, thresholds=np.full(6, np.nan, dtype=np.float32)), tmp_path / "x.nir")
     with pytest.raises(InvalidValueError, match="wta_inhibition"):
         build_graph(model, wta_inhibition=-1.0)

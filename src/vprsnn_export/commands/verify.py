@@ -21,7 +21,6 @@ from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import check_bits
 from ..runtime.conformance import parse_targets
-from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
@@ -31,8 +30,8 @@ from ._common import (
     add_runtime_options,
     format_table,
     parse_int_list,
-    parse_velocity_grid,
     print_json,
+    readout_options,
 )
 
 DEFAULT_BITS = "8,6,4,3,2"
@@ -117,14 +116,7 @@ def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
     if args.match_window < 0:
         raise InvalidValueError(f"--match-window must be >= 0, got {args.match_window}")
-    readout = ReadoutOptions(
-        gamma=gamma,
-        ks=parse_int_list(args.k, "--k"),
-        rule=args.rule,
-        velocity=args.velocity,
-        velocity_candidates=parse_velocity_grid(args.velocity_search),
-        tolerance=args.match_window,
-    )
+    readout = readout_options(args, gamma)
     return VerifyOptions(
         readout=readout,
         bits=bits,
