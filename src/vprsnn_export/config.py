@@ -8,6 +8,7 @@ the paper's text (Sections III-IV), not its scripts (field notes §1).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
@@ -91,17 +92,26 @@ class Config:
     assignment: AssignmentConfig = field(default_factory=AssignmentConfig)
 
     def __post_init__(self) -> None:
+        for section in fields(self):
+            value = getattr(self, section.name)
+            if is_dataclass(value):
+                for item in fields(value):
+                    check_range(f"{section.name}.{item.name}", getattr(value, item.name))
+            else:
+                check_range(section.name, value)
         side = self.preprocess.image_size
         if side % self.preprocess.patch_size:
-            raise InvalidValueError(f"image_size {side} is not a multiple of patch_size {self.preprocess.patch_size}")
+            raise InvalidValueError(
+                f"preprocess.image_size {side} is not a multiple of preprocess.patch_size {self.preprocess.patch_size}"
+            )
         if self.network.n_inputs != side * side:
-            raise InvalidValueError(f"n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}")
-        if self.encoder.timesteps < 1:
-            raise InvalidValueError(f"timesteps must be >= 1, got {self.encoder.timesteps}")
-        if self.train.batch_size < 1 or self.train.epochs < 0:
-            raise InvalidValueError("batch_size must be >= 1 and epochs >= 0")
-        if not 0.0 < self.network.beta <= 1.0:
-            raise InvalidValueError(f"beta must lie in (0, 1], got {self.network.beta}")
+            raise InvalidValueError(
+                f"network.n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}"
+            )
+        if self.homeostasis.theta_min > self.homeostasis.theta_max:
+            raise InvalidValueError(
+                f"homeostasis.theta_min {self.homeostasis.theta_min} exceeds theta_max {self.homeostasis.theta_max}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -127,6 +137,48 @@ class Config:
         return Config.from_dict(data)
 
 
+#: Allowed values of every numeric setting: (lowest, highest, lowest allowed itself, highest allowed itself).
+#: Values outside, NaN and infinities are refused with a message naming the key.
+RANGES: dict[str, tuple[float, float, bool, bool]] = {
+    "seed": (0, 2**63 - 1, True, True),
+    "encoder.rate_scale": (0.0, 1e6, False, True),
+    "encoder.timesteps": (1, 100_000, True, True),
+    "preprocess.image_size": (1, 4096, True, True),
+    "preprocess.patch_size": (1, 4096, True, True),
+    "network.n_inputs": (1, 2**24, True, True),
+    "network.n_neurons": (1, 1_000_000, True, True),
+    "network.beta": (0.0, 1.0, False, True),
+    "network.theta_init": (0.0, 1e9, False, True),
+    "stdp.a_plus": (0.0, 1e6, True, True),
+    "stdp.a_minus": (0.0, 1e6, True, True),
+    "stdp.tau_pre": (0.0, 1e9, False, True),
+    "stdp.tau_post": (0.0, 1e9, False, True),
+    "stdp.w_max": (0.0, 1e9, False, True),
+    "homeostasis.eta": (0.0, 1e6, True, True),
+    "homeostasis.r_target": (0.0, 1.0, True, True),
+    "homeostasis.theta_min": (0.0, 1e9, False, True),
+    "homeostasis.theta_max": (0.0, 1e9, False, True),
+    "train.epochs": (0, 100_000, True, True),
+    "train.batch_size": (1, 1_000_000, True, True),
+    "assignment.gamma": (0.0, 1.0, True, True),
+}
+
+
+def check_range(key: str, value: Any) -> None:
+    """InvalidValueError naming ``key`` when a numeric setting is NaN, infinite or outside :data:`RANGES`."""
+    if isinstance(value, bool) or key not in RANGES:
+        return
+    low, high, low_ok, high_ok = RANGES[key]
+    number = float(value)
+    if math.isnan(number) or math.isinf(number):
+        raise InvalidValueError(f"config.{key}: expected a finite number, got {value!r}")
+    below = number < low or (number == low and not low_ok)
+    above = number > high or (number == high and not high_ok)
+    if below or above:
+        interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
+        raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
+
+
 def _build(cls: type, data: dict[str, Any], where: str) -> Any:
     if not isinstance(data, dict):
         raise InvalidValueError(f"{where}: expected a mapping, got {type(data).__name__}")
@@ -150,10 +202,14 @@ def _coerce(value: Any, kind: type, where: str) -> Any:
             return value
         raise InvalidValueError(f"{where}: expected true/false, got {value!r}")
     if kind is int:
-        if isinstance(value, bool) or not float(value).is_integer():
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise InvalidValueError(f"{where}: expected an integer, got {value!r}")
+        if not float(value).is_integer():
             raise InvalidValueError(f"{where}: expected an integer, got {value!r}")
         return int(value)
     if kind is float:
+        if isinstance(value, bool) or not isinstance(value, int | float | str):
+            raise InvalidValueError(f"{where}: expected a number, got {value!r}")
         try:
             return float(value)
         except (TypeError, ValueError):

@@ -1,0 +1,72 @@
+"""The typed config refuses every invalid value with one message naming the key; legal extremes pass."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from vprsnn_export.cli import main
+from vprsnn_export.config import RANGES, Config
+from vprsnn_export.errors import InvalidValueError
+
+BAD = [
+    ("encoder.timesteps", "abc", "expected an integer"),
+    ("encoder.timesteps", None, "expected an integer"),
+    ("encoder.timesteps", [1], "expected an integer"),
+    ("encoder.timesteps", 0, "outside"),
+    ("encoder.timesteps", 2.5, "expected an integer"),
+    ("preprocess.patch_size", 0, "outside"),
+    ("stdp.tau_pre", 0, "outside"),
+    ("stdp.w_max", 0, "outside"),
+    ("network.n_neurons", 0, "outside"),
+    ("network.n_neurons", -5, "outside"),
+    ("network.theta_init", -1, "outside"),
+    ("network.beta", 1.5, "outside"),
+    ("assignment.gamma", math.nan, "finite"),
+    ("encoder.rate_scale", -1, "outside"),
+    ("encoder.rate_scale", math.inf, "finite"),
+    ("homeostasis.theta_min", 200.0, "exceeds theta_max"),
+    ("network.wta", "yes", "true/false"),
+    ("seed", "1", "expected an integer"),
+]
+
+
+@pytest.mark.parametrize(("key", "value", "message"), BAD)
+def test_invalid_values_name_the_key(key, value, message):
+    with pytest.raises(InvalidValueError, match=message) as caught:
+        Config().replace(**{key: value})
+    assert key.split(".")[-1] in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"encoder.timesteps": 1},
+        {"network.n_neurons": 1},
+        {"train.epochs": 0},
+        {"network.beta": 1.0},
+        {"assignment.gamma": 0.0},
+        {"homeostasis.eta": 0.0},
+    ],
+)
+def test_legal_extremes_are_accepted(changes):
+    assert Config().replace(**changes).to_dict() != {}
+
+
+@given(key=st.sampled_from(sorted(RANGES)), value=st.one_of(st.floats(allow_nan=True), st.integers(-(2**70), 2**70)))
+def test_any_number_is_accepted_or_refused_with_the_key(key, value):
+    try:
+        Config().replace(**{key: value})
+    except InvalidValueError as exc:
+        assert key.split(".")[-1] in str(exc)
+
+
+def test_the_command_line_reports_one_line_and_exit_2(capsys, tmp_path):
+    code = main(["train", "--data", "synthetic:10", "--reference", "summer", "--out", str(tmp_path / "t.npz"),
+                 "--set", "encoder.timesteps=abc", "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and err.startswith("error: config.encoder.timesteps")
+    assert not (tmp_path / "t.npz").exists()
