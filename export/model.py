@@ -36,6 +36,7 @@ DECAY_BITS = 12  # Loihi: decays are 12-bit, 4096 = no decay
 VOLTAGE_BITS = 24  # Loihi: 24-bit signed membrane voltage
 VOLTAGE_SHIFT = 6  # Loihi: the synaptic input and vth mantissa are shifted left by 6
 MULTIPLIER_BITS = 16  # per-neuron scale multipliers m_j are unsigned 16-bit
+DEFAULT_BITS = (8, 4, 2)  # the weight widths quantize, verify and demo use unless told otherwise
 THRESHOLD_BITS = 17  # Loihi: vth mantissa is 17 bits unsigned
 
 

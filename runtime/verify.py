@@ -47,7 +47,7 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import FixedPointModel, check_bits, save_fixed_point
+from vprsnn_export.export.model import DEFAULT_BITS, FixedPointModel, check_bits, save_fixed_point
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.stats import mean_std
@@ -136,7 +136,7 @@ class VerifyOptions:
     """What `verify` quantises and how it reads out and judges."""
 
     readout: ReadoutOptions
-    bits: tuple[int, ...] = (8, 6, 4, 3, 2)
+    bits: tuple[int, ...] = DEFAULT_BITS
     per_neuron: bool = True
     scale_method: str = "max"
     calibration: str = "deployed"  # "deployed": S^R re-measured on the integer simulator; "float": reused

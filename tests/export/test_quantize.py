@@ -233,8 +233,8 @@ def test_command_errors_are_clear(tmp_path, capsys):
     source = save_checkpoint(tmp_path / "float.npz", ckpt)
     assert main(["quantize", str(source), "--bits", "8,1", "--out", str(tmp_path / "m")]) == 2
     assert "unsupported weight bit width 1" in capsys.readouterr().err
-    assert main(["quantize", str(source), "--fold-thresholds", "--out", str(tmp_path / "m")]) == 2
-    assert "--fold-thresholds needs --per-neuron" in capsys.readouterr().err
+    assert main(["quantize", str(source), "--fold-thresholds", "--per-tensor", "--out", str(tmp_path / "m")]) == 2
+    assert "--fold-thresholds needs per-neuron scales" in capsys.readouterr().err
     assert (
         main(
             [
@@ -254,7 +254,7 @@ def test_command_errors_are_clear(tmp_path, capsys):
     other = save_checkpoint(
         tmp_path / "other.npz", ckpt.__class__(**{**ckpt.__dict__, "thresholds": ckpt.thresholds + 1})
     )
-    model = tmp_path / "m" / "model_4bit_per-tensor_max.npz"
+    model = tmp_path / "m" / "model_4bit_per-neuron_max.npz"
     assert main(["simulate", str(model), "--query", "winter", "--compare", str(other)]) == 2
     assert "not the checkpoint this model was quantised from" in capsys.readouterr().err
     assert main(["simulate", str(tmp_path / "nope.npz"), "--query", "winter"]) == 2

@@ -25,6 +25,7 @@ from ..config import Config
 from ..dataset import load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
+from ..export.model import DEFAULT_BITS
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.results import VerifiedRun
@@ -36,7 +37,7 @@ DEMO_DATA = "synthetic"
 DEMO_REFERENCE = "summer"
 DEMO_QUERY = "winter"
 DEMO_KS = (1, 3, 5)
-DEMO_BITS = (8, 4, 2)
+DEMO_BITS = DEFAULT_BITS
 #: Config overrides of the demo: none, the paper's configuration runs in about a minute on one CPU core.
 DEMO_PROFILE: dict = {}
 #: --quick (tests): a tiny network on a short route.

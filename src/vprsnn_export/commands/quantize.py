@@ -11,10 +11,11 @@ import numpy as np
 from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..export.model import check_bits, save_fixed_point
+from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from ..runtime.deployment import deploy
 from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json, query_data
 
+DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 TABLE_COLUMNS = (
     ("bits", "bits"),
     ("scheme", "scheme"),
@@ -31,13 +32,17 @@ TABLE_COLUMNS = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("quantize", help="quantise a float checkpoint into fixed-point models")
     parser.add_argument("checkpoint", help="checkpoint written by train")
-    parser.add_argument("--bits", default="8,4,2", help="weight bit widths, each 2..8 (default 8,4,2)")
-    parser.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (default: per tensor)")
+    parser.add_argument(
+        "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
+    )
+    scales = parser.add_mutually_exclusive_group()
+    scales.add_argument("--per-tensor", action="store_true", help="one weight scale for all neurons")
+    scales.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (the default)")
     parser.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice: max-abs or minimum MSE")
     parser.add_argument(
         "--fold-thresholds",
         action="store_true",
-        help="choose per-neuron scales so that all neurons share one integer threshold (needs --per-neuron)",
+        help="choose per-neuron scales so that all neurons share one integer threshold (not with --per-tensor)",
     )
     parser.add_argument(
         "--reuse-float-calibration",
@@ -59,8 +64,9 @@ def model_filename(bits: int, per_neuron: bool, scale_method: str, fold_threshol
 
 def run(args: argparse.Namespace) -> int:
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
-    if args.fold_thresholds and not args.per_neuron:
-        raise InvalidValueError("--fold-thresholds needs --per-neuron")
+    per_neuron = not args.per_tensor
+    if args.fold_thresholds and not per_neuron:
+        raise InvalidValueError("--fold-thresholds needs per-neuron scales (drop --per-tensor)")
     ckpt = load_checkpoint(args.checkpoint)
     digest = checkpoint_sha256(args.checkpoint)
     device = resolve_device(args.device)
@@ -76,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
             ckpt,
             digest,
             bits,
-            per_neuron=args.per_neuron,
+            per_neuron=per_neuron,
             scale_method=args.scale,
             fold_thresholds=args.fold_thresholds,
             calibration="float" if args.reuse_float_calibration else "deployed",
@@ -84,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
             device=device,
         )
         path = save_fixed_point(
-            Path(args.out) / model_filename(bits, args.per_neuron, args.scale, args.fold_thresholds), model
+            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds), model
         )
         report = model.quantisation.to_dict()
         rows.append(

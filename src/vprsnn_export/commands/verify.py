@@ -19,7 +19,7 @@ from ..dataset import Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
-from ..export.model import check_bits
+from ..export.model import DEFAULT_BITS, check_bits
 from ..runtime.conformance import parse_targets
 from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
@@ -34,7 +34,7 @@ from ._common import (
     readout_options,
 )
 
-DEFAULT_BITS = "8,6,4,3,2"
+DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 TABLE_COLUMNS = (
     ("network", "network"),
     ("bits", "bits"),
@@ -57,7 +57,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "Exit 0: every check passed; 1: a check failed; 2: bad input.",
     )
     parser.add_argument("checkpoints", nargs="+", metavar="CKPT", help="float checkpoint(s) written by train")
-    parser.add_argument("--bits", default=DEFAULT_BITS, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS})")
+    parser.add_argument(
+        "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
+    )
     parser.add_argument("--query", required=True, help="query traversal name")
     add_data_options(parser, data_required=False)
     readout = parser.add_argument_group("readout")
