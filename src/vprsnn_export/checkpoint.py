@@ -48,8 +48,18 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
         "seed": ckpt.config.seed,
         "reference_traversals": list(ckpt.reference_traversals),
         "data": ckpt.data,
-        "history": ckpt.history,
+        "history": [reproducible(entry) for entry in ckpt.history],
     }
+
+
+#: History fields that measure the machine, not the network: left out of files so that two
+#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
+TIMING_FIELDS = ("seconds",)
+
+
+def reproducible(entry: dict[str, Any]) -> dict[str, Any]:
+    """One epoch's history entry without its wall-clock timings."""
+    return {key: value for key, value in entry.items() if key not in TIMING_FIELDS}
 
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:

@@ -182,7 +182,10 @@ def load_dataset(
     ) as bar:
         for name in names:
             images[name] = _decode(cells[name], cfg, bar)
-    return Dataset(source=str(data), manifest_sha256=manifest.sha256, place_ids=selected, images=images)
+    # stored resolved, so a checkpoint made here still finds its data when used from another directory
+    return Dataset(
+        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
+    )
 
 
 def read_manifest(data: str | Path) -> Manifest:

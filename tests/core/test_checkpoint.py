@@ -89,3 +89,14 @@ def test_not_a_checkpoint(tmp_path):
     (tmp_path / "text.npz").write_text(json.dumps({"hello": 1}))
     with pytest.raises(ModelFileError, match="truncated or corrupt"):
         load_checkpoint(tmp_path / "text.npz")
+
+
+def test_identical_runs_write_byte_identical_checkpoints(tmp_path):
+    from vprsnn_export.checkpoint import checkpoint_sha256
+    from vprsnn_export.cli import main
+
+    paths = [tmp_path / "a.npz", tmp_path / "b.npz"]
+    for path in paths:
+        argv = ["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(path), "--quiet"]
+        assert main([*argv, "--timesteps", "20", "--epochs", "2", "--neurons", "16"]) == 0
+    assert checkpoint_sha256(paths[0]) == checkpoint_sha256(paths[1])
