@@ -6,6 +6,7 @@ import argparse
 import importlib
 import pkgutil
 import re
+import signal
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -55,20 +56,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised like an interrupt so that temp files are removed on the way out."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    argv = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(join_negative_values(argv))
-    args.argv = argv
+    """Parse, run one command; expected errors are one line and exit 2, an interrupt exits 130, SIGTERM 143."""
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _terminate)
     try:
+        parser = build_parser()
+        argv = list(sys.argv[1:] if argv is None else argv)
+        args = parser.parse_args(join_negative_values(argv))
+        args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
         return int(args.handler(args) or 0)
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        print("error: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("error: terminated", file=sys.stderr)
+        return 143
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import hashlib
 import io
 import json
 import os
+import stat
 import tempfile
 import zipfile
 from collections.abc import Callable
@@ -20,7 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ModelFileError
+from .errors import ModelFileError, VprError
+
+
+class OutputError(VprError):
+    """An output path that cannot or must not be written (a folder, a device, a link, no permission)."""
+
 
 META_KEY = "__meta__"
 
@@ -30,20 +36,58 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     return atomic_write(path, lambda handle: handle.write(data))
 
 
-def atomic_write(path: str | Path, write: Callable[[Any], Any]) -> Path:
-    """Call ``write(binary_handle)`` on a temp file next to ``path``, then rename it into place."""
+def check_output(path: str | Path, *, overwrite: bool = True) -> Path:
+    """The output file ``path`` if it may be written: OutputError when it is empty, a folder, a device or
+    other special file, a symbolic link, or (``overwrite=False``) an existing file."""
+    if str(path).strip() == "":
+        raise OutputError("empty output path")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    if path.is_symlink():
+        raise OutputError("is a symbolic link: give the path of the file itself", path)
+    if path.exists():
+        mode = path.stat().st_mode
+        if stat.S_ISDIR(mode):
+            raise OutputError("is a folder: give a file name", path)
+        if not stat.S_ISREG(mode):
+            raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
+        if not overwrite:
+            raise OutputError("exists already: give another name, or --force to replace it", path)
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise OutputError(f"{parent} is not a folder", path)
+    return path
+
+
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
+
+
+def atomic_write(path: str | Path, write: Callable[[Any], Any]) -> Path:
+    """Call ``write(binary_handle)`` on a temp file next to ``path``, then rename it into place.
+
+    The file gets the permissions a plain ``open`` would give (0666 less the umask); the temp
+    file is removed on any failure or interrupt; an unwritable place is one OutputError.
+    """
+    path = check_output(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
     try:
         with os.fdopen(fd, "wb") as handle:
             write(handle)
             handle.flush()
             os.fsync(handle.fileno())
+        os.chmod(tmp_name, 0o666 & ~_umask())
         os.replace(tmp_name, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp_name):
             os.unlink(tmp_name)
+        if isinstance(exc, OSError):
+            raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
         raise
     return path
 

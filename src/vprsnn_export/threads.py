@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import os
 
-import torch
-
 from .errors import InvalidValueError
 
 DEFAULT_THREADS = 1
@@ -27,5 +25,7 @@ def set_threads(threads: int | None = None) -> int:
     count = default_threads() if threads is None else threads
     if not isinstance(count, int) or count < 1 or count > 1024:
         raise InvalidValueError(f"--threads: expected an integer from 1 to 1024, got {threads!r}")
+    import torch  # here, not at module top: the CLI imports this module before it can catch an interrupt
+
     torch.set_num_threads(count)
     return count

@@ -12,6 +12,7 @@ from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
+from ..fileio import check_output
 from ..runtime.deployment import deploy
 from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json, query_data
 
@@ -50,6 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="keep the float network's S^R instead of recalibrating on the integer simulator (needs no data)",
     )
     parser.add_argument("--out", required=True, help="folder for the model files")
+    parser.add_argument("--force", action="store_true", help="replace model files that exist in --out")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
@@ -76,6 +78,10 @@ def run(args: argparse.Namespace) -> int:
         if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
             raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
+    for bits in bit_widths:  # every output is checked before any quantisation runs
+        check_output(
+            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds), overwrite=args.force
+        )
     rows = []
     for bits in bit_widths:
         model = deploy(

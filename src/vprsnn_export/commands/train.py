@@ -9,6 +9,7 @@ import time
 from ..checkpoint import save_checkpoint
 from ..dataset import load_dataset, selection_record
 from ..device import resolve_device
+from ..fileio import check_output
 from ..trainer.pipeline import train_and_calibrate
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
 
@@ -18,12 +19,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_data_options(parser, data_required=True)
     parser.add_argument("--reference", required=True, help="reference traversal(s), e.g. summer or spring,fall")
     parser.add_argument("--out", required=True, help="checkpoint file to write (.npz)")
+    parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     add_config_options(parser)
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.out, overwrite=args.force)  # before minutes of training, not after
     cfg = config_from_args(args)
     references = parse_names(args.reference, "--reference")
     device = resolve_device(args.device)

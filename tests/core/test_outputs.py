@@ -1,0 +1,76 @@
+"""Outputs: what may be written, permissions, no temp files left, one line and exit 2 for a bad --out."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from vprsnn_export.cli import main
+from vprsnn_export.fileio import OutputError, atomic_write_text, check_output
+
+TRAIN = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
+
+
+def test_refuses_folders_special_files_links_and_empty_paths(tmp_path):
+    (tmp_path / "folder").mkdir()
+    target = tmp_path / "real.txt"
+    target.write_text("x")
+    (tmp_path / "link.txt").symlink_to(target)
+    os.mkfifo(tmp_path / "pipe")
+    for bad, message in (
+        (tmp_path / "folder", "is a folder"),
+        (tmp_path / "link.txt", "symbolic link"),
+        (tmp_path / "pipe", "not a regular file"),
+        ("", "empty output path"),
+    ):
+        with pytest.raises(OutputError, match=message):
+            atomic_write_text(bad, "new")
+    assert target.read_text() == "x"
+    with pytest.raises(OutputError, match="--force"):
+        check_output(target, overwrite=False)
+
+
+def test_written_files_respect_the_umask_and_leave_no_temp_files(tmp_path):
+    previous = os.umask(0o022)
+    try:
+        path = atomic_write_text(tmp_path / "a.txt", "hello")
+    finally:
+        os.umask(previous)
+    assert (path.stat().st_mode & 0o777) == 0o644
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_unwritable_place_is_one_error():
+    with pytest.raises(OutputError, match="cannot write here"):
+        atomic_write_text("/proc/x.npz", "x")  # a place no user, root included, can create a file in
+
+
+def test_train_checks_its_output_before_training(tmp_path, capsys):
+    existing = tmp_path / "net.npz"
+    existing.write_bytes(b"old")
+    assert main([*TRAIN, "--out", str(existing)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "exists already" in err and existing.read_bytes() == b"old"
+    assert main([*TRAIN, "--out", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert main([*TRAIN, "--out", str(existing), "--force"]) == 0
+    assert existing.read_bytes() != b"old"
+
+
+def test_sigint_exits_130_with_one_line_and_no_temp_file(tmp_path):
+    out = tmp_path / "net.npz"
+    command = [sys.executable, "-m", "vprsnn_export", *TRAIN[:-4], "--timesteps", "300", "--epochs", "50"]
+    process = subprocess.Popen(
+        [*command, "--out", str(out)], stderr=subprocess.PIPE, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"}
+    )
+    time.sleep(4)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "error: interrupted" and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
