@@ -12,6 +12,7 @@ import torch
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
@@ -62,6 +63,32 @@ def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positio
     return aggregate(wprob, k, options.velocity, rule=options.rule, frame_positions=frame_positions)
 
 
+def check_sequence_length(options: ReadoutOptions, n_queries: int) -> None:
+    """InvalidValueError when a sequence length k exceeds the number of queries (no full window exists)."""
+    if max(options.ks) > n_queries:
+        raise InvalidValueError(f"--k {max(options.ks)} exceeds the number of queries ({n_queries})")
+
+
+def sequence_warning(query_place_ids: np.ndarray, options: ReadoutOptions) -> str | None:
+    """A warning when sequence aggregation is asked for on queries that are not consecutive places.
+
+    Aggregation assumes the query stream is a traversal (consecutive place ids, in order, at the
+    velocity); on a subset spread along the route its windows mix unrelated places.
+    """
+    ids = np.asarray(query_place_ids)
+    if max(options.ks) <= 1 or ids.size < 2:
+        return None
+    steps = np.diff(ids)
+    if np.all(np.abs(steps) <= 2):
+        return None
+    share = float(np.mean(np.abs(steps) > 2))
+    return (
+        f"sequence aggregation (k up to {max(options.ks)}) on queries that are not consecutive places: "
+        f"{100 * share:.0f} % of successive queries are more than 2 places apart, so the k-frame windows "
+        "mix unrelated places"
+    )
+
+
 def readout_rows(
     calibration: np.ndarray,
     query_counts: np.ndarray,
@@ -71,6 +98,7 @@ def readout_rows(
     frame_positions: np.ndarray | None = None,
 ) -> list[dict]:
     """Rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries} for one network."""
+    check_sequence_length(options, len(query_place_ids))
     sr = np.asarray(calibration, dtype=np.float64)
     sq = np.asarray(query_counts, dtype=np.float64)
     rows = []

@@ -90,15 +90,23 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         config = Config.from_dict(meta["config"])
     except (KeyError, VprError) as exc:
         raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
+    traversals = meta.get("reference_traversals", [])
+    if not isinstance(traversals, list) or not all(isinstance(t, str) and t for t in traversals):
+        raise ModelFileError("reference_traversals must be a list of traversal names", path)
+    data, history = meta.get("data", {}), meta.get("history", [])
+    if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
+        raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+    if not isinstance(history, list) or not all(isinstance(entry, dict) for entry in history):
+        raise ModelFileError("history must be a list of per-epoch mappings", path)
     ckpt = Checkpoint(
         config=config,
         weights=arrays["weights"],
         thresholds=arrays["thresholds"],
         calibration=arrays["calibration"],
         reference_place_ids=arrays["reference_place_ids"],
-        reference_traversals=list(meta.get("reference_traversals", [])),
-        data=dict(meta.get("data", {})),
-        history=list(meta.get("history", [])),
+        reference_traversals=list(traversals),
+        data=dict(data),
+        history=list(history),
         version=str(meta.get("package_version", "unknown")),
     )
     validate_checkpoint(ckpt, path)
@@ -128,9 +136,16 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
             raise ModelFileError(f"{name} contains NaN or infinite values", path)
     if np.any(ckpt.weights < 0):
         raise ModelFileError("weights contain negative values (STDP weights are non-negative)", path)
-    n_places = ckpt.reference_place_ids.shape[0]
-    if ckpt.reference_place_ids.ndim != 1 or n_places == 0:
-        raise ModelFileError("reference_place_ids must be a non-empty 1-D array", path)
+    if np.any(ckpt.weights > ckpt.config.stdp.w_max * (1 + 1e-6)):
+        raise ModelFileError(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}", path)
+    if np.any(ckpt.thresholds <= 0):
+        raise ModelFileError("thresholds must be positive", path)
+    ids = np.asarray(ckpt.reference_place_ids)
+    if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer):
+        raise ModelFileError("reference_place_ids must be a non-empty 1-D integer array", path)
+    if np.unique(ids).size != ids.size or np.any(ids < 0):
+        raise ModelFileError("reference_place_ids must be distinct non-negative place ids", path)
+    n_places = ids.size
     if ckpt.calibration.shape != (net.n_neurons, n_places):
         raise ModelFileError(
             f"calibration has shape {ckpt.calibration.shape}, expected {(net.n_neurons, n_places)}", path

@@ -71,6 +71,11 @@ class Manifest:
     rows: dict[int, tuple[int, dict[str, str]]]  # place_id -> (CSV line number, row)
 
 
+MAX_PLACE_ID = 2**53  # ids beyond this cannot be told apart once they pass through float64
+MAX_PLACES = 10_000_000  # a selection larger than this is a typing error, not a route
+MAX_SYNTHETIC_PLACES = 100_000
+
+
 def parse_places(spec: str) -> tuple[int, int, int]:
     """``"START:COUNT[:STRIDE]"`` -> ``(start, count, stride)``: place ids ``start + k * stride``, k = 0..count-1.
 
@@ -85,7 +90,7 @@ def parse_places(spec: str) -> tuple[int, int, int]:
     except ValueError:
         raise InvalidValueError(usage) from None
     start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
-    if start < 0 or count < 1 or stride < 1:
+    if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
         raise InvalidValueError(usage)
     return start, count, stride
 
@@ -97,9 +102,9 @@ def parse_synthetic(data: str) -> int | None:
     if not data.startswith(SYNTHETIC + ":"):
         return None
     text = data[len(SYNTHETIC) + 1 :]
-    if not text.isdigit() or int(text) < 1:
+    if not text.isdigit() or not 1 <= int(text) <= MAX_SYNTHETIC_PLACES:
         raise InvalidValueError(
-            f"--data {data!r}: expected synthetic or synthetic:N with a positive number of places N"
+            f"--data {data!r}: expected synthetic or synthetic:N with N from 1 to {MAX_SYNTHETIC_PLACES}"
         )
     return int(text)
 
@@ -276,9 +281,12 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[
 
 def _place_id(value: str | None, line: int, path: Path) -> int:
     try:
-        return int(value or "")
+        place = int(value or "")
     except ValueError:
         raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
+    if not 0 <= place <= MAX_PLACE_ID:
+        raise DataError(f"line {line}: place_id {place} is outside 0..2**53", path)
+    return place
 
 
 def _select(available: np.ndarray, subset: Selection, places: str | None, source: str) -> np.ndarray:

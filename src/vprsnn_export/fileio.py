@@ -123,6 +123,8 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
         meta = json.loads(arrays.pop(META_KEY).tobytes().decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"the JSON header of this {kind} is corrupt ({exc})", path) from None
+    if not isinstance(meta, dict):
+        raise ModelFileError(f"the JSON header of this {kind} is a {type(meta).__name__}, not a mapping", path)
     return meta, arrays
 
 

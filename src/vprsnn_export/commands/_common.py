@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -130,13 +131,18 @@ def parse_value(raw: str) -> Any:
         return raw
 
 
-def parse_int_list(raw: str, option: str) -> tuple[int, ...]:
+MAX_LIST_VALUE = 10_000  # --k, --bits: far above any meaningful value, low enough to fail before memory does
+MAX_VELOCITY_CANDIDATES = 10_000
+
+
+def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
+    """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
     try:
         values = tuple(int(v) for v in raw.split(",") if v.strip())
     except ValueError:
         raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}") from None
-    if not values or min(values) < 1:
-        raise InvalidValueError(f"{option} expects positive integers, got {raw!r}")
+    if not values or min(values) < 1 or max(values) > maximum:
+        raise InvalidValueError(f"{option} expects integers from 1 to {maximum}, got {raw!r}")
     return values
 
 
@@ -154,9 +160,15 @@ def parse_velocity_grid(raw: str | None) -> tuple[float, ...] | None:
         lo, hi, step = (float(v) for v in raw.split(":"))
     except ValueError:
         raise InvalidValueError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
+    if not all(math.isfinite(v) for v in (lo, hi, step)):
+        raise InvalidValueError(f"--velocity-search expects finite numbers, got {raw!r}")
     if step <= 0 or hi < lo:
         raise InvalidValueError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
     count = int(round((hi - lo) / step)) + 1
+    if count > MAX_VELOCITY_CANDIDATES:
+        raise InvalidValueError(
+            f"--velocity-search {raw!r} gives {count} velocities; at most {MAX_VELOCITY_CANDIDATES} (use a larger STEP)"
+        )
     return tuple(round(lo + i * step, 10) for i in range(count))
 
 
@@ -202,8 +214,10 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
             "--tolerance: renamed to --match-window (the ground-truth window in places); "
             "verify's --tolerance sets pass/fail limits"
         )
-    if args.match_window < 0:
-        raise InvalidValueError(f"--match-window expects an integer >= 0, got {args.match_window}")
+    if not 0 <= args.match_window <= 1_000_000:
+        raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
+    if not math.isfinite(args.velocity) or args.velocity == 0:
+        raise InvalidValueError(f"--velocity expects a finite non-zero number of places per frame, got {args.velocity}")
     return ReadoutOptions(
         gamma=gamma,
         ks=parse_int_list(args.k, "--k"),

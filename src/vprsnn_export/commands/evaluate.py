@@ -10,7 +10,7 @@ import numpy as np
 from ..checkpoint import load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..runtime.evaluation import evaluate_float
+from ..runtime.evaluation import evaluate_float, sequence_warning
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -38,6 +38,9 @@ def run(args: argparse.Namespace) -> int:
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
     if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         raise InvalidValueError("--baseline needs the query places to be the checkpoint's reference places")
+    warning = sequence_warning(dataset.place_ids, options)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),

@@ -40,7 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     changes: dict[str, Any] = {"device": args.device, "progress": not args.quiet}
-    if args.seeds:
+    if args.seeds is not None:
+        if not 1 <= args.seeds <= 1000:
+            raise InvalidValueError(f"--seeds expects an integer from 1 to 1000, got {args.seeds}")
         changes["seeds"] = tuple(range(1, args.seeds + 1))
     settings = Settings.quick_settings(**changes) if args.quick else Settings(**changes)
     overrides = dict(settings.overrides)

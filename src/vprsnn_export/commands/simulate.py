@@ -9,7 +9,7 @@ from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
-from ..runtime.evaluation import evaluate_fixed_point
+from ..runtime.evaluation import evaluate_fixed_point, sequence_warning
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -45,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
         float_checkpoint = load_checkpoint(args.compare)
     options = readout_options(args, model.config.assignment.gamma)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
+    warning = sequence_warning(dataset.place_ids, options)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     result = evaluate_fixed_point(
         model,
         dataset.traversal(args.query),

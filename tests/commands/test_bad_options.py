@@ -1,0 +1,73 @@
+"""Bad numbers and names on the command line: one line `error: <option>: ...`, exit 2, no traceback."""
+
+from __future__ import annotations
+
+import pytest
+
+from vprsnn_export.cli import main
+
+TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    path = tmp_path_factory.mktemp("options") / "net.npz"
+    assert main(["train", "--data", "synthetic:10", "--reference", "summer", "--out", str(path), *TINY]) == 0
+    return str(path)
+
+
+EVALUATE_CASES = [
+    (["--k", "3", "--velocity", "nan"], "--velocity"),
+    (["--velocity-search", "nan:nan:nan"], "--velocity-search"),
+    (["--velocity-search", "0:inf:1"], "--velocity-search"),
+    (["--velocity-search", "0:1:1e-6"], "--velocity-search"),
+    (["--k", "100000000"], "--k"),
+    (["--k", "50"], "--k"),
+    (["--k", "0"], "--k"),
+    (["--match-window=-3"], "--match-window"),
+    (["--match-window", "99999999999999999999"], "--match-window"),
+    (["--tolerance", "1"], "--tolerance: renamed to --match-window"),
+    (["--threads", "0"], "--threads"),
+]
+
+
+@pytest.mark.parametrize(("extra", "message"), EVALUATE_CASES)
+def test_evaluate_options(checkpoint, capsys, extra, message):
+    assert main(["evaluate", checkpoint, "--query", "winter", "--quiet", *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize("argv", [["evaluate"], ["evaluate", "x.npz", "--query", "w", "--nope"], ["nope"]])
+def test_argparse_errors_are_one_line(capsys, argv):
+    with pytest.raises(SystemExit) as caught:
+        main(argv)
+    assert caught.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: ") and "usage" not in err
+
+
+def test_negative_velocity_ranges_are_read_as_written(checkpoint, capsys):
+    assert (
+        main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--k", "3", "--velocity-search", "-2:2:0.5"]) == 0
+    )
+    assert main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--k", "3", "--velocity", "-1"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["train", "--data", "synthetic:100000000000", "--reference", "summer", "--out", "x.npz"], "--data"),
+        (
+            ["train", "--data", "synthetic:10", "--places", "0:99999999999", "--reference", "summer", "--out", "x.npz"],
+            "--places",
+        ),
+        (["experiment", "assignment", "--quick", "--seeds=-2"], "--seeds"),
+        (["experiment", "assignment", "--quick", "--seeds", "0"], "--seeds"),
+    ],
+)
+def test_out_of_range_numbers(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1

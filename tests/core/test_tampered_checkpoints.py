@@ -1,0 +1,83 @@
+"""Tampered checkpoint files: each defect is one ModelFileError naming the file, never a traceback."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from vprsnn_export.checkpoint import load_checkpoint
+from vprsnn_export.cli import main
+from vprsnn_export.errors import ModelFileError
+from vprsnn_export.fileio import META_KEY
+
+TRAIN = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory):
+    path = tmp_path_factory.mktemp("tamper") / "net.npz"
+    assert main([*TRAIN, "--neurons", "16", "--out", str(path)]) == 0
+    with np.load(path) as npz:
+        arrays = {name: npz[name] for name in npz.files}
+    meta = json.loads(arrays.pop(META_KEY).tobytes().decode())
+    return meta, arrays
+
+
+def write(path, meta, arrays):
+    header = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    np.savez(path, **{META_KEY: header}, **arrays)
+    return path
+
+
+HEADER_EDITS = {
+    "header is a list": lambda m: [m],
+    "config is a string": lambda m: {**m, "config": "x"},
+    "config is a list": lambda m: {**m, "config": [1]},
+    "seed is a string": lambda m: {**m, "config": {**m["config"], "seed": "one"}},
+    "timesteps is null": lambda m: {**m, "config": {**m["config"], "encoder": {"timesteps": None}}},
+    "traversals is a string": lambda m: {**m, "reference_traversals": "summer"},
+    "data is a list": lambda m: {**m, "data": ["x"]},
+    "history is a mapping": lambda m: {**m, "history": {"a": 1}},
+    "format is another": lambda m: {**m, "format": "other"},
+}
+
+ARRAY_EDITS = {
+    "0-d reference ids": lambda a: {**a, "reference_place_ids": np.array(3)},
+    "duplicate reference ids": lambda a: {**a, "reference_place_ids": np.zeros_like(a["reference_place_ids"])},
+    "float reference ids": lambda a: {**a, "reference_place_ids": a["reference_place_ids"].astype(float)},
+    "zero thresholds": lambda a: {**a, "thresholds": np.zeros_like(a["thresholds"])},
+    "negative thresholds": lambda a: {**a, "thresholds": -a["thresholds"]},
+    "huge weights": lambda a: {**a, "weights": np.full_like(a["weights"], 1e30)},
+    "NaN weights": lambda a: {**a, "weights": np.full_like(a["weights"], np.nan)},
+    "missing calibration": lambda a: {k: v for k, v in a.items() if k != "calibration"},
+    "wrong weight shape": lambda a: {**a, "weights": a["weights"][:10]},
+}
+
+
+@pytest.mark.parametrize("edit", sorted(HEADER_EDITS))
+def test_tampered_headers_are_one_clear_error(good, tmp_path, edit):
+    meta, arrays = good
+    path = write(tmp_path / "bad.npz", HEADER_EDITS[edit](json.loads(json.dumps(meta))), arrays)
+    with pytest.raises(ModelFileError) as caught:
+        load_checkpoint(path)
+    assert str(path) in str(caught.value)
+
+
+@pytest.mark.parametrize("edit", sorted(ARRAY_EDITS))
+def test_tampered_arrays_are_one_clear_error(good, tmp_path, edit):
+    meta, arrays = good
+    path = write(tmp_path / "bad.npz", meta, ARRAY_EDITS[edit](dict(arrays)))
+    with pytest.raises(ModelFileError) as caught:
+        load_checkpoint(path)
+    assert str(path) in str(caught.value)
+
+
+def test_truncated_file_through_the_cli(good, tmp_path, capsys):
+    meta, arrays = good
+    path = write(tmp_path / "net.npz", meta, arrays)
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    assert main(["evaluate", str(path), "--query", "winter"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: {path}")
