@@ -9,7 +9,8 @@ import numpy as np
 
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
-from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.readout.aggregation import VELOCITY_ESTIMATES, aggregate, track_velocity
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.metrics import is_correct, pr_metrics
@@ -24,7 +25,9 @@ class ReadoutOptions:
     ks: tuple[int, ...] = (1,)
     rule: str = "product"
     velocity: float = 1.0
-    velocity_candidates: tuple[float, ...] | None = None  # search per window instead of a given velocity
+    velocity_candidates: tuple[float, ...] | None = None  # estimate the velocity over this grid instead
+    velocity_estimate: str = "window"  # with candidates: "window" (each window alone) or "track" (over the stream)
+    velocity_span: int = 10  # "track": windows whose scores are summed before the velocity is chosen
     tolerance: int = 0
 
 
@@ -44,12 +47,22 @@ def decision_metrics(
 
 
 def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positions: np.ndarray | None) -> np.ndarray:
-    """W+Prob aggregated over k frames, with the given velocity or one searched per window."""
+    """W+Prob aggregated over k frames: the given velocity, or one estimated from the query stream.
+
+    With ``velocity_candidates`` the velocity is estimated over that grid, per
+    window (``velocity_estimate="window"``) or tracked over the ``velocity_span``
+    most recent windows (``"track"``); otherwise ``options.velocity`` is used.
+    """
+    if options.velocity_candidates and options.velocity_estimate not in VELOCITY_ESTIMATES:
+        raise InvalidValueError(
+            f"unknown velocity estimate {options.velocity_estimate!r}; choose from {', '.join(VELOCITY_ESTIMATES)}"
+        )
     if k == 1:
         return wprob
     if options.velocity_candidates:
-        _, result = estimate_velocity(
-            wprob, k, np.asarray(options.velocity_candidates), rule=options.rule, frame_positions=frame_positions
+        span = options.velocity_span if options.velocity_estimate == "track" else 1
+        _, result = track_velocity(
+            wprob, k, np.asarray(options.velocity_candidates), span, options.rule, frame_positions
         )
         return result
     return aggregate(wprob, k, options.velocity, rule=options.rule, frame_positions=frame_positions)
