@@ -12,6 +12,7 @@ from vprsnn_export.readout.aggregation import (
     _aggregate_scored,
     aggregate,
     estimate_velocity,
+    stream_contrast,
     track_velocity,
     window_scores,
 )
@@ -83,14 +84,17 @@ def test_window_scores_are_the_aggregate_peaks_of_every_candidate() -> None:
 
 def test_tracked_velocity_is_the_argmax_of_the_causal_moving_sum() -> None:
     prob, _ = _stream(30, 40, 1.0, 2, seed=5, decoys=0.9)
-    span = 4
-    e = window_scores(prob, 3, GRID)
+    span, length, memory = 4, 6, 12
+    e = window_scores(stream_contrast(prob, memory), length, GRID)
     expected = np.array([GRID[np.argmax(e[max(0, j - span + 1) : j + 1].sum(axis=0))] for j in range(30)])
-    v_hat, agg = track_velocity(prob, 3, GRID, span=span)
+    v_hat, agg = track_velocity(prob, 3, GRID, span=span, length=length, memory=memory)
     np.testing.assert_array_equal(v_hat, expected)
     np.testing.assert_array_equal(agg, aggregate(prob, 3, v_hat))
-    # span 1 is the per-window search
-    v1, agg1 = track_velocity(prob, 3, GRID, span=1)
+    # the default trajectory length is 2k
+    default = track_velocity(prob, 3, GRID, span=span, memory=memory)[0]
+    np.testing.assert_array_equal(default, track_velocity(prob, 3, GRID, span=span, length=6, memory=memory)[0])
+    # span 1, length k and no contrast is the per-window search
+    v1, agg1 = track_velocity(prob, 3, GRID, span=1, length=3, memory=0)
     v_window, agg_window = estimate_velocity(prob, 3, GRID)
     np.testing.assert_array_equal(v1, v_window)
     np.testing.assert_array_equal(agg1, agg_window)
@@ -133,10 +137,42 @@ def test_every_pair_is_scored_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_no_ground_truth_in_signatures() -> None:
-    allowed = {"prob", "k", "candidates", "span", "rule", "frame_positions", "eps"}
-    for fn in (window_scores, track_velocity):
+    allowed = {"prob", "k", "candidates", "span", "rule", "frame_positions", "eps", "length", "memory"}
+    for fn in (window_scores, track_velocity, stream_contrast):
         params = set(inspect.signature(fn).parameters)
         assert params <= allowed, params
+
+
+def test_stream_contrast_by_hand() -> None:
+    prob = np.array([[0.5, 0.5, 0.0], [0.2, 0.6, 0.2], [0.0, 0.5, 0.5]])
+    out = stream_contrast(prob, 2)
+    np.testing.assert_array_equal(out[0], [0.5, 0.5, 0.0])  # a frame alone: P / P = 1 where P > 0
+    ratio = prob[1] / ((prob[0] + prob[1]) / 2)
+    np.testing.assert_allclose(out[1], ratio / ratio.sum())
+    ratio = np.array([0.0, 0.5 / 0.55, 0.5 / 0.35])  # frames 1 and 2 only (memory 2)
+    np.testing.assert_allclose(out[2], ratio / ratio.sum())
+    np.testing.assert_array_equal(stream_contrast(prob, 0), prob)
+    # causal: later frames do not change earlier rows
+    changed = prob.copy()
+    changed[2] = [1.0, 0.0, 0.0]
+    np.testing.assert_array_equal(stream_contrast(changed, 2)[:2], out[:2])
+
+
+def test_hub_place_fools_the_window_search_but_not_the_tracker() -> None:
+    """The failure seen on Nordland: runs of consecutive frames vote for the same wrong place."""
+    rng = np.random.default_rng(4)
+    prob, true = _stream(80, 120, 1.0, 5, seed=4, decoys=0.0)
+    hubs = rng.integers(0, 120, 8)
+    for run, hub in enumerate(hubs):
+        prob[10 * run : 10 * run + 10, hub] += 0.03  # each run of 10 frames shares one wrong peak above the true one
+    prob /= prob.sum(axis=1, keepdims=True)
+    settled = slice(30, None)
+    v_window, _ = estimate_velocity(prob, 5, GRID)
+    assert np.mean(prob.argmax(axis=1) == true) < 0.1  # single frames are nearly always wrong
+    assert np.mean(v_window[settled] == 1.0) < 0.5
+    v_hat, agg = track_velocity(prob, 5, GRID)
+    assert np.mean(v_hat[settled] == 1.0) >= 0.95
+    assert np.mean(agg[settled].argmax(axis=1) == true[settled]) >= 0.9
 
 
 def test_invalid_arguments() -> None:
@@ -150,3 +186,6 @@ def test_invalid_arguments() -> None:
         window_scores(prob, 2, [1.0, np.nan])
     with pytest.raises(ValueError, match="window size"):
         window_scores(prob, 0, GRID)
+    for memory in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="memory"):
+            stream_contrast(prob, memory)  # type: ignore[arg-type]

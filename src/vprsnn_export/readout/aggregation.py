@@ -288,7 +288,34 @@ def estimate_velocity(
     ground truth). With ``k == 1`` every candidate gives the same result and
     the first is returned.
     """
-    return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps)
+    return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps, length=k, memory=0)
+
+
+def stream_contrast(prob: np.ndarray, memory: int) -> np.ndarray:
+    """Each frame divided by the mean of the ``memory`` most recent frames, shape ``(n_queries, n_places)``.
+
+    .. math::
+        B_j(l) = \\frac{1}{j - j_0 + 1} \\sum_{i=j_0}^{j} P_i(l), \\quad j_0 = \\max(0, j - M + 1), \\qquad
+        Q_j(l) = \\frac{P_j(l) / B_j(l)}{\\sum_{l'} P_j(l') / B_j(l')}
+
+    (``P_j(l) / B_j(l) = 0`` where ``B_j(l) = 0``; a row that is then 0
+    everywhere stays 0). A "hub" place that many consecutive frames vote for,
+    whatever the true place, is discounted, while the true place, which moves
+    along the route, is not. Causal: frame ``j`` uses frames ``j0 .. j`` only.
+    ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
+    """
+    p = _prob2d(prob)
+    if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 0:
+        raise ValueError(f"background memory must be an integer >= 0, got {memory!r}")
+    if memory == 0:
+        return p.copy()
+    cumulative = np.concatenate([np.zeros((1, p.shape[1])), np.cumsum(p, axis=0)])
+    j = np.arange(p.shape[0])
+    first = np.maximum(0, j - int(memory) + 1)
+    background = (cumulative[j + 1] - cumulative[first]) / (j + 1 - first)[:, None]
+    ratio = np.divide(p, background, out=np.zeros_like(p), where=background > 0)
+    total = ratio.sum(axis=1, keepdims=True)
+    return np.divide(ratio, total, out=np.zeros_like(ratio), where=total > 0)
 
 
 def track_velocity(
@@ -299,32 +326,46 @@ def track_velocity(
     rule: str = "product",
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
+    *,
+    length: int | None = None,
+    memory: int = 50,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocity tracked over the query stream; returns ``(velocity, aggregated)``.
 
-    The speed of a train or car changes slowly, so the window scores
-    ``e_i(v)`` of :func:`window_scores` are summed over the ``span`` most
-    recent windows before the velocity is chosen (a causal moving sum: only
-    the frames seen so far are used):
+    Three steps, all causal (query ``j`` uses frames ``0 .. j`` only):
 
     .. math::
-        E_j(v) = \\sum_{i=\\max(0,\\, j-S+1)}^{j} e_i(v), \\qquad
+        Q = \\text{stream\\_contrast}(P, M), \\qquad
+        E_j(v) = \\sum_{i=\\max(0,\\, j-S+1)}^{j} e_i^{(Q, L)}(v), \\qquad
         \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} E_j(v), \\qquad
         \\hat P_j = \\text{aggregate}(P, k, \\hat v)_j
 
-    A velocity that is right lines up every window of the span, while the
-    spurious alignments that noise creates in single windows change from
-    window to window and do not add up. The velocity is in places per unit of
-    ``frame_positions`` (so dropped frames are handled as in :func:`aggregate`);
-    negative candidates cover a reversed traversal. ``span == 1`` is the
-    per-window search :func:`estimate_velocity`. Ties go to the first
-    candidate in the given order. Uses the stream order, ``frame_positions``
-    and the frames' distributions only (no ground truth).
+    1. :func:`stream_contrast` divides out the places that the last ``memory``
+       (M) frames all vote for. Without it, consecutive frames that vote for
+       the same wrong place make the velocity 0 look best.
+    2. ``e_i^{(Q, L)}(v)`` is :func:`window_scores` of Q over trajectories of
+       ``length`` (L, default 2k) frames: how well the frames line up at v.
+    3. The speed of a train or car changes slowly, so the scores of the
+       ``span`` (S) most recent windows are summed before the velocity is
+       chosen: the right velocity lines up every window, while spurious
+       alignments change from window to window and do not add up.
+
+    The decision itself aggregates the unchanged ``prob`` over k frames at the
+    chosen velocity, exactly as a given velocity would. The velocity is in
+    places per unit of ``frame_positions`` (dropped frames are handled as in
+    :func:`aggregate`); negative candidates cover a reversed traversal. Ties
+    go to the first candidate in the given order. ``span=1, length=k,
+    memory=0`` is the per-window search :func:`estimate_velocity`. Uses the
+    stream order, ``frame_positions`` and the frames' distributions only (no
+    ground truth).
     """
     if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
         raise ValueError(f"velocity span must be an integer >= 1, got {span!r}")
+    k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
-    scores = window_scores(prob, k, cands, rule, frame_positions, eps)
+    scores = window_scores(
+        stream_contrast(prob, memory), 2 * k if length is None else length, cands, rule, frame_positions, eps
+    )
     padded = np.concatenate([np.zeros((int(span) - 1, cands.size)), scores])
     tracked = np.lib.stride_tricks.sliding_window_view(padded, int(span), axis=0).sum(axis=2)
     velocity = cands[np.argmax(tracked, axis=1)]
