@@ -10,7 +10,7 @@ import numpy as np
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.readout.aggregation import VELOCITY_ESTIMATES, aggregate, track_velocity
+from vprsnn_export.readout.aggregation import VELOCITY_ESTIMATES, aggregate, estimate_velocity, track_velocity
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.metrics import is_correct, pr_metrics
@@ -28,6 +28,8 @@ class ReadoutOptions:
     velocity_candidates: tuple[float, ...] | None = None  # estimate the velocity over this grid instead
     velocity_estimate: str = "window"  # with candidates: "window" (each window alone) or "track" (over the stream)
     velocity_span: int = 10  # "track": windows whose scores are summed before the velocity is chosen
+    velocity_length: int | None = None  # "track": frames per scored trajectory (None: 2k)
+    velocity_memory: int = 50  # "track": recent frames whose mean is divided out (0: none)
     tolerance: int = 0
 
 
@@ -60,11 +62,20 @@ def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positio
     if k == 1:
         return wprob
     if options.velocity_candidates:
-        span = options.velocity_span if options.velocity_estimate == "track" else 1
-        _, result = track_velocity(
-            wprob, k, np.asarray(options.velocity_candidates), span, options.rule, frame_positions
-        )
-        return result
+        candidates = np.asarray(options.velocity_candidates)
+        if options.velocity_estimate == "track":
+            _, result = track_velocity(
+                wprob,
+                k,
+                candidates,
+                options.velocity_span,
+                options.rule,
+                frame_positions,
+                length=options.velocity_length,
+                memory=options.velocity_memory,
+            )
+            return result
+        return estimate_velocity(wprob, k, candidates, options.rule, frame_positions)[1]
     return aggregate(wprob, k, options.velocity, rule=options.rule, frame_positions=frame_positions)
 
 

@@ -97,5 +97,8 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             + envelope.compact_table(velocity["summary"])
             + "\n\n"
             + envelope.explanation(velocity)
+            + "\n### Warm-up: the first queries of the stream\n\n"
+            + envelope.warmup_table(velocity["per_seed"], velocity["warmup"])
+            + "\n"
         )
     return text

@@ -18,7 +18,7 @@ from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
 
-from .common import Settings, consecutive_networks, pct, provenance, rows_table, summarise_rows
+from .common import Settings, consecutive_networks, mean_std, pct, provenance, rows_table, summarise_rows
 
 NAME = "envelope"
 DESCRIPTION = (
@@ -28,6 +28,11 @@ DESCRIPTION = (
 K = 5
 VELOCITY_GRID = tuple(float(v) for v in np.round(np.arange(-2.0, 2.0001, 0.05), 2))
 SPAN = 10  # windows whose scores the tracker sums
+LENGTH = 2 * K  # frames per trajectory the tracker scores
+#: recent frames whose mean the tracker divides out: W+Prob has "hub" places that runs of consecutive
+#: frames all vote for; the SAD distribution has none, and dividing its flat rows only adds noise
+MEMORY = {"wprob": 50, "sad": 0}
+WARMUP = 30  # queries at the start of the stream left out of the "after warm-up" accuracy (at most half)
 SOURCES = ("given", "per-window search", "tracked")
 METHODS = ("wprob", "sad")
 KEYS = ("condition", "method", "velocity")
@@ -75,10 +80,15 @@ def envelope_rows(
             per_source = {
                 "given": (np.full(len(order), velocity), aggregate(stream, K, velocity, "product", positions)),
                 "per-window search": estimate_velocity(stream, K, grid, "product", positions),
-                "tracked": track_velocity(stream, K, grid, SPAN, "product", positions),
+                "tracked": track_velocity(
+                    stream, K, grid, SPAN, "product", positions, length=LENGTH, memory=MEMORY[method]
+                ),
             }
             for source, (v, agg) in per_source.items():
-                metrics = decision_metrics(agg, "wprob", reference_place_ids, query_place_ids[order], 0)
+                truth = query_place_ids[order]
+                metrics = decision_metrics(agg, "wprob", reference_place_ids, truth, 0)
+                skip = min(WARMUP, len(order) // 2)
+                settled = decision_metrics(agg[skip:], "wprob", reference_place_ids, truth[skip:], 0)
                 rows.append(
                     {
                         "condition": name,
@@ -86,6 +96,7 @@ def envelope_rows(
                         "velocity": source,
                         "k": K,
                         **metrics,
+                        "accuracy_after_warmup": settled["accuracy"],
                         "velocity_median": float(np.median(v[K - 1 :])),
                     }
                 )
@@ -127,7 +138,14 @@ def run(settings: Settings) -> dict:
 
 
 def estimator_settings() -> dict:
-    return {"k": K, "velocity_grid": list(VELOCITY_GRID), "track_span": SPAN}
+    return {
+        "k": K,
+        "velocity_grid": list(VELOCITY_GRID),
+        "track_span": SPAN,
+        "track_length": LENGTH,
+        "track_memory": MEMORY,
+        "warmup": WARMUP,
+    }
 
 
 def compact_table(summary: list[dict]) -> str:
@@ -139,9 +157,7 @@ def compact_table(summary: list[dict]) -> str:
     lines = ["| condition | " + " | ".join(labels) + " |", "|---|" + "---|" * len(columns)]
     for name in names:
         row = [cells[(name, m, s)] for m, s in columns]
-        lines.append(
-            f"| {name} | " + " | ".join(f"{pct(r['accuracy'])} / {pct(r['r_at_100p'])}" for r in row) + " |"
-        )
+        lines.append(f"| {name} | " + " | ".join(f"{pct(r['accuracy'])} / {pct(r['r_at_100p'])}" for r in row) + " |")
     return "\n".join(lines)
 
 
@@ -153,8 +169,12 @@ def explanation(results: dict) -> str:
         "The estimators ignore it, so their velocity-mismatch rows equal the baseline row.\n"
         f"* **per-window search**: each window keeps its best-scoring velocity on the grid {grid[0]} .. {grid[-1]} "
         "(step 0.05) on its own (`estimate_velocity`).\n"
-        f"* **tracked**: the window scores of the same grid are summed over the {results['track_span']} most recent "
-        "windows before the velocity is chosen (`track_velocity`; causal, query stream only).\n"
+        "* **tracked** (`track_velocity`, causal, query stream only): each frame is divided by the mean of the "
+        f"most recent frames ({results['track_memory']['wprob']} for W+Prob, which has places that runs of "
+        f"consecutive frames all vote for; {results['track_memory']['sad']}, i.e. not at all, for SAD), "
+        f"trajectories of {results['track_length']} frames are scored on the same grid, and the scores of the "
+        f"{results['track_span']} most recent windows are summed before the velocity is chosen; the decision "
+        "aggregates the unchanged distributions over k frames at that velocity.\n"
         "* **SAD**: the no-learning baseline (sum of absolute differences to the reference images), aggregated on "
         "the same windows with the same velocity sources.\n"
         "* Windows come from the query stream and the robot's frame positions only; no ground truth. "
@@ -163,11 +183,32 @@ def explanation(results: dict) -> str:
     )
 
 
+def warmup_table(per_seed: list[list[dict]], warmup: int) -> str:
+    """Accuracy on the whole stream and after the first ``warmup`` queries, per method and velocity source."""
+    lines = [
+        f"| condition | method | velocity | accuracy % | accuracy after the first {warmup} queries % |",
+        "|---|---|---|---|---|",
+    ]
+    groups: dict[tuple, list[dict]] = {}
+    for rows in per_seed:
+        for row in rows:
+            groups.setdefault((row["condition"], row["method"], row["velocity"]), []).append(row)
+    for (condition, method, source), rows in groups.items():
+        if condition.startswith(("baseline", "reverse")):
+            whole = mean_std(r["accuracy"] for r in rows)
+            after = mean_std(r["accuracy_after_warmup"] for r in rows)
+            lines.append(f"| {condition} | {method} | {source} | {pct(whole)} | {pct(after)} |")
+    return "\n".join(lines)
+
+
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     return (
         compact_table(results["summary"])
         + "\n\n"
         + explanation(results)
+        + "\n## Warm-up: the first queries of the stream\n\n"
+        + warmup_table(results["per_seed"], results["warmup"])
+        + "\n"
         + "\n## Every metric\n\n"
         + rows_table(results["summary"], KEYS)
         + "\n"
