@@ -14,7 +14,7 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.aggregation import aggregate, estimate_velocity
+from vprsnn_export.readout.aggregation import VELOCITY_ESTIMATES, aggregate, estimate_velocity, track_velocity
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
@@ -34,7 +34,11 @@ class ReadoutOptions:
     ks: tuple[int, ...] = (1,)
     rule: str = "product"
     velocity: float = 1.0
-    velocity_candidates: tuple[float, ...] | None = None  # search per window instead of a given velocity
+    velocity_candidates: tuple[float, ...] | None = None  # estimate the velocity over this grid instead
+    velocity_estimate: str = "window"  # with candidates: "window" (each window alone) or "track" (over the stream)
+    velocity_span: int = 10  # "track": windows whose scores are summed before the velocity is chosen
+    velocity_length: int | None = None  # "track": frames per scored trajectory (None: 2k)
+    velocity_memory: int = 50  # "track": recent frames whose mean is divided out (0: none)
     tolerance: int = 0
 
 
@@ -52,14 +56,33 @@ def decision_metrics(
 
 
 def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positions: np.ndarray | None) -> np.ndarray:
-    """W+Prob aggregated over k frames, with the given velocity or one searched per window."""
+    """W+Prob aggregated over k frames: the given velocity, or one estimated from the query stream.
+
+    With ``velocity_candidates`` the velocity is estimated over that grid, per
+    window (``velocity_estimate="window"``) or tracked over the ``velocity_span``
+    most recent windows (``"track"``); otherwise ``options.velocity`` is used.
+    """
+    if options.velocity_candidates and options.velocity_estimate not in VELOCITY_ESTIMATES:
+        raise InvalidValueError(
+            f"unknown velocity estimate {options.velocity_estimate!r}; choose from {', '.join(VELOCITY_ESTIMATES)}"
+        )
     if k == 1:
         return wprob
     if options.velocity_candidates:
-        _, result = estimate_velocity(
-            wprob, k, np.asarray(options.velocity_candidates), rule=options.rule, frame_positions=frame_positions
-        )
-        return result
+        candidates = np.asarray(options.velocity_candidates)
+        if options.velocity_estimate == "track":
+            _, result = track_velocity(
+                wprob,
+                k,
+                candidates,
+                options.velocity_span,
+                options.rule,
+                frame_positions,
+                length=options.velocity_length,
+                memory=options.velocity_memory,
+            )
+            return result
+        return estimate_velocity(wprob, k, candidates, options.rule, frame_positions)[1]
     return aggregate(wprob, k, options.velocity, rule=options.rule, frame_positions=frame_positions)
 
 

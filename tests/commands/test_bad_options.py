@@ -52,6 +52,8 @@ def test_negative_velocity_ranges_are_read_as_written(checkpoint, capsys):
         main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--k", "3", "--velocity-search", "-2:2:0.5"]) == 0
     )
     assert main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--k", "3", "--velocity", "-1"]) == 0
+    window = ["--velocity-search", "-1:1:0.5", "--velocity-estimate", "window"]
+    assert main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--k", "3", *window]) == 0
 
 
 @pytest.mark.parametrize(

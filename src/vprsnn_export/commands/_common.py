@@ -50,15 +50,33 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def add_readout_options(parser: argparse.ArgumentParser) -> None:
+def add_readout_options(
+    parser: argparse.ArgumentParser, *, default_k: str = "1", old_window_option: str = "--tolerance", json: bool = True
+) -> None:
+    """--k, --rule, the velocity options and --match-window (``old_window_option`` stops with a hint)."""
     group = parser.add_argument_group("readout")
-    group.add_argument("--k", default="1", help="sequence lengths, e.g. 1,3,5 (W+Prob aggregated for k > 1)")
+    group.add_argument(
+        "--k",
+        default=default_k,
+        help=f"sequence lengths, e.g. 1,3,5 (W+Prob aggregated for k > 1; default {default_k})",
+    )
     group.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
     group.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
     group.add_argument(
         "--velocity-search",
         metavar="LO:HI:STEP",
-        help="estimate the velocity per window over this grid instead of using --velocity",
+        help="estimate the velocity from the query stream over this grid instead of using --velocity "
+        "(negative values allowed: -2:2:0.1)",
+    )
+    group.add_argument(
+        "--velocity-estimate",
+        choices=("track", "window"),
+        default="track",
+        help="with --velocity-search: track the velocity over the recent windows (default) or choose it per "
+        "window on its own (the older, noisier search)",
+    )
+    group.add_argument(
+        "--velocity-span", type=int, default=10, metavar="N", help="track: windows whose scores are summed (10)"
     )
     group.add_argument(
         "--match-window",
@@ -67,8 +85,10 @@ def add_readout_options(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="a prediction within +-N places of the truth is correct",
     )
-    group.add_argument("--tolerance", dest="renamed_tolerance", help=argparse.SUPPRESS)
-    group.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    group.add_argument(old_window_option, dest="renamed_window", help=argparse.SUPPRESS)
+    parser.set_defaults(old_window_option=old_window_option)
+    if json:
+        group.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -209,11 +229,13 @@ RESULT_COLUMNS = (
 
 def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
     """The readout options of evaluate/simulate/export --check from their arguments."""
-    if getattr(args, "renamed_tolerance", None) is not None:
+    if args.renamed_window is not None:
         raise InvalidValueError(
-            "--tolerance: renamed to --match-window (the ground-truth window in places); "
+            f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
             "verify's --tolerance sets pass/fail limits"
         )
+    if not 1 <= args.velocity_span <= 100_000:
+        raise InvalidValueError(f"--velocity-span expects an integer from 1 to 100000, got {args.velocity_span}")
     if not 0 <= args.match_window <= 1_000_000:
         raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
     if not math.isfinite(args.velocity) or args.velocity == 0:
@@ -224,6 +246,8 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
         rule=args.rule,
         velocity=args.velocity,
         velocity_candidates=parse_velocity_grid(args.velocity_search),
+        velocity_estimate=args.velocity_estimate,
+        velocity_span=args.velocity_span,
         tolerance=args.match_window,
     )
 

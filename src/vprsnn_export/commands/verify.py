@@ -27,6 +27,7 @@ from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, veri
 from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     add_data_options,
+    add_readout_options,
     add_runtime_options,
     format_table,
     parse_int_list,
@@ -62,17 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--query", required=True, help="query traversal name")
     add_data_options(parser, data_required=False)
-    readout = parser.add_argument_group("readout")
-    readout.add_argument("--k", default="1,3,5", help="sequence lengths (default 1,3,5); W+Prob aggregated for k > 1")
-    readout.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
-    readout.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
-    readout.add_argument(
-        "--velocity-search", metavar="LO:HI:STEP", help="estimate the velocity per window over this grid"
-    )
-    readout.add_argument(
-        "--match-window", type=int, default=0, metavar="N", help="a prediction within +-N places is correct (default 0)"
-    )
-    readout.add_argument("--gt-tolerance", dest="renamed_gt_tolerance", help=argparse.SUPPRESS)
+    add_readout_options(parser, default_k="1,3,5", old_window_option="--gt-tolerance", json=False)
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
@@ -111,8 +102,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
-    if args.renamed_gt_tolerance is not None:
-        raise InvalidValueError("--gt-tolerance: renamed to --match-window (the ground-truth window in places)")
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")

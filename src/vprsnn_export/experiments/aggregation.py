@@ -1,18 +1,30 @@
-"""Table V: W+Prob aggregated over k frames, product vs sum rule, on consecutive places."""
+"""Table V: W+Prob aggregated over k frames, product vs sum rule, on consecutive places.
+
+Beside it, Table IV's conditions at k=5 with three velocity sources (given,
+per-window search, tracked over the query stream) for W+Prob and SAD, from
+:mod:`.envelope`.
+"""
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
+import numpy as np
+
 from vprsnn_export.device import resolve_device
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 
+from . import envelope
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
 
 NAME = "aggregation"
-DESCRIPTION = "W+Prob with k in {1, 3, 5, 7, 10, 15}, product vs sum rule, on 100 consecutive places"
+DESCRIPTION = (
+    "W+Prob with k in {1, 3, 5, 7, 10, 15}, product vs sum rule, on 100 consecutive places; "
+    "at k=5 every operational-envelope condition with the given, per-window searched and tracked velocity, "
+    "beside SAD on the same windows"
+)
 KS = (1, 3, 5, 7, 10, 15)
 RULES = ("product", "sum")
 
@@ -20,6 +32,7 @@ RULES = ("product", "sum")
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
+    velocity_per_seed = []
     for seed, cfg, data, ckpt in consecutive_networks(settings):
         counts = evaluate_float(
             ckpt,
@@ -40,10 +53,20 @@ def run(settings: Settings) -> dict:
                 if r["strategy"] == "wprob"
             ]
         per_seed.append(rows)
+        distributions = envelope.network_distributions(settings, cfg, data, ckpt)
+        velocity_rows = envelope.envelope_rows(
+            distributions, ckpt.reference_place_ids, data.place_ids, np.random.default_rng(seed)
+        )
+        velocity_per_seed.append([dict(r, seed=seed) for r in velocity_rows])
     return {
         "experiment": NAME,
         "summary": summarise_rows(per_seed, ("rule", "k")),
         "per_seed": per_seed,
+        "velocity_sources": {
+            "summary": summarise_rows(velocity_per_seed, envelope.KEYS),
+            "per_seed": velocity_per_seed,
+            **envelope.estimator_settings(),
+        },
         "provenance": provenance(settings, started),
     }
 
@@ -66,4 +89,16 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         ylabel="%",
         title="Sequence aggregation (W+Prob), consecutive places",
     )
-    return rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({stem}.png)\n"
+    text = rows_table(summary, ("rule", "k")) + f"\n\n![aggregation]({stem}.png)\n"
+    velocity = results.get("velocity_sources")
+    if velocity:
+        text += (
+            "\n## Unknown velocity: given, per-window search and tracked (Table IV conditions)\n\n"
+            + envelope.compact_table(velocity["summary"])
+            + "\n\n"
+            + envelope.explanation(velocity)
+            + "\n### Warm-up: the first queries of the stream\n\n"
+            + envelope.warmup_table(velocity["per_seed"], velocity["warmup"])
+            + "\n"
+        )
+    return text

@@ -25,6 +25,8 @@ from typing import Final
 import numpy as np
 
 RULES: Final[tuple[str, ...]] = ("product", "sum")
+#: How a velocity is estimated from the query stream: each window alone, or tracked over several windows.
+VELOCITY_ESTIMATES: Final[tuple[str, ...]] = ("window", "track")
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
@@ -95,6 +97,21 @@ def shift_window(
     ``m < 0`` (before the start of the stream); those rows are 0 and must be
     left out of the combination. Inputs must already be validated float64.
     """
+    return _shift_rows(prob, queries, k, velocity[queries], frame_positions)
+
+
+def _shift_rows(
+    prob: np.ndarray,
+    queries: np.ndarray,
+    k: int,
+    row_velocity: np.ndarray,
+    frame_positions: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`shift_window` with one velocity per row (``row_velocity[c]`` for ``queries[c]``).
+
+    A query may appear in several rows with different velocities, which is how
+    :func:`window_scores` evaluates every (query, candidate) pair at once.
+    """
     n_places = prob.shape[1]
     offsets = np.arange(k)
     frames = queries[:, None] - offsets[None, :]  # (C, k)
@@ -102,7 +119,7 @@ def shift_window(
     frames_safe = np.where(valid, frames, 0)
     dist = frame_positions[queries][:, None] - frame_positions[frames_safe]  # (C, k)
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - (
-        velocity[queries][:, None, None] * dist[:, :, None]
+        row_velocity[:, None, None] * dist[:, :, None]
     )  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
@@ -202,6 +219,52 @@ def _aggregate_scored(
     return out, score
 
 
+def window_scores(
+    prob: np.ndarray,
+    k: int,
+    candidates: np.ndarray,
+    rule: str = "product",
+    frame_positions: np.ndarray | None = None,
+    eps: float = 1e-6,
+) -> np.ndarray:
+    """How well each window fits each candidate velocity, shape ``(n_queries, n_candidates)``.
+
+    .. math:: e_j(v) = \\max_l A_j^{(v)}(l)
+
+    where ``A^{(v)}`` is the un-normalised aggregate of :func:`aggregate` at
+    velocity v (summed logs for the product rule, summed probabilities for the
+    sum rule). Every (query, candidate) pair is evaluated at once, in chunks of
+    rows of at most ``_MAX_ELEMENTS`` elements. Uses the query frames and their
+    window only (no ground truth). With ``k == 1`` every candidate scores
+    ``max_l P_j(l)``.
+    """
+    cands = _candidates(candidates)
+    p = _prob2d(prob)
+    k = _check_args(k, rule, eps)
+    n_queries, n_places = p.shape
+    t = _positions(frame_positions, n_queries)
+    if k == 1:
+        return np.repeat(p.max(axis=1)[:, None], cands.size, axis=1)
+    rows_query = np.repeat(np.arange(n_queries), cands.size)
+    rows_velocity = np.tile(cands, n_queries)
+    scores = np.empty(rows_query.size)
+    chunk = max(1, _MAX_ELEMENTS // (k * n_places))
+    for start in range(0, rows_query.size, chunk):
+        rows = slice(start, start + chunk)
+        shifted, valid = _shift_rows(p, rows_query[rows], k, rows_velocity[rows], t)
+        scores[rows] = _combine(shifted, valid, rule, eps)[1]
+    return scores.reshape(n_queries, cands.size)
+
+
+def _candidates(candidates: np.ndarray) -> np.ndarray:
+    cands = np.asarray(candidates, dtype=np.float64).ravel()
+    if cands.size == 0:
+        raise ValueError("candidates must contain at least one velocity")
+    if not np.all(np.isfinite(cands)):
+        raise ValueError("candidates contains NaN or infinite values")
+    return cands
+
+
 def estimate_velocity(
     prob: np.ndarray,
     k: int,
@@ -210,31 +273,100 @@ def estimate_velocity(
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-query velocity search over a candidate grid; returns ``(velocity, aggregated)``.
+    """Per-window velocity search over a candidate grid; returns ``(velocity, aggregated)``.
 
-    .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} \\max_l A_j^{(v)}(l)
+    .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} e_j(v) = \\arg\\max_{v} \\max_l A_j^{(v)}(l)
 
-    where ``A^{(v)}`` is the un-normalised aggregate of :func:`aggregate` at
-    velocity v (summed logs for the product rule, summed probabilities for the
-    sum rule): for every query the candidate whose window explains the frames
-    best wins (ties: the first candidate in the given order). The normalised
-    peak is not used: it rewards velocities that pile the window onto one
-    place whatever the frames say. Returns the chosen velocity per
-    query, shape ``(n_queries,)``, and the aggregated distributions at that
-    velocity, shape ``(n_queries, n_places)``. Uses the query frames and their
-    window only (no ground truth). With ``k == 1`` every candidate gives the
-    same result and the first is returned.
+    (:func:`window_scores`): for every query the candidate whose window
+    explains the frames best wins (ties: the first candidate in the given
+    order). The normalised peak is not used: it rewards velocities that pile
+    the window onto one place whatever the frames say. Each window decides
+    alone, so with few frames noise often picks a wrong velocity; see
+    :func:`track_velocity`. Returns the chosen velocity per query, shape
+    ``(n_queries,)``, and the aggregated distributions at that velocity, shape
+    ``(n_queries, n_places)``. Uses the query frames and their window only (no
+    ground truth). With ``k == 1`` every candidate gives the same result and
+    the first is returned.
     """
-    cands = np.asarray(candidates, dtype=np.float64).ravel()
-    if cands.size == 0:
-        raise ValueError("candidates must contain at least one velocity")
+    return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps, length=k, memory=0)
+
+
+def stream_contrast(prob: np.ndarray, memory: int) -> np.ndarray:
+    """Each frame divided by the mean of the ``memory`` most recent frames, shape ``(n_queries, n_places)``.
+
+    .. math::
+        B_j(l) = \\frac{1}{j - j_0 + 1} \\sum_{i=j_0}^{j} P_i(l), \\quad j_0 = \\max(0, j - M + 1), \\qquad
+        Q_j(l) = \\frac{P_j(l) / B_j(l)}{\\sum_{l'} P_j(l') / B_j(l')}
+
+    (``P_j(l) / B_j(l) = 0`` where ``B_j(l) = 0``; a row that is then 0
+    everywhere stays 0). A "hub" place that many consecutive frames vote for,
+    whatever the true place, is discounted, while the true place, which moves
+    along the route, is not. Causal: frame ``j`` uses frames ``j0 .. j`` only.
+    ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
+    """
     p = _prob2d(prob)
-    best_v = np.full(p.shape[0], cands[0])
-    best, best_peak = _aggregate_scored(p, k, float(cands[0]), rule, frame_positions, eps)
-    for c in cands[1:]:
-        agg, peak = _aggregate_scored(p, k, float(c), rule, frame_positions, eps)
-        better = peak > best_peak
-        best_v[better] = c
-        best[better] = agg[better]
-        best_peak[better] = peak[better]
-    return best_v, best
+    if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 0:
+        raise ValueError(f"background memory must be an integer >= 0, got {memory!r}")
+    if memory == 0:
+        return p.copy()
+    cumulative = np.concatenate([np.zeros((1, p.shape[1])), np.cumsum(p, axis=0)])
+    j = np.arange(p.shape[0])
+    first = np.maximum(0, j - int(memory) + 1)
+    background = (cumulative[j + 1] - cumulative[first]) / (j + 1 - first)[:, None]
+    ratio = np.divide(p, background, out=np.zeros_like(p), where=background > 0)
+    total = ratio.sum(axis=1, keepdims=True)
+    return np.divide(ratio, total, out=np.zeros_like(ratio), where=total > 0)
+
+
+def track_velocity(
+    prob: np.ndarray,
+    k: int,
+    candidates: np.ndarray,
+    span: int = 10,
+    rule: str = "product",
+    frame_positions: np.ndarray | None = None,
+    eps: float = 1e-6,
+    *,
+    length: int | None = None,
+    memory: int = 50,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity tracked over the query stream; returns ``(velocity, aggregated)``.
+
+    Three steps, all causal (query ``j`` uses frames ``0 .. j`` only):
+
+    .. math::
+        Q = \\text{stream\\_contrast}(P, M), \\qquad
+        E_j(v) = \\sum_{i=\\max(0,\\, j-S+1)}^{j} e_i^{(Q, L)}(v), \\qquad
+        \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} E_j(v), \\qquad
+        \\hat P_j = \\text{aggregate}(P, k, \\hat v)_j
+
+    1. :func:`stream_contrast` divides out the places that the last ``memory``
+       (M) frames all vote for. Without it, consecutive frames that vote for
+       the same wrong place make the velocity 0 look best.
+    2. ``e_i^{(Q, L)}(v)`` is :func:`window_scores` of Q over trajectories of
+       ``length`` (L, default 2k) frames: how well the frames line up at v.
+    3. The speed of a train or car changes slowly, so the scores of the
+       ``span`` (S) most recent windows are summed before the velocity is
+       chosen: the right velocity lines up every window, while spurious
+       alignments change from window to window and do not add up.
+
+    The decision itself aggregates the unchanged ``prob`` over k frames at the
+    chosen velocity, exactly as a given velocity would. The velocity is in
+    places per unit of ``frame_positions`` (dropped frames are handled as in
+    :func:`aggregate`); negative candidates cover a reversed traversal. Ties
+    go to the first candidate in the given order. ``span=1, length=k,
+    memory=0`` is the per-window search :func:`estimate_velocity`. Uses the
+    stream order, ``frame_positions`` and the frames' distributions only (no
+    ground truth).
+    """
+    if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
+        raise ValueError(f"velocity span must be an integer >= 1, got {span!r}")
+    k = _check_args(k, rule, eps)
+    cands = _candidates(candidates)
+    scores = window_scores(
+        stream_contrast(prob, memory), 2 * k if length is None else length, cands, rule, frame_positions, eps
+    )
+    padded = np.concatenate([np.zeros((int(span) - 1, cands.size)), scores])
+    tracked = np.lib.stride_tricks.sliding_window_view(padded, int(span), axis=0).sum(axis=2)
+    velocity = cands[np.argmax(tracked, axis=1)]
+    return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
