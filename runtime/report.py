@@ -68,11 +68,24 @@ def load_report(path: str | Path) -> VerifyReport:
     return VerifyReport.from_dict(data, str(file))
 
 
-def combine_reports(reports: Sequence[VerifyReport], sources: Sequence[str] | None = None) -> VerifyReport:
+#: Settings that make two verification runs measure different things: pooling them into one
+#: mean ± std needs the user's explicit consent (``allow_mixed``).
+POOLING_KEYS = ("query", "data", "subset", "places", "bits", "readout", "per_neuron", "scale_method", "calibration")
+
+
+def _as_json(value: Any) -> str:
+    """A setting as JSON text, so a tuple and the list a JSON file gives back compare equal."""
+    return json.dumps(value, sort_keys=True, default=str)
+
+
+def combine_reports(
+    reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
+) -> VerifyReport:
     """One report holding every run of ``reports``; the summary becomes mean ± std over all of them.
 
-    Settings come from the first report; keys on which the others differ are listed
-    under ``settings_differ`` (and shown in the report).
+    Settings come from the first report; keys on which the others differ are listed under
+    ``settings_differ`` (and shown in the report). Reports that differ in a :data:`POOLING_KEYS`
+    setting (other data, bit widths, readout) are refused unless ``allow_mixed``.
     """
     if not reports:
         raise ReportError("no reports to combine")
@@ -85,9 +98,15 @@ def combine_reports(reports: Sequence[VerifyReport], sources: Sequence[str] | No
             key
             for report in reports[1:]
             for key in set(settings) | set(report.settings)
-            if report.settings.get(key) != settings.get(key)
+            if _as_json(report.settings.get(key)) != _as_json(settings.get(key))
         }
     )
+    incompatible = [key for key in differ if key in POOLING_KEYS]
+    if incompatible and not allow_mixed:
+        raise ReportError(
+            f"the reports differ in {', '.join(incompatible)}: pooling them into one mean ± std would mix different "
+            "measurements (--allow-mixed to pool them anyway)"
+        )
     return dataclasses.replace(
         build_report(runs, settings, command=None),
         seconds=sum(float(report.seconds or 0) for report in reports),
@@ -146,6 +165,24 @@ def network_label(run: VerifiedRun, index: int) -> str:
     return run.label or str(index + 1)
 
 
+def failure_lines(report: VerifyReport) -> list[str]:
+    """Each failed check, named with its network and bit width: what the verdict line's FAIL means."""
+    lines = []
+    for index, run in enumerate(report.runs):
+        network = run.label or f"network {index + 1}"
+        for result in run.bits:
+            if not result.cross_implementation.passed:
+                lines.append(
+                    f"{network}, {result.bits} bits: {result.cross_implementation.n_failed} cross-implementation differences"
+                )
+            for check in result.tolerance_checks:
+                if not check.passed:
+                    lines.append(
+                        f"{network}, {result.bits} bits: {check.what} = {check.value:.4g} (limit {check.applied_limit:.4g})"
+                    )
+    return lines
+
+
 def blocks_of(report: VerifyReport) -> list[Block]:
     """The whole document, format-neutral."""
     summary = report.summary
@@ -168,6 +205,9 @@ def blocks_of(report: VerifyReport) -> list[Block]:
             ),
         )
     )
+    failures = failure_lines(report)
+    if failures:
+        blocks.append(Block("p", "**Failed:** " + "; ".join(failures) + "."))
     if report.settings_differ:
         blocks.append(
             Block(

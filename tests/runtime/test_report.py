@@ -159,3 +159,12 @@ def test_bad_report_files(tmp_path):
     with pytest.raises(ReportError, match="malformed"):
         load_report(tmp_path)
     assert main(["report", str(tmp_path)]) == EXIT_BAD_INPUT
+
+
+def test_combining_reports_of_other_data_or_bits_needs_consent(report):
+    other = json.loads(json.dumps(report.to_dict()))
+    other["settings"]["bits"] = [8]
+    with pytest.raises(ReportError, match="differ in bits"):
+        combine_reports([report, VerifyReport.from_dict(other)])
+    combined = combine_reports([report, VerifyReport.from_dict(other)], allow_mixed=True)
+    assert combined.settings_differ == ("bits",)

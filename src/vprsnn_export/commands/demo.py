@@ -28,7 +28,7 @@ from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
-from ..runtime.results import VerifiedRun
+from ..runtime.results import BitsResult, VerifiedRun
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
@@ -49,8 +49,9 @@ SUMMARY_COLUMNS = (
     ("exports", "NIR / Loihi / ONNX read back"),
     ("accuracy", "acc W+Prob k=1 %"),
     ("r_at_100p", "R@100P W+Prob k=5 %"),
-    ("delta", "Δ vs float (pts)"),
+    ("delta", "R@100P k=5 Δ vs float (pts)"),
     ("winner", "same winner %"),
+    ("failed", "failed checks"),
 )
 
 
@@ -84,6 +85,20 @@ def profile_text(profile: dict) -> str:
     )
 
 
+def check_value(check: str, value: float) -> str:
+    """A tolerance value as the reports show it: fractions as percentage points, counts as counts."""
+    return str(int(value)) if check == "saturations" else f"{100 * value:.1f} pts"
+
+
+def failed_checks(result: BitsResult) -> str:
+    """The checks a bit width failed, named ("-" when none): the verdict's reason on the console."""
+    failed = [f"{c.what}: {check_value(c.check, c.value)} (limit {check_value(c.check, c.applied_limit)})"
+              for c in result.tolerance_checks if not c.passed]  # fmt: skip
+    if not result.cross_implementation.passed:
+        failed.insert(0, f"{result.cross_implementation.n_failed} cross-implementation differences")
+    return "; ".join(failed) or "-"
+
+
 def summary_rows(run_result: VerifiedRun) -> list[dict]:
     top = max(DEMO_KS)
     rows = []
@@ -101,6 +116,7 @@ def summary_rows(run_result: VerifiedRun) -> list[dict]:
                 "r_at_100p": f"{100 * aggregated.r_at_100p:.1f}",
                 "delta": f"{100 * delta:+.1f}",
                 "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
+                "failed": failed_checks(result),
             }
         )
     return rows

@@ -20,6 +20,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="verify output folder(s) or report.json file(s)")
     parser.add_argument("--out", help="output folder (required with several RUN_DIRs; default: the one RUN_DIR)")
+    parser.add_argument(
+        "--allow-mixed",
+        action="store_true",
+        help="pool reports made on other data, bit widths or readout settings (refused otherwise)",
+    )
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
     parser.set_defaults(handler=run)
 
@@ -32,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     if len(reports) > 1 and not args.out:
         raise InvalidValueError("combining several reports needs --out DIR")
     out = Path(args.out) if args.out else report_path(args.runs[0]).parent
-    combined = combine_reports(reports, sources)
+    combined = combine_reports(reports, sources, allow_mixed=args.allow_mixed)
     rewrite_json = len(reports) > 1 or (
         args.out is not None and out.resolve() != report_path(args.runs[0]).parent.resolve()
     )
