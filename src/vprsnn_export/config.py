@@ -23,13 +23,28 @@ class EncoderConfig:
     timesteps: int = 300
 
 
+CHANNELS = ("intensity", "dog_on_off")
+
+
 @dataclass(frozen=True)
 class PreprocessConfig:
-    """Greyscale, resize to image_size x image_size (INTER_AREA), patch min-max normalisation."""
+    """Greyscale, resize to image_size x image_size (INTER_AREA), then the input channels.
+
+    ``channels="intensity"`` (the paper): patch min-max normalisation, image_size**2 inputs.
+    ``channels="dog_on_off"``: centre-surround (difference of Gaussians) ON and OFF channels,
+    2 * image_size**2 inputs (docs/model.md, docs/research/recognition-quality.md).
+    """
 
     image_size: int = 28
     patch_size: int = 7
     patch_norm: bool = True  # ablation switch: False scales the whole image to [0, 1] instead
+    channels: str = "intensity"
+    dog_sigma_centre: float = 1.0  # DoG centre Gaussian, in pixels of the resized image
+    dog_sigma_surround: float = 2.0  # DoG surround Gaussian
+
+    @property
+    def n_channels(self) -> int:
+        return 2 if self.channels == "dog_on_off" else 1
 
 
 @dataclass(frozen=True)
@@ -100,13 +115,21 @@ class Config:
             else:
                 check_range(section.name, value)
         side = self.preprocess.image_size
+        if self.preprocess.channels not in CHANNELS:
+            raise InvalidValueError(
+                f"config.preprocess.channels: {self.preprocess.channels!r} is not one of {', '.join(CHANNELS)}"
+            )
+        if self.preprocess.dog_sigma_centre >= self.preprocess.dog_sigma_surround:
+            raise InvalidValueError("config.preprocess.dog_sigma_centre must be below dog_sigma_surround")
         if side % self.preprocess.patch_size:
             raise InvalidValueError(
                 f"preprocess.image_size {side} is not a multiple of preprocess.patch_size {self.preprocess.patch_size}"
             )
-        if self.network.n_inputs != side * side:
+        inputs = self.preprocess.n_channels * side * side
+        if self.network.n_inputs != inputs:
             raise InvalidValueError(
-                f"network.n_inputs {self.network.n_inputs} must equal image_size**2 = {side * side}"
+                f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "
+                f"image_size**2 = {inputs} (preprocess.channels = {self.preprocess.channels!r})"
             )
         if self.homeostasis.theta_min > self.homeostasis.theta_max:
             raise InvalidValueError(
@@ -145,6 +168,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "encoder.timesteps": (1, 100_000, True, True),
     "preprocess.image_size": (1, 4096, True, True),
     "preprocess.patch_size": (1, 4096, True, True),
+    "preprocess.dog_sigma_centre": (0.0, 100.0, False, True),
+    "preprocess.dog_sigma_surround": (0.0, 100.0, False, True),
     "network.n_inputs": (1, 2**24, True, True),
     "network.n_neurons": (1, 1_000_000, True, True),
     "network.beta": (0.0, 1.0, False, True),
@@ -215,3 +240,18 @@ def _coerce(value: Any, kind: type, where: str) -> Any:
         except (TypeError, ValueError):
             raise InvalidValueError(f"{where}: expected a number, got {value!r}") from None
     return value
+
+
+#: Named starting points for the config (``--preset``): the paper's constants, and the
+#: illumination-invariant DoG ON/OFF input channels (docs/research/recognition-quality.md).
+PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "dog": {"preprocess.channels": "dog_on_off", "network.n_inputs": 2 * 28 * 28},
+}
+
+
+def preset(name: str) -> Config:
+    """The config of a named preset; InvalidValueError listing the presets otherwise."""
+    if name not in PRESETS:
+        raise InvalidValueError(f"--preset: unknown preset {name!r}; choose from {', '.join(PRESETS)}")
+    return Config().replace(**PRESETS[name])

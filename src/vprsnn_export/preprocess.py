@@ -10,6 +10,15 @@ For an input image ``I`` (uint8, any H x W) and ``S = image_size``, ``p = patch_
 3. Flatten row-major: the value of pixel ``(row, col)`` sits at index ``row * S + col``.
 
 The result lies in [0, 1] as float32, shape ``(N, S * S)``.
+
+With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF
+channels (the retina's, and an event camera's, split of a signed response):
+
+    D = G_{sigma_c} * R - G_{sigma_s} * R          (Gaussian blurs of R as float, reflected borders)
+    ON = max(D, 0),  OFF = max(-D, 0),  both divided by max(ON, OFF) over the image (0 if flat)
+
+and the image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input
+``r * 2S + c`` (ON) and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
 """
 
 from __future__ import annotations
@@ -73,11 +82,31 @@ def scale_unit(resized: np.ndarray) -> np.ndarray:
     return resized.astype(np.float32) / np.float32(255.0)
 
 
+def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) -> np.ndarray:
+    """Difference-of-Gaussians ON/OFF channels of ``(N, S, S)`` uint8 images -> ``(N, S, 2S)`` float32 in [0, 1].
+
+    ``D = G_c * R - G_s * R``; ``ON = max(D, 0)``, ``OFF = max(-D, 0)``, side by side in each row,
+    scaled by the image's largest ON or OFF value (a flat image gives zeros).
+    """
+    images = resized.astype(np.float32)
+    centre = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_centre, borderType=cv2.BORDER_REFLECT) for i in images])
+    surround = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_surround, borderType=cv2.BORDER_REFLECT) for i in images])
+    response = centre - surround
+    both = np.concatenate([np.maximum(response, 0), np.maximum(-response, 0)], axis=2)
+    top = both.reshape(len(both), -1).max(axis=1)
+    return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
+
+
 def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
-    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: normalise, then flatten to ``(N, S*S)``."""
+    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
     if resized.ndim != 3 or resized.dtype != np.uint8:
         raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
-    scaled = patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else scale_unit(resized)
+    if len(resized) == 0:
+        raise DataError("no images to preprocess")
+    if cfg.channels == "dog_on_off":
+        scaled = dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
+    else:
+        scaled = patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else scale_unit(resized)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 

@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from ..config import Config, PreprocessConfig
+from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
 from ..runtime.evaluation import ReadoutOptions
@@ -93,6 +93,12 @@ def add_readout_options(
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("configuration (defaults: the paper's text)")
+    group.add_argument(
+        "--preset",
+        choices=sorted(PRESETS),
+        help="starting configuration: paper (the default) or dog (illumination-invariant DoG ON/OFF input "
+        "channels, docs/model.md); the options below apply on top",
+    )
     group.add_argument("--seed", type=int, help="seed for weights, shuffles and every spike")
     group.add_argument("--epochs", type=int, help="training epochs")
     group.add_argument("--timesteps", type=int, help="presentation window T")
@@ -140,7 +146,8 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = parse_value(raw.strip())
-    return (base or Config()).replace(**overrides)
+    start = base if base is not None else (preset(args.preset) if getattr(args, "preset", None) else Config())
+    return start.replace(**overrides)
 
 
 def parse_value(raw: str) -> Any:
