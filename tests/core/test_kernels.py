@@ -1,0 +1,186 @@
+"""The compiled event-driven kernels against the integer simulator, its reference stepper and the float path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from vprsnn_export.config import Config
+from vprsnn_export.dynamics import run_network
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.kernels import as_spike_array, float_run, integer_run
+from vprsnn_export.runs import SpikeRun
+from vprsnn_export.targets.intsim import prepare, run_prepared
+from vprsnn_export.targets.reference_stepper import reference_run
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def make_model(q, m, threshold, dv, bits, *, wta=True, per_neuron=True) -> FixedPointModel:
+    n_inputs, n_neurons = q.shape
+    side = int(round(n_inputs**0.5))
+    cfg = Config().replace(
+        **{
+            "preprocess.image_size": side,
+            "preprocess.patch_size": 1,
+            "network.n_inputs": n_inputs,
+            "network.n_neurons": n_neurons,
+            "network.wta": wta,
+        }
+    )
+    return FixedPointModel(
+        bits=bits,
+        weight_mantissa=np.asarray(q, dtype=np.int32),
+        scale_multiplier=np.asarray(m, dtype=np.int32),
+        scale_exponent=-20,
+        threshold=np.asarray(threshold, dtype=np.int32),
+        decay_dv=int(dv),
+        config=cfg,
+        calibration=np.zeros((n_neurons, 1), dtype=np.int64),
+        float_calibration=np.zeros((n_neurons, 1), dtype=np.int64),
+        reference_place_ids=np.zeros(1, dtype=np.int64),
+        reference_traversals=["summer"],
+        quantisation={"per_neuron": per_neuron},
+        source_sha256="0" * 64,
+    )
+
+
+def kernel_run(model: FixedPointModel, spikes: np.ndarray, isolation: bool) -> SpikeRun:
+    prep = prepare(model, torch.device("cpu"))
+    return integer_run(
+        spikes,
+        prep.weights.to(torch.int64).numpy(),
+        prep.threshold.numpy(),
+        None if prep.multipliers is None else prep.multipliers.numpy(),
+        keep=prep.keep,
+        limit=prep.limit,
+        shift=prep.shift,
+        wta=prep.wta,
+        isolation=isolation,
+        record=True,
+    )
+
+
+def assert_same_integer_run(model: FixedPointModel, spikes: np.ndarray, isolation: bool) -> SpikeRun:
+    """Kernel == run_prepared (every field) == the reference stepper (what it reports)."""
+    fast = kernel_run(model, spikes, isolation)
+    sim = run_prepared(prepare(model, torch.device("cpu")), torch.from_numpy(spikes), isolation=isolation, record=True)
+    for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
+        assert torch.equal(getattr(fast, field), getattr(sim, field)), field
+    assert (fast.saturations, fast.max_current) == (sim.saturations, sim.max_current)
+    slow = reference_run(model, spikes, state_isolation=isolation)
+    assert torch.equal(fast.raster, slow.raster)
+    assert torch.equal(fast.final_voltage, slow.final_voltage)
+    assert torch.equal(fast.candidates_per_step, slow.candidates_per_step)
+    assert fast.saturations == slow.saturations
+    return fast
+
+
+@st.composite
+def integer_cases(draw):
+    """Small random models: any bit width, equal or unequal multipliers (tie-prone or not), decays,
+    thresholds from tiny (many candidates) to huge, WTA on/off, isolation on/off, and saturating ones."""
+    saturating = draw(st.booleans())
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    n_inputs = draw(st.sampled_from([8, 10]) if saturating else st.integers(1, 4)) ** 2
+    n_neurons = draw(st.integers(1, 7))
+    bits = draw(st.integers(7, 8) if saturating else st.integers(2, 8))
+    top = 2**bits
+    q = rng.integers(top // 2 if saturating else 0, top, (n_inputs, n_neurons))
+    per_neuron = draw(st.booleans())
+    span = draw(st.sampled_from([3, 2**16]))
+    m = rng.integers(1, span, n_neurons) if per_neuron else np.full(n_neurons, rng.integers(1, 2**16))
+    if saturating:
+        threshold, dv = rng.integers(2**17 - 2**10, 2**17, n_neurons), draw(st.integers(0, 8))
+    else:
+        threshold, dv = rng.integers(1, draw(st.sampled_from([8, 300, 2**17])), n_neurons), draw(st.integers(0, 4095))
+    model = make_model(q, m, threshold, dv, bits, wta=draw(st.booleans()), per_neuron=per_neuron)
+    steps = draw(st.integers(20, 40) if saturating else st.integers(1, 15))
+    shape = (draw(st.integers(1, 3)), steps, n_inputs)
+    density = draw(st.floats(0.6, 1.0) if saturating else st.floats(0.0, 1.0))
+    spikes = (rng.random(shape) < density).astype(np.uint8)
+    return model, spikes, draw(st.booleans())
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(integer_cases())
+def test_integer_kernel_is_bit_identical_to_the_simulator_and_the_reference(case):
+    assert_same_integer_run(*case)
+
+
+def test_integer_kernel_counts_saturations_and_reports_the_unshifted_peak():
+    model = make_model(np.full((64, 2), 255), [1, 1], [2**17 - 1, 2**17 - 1], 0, 8)
+    run = assert_same_integer_run(model, np.ones((2, 12, 64), dtype=np.uint8), isolation=True)
+    assert run.saturations == 4 and run.max_current == 64 * 255
+
+
+def test_integer_kernel_ties_and_multipliers():
+    same = make_model(np.ones((4, 3)), [5, 5, 5], [1, 1, 1], 0, 2)
+    assert kernel_run(same, np.ones((1, 3, 4), dtype=np.uint8), True).raster[0, :, 0].all()
+    weighted = make_model(np.array([[3, 1]] * 4), [1, 4], [1, 1], 0, 2)  # a m = (12, 16)
+    assert kernel_run(weighted, np.ones((1, 1, 4), dtype=np.uint8), True).raster[0, 0].tolist() == [False, True]
+
+
+def test_integer_kernel_wide_currents_use_int64():
+    model = make_model(np.full((36, 2), 255), [1, 2], [2**16, 2**16], 100, 8)
+    weights = prepare(model, torch.device("cpu")).weights.to(torch.int64).numpy() << 12  # sums beyond 2**31
+    run = integer_run(
+        np.ones((1, 3, 36), dtype=np.uint8), weights, np.array([1, 1]), None, keep=4096, limit=2**40, shift=6, wta=True
+    )
+    assert run.max_current == (36 * 255 << 18) >> 6
+    with pytest.raises(ValueError, match="non-negative"):
+        integer_run(np.ones((1, 1, 1), np.uint8), -np.ones((1, 1)), np.ones(1), None, keep=1, limit=1, shift=0, wta=True)
+
+
+def float_case(seed: int, n: int = 4, timesteps: int = 40, n_inputs: int = 30, n_neurons: int = 9):
+    gen = torch.Generator().manual_seed(seed)
+    weights = torch.rand((n_inputs, n_neurons), generator=gen)
+    theta = 0.5 + 2 * torch.rand(n_neurons, generator=gen)
+    spikes = (torch.rand((n, timesteps, n_inputs), generator=gen) < 0.2).to(torch.uint8)
+    return spikes, weights, theta
+
+
+@pytest.mark.parametrize("wta", [True, False])
+@pytest.mark.parametrize("isolation", [True, False])
+def test_float_kernel_matches_run_network(wta, isolation):
+    for seed in range(5):
+        spikes, weights, theta = float_case(seed)
+        torch_run = run_network(spikes, weights, theta, beta=0.95, wta=wta, state_isolation=isolation, record=True)
+        for accumulate in ("float32", "float64"):
+            fast = float_run(spikes, weights, theta, beta=0.95, wta=wta, isolation=isolation, record=True, accumulate=accumulate)
+            assert torch.equal(fast.raster, torch_run.raster)
+            assert torch.equal(fast.counts, torch_run.counts)
+            assert torch.equal(fast.candidates_per_step, torch_run.candidates_per_step)
+            if isolation:
+                assert torch.allclose(fast.final_voltage, torch_run.final_voltage, atol=1e-5)
+
+
+def test_float_kernel_exact_on_dyadic_weights_ties_to_the_lowest_index():
+    """Weights that are multiples of 1/8 sum exactly in any order: the kernel must equal run_network bit for bit."""
+    gen = torch.Generator().manual_seed(3)
+    weights = torch.randint(0, 8, (25, 6), generator=gen).float() / 8
+    weights[:, 3] = weights[:, 1]  # identical currents: ties
+    theta = torch.tensor([1.0, 0.5, 2.0, 0.5, 1.5, 3.0])
+    spikes = (torch.rand((3, 30, 25), generator=gen) < 0.3).to(torch.uint8)
+    fast = float_run(spikes, weights, theta, beta=0.5, record=True)
+    slow = run_network(spikes, weights, theta, beta=0.5, record=True)
+    assert torch.equal(fast.raster, slow.raster) and torch.equal(fast.final_voltage, slow.final_voltage)
+
+
+def test_spike_arrays_are_checked_and_bool_is_accepted():
+    assert as_spike_array(torch.ones((1, 2, 3), dtype=torch.bool)).dtype == np.uint8
+    with pytest.raises(ValueError, match="uint8 or bool"):
+        as_spike_array(np.ones((1, 2, 3), dtype=np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        as_spike_array(np.ones((2, 3), dtype=np.uint8))
+    with pytest.raises(ValueError, match="accumulate"):
+        float_run(np.ones((1, 1, 2), np.uint8), np.ones((2, 1)), np.ones(1), beta=0.9, accumulate="half")  # type: ignore[arg-type]
