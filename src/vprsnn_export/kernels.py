@@ -16,11 +16,13 @@ recurrence over presentations, steps and neurons runs in one numba-compiled loop
     V_j <- 0 for every j in C
 
 State is zeroed at the start of every presentation (isolation) or carried over in
-order. The integer kernel is bit-identical to the integer simulator. The float
-kernel sums each step's currents in increasing input order in float32 (or in float64
-and rounds once, ``accumulate="float64"``); BLAS sums the same terms in its own order,
-so a current may differ in its last bit from :func:`vprsnn_export.dynamics.run_network`
-and, rarely, a threshold decision with it (bench/bench_kernels.py counts how often).
+order. The integer kernel is bit-identical to the integer simulator. The float kernel
+sums each step's active rows in float32 in the order this machine's BLAS uses for the
+dense matmul (probed: :func:`blas_block`), so it reproduces
+:func:`vprsnn_export.dynamics.run_network` bit for bit where the probe succeeds; elsewhere
+a current may differ in its last bit and, rarely, a threshold decision with it.
+:func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column
+normalisation) with every float32 operation in the torch loop's order.
 
 Compilation is lazy (first call, about a second per signature) and cached next to this
 file (numba ``cache=True``); on a read-only install numba warns and compiles in memory.
@@ -28,16 +30,18 @@ file (numba ``cache=True``); on a read-only install numba warns and compiles in 
 
 from __future__ import annotations
 
-from typing import Literal
+import functools
 
 import numpy as np
 import torch
 from numba import njit
 
+from .config import Config
 from .runs import SpikeRun
 
 DECAY_BITS = 12  # V <- (V keep) >> 12: the integer decay's 12-bit fraction (export/model.py DECAY_BITS)
 INT32_SAFE = (1 << 31) - 1
+QUERY_CHUNK = 128  # dynamics.QUERY_CHUNK: the presentations run_network multiplies at once
 
 
 def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
@@ -129,6 +133,45 @@ def _integer_kernel(
 
 
 @njit(cache=True, nogil=True)
+def _blocked_sum(
+    weights: np.ndarray, index: np.ndarray, k: int, block: int, total: np.ndarray, partial: np.ndarray
+) -> None:
+    """total = sum over the active rows index[:k] of weights, the way a K-blocked GEMM adds them.
+
+    Inputs are cut into blocks of ``block`` consecutive indices; each block's rows are summed
+    from zero in increasing order, and the block sums are added to the total in order
+    (``block`` >= the number of inputs: one plain left-to-right sum).
+    """
+    total[:] = 0
+    a = 0
+    first = True
+    while a < k:
+        stop = (index[a] // block + 1) * block
+        partial[:] = 0
+        while a < k and index[a] < stop:
+            partial += weights[index[a]]
+            a += 1
+        if first:
+            total[:] = partial
+            first = False
+        else:
+            total += partial
+
+
+@njit(cache=True, nogil=True)
+def _blocked_currents(spikes: np.ndarray, weights: np.ndarray, block: int) -> np.ndarray:
+    """Currents (rows, neurons) float32 of 0/1 spikes (rows, inputs) by :func:`_blocked_sum` (the BLAS probe)."""
+    rows, n_inputs = spikes.shape
+    out = np.empty((rows, weights.shape[1]), dtype=np.float32)
+    index = np.empty(n_inputs, dtype=np.int64)
+    partial = np.empty(weights.shape[1], dtype=np.float32)
+    for r in range(rows):
+        k = _active_inputs(spikes[r], index)
+        _blocked_sum(weights, index, k, block, out[r], partial)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _float_kernel(
     spikes: np.ndarray,  # (N, T, inputs) uint8
     weights: np.ndarray,  # (inputs, neurons) float32
@@ -137,7 +180,7 @@ def _float_kernel(
     wta: bool,
     isolation: bool,
     record: bool,
-    accumulator: np.ndarray,  # (neurons,) float32 or float64 scratch: the dtype the currents are summed in
+    block: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     n, timesteps, n_inputs = spikes.shape
     n_neurons = weights.shape[1]
@@ -146,20 +189,20 @@ def _float_kernel(
     raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
     final = np.zeros((n, n_neurons), dtype=np.float32)
     voltage = np.zeros(n_neurons, dtype=np.float32)
+    current = np.empty(n_neurons, dtype=np.float32)
+    partial = np.empty(n_neurons, dtype=np.float32)
     index = np.empty(n_inputs, dtype=np.int64)
     for p in range(n):
         if isolation:
             voltage[:] = 0
         for t in range(timesteps):
             k = _active_inputs(spikes[p, t], index)
-            accumulator[:] = 0
-            for a in range(k):
-                accumulator += weights[index[a]]
+            _blocked_sum(weights, index, k, block, current, partial)
             n_cand = 0
             best = -1
             best_current = np.float32(-np.inf)
             for j in range(n_neurons):
-                c = np.float32(accumulator[j])
+                c = current[j]
                 v = beta * voltage[j] + c
                 if v > theta[j]:
                     n_cand += 1
@@ -242,20 +285,24 @@ def float_run(
     wta: bool = True,
     isolation: bool = True,
     record: bool = False,
-    accumulate: Literal["float32", "float64"] = "float32",
+    block: int | None = None,
 ) -> SpikeRun:
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
 
-    Same dynamics as :func:`vprsnn_export.dynamics.run_network`; each step's currents are the
-    weight rows of the active inputs summed in increasing input order in ``accumulate``
-    precision, then rounded to float32. ``final_voltage`` is reported with and without isolation.
+    Same dynamics as :func:`vprsnn_export.dynamics.run_network`. Each step's currents are the
+    active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
+    :func:`_blocked_sum`); by default the block that reproduces this machine's BLAS on the
+    shape ``run_network`` multiplies (:func:`blas_block`), so the counts are those of
+    ``run_network`` bit for bit wherever the probe succeeds. ``final_voltage`` is reported
+    with and without isolation.
     """
     array = as_spike_array(spikes)
     w = np.ascontiguousarray(_numpy(weights), dtype=np.float32)
     if w.ndim != 2 or array.shape[2] != w.shape[0]:
         raise ValueError(f"spikes {array.shape} do not match weights {w.shape}")
-    if accumulate not in ("float32", "float64"):
-        raise ValueError(f"accumulate must be 'float32' or 'float64', got {accumulate!r}")
+    n, timesteps, n_inputs = array.shape
+    if block is None:
+        block = blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1]) or n_inputs
     counts, n_candidates, raster, final = _float_kernel(
         array,
         w,
@@ -264,7 +311,7 @@ def float_run(
         bool(wta),
         bool(isolation),
         bool(record),
-        np.zeros(w.shape[1], dtype=np.dtype(accumulate)),
+        max(1, int(block)),
     )
     return SpikeRun(
         counts=torch.from_numpy(counts),
@@ -272,6 +319,182 @@ def float_run(
         raster=torch.from_numpy(raster) if record else None,
         final_voltage=torch.from_numpy(final),
     )
+
+
+BLOCK_CANDIDATES = (0, 192, 256, 128, 384, 512, 96, 64, 160, 224, 320, 448, 768)  # 0: no blocking
+PROBE_ROWS = 512  # at most this many rows in a probe matmul
+
+
+@functools.lru_cache(maxsize=64)
+def _probe_block(rows: int, n_inputs: int, n_neurons: int, threads: int) -> int | None:
+    gen = np.random.default_rng(20240611)
+    spikes = gen.random((rows, n_inputs)) < 0.125
+    weights = gen.random((n_inputs, n_neurons)).astype(np.float32)
+    expected = torch.matmul(torch.from_numpy(spikes.astype(np.float32)), torch.from_numpy(weights)).numpy()
+    packed = spikes.astype(np.uint8)
+    for block in BLOCK_CANDIDATES:
+        size = block or n_inputs
+        if block and block >= n_inputs:
+            continue
+        if np.array_equal(_blocked_currents(packed, weights, max(size, 1)), expected):
+            return size
+    return None
+
+
+def blas_block(rows: int, n_inputs: int, n_neurons: int) -> int | None:
+    """The K-block of torch's CPU float32 matmul (rows, inputs) @ (inputs, neurons) for 0/1 rows, if any reproduces it.
+
+    With 0/1 left operands every product is exact, so a BLAS result differs from a plain sum
+    only in the order of the additions. MKL's AVX-512 sgemm (torch 2.13 CPU wheel) sums the
+    inputs in blocks of 192 for 64 rows and more and left to right for one or two rows;
+    other builds may differ. Probed once per shape and thread count on random data (at most
+    ``PROBE_ROWS`` rows); ``None`` when no candidate block reproduces it bit for bit.
+    """
+    return _probe_block(max(1, min(rows, PROBE_ROWS)), n_inputs, n_neurons, torch.get_num_threads())
+
+
+@functools.lru_cache(maxsize=64)
+def _probe_batch_sums(batch: int, n_inputs: int, n_neurons: int, threads: int) -> bool:
+    gen = np.random.default_rng(20240612)
+    trace = torch.from_numpy(gen.random((batch, n_inputs)).astype(np.float32))
+    spikes = torch.from_numpy((gen.random((batch, n_inputs)) < 0.3).astype(np.float32))
+    post = torch.from_numpy((gen.random((batch, n_neurons)) < 0.3).astype(np.float32))
+    post_trace = torch.from_numpy(gen.random((batch, n_neurons)).astype(np.float32))
+    for left, right in ((trace, post), (spikes, post_trace)):
+        expected = (left.transpose(0, 1) @ right).numpy()
+        total = np.zeros_like(expected)
+        for b in range(batch):
+            total = total + left[b].numpy()[:, None] * right[b].numpy()[None, :]
+        if not np.array_equal(total, expected):
+            return False
+    return True
+
+
+def batch_sums_in_order(batch: int, n_inputs: int, n_neurons: int) -> bool:
+    """Whether torch's x^T @ y over a batch (the STDP terms) sums the rows left to right on this machine."""
+    return _probe_batch_sums(batch, n_inputs, n_neurons, torch.get_num_threads())
+
+
+@njit(cache=True, nogil=True)
+def _stdp_window(
+    spikes: np.ndarray,  # (B, T, inputs) uint8
+    weights: np.ndarray,  # (inputs, neurons) float32, updated in place
+    theta: np.ndarray,  # (neurons,) float32
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+    block: int,
+) -> np.ndarray:
+    batch, timesteps, n_inputs = spikes.shape
+    n_neurons = weights.shape[1]
+    zero = np.float32(0)
+    tiny = np.float32(np.finfo(np.float32).tiny)
+    voltage = np.zeros((batch, n_neurons), dtype=np.float32)
+    post_trace = np.zeros((batch, n_neurons), dtype=np.float32)
+    pre_trace = np.zeros((batch, n_inputs), dtype=np.float32)
+    current = np.empty((batch, n_neurons), dtype=np.float32)
+    fired = np.zeros((batch, n_neurons), dtype=np.bool_)
+    partial = np.empty(n_neurons, dtype=np.float32)
+    index = np.empty((batch, n_inputs), dtype=np.int64)
+    n_active = np.empty(batch, dtype=np.int64)
+    potentiation = np.empty((n_inputs, n_neurons), dtype=np.float32)
+    depression = np.empty((n_inputs, n_neurons), dtype=np.float32)
+    squares = np.empty(n_neurons, dtype=np.float32)
+    fired_total = np.zeros(n_neurons, dtype=np.float32)
+    for t in range(timesteps):
+        for b in range(batch):
+            n_active[b] = _active_inputs(spikes[b, t], index[b])
+            _blocked_sum(weights, index[b], n_active[b], block, current[b], partial)
+        for b in range(batch):
+            best = -1
+            best_current = np.float32(-np.inf)
+            for j in range(n_neurons):
+                c = current[b, j]
+                v = beta * voltage[b, j] + c
+                candidate = v > theta[j]
+                fired[b, j] = candidate and not wta
+                if candidate:
+                    voltage[b, j] = zero
+                    if best < 0 or c > best_current:
+                        best_current = c
+                        best = j
+                else:
+                    voltage[b, j] = v
+            if wta and best >= 0:
+                fired[b, best] = True
+        for b in range(batch):
+            for i in range(n_inputs):
+                pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
+            for j in range(n_neurons):
+                post_trace[b, j] = post_trace[b, j] * post_keep + (np.float32(1) if fired[b, j] else zero)
+                if fired[b, j]:
+                    fired_total[j] += np.float32(1)
+        potentiation[:] = zero
+        depression[:] = zero
+        for b in range(batch):
+            for j in range(n_neurons):
+                if fired[b, j]:
+                    for i in range(n_inputs):
+                        potentiation[i, j] += pre_trace[b, i]
+            for a in range(n_active[b]):
+                depression[index[b, a]] += post_trace[b]
+        squares[:] = zero
+        for i in range(n_inputs):
+            for j in range(n_neurons):
+                w = weights[i, j]
+                delta = a_plus * (w_max - w) * potentiation[i, j] - a_minus * w * depression[i, j]
+                w = min(max(w + delta, zero), w_max)
+                weights[i, j] = w
+                squares[j] += w * w
+        if weight_norm:
+            for j in range(n_neurons):
+                squares[j] = max(np.sqrt(squares[j]), tiny)
+            for i in range(n_inputs):
+                for j in range(n_neurons):
+                    weights[i, j] = weights[i, j] / squares[j]
+    return fired_total
+
+
+def stdp_window(
+    weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """One training batch's window (B, T, inputs) with plasticity on, compiled: the loop of ``trainer.train.train_batch``.
+
+    Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
+    and column normalisation, each float32 operation in torch's order, so the weights are bit
+    for bit those of the torch loop when this machine's BLAS orders its sums as probed
+    (:func:`blas_block`, :func:`batch_sums_in_order`). Returns (new weights, spikes per neuron
+    in the batch as float32), or ``None`` when the tensors are not float32 on the CPU or the
+    BLAS order is not reproducible: the caller then runs the torch loop. Homeostasis is the caller's.
+    """
+    batch, _, n_inputs = spikes.shape
+    n_neurons = weights.shape[1]
+    if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
+        return None
+    block = blas_block(batch, n_inputs, n_neurons)
+    if block is None or not batch_sums_in_order(batch, n_inputs, n_neurons):
+        return None
+    updated = weights.detach().clone().contiguous()
+    fired = _stdp_window(
+        as_spike_array(spikes),
+        updated.numpy(),
+        np.ascontiguousarray(theta.detach().numpy()),
+        np.float32(cfg.network.beta),
+        bool(cfg.network.wta),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
+        np.float32(cfg.stdp.a_plus),
+        np.float32(cfg.stdp.a_minus),
+        np.float32(cfg.stdp.w_max),
+        bool(cfg.stdp.weight_norm),
+        block,
+    )
+    return updated, torch.from_numpy(fired)
 
 
 def _numpy(values: torch.Tensor | np.ndarray) -> np.ndarray:
