@@ -62,7 +62,7 @@ def kernel_run(model: FixedPointModel, spikes: np.ndarray, isolation: bool) -> S
     prep = prepare(model, torch.device("cpu"))
     return integer_run(
         spikes,
-        prep.weights.to(torch.int64).numpy(),
+        model.weight_mantissa,
         prep.threshold.numpy(),
         None if prep.multipliers is None else prep.multipliers.numpy(),
         keep=prep.keep,
@@ -134,15 +134,16 @@ def test_integer_kernel_ties_and_multipliers():
     assert kernel_run(weighted, np.ones((1, 1, 4), dtype=np.uint8), True).raster[0, 0].tolist() == [False, True]
 
 
-def test_integer_kernel_wide_currents_use_int64():
-    model = make_model(np.full((36, 2), 255), [1, 2], [2**16, 2**16], 100, 8)
-    weights = prepare(model, torch.device("cpu")).weights.to(torch.int64).numpy() << 12  # sums beyond 2**31
+def test_integer_kernel_wide_mantissas_use_int64_sums():
+    q = np.full((36, 2), 2**26)  # sums beyond 2**31: the int64 path
     run = integer_run(
-        np.ones((1, 3, 36), dtype=np.uint8), weights, np.array([1, 1]), None, keep=4096, limit=2**40, shift=6, wta=True
+        np.ones((1, 3, 36), np.uint8), q, np.array([1, 1]), None, shift=6, keep=4096, limit=2**40, wta=True
     )
-    assert run.max_current == (36 * 255 << 18) >> 6
+    assert run.max_current == 36 * 2**26 and run.counts.tolist() == [[3, 0]]
     with pytest.raises(ValueError, match="non-negative"):
-        integer_run(np.ones((1, 1, 1), np.uint8), -np.ones((1, 1)), np.ones(1), None, keep=1, limit=1, shift=0, wta=True)
+        integer_run(
+            np.ones((1, 1, 1), np.uint8), -np.ones((1, 1)), np.ones(1), None, shift=0, keep=1, limit=1, wta=True
+        )
 
 
 def float_case(seed: int, n: int = 4, timesteps: int = 40, n_inputs: int = 30, n_neurons: int = 9):
