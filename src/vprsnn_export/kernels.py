@@ -25,12 +25,18 @@ a current may differ in its last bit and, rarely, a threshold decision with it.
 normalisation) with every float32 operation in the torch loop's order.
 
 Compilation is lazy (first call, about a second per signature) and cached next to this
-file (numba ``cache=True``); on a read-only install numba warns and compiles in memory.
+file (numba ``cache=True``); on a read-only install without a writable cache directory the
+kernels are compiled in memory with one warning (:func:`compiled`). The kernels are serial:
+numba's threading layer is never launched (once launched, its OpenMP workers slowed torch's
+training loop sevenfold here).
 """
 
 from __future__ import annotations
 
 import functools
+import warnings
+from collections.abc import Callable
+from typing import TypeVar, cast
 
 import numpy as np
 import torch
@@ -42,6 +48,26 @@ from .runs import SpikeRun
 DECAY_BITS = 12  # V <- (V keep) >> 12: the integer decay's 12-bit fraction (export/model.py DECAY_BITS)
 INT32_SAFE = (1 << 31) - 1
 QUERY_CHUNK = 128  # dynamics.QUERY_CHUNK: the presentations run_network multiplies at once
+
+
+F = TypeVar("F", bound=Callable[..., object])
+_uncached: list[str] = []
+
+
+def compiled(function: F) -> F:
+    """numba ``njit(nogil=True)``, cached on disk when a cache directory is writable.
+
+    numba caches next to this file, else in the user's cache directory (or ``NUMBA_CACHE_DIR``);
+    when none is writable (a read-only install and home) numba refuses ``cache=True`` at import,
+    so the kernels are compiled in memory on first call instead, with one warning.
+    """
+    try:
+        return cast(F, njit(cache=True, nogil=True)(function))
+    except RuntimeError as exc:
+        if not _uncached:
+            warnings.warn(f"numba cannot cache the kernels ({exc}); compiling them in memory", stacklevel=2)
+        _uncached.append(function.__name__)
+        return cast(F, njit(nogil=True)(function))
 
 
 def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
@@ -56,7 +82,7 @@ def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array)
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _active_inputs(row: np.ndarray, index: np.ndarray) -> int:
     """Write the indices i with row[i] != 0 into index[:k], in increasing order; return k (branch-free)."""
     k = 0
@@ -66,7 +92,7 @@ def _active_inputs(row: np.ndarray, index: np.ndarray) -> int:
     return k
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _step_lists(spikes: np.ndarray, index: np.ndarray, offsets: np.ndarray) -> None:
     """Spikes (T, inputs) as per-step lists: step t's active inputs are index[offsets[t]:offsets[t + 1]]."""
     k = 0
@@ -76,7 +102,7 @@ def _step_lists(spikes: np.ndarray, index: np.ndarray, offsets: np.ndarray) -> N
     offsets[spikes.shape[0]] = k
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _step_currents(
     weights: np.ndarray, index: np.ndarray, offsets: np.ndarray, block: int, out: np.ndarray, partial: np.ndarray
 ) -> None:
@@ -104,7 +130,7 @@ def _step_currents(
                 total += partial
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _integer_kernel(
     spikes: np.ndarray,  # (N, T, inputs) uint8
     mantissas: np.ndarray,  # (inputs, neurons) q_ij, unsigned, in the narrowest integer dtype that holds them
@@ -118,7 +144,7 @@ def _integer_kernel(
     isolation: bool,
     record: bool,
     current: np.ndarray,  # (T, neurons) scratch: int32 when every sum of q fits, else int64
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, np.int64]:
     n, timesteps, n_inputs = spikes.shape
     n_neurons = mantissas.shape[1]
     counts = np.zeros((n, n_neurons), dtype=np.int64)
@@ -130,7 +156,7 @@ def _integer_kernel(
     offsets = np.empty(timesteps + 1, dtype=np.int64)
     partial = np.empty(n_neurons, dtype=current.dtype)
     saturations = 0
-    peak = 0
+    peak = np.int64(0)
     for p in range(n):
         if isolation:
             voltage[:] = 0
@@ -139,7 +165,7 @@ def _integer_kernel(
         for t in range(timesteps):
             n_cand = 0
             best = -1
-            best_score = -1
+            best_score = np.int64(-1)
             for j in range(n_neurons):
                 c = np.int64(current[t, j]) << shift
                 if c > peak:
@@ -170,7 +196,7 @@ def _integer_kernel(
     return counts, n_candidates, raster, final, saturations, peak
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _blocked_sum(
     weights: np.ndarray, index: np.ndarray, k: int, block: int, total: np.ndarray, partial: np.ndarray
 ) -> None:
@@ -196,7 +222,7 @@ def _blocked_sum(
             total += partial
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _blocked_currents(spikes: np.ndarray, weights: np.ndarray, block: int) -> np.ndarray:
     """Currents (rows, neurons) float32 of 0/1 spikes (rows, inputs) by :func:`_blocked_sum` (the BLAS probe)."""
     rows, n_inputs = spikes.shape
@@ -209,7 +235,7 @@ def _blocked_currents(spikes: np.ndarray, weights: np.ndarray, block: int) -> np
     return out
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _float_kernel(
     spikes: np.ndarray,  # (N, T, inputs) uint8
     weights: np.ndarray,  # (inputs, neurons) float32
@@ -421,7 +447,7 @@ def batch_sums_in_order(batch: int, n_inputs: int, n_neurons: int) -> bool:
     return _probe_batch_sums(batch, n_inputs, n_neurons, torch.get_num_threads())
 
 
-@njit(cache=True, nogil=True)
+@compiled
 def _stdp_window(
     spikes: np.ndarray,  # (B, T, inputs) uint8
     weights: np.ndarray,  # (inputs, neurons) float32, updated in place

@@ -8,6 +8,7 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from vprsnn_export import kernels
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import run_network
 from vprsnn_export.export.model import FixedPointModel
@@ -255,3 +256,20 @@ def test_training_through_the_kernel_gives_identical_weights(monkeypatch):
     got = train_network(images, presentations, cfg, device=torch.device("cpu"), progress=False)
     assert torch.equal(got.weights, expected.weights)
     assert torch.equal(got.thresholds, expected.thresholds)
+
+
+def test_read_only_install_compiles_in_memory_with_a_warning(monkeypatch):
+    """numba refuses cache=True when no cache directory is writable: the kernels fall back to in-memory compilation."""
+    calls = []
+
+    def fake_njit(**options):
+        calls.append(options)
+        if options.get("cache"):
+            raise RuntimeError("cannot cache function: no locator available")
+        return lambda function: function
+
+    monkeypatch.setattr(kernels, "njit", fake_njit)
+    monkeypatch.setattr(kernels, "_uncached", [])
+    with pytest.warns(UserWarning, match="compiling them in memory"):
+        function = kernels.compiled(abs)
+    assert function is abs and calls == [{"cache": True, "nogil": True}, {"nogil": True}]
