@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
+from vprsnn_export.kernels import integer_run
 from vprsnn_export.runs import SpikeRun
 
 QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
@@ -73,6 +74,7 @@ class PreparedModel:
     limit: int  # 2**23 - 1
     shift: int
     wta: bool
+    mantissas: np.ndarray  # (inputs, neurons) the unshifted q_ij, for the compiled CPU kernel
 
 
 def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
@@ -89,6 +91,7 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
         limit=model.voltage_limit,
         shift=model.voltage_shift,
         wta=model.config.network.wta,
+        mantissas=model.weight_mantissa,
     )
 
 
@@ -167,8 +170,25 @@ class ChunkRun:
     max_current: int  # shifted
 
 
-def run_prepared(prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool) -> SpikeRun:
-    """Chunks of QUERY_CHUNK presentations in parallel (isolation), or one presentation at a time carrying V."""
+def run_prepared(
+    prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool, compiled: bool = True
+) -> SpikeRun:
+    """The whole run: on the CPU the compiled event-driven kernel (:func:`vprsnn_export.kernels.integer_run`,
+    bit-identical); otherwise (or ``compiled=False``) chunks of QUERY_CHUNK presentations in parallel
+    (isolation), or one presentation at a time carrying V, through :func:`recur`."""
+    if compiled and prep.threshold.device.type == "cpu":
+        return integer_run(
+            spikes,
+            prep.mantissas,
+            prep.threshold.numpy(),
+            None if prep.multipliers is None else prep.multipliers.numpy(),
+            shift=prep.shift,
+            keep=prep.keep,
+            limit=prep.limit,
+            wta=prep.wta,
+            isolation=isolation,
+            record=record,
+        )
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
     device = prep.threshold.device

@@ -13,6 +13,7 @@ from tqdm.auto import tqdm
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import wta_step
 from vprsnn_export.encoding import encode, presentation_seed
+from vprsnn_export.kernels import stdp_window
 
 from .homeostasis import homeostasis_update
 from .stdp import apply_update, decay_trace, initial_weights, stdp_delta
@@ -34,7 +35,7 @@ class TrainedNetwork:
 
 
 def train_batch(
-    weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
+    weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config, *, compiled: bool = True
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Present one batch (B, T, inputs) with plasticity on; state starts at zero for every row.
 
@@ -42,8 +43,16 @@ def train_batch(
     (summed over the batch), clip and column normalisation. After the window:
     homeostasis with rbar_j = (spikes of j in the batch) / (B T).
     Returns (weights, thresholds, per-neuron spike counts of the batch).
+
+    On the CPU the compiled kernel (:func:`vprsnn_export.kernels.stdp_window`) runs the window
+    when it can reproduce torch's summation order here (identical weights); otherwise, or with
+    ``compiled=False``, the torch loop below.
     """
     batch, timesteps, n_inputs = spikes.shape
+    window = stdp_window(weights, theta, spikes, cfg) if compiled else None
+    if window is not None:
+        weights, fired_total = window
+        return weights, homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis), fired_total
     n_neurons = weights.shape[1]
     voltage = torch.zeros((batch, n_neurons), dtype=weights.dtype, device=weights.device)
     post_trace = torch.zeros_like(voltage)

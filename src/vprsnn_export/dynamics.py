@@ -24,9 +24,8 @@ import numpy as np
 import torch
 
 from .config import Config
+from .kernels import QUERY_CHUNK, blas_block, float_run
 from .runs import SpikeRun
-
-QUERY_CHUNK = 128  # presentations per matmul chunk: bounds the (chunk, T, neurons) current tensor
 
 
 def wta_step(
@@ -52,6 +51,12 @@ def input_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
     return torch.matmul(spikes.to(weights.dtype), weights)
 
 
+def _blas_order_known(spikes: torch.Tensor, weights: torch.Tensor) -> bool:
+    """Whether the kernel can sum currents in the order this machine's BLAS uses (else: the torch loop)."""
+    n, timesteps, n_inputs = spikes.shape
+    return blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, weights.shape[1]) is not None
+
+
 def run_network(
     spikes: torch.Tensor,
     weights: torch.Tensor,
@@ -61,11 +66,24 @@ def run_network(
     wta: bool = True,
     state_isolation: bool = True,
     record: bool = False,
+    compiled: bool = True,
 ) -> SpikeRun:
     """Present N spike trains (N, T, inputs) to the network with plasticity off.
 
-    The spikes may live on the CPU; they are moved to ``weights.device`` chunk by chunk.
+    On the CPU (float32 weights) the compiled event-driven kernel runs it
+    (:func:`vprsnn_export.kernels.float_run`: the same counts bit for bit, the currents summed
+    in this machine's BLAS order); ``compiled=False`` (and any GPU) runs the torch loop below,
+    one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
+    moved to ``weights.device`` chunk by chunk.
     """
+    if (
+        compiled
+        and weights.device.type == "cpu"
+        and weights.dtype == torch.float32
+        and _blas_order_known(spikes, weights)
+    ):
+        run = float_run(spikes, weights, theta, beta=beta, wta=wta, isolation=state_isolation, record=record)
+        return run if state_isolation else SpikeRun(run.counts, run.candidates_per_step, run.raster, None)
     device = weights.device
     n_presentations, timesteps, _ = spikes.shape
     n_neurons = weights.shape[1]
