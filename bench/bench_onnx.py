@@ -19,13 +19,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.commands._common import format_table
-from vprsnn_export.commands.export import load_model
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import encode, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.fileio import sha256_file
+from vprsnn_export.runtime.exporting import load_source
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
 
@@ -107,15 +105,15 @@ def main() -> int:
     args = parser.parse_args()
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
-    source = load_model(args.model)
-    if isinstance(source, Checkpoint):
-        digest = sha256_file(args.model)
+    source = load_source(args.model)
+    if source.checkpoint is not None:
         models = [
-            quantize_checkpoint(source, digest, int(b), per_neuron=True, scale_method="max")
+            quantize_checkpoint(source.checkpoint, source.sha256, int(b), per_neuron=True, scale_method="max")
             for b in args.bits.split(",")
         ]
     else:
-        models = [source]
+        assert source.fixed_point is not None
+        models = [source.fixed_point]
     spikes, described = spikes_for(models[0], args)
     threads = [int(t) for t in args.threads.split(",")]
     rows = []
