@@ -66,7 +66,12 @@ def test_sigint_exits_130_with_one_line_and_no_temp_file(tmp_path):
     out = tmp_path / "net.npz"
     command = [sys.executable, "-m", "vprsnn_export", *TRAIN[:-4], "--timesteps", "300", "--epochs", "50"]
     process = subprocess.Popen(
-        [*command, "--out", str(out)], stderr=subprocess.PIPE, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"}
+        [*command, "--out", str(out)],
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+        # a job started in the background inherits SIGINT ignored; a user's Ctrl-C reaches a foreground process
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     time.sleep(4)
     process.send_signal(signal.SIGINT)
