@@ -112,22 +112,8 @@ def _step_currents(
     weight rows in L2 measured slower here: the per-tile overhead outweighs the misses).
     """
     for t in range(out.shape[0]):
-        total = out[t]
-        total[:] = 0
-        a = offsets[t]
-        end = offsets[t + 1]
-        first = True
-        while a < end:
-            stop = (index[a] // block + 1) * block
-            partial[:] = 0
-            while a < end and index[a] < stop:
-                partial += weights[index[a]]
-                a += 1
-            if first:
-                total[:] = partial
-                first = False
-            else:
-                total += partial
+        start, end = offsets[t], offsets[t + 1]
+        _blocked_sum(weights, index[start:end], end - start, block, out[t], partial)
 
 
 @compiled
