@@ -29,12 +29,12 @@ from bench_intsim import untrained_checkpoint  # the sibling script (bench/ is o
 from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.config import Config, PreprocessConfig
 from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork, input_currents
+from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
 from vprsnn_export.encoding import encode, presentation_seed, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.kernels import blas_block, float_run, integer_run, stdp_window
 from vprsnn_export.runs import SpikeRun
-from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.intsim import IntegerNetwork, run_prepared
 from vprsnn_export.trainer.stdp import initial_weights
 from vprsnn_export.trainer.train import train_batch
 
@@ -112,16 +112,23 @@ def main() -> None:
     run_integer_kernel = integer_kernel_runner(integer)
     weights, thresholds = float_net.weights, float_net.thresholds
     beta = cfg.network.beta
+
+    def torch_float(s: torch.Tensor) -> SpikeRun:
+        return run_network(s, weights, thresholds, beta=beta, wta=cfg.network.wta, compiled=False)
+
+    def torch_integer(s: torch.Tensor) -> SpikeRun:
+        return run_prepared(integer.prepared, s, isolation=True, record=False, compiled=False)
+
     paths: dict[str, Callable[[torch.Tensor], object]] = {
-        "float path (run_network)": float_net.run,
-        "integer simulator (intsim)": integer.run,
+        "float path, torch loop (run_network compiled=False)": torch_float,
+        "integer simulator, torch loop (compiled=False)": torch_integer,
         "float kernel": lambda s: float_run(s, weights, thresholds, beta=beta, wta=cfg.network.wta),
         "integer kernel": run_integer_kernel,
         "dense-BLAS bound (currents matmul only)": lambda s: input_currents(s, weights),
     }
     # warm-up (numba compiles or loads its cache here) and the exactness check of this run
-    float_same = torch.equal(float_net.run(spikes).counts, float_run(spikes, weights, thresholds, beta=beta).counts)
-    reference, kernel = integer.run(spikes), run_integer_kernel(spikes)
+    float_same = torch.equal(torch_float(spikes).counts, float_run(spikes, weights, thresholds, beta=beta).counts)
+    reference, kernel = torch_integer(spikes), run_integer_kernel(spikes)
     integer_same = all(
         torch.equal(getattr(reference, f), getattr(kernel, f))
         for f in ("counts", "candidates_per_step", "final_voltage")
@@ -154,7 +161,8 @@ def main() -> None:
             f"| {name} | {timing.batch_rate:.0f} | {timing.batch_rate / bound.batch_rate:.2f} "
             f"| {timing.single_ms:.2f} | {1e3 / timing.single_ms:.0f} | {bound.single_ms / timing.single_ms:.2f} |"
         )
-    today_f, today_i = timings["float path (run_network)"], timings["integer simulator (intsim)"]
+    today_f = timings["float path, torch loop (run_network compiled=False)"]
+    today_i = timings["integer simulator, torch loop (compiled=False)"]
     kernel_f, kernel_i = timings["float kernel"], timings["integer kernel"]
     print(
         f"\nspeed-up, batch 100: float {kernel_f.batch_rate / today_f.batch_rate:.1f}x, "
