@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from vprsnn_export.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.fileio import read_container, write_container
@@ -223,6 +224,7 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     }
     if needed - set(arrays):
         raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
+    traversals, data = reference_header(meta, path)
     try:
         model = FixedPointModel(
             bits=int(meta["bits"]),
@@ -235,10 +237,10 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
             calibration=arrays["calibration"],
             float_calibration=arrays["float_calibration"],
             reference_place_ids=arrays["reference_place_ids"],
-            reference_traversals=list(meta["reference_traversals"]),
+            reference_traversals=traversals,
             quantisation=QuantisationReport.from_dict(meta["quantisation"]),
             source_sha256=str(meta["source_sha256"]),
-            data=dict(meta.get("data", {})),
+            data=data,
             voltage_shift=int(meta["voltage_shift"]),
             voltage_bits=int(meta["voltage_bits"]),
             version=str(meta.get("package_version", "unknown")),
@@ -286,7 +288,7 @@ def validate(model: FixedPointModel, path: Path) -> None:
         fail(f"decay_dv {model.decay_dv} does not fit {DECAY_BITS} bits")
     if model.voltage_bits != VOLTAGE_BITS or not 0 <= model.voltage_shift < model.voltage_bits:
         fail(f"unsupported voltage format ({model.voltage_bits} bits, shift {model.voltage_shift})")
-    n_places = model.reference_place_ids.shape[0]
+    n_places = validate_reference_ids(model.reference_place_ids, path)
     for name in ("calibration", "float_calibration"):
         array = getattr(model, name)
         if array.shape != (net.n_neurons, n_places) or not np.issubdtype(array.dtype, np.integer) or (array < 0).any():

@@ -13,6 +13,8 @@ consumer (a measurement, not a check).
 from __future__ import annotations
 
 import json
+import shutil
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +22,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
@@ -28,7 +31,14 @@ from vprsnn_export.encoding import encode, query_spikes
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
-from vprsnn_export.fileio import atomic_write_text, read_container, sha256_file
+from vprsnn_export.fileio import (
+    OutputError,
+    atomic_write_text,
+    publish_folder,
+    read_container,
+    sha256_file,
+    staging_folder,
+)
 from vprsnn_export.readout.assignment import decide, strategy_scores
 from vprsnn_export.targets.loihi_target import write_loihi
 from vprsnn_export.targets.nir_target import CONSUMERS, WTA_INHIBITION, load_graph, spike_agreement, write_nir
@@ -332,23 +342,26 @@ def check_exports(
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",
     device: torch.device | None = None,
+    progress: bool = False,
 ) -> ExportChecks:
     """Read every written file back and run it against the project's simulator of what it was written from."""
     comparisons: list[Comparison] = []
     measurements: list[CheckRow] = []
-    if "nir" in written:
-        network = source.network
-        baseline = backend_of(network, device)
-        base_run = baseline.run(spikes, record=True)
-        path = target_path("nir", written["nir"])
-        contender = read_back("nir", path, network, device)
-        comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
-        if base_run.raster is not None:
-            measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
     integer = [t for t in ("onnx", "loihi") if t in written]
-    if integer and model is not None:
-        contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
-        comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+    stages = ["nir"] * ("nir" in written) + ["integer"] * bool(integer and model is not None)
+    for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
+        if stage == "nir":
+            network = source.network
+            baseline = backend_of(network, device)
+            base_run = baseline.run(spikes, record=True)
+            path = target_path("nir", written["nir"])
+            contender = read_back("nir", path, network, device)
+            comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
+            if base_run.raster is not None:
+                measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
+        elif model is not None:
+            contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
+            comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
     return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))
 
 
@@ -366,8 +379,9 @@ class WrittenFile:
 
 @dataclass(frozen=True)
 class ExportResult:
-    """What `export` wrote (export.json): the model, every file with its hash, the consumers, the checks."""
+    """What `export` wrote (export.json): the folder, the model, every file with its hash, the consumers, the checks."""
 
+    folder: Path
     model: str
     model_sha256: str
     kind: str
@@ -387,6 +401,7 @@ class ExportResult:
 
     def to_dict(self) -> dict[str, Any]:
         data: dict[str, Any] = {
+            "folder": str(self.folder),
             "model": self.model,
             "model_sha256": self.model_sha256,
             "kind": self.kind,
@@ -410,24 +425,109 @@ def export_and_check(
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",
     device: torch.device | None = None,
+    overwrite: bool = True,
+    progress: bool = False,
 ) -> ExportResult:
-    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content."""
+    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
+
+    The folder is built as a whole beside ``out`` and then put in its place
+    (:func:`vprsnn_export.fileio.publish_folder`), export.json last: a reader never sees new
+    files beside old ones, and an interrupted export leaves the previous folder as it was.
+    An existing ``out`` must be empty or an earlier export (it holds export.json); that one is
+    replaced only with ``overwrite=True``.
+    """
     out = Path(out)
-    written = export_all(source, model, targets, out, inhibition=inhibition, wta_node=wta_node)
-    checks = None
-    if spikes is not None:
-        checks = check_exports(
-            source, model, written, spikes, spikes_label=spikes_label, nir_consumer=nir_consumer, device=device
+    check_deploy_folder(out, overwrite=overwrite)
+    staging = staging_folder(out)
+    try:
+        written = export_all(source, model, targets, staging, inhibition=inhibition, wta_node=wta_node)
+        checks = None
+        if spikes is not None:
+            checks = check_exports(
+                source,
+                model,
+                written,
+                spikes,
+                spikes_label=spikes_label,
+                nir_consumer=nir_consumer,
+                device=device,
+                progress=progress,
+            )
+        result = ExportResult(
+            folder=out,
+            model=str(source.path),
+            model_sha256=source.sha256,
+            kind=source.kind,
+            files={
+                t: tuple(WrittenFile(out / p.relative_to(staging), sha256_file(p)) for p in paths)
+                for t, paths in written.items()
+            },
+            consumers=consumer_statements(source, model, targets, wta_node, inhibition),
+            checks=checks,
         )
-    result = ExportResult(
-        model=str(source.path),
-        model_sha256=source.sha256,
-        kind=source.kind,
-        files={t: tuple(WrittenFile(p, sha256_file(p)) for p in paths) for t, paths in written.items()},
-        consumers=consumer_statements(source, model, targets, wta_node, inhibition),
-        checks=checks,
-    )
-    atomic_write_text(out / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+        atomic_write_text(staging / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+        publish_folder(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return result
+
+
+def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
+    """OutputError unless ``out`` is new, an empty folder, or (``overwrite``) an earlier export's folder."""
+    if str(out).strip() == "":
+        raise OutputError("empty output path")
+    if out.is_symlink():
+        raise OutputError("is a symbolic link: give the path of the folder itself", out)
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise OutputError("is not a folder: export writes a folder of files (give a new folder name)", out)
+    if (out / MANIFEST_NAME).is_file():
+        if not overwrite:
+            raise OutputError(f"holds an earlier export ({MANIFEST_NAME}): --force to replace it", out)
+        return
+    if any(out.iterdir()):
+        raise OutputError(f"is a folder with other files and no {MANIFEST_NAME}: give a new or empty folder", out)
+
+
+def read_export(folder: str | Path) -> ExportResult:
+    """Read a deploy folder's export.json and check every file it lists against its sha256.
+
+    ModelFileError when the manifest is missing or corrupt, or a file is missing or differs
+    from what export wrote (an interrupted or mixed folder); the checks are not re-run.
+    """
+    folder = Path(folder)
+    manifest = folder / MANIFEST_NAME
+    if not manifest.is_file():
+        raise ModelFileError(f"not a deploy folder: no {MANIFEST_NAME}", folder)
+    try:
+        data = json.loads(manifest.read_text(encoding="utf-8"))
+        files = {
+            target: tuple(WrittenFile(Path(f["path"]), str(f["sha256"])) for f in entries)
+            for target, entries in data["files"].items()
+        }
+        result = ExportResult(
+            folder=Path(str(data["folder"])),
+            model=str(data["model"]),
+            model_sha256=str(data["model_sha256"]),
+            kind=str(data["kind"]),
+            files=files,
+            consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
+        )
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
+        raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
+    base = Path(str(data.get("folder", "")))
+    for entries in files.values():
+        for entry in entries:
+            try:
+                path = folder / entry.path.relative_to(base)
+            except ValueError:
+                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, outside its folder {base}", folder) from None
+            if not path.is_file():
+                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, which is missing", folder)
+            if sha256_file(path) != entry.sha256:
+                raise ModelFileError(f"{entry.path} differs from what export wrote (sha256 mismatch)", folder)
     return result
 
 
@@ -441,6 +541,7 @@ __all__ = [
     "ExportSource",
     "WrittenFile",
     "check_exports",
+    "check_deploy_folder",
     "check_presentations",
     "consumer_statements",
     "export_all",
@@ -448,4 +549,5 @@ __all__ = [
     "integer_model",
     "load_source",
     "parse_export_targets",
+    "read_export",
 ]

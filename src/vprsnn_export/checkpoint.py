@@ -90,12 +90,8 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         config = Config.from_dict(meta["config"])
     except (KeyError, VprError) as exc:
         raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
-    traversals = meta.get("reference_traversals", [])
-    if not isinstance(traversals, list) or not all(isinstance(t, str) and t for t in traversals):
-        raise ModelFileError("reference_traversals must be a list of traversal names", path)
-    data, history = meta.get("data", {}), meta.get("history", [])
-    if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
-        raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+    traversals, data = reference_header(meta, path)
+    history = meta.get("history", [])
     if not isinstance(history, list) or not all(isinstance(entry, dict) for entry in history):
         raise ModelFileError("history must be a list of per-epoch mappings", path)
     ckpt = Checkpoint(
@@ -111,6 +107,30 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     )
     validate_checkpoint(ckpt, path)
     return ckpt
+
+
+def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
+    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
+
+    Shared by checkpoints and fixed-point models; ModelFileError naming ``path`` otherwise.
+    """
+    traversals = meta.get("reference_traversals", [])
+    if not isinstance(traversals, list) or not traversals or not all(isinstance(t, str) and t for t in traversals):
+        raise ModelFileError("reference_traversals must be a non-empty list of traversal names", path)
+    data = meta.get("data", {})
+    if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
+        raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+    return list(traversals), dict(data)
+
+
+def validate_reference_ids(ids: np.ndarray, path: str | Path) -> int:
+    """The number of reference places: ``ids`` must be a non-empty 1-D array of distinct non-negative integers."""
+    ids = np.asarray(ids)
+    if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer):
+        raise ModelFileError("reference_place_ids must be a non-empty 1-D integer array", path)
+    if np.unique(ids).size != ids.size or np.any(ids < 0):
+        raise ModelFileError("reference_place_ids must be distinct non-negative place ids", path)
+    return int(ids.size)
 
 
 def checkpoint_sha256(path: str | Path) -> str:
@@ -140,12 +160,7 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
         raise ModelFileError(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}", path)
     if np.any(ckpt.thresholds <= 0):
         raise ModelFileError("thresholds must be positive", path)
-    ids = np.asarray(ckpt.reference_place_ids)
-    if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer):
-        raise ModelFileError("reference_place_ids must be a non-empty 1-D integer array", path)
-    if np.unique(ids).size != ids.size or np.any(ids < 0):
-        raise ModelFileError("reference_place_ids must be distinct non-negative place ids", path)
-    n_places = ids.size
+    n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     if ckpt.calibration.shape != (net.n_neurons, n_places):
         raise ModelFileError(
             f"calibration has shape {ckpt.calibration.shape}, expected {(net.n_neurons, n_places)}", path

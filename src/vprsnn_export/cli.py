@@ -13,6 +13,7 @@ from typing import NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
+from .fileio import output_lock
 from .threads import set_threads
 from .version import __version__
 
@@ -65,16 +66,24 @@ def _terminate(signum: int, frame: object) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Parse, run one command; expected errors are one line and exit 2, an interrupt exits 130, SIGTERM 143."""
+    """Parse, run one command; expected errors are one line and exit 2, an interrupt exits 130, SIGTERM 143.
+
+    The command's output (``--out``, or ``--report`` for verify) is locked for the whole run
+    (:func:`vprsnn_export.fileio.output_lock`): a second run writing the same output stops at once.
+    """
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminate)
     try:
         parser = build_parser()
         argv = list(sys.argv[1:] if argv is None else argv)
-        args = parser.parse_args(join_negative_values(argv))
+        try:
+            args = parser.parse_args(join_negative_values(argv))
+        except SystemExit as exc:  # --help, --version, or a one-line parse error already printed
+            return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
-        return int(args.handler(args) or 0)
+        with output_lock(getattr(args, "out", None) or getattr(args, "report", None)):
+            return int(args.handler(args) or 0)
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code

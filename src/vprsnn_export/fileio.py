@@ -8,14 +8,18 @@ interrupted run never leaves a half-written file under the final name.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import io
 import json
 import os
+import shutil
 import stat
 import tempfile
 import zipfile
-from collections.abc import Callable
+import zlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +100,109 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def _existing_ancestor(path: Path) -> Path:
+    for candidate in path.absolute().parents:
+        if candidate.is_dir():
+            return candidate
+    return Path("/")
+
+
+@contextlib.contextmanager
+def output_lock(path: str | Path | None) -> Iterator[None]:
+    """Hold an exclusive lock on the output ``path`` (a file or a folder) for the whole ``with`` block.
+
+    The lock is an ``flock`` on a hidden file beside the output, ``.NAME.lock`` (in the nearest
+    existing folder above it when its folder does not exist yet); the kernel releases it when the
+    process dies, so a killed run never blocks the next one. A second writer to the same output
+    gets one OutputError instead of both runs finishing and the last one winning. While the lock
+    is held, temp files and staging folders that a killed run left beside the output
+    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``) are removed: no live writer owns them.
+    ``None`` or an empty path: no lock.
+    """
+    if path is None or str(path).strip() == "":
+        yield
+        return
+    target = Path(path)
+    home = target.absolute().parent if target.absolute().parent.is_dir() else _existing_ancestor(target)
+    lock_path = home / f".{target.name or 'output'}.lock"
+    fd = _acquire(lock_path, target)
+    try:
+        if target.parent.is_dir():
+            _remove_leftovers(target)
+        try:
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(lock_path)
+    finally:
+        os.close(fd)
+
+
+def _acquire(lock_path: Path, target: Path) -> int:
+    """An fd holding the flock of ``lock_path``; retried when the file was unlinked by a finishing holder."""
+    for _ in range(3):
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+        except OSError as exc:
+            raise OutputError(f"cannot write here ({exc.strerror or exc})", target) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(
+                "another vprsnn-export run is writing it now: wait for it or give another output", target
+            ) from None
+        try:
+            if os.stat(lock_path).st_ino == os.fstat(fd).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # the holder unlinked this file as we took it: take the new one
+    raise OutputError("could not take the output lock (a run keeps replacing it)", target)
+
+
+def _remove_leftovers(target: Path) -> None:
+    """Temp files and staging folders of ``target`` left by a killed run (call with the lock held)."""
+    for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
+        for leftover in target.parent.glob(pattern):
+            if leftover.is_dir() and not leftover.is_symlink():
+                shutil.rmtree(leftover, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    leftover.unlink()
+
+
+def staging_folder(out: Path) -> Path:
+    """A new hidden folder beside ``out`` (same file system) to build its content in before :func:`publish_folder`."""
+    try:
+        out.absolute().parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=out.absolute().parent))
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
+
+
+def publish_folder(staging: Path, out: Path) -> Path:
+    """Put the finished folder ``staging`` in place of ``out`` as a whole.
+
+    With no ``out`` yet this is one atomic rename. An existing ``out`` is first renamed aside
+    (``.NAME.old-*``), the new folder renamed into place, the old one removed: a reader sees the
+    old folder, then briefly none, then the new one, never a mix of the two.
+    """
+    out = Path(out)
+    os.chmod(staging, 0o777 & ~_umask())
+    try:
+        if out.exists():
+            aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.absolute().parent))
+            os.replace(out, aside / out.name)
+            os.replace(staging, out)
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.replace(staging, out)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
+    return out
+
+
 def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
     """Write arrays plus a JSON header into one ``.npz`` atomically."""
     if META_KEY in arrays:
@@ -115,7 +222,7 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {name: npz[name] for name in npz.files}
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError) as exc:
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as exc:
         raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
     if META_KEY not in arrays:
         raise ModelFileError(f"not a {kind}: the JSON header is missing", path)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from vprsnn_export.cli import main
 
@@ -40,9 +42,7 @@ def test_evaluate_options(checkpoint, capsys, extra, message):
 
 @pytest.mark.parametrize("argv", [["evaluate"], ["evaluate", "x.npz", "--query", "w", "--nope"], ["nope"]])
 def test_argparse_errors_are_one_line(capsys, argv):
-    with pytest.raises(SystemExit) as caught:
-        main(argv)
-    assert caught.value.code == 2
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("error: ") and "usage" not in err
 
@@ -73,3 +73,27 @@ def test_out_of_range_numbers(tmp_path, monkeypatch, capsys, argv, message):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and message in err and err.count("\n") == 1
+
+
+OPTION_VALUES = st.one_of(
+    st.text(max_size=12),
+    st.sampled_from(["nan", "inf", "-inf", "1e308", "-0", "0x10", "1_000", "3.5", "::", "1:2", "0:1:0", "-1:1:1e-9"]),
+    st.integers(-(2**70), 2**70).map(str),
+    st.floats().map(str),
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    option=st.sampled_from(
+        ["--k", "--match-window", "--velocity", "--velocity-search", "--velocity-span", "--threads"]
+    ),
+    value=OPTION_VALUES,
+)
+def test_any_option_value_runs_or_is_one_line(checkpoint, capsys, option, value):
+    capsys.readouterr()
+    code = main(["evaluate", checkpoint, "--query", "winter", "--quiet", "--json", f"{option}={value}"])
+    err = capsys.readouterr().err
+    assert code in (0, 2), err
+    if code == 2:
+        assert err.startswith("error: ") and err.count("\n") == 1, err

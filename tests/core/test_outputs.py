@@ -11,7 +11,14 @@ import time
 import pytest
 
 from vprsnn_export.cli import main
-from vprsnn_export.fileio import OutputError, atomic_write_text, check_output
+from vprsnn_export.fileio import (
+    OutputError,
+    atomic_write_text,
+    check_output,
+    output_lock,
+    publish_folder,
+    staging_folder,
+)
 
 TRAIN = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
 
@@ -79,3 +86,36 @@ def test_sigint_exits_130_with_one_line_and_no_temp_file(tmp_path):
     assert process.returncode == 130, err
     assert err.strip().splitlines()[-1] == "error: interrupted" and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_second_writer_to_the_same_output_stops_at_once(tmp_path, capsys):
+    out = tmp_path / "net.npz"
+    (tmp_path / ".net.npz.x1y2.tmp").write_bytes(b"left by a killed run")
+    with output_lock(out):
+        assert not (tmp_path / ".net.npz.x1y2.tmp").exists()
+        with pytest.raises(OutputError, match="another vprsnn-export run"):
+            with output_lock(out):
+                pass
+        assert main([*TRAIN, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "another vprsnn-export run" in err
+    assert list(tmp_path.iterdir()) == []  # the lock file goes with the lock
+    with output_lock(out):
+        pass
+
+
+def test_a_lock_for_an_output_in_a_folder_not_made_yet(tmp_path):
+    with output_lock(tmp_path / "new" / "deeper" / "net.npz"):
+        assert [p.name for p in tmp_path.iterdir()] == [".net.npz.lock"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_publish_folder_replaces_the_old_folder_whole(tmp_path):
+    out = tmp_path / "deploy"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    staging = staging_folder(out)
+    (staging / "new.txt").write_text("new")
+    publish_folder(staging, out)
+    assert [p.name for p in out.iterdir()] == ["new.txt"]
+    assert [p.name for p in tmp_path.iterdir()] == ["deploy"]

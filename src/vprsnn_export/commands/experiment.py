@@ -13,7 +13,7 @@ from typing import Any
 
 from .. import experiments
 from ..errors import InvalidValueError
-from ..experiments.common import Settings
+from ..experiments.common import Settings, document
 from ..fileio import atomic_write_text
 from ._common import parse_value
 
@@ -75,12 +75,6 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / f"{stem}.json", json.dumps(results, indent=1, default=float))
     body = module.render(results, out, stem)
-    prov = results["provenance"]
-    header = (
-        f"# Experiment: {args.name}\n\n{module.DESCRIPTION}.\n\n"
-        f"Generated from `{stem}.json` by `{command}` "
-        f"({prov['seconds']} s on {prov['machine']}, torch {prov['torch']}, vprsnn-export {prov['package_version']}).\n\n"
-    )
-    atomic_write_text(out / f"{stem}.md", header + body)
+    atomic_write_text(out / f"{stem}.md", document(args.name, module.DESCRIPTION, stem, results, body))
     print(f"wrote {out / (stem + '.json')} and {out / (stem + '.md')}")
     return 0

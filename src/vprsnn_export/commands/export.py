@@ -20,6 +20,7 @@ from pathlib import Path
 from ..device import resolve_device
 from ..runtime.exporting import (
     MANIFEST_NAME,
+    check_deploy_folder,
     check_presentations,
     export_and_check,
     integer_model,
@@ -36,7 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("export", help="export a model to NIR, a Loihi-style description and ONNX")
     parser.add_argument("model", help="float checkpoint (train) or fixed-point model (quantize)")
     parser.add_argument("--to", default="nir,loihi,onnx", help="comma-separated targets: nir, loihi, onnx")
-    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--out", required=True, help="output folder (new or empty; built whole, then put in place)")
+    parser.add_argument("--force", action="store_true", help="replace an earlier export in --out")
     parser.add_argument(
         "--quantize",
         type=int,
@@ -79,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)
     out = Path(args.out)
+    check_deploy_folder(out, overwrite=args.force)
     spikes, label = None, ""
     if args.check:
         spikes, label = check_presentations(
@@ -101,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         spikes_label=label,
         nir_consumer=args.nir_consumer,
         device=resolve_device(args.device),
+        overwrite=args.force,
+        progress=not args.quiet,
     )
     if args.json:
         print_json(result.to_dict())

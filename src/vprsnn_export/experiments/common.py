@@ -76,6 +76,17 @@ def provenance(settings: Settings, started: float) -> dict:
     }
 
 
+def document(name: str, description: str, stem: str, results: dict, body: str) -> str:
+    """The Markdown page of an experiment: title, description, the command and provenance, then ``body``."""
+    prov = results["provenance"]
+    return (
+        f"# Experiment: {name}\n\n{description}.\n\n"
+        f"Generated from `{stem}.json` by `{results['command']}` "
+        f"({prov['seconds']} s on {prov['machine']}, torch {prov['torch']}, vprsnn-export {prov['package_version']}).\n\n"
+        + body
+    )
+
+
 def pct(summary: dict) -> str:
     return f"{100 * summary['mean']:.1f} ± {100 * summary['std']:.1f}"
 

@@ -1,0 +1,85 @@
+"""A deploy folder is written as a whole: never mixed, never half-replaced, checked on read."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vprsnn_export.cli import main
+from vprsnn_export.errors import ModelFileError
+from vprsnn_export.runtime import exporting
+from vprsnn_export.runtime.exporting import MANIFEST_NAME, read_export
+
+TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("exporting")
+    assert (
+        main(["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(folder / "net.npz"), *TINY]) == 0
+    )
+    assert main(["quantize", str(folder / "net.npz"), "--bits", "4", "--out", str(folder / "q"), "--quiet"]) == 0
+    return str(next((folder / "q").glob("*.npz")))
+
+
+def export(model, out, *extra):
+    return main(["export", model, "--to", "nir,loihi,onnx", "--out", str(out), "--quiet", *extra])
+
+
+def test_reexport_needs_force_and_replaces_the_folder_whole(model, tmp_path, capsys):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    first = read_export(out)
+    assert {t: [f.path.name for f in files] for t, files in first.files.items()}["onnx"] == ["model.onnx"]
+    (out / "stray.txt").write_text("from the old folder")
+    assert export(model, out) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "earlier export" in err and "--force" in err
+    assert export(model, out, "--to", "nir", "--force") == 0
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST_NAME, "model.nir"]  # nothing of the old folder left
+    assert [p.name for p in tmp_path.iterdir()] == ["deploy"]  # no staging or lock files left beside it
+
+
+def test_a_folder_with_other_files_or_a_file_is_refused(model, tmp_path, capsys):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep me")
+    assert export(model, tmp_path / "mine", "--force") == 2
+    assert "no export.json" in capsys.readouterr().err
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep me"
+    (tmp_path / "file").write_text("x")
+    assert export(model, tmp_path / "file") == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
+def test_an_interrupted_export_leaves_the_previous_folder_as_it_was(model, tmp_path, monkeypatch):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(exporting, "write_onnx", interrupted)
+    assert export(model, out, "--force") == 130
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["deploy"]
+    read_export(out)
+
+
+def test_read_export_detects_a_changed_or_missing_file(model, tmp_path):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    moved = tmp_path / "elsewhere"
+    out.rename(moved)
+    assert read_export(moved).kind == "fixed-point model"  # a moved folder still reads
+    (moved / "model.onnx").write_bytes(b"other")
+    with pytest.raises(ModelFileError, match="sha256 mismatch"):
+        read_export(moved)
+    (moved / "model.onnx").unlink()
+    with pytest.raises(ModelFileError, match="missing"):
+        read_export(moved)
+    (moved / MANIFEST_NAME).write_text(json.dumps({"files": 3}))
+    with pytest.raises(ModelFileError, match="corrupt"):
+        read_export(moved)
