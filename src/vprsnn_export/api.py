@@ -29,7 +29,7 @@ from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
-from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source
+from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
 from .runtime.report import write_report
 from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
@@ -88,6 +88,7 @@ __all__ = [
     "pr_metrics",
     "quantize_checkpoint",
     "query_spikes",
+    "read_export",
     "read_loihi_model",
     "read_nir",
     "readout_rows",

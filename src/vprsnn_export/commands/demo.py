@@ -59,7 +59,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "demo", help="train, quantise, export, verify and report on the embedded synthetic route"
     )
-    parser.add_argument("--out", default="vprsnn-demo", help="output folder (default: ./vprsnn-demo)")
+    parser.add_argument(
+        "--out",
+        default="vprsnn-demo",
+        help="output folder (default: ./vprsnn-demo; its files are regenerated on each run)",
+    )
     parser.add_argument("--seed", type=int, default=Config().seed, help="seed")
     parser.add_argument("--quick", action="store_true", help=argparse.SUPPRESS)  # tiny run for the tests
     add_runtime_options(parser)

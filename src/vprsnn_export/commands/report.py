@@ -19,7 +19,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(mean ± std over all of them) written to --out, report.json included. Nothing is re-run.",
     )
     parser.add_argument("runs", nargs="+", metavar="RUN_DIR", help="verify output folder(s) or report.json file(s)")
-    parser.add_argument("--out", help="output folder (required with several RUN_DIRs; default: the one RUN_DIR)")
+    parser.add_argument(
+        "--out",
+        help="output folder (required with several RUN_DIRs; default: the one RUN_DIR; report.md/html there are regenerated)",
+    )
     parser.add_argument(
         "--allow-mixed",
         action="store_true",

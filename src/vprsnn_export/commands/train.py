@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
 from ..checkpoint import save_checkpoint
@@ -43,10 +42,8 @@ def run(args: argparse.Namespace) -> int:
         selection=selection_record(args.subset, args.places),
     )
     path = save_checkpoint(args.out, ckpt)
-    if not args.quiet:
-        print(
-            f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
-            f"in {time.perf_counter() - started:.1f} s on {device}; wrote {path}",
-            file=sys.stderr,
-        )
+    print(
+        f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
+        f"in {time.perf_counter() - started:.1f} s on {device} ({args.threads} thread(s)); wrote {path}"
+    )
     return 0

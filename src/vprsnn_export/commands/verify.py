@@ -94,7 +94,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--seeds", type=int, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std"
     )
-    parser.add_argument("--report", required=True, metavar="DIR", help="folder for report.json, report.md, report.html")
+    parser.add_argument(
+        "--report",
+        required=True,
+        metavar="DIR",
+        help="folder for report.json, report.md, report.html (regenerated on each run)",
+    )
     parser.add_argument("--json", action="store_true", help="print the verdict and summary as JSON instead of a table")
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
