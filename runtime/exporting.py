@@ -41,7 +41,14 @@ from vprsnn_export.fileio import (
 )
 from vprsnn_export.readout.assignment import decide, strategy_scores
 from vprsnn_export.targets.loihi_target import write_loihi
-from vprsnn_export.targets.nir_target import CONSUMERS, WTA_INHIBITION, load_graph, spike_agreement, write_nir
+from vprsnn_export.targets.nir_target import (
+    CONSUMERS,
+    WTA_INHIBITION,
+    apply_readout_rule,
+    load_graph,
+    spike_agreement,
+    write_nir,
+)
 from vprsnn_export.targets.onnx_target import write_onnx
 
 from .conformance import (
@@ -170,14 +177,21 @@ def consumer_statements(
         notes["nir"] = (
             "vprsnn-export's read_nir rebuilds the network exactly (WTA from the metadata). A consumer that reads "
             f"only the nodes (nirtorch with NIR's LIF, snnTorch, Norse) computes {arithmetic}, every neuron over "
-            f"threshold spiking (no WTA) {inhibit}. At dt = 1e-4 s Euler gives "
+            f"threshold spiking (no WTA) {inhibit}"
+            + (
+                ""
+                if wta_node
+                else "; vx.apply_readout_rule(graph, input spikes, its spikes) turns that into the network's raster "
+                "(the hard WTA, stated as metadata['readout_rule'])"
+            )
+            + ". At dt = 1e-4 s Euler gives "
             "v <- beta v + I; Norse ignores r (input scaled by 1 - beta); snnTorch's importer needs one threshold "
             f"for all neurons ({'met' if uniform else 'not met by this model'})"
             + (
                 ""
                 if not wta_node
                 else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
-                "the wta node's output instead of the spikes (--nir-no-wta-node avoids both)"
+                "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
             )
             + "."
         )
@@ -201,7 +215,7 @@ def export_all(
     out: Path,
     *,
     inhibition: float = WTA_INHIBITION,
-    wta_node: bool = True,
+    wta_node: bool = False,
 ) -> dict[str, list[Path]]:
     """Write each target into ``out``: NIR of the source, ONNX and Loihi-style files of the fixed-point model."""
     written: dict[str, list[Path]] = {}
@@ -314,10 +328,24 @@ def nir_consumer_rows(
     except AssertionError as exc:  # snnTorch's importer asserts on what it cannot express
         return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
     agreement = spike_agreement(raster, consumer)
+    graph = load_graph(path)
+    rows: list[CheckRow] = []
+    if "wta" not in graph.nodes:
+        ruled = apply_readout_rule(graph, spikes, consumer)
+        differing = int((ruled != raster.to(torch.bool)).sum())
+        rows.append(
+            CheckRow(
+                "nir",
+                f"{consumer_name} + readout rule (metadata) vs network",
+                None,
+                f"{differing} differing raster entries of {raster.numel()}",
+            )
+        )
     places = decided_places(network, raster.sum(dim=1).numpy())
     consumer_places = decided_places(network, consumer.sum(dim=1).numpy())
     rate = consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1])
     return [
+        *rows,
         CheckRow(
             "nir",
             f"{consumer_name} (no metadata) vs network",
@@ -420,7 +448,7 @@ def export_and_check(
     out: str | Path,
     *,
     inhibition: float = WTA_INHIBITION,
-    wta_node: bool = True,
+    wta_node: bool = False,
     spikes: torch.Tensor | None = None,
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",

@@ -100,6 +100,26 @@ def wta_rule(source: Source) -> str:
     )
 
 
+READOUT_RULE = "vprsnn-hard-wta"
+READOUT_RULE_VERSION = 1
+
+
+def readout_rule(source: Source) -> dict[str, Any]:
+    """The hard WTA as a machine-readable rule over the lif node's WTA-off spikes (stored as JSON)."""
+    if not source.config.network.wta:
+        return {"name": "none", "version": READOUT_RULE_VERSION, "output": "the lif node's spikes as they are"}
+    return {
+        "name": READOUT_RULE,
+        "version": READOUT_RULE_VERSION,
+        "candidates": "the lif node's spikes at a step (every neuron with v_j > v_threshold_j; all of them reset)",
+        "score": "I_j * wta_score_multiplier_j, with I_j = sum_i linear.weight[j, i] s_i[t] the linear node's output",
+        "winner": "the candidate with the largest score; ties: the lowest index",
+        "output": "at most one spike per step: the winner's",
+        "arithmetic": "integer (exact) for kind fixed-point; float32 for kind float",
+        "function": "vprsnn_export.targets.nir_target.apply_readout_rule",
+    }
+
+
 def graph_metadata(source: Source, source_sha256: str | None, inhibition: float | None, dt: float) -> dict[str, Any]:
     """Human-readable facts plus the source's full JSON header for an exact rebuild."""
     cfg = source.config
@@ -131,6 +151,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "reset": "v <- v_reset = 0 for every neuron over threshold, whether or not it wins the WTA",
         "wta": "on" if cfg.network.wta else "off",
         "wta_rule": wta_rule(source),
+        "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
         "wta_node": (
             "none (left out on request)"
             if inhibition is None
@@ -174,13 +195,15 @@ def build_graph(
     *,
     source_sha256: str | None = None,
     wta_inhibition: float = WTA_INHIBITION,
-    wta_node: bool = True,
+    wta_node: bool = False,
     dt: float = DT_SECONDS,
 ):
     """The ``nir.NIRGraph`` of a float checkpoint or a fixed-point model (see the module docstring).
 
-    ``wta_node=False`` leaves the recurrent ``wta`` Linear out (the metadata still states the
-    rule): snnTorch's importer routes a recurrent subgraph's input through its recurrent Linear.
+    The default is the portable graph input -> linear -> lif -> output, with the hard WTA as
+    the machine-readable readout rule in the metadata (:func:`apply_readout_rule`).
+    ``wta_node=True`` adds the recurrent ``wta`` Linear (lateral inhibition, an approximation
+    for consumers that ignore the metadata; snnTorch's and Norse's importers mishandle it).
     """
     import nir
 
@@ -216,7 +239,7 @@ def write_nir(
     *,
     source_sha256: str | None = None,
     wta_inhibition: float = WTA_INHIBITION,
-    wta_node: bool = True,
+    wta_node: bool = False,
     dt: float = DT_SECONDS,
 ) -> Path:
     """Build the graph, serialise it with ``nir.write`` into memory, write it atomically."""
@@ -466,6 +489,41 @@ CONSUMERS = {
     "snntorch": lambda graph, spikes: snntorch_consumer_raster(graph, spikes),
     "norse": norse_consumer_raster,
 }
+
+
+def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
+    """The network's exact raster from any consumer's WTA-off spikes, by the rule in the graph's metadata.
+
+    ``spikes`` (N, T, inputs) are the input spike trains, ``candidates`` (N, T, neurons) the
+    consumer's output of the portable graph (every neuron over threshold). Per step:
+
+        score_j = I_j m_j,  I = W s[t]   (W: the linear node's weight, m: wta_score_multiplier)
+        winner  = argmax_{j in candidates} score_j   (ties: lowest j)
+
+    Returns (N, T, neurons) bool with at most one spike per step. A graph whose rule is
+    ``none`` (WTA off) returns the candidates unchanged.
+    """
+    meta = graph.metadata
+    rule = json.loads(str(meta.get("readout_rule", "{}")))
+    if rule.get("name") == "none":
+        return candidates.to(torch.bool)
+    if rule.get("name") != READOUT_RULE or int(rule.get("version", -1)) != READOUT_RULE_VERSION:
+        raise InvalidValueError(f"unknown readout rule {rule.get('name')!r} v{rule.get('version')!r} in the graph")
+    weight = np.asarray(graph.nodes["linear"].weight)
+    flat = spikes.reshape(-1, spikes.shape[-1])
+    if str(meta["kind"]) == "fixed-point":
+        currents = flat.to(torch.float64) @ torch.as_tensor(weight.T, dtype=torch.float64)  # exact below 2**53
+        multipliers = torch.as_tensor(np.asarray(meta["wta_score_multiplier"]), dtype=torch.float64)
+        score = currents.round().to(torch.int64) * multipliers.to(torch.int64)
+        masked = torch.where(candidates.reshape(score.shape), score, torch.iinfo(torch.int64).min)
+    else:
+        score_f = flat.to(torch.float32) @ torch.as_tensor(np.ascontiguousarray(weight.T), dtype=torch.float32)
+        masked = torch.where(candidates.reshape(score_f.shape), score_f, -torch.inf)
+    winner = masked.argmax(dim=1)
+    raster = torch.zeros(masked.shape, dtype=torch.bool)
+    raster[torch.arange(masked.shape[0]), winner] = True
+    raster &= candidates.reshape(masked.shape).to(torch.bool).any(dim=1, keepdim=True)
+    return raster.reshape(candidates.shape)
 
 
 def spike_agreement(reference: torch.Tensor, consumer: torch.Tensor) -> dict[str, float]:

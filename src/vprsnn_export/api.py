@@ -35,7 +35,7 @@ from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from .targets.intsim import IntegerNetwork
 from .targets.loihi_target import read_loihi_model, write_loihi
-from .targets.nir_target import read_nir, write_nir
+from .targets.nir_target import apply_readout_rule, read_nir, write_nir
 from .targets.onnx_target import OnnxBackend, write_onnx
 from .targets.reference_stepper import ReferenceStepper
 from .threads import set_threads
@@ -69,6 +69,7 @@ __all__ = [
     "VprError",
     "__version__",
     "aggregate",
+    "apply_readout_rule",
     "build_report",
     "calibrate",
     "calibration_spikes",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import h5py
@@ -19,6 +20,7 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_target import (
     DT_SECONDS,
+    apply_readout_rule,
     build_graph,
     generic_consumer_raster,
     read_nir,
@@ -128,7 +130,7 @@ def test_float_round_trip_is_exact(tmp_path, wta):
 
 def test_nir_read_sees_the_documented_graph(tmp_path):
     model = make_model(np.random.default_rng(3))
-    graph = nir.read(write_nir(model, tmp_path / "m.nir", wta_inhibition=0.5))
+    graph = nir.read(write_nir(model, tmp_path / "m.nir", wta_inhibition=0.5, wta_node=True))
     assert isinstance(graph.nodes["linear"], nir.Linear) and graph.nodes["linear"].weight.shape == (6, 16)
     lif = graph.nodes["lif"]
     beta = (4096 - 205) / 4096
@@ -144,6 +146,34 @@ def test_nir_read_sees_the_documented_graph(tmp_path):
     assert "largest a_j * m_j" in meta["wta_rule"] and np.array_equal(
         meta["wta_score_multiplier"], model.scale_multiplier
     )
+
+
+def test_the_default_graph_is_portable_and_states_its_readout_rule(tmp_path):
+    graph = nir.read(write_nir(make_model(np.random.default_rng(3)), tmp_path / "m.nir"))
+    assert sorted(graph.nodes) == ["input", "lif", "linear", "output"]
+    rule = json.loads(graph.metadata["readout_rule"])
+    assert rule["name"] == "vprsnn-hard-wta" and rule["version"] == 1 and "lowest index" in rule["winner"]
+    off = nir.read(write_nir(make_model(np.random.default_rng(3), wta=False), tmp_path / "off.nir"))
+    assert json.loads(off.metadata["readout_rule"])["name"] == "none"
+
+
+@pytest.mark.parametrize("bits", [8, 4, 2])
+def test_readout_rule_on_the_wta_off_raster_gives_the_integer_network(tmp_path, bits):
+    """Integer currents are exact: the rule applied to the WTA-off raster is the WTA-on raster, spike for spike."""
+    model = make_model(np.random.default_rng(8), bits=bits)
+    graph = nir.read(write_nir(model, tmp_path / "m.nir"))
+    spikes = random_spikes(8, p=0.5)
+    ruled = apply_readout_rule(graph, spikes, int_raster(model, spikes, wta=False))
+    assert torch.equal(ruled, int_raster(model, spikes)) and int(ruled.sum()) > 0
+
+
+def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path):
+    ckpt = make_checkpoint(np.random.default_rng(9), dyadic=True)
+    graph = nir.read(write_nir(ckpt, tmp_path / "f.nir"))
+    spikes = random_spikes(9)
+    consumer = generic_consumer_raster(graph, spikes)
+    assert not torch.equal(consumer, float_raster(ckpt, spikes))
+    assert torch.equal(apply_readout_rule(graph, spikes, consumer), float_raster(ckpt, spikes))
 
 
 def test_no_leak_becomes_an_if_node(tmp_path):

@@ -49,13 +49,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--nir-inhibition",
         type=float,
         default=WTA_INHIBITION,
-        help="strength k of the NIR graph's recurrent inhibitory WTA Linear, W[j, i] = -k theta_j "
-        f"(default {WTA_INHIBITION}; 0 = a consumer computes the WTA-off network)",
+        help="with --nir-wta-node: strength k of the recurrent inhibitory WTA Linear, W[j, i] = -k theta_j "
+        f"(default {WTA_INHIBITION})",
     )
     parser.add_argument(
-        "--nir-no-wta-node",
+        "--nir-wta-node",
         action="store_true",
-        help="leave the recurrent WTA Linear out of the NIR graph (snnTorch and Norse mishandle recurrent graphs)",
+        help="add a recurrent inhibitory WTA Linear to the NIR graph (default: none; the WTA is the readout rule "
+        "in the metadata; snnTorch and Norse mishandle recurrent graphs)",
+    )
+    parser.add_argument(
+        "--nir-no-wta-node", action="store_true", help="the default now (kept so that older commands still run)"
     )
     parser.add_argument(
         "--check", action="store_true", help="read every file back and run it beside the project's simulators"
@@ -99,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         targets,
         out,
         inhibition=args.nir_inhibition,
-        wta_node=not args.nir_no_wta_node,
+        wta_node=args.nir_wta_node and not args.nir_no_wta_node,
         spikes=spikes,
         spikes_label=label,
         nir_consumer=args.nir_consumer,
