@@ -478,8 +478,9 @@ def _stdp_window(
     settled = np.zeros(n_neurons, dtype=np.bool_)  # column norm exactly 1.0f and column unchanged since
     column = np.full(n_neurons, -1, dtype=np.int64)  # neuron -> its slot among this step's columns
     columns = np.empty(n_neurons, dtype=np.int64)
-    potentiation = np.empty((n_inputs, n_neurons), dtype=np.float32)  # (inputs, slots)
-    depression = np.empty((n_inputs, n_neurons), dtype=np.float32)
+    potentiation_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots)
+    depression_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots)
+    gathered_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots): the columns' weights
     squares = np.empty(n_neurons, dtype=np.float32)
     fired_total = np.zeros(n_neurons, dtype=np.float32)
     for t in range(timesteps):
@@ -512,12 +513,14 @@ def _stdp_window(
         for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
-            for j in range(n_neurons):
+            for q in range(n_traced[b]):  # y_bj = 0 (exactly, as 0 keep + 0) for every other neuron
+                j = traced[b, q]
                 post_trace[b, j] = post_trace[b, j] * post_keep + (np.float32(1) if fired[b, j] else zero)
             for w in range(n_winners[b]):
                 j = winners[b, w]
                 fired_total[j] += np.float32(1)
-                if post_trace[b, j] == np.float32(1) and (n_traced[b] == 0 or not _listed(traced[b], n_traced[b], j)):
+                if not _listed(traced[b], n_traced[b], j):  # first firing: y_bj = 0 keep + 1
+                    post_trace[b, j] = np.float32(1)
                     traced[b, n_traced[b]] = j
                     n_traced[b] += 1
         m = 0
@@ -534,8 +537,11 @@ def _stdp_window(
                     column[j] = m
                     columns[m] = j
                     m += 1
-        potentiation[:, :m] = zero
-        depression[:, :m] = zero
+        potentiation = potentiation_store[: n_inputs * m].reshape((n_inputs, m))
+        depression = depression_store[: n_inputs * m].reshape((n_inputs, m))
+        gathered = gathered_store[: n_inputs * m].reshape((n_inputs, m))
+        potentiation[:] = zero
+        depression[:] = zero
         for b in range(batch):
             for w in range(n_winners[b]):
                 slot = column[winners[b, w]]
@@ -546,14 +552,16 @@ def _stdp_window(
                 for q in range(n_traced[b]):
                     j = traced[b, q]
                     row[column[j]] += post_trace[b, j]
+        for i in range(n_inputs):  # gather, update in contiguous (vectorised) rows, scatter
+            for slot in range(m):
+                gathered[i, slot] = weights[i, columns[slot]]
         squares[:m] = zero
         for i in range(n_inputs):
             for slot in range(m):
-                j = columns[slot]
-                w = weights[i, j]
+                w = gathered[i, slot]
                 delta = a_plus * (w_max - w) * potentiation[i, slot] - a_minus * w * depression[i, slot]
                 w = min(max(w + delta, zero), w_max)
-                weights[i, j] = w
+                gathered[i, slot] = w
                 squares[slot] += w * w
         if weight_norm:
             for slot in range(m):
@@ -561,7 +569,10 @@ def _stdp_window(
                 settled[columns[slot]] = squares[slot] == np.float32(1)
             for i in range(n_inputs):
                 for slot in range(m):
-                    weights[i, columns[slot]] = weights[i, columns[slot]] / squares[slot]
+                    gathered[i, slot] = gathered[i, slot] / squares[slot]
+        for i in range(n_inputs):
+            for slot in range(m):
+                weights[i, columns[slot]] = gathered[i, slot]
         for slot in range(m):
             column[columns[slot]] = -1
     return fired_total
