@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from .config import Config, EncoderConfig
+from .kernels import bernoulli_spikes
 
 STREAM_QUERY = "query"
 STREAM_CALIBRATE = "calibrate"
@@ -46,21 +47,14 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
     """Spike trains of shape (N, T, D), dtype uint8, on the CPU.
 
     Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i]
-    with u drawn from ``torch.Generator().manual_seed(seeds[n])``.
+    with u drawn from ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced by
+    the compiled :func:`vprsnn_export.kernels.bernoulli_spikes` without building u.
     """
     images = np.asarray(images, dtype=np.float32)
     if images.ndim != 2 or len(seeds) != images.shape[0]:
         raise ValueError(f"expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
-    prob = firing_probabilities(images, cfg)
-    n_images, n_inputs = images.shape
-    spikes = torch.empty((n_images, cfg.timesteps, n_inputs), dtype=torch.uint8)
-    uniforms = torch.empty((cfg.timesteps, n_inputs), dtype=torch.float32)
-    generator = torch.Generator()
-    for row, seed in enumerate(seeds):
-        generator.manual_seed(int(seed))
-        torch.rand((cfg.timesteps, n_inputs), generator=generator, out=uniforms)
-        torch.lt(uniforms, prob[row], out=spikes[row])
-    return spikes
+    prob = firing_probabilities(images, cfg).numpy()
+    return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps))
 
 
 def encode_presentations(

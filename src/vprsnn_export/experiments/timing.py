@@ -8,11 +8,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.kernels import QUERY_CHUNK
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork
@@ -22,6 +24,7 @@ from vprsnn_export.trainer.train import Presentation, train_network
 from .common import Settings, load, provenance, trained_checkpoint
 
 NAME = "timing"
+VERSION = 2  # 2: float torch-loop and dense-bound rows, ratio_to_dense, threads, training_path
 DESCRIPTION = (
     "queries/s of the float path, the integer simulator and onnxruntime at T=150 and 300, batch 1 and "
     "batch 100; per-query latency; training s/epoch; aggregation overhead; FLOPs per query; peak memory"
@@ -35,6 +38,12 @@ def best_seconds(fn, repeats: int) -> float:
         fn()
         best = min(best, time.perf_counter() - started)
     return best
+
+
+def dense_currents(spikes: torch.Tensor, weights: torch.Tensor) -> None:
+    """The dense-BLAS bound: the input-current matmul alone, (chunk, T, inputs) @ (inputs, neurons), chunk by chunk."""
+    for start in range(0, len(spikes), QUERY_CHUNK):
+        input_currents(spikes[start : start + QUERY_CHUNK].to(weights.device), weights)
 
 
 def flops_per_query(timesteps: int, n_inputs: int, n_neurons: int) -> dict:
@@ -68,6 +77,13 @@ def run(settings: Settings) -> dict:
                 part = spikes[:batch]
                 times = {
                     "float": best_seconds(lambda: float_net.run(part), repeats),
+                    "float_torch_loop": best_seconds(
+                        lambda: run_network(
+                            part, float_net.weights, float_net.thresholds, beta=cfg.network.beta, compiled=False
+                        ),
+                        repeats,
+                    ),
+                    "dense_bound": best_seconds(lambda: dense_currents(part, float_net.weights), repeats),
                     "integer": best_seconds(lambda: int_net.run(part), repeats),
                     "onnxruntime": best_seconds(lambda: run_session(sess, part, batch=batch), repeats),
                 }
@@ -80,6 +96,7 @@ def run(settings: Settings) -> dict:
                             "queries_per_s": batch / seconds,
                             "ms_per_query": 1000 * seconds / batch,
                             "ratio_to_float": times["float"] / seconds,
+                            "ratio_to_dense": times["dense_bound"] / seconds,
                         }
                     )
     cfg = settings.config(seed)
@@ -97,6 +114,9 @@ def run(settings: Settings) -> dict:
     agg_one_s = best_seconds(lambda: aggregate(single, 5, 1.0), max(repeats, 20))
     return {
         "experiment": NAME,
+        "version": VERSION,
+        "threads": torch.get_num_threads(),
+        "training_path": "compiled kernel (vprsnn_export.kernels.stdp_window)",
         "device": str(device),
         "throughput": rows,
         "training_seconds_per_epoch": train_s,
@@ -111,13 +131,21 @@ def run(settings: Settings) -> dict:
 
 
 def table(results: dict) -> str:
-    lines = ["| T | batch | path | queries/s | ms/query | ratio to float |", "|---:|---:|---|---:|---:|---:|"]
+    lines = [
+        "| T | batch | path | queries/s | ms/query | ratio to float | ratio to dense bound |",
+        "|---:|---:|---|---:|---:|---:|---:|",
+    ]
     for r in results["throughput"]:
         lines.append(
             f"| {r['T']} | {r['batch']} | {r['path']} | {r['queries_per_s']:.1f} | {r['ms_per_query']:.2f} |"
-            f" {r['ratio_to_float']:.2f} |"
+            f" {r['ratio_to_float']:.2f} | {dense_ratio(r)} |"
         )
     return "\n".join(lines)
+
+
+def dense_ratio(row: dict) -> str:
+    """ratio_to_dense as text; '-' for results written before version 2."""
+    return f"{row['ratio_to_dense']:.2f}" if "ratio_to_dense" in row else "-"
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
@@ -125,7 +153,10 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     return (
         f"{table(results)}\n\n"
         f"* training: {results['training_seconds_per_epoch']:.2f} s per epoch ({results['training_images']} images, "
-        f"T={results['training_timesteps']}, batch 64) on {results['device']}\n"
+        f"T={results['training_timesteps']}, batch 64) on {results['device']}, "
+        f"{results.get('threads', '?')} thread(s), {results.get('training_path', 'torch loop')}\n"
+        "* dense bound: the input-current matmul alone (spikes @ W in float32), which the torch loop cannot avoid; "
+        "ratio to dense bound > 1: faster than that matmul\n"
         f"* sequence aggregation (k=5, product rule): {results['aggregation_ms_per_query_batched']:.3f} ms per query "
         f"batched, {results['aggregation_ms_one_window']:.3f} ms for one 5-frame window alone\n"
         f"* dense FLOPs per query: {flops[150]['total'] / 1e6:.0f} M at T=150, {flops[300]['total'] / 1e6:.0f} M at "
