@@ -20,12 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
 
 from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
 from vprsnn_export.stats import MeanStd  # noqa: E402
@@ -45,6 +40,16 @@ REPORT_HTML = "report.html"
 PLOTS_DIR = "plots"
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 STRATEGY_TITLES = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob"}
+
+
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend, imported on first use (it costs ~0.8 s at start-up)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 # ---------------------------------------------------------------------------- reading and combining
@@ -539,7 +544,8 @@ def provenance_blocks(report: VerifyReport) -> list[Block]:
 # ---------------------------------------------------------------------------- plots
 
 
-def png(fig: Figure) -> bytes:
+def png(fig: Any) -> bytes:
+    plt = pyplot()
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, bbox_inches="tight")
     plt.close(fig)
@@ -558,6 +564,7 @@ def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[lis
 
 
 def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
+    plt = pyplot()
     keys = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
@@ -597,6 +604,7 @@ def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
 
 
 def plot_pr(run: VerifiedRun) -> bytes:
+    plt = pyplot()
     names = list(run.float.pr_curves)
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), squeeze=False)
     cmap = plt.get_cmap("viridis")
@@ -621,6 +629,7 @@ def plot_pr(run: VerifiedRun) -> bytes:
 def plot_weights(run: VerifiedRun) -> bytes:
     """Per bit width: the share of weights on each level q / L (bars) over the float weights' histogram
     rescaled to the same units (share per interval of width 1 / L, line)."""
+    plt = pyplot()
     results = run.bits
     fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
     hist = run.float.weights
@@ -652,6 +661,7 @@ def plot_weights(run: VerifiedRun) -> bytes:
 
 
 def plot_spikes(report: VerifyReport) -> bytes:
+    plt = pyplot()
     summary = report.summary
     bits = [b.bits for b in summary.bits]
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))

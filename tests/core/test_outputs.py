@@ -71,7 +71,7 @@ def test_train_checks_its_output_before_training(tmp_path, capsys):
 
 def test_sigint_exits_130_with_one_line_and_no_temp_file(tmp_path):
     out = tmp_path / "net.npz"
-    command = [sys.executable, "-m", "vprsnn_export", *TRAIN[:-4], "--timesteps", "300", "--epochs", "50"]
+    command = [sys.executable, "-m", "vprsnn_export", *TRAIN[:-4], "--timesteps", "300", "--epochs", "100000"]
     process = subprocess.Popen(
         [*command, "--out", str(out)],
         stderr=subprocess.PIPE,

@@ -124,7 +124,9 @@ def run(settings: Settings) -> dict:
         "training_timesteps": cfg.encoder.timesteps,
         "aggregation_ms_per_query_batched": 1000 * agg_s / len(images),
         "aggregation_ms_one_window": 1000 * agg_one_s,
-        "flops_per_query": {t: flops_per_query(t, cfg.network.n_inputs, cfg.network.n_neurons) for t in (150, 300)},
+        "flops_per_query": {
+            str(t): flops_per_query(t, cfg.network.n_inputs, cfg.network.n_neurons) for t in (150, 300)
+        },
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "provenance": provenance(settings, started),
     }
@@ -159,7 +161,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         "ratio to dense bound > 1: faster than that matmul\n"
         f"* sequence aggregation (k=5, product rule): {results['aggregation_ms_per_query_batched']:.3f} ms per query "
         f"batched, {results['aggregation_ms_one_window']:.3f} ms for one 5-frame window alone\n"
-        f"* dense FLOPs per query: {flops[150]['total'] / 1e6:.0f} M at T=150, {flops[300]['total'] / 1e6:.0f} M at "
+        f"* dense FLOPs per query: {flops['150']['total'] / 1e6:.0f} M at T=150, {flops['300']['total'] / 1e6:.0f} M at "
         f"T=300 (2 T 784 N_exc for the currents + ~6 T N_exc for the neuron updates)\n"
         f"* peak resident memory of the whole run: {results['peak_rss_mib']:.0f} MiB\n"
     )
