@@ -156,7 +156,7 @@ def selection_titles(results: dict) -> dict[str, str]:
     settings = results["provenance"]["settings"]
     start, _, count = settings["consecutive"].partition(":")
     span = f"places {start}-{int(start) + int(count or 1) - 1}"
-    subset = "100-place subset (spread along the route)" if settings["subset"] else f"subset not given: {span}"
+    subset = "subset spread along the route" if settings["subset"] else f"subset not given: {span}"
     return {"subset": subset, "consecutive": f"consecutive {span}"}
 
 
