@@ -6,6 +6,7 @@ import argparse
 import importlib
 import json
 import pkgutil
+import re
 import shlex
 from dataclasses import replace
 from pathlib import Path
@@ -13,7 +14,7 @@ from typing import Any
 
 from .. import experiments
 from ..errors import InvalidValueError
-from ..experiments.common import Settings, document
+from ..experiments.common import Settings, Variant, document
 from ..fileio import atomic_write_text
 from ._common import parse_value
 
@@ -34,6 +35,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seeds", type=int, help="number of independently trained networks (seeds 1..N)")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
+    parser.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        metavar="NAME=PRESET[,KEY=VALUE...]",
+        help="experiment sweep: one variant of the grid (repeatable; default paper, paper+gamma=0.1, dog, dog+gamma=0.1)",
+    )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)
 
@@ -51,10 +59,23 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = parse_value(raw.strip())
-    extra: dict[str, Any] = {"overrides": overrides}
+    extra: dict[str, Any] = {"overrides": overrides, "grid": tuple(parse_grid_entry(item) for item in args.grid)}
     if args.data:
         extra.update(data=args.data, subset=None)
     return replace(settings, **extra)
+
+
+def parse_grid_entry(item: str) -> Variant:
+    """``"dog+g=dog,assignment.gamma=0.1"`` -> Variant("dog+g", "dog", {"assignment.gamma": 0.1})."""
+    name, sep, rest = item.partition("=")
+    parts = re.split(r",(?=\s*[\w.]+\s*=)", rest)  # commas inside values (lists) stay
+    if not sep or not name.strip() or not parts[0].strip() or "=" in parts[0]:
+        raise InvalidValueError(f"--grid expects NAME=PRESET[,KEY=VALUE...], got {item!r}")
+    overrides = {}
+    for part in parts[1:]:
+        key, _, raw = part.partition("=")
+        overrides[key.strip()] = parse_value(raw.strip())
+    return Variant(name.strip(), parts[0].strip(), overrides)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     if args.name not in modules:
         raise InvalidValueError(f"unknown experiment {args.name!r}; choose from {', '.join(modules)}")
     module = modules[args.name]
+    if args.grid and args.name != "sweep":
+        raise InvalidValueError(f"--grid applies only to experiment sweep, not {args.name!r}")
     settings = settings_from_args(args)
     results = module.run(settings)
     command = "vprsnn-export " + " ".join(shlex.quote(a) for a in args.argv)

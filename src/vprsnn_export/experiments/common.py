@@ -25,6 +25,15 @@ NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to th
 
 
 @dataclass(frozen=True)
+class Variant:
+    """One named point of a sweep grid (``--grid NAME=PRESET[,KEY=VALUE...]``): a preset plus config overrides."""
+
+    name: str
+    preset: str = "paper"
+    overrides: dict = field(default_factory=dict)  # dotted config overrides, applied after the settings' own
+
+
+@dataclass(frozen=True)
 class Settings:
     """An experiment's size and data. ``quick`` runs on the synthetic route in CI."""
 
@@ -38,6 +47,7 @@ class Settings:
     device: str = "cpu"
     progress: bool = True
     overrides: dict = field(default_factory=dict)  # dotted config overrides
+    grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:
