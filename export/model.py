@@ -17,6 +17,7 @@ scale and comparing currents across neurons (the WTA) uses a_j m_j.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -39,6 +40,7 @@ VOLTAGE_SHIFT = 6  # Loihi: the synaptic input and vth mantissa are shifted left
 MULTIPLIER_BITS = 16  # per-neuron scale multipliers m_j are unsigned 16-bit
 DEFAULT_BITS = (8, 4, 2)  # the weight widths quantize, verify and demo use unless told otherwise
 THRESHOLD_BITS = 17  # Loihi: vth mantissa is 17 bits unsigned
+MIN_EXPONENT, MAX_EXPONENT = -64, 8  # the shared scale exponent e of s_j = m_j 2**e that a header may state
 
 
 def decay_mantissa(beta: float) -> int:
@@ -225,6 +227,20 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     if needed - set(arrays):
         raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
     traversals, data = reference_header(meta, path)
+    for key in ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits"):
+        if not isinstance(meta.get(key), int) or isinstance(meta.get(key), bool):
+            raise ModelFileError(f"invalid fixed-point header: {key} must be an integer, got {meta.get(key)!r}", path)
+    if not MIN_EXPONENT <= meta["scale_exponent"] <= MAX_EXPONENT:
+        raise ModelFileError(
+            f"scale_exponent {meta['scale_exponent']} is outside [{MIN_EXPONENT}, {MAX_EXPONENT}] "
+            "(weights <= w_max give negative exponents)",
+            path,
+        )
+    sha = meta.get("source_sha256")
+    if not isinstance(sha, str) or not re.fullmatch(r"[!-~]{1,128}", sha):
+        raise ModelFileError(f"source_sha256 must be a digest or label (1-128 printable characters), got {sha!r}", path)
+    if not isinstance(meta.get("arithmetic", {}), dict) or not isinstance(meta.get("quantisation"), dict):
+        raise ModelFileError("invalid fixed-point header: arithmetic and quantisation must be mappings", path)
     try:
         model = FixedPointModel(
             bits=int(meta["bits"]),
@@ -248,6 +264,10 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     except (KeyError, TypeError, ValueError, VprError) as exc:
         raise ModelFileError(f"invalid fixed-point header ({exc})", path) from None
     validate(model, path)
+    if meta["quantisation"].get("bits") not in (None, meta["bits"]):
+        raise ModelFileError(
+            f"the quantisation record says {meta['quantisation'].get('bits')!r} bits, the header {meta['bits']}", path
+        )
     return model
 
 

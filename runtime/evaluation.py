@@ -112,6 +112,24 @@ def sequence_warning(query_place_ids: np.ndarray, options: ReadoutOptions) -> st
     )
 
 
+def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int) -> None:
+    """InvalidValueError when no query place lies within ``tolerance`` of a reference place: every
+    decision would be wrong by construction (the model was trained on other places)."""
+    reference = np.sort(np.asarray(reference_place_ids, dtype=np.int64))
+    queries = np.asarray(query_place_ids, dtype=np.int64)
+    if reference.size == 0 or queries.size == 0:
+        return
+    nearest = np.clip(np.searchsorted(reference, queries), 0, reference.size - 1)
+    below = reference[np.clip(nearest - 1, 0, reference.size - 1)]
+    gap = np.minimum(np.abs(reference[nearest] - queries), np.abs(below - queries))
+    if np.all(gap > tolerance):
+        raise InvalidValueError(
+            f"none of the {queries.size} query places ({queries.min()}..{queries.max()}) is among the model's "
+            f"{reference.size} reference places ({reference[0]}..{reference[-1]}): select the places it was "
+            "trained on (--places / --subset)"
+        )
+
+
 def readout_rows(
     calibration: np.ndarray,
     query_counts: np.ndarray,
@@ -122,6 +140,7 @@ def readout_rows(
 ) -> list[dict]:
     """Rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries} for one network."""
     check_sequence_length(options, len(query_place_ids))
+    check_places_overlap(reference_place_ids, query_place_ids, options.tolerance)
     sr = np.asarray(calibration, dtype=np.float64)
     sq = np.asarray(query_counts, dtype=np.float64)
     rows = []

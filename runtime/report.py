@@ -20,19 +20,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text  # noqa: E402
-from vprsnn_export.stats import MeanStd  # noqa: E402
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.stats import MeanStd
 
-from .results import (  # noqa: E402
+from .results import (
     METRICS,
     ReportError,
     RunSummary,
     VerifiedRun,
     VerifyReport,
 )
-from .verify import TOLERANCE_MEANING, build_report, summarise_runs  # noqa: E402
+from .verify import TOLERANCE_MEANING, build_report, summarise_runs
 
 REPORT_JSON = "report.json"
 REPORT_MD = "report.md"

@@ -726,7 +726,7 @@ class VerifyReport:
             raise ReportError("the report holds no runs", source)
         try:
             commands = data.get("commands")
-            return cls(
+            report = cls(
                 created=str(data.get("created", "?")),
                 command=None if data.get("command") is None else tuple(data["command"]),
                 seconds=_float_or_none(data.get("seconds")),
@@ -740,6 +740,13 @@ class VerifyReport:
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ReportError(f"malformed verify report ({type(exc).__name__}: {exc})", source) from None
+        if any(not run.bits for run in report.runs):
+            raise ReportError("a run of the report holds no bit widths", source)
+        if data.get("passed") is not report.passed:
+            raise ReportError(
+                f"the stored verdict passed={data.get('passed')!r} does not match the report's checks", source
+            )
+        return report
 
 
 __all__ = [

@@ -8,6 +8,7 @@ a test) does not import onnx, nir and matplotlib.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from typing import TYPE_CHECKING, Any
 
 from .version import __version__ as __version__
@@ -19,6 +20,8 @@ _API = "vprsnn_export.api"
 
 
 def __getattr__(name: str) -> Any:
+    if name != "__all__" and (name.startswith("_") or importlib.util.find_spec(f"{__name__}.{name}") is not None):
+        raise AttributeError(name)  # a submodule (``from . import commands``) loads itself, not the whole API
     api = importlib.import_module(_API)
     if name == "__all__":  # `from vprsnn_export import *`
         return list(api.__all__)

@@ -1,7 +1,30 @@
-"""``python -m vprsnn_export``: the same as the ``vprsnn-export`` command."""
+"""The ``vprsnn-export`` command's entry point (also ``python -m vprsnn_export``).
 
+A Ctrl-C while torch, numba and the rest load (a few seconds on a busy machine) exits with
+code 130 and one line, like one during the command itself: the guard below stands until
+the command line is imported, then Python's own handler is back and
+:func:`vprsnn_export.cli.main` turns the interrupt into the same line after cleaning up.
+"""
+
+import signal
 import sys
 
-from .cli import main
 
-sys.exit(main())
+def _interrupted_while_loading(signum: int, frame: object) -> None:
+    print("error: interrupted", file=sys.stderr)
+    raise SystemExit(130)
+
+
+signal.signal(signal.SIGINT, _interrupted_while_loading)
+
+from .cli import main  # noqa: E402  (imported under the guard above)
+
+signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def run() -> None:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    run()

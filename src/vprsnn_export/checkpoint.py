@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from .config import Config
-from .errors import ModelFileError, VprError
+from .dataset import MAX_PLACE_ID, parse_places, parse_synthetic
+from .errors import InvalidValueError, ModelFileError, VprError
 from .fileio import read_container, sha256_file, write_container
 from .version import __version__
 
@@ -120,6 +121,13 @@ def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str],
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
         raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+    try:
+        if data.get("places"):
+            parse_places(data["places"])
+        if str(data.get("source", "")).startswith("synthetic"):
+            parse_synthetic(data["source"])
+    except InvalidValueError as exc:
+        raise ModelFileError(f"the data record is invalid ({exc})", path) from None
     return list(traversals), dict(data)
 
 
@@ -128,8 +136,8 @@ def validate_reference_ids(ids: np.ndarray, path: str | Path) -> int:
     ids = np.asarray(ids)
     if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer):
         raise ModelFileError("reference_place_ids must be a non-empty 1-D integer array", path)
-    if np.unique(ids).size != ids.size or np.any(ids < 0):
-        raise ModelFileError("reference_place_ids must be distinct non-negative place ids", path)
+    if np.unique(ids).size != ids.size or np.any(ids < 0) or np.any(ids > MAX_PLACE_ID):
+        raise ModelFileError(f"reference_place_ids must be distinct place ids from 0 to {MAX_PLACE_ID}", path)
     return int(ids.size)
 
 
@@ -160,6 +168,9 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
         raise ModelFileError(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}", path)
     if np.any(ckpt.thresholds <= 0):
         raise ModelFileError("thresholds must be positive", path)
+    ceiling = max(ckpt.config.homeostasis.theta_max, ckpt.config.network.theta_init)
+    if np.any(ckpt.thresholds > ceiling * (1 + 1e-6)):
+        raise ModelFileError(f"thresholds exceed the config's theta_max / theta_init ({ceiling})", path)
     n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     if ckpt.calibration.shape != (net.n_neurons, n_places):
         raise ModelFileError(

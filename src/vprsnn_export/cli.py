@@ -13,7 +13,7 @@ from typing import NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
-from .fileio import output_lock
+from .fileio import check_output_folder, output_lock
 from .threads import set_threads
 from .version import __version__
 
@@ -82,7 +82,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
-        with output_lock(getattr(args, "out", None) or getattr(args, "report", None)):
+        output = getattr(args, "report", None) or getattr(args, "out", None)
+        if output is not None and getattr(args, "output_kind", "folder") == "folder":
+            check_output_folder(output)  # a file output (train) is checked by its command, against its inputs
+        with output_lock(output):
             return int(args.handler(args) or 0)
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
-from .fileio import sha256_bytes
+from .fileio import is_readable_file, sha256_bytes
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
@@ -200,7 +200,7 @@ def read_manifest(data: str | Path) -> Manifest:
         if not (path / MANIFEST_NAME).is_file():
             raise DataError(f"this folder has no {MANIFEST_NAME} place manifest", path)
         path = path / MANIFEST_NAME
-    elif not path.is_file():
+    elif not is_readable_file(path):
         hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
         raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
     raw = path.read_bytes()
@@ -223,7 +223,7 @@ def read_manifest(data: str | Path) -> Manifest:
 def read_subset(path: str | Path) -> np.ndarray:
     """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
     path = Path(path)
-    if not path.is_file():
+    if not is_readable_file(path):
         raise DataError("no such subset file (a CSV with a place_id column)", path)
     columns, records = _read_csv(path.read_bytes(), path, "subset file")
     if PLACE_ID not in columns:

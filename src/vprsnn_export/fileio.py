@@ -40,26 +40,58 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     return atomic_write(path, lambda handle: handle.write(data))
 
 
-def check_output(path: str | Path, *, overwrite: bool = True) -> Path:
+def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str | Path | None, ...] = ()) -> Path:
     """The output file ``path`` if it may be written: OutputError when it is empty, a folder, a device or
-    other special file, a symbolic link, or (``overwrite=False``) an existing file."""
+    other special file, a symbolic link, one of the command's ``inputs``, a name too long for the file
+    system, under a file, or (``overwrite=False``) an existing file."""
     if str(path).strip() == "":
         raise OutputError("empty output path")
     path = Path(path)
-    if path.is_symlink():
-        raise OutputError("is a symbolic link: give the path of the file itself", path)
-    if path.exists():
-        mode = path.stat().st_mode
-        if stat.S_ISDIR(mode):
-            raise OutputError("is a folder: give a file name", path)
-        if not stat.S_ISREG(mode):
-            raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
-        if not overwrite:
-            raise OutputError("exists already: give another name, or --force to replace it", path)
-    parent = path.parent
-    if parent.exists() and not parent.is_dir():
-        raise OutputError(f"{parent} is not a folder", path)
+    try:
+        if path.is_symlink():
+            raise OutputError("is a symbolic link: give the path of the file itself", path)
+        if path.exists():
+            mode = path.stat().st_mode
+            if stat.S_ISDIR(mode):
+                raise OutputError("is a folder: give a file name", path)
+            if not stat.S_ISREG(mode):
+                raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
+            if any(source and Path(source).exists() and path.samefile(source) for source in inputs):
+                raise OutputError("is one of this command's input files: give another output name", path)
+            if not overwrite:
+                raise OutputError("exists already: give another name, or --force to replace it", path)
+        _check_ancestors(path)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
     return path
+
+
+def check_output_folder(path: str | Path) -> Path:
+    """The output folder ``path`` if it may be created or written into: OutputError when it is empty, a
+    symbolic link, an existing file or special file, under a file, or a name too long for the file system."""
+    if str(path).strip() == "":
+        raise OutputError("empty output path")
+    path = Path(path)
+    try:
+        if path.is_symlink():
+            raise OutputError("is a symbolic link: give the path of the folder itself", path)
+        if path.exists() and not path.is_dir():
+            raise OutputError("is not a folder: give a new or existing folder", path)
+        _check_ancestors(path)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+    return path
+
+
+def _check_ancestors(path: Path) -> None:
+    """OutputError when an existing ancestor of ``path`` is not a folder; OSError for a name too long."""
+    for parent in path.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputError(f"{parent} is not a folder", path)
+            break
+    if len(path.name.encode()) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
+        raise OutputError("the file name is too long for this file system", path)
 
 
 def _umask() -> int:
@@ -214,15 +246,26 @@ def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np
     return atomic_write_bytes(path, buffer.getvalue())
 
 
+def is_readable_file(path: str | Path) -> bool:
+    """``Path.is_file`` that answers False instead of raising for a name too long or a path through a file."""
+    try:
+        return Path(path).is_file()
+    except OSError:
+        return False
+
+
 def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Read a container written by :func:`write_container`; any defect is a ModelFileError naming the file."""
     path = Path(path)
-    if not path.is_file():
-        raise ModelFileError(f"no such {kind} file", path)
+    if not is_readable_file(path):
+        raise ModelFileError(f"no such {kind} file" + (" (a folder)" if path.is_dir() else ""), path)
     try:
-        with np.load(path, allow_pickle=False) as npz:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ModelFileError(f"not a {kind}: a single .npy array, not an .npz container", path)
+        with loaded as npz:
             arrays = {name: npz[name] for name in npz.files}
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as exc:
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, TypeError) as exc:
         raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
     if META_KEY not in arrays:
         raise ModelFileError(f"not a {kind}: the JSON header is missing", path)

@@ -41,7 +41,11 @@ def read_grey_image(path: Path, context: str = "") -> np.ndarray:
     """
     path = Path(path)
     suffix = f" ({context})" if context else ""
-    if not path.is_file():
+    try:
+        found = path.is_file()
+    except OSError as exc:  # a name too long for the file system, a path through a file
+        raise DataError(f"cannot read image ({exc.strerror or exc}){suffix}", path) from None
+    if not found:
         raise DataError(f"image file not found{suffix}", path)
     try:
         image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)

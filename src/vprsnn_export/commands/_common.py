@@ -15,16 +15,24 @@ from ..errors import InvalidValueError
 from ..runtime.evaluation import ReadoutOptions
 
 
+def non_empty(text: str) -> str:
+    """argparse type: any text but an empty or blank one (``--data ''`` is a slip, not the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("empty value")
+    return text
+
+
 def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) -> None:
     group = parser.add_argument_group("data")
     group.add_argument(
         "--data",
+        type=non_empty,
         required=data_required,
         help="place manifest CSV (or its folder), or 'synthetic[:N]' for the embedded synthetic route",
     )
     selection = group.add_mutually_exclusive_group()
-    selection.add_argument("--subset", help="CSV with a place_id column: the places to use, in order")
-    selection.add_argument("--places", help="START:COUNT[:STRIDE] consecutive place ids")
+    selection.add_argument("--subset", type=non_empty, help="CSV with a place_id column: the places to use, in order")
+    selection.add_argument("--places", type=non_empty, help="START:COUNT[:STRIDE] consecutive place ids")
 
 
 def add_query_options(parser: argparse.ArgumentParser) -> None:

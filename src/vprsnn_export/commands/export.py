@@ -17,7 +17,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..dataset import MAX_PLACES
 from ..device import resolve_device
+from ..errors import InvalidValueError
 from ..runtime.exporting import (
     MANIFEST_NAME,
     check_deploy_folder,
@@ -84,6 +86,11 @@ def run(args: argparse.Namespace) -> int:
     targets = parse_export_targets(args.to)
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)
+    unused = [f"--{name.replace('_', '-')}" for name in ("query", "data", "subset", "places") if getattr(args, name)]
+    if not args.check and unused:
+        raise InvalidValueError(f"{', '.join(unused)}: only used with --check (add --check, or leave them out)")
+    if not 0 <= args.check_samples <= MAX_PLACES:
+        raise InvalidValueError(f"--check-samples expects 0 (all queries) to {MAX_PLACES}, got {args.check_samples}")
     out = Path(args.out)
     check_deploy_folder(out, overwrite=args.force)
     spikes, label = None, ""

@@ -38,11 +38,11 @@ def run(args: argparse.Namespace) -> int:
     model = load_fixed_point(args.model)
     float_checkpoint = None
     if args.compare:
+        float_checkpoint = load_checkpoint(args.compare)
         if checkpoint_sha256(args.compare) != model.source_sha256:
             raise InvalidValueError(
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
-        float_checkpoint = load_checkpoint(args.compare)
     options = readout_options(args, model.config.assignment.gamma)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
     warning = sequence_warning(dataset.place_ids, options)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 from ..checkpoint import save_checkpoint
 from ..dataset import load_dataset, selection_record
@@ -21,11 +22,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     add_config_options(parser)
     add_runtime_options(parser)
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, output_kind="file")
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output(args.out, overwrite=args.force)  # before minutes of training, not after
+    inputs = (args.data, args.subset, Path(args.data) / "places.csv")
+    check_output(args.out, overwrite=args.force, inputs=inputs)  # before minutes of training, not after
     cfg = config_from_args(args)
     references = parse_names(args.reference, "--reference")
     device = resolve_device(args.device)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
-from ..dataset import Dataset, load_dataset
+from ..dataset import MAX_PLACES, Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
@@ -269,13 +269,21 @@ def _delta(row: MetricRow, metric: str) -> float:
     return 0.0 if row.delta is None else row.delta.get(metric)
 
 
+MAX_SEEDS = 1000  # networks trained by one verify run
+
+
 def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     progress = not args.quiet
-    if args.seeds is not None and (args.seeds < 1 or len(args.checkpoints) != 1):
+    if args.seeds is not None and (not 1 <= args.seeds <= MAX_SEEDS or len(args.checkpoints) != 1):
         raise InvalidValueError(
-            "--seeds N needs N >= 1 and exactly one CKPT (the template whose config and data are used)"
+            f"--seeds N needs N from 1 to {MAX_SEEDS} and exactly one CKPT (the template whose config and data are used)"
         )
+    if not 0 <= args.reference_queries <= MAX_PLACES:
+        raise InvalidValueError(f"--reference-queries expects 0 to {MAX_PLACES}, got {args.reference_queries}")
+    for option, value in (("--tolerance", args.tolerance), ("--targets", args.targets)):
+        if value is not None and not value.strip():
+            raise InvalidValueError(f"{option}: empty value")
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
