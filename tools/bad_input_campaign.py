@@ -1,0 +1,1730 @@
+"""Bad-input campaign over all nine `vprsnn-export` commands (issue 12), reproducible.
+
+Builds tiny fixtures once in a temp folder (a checkpoint trained for one epoch on
+``synthetic:10``, 8- and 2-bit models, an export, a verify report, tampered copies of each,
+small place manifests made from a few Nordland images, or generated ones when the shared data
+is absent), then runs every case of :func:`all_cases`: bad inputs, which must stop with one
+line ``error: ...`` and exit 2, and legal extremes, which must run. Run from the repository
+root, with the project's virtual environment active:
+
+    OMP_NUM_THREADS=1 python tools/bad_input_campaign.py --out build/campaign
+    python tools/bad_input_campaign.py --out build/campaign --only velocity   # a subset
+    python tools/bad_input_campaign.py --out build/campaign --exec            # every case a fresh process
+
+Each case runs in its own empty folder, with stdin from /dev/null, OMP_NUM_THREADS=1, a private
+VPRSNN_CACHE and a timeout. By default a case is a child forked from this interpreter once it has
+imported the CLI: the child redirects its file descriptors 0-2 and exits with
+``sys.exit(vprsnn_export.cli.main())``'s status, as the ``vprsnn-export`` script does, without
+2.5 s of imports per case. Every case that is not clean (or, for a legal extreme, did not run) is
+run again as a real ``vprsnn-export`` process, and that result is the one reported (``--exec``:
+every case that way, about 30 minutes).
+
+Classes of a bad input: ``clean`` (exit 2, stderr exactly one line starting with ``error: ``),
+``traceback`` (``Traceback`` in stderr), ``multi-line`` (non-zero exit with more than one stderr
+line, an argparse usage block or an OpenCV warning), ``accepted`` (exit 0), ``timeout``,
+``other``. A legal extreme: ``ran`` (an exit code it may give: 0, or 1 where a verification check
+may fail) or the failure class (``refused`` for a clean error). Progress bars (tqdm) are not
+counted as stderr lines. Writes OUT/bad_inputs.json and OUT/bad_inputs.md, prints one line per
+case to stderr and the counts to stdout; exit status 0 when every bad input is clean and every
+legal extreme ran, 1 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import importlib
+import importlib.util
+import json
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+import zipfile
+from collections import Counter
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+NORDLAND = ROOT.parent / "shared" / "data" / "nordland_64x32_summer_winter"
+COMMANDS = ("train", "evaluate", "quantize", "simulate", "export", "verify", "report", "experiment", "demo")
+BAD_CLASSES = ("clean", "traceback", "multi-line", "accepted", "timeout", "other")
+LEGAL_CLASSES = ("ran", "refused", "traceback", "multi-line", "timeout", "other")
+TIMEOUT_S = 60.0  # the slowest legal extreme takes about 10 s
+
+# Fixture paths as cases name them: {fx} is the fixture folder, {ro} a folder nothing can be written in.
+CK = "{fx}/net.npz"
+OTHER = "{fx}/other.npz"
+EDGE = "{fx}/edge.npz"
+M8 = "{fx}/models/model_8bit_per-neuron_max.npz"
+M2 = "{fx}/models/model_2bit_per-neuron_max.npz"
+NORD = "{fx}/nord/places.csv"
+HUGE = "99999999999999999999"
+TINY = ("--timesteps", "20", "--epochs", "1", "--neurons", "16")
+TRAIN = ("train", "--data", "synthetic:10", "--reference", "summer", *TINY, "--out", "t.npz")
+EVAL = ("evaluate", CK, "--query", "winter")
+SIM = ("simulate", M8, "--query", "winter")
+QUANT = ("quantize", CK, "--bits", "8", "--out", "q")
+EXPORT = ("export", M8, "--out", "x")
+VERIFY = ("verify", CK, "--bits", "8", "--query", "winter", "--report", "v")
+EXPERIMENT = ("experiment", "assignment", "--quick", "--out", "e")
+DEMO = ("demo", "--quick", "--out", "d")
+#: The values every numeric option is tried with.
+VALUES = {"nan": "nan", "inf": "inf", "neg": "-1", "zero": "0", "huge": HUGE, "text": "abc", "empty": ""}
+
+
+@dataclass(frozen=True)
+class Case:
+    """One command line; ``copy`` fixtures are copied into its folder, ``links`` are (name, target) symlinks."""
+
+    id: str
+    argv: tuple[str, ...]
+    legal: bool = False
+    copy: tuple[str, ...] = ()  # fixture names ("rep", or "rep->rep2" to rename)
+    links: tuple[tuple[str, str], ...] = ()
+    ok_rc: tuple[int, ...] = (0,)
+    note: str = ""
+
+    @property
+    def command(self) -> str:
+        return self.argv[0] if self.argv and self.argv[0] in COMMANDS else "(none)"
+
+
+@dataclass(frozen=True)
+class Raw:
+    """What one run gave: exit code, output, wall time."""
+
+    rc: int
+    stdout: str
+    stderr: str
+    seconds: float
+    timed_out: bool
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One case's classified result, as bad_inputs.json stores it."""
+
+    id: str
+    command: str
+    line: str
+    legal: bool
+    klass: str
+    rc: int
+    first_line: str
+    last_line: str
+    seconds: float
+    runner: str
+    fork_class: str | None
+    note: str
+    stderr: str
+
+
+def bad(case_id: str, *argv: str, **options: Any) -> Case:
+    return Case(case_id, tuple(argv), **options)
+
+
+def legal(case_id: str, *argv: str, **options: Any) -> Case:
+    """A legal extreme; for verify, demo and export --check exit 1 (a check failed) also counts as ran."""
+    checks = bool(argv) and (argv[0] in ("verify", "demo") or "--check" in argv)
+    return Case(case_id, tuple(argv), legal=True, **{"ok_rc": (0, 1) if checks else (0,), **options})
+
+
+# ---------------------------------------------------------------------------------------------- running
+
+
+def exit_status(main: Callable[[], object]) -> int:
+    """The exit status of ``sys.exit(main())`` in a fresh interpreter (an uncaught exception: traceback, 1)."""
+    try:
+        status: object = main()
+    except SystemExit as exc:
+        status = exc.code
+    except BaseException:
+        traceback.print_exc()
+        return 1
+    if status is None:
+        return 0
+    if isinstance(status, int):
+        return status & 0xFF
+    print(status, file=sys.stderr)
+    return 1
+
+
+def redirect(fd: int, path: str, flags: int) -> None:
+    target = os.open(path, flags, 0o644)
+    os.dup2(target, fd)
+    os.close(target)
+
+
+def forked_child(main: Callable[[], object], argv: Sequence[str], cwd: Path, out: Path, err: Path) -> NoReturn:
+    """In the forked child: become ``vprsnn-export ARGV`` run in ``cwd``, then exit."""
+    code = 1
+    try:
+        os.chdir(cwd)
+        redirect(0, os.devnull, os.O_RDONLY)
+        redirect(1, str(out), os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+        redirect(2, str(err), os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+        sys.argv = ["vprsnn-export", *argv]
+        code = exit_status(main)
+        atexit._run_exitfuncs()
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+
+
+def wait_child(pid: int, timeout: float) -> tuple[int, bool]:
+    """Exit code of child ``pid`` (-signal when killed), and whether it ran past ``timeout`` (then killed)."""
+    deadline = time.monotonic() + timeout
+    timed_out = False
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status), timed_out
+        if time.monotonic() > deadline and not timed_out:
+            timed_out = True
+            os.kill(pid, signal.SIGTERM)
+            deadline = time.monotonic() + 5
+        elif timed_out and time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            deadline = float("inf")
+        time.sleep(0.005)
+
+
+class ForkRunner:
+    """Runs a case in a child forked from this interpreter after it imported the whole CLI."""
+
+    name = "fork"
+
+    def __init__(self, timeout: float, logs: Path) -> None:
+        cli = importlib.import_module("vprsnn_export.cli")
+        cli.build_parser()  # imports every command module (torch, numba, ...) once, here
+        self.main: Callable[[], object] = cli.main
+        self.timeout = timeout
+        self.logs = logs
+
+    def __call__(self, argv: Sequence[str], cwd: Path) -> Raw:
+        out, err = self.logs / "stdout", self.logs / "stderr"
+        sys.stdout.flush()
+        sys.stderr.flush()
+        started = time.perf_counter()
+        pid = os.fork()
+        if pid == 0:
+            forked_child(self.main, argv, cwd, out, err)
+        rc, timed_out = wait_child(pid, self.timeout)
+        return Raw(rc, read_text(out), read_text(err), time.perf_counter() - started, timed_out)
+
+
+class ExecRunner:
+    """Runs a case as a real ``vprsnn-export`` process (its own session, killed on timeout)."""
+
+    name = "exec"
+
+    def __init__(self, timeout: float) -> None:
+        found = shutil.which("vprsnn-export") or str(Path(sys.executable).with_name("vprsnn-export"))
+        self.program = found
+        self.timeout = timeout
+
+    def __call__(self, argv: Sequence[str], cwd: Path) -> Raw:
+        started = time.perf_counter()
+        process = subprocess.Popen(
+            [self.program, *argv],
+            cwd=cwd,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
+        )
+        timed_out = False
+        try:
+            out, err = process.communicate(timeout=self.timeout)
+        except subprocess.TimeoutExpired:
+            timed_out = True
+            os.killpg(process.pid, signal.SIGKILL)
+            out, err = process.communicate()
+        seconds = time.perf_counter() - started
+        return Raw(process.returncode, decode(out), decode(err), seconds, timed_out)
+
+
+Runner = ForkRunner | ExecRunner
+
+
+def decode(data: bytes) -> str:
+    return data.decode("utf-8", errors="replace")
+
+
+def read_text(path: Path) -> str:
+    return decode(path.read_bytes()) if path.exists() else ""
+
+
+# ---------------------------------------------------------------------------------------------- classifying
+
+OPENCV_WARNING = re.compile(r"\[ ?WARN:|libpng (warning|error)|global \S+\.cpp")
+PROGRESS_BAR = re.compile(r"\d+%\||\d+(it|epoch|img|query|queries|step)s? \[")
+
+
+def stderr_lines(stderr: str) -> list[str]:
+    """The stderr lines a user reads: split at newlines and carriage returns, tqdm progress bars dropped."""
+    return [piece for piece in re.split(r"[\r\n]", stderr) if piece.strip() and not PROGRESS_BAR.search(piece)]
+
+
+def is_multi_line(stderr: str, lines: Sequence[str]) -> bool:
+    usage = any(line.startswith("usage:") for line in lines)
+    opencv = OPENCV_WARNING.search(stderr) is not None
+    return len(lines) > 1 or usage or opencv
+
+
+def classify(case: Case, raw: Raw) -> str:
+    """The class of one outcome (see the module docstring)."""
+    if raw.timed_out:
+        return "timeout"
+    if "Traceback" in raw.stderr:
+        return "traceback"
+    if case.legal and raw.rc in case.ok_rc:
+        return "ran"
+    if not case.legal and raw.rc == 0:
+        return "accepted"
+    lines = stderr_lines(raw.stderr)
+    if is_multi_line(raw.stderr, lines):
+        return "multi-line"
+    if raw.rc == 2 and len(lines) == 1 and lines[0].startswith("error: "):
+        return "refused" if case.legal else "clean"
+    return "other"
+
+
+def is_finding(outcome: Outcome) -> bool:
+    return outcome.klass != ("ran" if outcome.legal else "clean")
+
+
+# ---------------------------------------------------------------------------------------------- fixtures
+
+
+def read_npz(path: Path) -> tuple[Any, dict[str, np.ndarray]]:
+    """JSON header and arrays of a project container."""
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {name: npz[name] for name in npz.files}
+    return json.loads(arrays.pop("__meta__").tobytes().decode("utf-8")), arrays
+
+
+def write_npz(path: Path, meta: Any, arrays: Mapping[str, np.ndarray]) -> None:
+    """A container with this header (any JSON value) and arrays; object arrays are pickled."""
+    header = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    members: dict[str, Any] = {"__meta__": header, **arrays}
+    with open(path, "wb") as handle:
+        np.savez(handle, **members)
+
+
+def nested(meta: dict[str, Any], dotted: str, value: Any) -> dict[str, Any]:
+    """A deep copy of ``meta`` with the dotted key set (``None`` value: left as null)."""
+    copy = json.loads(json.dumps(meta))
+    *parents, key = dotted.split(".")
+    target = copy
+    for part in parents:
+        target = target[part]
+    target[key] = value
+    return copy
+
+
+def without(mapping: dict[str, Any], key: str) -> dict[str, Any]:
+    return {k: v for k, v in mapping.items() if k != key}
+
+
+Meta = Any
+Arrays = dict[str, np.ndarray]
+Edit = Callable[[Meta, Arrays], tuple[Meta, Arrays]]
+
+
+def header(change: Callable[[Meta], Meta]) -> Edit:
+    return lambda meta, arrays: (change(meta), arrays)
+
+
+def array(change: Callable[[Arrays], Arrays]) -> Edit:
+    return lambda meta, arrays: (meta, change(arrays))
+
+
+def set_array(name: str, make: Callable[[np.ndarray], Any]) -> Edit:
+    return array(lambda a: {**a, name: np.asarray(make(a[name]))})
+
+
+#: Tampered checkpoints: a header or array edit of net.npz each.
+CHECKPOINT_EDITS: dict[str, Edit] = {
+    "header-list": header(lambda m: [m]),
+    "header-string": header(lambda m: "summer"),
+    "header-number": header(lambda m: 5),
+    "format-other": header(lambda m: {**m, "format": "other"}),
+    "format-version-99": header(lambda m: {**m, "format_version": 99}),
+    "format-version-string": header(lambda m: {**m, "format_version": "1"}),
+    "config-list": header(lambda m: {**m, "config": [1]}),
+    "config-string": header(lambda m: {**m, "config": "paper"}),
+    "config-null": header(lambda m: {**m, "config": None}),
+    "config-missing": header(lambda m: without(m, "config")),
+    "config-unknown-key": header(lambda m: nested(m, "config.nope", 1)),
+    "section-list": header(lambda m: nested(m, "config.network", [1])),
+    "section-string": header(lambda m: nested(m, "config.encoder", "x")),
+    "seed-string": header(lambda m: nested({**m, "seed": "one"}, "config.seed", "one")),
+    "seed-float": header(lambda m: nested({**m, "seed": 1.5}, "config.seed", 1.5)),
+    "seed-negative": header(lambda m: nested({**m, "seed": -1}, "config.seed", -1)),
+    "timesteps-null": header(lambda m: nested(m, "config.encoder.timesteps", None)),
+    "timesteps-string": header(lambda m: nested(m, "config.encoder.timesteps", "20")),
+    "timesteps-zero": header(lambda m: nested(m, "config.encoder.timesteps", 0)),
+    "neurons-mismatch": header(lambda m: nested(m, "config.network.n_neurons", 17)),
+    "beta-nan": header(lambda m: nested(m, "config.network.beta", float("nan"))),
+    "gamma-infinity": header(lambda m: nested(m, "config.assignment.gamma", float("inf"))),
+    "wta-string": header(lambda m: nested(m, "config.network.wta", "yes")),
+    "channels-unknown": header(lambda m: nested(m, "config.preprocess.channels", "rgb")),
+    "traversals-string": header(lambda m: {**m, "reference_traversals": "summer"}),
+    "traversals-empty": header(lambda m: {**m, "reference_traversals": []}),
+    "traversals-unknown": header(lambda m: {**m, "reference_traversals": ["autumn"]}),
+    "traversals-numbers": header(lambda m: {**m, "reference_traversals": [1]}),
+    "data-list": header(lambda m: {**m, "data": ["x"]}),
+    "data-string": header(lambda m: {**m, "data": "synthetic:10"}),
+    "data-source-missing": header(lambda m: nested(m, "data.source", "/nope/places.csv")),
+    "data-source-number": header(lambda m: nested(m, "data.source", 5)),
+    "data-source-huge": header(lambda m: nested(m, "data.source", "synthetic:100000000000")),
+    "data-places-text": header(lambda m: nested(m, "data.places", "abc")),
+    "history-mapping": header(lambda m: {**m, "history": {"a": 1}}),
+    "history-strings": header(lambda m: {**m, "history": ["x"]}),
+    "package-version-list": header(lambda m: {**m, "package_version": [1]}),
+    "ref-ids-0d": set_array("reference_place_ids", lambda a: np.array(3)),
+    "ref-ids-duplicate": set_array("reference_place_ids", np.zeros_like),
+    "ref-ids-float": set_array("reference_place_ids", lambda a: a.astype(float) + 0.5),
+    "ref-ids-negative": set_array("reference_place_ids", lambda a: -a - 1),
+    "ref-ids-empty": set_array("reference_place_ids", lambda a: a[:0]),
+    "ref-ids-2d": set_array("reference_place_ids", lambda a: a.reshape(1, -1)),
+    "ref-ids-huge": set_array("reference_place_ids", lambda a: a + 10**18),
+    "ref-ids-absent": set_array("reference_place_ids", lambda a: a + 50),
+    "thresholds-zero": set_array("thresholds", np.zeros_like),
+    "thresholds-negative": set_array("thresholds", lambda a: -a),
+    "thresholds-nan": set_array("thresholds", lambda a: np.full_like(a, np.nan)),
+    "thresholds-inf": set_array("thresholds", lambda a: np.full_like(a, np.inf)),
+    "thresholds-int": set_array("thresholds", lambda a: np.ones(a.shape, dtype=np.int32)),
+    "thresholds-0d": set_array("thresholds", lambda a: np.float32(1.5)),
+    "thresholds-huge": set_array("thresholds", lambda a: np.full_like(a, 1e30)),
+    "weights-huge": set_array("weights", lambda a: np.full_like(a, 1e30)),
+    "weights-nan": set_array("weights", lambda a: np.full_like(a, np.nan)),
+    "weights-negative": set_array("weights", lambda a: -a),
+    "weights-shape": set_array("weights", lambda a: a[:10]),
+    "weights-0d": set_array("weights", lambda a: np.float32(0.5)),
+    "weights-int": set_array("weights", lambda a: np.zeros(a.shape, dtype=np.int64)),
+    "weights-text": set_array("weights", lambda a: np.array(["a", "b"])),
+    "weights-object": set_array("weights", lambda a: np.array([{"a": 1}], dtype=object)),
+    "calibration-negative": set_array("calibration", lambda a: a - 100),
+    "calibration-float": set_array("calibration", lambda a: a.astype(float) + 0.5),
+    "calibration-shape": set_array("calibration", lambda a: a[:, :3]),
+    "missing-weights": array(lambda a: without(a, "weights")),
+    "missing-reference-ids": array(lambda a: without(a, "reference_place_ids")),
+}
+
+#: Tampered fixed-point models: edits of models/model_8bit_per-neuron_max.npz.
+MODEL_EDITS: dict[str, Edit] = {
+    "header-list": header(lambda m: [m]),
+    "format-other": header(lambda m: {**m, "format": "vprsnn-checkpoint"}),
+    "bits-text": header(lambda m: {**m, "bits": "eight"}),
+    "bits-9": header(lambda m: {**m, "bits": 9}),
+    "bits-null": header(lambda m: {**m, "bits": None}),
+    "bits-float": header(lambda m: {**m, "bits": 8.5}),
+    "bits-list": header(lambda m: {**m, "bits": [8]}),
+    "scale-exponent-null": header(lambda m: {**m, "scale_exponent": None}),
+    "scale-exponent-huge": header(lambda m: {**m, "scale_exponent": 10**30}),
+    "scale-exponent-positive": header(lambda m: {**m, "scale_exponent": 40}),
+    "decay-negative": header(lambda m: {**m, "decay_dv": -1}),
+    "decay-float": header(lambda m: {**m, "decay_dv": 204.5}),
+    "voltage-bits-16": header(lambda m: {**m, "voltage_bits": 16}),
+    "voltage-shift-99": header(lambda m: {**m, "voltage_shift": 99}),
+    "config-list": header(lambda m: {**m, "config": [1]}),
+    "seed-string": header(lambda m: nested(m, "config.seed", "one")),
+    "timesteps-null": header(lambda m: nested(m, "config.encoder.timesteps", None)),
+    "neurons-mismatch": header(lambda m: nested(m, "config.network.n_neurons", 17)),
+    "quantisation-list": header(lambda m: {**m, "quantisation": [1]}),
+    "quantisation-missing": header(lambda m: without(m, "quantisation")),
+    "quantisation-bits-differ": header(lambda m: nested(m, "quantisation.bits", 2)),
+    "source-sha-list": header(lambda m: {**m, "source_sha256": [1, 2]}),
+    "source-sha-short": header(lambda m: {**m, "source_sha256": "abc"}),
+    "data-list": header(lambda m: {**m, "data": ["x"]}),
+    "data-source-number": header(lambda m: nested(m, "data.source", 5)),
+    "traversals-string": header(lambda m: {**m, "reference_traversals": "summer"}),
+    "traversals-empty": header(lambda m: {**m, "reference_traversals": []}),
+    "traversals-numbers": header(lambda m: {**m, "reference_traversals": [1]}),
+    "arithmetic-list": header(lambda m: {**m, "arithmetic": [1]}),
+    "mantissa-out-of-range": set_array("weight_mantissa", lambda a: a + 1000),
+    "mantissa-negative": set_array("weight_mantissa", lambda a: a - 1000),
+    "mantissa-float": set_array("weight_mantissa", lambda a: a.astype(float)),
+    "mantissa-shape": set_array("weight_mantissa", lambda a: a[:10]),
+    "mantissa-0d": set_array("weight_mantissa", lambda a: np.int32(1)),
+    "threshold-zero": set_array("threshold", np.zeros_like),
+    "threshold-negative": set_array("threshold", lambda a: -a),
+    "multiplier-zero": set_array("scale_multiplier", np.zeros_like),
+    "calibration-negative": set_array("calibration", lambda a: a - 100),
+    "calibration-float": set_array("calibration", lambda a: a.astype(float) + 0.5),
+    "calibration-shape": set_array("calibration", lambda a: a[:, :3]),
+    "float-calibration-shape": set_array("float_calibration", lambda a: a[:3]),
+    "ref-ids-0d": set_array("reference_place_ids", lambda a: np.array(3)),
+    "ref-ids-duplicate": set_array("reference_place_ids", np.zeros_like),
+    "ref-ids-float": set_array("reference_place_ids", lambda a: a.astype(float) + 0.5),
+    "missing-threshold": array(lambda a: without(a, "threshold")),
+}
+
+#: Tampered verify reports (report.json of the rep fixture).
+REPORT_EDITS: dict[str, Callable[[Any], Any]] = {
+    "list": lambda r: [r],
+    "string": lambda r: "report",
+    "empty-object": lambda r: {},
+    "no-float-run": lambda r: {**r, "runs": [without(r["runs"][0], "float")]},
+    "float-metrics-string": lambda r: {
+        **r,
+        "runs": [{**r["runs"][0], "float": {**r["runs"][0]["float"], "metrics": "x"}}],
+    },
+    "runs-empty": lambda r: {**r, "runs": []},
+    "runs-string": lambda r: {**r, "runs": "x"},
+    "runs-null": lambda r: {**r, "runs": None},
+    "bits-empty": lambda r: {**r, "runs": [{**r["runs"][0], "bits": []}]},
+    "bits-mapping": lambda r: {**r, "runs": [{**r["runs"][0], "bits": {"8": 1}}]},
+    "schema-999": lambda r: {**r, "schema": "vprsnn-verify-report/999"},
+    "schema-missing": lambda r: without(r, "schema"),
+    "settings-list": lambda r: {**r, "settings": [1]},
+    "summary-missing": lambda r: without(r, "summary"),
+    "passed-string": lambda r: {**r, "passed": "yes"},
+    "n-queries-string": lambda r: {**r, "runs": [{**r["runs"][0], "n_queries": "ten"}]},
+}
+
+#: Byte-level defects written for checkpoints (ck_), models (fp_) alike.
+RAW_DEFECTS = ("truncated", "bad-crc", "member-garbage", "header-not-json", "header-not-utf8", "no-header", "plain-npy")
+
+
+def write_defect(kind: str, source: Path, target: Path) -> None:
+    """A container with a byte-level defect of ``kind`` (see RAW_DEFECTS)."""
+    meta, arrays = read_npz(source)
+    members: dict[str, Any] = dict(arrays)
+    if kind == "truncated":
+        data = source.read_bytes()
+        target.write_bytes(data[: len(data) // 2])
+    elif kind == "bad-crc":
+        write_npz(target, meta, arrays)
+        flip_member_byte(target, "weights.npy" if "weights" in arrays else "weight_mantissa.npy")
+    elif kind == "member-garbage":
+        write_npz(target, meta, arrays)
+        replace_member(target, "weights.npy" if "weights" in arrays else "weight_mantissa.npy", b"garbage")
+    elif kind in ("header-not-json", "header-not-utf8"):
+        raw = b"{not json" if kind == "header-not-json" else b"\xff\xfe\x00"
+        with open(target, "wb") as handle:
+            np.savez(handle, **{"__meta__": np.frombuffer(raw, dtype=np.uint8), **members})
+    elif kind == "no-header":
+        with open(target, "wb") as handle:
+            np.savez(handle, **members)
+    elif kind == "plain-npy":
+        with open(target, "wb") as handle:
+            np.save(handle, next(iter(arrays.values())))
+
+
+def flip_member_byte(path: Path, member: str) -> None:
+    """Corrupt one byte inside a stored zip member: its CRC no longer matches."""
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo(member)
+    data = bytearray(path.read_bytes())
+    name_length = int.from_bytes(data[info.header_offset + 26 : info.header_offset + 28], "little")
+    extra_length = int.from_bytes(data[info.header_offset + 28 : info.header_offset + 30], "little")
+    where = info.header_offset + 30 + name_length + extra_length + 200
+    data[where] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def replace_member(path: Path, member: str, content: bytes) -> None:
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    members[member] = content
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+
+
+def write_tampered(fx: Path, source: Path, prefix: str, edits: Mapping[str, Edit]) -> None:
+    meta, arrays = read_npz(source)
+    for name, edit in edits.items():
+        new_meta, new_arrays = edit(json.loads(json.dumps(meta)), dict(arrays))
+        write_npz(fx / f"{prefix}_{name}.npz", new_meta, new_arrays)
+    for kind in RAW_DEFECTS:
+        write_defect(kind, source, fx / f"{prefix}_{kind}.npz")
+
+
+def write_reports(fx: Path) -> None:
+    """rp_NAME/ folders: the rep fixture with an edited report.json (and raw defects)."""
+    source = fx / "rep" / "report.json"
+    report = json.loads(source.read_text(encoding="utf-8"))
+    texts = {name: json.dumps(edit(json.loads(json.dumps(report)))) for name, edit in REPORT_EDITS.items()}
+    texts["truncated"] = source.read_text(encoding="utf-8")[:500]
+    texts["empty-file"] = ""
+    for name, text in texts.items():
+        folder = fx / f"rp_{name}"
+        folder.mkdir()
+        (folder / "report.json").write_text(text, encoding="utf-8")
+    (fx / "rp_not-utf8").mkdir()
+    (fx / "rp_not-utf8" / "report.json").write_bytes(b"\xff\xfe{")
+    (fx / "rp_json-is-folder" / "report.json").mkdir(parents=True)
+
+
+def nordland_rows(nordland: Path, count: int) -> list[tuple[Path, Path]]:
+    """(summer, winter) image paths of ``count`` consecutive textured places of the shared data."""
+    with open(nordland / "places.csv", encoding="utf-8") as handle:
+        lines = handle.read().splitlines()[1:]
+    rows = [line.split(",") for line in lines]
+    chosen = [r for r in rows if r[6] == "0" and r[7] == "0"][100 : 100 + count]
+    return [(nordland / r[2], nordland / r[3]) for r in chosen]
+
+
+def write_images(folder: Path, nordland: Path | None, count: int) -> list[str]:
+    """summer/ and winter/ PNGs of ``count`` places (Nordland copies, or generated); returns the file names."""
+    cv2 = importlib.import_module("cv2")
+    (folder / "summer").mkdir(parents=True)
+    (folder / "winter").mkdir()
+    names = [f"images-{i:05d}.png" for i in range(count)]
+    if nordland is not None and (nordland / "places.csv").is_file():
+        for name, (summer, winter) in zip(names, nordland_rows(nordland, count), strict=True):
+            shutil.copyfile(summer, folder / "summer" / name)
+            shutil.copyfile(winter, folder / "winter" / name)
+        return names
+    generator = np.random.default_rng(0)
+    for name in names:
+        image = generator.integers(0, 256, size=(32, 64, 3), dtype=np.uint8)
+        cv2.imwrite(str(folder / "summer" / name), image)
+        cv2.imwrite(str(folder / "winter" / name), (image // 2 + 40).astype(np.uint8))
+    return names
+
+
+def manifest_text(rows: Iterable[Sequence[object]], head: str = "place_id,summer,winter") -> str:
+    return head + "\n" + "".join(",".join(str(cell) for cell in row) + "\n" for row in rows)
+
+
+def write_manifests(folder: Path, names: Sequence[str]) -> None:
+    """places.csv (good) and one defective manifest per variant, all beside the same images."""
+    good = [[i, f"summer/{n}", f"winter/{n}"] for i, n in enumerate(names)]
+
+    def edited(row: int, cells: Sequence[object]) -> str:
+        return manifest_text(good[:row] + [list(cells)] + good[row + 1 :])
+
+    (folder / "garbage.png").write_bytes(np.random.default_rng(1).integers(0, 256, 2048, dtype=np.uint8).tobytes())
+    (folder / "empty.png").write_bytes(b"")
+    (folder / "text.png").write_text("not an image\n", encoding="utf-8")
+    long_name = "a" * 300 + ".png"
+    variants = {
+        "places": manifest_text(good),
+        "missing_image": edited(3, [3, "summer/nope.png", "winter/nope.png"]),
+        "garbage_image": edited(3, [3, "garbage.png", "garbage.png"]),
+        "empty_image": edited(3, [3, "empty.png", "empty.png"]),
+        "text_image": edited(3, [3, "text.png", "text.png"]),
+        "dir_image": edited(3, [3, "summer", "winter"]),
+        "long_name": edited(3, [3, long_name, long_name]),
+        "huge_id": edited(3, [10**23, good[3][1], good[3][2]]),
+        "negative_id": edited(3, [-1, good[3][1], good[3][2]]),
+        "float_id": edited(3, [1.5, good[3][1], good[3][2]]),
+        "text_id": edited(3, ["x", good[3][1], good[3][2]]),
+        "duplicate_id": edited(3, [2, good[3][1], good[3][2]]),
+        "empty_cell": edited(3, [3, "", ""]),
+        "short_row": edited(3, [3]),
+        "header_only": manifest_text([]),
+        "wrong_columns": manifest_text(good, head="id,a,b"),
+        "no_winter": manifest_text([r[:2] for r in good], head="place_id,summer"),
+        "repeated_column": manifest_text(good, head="place_id,summer,summer"),
+        "nul_byte": edited(3, [3, "sum\0mer.png", "win\0ter.png"]),
+    }
+    for name, text in variants.items():
+        (folder / f"{name}.csv").write_text(text, encoding="utf-8")
+    (folder / "empty.csv").write_bytes(b"")
+    (folder / "latin1.csv").write_bytes(manifest_text(good).replace("place_id", "pläce").encode("latin-1"))
+    (folder / "binary.csv").write_bytes(np.random.default_rng(2).integers(0, 256, 512, dtype=np.uint8).tobytes())
+
+
+def write_subsets(fx: Path) -> None:
+    subsets = {
+        "ok": "place_id\n0\n1\n2\n3\n4\n",
+        "empty": "",
+        "header_only": "place_id\n",
+        "wrong_column": "id\n0\n1\n",
+        "duplicate": "place_id\n1\n1\n",
+        "absent": "place_id\n50\n51\n",
+        "text": "place_id\nx\n",
+        "huge": f"place_id\n{10**23}\n",
+    }
+    for name, text in subsets.items():
+        (fx / f"subset_{name}.csv").write_text(text, encoding="utf-8")
+
+
+def write_plain_files(fx: Path) -> None:
+    (fx / "empty.npz").write_bytes(b"")
+    (fx / "notes.txt").write_text("not a model\n", encoding="utf-8")
+    (fx / "garbage.npz").write_bytes(np.random.default_rng(3).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    (fx / "folder.npz").mkdir()
+    (fx / "emptydir").mkdir()
+    (fx / "nord_noplaces").mkdir()
+    with zipfile.ZipFile(fx / "emptyzip.npz", "w"):
+        pass
+    shutil.copyfile(fx / "net.npz", fx / "ñet 网络.npz")
+
+
+def make_readonly(folder: Path) -> Path:
+    """A folder nothing can be created in: mode 555, and immutable (chattr +i) for root, who ignores modes."""
+    folder.mkdir()
+    folder.chmod(0o555)
+    if os.geteuid() == 0:
+        done = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, check=False)
+        if done.returncode != 0:
+            return Path("/sys/kernel")  # root cannot create files here either
+    return folder
+
+
+def release_readonly(folder: Path) -> None:
+    if folder.is_dir() and os.geteuid() == 0:
+        subprocess.run(["chattr", "-i", str(folder)], capture_output=True, check=False)
+    if folder.is_dir():
+        folder.chmod(0o755)
+
+
+#: Fixtures written by the CLI itself: (argv, must succeed).
+CLI_FIXTURES: tuple[tuple[tuple[str, ...], bool], ...] = (
+    (("train", "--data", "synthetic:10", "--reference", "summer", *TINY, "--quiet", "--out", "net.npz"), True),
+    (
+        (
+            "train",
+            "--data",
+            "synthetic:10",
+            "--reference",
+            "summer",
+            *TINY,
+            "--seed",
+            "7",
+            "--quiet",
+            "--out",
+            "other.npz",
+        ),
+        True,
+    ),
+    (("quantize", "net.npz", "--bits", "8,2", "--out", "models/", "--quiet"), True),
+    (("export", "models/model_8bit_per-neuron_max.npz", "--to", "nir,loihi,onnx", "--out", "deploy/", "--quiet"), True),
+    (("verify", "net.npz", "--bits", "8", "--query", "winter", "--report", "rep", "--quiet"), True),
+    (
+        (
+            "train",
+            "--data",
+            "synthetic:10",
+            "--reference",
+            "summer",
+            "--timesteps",
+            "1",
+            "--epochs",
+            "0",
+            "--neurons",
+            "1",
+        )
+        + ("--quiet", "--out", "edge.npz"),
+        False,
+    ),
+)
+
+
+def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
+    """Every file the cases name, in ``fx``; SystemExit when a fixture the campaign needs cannot be made."""
+    fx.mkdir(parents=True)
+    for argv, needed in CLI_FIXTURES:
+        raw = run(argv, fx)
+        if raw.rc != 0:
+            message = f"fixture {shlex.join(['vprsnn-export', *argv])} failed (rc {raw.rc}):\n{raw.stderr[-2000:]}"
+            if needed:
+                raise SystemExit(message)
+            print(f"warning: {message}", file=sys.stderr)
+    write_tampered(fx, fx / "net.npz", "ck", CHECKPOINT_EDITS)
+    write_tampered(fx, fx / "models" / "model_8bit_per-neuron_max.npz", "fp", MODEL_EDITS)
+    write_reports(fx)
+    names = write_images(fx / "nord", nordland, 12)
+    write_manifests(fx / "nord", names)
+    shutil.copytree(fx / "nord", fx / "nörd 路径")
+    write_subsets(fx)
+    write_plain_files(fx)
+
+
+# ---------------------------------------------------------------------------------------------- cases
+
+
+def numeric(
+    prefix: str,
+    base: Sequence[str],
+    option: str,
+    *,
+    ok: Iterable[str] = (),
+    skip: Iterable[str] = (),
+    values: Mapping[str, str] | None = None,
+    **options: Any,
+) -> list[Case]:
+    """``base OPTION VALUE`` for every value of VALUES (or ``values``); keys in ``ok`` are legal."""
+    table = dict(VALUES if values is None else values)
+    legal_keys, skipped = set(ok), set(skip)
+    cases = []
+    for key, value in table.items():
+        if key in skipped:
+            continue
+        make = legal if key in legal_keys else bad
+        cases.append(make(f"{prefix}-{option.lstrip('-')}-{key}", *base, option, value, **options))
+    return cases
+
+
+def cli_cases() -> list[Case]:
+    """No command, unknown commands and options, missing required arguments, --help."""
+    cases = [
+        bad("cli-no-command"),
+        bad("cli-unknown-command", "nope"),
+        bad("cli-unknown-global-option", "--nope"),
+        legal("cli-version", "--version"),
+        legal("cli-help", "--help"),
+    ]
+    minimal = {
+        "train": TRAIN,
+        "evaluate": EVAL,
+        "quantize": QUANT,
+        "simulate": SIM,
+        "export": EXPORT,
+        "verify": VERIFY,
+        "report": ("report", "{fx}/rep", "--out", "r"),
+        "experiment": EXPERIMENT,
+        "demo": DEMO,
+    }
+    for command, base in minimal.items():
+        cases += [
+            legal(f"{command}-help", command, "--help"),
+            *([] if command == "demo" else [bad(f"{command}-no-arguments", command)]),
+            bad(f"{command}-unknown-option", *base, "--nope"),
+            bad(f"{command}-unknown-option-value", *base, "--nope=1"),
+            bad(f"{command}-typo-quiet", *base, "--quite"),
+            bad(f"{command}-stray-argument", *base, "stray.npz"),
+        ]
+    cases += [
+        bad("train-no-reference", "train", "--data", "synthetic:10", "--out", "t.npz"),
+        bad("train-no-out", "train", "--data", "synthetic:10", "--reference", "summer"),
+        bad("train-no-data", "train", "--reference", "summer", "--out", "t.npz"),
+        bad("evaluate-no-query", "evaluate", CK),
+        bad("simulate-no-query", "simulate", M8),
+        bad("quantize-no-out", "quantize", CK),
+        bad("export-no-out", "export", M8),
+        bad("verify-no-report", "verify", CK, "--query", "winter"),
+        bad("verify-no-query", "verify", CK, "--report", "v"),
+        bad("report-several-no-out", "report", "rep", "rep2", copy=("rep", "rep->rep2")),
+        bad("experiment-no-name", "experiment", "--quick"),
+        bad("train-subset-and-places", *TRAIN, "--subset", "{fx}/subset_ok.csv", "--places", "0:5"),
+        bad("quantize-per-tensor-and-per-neuron", *QUANT, "--per-tensor", "--per-neuron"),
+    ]
+    return cases
+
+
+SET_KEYS_BOOL = (
+    "network.wta",
+    "network.state_isolation",
+    "stdp.weight_norm",
+    "homeostasis.enabled",
+    "preprocess.patch_norm",
+)
+
+
+def range_values(low: float, high: float, low_ok: bool, high_ok: bool, integer: bool) -> dict[str, str]:
+    """Bad --set values of a numeric key: NaN, infinities, just outside its range, text, null, a list."""
+    below = low - 1 if low_ok else low
+    above = high + 1 if high_ok else high
+    cast = int if integer else float
+    return {
+        "NaN": "NaN",
+        "nan": "nan",
+        "Infinity": "Infinity",
+        "below": json.dumps(cast(below)),
+        "above": json.dumps(cast(above)),
+        "text": "abc",
+        "null": "null",
+        "list": "[1]",
+    }
+
+
+def config_cases() -> list[Case]:
+    """--set with bad values for every config key (config.RANGES), cross-field conflicts, unknown keys."""
+    config = importlib.import_module("vprsnn_export.config")
+    ranges: Mapping[str, tuple[float, float, bool, bool]] = config.RANGES
+    defaults = config.Config().to_dict()
+    cases = []
+    for key, limits in ranges.items():
+        section, _, name = key.rpartition(".")
+        default = defaults[section][name] if section else defaults[name]
+        integer = isinstance(default, int) and not isinstance(default, bool)
+        for label, value in range_values(*limits, integer=integer).items():
+            cases.append(bad(f"train-set-{key}-{label}", *TRAIN, "--set", f"{key}={value}"))
+    for key in SET_KEYS_BOOL:
+        for label, value in {"text": "abc", "two": "2", "one": "1", "null": "null", "quoted": '"true"'}.items():
+            cases.append(bad(f"train-set-{key}-{label}", *TRAIN, "--set", f"{key}={value}"))
+    for label, value in {"rgb": "rgb", "number": "1", "null": "null", "list": "[1]"}.items():
+        cases.append(bad(f"train-set-preprocess.channels-{label}", *TRAIN, "--set", f"preprocess.channels={value}"))
+    conflicts = {
+        "patch-not-divisor": ["preprocess.patch_size=5"],
+        "image-size-vs-inputs": ["preprocess.image_size=30"],
+        "inputs-vs-image-size": ["network.n_inputs=100"],
+        "theta-min-above-max": ["homeostasis.theta_min=200"],
+        "dog-centre-above-surround": ["preprocess.dog_sigma_centre=3"],
+    }
+    for label, items in conflicts.items():
+        sets = [arg for item in items for arg in ("--set", item)]
+        cases.append(bad(f"train-set-conflict-{label}", *TRAIN, *sets))
+    unknown = {
+        "key": "nope=1",
+        "section-key": "network.nope=1",
+        "section": "network=1",
+        "no-equals": "encoder.timesteps",
+        "no-key": "=5",
+        "too-deep": "network.n_neurons.x=1",
+        "empty": "",
+        "upper-case": "Encoder.Timesteps=20",
+    }
+    cases += [bad(f"train-set-unknown-{label}", *TRAIN, "--set", item) for label, item in unknown.items()]
+    cases += [
+        bad("train-preset-unknown", *TRAIN, "--preset", "nope"),
+        bad("issue-train-neurons-equals-neg5", *TRAIN, "--neurons=-5"),
+        bad("issue-train-rate-scale-Infinity", *TRAIN, "--set", "encoder.rate_scale=Infinity"),
+        bad("experiment-set-text", *EXPERIMENT, "--set", "encoder.timesteps=abc"),
+        bad("experiment-set-unknown", *EXPERIMENT, "--set", "nope=1"),
+        bad("experiment-set-no-equals", *EXPERIMENT, "--set", "encoder.timesteps"),
+        bad("experiment-set-zero-neurons", *EXPERIMENT, "--set", "network.n_neurons=0"),
+    ]
+    return cases
+
+
+K_BAD = {
+    "zero": "0",
+    "neg": "-1",
+    "nan": "nan",
+    "text": "abc",
+    "empty": "",
+    "huge": "100000000",
+    "above-queries": "11",
+    "gap": "1,,x",
+    "float": "1.5",
+}
+K_OK = {"one": "1", "all-queries": "10", "list": "1,3,5"}
+SEARCH_BAD = {
+    "nan": "nan:nan:nan",
+    "inf": "0:inf:1",
+    "tiny-step": "0:1:1e-6",
+    "reversed": "1:0:1",
+    "zero-step": "0:1:0",
+    "neg-step": "0:1:-1",
+    "text": "abc",
+    "empty": "",
+    "two-parts": "0:1",
+    "four-parts": "0:1:1:1",
+}
+SEARCH_OK = {"neg-range": "-2:2:0.5", "single": "1:1:1"}
+
+
+def readout_cases(prefix: str, base: Sequence[str]) -> list[Case]:
+    """--k, the velocity options and --match-window of evaluate, simulate (and a share of verify)."""
+    cases = numeric(prefix, base, "--k", values={**K_BAD, **K_OK}, ok=K_OK)
+    velocities = {**VALUES, "minus-inf": "-inf", "half": "0.5"}
+    cases += numeric(prefix, [*base, "--k", "3"], "--velocity", ok={"neg", "half"}, values=velocities)
+    cases += numeric(prefix, base, "--velocity-search", values={**SEARCH_BAD, **SEARCH_OK}, ok=SEARCH_OK)
+    cases += numeric(prefix, base, "--velocity-span", values={**VALUES, "one": "1"}, ok={"one"})
+    cases += numeric(
+        prefix, base, "--match-window", ok={"zero", "nine"}, values={**VALUES, "above": "1000001", "nine": "9"}
+    )
+    cases += numeric(prefix, [*base, "--velocity-search", "0:2:0.5"], "--velocity-estimate", values={"x": "x"})
+    cases += [
+        bad(f"{prefix}-rule-max", *base, "--rule", "max"),
+        bad(f"{prefix}-old-tolerance", *base, "--tolerance=-3"),
+        bad(f"{prefix}-old-tolerance-1", *base, "--tolerance", "1"),
+        bad(f"{prefix}-k3-velocity-nan", *base, "--k", "3", "--velocity", "nan"),
+        legal(
+            f"{prefix}-velocity-window",
+            *base,
+            "--k",
+            "3",
+            "--velocity-search",
+            "-1:1:0.5",
+            "--velocity-estimate",
+            "window",
+        ),
+    ]
+    return cases
+
+
+def common_runtime_cases(prefix: str, base: Sequence[str], threads: bool = True) -> list[Case]:
+    cases = (
+        numeric(prefix, base, "--threads", values={**VALUES, "one": "1", "two": "2"}, ok={"one", "two"})
+        if threads
+        else []
+    )
+    cases += [
+        bad(f"{prefix}-device-gpu", *base, "--device", "gpu"),
+        bad(f"{prefix}-device-empty", *base, "--device", ""),
+    ]
+    cuda = importlib.import_module("torch").cuda.is_available()
+    cases.append(
+        (legal if cuda else bad)(f"{prefix}-device-cuda", *base, "--device", "cuda", note="no CUDA GPU on this machine")
+    )
+    return cases
+
+
+PLACES_BAD = {
+    "zero-count": "0:0",
+    "neg-start": "-1:5",
+    "huge-count": "0:99999999999",
+    "text": "abc",
+    "zero-stride": "0:5:0",
+    "neg-stride": "0:5:-1",
+    "nan": "nan:5",
+    "empty": "",
+    "absent": "8:5",
+    "one-part": "0",
+    "four-parts": "0:1:2:3",
+    "float": "1.5:3",
+}
+
+
+def data_cases(prefix: str, base: Sequence[str]) -> list[Case]:
+    """--data and --places values, for the commands that load data."""
+    data_bad = {
+        "synthetic-0": "synthetic:0",
+        "synthetic-neg": "synthetic:-1",
+        "synthetic-text": "synthetic:abc",
+        "synthetic-huge": "synthetic:100000000000",
+        "synthetic-empty": "synthetic:",
+        "synthetic-exp": "synthetic:1e3",
+        "empty": "",
+        "missing": "/nope/places.csv",
+        "nordland-missing": "../shared/data/nordland_missing",
+        "folder-no-manifest": "{fx}/nord_noplaces",
+        "text-file": "{fx}/notes.txt",
+        "npz-file": CK,
+        "dev-null": "/dev/null",
+    }
+    cases = numeric(prefix, base, "--data", values=data_bad)
+    cases += numeric(prefix, base, "--places", values=PLACES_BAD)
+    return cases
+
+
+def train_cases() -> list[Case]:
+    cases = numeric("train", TRAIN, "--epochs", ok={"zero"})
+    cases += numeric("train", TRAIN, "--timesteps", values={**VALUES, "one": "1"}, ok={"one"})
+    cases += numeric("train", TRAIN, "--neurons", values={**VALUES, "one": "1"}, ok={"one"})
+    cases += numeric(
+        "train", TRAIN, "--seed", ok={"zero"}, values={**VALUES, "max": str(2**63 - 1), "above-max": str(2**63)}
+    )
+    cases += common_runtime_cases("train", TRAIN)
+    cases += data_cases("train", TRAIN)
+    references = {
+        "empty": "",
+        "comma": ",",
+        "unknown": "autumn",
+        "place-id": "place_id",
+        "one-unknown": "summer,autumn",
+    }
+    cases += numeric("train", TRAIN, "--reference", values=references)
+    return cases
+
+
+def evaluate_cases() -> list[Case]:
+    cases = readout_cases("evaluate", EVAL)
+    cases += common_runtime_cases("evaluate", EVAL)
+    cases += data_cases("evaluate", EVAL)
+    cases += numeric("evaluate", EVAL, "--query", values={"empty": "", "unknown": "autumn", "place-id": "place_id"})
+    cases += [
+        bad("evaluate-k-above-one-place", *EVAL, "--places", "0:1", "--k", "3"),
+        bad("evaluate-baseline-other-places", *EVAL, "--baseline", "--places", "0:5"),
+    ]
+    return cases
+
+
+def simulate_cases() -> list[Case]:
+    cases = readout_cases("simulate", SIM)
+    cases += common_runtime_cases("simulate", SIM)
+    cases += data_cases("simulate", SIM)
+    cases += numeric("simulate", SIM, "--query", values={"empty": "", "unknown": "autumn"})
+    compare = {
+        "missing": "/nope",
+        "folder": "{fx}/emptydir",
+        "empty": "{fx}/empty.npz",
+        "other-checkpoint": OTHER,
+        "model": M8,
+        "tampered": "{fx}/ck_header-list.npz",
+        "dev-null": "/dev/null",
+    }
+    cases += numeric("simulate", SIM, "--compare", values=compare)
+    return cases
+
+
+BITS_BAD = {
+    "zero": "0",
+    "one": "1",
+    "nine": "9",
+    "neg": "-1",
+    "nan": "nan",
+    "text": "abc",
+    "empty": "",
+    "huge": "100000000",
+    "gap": "8,,x",
+    "float": "4.5",
+}
+BITS_OK = {"two-only": "2", "duplicate": "8,8"}
+
+
+def quantize_cases() -> list[Case]:
+    cases = numeric("quantize", QUANT, "--bits", values={**BITS_BAD, **BITS_OK}, ok=BITS_OK)
+    cases += common_runtime_cases("quantize", QUANT)
+    cases += data_cases("quantize", QUANT)
+    cases += [
+        bad("quantize-scale-x", *QUANT, "--scale", "x"),
+        bad("quantize-fold-per-tensor", *QUANT, "--fold-thresholds", "--per-tensor"),
+        bad("quantize-places-other", *QUANT, "--places", "0:5"),
+    ]
+    return cases
+
+
+def export_cases() -> list[Case]:
+    from_checkpoint = ("export", CK, "--to", "onnx", "--out", "x")
+    check = (*EXPORT, "--check")
+    cases = numeric("export", from_checkpoint, "--quantize", values={**BITS_BAD, "two": "2"}, ok={"two"}, skip={"gap"})
+    cases += numeric(
+        "export", EXPORT, "--nir-inhibition", ok={"zero", "half"}, skip={"huge"}, values={**VALUES, "half": "0.5"}
+    )
+    cases += numeric(
+        "export", check, "--check-samples", ok={"zero", "one"}, values={**VALUES, "one": "1", "issue": "-5"}
+    )
+    targets = {"empty": "", "unknown": "tflite", "comma": ","}
+    lenient = {"nir": "nir", "two": "onnx,nir", "gap": "nir,,", "upper": "NIR,ONNX"}  # empty items, any case: by design
+    cases += numeric("export", EXPORT, "--to", values={**targets, **lenient}, ok=lenient)
+    cases += common_runtime_cases("export", check)
+    cases += numeric("export", [*check, "--query", "winter"], "--places", values=PLACES_BAD)
+    cases += [
+        bad("export-checkpoint-to-loihi", "export", CK, "--to", "loihi", "--out", "x"),
+        bad("export-model-with-quantize", *EXPORT, "--quantize", "4"),
+        bad("export-check-query-unknown", *check, "--query", "autumn"),
+        bad("export-check-data-missing", *check, "--query", "winter", "--data", "/nope.csv"),
+        bad("export-nir-consumer-x", *check, "--nir-consumer", "x"),
+        bad("export-places-without-query", *check, "--places", "abc", note="--places is unused without --query"),
+        bad("export-query-without-check", *EXPORT, "--query", "autumn", note="--query is unused without --check"),
+    ]
+    if importlib.util.find_spec("norse") is None:
+        cases.append(bad("export-nir-consumer-norse-missing", *check, "--nir-consumer", "norse", note="norse absent"))
+    return cases
+
+
+def verify_cases() -> list[Case]:
+    cases = numeric("verify", VERIFY, "--bits", values={**BITS_BAD, **BITS_OK}, ok=BITS_OK)
+    cases += numeric("verify", VERIFY, "--k", values={**K_BAD, **K_OK}, ok=K_OK)
+    cases += numeric("verify", VERIFY, "--velocity", skip={"neg"})
+    cases += numeric("verify", VERIFY, "--velocity-search", values=SEARCH_BAD)
+    cases += numeric("verify", VERIFY, "--match-window", ok={"zero"})
+    cases += numeric("verify", VERIFY, "--reference-queries", ok={"zero"})
+    cases += numeric("verify", VERIFY, "--seeds", values={**VALUES, "one": "1"}, ok={"one"})
+    tolerances = {
+        "text": "accuracy=abc",
+        "unknown": "nope=0.1",
+        "no-value": "accuracy",
+        "neg": "accuracy=-1",
+        "nan": "accuracy=nan",
+        "inf": "accuracy=inf",
+        "empty": "",
+        "gap": "accuracy=0.1,,x",
+        "off": "accuracy=off",
+        "fractions": "r_at_100p=0.5,auc_pr=0.5",
+    }
+    cases += numeric("verify", VERIFY, "--tolerance", values=tolerances, ok={"off", "fractions"})
+    targets = {"unknown": "tflite", "empty": "", "gap": "nir,,x", "none": "none", "onnx": "onnx"}
+    cases += numeric("verify", VERIFY, "--targets", values=targets, ok={"none", "onnx"})
+    cases += common_runtime_cases("verify", VERIFY)
+    cases += data_cases("verify", VERIFY)
+    cases += [
+        bad("verify-old-gt-tolerance", *VERIFY, "--gt-tolerance", "1"),
+        bad("verify-seeds-two-checkpoints", "verify", CK, OTHER, "--seeds", "2", "--query", "winter", "--report", "v"),
+        bad("verify-query-unknown", "verify", CK, "--query", "autumn", "--report", "v"),
+        bad("verify-model-not-checkpoint", "verify", M8, "--query", "winter", "--report", "v"),
+        bad("verify-scale-x", *VERIFY, "--scale", "x"),
+    ]
+    return cases
+
+
+def experiment_cases() -> list[Case]:
+    cases = numeric("experiment", EXPERIMENT, "--seeds", values={**VALUES, "issue": "-2"})
+    names = {"unknown": "nope", "empty": "", "path": "../assignment", "helper": "common", "upper": "ASSIGNMENT"}
+    for label, name in names.items():
+        cases.append(bad(f"experiment-name-{label}", "experiment", name, "--quick", "--out", "e"))
+    data = {
+        "missing": "/nope.csv",
+        "text-file": "{fx}/notes.txt",
+        "synthetic-0": "synthetic:0",
+        "folder": "{fx}/emptydir",
+    }
+    cases += numeric("experiment", EXPERIMENT, "--data", values=data)
+    cases += [bad("experiment-device-gpu", *EXPERIMENT, "--device", "gpu")]
+    return cases
+
+
+def demo_cases() -> list[Case]:
+    cases = numeric("demo", DEMO, "--seed", ok={"zero"})
+    cases += common_runtime_cases("demo", DEMO)
+    return cases
+
+
+def file_argument_cases() -> list[Case]:
+    """The model/checkpoint argument of evaluate, quantize, simulate, export and verify: missing, a folder, empty,
+    truncated, of the wrong kind."""
+    wrong = {
+        "missing": "/nope/net.npz",
+        "missing-relative": "net.npz",
+        "folder": "{fx}/folder.npz",
+        "fixture-folder": "{fx}",
+        "empty": "{fx}/empty.npz",
+        "garbage": "{fx}/garbage.npz",
+        "empty-zip": "{fx}/emptyzip.npz",
+        "text": "{fx}/notes.txt",
+        "csv": NORD,
+        "png": "{fx}/nord/summer/images-00000.png",
+        "onnx": "{fx}/deploy/model.onnx",
+        "nir": "{fx}/deploy/model.nir",
+        "dev-null": "/dev/null",
+        "empty-name": "",
+    }
+    commands = {
+        "evaluate": lambda path: ("evaluate", path, "--query", "winter"),
+        "quantize": lambda path: ("quantize", path, "--bits", "8", "--out", "q"),
+        "simulate": lambda path: ("simulate", path, "--query", "winter"),
+        "export": lambda path: ("export", path, "--out", "x"),
+        "verify": lambda path: ("verify", path, "--bits", "8", "--query", "winter", "--report", "v"),
+    }
+    cases = []
+    for command, argv in commands.items():
+        kinds = {**wrong, "model": M8} if command in ("evaluate", "quantize", "verify") else {**wrong}
+        if command == "simulate":
+            kinds["checkpoint"] = CK
+        for label, path in kinds.items():
+            cases.append(bad(f"{command}-file-{label}", *argv(path)))
+    return cases
+
+
+def tamper_cases() -> list[Case]:
+    """Tampered checkpoints into evaluate, quantize, export and verify; tampered models into simulate and export."""
+    checkpoint_commands = {
+        "evaluate": lambda path: ("evaluate", path, "--query", "winter"),
+        "quantize": lambda path: ("quantize", path, "--bits", "8", "--out", "q"),
+        "export": lambda path: ("export", path, "--to", "nir", "--out", "x"),
+        "verify": lambda path: ("verify", path, "--bits", "8", "--query", "winter", "--report", "v"),
+    }
+    model_commands = {
+        "simulate": lambda path: ("simulate", path, "--query", "winter"),
+        "export": lambda path: ("export", path, "--out", "x"),
+    }
+    cases = []
+    for edit in [*CHECKPOINT_EDITS, *RAW_DEFECTS]:
+        for command, argv in checkpoint_commands.items():
+            cases.append(bad(f"{command}-ckpt-{edit}", *argv(f"{{fx}}/ck_{edit}.npz")))
+    for edit in [*MODEL_EDITS, *RAW_DEFECTS]:
+        for command, argv in model_commands.items():
+            cases.append(bad(f"{command}-model-{edit}", *argv(f"{{fx}}/fp_{edit}.npz")))
+    return cases
+
+
+def report_cases() -> list[Case]:
+    """report on missing, empty and tampered report folders, and bad combinations."""
+    edits = [*REPORT_EDITS, "truncated", "empty-file", "not-utf8", "json-is-folder"]
+    cases = [bad(f"report-{edit}", "report", f"rp_{edit}", copy=(f"rp_{edit}",)) for edit in edits]
+    cases += [
+        bad(f"report-combine-{edit}", "report", "rep", f"rp_{edit}", "--out", "c", copy=("rep", f"rp_{edit}"))
+        for edit in ("no-float-run", "runs-empty", "list")
+    ]
+    cases += [
+        bad("report-missing", "report", "/nope"),
+        bad("report-empty-folder", "report", "{fx}/emptydir"),
+        bad("report-npz-file", "report", CK),
+        bad("report-text-file", "report", "{fx}/notes.txt"),
+        bad("report-same-twice", "report", "rep", "rep", "--out", "c", copy=("rep",)),
+        bad("report-same-twice-json", "report", "rep", "rep/report.json", "--out", "c", copy=("rep",)),
+        bad("report-empty-name", "report", ""),
+    ]
+    return cases
+
+
+def manifest_cases() -> list[Case]:
+    """Defective place manifests and subset files, into train and evaluate."""
+    manifests = [
+        "missing_image",
+        "garbage_image",
+        "empty_image",
+        "text_image",
+        "dir_image",
+        "long_name",
+        "huge_id",
+        "negative_id",
+        "float_id",
+        "text_id",
+        "duplicate_id",
+        "empty_cell",
+        "short_row",
+        "header_only",
+        "wrong_columns",
+        "no_winter",
+        "repeated_column",
+        "empty",
+        "latin1",
+        "binary",
+        "nul_byte",
+    ]
+    cases = []
+    for name in manifests:
+        path = f"{{fx}}/nord/{name}.csv"
+        cases.append(
+            bad(
+                f"train-manifest-{name}",
+                "train",
+                "--data",
+                path,
+                "--reference",
+                "summer,winter",
+                *TINY,
+                "--out",
+                "t.npz",
+            )
+        )
+        cases.append(bad(f"evaluate-manifest-{name}", *EVAL, "--data", path))
+    subsets = ["empty", "header_only", "wrong_column", "duplicate", "absent", "text", "huge"]
+    subset_paths = {name: f"{{fx}}/subset_{name}.csv" for name in subsets}
+    subset_paths.update(missing="/nope/subset.csv", folder="{fx}/emptydir")
+    for name, path in subset_paths.items():
+        cases.append(
+            bad(
+                f"train-subset-{name}",
+                "train",
+                "--data",
+                NORD,
+                "--subset",
+                path,
+                "--reference",
+                "summer",
+                *TINY,
+                "--out",
+                "t.npz",
+            )
+        )
+        cases.append(bad(f"evaluate-subset-{name}", *EVAL, "--subset", path))
+    return cases
+
+
+#: Bad output folders for the commands that write a folder (quantize, export, verify, report, experiment, demo).
+FOLDER_OUTPUTS: dict[str, tuple[str, dict[str, Any]]] = {
+    "empty": ("", {}),
+    "readonly": ("{ro}", {}),
+    "readonly-sub": ("{ro}/sub", {}),
+    "proc": ("/proc/x", {}),
+    "dev-full": ("/dev/full", {}),
+    "dev-null": ("/dev/null", {}),
+    "file": ("notes.txt", {"copy": ("notes.txt",)}),
+    "link-to-file": ("link", {"links": (("link", "{fx}/notes.txt"),)}),
+    "dangling-link": ("link", {"links": (("link", "/nope/target"),)}),
+    "parent-is-file": ("notes.txt/sub", {"copy": ("notes.txt",)}),
+    "long-name": ("a" * 300, {}),
+}
+
+
+def sh(text: str) -> tuple[str, ...]:
+    """The argv of a command line written with shell quoting (placeholders such as {fx} kept)."""
+    return tuple(shlex.split(text))
+
+
+FX = "{fx}"
+T_TINY = "train --data synthetic:10 --reference summer --timesteps 20 --epochs 1 --neurons 16"
+
+#: Output paths that are the command's own input, or exist already (case id -> command line, fixtures copied).
+INPUT_AS_OUTPUT: dict[str, tuple[str, tuple[str, ...]]] = {
+    "train-out-is-manifest": (f"{T_TINY} --data nord/places.csv --out nord/places.csv", ("nord",)),
+    "train-out-is-manifest-force": (f"{T_TINY} --data nord/places.csv --out nord/places.csv --force", ("nord",)),
+    "train-out-is-subset-force": (f"{T_TINY} --subset subset_ok.csv --out subset_ok.csv --force", ("subset_ok.csv",)),
+    "quantize-out-is-input": ("quantize net.npz --bits 8 --out net.npz", ("net.npz",)),
+    "quantize-out-exists-no-force": (f"quantize {CK} --bits 8 --out models", ("models",)),
+    "export-out-is-input": (
+        "export models/model_8bit_per-neuron_max.npz --out models/model_8bit_per-neuron_max.npz",
+        ("models",),
+    ),
+    "verify-report-is-input": ("verify net.npz --bits 8 --query winter --report net.npz", ("net.npz",)),
+    "report-out-is-input": ("report rep --out rep/report.json", ("rep",)),
+}
+
+
+def output_cases() -> list[Case]:
+    """--out (--report) targets that cannot or must not be written, in all seven writing commands."""
+    train_out: dict[str, tuple[str, dict[str, Any]]] = {
+        "empty": ("", {}),
+        "readonly": ("{ro}/t.npz", {}),
+        "proc": ("/proc/x.npz", {}),
+        "existing-folder": (".", {}),
+        "tmp": ("/tmp", {}),
+        "dev-full": ("/dev/full", {}),
+        "dev-null": ("/dev/null", {}),
+        "link-to-file": ("link.npz", {"links": (("link.npz", "{fx}/notes.txt"),)}),
+        "dangling-link": ("link.npz", {"links": (("link.npz", "/nope/target.npz"),)}),
+        "exists-no-force": ("net.npz", {"copy": ("net.npz",)}),
+        "parent-is-file": ("net.npz/x.npz", {"copy": ("net.npz",)}),
+        "long-name": ("a" * 300 + ".npz", {}),
+    }
+    cases = [bad(f"train-out-{label}", *sh(T_TINY), "--out", out, **extra) for label, (out, extra) in train_out.items()]
+    writers = {
+        "quantize": f"quantize {CK} --bits 8 --out",
+        "export": f"export {M8} --out",
+        "verify": f"verify {CK} --bits 8 --query winter --report",
+        "report": f"report {FX}/rep --out",
+        "experiment": "experiment assignment --quick --out",
+        "demo": "demo --quick --out",
+    }
+    for command, text in writers.items():
+        cases += [
+            bad(f"{command}-out-{label}", *sh(text), out, **extra) for label, (out, extra) in FOLDER_OUTPUTS.items()
+        ]
+    cases += [bad(name, *sh(text), copy=copy) for name, (text, copy) in INPUT_AS_OUTPUT.items()]
+    return cases
+
+
+#: Legal extremes that must run (besides the legal values of the option lists above): id -> command line.
+LEGAL_LINES: dict[str, str] = {
+    "train-T1-one-neuron-0-epochs": "train --data synthetic:10 --reference summer --timesteps 1 --neurons 1 --epochs 0 --out e.npz",
+    "train-one-place": "train --data synthetic:1 --reference summer --timesteps 20 --epochs 1 --neurons 16 --out t.npz",
+    "train-places-one": f"{T_TINY} --places 0:1 --out t.npz",
+    "train-places-stride": f"{T_TINY} --places 3:2:2 --out t.npz",
+    "train-synthetic-default": f"{T_TINY} --data synthetic --out t.npz",
+    "train-two-references": f"{T_TINY} --reference summer,winter --out t.npz",
+    "train-unicode-out": f"{T_TINY} --out 'Ünïcödé ñet 网络.npz'",
+    "train-nested-out": f"{T_TINY} --out a/b/c/t.npz",
+    "train-force": f"{T_TINY} --out net.npz --force",
+    "train-manifest": f"{T_TINY} --data {NORD} --out t.npz",
+    "train-manifest-folder": f"{T_TINY} --data {FX}/nord --reference winter --out t.npz",
+    "train-manifest-unicode": f"{T_TINY} --data '{FX}/nörd 路径/places.csv' --out ü.npz",
+    "train-subset": f"{T_TINY} --data {NORD} --subset {FX}/subset_ok.csv --out t.npz",
+    "train-preset-dog": f"{T_TINY} --preset dog --out t.npz",
+    "train-ablations": f"{T_TINY} --no-wta --no-homeostasis --no-patch-norm --no-weight-norm --no-state-isolation --out t.npz",
+    "train-set-bounds": f"{T_TINY} --set homeostasis.eta=0 --set stdp.a_plus=0 --set assignment.gamma=1 --set network.beta=1 --out t.npz",
+    "train-small-image": f"{T_TINY} --set preprocess.image_size=7 --set preprocess.patch_size=7 --set network.n_inputs=49 --out t.npz",
+    "train-batch-one": f"{T_TINY} --set train.batch_size=1 --out t.npz",
+    "train-quiet": f"{T_TINY} --quiet --out t.npz",
+    "evaluate-edge-network": f"evaluate {EDGE} --query winter",
+    "evaluate-unicode-file": f"evaluate '{FX}/ñet 网络.npz' --query winter",
+    "evaluate-one-place": f"evaluate {CK} --query winter --places 0:1",
+    "evaluate-json": f"evaluate {CK} --query winter --json --k 1,3",
+    "evaluate-baseline": f"evaluate {CK} --query winter --baseline",
+    "evaluate-spillover": f"evaluate {CK} --query winter --no-state-isolation",
+    "evaluate-rule-sum": f"evaluate {CK} --query winter --k 3 --rule sum",
+    "evaluate-query-reference": f"evaluate {CK} --query summer",
+    "evaluate-manifest": f"evaluate {CK} --query winter --data {NORD} --places 0:10",
+    "evaluate-subset": f"evaluate {CK} --query winter --subset {FX}/subset_ok.csv",
+    "evaluate-device-cpu": f"evaluate {CK} --query winter --device cpu",
+    "quantize-edge-network": f"quantize {EDGE} --bits 2 --out q",
+    "quantize-all-options": f"quantize {CK} --bits 8 --out q --per-tensor --scale mse --json",
+    "quantize-fold": f"quantize {CK} --bits 8 --out q --fold-thresholds",
+    "quantize-reuse-float": f"quantize {CK} --bits 8 --out q --reuse-float-calibration",
+    "quantize-out-existing-folder": f"quantize {CK} --bits 8 --out .",
+    "quantize-out-unicode": f"quantize {CK} --bits 2 --out 'módèls 模型'",
+    "quantize-force": f"quantize {CK} --bits 8 --out models --force",
+    "quantize-out-link-to-folder": f"quantize {CK} --bits 8 --out link",
+    "simulate-2bit": f"simulate {M2} --query winter",
+    "simulate-compare": f"simulate {M8} --query winter --compare {CK}",
+    "simulate-json": f"simulate {M8} --query winter --json --k 1,3,5",
+    "simulate-one-place": f"simulate {M8} --query winter --places 0:1",
+    "export-checkpoint-nir": f"export {CK} --to nir --out x",
+    "export-2bit-onnx": f"export {M2} --to onnx --out x",
+    "export-check-query": f"export {M8} --out x --check --query winter --json",
+    "export-no-wta-node": f"export {M8} --out x --nir-no-wta-node --to nir",
+    "export-out-unicode": f"export {M8} --out 'düpløy 导出'",
+    "export-into-existing-export": f"export {M8} --out deploy",
+    "export-edge-network": f"export {EDGE} --quantize 2 --out x",
+    "verify-edge-network": f"verify {EDGE} --bits 2 --query winter --report v",
+    "verify-two-checkpoints": f"verify {CK} {OTHER} --bits 8 --query winter --report v",
+    "verify-same-checkpoint-twice": f"verify {CK} {CK} --bits 8 --query winter --report v",
+    "verify-quick-options": f"verify {CK} --bits 8 --query winter --report v --k 1 --reference-queries 0 --targets none --per-tensor --scale mse --json",
+    "verify-reuse-float": f"verify {CK} --bits 8 --query winter --report v --reuse-float-calibration",
+    "verify-places": f"verify {CK} --bits 8 --query winter --report v --places 0:5",
+    "verify-report-unicode": f"verify {CK} --bits 2 --query winter --report 'rëport 报告'",
+    "report-in-place": "report rep",
+    "report-json-file": "report rep/report.json --out r2",
+    "report-combine-copies": "report rep rep2 --out c",
+    "report-quiet-unicode": f"report {FX}/rep --out 'rëp 报告' --quiet",
+    "experiment-list": "experiment list",
+    "experiment-assignment-quick": "experiment assignment --quick --out e",
+    "experiment-seeds-one": "experiment assignment --quick --out e --seeds 1",
+    "experiment-out-unicode": "experiment assignment --quick --out 'éxp 实验' --seeds 1",
+    "demo-quick": "demo --quick --out d",
+    "demo-out-unicode": "demo --quick --out 'démo 演示' --quiet",
+    "demo-out-existing-folder": "demo --quick --out . --quiet",
+}
+LEGAL_SETUP: dict[str, dict[str, Any]] = {
+    "train-force": {"copy": ("net.npz",)},
+    "quantize-force": {"copy": ("models",)},
+    "quantize-out-link-to-folder": {"links": (("link", "real"),), "note": "link to ./real, a folder made first"},
+    "export-into-existing-export": {
+        "copy": ("deploy",),
+        "note": "export has no --force: a new export replaces the old",
+    },
+    "report-in-place": {"copy": ("rep",)},
+    "report-json-file": {"copy": ("rep",)},
+    "report-combine-copies": {"copy": ("rep", "rep->rep2")},
+}
+
+
+def legal_cases() -> list[Case]:
+    return [legal(f"legal-{name}", *sh(text), **LEGAL_SETUP.get(name, {})) for name, text in LEGAL_LINES.items()]
+
+
+def all_cases() -> list[Case]:
+    """Every case, in a fixed order; ids are unique."""
+    groups = (
+        cli_cases,
+        config_cases,
+        train_cases,
+        evaluate_cases,
+        simulate_cases,
+        quantize_cases,
+        export_cases,
+        verify_cases,
+        experiment_cases,
+        demo_cases,
+        file_argument_cases,
+        tamper_cases,
+        report_cases,
+        manifest_cases,
+        output_cases,
+        legal_cases,
+    )
+    cases = [case for group in groups for case in group()]
+    repeated = [name for name, count in Counter(c.id for c in cases).items() if count > 1]
+    if repeated:
+        raise SystemExit(f"repeated case ids: {repeated}")
+    return cases
+
+
+# ---------------------------------------------------------------------------------------------- campaign
+
+
+def expand(arg: str, fx: Path, ro: Path) -> str:
+    return arg.replace("{fx}", str(fx)).replace("{ro}", str(ro))
+
+
+def prepare(case: Case, work: Path, fx: Path, ro: Path) -> Path:
+    """The case's own fresh folder with its copied fixtures and links."""
+    cwd = work / case.id
+    if cwd.exists():
+        shutil.rmtree(cwd)
+    cwd.mkdir(parents=True)
+    for item in case.copy:
+        name, _, renamed = item.partition("->")
+        source, target = fx / name, cwd / (renamed or name)
+        if source.is_dir():
+            shutil.copytree(source, target, symlinks=True)
+        else:
+            shutil.copyfile(source, target)
+    for name, target_name in case.links:
+        link_target = expand(target_name, fx, ro)
+        if not link_target.startswith("/"):
+            (cwd / link_target).mkdir(parents=True, exist_ok=True)
+        os.symlink(link_target, cwd / name)
+    return cwd
+
+
+def run_case(case: Case, run: Runner, work: Path, fx: Path, ro: Path) -> Outcome:
+    cwd = prepare(case, work, fx, ro)
+    argv = [expand(arg, fx, ro) for arg in case.argv]
+    raw = run(argv, cwd)
+    lines = stderr_lines(raw.stderr)
+    return Outcome(
+        id=case.id,
+        command=case.command,
+        line=shlex.join(["vprsnn-export", *case.argv]),
+        legal=case.legal,
+        klass=classify(case, raw),
+        rc=raw.rc,
+        first_line=lines[0] if lines else "",
+        last_line=lines[-1] if lines else "",
+        seconds=round(raw.seconds, 2),
+        runner=run.name,
+        fork_class=None,
+        note=case.note,
+        stderr=raw.stderr[-3000:],
+    )
+
+
+def confirm(case: Case, first: Outcome, run: ExecRunner, work: Path, fx: Path, ro: Path) -> Outcome:
+    """A finding of the fork runner, run again as a real process: that result is kept (with the fork class)."""
+    again = run_case(case, run, work, fx, ro)
+    return Outcome(**{**asdict(again), "fork_class": first.klass})
+
+
+def progress(index: int, total: int, outcome: Outcome) -> None:
+    confirmed = f" (fork: {outcome.fork_class})" if outcome.fork_class else ""
+    print(f"[{index}/{total}] {outcome.klass:10s}{confirmed} {outcome.seconds:6.1f} s  {outcome.id}", file=sys.stderr)
+
+
+def run_campaign(
+    cases: Sequence[Case], run: Runner, exec_run: ExecRunner | None, work: Path, fx: Path, ro: Path
+) -> list[Outcome]:
+    outcomes = []
+    for index, case in enumerate(cases, 1):
+        outcome = run_case(case, run, work, fx, ro)
+        if exec_run is not None and is_finding(outcome) and outcome.klass != "timeout":
+            outcome = confirm(case, outcome, exec_run, work, fx, ro)
+        progress(index, len(cases), outcome)
+        outcomes.append(outcome)
+        shutil.rmtree(work / case.id, ignore_errors=True)
+    return outcomes
+
+
+# ---------------------------------------------------------------------------------------------- writing
+
+
+def counts(outcomes: Sequence[Outcome], is_legal: bool) -> Counter[str]:
+    return Counter(o.klass for o in outcomes if o.legal == is_legal)
+
+
+def counts_table(outcomes: Sequence[Outcome]) -> str:
+    """Markdown tables: totals by class, then by command."""
+    bad_counts, legal_counts = counts(outcomes, False), counts(outcomes, True)
+    lines = [
+        "| bad inputs | " + " | ".join(BAD_CLASSES) + " | total |",
+        "|---|" + "---:|" * (len(BAD_CLASSES) + 1),
+        "| all | " + " | ".join(str(bad_counts[c]) for c in BAD_CLASSES) + f" | {sum(bad_counts.values())} |",
+        "",
+        "| legal extremes | " + " | ".join(LEGAL_CLASSES) + " | total |",
+        "|---|" + "---:|" * (len(LEGAL_CLASSES) + 1),
+        "| all | " + " | ".join(str(legal_counts[c]) for c in LEGAL_CLASSES) + f" | {sum(legal_counts.values())} |",
+        "",
+        "| command | bad | " + " | ".join(BAD_CLASSES) + " | legal | ran | not ran |",
+        "|---|" + "---:|" * (len(BAD_CLASSES) + 4),
+    ]
+    for command in (*COMMANDS, "(none)"):
+        mine = [o for o in outcomes if o.command == command]
+        if not mine:
+            continue
+        bad_here, legal_here = counts(mine, False), counts(mine, True)
+        cells = [str(sum(bad_here.values())), *(str(bad_here[c]) for c in BAD_CLASSES)]
+        cells += [
+            str(sum(legal_here.values())),
+            str(legal_here["ran"]),
+            str(sum(legal_here.values()) - legal_here["ran"]),
+        ]
+        lines.append(f"| {command} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def finding_text(outcome: Outcome) -> str:
+    kind = "legal extreme" if outcome.legal else "bad input"
+    confirmed = f"; fork runner: {outcome.fork_class}" if outcome.fork_class else ""
+    note = f"; note: {outcome.note}" if outcome.note else ""
+    tail = outcome.stderr.strip().splitlines()[-8:]
+    block = "\n".join("    " + line[:300] for line in tail) if tail else "    (stderr empty)"
+    return (
+        f"* `{outcome.id}` ({kind}, rc {outcome.rc}, {outcome.runner}{confirmed}{note})\n"
+        f"  `{outcome.line}`\n\n{block}\n"
+    )
+
+
+def markdown(outcomes: Sequence[Outcome], command: str, seconds: float) -> str:
+    findings = [o for o in outcomes if is_finding(o)]
+    parts = [
+        "# Bad-input campaign (issue 12)\n",
+        f"`{command}`: {len(outcomes)} cases in {seconds:.0f} s, {time.strftime('%Y-%m-%d %H:%M')}.\n",
+        "Classes: see the docstring of tools/bad_input_campaign.py.\n",
+        "## Counts\n",
+        counts_table(outcomes),
+        f"\n## Cases that are not clean ({len(findings)})\n",
+    ]
+    for klass in (*BAD_CLASSES, *LEGAL_CLASSES):
+        group = [o for o in findings if o.klass == klass]
+        if group:
+            parts.append(f"### {klass} ({len(group)})\n")
+            parts += [finding_text(o) for o in group]
+    return "\n".join(parts) + "\n"
+
+
+def write_results(out: Path, outcomes: Sequence[Outcome], command: str, seconds: float) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    records = []
+    for outcome in outcomes:
+        record = asdict(outcome)
+        record["class"] = record.pop("klass")
+        if not is_finding(outcome):
+            record.pop("stderr")
+        records.append(record)
+    summary = {
+        "bad": dict(counts(outcomes, False)),
+        "legal": dict(counts(outcomes, True)),
+        "seconds": round(seconds, 1),
+        "command": command,
+    }
+    text = json.dumps({"summary": summary, "cases": records}, indent=1, ensure_ascii=False)
+    (out / "bad_inputs.json").write_text(text + "\n", encoding="utf-8")
+    (out / "bad_inputs.md").write_text(markdown(outcomes, command, seconds), encoding="utf-8")
+
+
+# ---------------------------------------------------------------------------------------------- main
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", required=True, type=Path, help="folder for bad_inputs.json and bad_inputs.md")
+    parser.add_argument("--only", help="run only the cases whose id or command line contains this text")
+    parser.add_argument("--exec", action="store_true", help="run every case as a fresh vprsnn-export process")
+    parser.add_argument("--no-confirm", action="store_true", help="keep the fork runner's result of every case")
+    parser.add_argument("--timeout", type=float, default=TIMEOUT_S, help="seconds per case (default 60)")
+    parser.add_argument("--nordland", type=Path, default=NORDLAND, help="the shared Nordland data, for manifests")
+    parser.add_argument("--keep", action="store_true", help="keep the temp folder (fixtures, logs)")
+    parser.add_argument("--list", action="store_true", help="print the case ids and command lines, run nothing")
+    return parser.parse_args(argv)
+
+
+def selected(cases: Sequence[Case], only: str | None) -> list[Case]:
+    if not only:
+        return list(cases)
+    return [c for c in cases if only in c.id or only in shlex.join(c.argv)]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    cases = selected(all_cases(), args.only)
+    if args.list:
+        for case in cases:
+            print(f"{'legal' if case.legal else 'bad  '} {case.id}: {shlex.join(case.argv)}")
+        return 0
+    started = time.perf_counter()
+    temp = Path(tempfile.mkdtemp(prefix="vprsnn-campaign-"))
+    os.environ.update(OMP_NUM_THREADS="1", VPRSNN_CACHE=str(temp / "cache"))
+    fx, work, logs = temp / "fixtures", temp / "cases", temp / "logs"
+    logs.mkdir()
+    exec_run = ExecRunner(args.timeout)
+    run: Runner = exec_run if args.exec else ForkRunner(args.timeout, logs)
+    ro = temp / "readonly"
+    try:
+        build_fixtures(fx, run, args.nordland)
+        ro = make_readonly(ro)
+        print(f"fixtures ready in {time.perf_counter() - started:.0f} s; {len(cases)} cases", file=sys.stderr)
+        confirm_run = None if args.exec or args.no_confirm else exec_run
+        outcomes = run_campaign(cases, run, confirm_run, work, fx, ro)
+    finally:
+        release_readonly(temp / "readonly")
+        if not args.keep:
+            shutil.rmtree(temp, ignore_errors=True)
+    seconds = time.perf_counter() - started
+    command = shlex.join(["python", "tools/bad_input_campaign.py", *(sys.argv[1:] if argv is None else argv)])
+    write_results(args.out, outcomes, command, seconds)
+    print(counts_table(outcomes))
+    print(f"\n{len(outcomes)} cases in {seconds:.0f} s; details: {args.out / 'bad_inputs.md'}")
+    return 1 if any(is_finding(o) for o in outcomes) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
