@@ -185,7 +185,9 @@ def consumer_statements(
                 "(the hard WTA, stated as metadata['readout_rule'])"
             )
             + ". At dt = 1e-4 s Euler gives "
-            "v <- beta v + I; Norse ignores r (input scaled by 1 - beta); snnTorch's importer needs one threshold "
+            "v <- beta v + I; Norse ignores r (multiply v_threshold by its gain dt/tau before from_nir(graph, "
+            "dt=1e-4)); SpikingJelly fires at v >= threshold (set the threshold to the next float32 above it); "
+            "metadata['consumer_settings'] states both; snnTorch's and SpikingJelly's importers need one threshold "
             f"for all neurons ({'met' if uniform else 'not met by this model'})"
             + (
                 ""
@@ -325,7 +327,10 @@ def nir_consumer_rows(
     """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
     try:
         consumer = CONSUMERS[consumer_name](load_graph(path), spikes)
-    except AssertionError as exc:  # snnTorch's importer asserts on what it cannot express
+    except (
+        AssertionError,
+        ValueError,
+    ) as exc:  # snnTorch asserts, SpikingJelly raises ValueError on what they cannot express
         return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
     agreement = spike_agreement(raster, consumer)
     graph = load_graph(path)

@@ -152,6 +152,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta": "on" if cfg.network.wta else "off",
         "wta_rule": wta_rule(source),
         "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
+        "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),
         "wta_node": (
             "none (left out on request)"
             if inhibition is None
@@ -457,10 +458,73 @@ def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
     return step_module(module, spikes)
 
 
-def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS) -> torch.Tensor:
+CONSUMERS_INSTALL = 'pip install -c constraints.txt ".[consumers]"'
+
+
+def consumer_settings(dt: float) -> dict[str, Any]:
+    """How to load the file in each NIR consumer so that it computes the WTA-off network (stored as JSON).
+
+    Each consumer's WTA-off raster then goes through :func:`apply_readout_rule`. Norse 1.1 integrates
+    v' <- v' + g (v_leak - v' + I) with g = dt/tau and no r, i.e. v' = g v (1 - beta = g): a threshold
+    g_j v_threshold_j, with g_j computed as Norse does (float32 dt * (1 / tau_j)), gives the network's
+    spikes; in particular v' = g I right after a reset equals it exactly when I = v_threshold (a tie,
+    no spike), which scaling the weights by r instead would get wrong by rounding. SpikingJelly 2.0
+    fires at v >= v_threshold: the next float32 above v_threshold makes that v > v_threshold.
+    """
+    return {
+        "nirtorch": {"dt": dt, "load": "NIR's LIF stepped by forward Euler at dt; nothing else to set"},
+        "snntorch": {
+            "load": "snntorch.import_nir.import_from_nir(graph) (dt 1e-4 built in)",
+            "needs": "one v_threshold for all neurons (quantize --fold-thresholds)",
+        },
+        "norse": {
+            "dt": dt,
+            "v_threshold": "times_norse_gain",
+            "load": "Norse 1.1 ignores lif.r, so its voltage is (dt/tau) v: set lif.v_threshold to "
+            "g * v_threshold with g = dt * (1 / tau) in torch.float32 (as Norse computes it), then "
+            "norse.torch.from_nir(graph, dt=dt)",
+        },
+        "spikingjelly": {
+            "dt": dt,
+            "v_threshold": "next_float32_above",
+            "load": "SpikingJelly 2.0 fires at v >= v_threshold: set lif.v_threshold to "
+            "numpy.nextafter(numpy.float32(v_threshold), numpy.float32(inf)), then "
+            "spikingjelly.activation_based.nir_exchange.import_from_nir(graph, dt=dt)",
+            "needs": "one v_threshold for all neurons (quantize --fold-thresholds)",
+        },
+        "then": "apply_readout_rule(graph, input spikes, the consumer's spikes) for the network's raster",
+    }
+
+
+def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
+    """A copy of ``graph`` with :func:`consumer_settings` applied for ``consumer`` (norse, spikingjelly).
+
+    norse (LIF):   v_threshold'_j = g_j v_threshold_j,  g_j = dt * (1 / tau_j)   (all float32, Norse's order)
+    spikingjelly:  v_threshold'_j = nextafter(float32(v_threshold_j), +inf)
+    """
+    import copy
+
+    import nir
+
+    adjusted = copy.deepcopy(graph)
+    lif = adjusted.nodes["lif"]
+    threshold32 = torch.as_tensor(np.asarray(lif.v_threshold), dtype=torch.float32)
+    if consumer == "norse":
+        if isinstance(lif, nir.LIF):
+            gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
+            lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
+    elif consumer == "spikingjelly":
+        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
+    else:
+        raise InvalidValueError(f"no load settings for consumer {consumer!r} (norse, spikingjelly)")
+    return adjusted
+
+
+def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS, plain: bool = False) -> torch.Tensor:
     """Run a NIR graph through Norse's importer (``norse.torch.from_nir``, an optional package) at ``dt``.
 
-    Norse 1.1 ignores the LIF's r (it integrates v <- v + dt/tau (v_leak - v + I)). Its graph
+    Norse 1.1 ignores the LIF's r (it integrates v <- v + dt/tau (v_leak - v + I)); unless
+    ``plain``, the thresholds are scaled by dt/tau first as :func:`consumer_settings` says. Its graph
     executor returns the output of the last node it runs, which is ``wta`` when that node is
     present, so the spikes are read from the executor's cache of the ``lif`` node instead.
     """
@@ -469,10 +533,10 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     try:
         import norse.torch as norse_torch
     except ImportError:
-        raise InvalidValueError("the Norse consumer needs the norse package (pip install norse)") from None
+        raise InvalidValueError(f"the Norse consumer needs the norse package ({CONSUMERS_INSTALL})") from None
     logging.getLogger().disabled = True
     try:
-        module = norse_torch.from_nir(graph, dt=dt)
+        module = norse_torch.from_nir(graph if plain else consumer_graph(graph, "norse", dt), dt=dt)
     finally:
         logging.getLogger().disabled = False
     state = None
@@ -484,10 +548,35 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     return torch.stack(outputs, dim=1)
 
 
+def spikingjelly_consumer_raster(
+    graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS, plain: bool = False
+) -> torch.Tensor:
+    """Run a NIR graph through SpikingJelly's importer (``nir_exchange.import_from_nir``, optional) at ``dt``.
+
+    SpikingJelly 2.0 maps the LIF (r = tau/dt) to ``LIFNode(tau/dt, decay_input=False)``:
+    v <- v - v dt/tau + I = beta v + I, and fires at v >= v_threshold; unless ``plain``, the
+    threshold is moved to the next float32 above it as :func:`consumer_settings` says. It
+    refuses (ValueError) per-neuron thresholds.
+    """
+    try:
+        from spikingjelly.activation_based.nir_exchange import import_from_nir
+        from spikingjelly.logger import logger
+    except ImportError:
+        raise InvalidValueError(
+            f"the SpikingJelly consumer needs the spikingjelly package ({CONSUMERS_INSTALL})"
+        ) from None
+    logger.disable("spikingjelly")
+    module = import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly", dt), dt=dt)
+    return step_module(module, spikes)
+
+
 CONSUMERS = {
     "nirtorch": generic_consumer_raster,
     "snntorch": lambda graph, spikes: snntorch_consumer_raster(graph, spikes),
     "norse": norse_consumer_raster,
+    "norse-plain": lambda graph, spikes: norse_consumer_raster(graph, spikes, plain=True),
+    "spikingjelly": spikingjelly_consumer_raster,
+    "spikingjelly-plain": lambda graph, spikes: spikingjelly_consumer_raster(graph, spikes, plain=True),
 }
 
 

@@ -68,9 +68,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--nir-consumer",
-        choices=("nirtorch", "snntorch", "norse"),
+        choices=("nirtorch", "snntorch", "norse", "norse-plain", "spikingjelly", "spikingjelly-plain"),
         default="nirtorch",
-        help="with --check: the metadata-blind NIR consumer to measure (norse: optional package)",
+        help="with --check: the metadata-blind NIR consumer to measure (norse, spikingjelly: the consumers extra; "
+        "-plain: without the file's consumer_settings)",
     )
     parser.add_argument("--query", help="with --check: query traversal to present (default: synthetic spike trains)")
     parser.add_argument(
