@@ -210,8 +210,8 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
 
 def load_fixed_point(path: str | Path) -> FixedPointModel:
     """Read and validate a fixed-point model; ModelFileError names the file and the problem."""
+    meta, arrays = read_container(path, "fixed-point model")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
-    meta, arrays = read_container(path, "fixed-point model")
     if meta.get("format") != FORMAT:
         raise ModelFileError(f"not a vprsnn fixed-point model (format {meta.get('format')!r})", path)
     if meta.get("format_version") != FORMAT_VERSION:

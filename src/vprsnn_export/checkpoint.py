@@ -78,8 +78,8 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
     """Read and validate a checkpoint (shapes, dtypes, finiteness, config); ModelFileError names the file and the problem."""
+    meta, arrays = read_container(path, "checkpoint")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
-    meta, arrays = read_container(path, "checkpoint")
     if meta.get("format") != FORMAT:
         raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
     if meta.get("format_version") != FORMAT_VERSION:
@@ -113,8 +113,11 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
 def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
     """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
 
-    Shared by checkpoints and fixed-point models; ModelFileError naming ``path`` otherwise.
+    Shared by checkpoints and fixed-point models (which also need a string ``package_version``);
+    ModelFileError naming ``path`` otherwise.
     """
+    if not isinstance(meta.get("package_version", "unknown"), str):
+        raise ModelFileError(f"package_version must be a version string, got {meta['package_version']!r}", path)
     traversals = meta.get("reference_traversals", [])
     if not isinstance(traversals, list) or not traversals or not all(isinstance(t, str) and t for t in traversals):
         raise ModelFileError("reference_traversals must be a non-empty list of traversal names", path)

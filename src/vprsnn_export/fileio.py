@@ -256,6 +256,8 @@ def is_readable_file(path: str | Path) -> bool:
 
 def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Read a container written by :func:`write_container`; any defect is a ModelFileError naming the file."""
+    if not str(path).strip():
+        raise ModelFileError(f"empty {kind} path")
     path = Path(path)
     if not is_readable_file(path):
         raise ModelFileError(f"no such {kind} file" + (" (a folder)" if path.is_dir() else ""), path)
@@ -265,6 +267,9 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
             raise ModelFileError(f"not a {kind}: a single .npy array, not an .npz container", path)
         with loaded as npz:
             arrays = {name: npz[name] for name in npz.files}
+        foreign = sorted(name for name, value in arrays.items() if not isinstance(value, np.ndarray))
+        if foreign:
+            raise ModelFileError(f"not a {kind}: members {foreign} are not .npy arrays", path)
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, TypeError) as exc:
         raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
     if META_KEY not in arrays:

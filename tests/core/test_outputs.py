@@ -119,3 +119,31 @@ def test_publish_folder_replaces_the_old_folder_whole(tmp_path):
     publish_folder(staging, out)
     assert [p.name for p in out.iterdir()] == ["new.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["deploy"]
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda d: "", "empty output path"),
+        (lambda d: d / "notes.txt", "is not a folder"),
+        (lambda d: d / "notes.txt" / "sub", "is not a folder"),
+        (lambda d: d / "link", "symbolic link"),
+        (lambda d: d / ("a" * 300), "too long"),
+    ],
+)
+def test_folder_outputs_are_checked_before_any_work(tmp_path, capsys, make, message):
+    (tmp_path / "notes.txt").write_text("x")
+    (tmp_path / "link").symlink_to(tmp_path / "notes.txt")
+    out = make(tmp_path)
+    assert main(["experiment", "assignment", "--quick", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert (tmp_path / "notes.txt").read_text() == "x"
+
+
+def test_train_never_overwrites_its_own_input(tmp_path, capsys):
+    manifest = tmp_path / "subset.csv"
+    manifest.write_text("place_id\n0\n1\n2\n")
+    argv = [*TRAIN, "--subset", str(manifest), "--out", str(manifest), "--force"]
+    assert main(argv) == 2
+    assert "input files" in capsys.readouterr().err and manifest.read_text().startswith("place_id")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 
 import numpy as np
 import pytest
@@ -41,6 +42,10 @@ HEADER_EDITS = {
     "data is a list": lambda m: {**m, "data": ["x"]},
     "history is a mapping": lambda m: {**m, "history": {"a": 1}},
     "format is another": lambda m: {**m, "format": "other"},
+    "package_version is a list": lambda m: {**m, "package_version": [1]},
+    "data places is text": lambda m: {**m, "data": {**m["data"], "places": "abc"}},
+    "data source is a huge synthetic route": lambda m: {**m, "data": {"source": "synthetic:100000000000"}},
+    "no reference traversal": lambda m: {**m, "reference_traversals": []},
 }
 
 ARRAY_EDITS = {
@@ -53,6 +58,9 @@ ARRAY_EDITS = {
     "NaN weights": lambda a: {**a, "weights": np.full_like(a["weights"], np.nan)},
     "missing calibration": lambda a: {k: v for k, v in a.items() if k != "calibration"},
     "wrong weight shape": lambda a: {**a, "weights": a["weights"][:10]},
+    "thresholds of 1e30": lambda a: {**a, "thresholds": np.full_like(a["thresholds"], 1e30)},
+    "reference ids beyond 2**53": lambda a: {**a, "reference_place_ids": a["reference_place_ids"] + 10**18},
+    "an object array (pickled)": lambda a: {**a, "weights": np.array(["garbage"], dtype=object)},
 }
 
 
@@ -81,3 +89,18 @@ def test_truncated_file_through_the_cli(good, tmp_path, capsys):
     assert main(["evaluate", str(path), "--query", "winter"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {path}")
+
+
+def test_foreign_members_and_plain_npy_files(good, tmp_path):
+    meta, arrays = good
+    path = write(tmp_path / "member.npz", meta, arrays)
+    with zipfile.ZipFile(path, "a") as archive:
+        archive.writestr("calibration_extra.npy", b"garbage")
+    with pytest.raises(ModelFileError, match="not .npy arrays"):
+        load_checkpoint(path)
+    np.save(tmp_path / "plain.npy", arrays["weights"])
+    (tmp_path / "plain.npy").rename(tmp_path / "plain.npz")
+    with pytest.raises(ModelFileError, match="single .npy array"):
+        load_checkpoint(tmp_path / "plain.npz")
+    with pytest.raises(ModelFileError, match="empty checkpoint path"):
+        load_checkpoint("")

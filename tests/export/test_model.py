@@ -129,6 +129,15 @@ def test_bad_arrays_are_refused_on_load(tmp_path, field, value, message):
         ({"decay_dv": 4096}, "decay_dv 4096 does not fit 12 bits"),
         ({"voltage_bits": 32}, "unsupported voltage format"),
         ({"config": {"network": {"bogus": 1}}}, "invalid fixed-point header"),
+        ({"bits": 8.5}, "bits must be an integer"),
+        ({"decay_dv": 204.5}, "decay_dv must be an integer"),
+        ({"scale_exponent": 40}, "scale_exponent 40 is outside"),
+        ({"scale_exponent": 10**30}, "is outside"),
+        ({"source_sha256": [1, 2]}, "source_sha256 must be"),
+        ({"arithmetic": [1]}, "must be mappings"),
+        ({"reference_traversals": "summer"}, "reference_traversals must be"),
+        ({"data": {"source": 5}}, "data must be a mapping"),
+        ({"package_version": [1]}, "package_version must be"),
     ],
 )
 def test_bad_headers_are_refused(tmp_path, meta, message):
