@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -36,8 +35,6 @@ from vprsnn_export.targets.loihi_target import (
 HERE = Path(__file__).resolve().parent
 RUN_LAVA = HERE / "lava_conformance" / "run_lava.py"
 NORDLAND = HERE.parents[1].parent / "shared/data/nordland_64x32_summer_winter"
-LAVA_VENV = Path(os.environ.get("VPRSNN_LAVA_VENV", Path.home() / ".cache/vprsnn-export/lava-venv"))
-PYTHON310 = [Path.home() / ".pyenv/versions/3.10.13/bin/python", shutil.which("python3.10")]
 
 
 def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, uniform=False, p=0.3, dv=205) -> FixedPointModel:
@@ -235,26 +232,6 @@ def test_writer_validates_before_writing(tmp_path):
 # --- the conformance run in Lava (lava-nc 0.10, Python 3.10) --------------------------------------------
 
 
-def lava_python() -> Path:
-    """The Lava venv's interpreter, building the venv on first use; skip with the reason when impossible."""
-    python = LAVA_VENV / "bin" / "python"
-    if (
-        python.exists()
-        and subprocess.run([python, "-c", "import lava.proc.lif.process"], capture_output=True).returncode == 0
-    ):
-        return python
-    base = next((Path(p) for p in PYTHON310 if p and Path(p).exists()), None)
-    if base is None:
-        pytest.skip("lava-nc 0.10 needs Python 3.10 and none was found (pyenv 3.10.13 or python3.10 on PATH)")
-    LAVA_VENV.parent.mkdir(parents=True, exist_ok=True)
-    steps = [[str(base), "-m", "venv", str(LAVA_VENV)], [str(python), "-m", "pip", "install", "-q", "lava-nc==0.10.*"]]
-    for step in steps:
-        done = subprocess.run(step, capture_output=True, text=True, timeout=1800)
-        if done.returncode != 0:
-            pytest.skip(f"could not build the Lava venv ({' '.join(step[-2:])}): {done.stderr.strip()[-400:]}")
-    return python
-
-
 def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path) -> torch.Tensor:
     np.save(tmp_path / "spikes.npy", spikes.numpy())
     done = subprocess.run(
@@ -288,9 +265,9 @@ def assert_lava_conforms(model: FixedPointModel, spikes: torch.Tensor, tmp_path:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("bits", [8, 4, 2])
-def test_lava_runs_the_description_spike_for_spike(tmp_path, bits):
+def test_lava_runs_the_description_spike_for_spike(tmp_path, bits, lava_python):
     """Full size (784 x 400), per-neuron thresholds, WTA off in Lava, against the integer simulator."""
-    python = lava_python()
+    python = lava_python
     model = make_model(np.random.default_rng(bits), n_inputs=784, n_neurons=400, bits=bits, p=0.12)
     spikes = random_spikes(bits, 3, 60, 784, p=0.12)
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
@@ -325,11 +302,11 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
-def test_lava_on_real_nordland_queries(tmp_path):
+def test_lava_on_real_nordland_queries(tmp_path, lava_python):
     """Real winter queries at the model's T through Lava (WTA off) against the integer simulator.
 
     VPRSNN_LAVA_MODEL=path runs a given fixed-point model, VPRSNN_LAVA_QUERIES=n sets the number of queries (4).
     """
-    python = lava_python()
+    python = lava_python
     model, spikes = real_model_and_queries(int(os.environ.get("VPRSNN_LAVA_QUERIES", "4")))
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
