@@ -226,6 +226,9 @@ def write_loihi(model: FixedPointModel, out_dir: str | Path, *, source_sha256: s
 def write_netx(model: FixedPointModel, path: str | Path) -> Path:
     """lava-dl netx HDF5: ``layer/0`` a dense layer with a CUBA neuron, the mantissas as uint8 weights.
 
+    The weight dataset is gzip-compressed (an HDF5 filter h5py reads transparently): about
+    1.15 x bits per synapse at 2 and 4 bits instead of 8.
+
     netx maps CUBA to Lava's LIF with du = iDecay - 1, dv = vDecay and vth = vThMant (a
     scalar when every neuron shares the threshold, else the (neurons,) array, which Lava's
     LIF broadcasts), and re-derives num_weight_bits / weight_exp from the weights itself
@@ -241,7 +244,8 @@ def write_netx(model: FixedPointModel, path: str | Path) -> Path:
             layer = f.create_group("layer").create_group("0")
             layer.create_dataset("type", data=np.bytes_("dense"))
             layer.create_dataset("shape", data=np.array([model.n_neurons], dtype=np.int64))
-            layer.create_dataset("weight", data=model.weight_mantissa.T.astype(np.uint8))
+            weight = model.weight_mantissa.T.astype(np.uint8)
+            layer.create_dataset("weight", data=weight, compression="gzip", compression_opts=9, shuffle=False)
             neuron = layer.create_group("neuron")
             neuron.create_dataset("type", data=np.bytes_("CUBA"))
             neuron.create_dataset("iDecay", data=np.int64(DU_NO_CURRENT_MEMORY + 1))

@@ -8,6 +8,8 @@ are in conftest.py).
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import subprocess
 from pathlib import Path
 
@@ -70,4 +72,28 @@ def test_netx_runs_network_net_spike_for_spike(tmp_path, netx_python, bits, unif
     netx = run_netx(netx_python, tmp_path / "desc", spikes, tmp_path)
     expected = simulate(model, spikes, record=True).raster
     assert int(expected.sum()) > 0
+    assert torch.equal(netx, expected), f"{int((netx != expected).sum())} of {netx.numel()} spikes differ"
+
+
+NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("VPRSNN_LAVA_MODEL"), reason="set VPRSNN_LAVA_MODEL to a fixed-point model")
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
+def test_netx_on_real_nordland_queries(tmp_path, netx_python):
+    """VPRSNN_LAVA_MODEL's network.net on its first VPRSNN_LAVA_QUERIES (4) winter queries, at the model's T."""
+    from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.export.model import load_fixed_point
+
+    model = load_fixed_point(os.environ["VPRSNN_LAVA_MODEL"])
+    n = int(os.environ.get("VPRSNN_LAVA_QUERIES", "4"))
+    subset = NORDLAND / "subset_100_places.csv"
+    dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], model.config.preprocess, subset=subset)
+    spikes = query_spikes(dataset.traversal("winter")[:n], dataset.place_ids[:n], "winter", model.config)
+    write_loihi(model, tmp_path / "desc")
+    netx = run_netx(netx_python, tmp_path / "desc", spikes, tmp_path)
+    wta_off = dataclasses.replace(model, config=model.config.replace(**{"network.wta": False}))
+    expected = simulate(wta_off, spikes, record=True).raster
     assert torch.equal(netx, expected), f"{int((netx != expected).sum())} of {netx.numel()} spikes differ"
