@@ -22,7 +22,18 @@ Computation (every operation integer; the contract of :mod:`export.model`):
 
 int64 carries the voltage path: V (4096 - dv) reaches 2**35, beyond int32. The W+Prob
 head is eq. 9-13 of the readout on float64 (:mod:`runtime.assignment`) with the model's
-own calibration S^R folded into constant matrices.
+own calibration S^R, stored as integer counts in the smallest unsigned type that holds
+them; S'' and 1 / colsum(S^R) are derived from it in the graph with the same float64
+operations as :func:`readout.assignment.weighted_matrix` (so they are the same numbers).
+
+Weight storage (about ``bits`` bits per synapse; :mod:`targets.packing`):
+
+    8 bits     q as a uint8 initializer [inputs, neurons]
+    4 bits     q as a UINT4 initializer (ONNX's sub-byte type), Cast to uint8 in the graph
+    2, 3, 5, 6, 7 bits
+               a uint8 bitstream (values row-major over [inputs, neurons], least significant
+               bit first), unpacked in the graph: bits = BitwiseAnd(BitShift(bytes, 0..7), 1),
+               q = MatMulInteger(bits as [count, b], [1, 2, ..., 2**(b-1)])
 """
 
 from __future__ import annotations
@@ -39,14 +50,15 @@ from onnx import TensorProto, helper, numpy_helper
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
-from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.runs import SpikeRun
+from vprsnn_export.targets.packing import PACKING, pack_bits
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
 DOMAIN = "vprsnn-export"
 INPUT = "spikes"
 OUTPUTS = ("counts", "saturations", "wprob", "raster")
+NATIVE_SUB_BYTE = {4: TensorProto.UINT4}  # widths stored in an ONNX sub-byte type that onnxruntime casts (opset 21)
 
 
 @dataclass
@@ -76,8 +88,38 @@ def check_exportable(model: FixedPointModel) -> None:
         raise InvalidValueError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
 
 
+def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """The per-neuron int64 vectors the step reads from the outer graph, stored narrow and widened once.
+
+    vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. neurons - 1 (Range)
+    """
+    inits = [
+        const("threshold_stored", smallest_unsigned(model.threshold)),
+        const("vth_scale", np.int64(1 << model.voltage_shift)),
+    ]
+    nodes = [
+        helper.make_node("Cast", ["threshold_stored"], ["threshold_wide"], to=TensorProto.INT64),
+        helper.make_node("Mul", ["threshold_wide", "vth_scale"], ["vth"]),
+    ]
+    if model.config.network.wta:
+        inits += [
+            const("multiplier_stored", smallest_unsigned(model.scale_multiplier)),
+            const("index_start", np.int64(0)),
+            const("index_limit", np.int64(model.n_neurons)),
+            const("index_step", np.int64(1)),
+        ]
+        nodes += [
+            helper.make_node("Cast", ["multiplier_stored"], ["multiplier"], to=TensorProto.INT64),
+            helper.make_node("Range", ["index_start", "index_limit", "index_step"], ["neuron_index"]),
+        ]
+    return nodes, inits
+
+
 def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
-    """One time step: (V, counts, saturations, A[t]) -> (V', counts', saturations' [, S])."""
+    """One time step: (V, counts, saturations, A[t]) -> (V', counts', saturations' [, S]).
+
+    ``vth``, ``multiplier`` and ``neuron_index`` come from the outer graph (:func:`neuron_nodes`).
+    """
     n = model.n_neurons
     shift = 1 << model.voltage_shift
     limit = model.voltage_limit
@@ -88,7 +130,6 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
         const("shift", np.int64(shift)),
         const("vmin", np.int64(-limit)),
         const("vmax", np.int64(limit)),
-        const("vth", model.threshold.astype(np.int64) << model.voltage_shift),
         const("zero", np.int64(0)),
         const("axis1", np.array([1], dtype=np.int64)),
     ]
@@ -110,8 +151,6 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     if model.config.network.wta:
         inits += [
             const("minus_one", np.int64(-1)),
-            const("multiplier", model.scale_multiplier.astype(np.int64)),
-            const("neuron_index", np.arange(n, dtype=np.int64)[None, :]),
         ]
         nodes += [
             helper.make_node("Mul", ["a", "multiplier"], ["score"]),
@@ -143,17 +182,60 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     return helper.make_graph(nodes, "lif_wta_step", inputs, outputs, inits)
 
 
+def weight_storage(bits: int) -> str:
+    """How the graph stores ``bits``-bit mantissas (the ``vprsnn.weight_storage`` property)."""
+    if bits == 8:
+        return "uint8"
+    if bits in NATIVE_SUB_BYTE:
+        return f"{TensorProto.DataType.Name(NATIVE_SUB_BYTE[bits]).lower()} initializer, Cast to uint8"
+    return f"{PACKING} of {bits}-bit values over [inputs, neurons], unpacked in the graph"
+
+
+def weight_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """Nodes yielding ``weight_mantissa`` uint8 [inputs, neurons] from the stored initializer (module docstring)."""
+    q, bits = model.weight_mantissa, model.bits
+    if bits == 8:
+        return [], [const("weight_mantissa", q.astype(np.uint8))]
+    packed = pack_bits(q, bits)
+    if bits in NATIVE_SUB_BYTE:
+        stored = helper.make_tensor("weight_packed", NATIVE_SUB_BYTE[bits], list(q.shape), packed.tobytes(), raw=True)
+        return [helper.make_node("Cast", ["weight_packed"], ["weight_mantissa"], to=TensorProto.UINT8)], [stored]
+    count = q.size
+    inits = [
+        const("weight_packed", packed[:, None]),
+        const("bit_positions", np.arange(8, dtype=np.uint8)[None, :]),
+        const("bit_one", np.uint8(1)),
+        const("stream_flat", np.array([-1], dtype=np.int64)),
+        const("stream_start", np.array([0], dtype=np.int64)),
+        const("stream_end", np.array([count * bits], dtype=np.int64)),
+        const("digit_shape", np.array([count, bits], dtype=np.int64)),
+        const("place_values", (1 << np.arange(bits, dtype=np.uint8))[:, None].astype(np.uint8)),
+        const("weight_shape", np.array(q.shape, dtype=np.int64)),
+    ]
+    nodes = [
+        helper.make_node("BitShift", ["weight_packed", "bit_positions"], ["bit_shifted"], direction="RIGHT"),
+        helper.make_node("BitwiseAnd", ["bit_shifted", "bit_one"], ["bit_plane"]),
+        helper.make_node("Reshape", ["bit_plane", "stream_flat"], ["bit_stream"]),
+        helper.make_node("Slice", ["bit_stream", "stream_start", "stream_end"], ["value_bits"]),
+        helper.make_node("Reshape", ["value_bits", "digit_shape"], ["digits"]),
+        helper.make_node("MatMulInteger", ["digits", "place_values"], ["values_i32"]),
+        helper.make_node("Cast", ["values_i32"], ["values_u8"], to=TensorProto.UINT8),
+        helper.make_node("Reshape", ["values_u8", "weight_shape"], ["weight_mantissa"]),
+    ]
+    return nodes, inits
+
+
 def currents_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """A[T, batch, neurons] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q); initial state zeros."""
-    inits = [
-        const("weight_mantissa", model.weight_mantissa.astype(np.uint8)),
+    unpack, inits = weight_nodes(model)
+    inits += [
         const("flat_shape", np.array([-1, model.n_inputs], dtype=np.int64)),
         const("neurons", np.array([model.n_neurons], dtype=np.int64)),
         const("first_two", np.array([0], dtype=np.int64)),
         const("two", np.array([2], dtype=np.int64)),
         const("one", np.array([1], dtype=np.int64)),
     ]
-    nodes = [
+    nodes = unpack + [
         helper.make_node("Shape", [INPUT], ["spike_shape"]),
         helper.make_node("Slice", ["spike_shape", "first_two", "two"], ["time_batch"]),
         helper.make_node("Slice", ["spike_shape", "one", "two"], ["batch"]),
@@ -172,26 +254,93 @@ def currents_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[T
     return nodes, inits
 
 
+def smallest_unsigned(values: np.ndarray) -> np.ndarray:
+    """``values`` (non-negative integers) in the narrowest unsigned dtype that holds them exactly."""
+    return values.astype(np.min_scalar_type(int(values.max()) if values.size else 0))
+
+
+def calibration_nodes(counts: np.ndarray) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """``s_r`` float64 [neurons, places] from S^R stored in the fewer bytes of two exact forms.
+
+    dense:  the counts in the narrowest unsigned type, Cast to float64
+    sparse: the non-zero counts and their row-major positions, each in the narrowest unsigned
+            type, ScatterND into zeros (S^R of a WTA network is mostly zeros: each place's T
+            spikes go to a few neurons)
+    """
+    dense = smallest_unsigned(counts)
+    flat = counts.reshape(-1)
+    where = np.flatnonzero(flat)
+    values, positions = smallest_unsigned(flat[where]), smallest_unsigned(where)
+    if dense.nbytes <= values.nbytes + positions.nbytes:
+        return [helper.make_node("Cast", ["s_r_counts"], ["s_r"], to=TensorProto.DOUBLE)], [const("s_r_counts", dense)]
+    inits = [
+        const("s_r_values", values),
+        const("s_r_positions", positions[:, None]),
+        const("s_r_size", np.array([flat.size], dtype=np.int64)),
+        const("s_r_shape", np.array(counts.shape, dtype=np.int64)),
+    ]
+    nodes = [
+        helper.make_node(
+            "ConstantOfShape", ["s_r_size"], ["s_r_zeros"], value=numpy_helper.from_array(np.zeros(1, dtype=np.float64))
+        ),
+        helper.make_node("Cast", ["s_r_values"], ["s_r_nonzero"], to=TensorProto.DOUBLE),
+        helper.make_node("Cast", ["s_r_positions"], ["s_r_index"], to=TensorProto.INT64),
+        helper.make_node("ScatterND", ["s_r_zeros", "s_r_index", "s_r_nonzero"], ["s_r_flat"]),
+        helper.make_node("Reshape", ["s_r_flat", "s_r_shape"], ["s_r"]),
+    ]
+    return nodes, inits
+
+
+def readout_matrix_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+    """``s_r``, ``s_double_prime`` and ``inv_colsum`` (float64) from the integer counts S^R (eq. 9-10).
+
+    omega_i = #{l : S^R_il > 0};  S'_il = S^R_il / omega_i where omega_i > gamma places, else S^R_il
+    S''_il  = S'_il (S^R_il / sum_m S^R_im)  (a silent row is 0);  inv_colsum_l = 1 / sum_i S^R_il, 0 where 0
+    Each is one correctly rounded float64 operation on exact integers, as in weighted_matrix.
+    """
+    n_places = model.calibration.shape[1]
+    nodes, inits = calibration_nodes(model.calibration)
+    inits += [
+        const("involvement", np.float64(float(model.config.assignment.gamma) * n_places)),
+        const("axis0_outer", np.array([0], dtype=np.int64)),
+        const("f_zero", np.float64(0.0)),
+        const("f_one", np.float64(1.0)),
+        const("axis1_outer", np.array([1], dtype=np.int64)),
+    ]
+    nodes += [
+        helper.make_node("Greater", ["s_r", "f_zero"], ["s_r_positive"]),
+        helper.make_node("Cast", ["s_r_positive"], ["s_r_involved"], to=TensorProto.DOUBLE),
+        helper.make_node("ReduceSum", ["s_r_involved", "axis1_outer"], ["omega"], keepdims=1),
+        helper.make_node("Greater", ["omega", "involvement"], ["penalised"]),
+        helper.make_node("Where", ["penalised", "omega", "f_one"], ["divisor"]),
+        helper.make_node("Div", ["s_r", "divisor"], ["s_prime"]),
+        helper.make_node("ReduceSum", ["s_r", "axis1_outer"], ["rowsum"], keepdims=1),
+        helper.make_node("Greater", ["rowsum", "f_zero"], ["row_active"]),
+        helper.make_node("Where", ["row_active", "rowsum", "f_one"], ["row_safe"]),
+        helper.make_node("Div", ["s_r", "row_safe"], ["row_share"]),
+        helper.make_node("Mul", ["s_prime", "row_share"], ["s_double_prime"]),
+        helper.make_node("ReduceSum", ["s_r", "axis0_outer"], ["colsum"], keepdims=1),
+        helper.make_node("Greater", ["colsum", "f_zero"], ["col_active"]),
+        helper.make_node("Where", ["col_active", "colsum", "f_one"], ["col_safe"]),
+        helper.make_node("Div", ["f_one", "col_safe"], ["col_inverse"]),
+        helper.make_node("Where", ["col_active", "col_inverse", "f_zero"], ["inv_colsum"]),
+    ]
+    return nodes, inits
+
+
 def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
 
     scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
     P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
     """
-    sr = model.calibration.astype(np.float64)
-    colsum = sr.sum(axis=0)
-    n_places = sr.shape[1]
-    inits = [
-        const("s_double_prime", weighted_matrix(sr, model.config.assignment.gamma)),
-        const("s_r", sr),
-        const("inv_colsum", np.where(colsum > 0, 1.0 / np.where(colsum > 0, colsum, 1.0), 0.0)[None, :]),
-        const("f_zero", np.float64(0.0)),
-        const("f_one", np.float64(1.0)),
+    n_places = model.calibration.shape[1]
+    nodes, inits = readout_matrix_nodes(model)
+    inits += [
         const("uniform", np.float64(1.0 / n_places)),
         const("i_zero", np.int64(0)),
-        const("axis1_outer", np.array([1], dtype=np.int64)),
     ]
-    nodes = [
+    nodes += [
         helper.make_node("Cast", ["counts"], ["sq"], to=TensorProto.DOUBLE),
         helper.make_node("MatMul", ["sq", "s_double_prime"], ["raw"]),
         helper.make_node("Greater", ["counts", "i_zero"], ["active_b"]),
@@ -220,6 +369,9 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
     check_exportable(model)
     n = model.n_neurons
     nodes, inits = currents_nodes(model)
+    per_neuron, per_neuron_inits = neuron_nodes(model)
+    nodes += per_neuron
+    inits += per_neuron_inits
     scan_outputs = ["v_final", "counts", "saturations"] + (["raster"] if with_raster else [])
     nodes.append(
         helper.make_node(
@@ -278,6 +430,7 @@ def metadata_props(model: FixedPointModel) -> dict[str, str]:
         "vprsnn.encoder": f"Bernoulli(clip({cfg.encoder.rate_scale} * pixel, 0, 1)), seed {cfg.seed}",
         "vprsnn.source_sha256": model.source_sha256,
         "vprsnn.gamma": repr(cfg.assignment.gamma),
+        "vprsnn.weight_storage": weight_storage(model.bits),
     }
 
 

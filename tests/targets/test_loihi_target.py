@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -17,13 +16,17 @@ import torch
 from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.fileio import sha256_bytes
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_target import (
     ARRAYS_NAME,
     HEADER_NAME,
     NETX_NAME,
+    WEIGHTS_NAME,
     describe,
+    lava_weight_matrix,
     lava_weights,
+    npz_bytes,
     read_loihi,
     read_loihi_model,
     write_loihi,
@@ -32,8 +35,6 @@ from vprsnn_export.targets.loihi_target import (
 HERE = Path(__file__).resolve().parent
 RUN_LAVA = HERE / "lava_conformance" / "run_lava.py"
 NORDLAND = HERE.parents[1].parent / "shared/data/nordland_64x32_summer_winter"
-LAVA_VENV = Path(os.environ.get("VPRSNN_LAVA_VENV", Path.home() / ".cache/vprsnn-export/lava-venv"))
-PYTHON310 = [Path.home() / ".pyenv/versions/3.10.13/bin/python", shutil.which("python3.10")]
 
 
 def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, uniform=False, p=0.3, dv=205) -> FixedPointModel:
@@ -119,19 +120,80 @@ def test_round_trip_rebuilds_the_model_exactly(tmp_path, bits):
     assert torch.equal(simulate(model, spikes, record=True).raster, simulate(rebuilt, spikes, record=True).raster)
 
 
-def test_netx_file_only_for_a_single_threshold(tmp_path):
-    per_neuron = write_loihi(make_model(np.random.default_rng(2)), tmp_path / "a")
-    assert "netx" not in per_neuron and not (tmp_path / "a" / NETX_NAME).exists()
-    assert read_loihi(tmp_path / "a").header["netx"]["reason"] == "per-neuron thresholds"
-    model = make_model(np.random.default_rng(3), uniform=True, bits=4)
+@pytest.mark.parametrize("uniform", [True, False])
+def test_netx_file_holds_one_or_per_neuron_thresholds(tmp_path, uniform):
+    model = make_model(np.random.default_rng(3), uniform=uniform, bits=4)
     written = write_loihi(model, tmp_path / "b")
+    assert read_loihi(tmp_path / "b").header["netx"]["file"] == NETX_NAME
     with h5py.File(written["netx"], "r") as f:
         layer = f["layer/0"]
         assert layer["type"][()] == b"dense" and list(layer["shape"][()]) == [6]
-        assert np.array_equal(layer["weight"][()], model.weight_mantissa.T)
+        assert layer["weight"].dtype == np.uint8 and np.array_equal(layer["weight"][()], model.weight_mantissa.T)
         neuron = layer["neuron"]
         assert neuron["type"][()] == b"CUBA" and neuron["iDecay"][()] == 4096 and neuron["vDecay"][()] == 205
-        assert neuron["vThMant"][()] == model.threshold[0]
+        vth = neuron["vThMant"][()]
+        if uniform:
+            assert np.ndim(vth) == 0 and vth == model.threshold[0]
+        else:
+            assert vth.shape == (6,) and np.array_equal(vth, model.threshold)
+
+
+@pytest.mark.parametrize("bits", [2, 3, 4, 5, 6, 7, 8])
+def test_weights_are_stored_bit_packed_as_the_header_states(tmp_path, bits):
+    model = make_model(np.random.default_rng(bits), n_inputs=25, n_neurons=7, bits=bits)
+    write_loihi(model, tmp_path / "d")
+    desc = read_loihi(tmp_path / "d")
+    conn = desc.header["connections"][0]
+    storage = conn["weights_storage"]
+    packed = desc.arrays[conn["weights"]]
+    assert desc.header["format_version"] == 2 and conn["weights"] == WEIGHTS_NAME
+    assert storage["packing"] == "lsb-first-bitstream" and storage["shape"] == [7, 25] and storage["bits"] == bits
+    assert packed.dtype == np.uint8 and packed.shape == ((7 * 25 * bits + 7) // 8,) == (storage["bytes"],)
+    # the documented rule, spelled out: value k = sum_i bit(k bits + i) 2**i, bit n = bit n % 8 of byte n // 8
+    stream = [(int(packed[n // 8]) >> (n % 8)) & 1 for n in range(7 * 25 * bits)]
+    values = [sum(stream[k * bits + i] << i for i in range(bits)) for k in range(7 * 25)]
+    assert np.array_equal(np.array(values).reshape(7, 25), model.weight_mantissa.T)
+    assert np.array_equal(lava_weight_matrix(desc), lava_weights(model)[0])
+
+
+def rewrite(folder: Path, header: dict, arrays: dict[str, np.ndarray]) -> None:
+    """Replace a description's arrays and header (the header naming the new arrays' sha256)."""
+    blob = npz_bytes(arrays)
+    header["arrays"]["sha256"] = sha256_bytes(blob)
+    (folder / ARRAYS_NAME).write_bytes(blob)
+    (folder / HEADER_NAME).write_text(json.dumps(header))
+
+
+def test_version_1_descriptions_still_load_and_unknown_versions_fail_clearly(tmp_path):
+    model = make_model(np.random.default_rng(11), bits=4)
+    write_loihi(model, tmp_path / "d")
+    desc = read_loihi(tmp_path / "d")
+    old = {name: value for name, value in desc.arrays.items() if name != WEIGHTS_NAME}
+    old["input_exc_weights"] = lava_weights(model)[0]
+    header = json.loads(json.dumps(desc.header))
+    header["format_version"] = 1
+    header["connections"][0]["weights"] = "input_exc_weights"
+    del header["connections"][0]["weights_storage"]
+    rewrite(tmp_path / "d", header, old)
+    assert np.array_equal(read_loihi_model(tmp_path / "d").weight_mantissa, model.weight_mantissa)
+    header["format_version"] = 3
+    rewrite(tmp_path / "d", header, old)
+    with pytest.raises(ModelFileError, match="unsupported Loihi description version 3"):
+        read_loihi(tmp_path / "d")
+
+
+def test_reader_rejects_packed_weights_that_do_not_match_the_header(tmp_path):
+    write_loihi(make_model(np.random.default_rng(12), bits=3), tmp_path / "d")
+    desc = read_loihi(tmp_path / "d")
+    short = dict(desc.arrays, **{WEIGHTS_NAME: desc.arrays[WEIGHTS_NAME][:-1]})
+    rewrite(tmp_path / "d", json.loads(json.dumps(desc.header)), short)
+    with pytest.raises(ModelFileError, match="weights cannot be read.*packed uint8 bytes"):
+        read_loihi(tmp_path / "d")
+    header = json.loads(json.dumps(desc.header))
+    header["connections"][0]["weights_storage"]["bits"] = 4
+    rewrite(tmp_path / "d", header, desc.arrays)
+    with pytest.raises(ModelFileError, match="num_weight_bits"):
+        read_loihi_model(tmp_path / "d")
 
 
 def test_reader_rejects_missing_corrupt_and_mismatched_files(tmp_path):
@@ -170,26 +232,6 @@ def test_writer_validates_before_writing(tmp_path):
 # --- the conformance run in Lava (lava-nc 0.10, Python 3.10) --------------------------------------------
 
 
-def lava_python() -> Path:
-    """The Lava venv's interpreter, building the venv on first use; skip with the reason when impossible."""
-    python = LAVA_VENV / "bin" / "python"
-    if (
-        python.exists()
-        and subprocess.run([python, "-c", "import lava.proc.lif.process"], capture_output=True).returncode == 0
-    ):
-        return python
-    base = next((Path(p) for p in PYTHON310 if p and Path(p).exists()), None)
-    if base is None:
-        pytest.skip("lava-nc 0.10 needs Python 3.10 and none was found (pyenv 3.10.13 or python3.10 on PATH)")
-    LAVA_VENV.parent.mkdir(parents=True, exist_ok=True)
-    steps = [[str(base), "-m", "venv", str(LAVA_VENV)], [str(python), "-m", "pip", "install", "-q", "lava-nc==0.10.*"]]
-    for step in steps:
-        done = subprocess.run(step, capture_output=True, text=True, timeout=1800)
-        if done.returncode != 0:
-            pytest.skip(f"could not build the Lava venv ({' '.join(step[-2:])}): {done.stderr.strip()[-400:]}")
-    return python
-
-
 def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path) -> torch.Tensor:
     np.save(tmp_path / "spikes.npy", spikes.numpy())
     done = subprocess.run(
@@ -223,9 +265,9 @@ def assert_lava_conforms(model: FixedPointModel, spikes: torch.Tensor, tmp_path:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("bits", [8, 4, 2])
-def test_lava_runs_the_description_spike_for_spike(tmp_path, bits):
+def test_lava_runs_the_description_spike_for_spike(tmp_path, bits, lava_python):
     """Full size (784 x 400), per-neuron thresholds, WTA off in Lava, against the integer simulator."""
-    python = lava_python()
+    python = lava_python
     model = make_model(np.random.default_rng(bits), n_inputs=784, n_neurons=400, bits=bits, p=0.12)
     spikes = random_spikes(bits, 3, 60, 784, p=0.12)
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
@@ -260,11 +302,11 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
-def test_lava_on_real_nordland_queries(tmp_path):
+def test_lava_on_real_nordland_queries(tmp_path, lava_python):
     """Real winter queries at the model's T through Lava (WTA off) against the integer simulator.
 
     VPRSNN_LAVA_MODEL=path runs a given fixed-point model, VPRSNN_LAVA_QUERIES=n sets the number of queries (4).
     """
-    python = lava_python()
+    python = lava_python
     model, spikes = real_model_and_queries(int(os.environ.get("VPRSNN_LAVA_QUERIES", "4")))
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0

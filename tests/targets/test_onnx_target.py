@@ -18,14 +18,16 @@ from vprsnn_export.cli import main
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
-from vprsnn_export.readout.assignment import strategy_scores
+from vprsnn_export.readout.assignment import strategy_scores, weighted_matrix
 from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_target import (
     IR_VERSION,
+    OPSET,
     OnnxBackend,
     build_onnx,
     read_onnx,
+    readout_matrix_nodes,
     run_onnx,
     run_onnx_outputs,
     write_onnx,
@@ -161,6 +163,75 @@ def test_graph_is_checked_ir10_and_self_describing(tmp_path):
     assert inputs["spikes"].type.tensor_type.elem_type == onnx.TensorProto.UINT8
     props = {p.key: p.value for p in loaded.metadata_props}
     assert props["vprsnn.bits"] == "8" and props["vprsnn.decay_dv"] == "205"
+
+
+def initializers(model: onnx.ModelProto) -> dict[str, onnx.TensorProto]:
+    return {t.name: t for t in model.graph.initializer}
+
+
+@pytest.mark.parametrize("bits", [2, 3, 4, 5, 6, 7, 8])
+def test_weights_take_about_bits_per_synapse(tmp_path, bits):
+    model = make_model(np.random.default_rng(bits), n_inputs=49, n_neurons=5, bits=bits)
+    graph = build_onnx(model)
+    inits = initializers(graph)
+    payload = (49 * 5 * bits + 7) // 8
+    if bits == 8:
+        stored = inits["weight_mantissa"]
+        assert stored.data_type == onnx.TensorProto.UINT8 and len(stored.raw_data) == 49 * 5
+    else:
+        stored = inits["weight_packed"]
+        kind = onnx.TensorProto.UINT4 if bits == 4 else onnx.TensorProto.UINT8
+        assert stored.data_type == kind and len(stored.raw_data) == payload
+    props = {p.key: p.value for p in graph.metadata_props}
+    assert props["vprsnn.weight_storage"].startswith({8: "uint8", 4: "uint4"}.get(bits, "lsb-first-bitstream"))
+    assert_identical(model, random_spikes(bits, 5, 20, 49), tmp_path / "w.onnx")
+
+
+def run_readout_matrices(model: FixedPointModel) -> list[np.ndarray]:
+    """The head's derived S^R, S'' and 1 / colsum(S^R), as onnxruntime computes them."""
+    import onnxruntime as ort
+
+    nodes, inits = readout_matrix_nodes(model)
+    n, places = model.calibration.shape
+    graph = onnx.helper.make_graph(
+        nodes,
+        "readout_matrices",
+        [],
+        [
+            onnx.helper.make_tensor_value_info("s_r", onnx.TensorProto.DOUBLE, [n, places]),
+            onnx.helper.make_tensor_value_info("s_double_prime", onnx.TensorProto.DOUBLE, [n, places]),
+            onnx.helper.make_tensor_value_info("inv_colsum", onnx.TensorProto.DOUBLE, [1, places]),
+        ],
+        inits,
+    )
+    proto = onnx.helper.make_model(graph, opset_imports=[onnx.helper.make_opsetid("", OPSET)], ir_version=IR_VERSION)
+    onnx.checker.check_model(proto, full_check=True)
+    return ort.InferenceSession(proto.SerializeToString(), providers=["CPUExecutionProvider"]).run(None, {})
+
+
+@pytest.mark.parametrize("sparse", [True, False])
+@pytest.mark.parametrize("gamma", [0.0, 0.3, 1.0])
+def test_readout_matrices_are_derived_in_graph_bit_for_bit(sparse, gamma):
+    """S^R stored as narrow integers (dense or non-zeros only); S'' and 1/colsum equal the float64 constants exactly."""
+    rng = np.random.default_rng(13)
+    model = make_model(rng, n_neurons=40, places=30)
+    counts = rng.integers(0, 301, (40, 30)) * (rng.random((40, 30)) < (0.05 if sparse else 0.9))
+    counts[3] = 0  # a silent neuron
+    counts[:, 4] = 0  # a place no neuron saw
+    model = dataclasses.replace(model, calibration=counts.astype(np.int64))
+    model.config = model.config.replace(**{"assignment.gamma": gamma})
+    s_r, s_double_prime, inv_colsum = run_readout_matrices(model)
+    sr = counts.astype(np.float64)
+    colsum = sr.sum(axis=0)
+    assert np.array_equal(s_r, sr)
+    assert np.array_equal(s_double_prime, weighted_matrix(sr, gamma))
+    assert np.array_equal(inv_colsum[0], np.where(colsum > 0, 1.0 / np.where(colsum > 0, colsum, 1.0), 0.0))
+    stored = initializers(build_onnx(model))
+    names = {"s_r_values", "s_r_positions"} if sparse else {"s_r_counts"}
+    assert names <= set(stored) and all(
+        onnx.helper.tensor_dtype_to_np_dtype(stored[k].data_type).itemsize == 2 for k in names
+    )
+    assert not any(t.data_type == onnx.TensorProto.DOUBLE and len(t.dims) for t in stored.values())
 
 
 def test_writer_refuses_invalid_models_and_writes_nothing(tmp_path):

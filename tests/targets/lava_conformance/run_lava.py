@@ -1,8 +1,9 @@
 """Run an exported Loihi description in Lava itself (lava-nc 0.10, Python 3.10), WTA off.
 
-Usage (inside the Lava venv):  python run_lava.py DESCRIPTION_DIR SPIKES.npy RASTER_OUT.npy
+Usage (inside the Lava venv):  python run_lava.py [--netx] DESCRIPTION_DIR SPIKES.npy RASTER_OUT.npy
 
-Reads only network.json and network.npz (numpy + json, no vprsnn-export import), builds
+Reads only network.json and network.npz (numpy + json, no vprsnn-export import; it unpacks
+the bit-packed weight mantissas of format version 2 itself), builds
 
     RingBuffer(spikes) -> Dense(weights, num_weight_bits, weight_exp, EXCITATORY) -> LIF(du, dv, vth) -> RingBuffer sink
 
@@ -11,6 +12,9 @@ Each presentation is one block of T + 1 steps: the Dense process delivers step t
 activation at step t + 1, so a silent input step at the end of every block flushes it;
 exc.v and exc.u are set to 0 before every block (state isolation). The LIF raster of
 block steps 1..T is presentation steps 0..T-1. Writes the raster (N, T, neurons) as uint8.
+
+With --netx it loads network.net with lava-dl's netx (lava.lib.dl.netx.hdf5.Network, lava-dl
+0.6) instead and runs the same blocks through it (netx builds its own Dense + LIF).
 """
 
 import json
@@ -34,6 +38,24 @@ def load(folder):
     return header, arrays
 
 
+def unpack_bits(packed, bits, shape):
+    """The header's "lsb-first-bitstream": value k = sum_i bit(k bits + i) 2**i, stream bit n = bit n % 8 of byte n // 8."""
+    count = int(np.prod(shape))
+    plane = np.unpackbits(packed, bitorder="little")[: count * bits].reshape(count, bits).astype(np.int32)
+    return (plane << np.arange(bits)).sum(axis=1).reshape(shape)
+
+
+def dense_weights(header, arrays):
+    """Dense.weights (neurons, inputs): version 1 stores them, version 2 the packed mantissas q (w = q << shift)."""
+    conn = header["connections"][0]
+    if header["format_version"] == 1:
+        return arrays[conn["weights"]]
+    storage = conn["weights_storage"]
+    assert storage["packing"] == "lsb-first-bitstream", storage["packing"]
+    q = unpack_bits(arrays[conn["weights"]], storage["bits"], tuple(storage["shape"]))
+    return q << -conn["weight_exp"]
+
+
 def source_data(spikes):
     """(N, T, inputs) -> (inputs, N (T + 1)): each presentation followed by one silent step."""
     n, timesteps, n_inputs = spikes.shape
@@ -52,7 +74,7 @@ def main(folder, spikes_path, out_path):
     neurons = exc["size"]
     source = SpikeSource(data=source_data(spikes))
     dense = Dense(
-        weights=arrays[conn["weights"]],
+        weights=dense_weights(header, arrays),
         num_weight_bits=conn["num_weight_bits"],
         weight_exp=conn["weight_exp"],
         sign_mode=SignMode(conn["sign_mode_value"]),
@@ -83,5 +105,36 @@ def main(folder, spikes_path, out_path):
     np.save(out_path, raster.astype(np.uint8))
 
 
+def main_netx(folder, spikes_path, out_path):
+    """The same blocks through lava-dl's netx: network.net loaded by lava.lib.dl.netx.hdf5.Network."""
+    from lava.lib.dl.netx.hdf5 import Network
+
+    spikes = np.load(spikes_path)
+    n, timesteps, _ = spikes.shape
+    block = timesteps + 1
+    net = Network(net_config=str(Path(folder) / "network.net"))
+    neuron = net.layers[0].neuron
+    neurons = net.out.shape[0]
+    source = SpikeSource(data=source_data(spikes))
+    sink = SpikeSink(shape=(neurons,), buffer=n * block)
+    source.s_out.connect(net.inp)
+    net.out.connect(sink.a_in)
+    config = Loihi2SimCfg(select_tag="fixed_pt")
+    zeros = np.zeros(neurons)
+    try:
+        for _ in range(n):
+            net.run(condition=RunSteps(num_steps=block), run_cfg=config)
+            neuron.v.set(zeros)
+            neuron.u.set(zeros)
+        data = sink.data.get()
+    finally:
+        net.stop()
+    raster = data.T.reshape(n, block, neurons)[:, 1:, :]
+    np.save(out_path, raster.astype(np.uint8))
+
+
 if __name__ == "__main__":
-    main(*sys.argv[1:4])
+    if sys.argv[1] == "--netx":
+        main_netx(*sys.argv[2:5])
+    else:
+        main(*sys.argv[1:4])
