@@ -14,7 +14,13 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.aggregation import VELOCITY_ESTIMATES, aggregate, estimate_velocity, track_velocity
+from vprsnn_export.readout.aggregation import (
+    VELOCITY_ESTIMATES,
+    aggregate,
+    estimate_velocity,
+    smooth_velocity,
+    track_velocity,
+)
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
@@ -35,10 +41,12 @@ class ReadoutOptions:
     rule: str = "product"
     velocity: float = 1.0
     velocity_candidates: tuple[float, ...] | None = None  # estimate the velocity over this grid instead
-    velocity_estimate: str = "window"  # with candidates: "window" (each window alone) or "track" (over the stream)
-    velocity_span: int = 10  # "track": windows whose scores are summed before the velocity is chosen
-    velocity_length: int | None = None  # "track": frames per scored trajectory (None: 2k)
-    velocity_memory: int = 50  # "track": recent frames whose mean is divided out (0: none)
+    # with candidates: "window" (each window alone), "track" (over the stream) or "smooth" (track with a fixed lag)
+    velocity_estimate: str = "window"
+    velocity_span: int = 10  # "track", "smooth": windows whose scores are summed before the velocity is chosen
+    velocity_length: int | None = None  # "track", "smooth": frames per scored trajectory (None: 2k, 3k)
+    velocity_memory: int = 50  # "track", "smooth": recent frames whose mean is divided out (0: none)
+    velocity_lag: int | None = None  # "smooth": frames each decision waits for (None: 2k - 1)
     tolerance: int = 0
 
 
@@ -59,8 +67,9 @@ def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positio
     """W+Prob aggregated over k frames: the given velocity, or one estimated from the query stream.
 
     With ``velocity_candidates`` the velocity is estimated over that grid, per
-    window (``velocity_estimate="window"``) or tracked over the ``velocity_span``
-    most recent windows (``"track"``); otherwise ``options.velocity`` is used.
+    window (``velocity_estimate="window"``), tracked over the ``velocity_span``
+    most recent windows (``"track"``) or over those and the next
+    ``velocity_lag`` windows (``"smooth"``); otherwise ``options.velocity`` is used.
     """
     if options.velocity_candidates and options.velocity_estimate not in VELOCITY_ESTIMATES:
         raise InvalidValueError(
@@ -70,6 +79,18 @@ def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positio
         return wprob
     if options.velocity_candidates:
         candidates = np.asarray(options.velocity_candidates)
+        if options.velocity_estimate == "smooth":
+            return smooth_velocity(
+                wprob,
+                k,
+                candidates,
+                options.velocity_span,
+                options.rule,
+                frame_positions,
+                lag=options.velocity_lag,
+                length=options.velocity_length,
+                memory=options.velocity_memory,
+            )[1]
         if options.velocity_estimate == "track":
             _, result = track_velocity(
                 wprob,

@@ -8,7 +8,7 @@ import pytest
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.experiments import envelope
 from vprsnn_export.experiments.common import summarise_rows
-from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, track_velocity
+from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
 from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated
 
 GRID = (-1.0, -0.5, 0.5, 1.0, 1.5)
@@ -40,6 +40,9 @@ def test_aggregated_routes_each_velocity_source() -> None:
     expected = track_velocity(prob, 5, np.asarray(GRID), 4, length=6, memory=8)[1]
     np.testing.assert_array_equal(tracked, expected)
     assert aggregated(prob, 1, options, None) is prob
+    options = ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="smooth", velocity_lag=3)
+    smoothed = aggregated(prob, 5, options, None)
+    np.testing.assert_array_equal(smoothed, smooth_velocity(prob, 5, np.asarray(GRID), 10, lag=3)[1])
 
 
 def test_unknown_velocity_estimate_is_a_clear_error() -> None:
@@ -64,8 +67,11 @@ def test_envelope_rows_cover_every_condition_method_and_source() -> None:
     assert by_key[(reverse, "wprob", "given")]["accuracy"] < 0.5
     assert by_key[(reverse, "wprob", "tracked")]["accuracy"] > 0.8
     assert by_key[(reverse, "wprob", "tracked")]["velocity_median"] == -1.0
+    assert by_key[(reverse, "wprob", "smoothed")]["accuracy"] > 0.8
+    assert by_key[(reverse, "wprob", "smoothed")]["velocity_median"] == -1.0
     mismatch = next(name for name in names if "-50%" in name)
     assert by_key[(mismatch, "wprob", "tracked")]["accuracy"] > 0.8
+    assert by_key[(mismatch, "wprob", "smoothed")]["accuracy"] > 0.8
     summary = summarise_rows([rows], envelope.KEYS)
     table = envelope.compact_table(summary)
     assert table.count("\n") == 1 + len(names)

@@ -1,4 +1,4 @@
-"""Velocity tracked over the query stream (track_velocity) and the window scores it sums."""
+"""Velocity tracked (track_velocity) or smoothed with a fixed lag (smooth_velocity) over the query stream."""
 
 from __future__ import annotations
 
@@ -11,7 +11,10 @@ from vprsnn_export.readout import aggregation
 from vprsnn_export.readout.aggregation import (
     _aggregate_scored,
     aggregate,
+    centre_of_best,
     estimate_velocity,
+    lagged_sum,
+    smooth_velocity,
     stream_contrast,
     track_velocity,
     window_scores,
@@ -137,8 +140,9 @@ def test_every_pair_is_scored_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_no_ground_truth_in_signatures() -> None:
-    allowed = {"prob", "k", "candidates", "span", "rule", "frame_positions", "eps", "length", "memory"}
-    for fn in (window_scores, track_velocity, stream_contrast):
+    allowed = {"prob", "k", "candidates", "span", "rule", "frame_positions", "eps", "length", "memory", "lag"}
+    allowed |= {"nearest", "scores", "totals"}
+    for fn in (window_scores, track_velocity, smooth_velocity, stream_contrast, lagged_sum, centre_of_best):
         params = set(inspect.signature(fn).parameters)
         assert params <= allowed, params
 
@@ -189,3 +193,106 @@ def test_invalid_arguments() -> None:
     for memory in (-1, 1.5, True):
         with pytest.raises(ValueError, match="memory"):
             stream_contrast(prob, memory)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("velocity", "start"),
+    [(1.0, 3), (2.0, 2), (-1.0, 75), (0.5, 10.2)],
+)
+def test_smoothing_recovers_a_known_velocity_from_the_first_queries(velocity: float, start: float) -> None:
+    prob, true = _stream(60, 130, velocity, start, seed=3)
+    v_hat, agg = smooth_velocity(prob, 5, GRID, memory=0)
+    assert np.all(v_hat == velocity)  # no warm-up: the lag gives the first windows the next 9 as well
+    assert np.mean(agg[4:].argmax(axis=1) == true[4:]) >= 0.95
+    np.testing.assert_array_equal(agg, aggregate(prob, 5, v_hat))
+    # the causal tracker on the same stream needs a warm-up
+    v_track, _ = track_velocity(prob, 5, GRID, memory=0)
+    assert np.mean(v_track[:10] == velocity) < 1.0
+
+
+def test_smoothing_handles_dropped_frames_and_reversal() -> None:
+    kept = np.sort(np.random.default_rng(7).choice(100, 60, replace=False)).astype(float)
+    prob, true = _stream(60, 110, 1.0, 4, seed=8, positions=kept)
+    v_hat, agg = smooth_velocity(prob, 5, GRID, frame_positions=kept)
+    assert np.all(v_hat == 1.0)
+    assert np.mean(agg[4:].argmax(axis=1) == true[4:]) >= 0.95
+    # the same frames seen in reverse (the stream's own positions count up again)
+    reverse_positions = kept[-1] - kept[::-1]
+    v_rev, agg_rev = smooth_velocity(prob[::-1], 5, GRID, frame_positions=reverse_positions)
+    assert np.all(v_rev == -1.0)
+    assert np.mean(agg_rev[4:].argmax(axis=1) == true[::-1][4:]) >= 0.95
+
+
+def test_smoothing_is_the_centre_of_the_best_of_the_lagged_sum() -> None:
+    prob, _ = _stream(30, 40, 1.0, 2, seed=5, decoys=0.9)
+    span, lag, length, memory = 4, 3, 7, 12
+    e = window_scores(stream_contrast(prob, memory, lag), length, GRID, nearest=True)
+    totals = np.array([e[max(0, j - span + 1) : j + lag + 1].sum(axis=0) for j in range(30)])
+    v_hat, agg = smooth_velocity(prob, 3, GRID, span, lag=lag, length=length, memory=memory)
+    np.testing.assert_allclose(lagged_sum(e, span, lag), totals, rtol=1e-12)
+    np.testing.assert_array_equal(v_hat, centre_of_best(lagged_sum(e, span, lag), GRID))
+    np.testing.assert_array_equal(agg, aggregate(prob, 3, v_hat))
+    # defaults: lag 2k - 1, trajectories of 3k frames
+    default = smooth_velocity(prob, 3, GRID, span, memory=memory)[0]
+    np.testing.assert_array_equal(default, smooth_velocity(prob, 3, GRID, span, lag=5, length=9, memory=memory)[0])
+
+
+def test_smoothing_waits_exactly_lag_frames() -> None:
+    prob, _ = _stream(40, 60, 1.0, 2, seed=6)
+    lag = 6
+    v_hat, agg = smooth_velocity(prob, 5, GRID, 8, lag=lag)
+    changed = prob.copy()
+    changed[25:] = np.random.default_rng(0).random((15, 60))
+    v_changed, agg_changed = smooth_velocity(changed, 5, GRID, 8, lag=lag)
+    np.testing.assert_array_equal(v_changed[: 25 - lag], v_hat[: 25 - lag])
+    np.testing.assert_array_equal(agg_changed[: 25 - lag], agg[: 25 - lag])
+    # lag 0 is causal
+    v0, _ = smooth_velocity(prob, 5, GRID, 8, lag=0)
+    np.testing.assert_array_equal(smooth_velocity(changed, 5, GRID, 8, lag=0)[0][:25], v0[:25])
+
+
+def test_lagged_sum_by_hand() -> None:
+    e = np.arange(5.0)[:, None] * np.array([[1.0, 10.0]])
+    np.testing.assert_array_equal(lagged_sum(e, 2, 0)[:, 0], [0, 1, 3, 5, 7])
+    np.testing.assert_array_equal(lagged_sum(e, 1, 2)[:, 0], [3, 6, 9, 7, 4])
+    np.testing.assert_array_equal(lagged_sum(e, 2, 1)[:, 1], [10, 30, 60, 90, 70])
+
+
+def test_centre_of_best_by_hand() -> None:
+    cands = np.array([0.9, 0.95, 1.0, 1.05, 1.1])
+    totals = np.array([[0, 1, 1, 1, 0], [0, 0, 0, 2, 2], [3, 0, 0, 0, 0], [1, 1, 1, 1, 1]], dtype=float)
+    np.testing.assert_allclose(centre_of_best(totals, cands), [1.0, 1.075, 0.9, 1.0])
+
+
+def test_nearest_shifts_round_the_displacement() -> None:
+    prob, _ = _stream(12, 30, 1.0, 2, seed=2)
+    # over 4 frames 0.95, 1.0 and 1.05 all round to shifts of 0, 1, 2, 3 places: identical scores
+    e = window_scores(prob, 4, [0.95, 1.0, 1.05], nearest=True)
+    np.testing.assert_array_equal(e[:, 0], e[:, 1])
+    np.testing.assert_array_equal(e[:, 2], e[:, 1])
+    # at an integral velocity nearest and interpolated shifts agree
+    np.testing.assert_array_equal(window_scores(prob, 4, [1.0, 2.0], nearest=True), window_scores(prob, 4, [1.0, 2.0]))
+
+
+def test_stream_contrast_with_a_lag_takes_the_next_frames() -> None:
+    prob = np.array([[0.5, 0.5, 0.0], [0.2, 0.6, 0.2], [0.0, 0.5, 0.5]])
+    out = stream_contrast(prob, 2, 1)
+    ratio = prob[0] / ((prob[0] + prob[1]) / 2)
+    np.testing.assert_allclose(out[0], ratio / ratio.sum())
+    ratio = prob[1] / prob.mean(axis=0)  # frames 0, 1 (memory 2) and 2 (lag 1)
+    np.testing.assert_allclose(out[1], ratio / ratio.sum())
+    np.testing.assert_array_equal(stream_contrast(prob, 2, 0), stream_contrast(prob, 2))
+
+
+def test_invalid_smoothing_arguments() -> None:
+    prob = np.full((4, 5), 0.2)
+    for lag in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="lag"):
+            smooth_velocity(prob, 2, GRID, lag=lag)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="lag"):
+            stream_contrast(prob, 2, lag)  # type: ignore[arg-type]
+    for span in (0, 2.5):
+        with pytest.raises(ValueError, match="span"):
+            smooth_velocity(prob, 2, GRID, span=span)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="candidates"):
+        smooth_velocity(prob, 2, [])

@@ -78,13 +78,24 @@ def add_readout_options(
     )
     group.add_argument(
         "--velocity-estimate",
-        choices=("track", "window"),
-        default="track",
-        help="with --velocity-search: track the velocity over the recent windows (default) or choose it per "
-        "window on its own (the older, noisier search)",
+        choices=("smooth", "track", "window"),
+        default="smooth",
+        help="with --velocity-search: smooth the velocity over the recent and the next --velocity-lag windows "
+        "(default; each decision waits for that many frames), track it over the recent windows only, or choose "
+        "it per window on its own (the older, noisier search)",
     )
     group.add_argument(
-        "--velocity-span", type=int, default=10, metavar="N", help="track: windows whose scores are summed (10)"
+        "--velocity-span",
+        type=int,
+        default=10,
+        metavar="N",
+        help="smooth, track: recent windows whose scores are summed (10)",
+    )
+    group.add_argument(
+        "--velocity-lag",
+        type=int,
+        metavar="N",
+        help="smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
     )
     group.add_argument(
         "--match-window",
@@ -251,6 +262,8 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
         )
     if not 1 <= args.velocity_span <= 100_000:
         raise InvalidValueError(f"--velocity-span expects an integer from 1 to 100000, got {args.velocity_span}")
+    if args.velocity_lag is not None and not 0 <= args.velocity_lag <= 100_000:
+        raise InvalidValueError(f"--velocity-lag expects an integer from 0 to 100000, got {args.velocity_lag}")
     if not 0 <= args.match_window <= 1_000_000:
         raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
     if not math.isfinite(args.velocity) or args.velocity == 0:
@@ -263,6 +276,7 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
         velocity_candidates=parse_velocity_grid(args.velocity_search),
         velocity_estimate=args.velocity_estimate,
         velocity_span=args.velocity_span,
+        velocity_lag=args.velocity_lag,
         tolerance=args.match_window,
     )
 

@@ -1,8 +1,8 @@
 """Table V: W+Prob aggregated over k frames, product vs sum rule, on consecutive places.
 
-Beside it, Table IV's conditions at k=5 with three velocity sources (given,
-per-window search, tracked over the query stream) for W+Prob and SAD, from
-:mod:`.envelope`.
+Beside it, Table IV's conditions at k=5 with four velocity sources (given,
+per-window search, tracked over the query stream, smoothed with a fixed lag)
+for W+Prob and SAD, from :mod:`.envelope`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from .plots import line_plot
 NAME = "aggregation"
 DESCRIPTION = (
     "W+Prob with k in {1, 3, 5, 7, 10, 15}, product vs sum rule, on 100 consecutive places; "
-    "at k=5 every operational-envelope condition with the given, per-window searched and tracked velocity, "
+    "at k=5 every operational-envelope condition with the given, per-window searched, tracked and smoothed velocity, "
     "beside SAD on the same windows"
 )
 KS = (1, 3, 5, 7, 10, 15)
@@ -93,7 +93,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     velocity = results.get("velocity_sources")
     if velocity:
         text += (
-            "\n## Unknown velocity: given, per-window search and tracked (Table IV conditions)\n\n"
+            "\n## Unknown velocity: given, per-window search, tracked and smoothed (Table IV conditions)\n\n"
             + envelope.compact_table(velocity["summary"])
             + "\n\n"
             + envelope.explanation(velocity)

@@ -1,8 +1,9 @@
 """Table IV: the operational envelope of sequence aggregation (k=5, product rule), windows from the query stream only.
 
-Every condition is read out with three velocity sources -- the given velocity,
-the per-window search and the velocity tracked over the query stream -- for the
-network's W+Prob and for the no-learning SAD baseline on the same windows.
+Every condition is read out with four velocity sources -- the given velocity,
+the per-window search, the velocity tracked over the query stream and the
+velocity smoothed with a fixed lag -- for the network's W+Prob and for the
+no-learning SAD baseline on the same windows.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, track_velocity
+from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
 from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
@@ -23,7 +24,7 @@ from .common import Settings, consecutive_networks, mean_std, pct, provenance, r
 NAME = "envelope"
 DESCRIPTION = (
     "W+Prob and SAD, k=5 product rule, under velocity mismatch, dropped frames, reversal and route deviations, "
-    "with the given velocity, the per-window search and the tracked velocity (100 consecutive places)"
+    "with the given velocity, the per-window search, the tracked and the smoothed velocity (100 consecutive places)"
 )
 K = 5
 VELOCITY_GRID = tuple(float(v) for v in np.round(np.arange(-2.0, 2.0001, 0.05), 2))
@@ -32,8 +33,10 @@ LENGTH = 2 * K  # frames per trajectory the tracker scores
 #: recent frames whose mean the tracker divides out: W+Prob has "hub" places that runs of consecutive
 #: frames all vote for; the SAD distribution has none, and dividing its flat rows only adds noise
 MEMORY = {"wprob": 50, "sad": 0}
+SMOOTH_LAG = 2 * K - 1  # frames each smoothed decision waits for: the windows after it also set its velocity
+SMOOTH_LENGTH = 3 * K  # frames per trajectory the smoother scores (through whole places)
 WARMUP = 30  # queries at the start of the stream left out of the "after warm-up" accuracy (at most half)
-SOURCES = ("given", "per-window search", "tracked")
+SOURCES = ("given", "per-window search", "tracked", "smoothed")
 METHODS = ("wprob", "sad")
 KEYS = ("condition", "method", "velocity")
 
@@ -82,6 +85,17 @@ def envelope_rows(
                 "per-window search": estimate_velocity(stream, K, grid, "product", positions),
                 "tracked": track_velocity(
                     stream, K, grid, SPAN, "product", positions, length=LENGTH, memory=MEMORY[method]
+                ),
+                "smoothed": smooth_velocity(
+                    stream,
+                    K,
+                    grid,
+                    SPAN,
+                    "product",
+                    positions,
+                    lag=SMOOTH_LAG,
+                    length=SMOOTH_LENGTH,
+                    memory=MEMORY[method],
                 ),
             }
             for source, (v, agg) in per_source.items():
@@ -144,6 +158,8 @@ def estimator_settings() -> dict:
         "track_span": SPAN,
         "track_length": LENGTH,
         "track_memory": MEMORY,
+        "smooth_lag": SMOOTH_LAG,
+        "smooth_length": SMOOTH_LENGTH,
         "warmup": WARMUP,
     }
 
@@ -175,6 +191,12 @@ def explanation(results: dict) -> str:
         f"trajectories of {results['track_length']} frames are scored on the same grid, and the scores of the "
         f"{results['track_span']} most recent windows are summed before the velocity is chosen; the decision "
         "aggregates the unchanged distributions over k frames at that velocity.\n"
+        f"* **smoothed** (`smooth_velocity`, fixed lag): each decision is given {results['smooth_lag']} frames "
+        "late, and the velocity of its window sums the scores of the same recent windows and of the "
+        f"{results['smooth_lag']} windows after it (the contrast background also takes those frames); "
+        f"trajectories of {results['smooth_length']} frames go through whole places (each frame shifted by a "
+        "rounded number of places, as in SeqSLAM) and the centre of the tied best velocities is kept. The "
+        "decision still aggregates the k frames up to the query, as with a given velocity.\n"
         "* **SAD**: the no-learning baseline (sum of absolute differences to the reference images), aggregated on "
         "the same windows with the same velocity sources.\n"
         "* Windows come from the query stream and the robot's frame positions only; no ground truth. "

@@ -25,8 +25,9 @@ from typing import Final
 import numpy as np
 
 RULES: Final[tuple[str, ...]] = ("product", "sum")
-#: How a velocity is estimated from the query stream: each window alone, or tracked over several windows.
-VELOCITY_ESTIMATES: Final[tuple[str, ...]] = ("window", "track")
+#: How a velocity is estimated from the query stream: each window alone, tracked over the recent windows
+#: (causal), or smoothed over the recent and the next few windows (fixed lag; the default).
+VELOCITY_ESTIMATES: Final[tuple[str, ...]] = ("smooth", "window", "track")
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
@@ -106,11 +107,14 @@ def _shift_rows(
     k: int,
     row_velocity: np.ndarray,
     frame_positions: np.ndarray,
+    nearest: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`shift_window` with one velocity per row (``row_velocity[c]`` for ``queries[c]``).
 
     A query may appear in several rows with different velocities, which is how
     :func:`window_scores` evaluates every (query, candidate) pair at once.
+    ``nearest`` rounds each displacement ``v_j (t_j - t_m)`` to the nearest
+    place (half to even) instead of interpolating, so ``f = 0``.
     """
     n_places = prob.shape[1]
     offsets = np.arange(k)
@@ -118,9 +122,10 @@ def _shift_rows(
     valid = frames >= 0
     frames_safe = np.where(valid, frames, 0)
     dist = frame_positions[queries][:, None] - frame_positions[frames_safe]  # (C, k)
-    x = np.arange(n_places, dtype=np.float64)[None, None, :] - (
-        row_velocity[:, None, None] * dist[:, :, None]
-    )  # (C, k, P)
+    displacement = row_velocity[:, None] * dist  # (C, k)
+    if nearest:
+        displacement = np.rint(displacement)
+    x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
     inside = (x >= 0) & (x <= n_places - 1) & valid[:, :, None]
@@ -226,6 +231,8 @@ def window_scores(
     rule: str = "product",
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
+    *,
+    nearest: bool = False,
 ) -> np.ndarray:
     """How well each window fits each candidate velocity, shape ``(n_queries, n_candidates)``.
 
@@ -236,7 +243,11 @@ def window_scores(
     sum rule). Every (query, candidate) pair is evaluated at once, in chunks of
     rows of at most ``_MAX_ELEMENTS`` elements. Uses the query frames and their
     window only (no ground truth). With ``k == 1`` every candidate scores
-    ``max_l P_j(l)``.
+    ``max_l P_j(l)``. ``nearest=True`` scores trajectories through whole
+    places, as SeqSLAM does: each frame is shifted by ``round(v (t_j - t_m))``
+    places instead of interpolated. Interpolating blurs a frame between two
+    places, and the blurred window scores higher under the product rule
+    (``log`` is concave), which biases the search towards non-integral shifts.
     """
     cands = _candidates(candidates)
     p = _prob2d(prob)
@@ -251,7 +262,7 @@ def window_scores(
     chunk = max(1, _MAX_ELEMENTS // (k * n_places))
     for start in range(0, rows_query.size, chunk):
         rows = slice(start, start + chunk)
-        shifted, valid = _shift_rows(p, rows_query[rows], k, rows_velocity[rows], t)
+        shifted, valid = _shift_rows(p, rows_query[rows], k, rows_velocity[rows], t, nearest)
         scores[rows] = _combine(shifted, valid, rule, eps)[1]
     return scores.reshape(n_queries, cands.size)
 
@@ -291,31 +302,78 @@ def estimate_velocity(
     return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps, length=k, memory=0)
 
 
-def stream_contrast(prob: np.ndarray, memory: int) -> np.ndarray:
+def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
     """Each frame divided by the mean of the ``memory`` most recent frames, shape ``(n_queries, n_places)``.
 
     .. math::
-        B_j(l) = \\frac{1}{j - j_0 + 1} \\sum_{i=j_0}^{j} P_i(l), \\quad j_0 = \\max(0, j - M + 1), \\qquad
+        B_j(l) = \\frac{1}{j_1 - j_0 + 1} \\sum_{i=j_0}^{j_1} P_i(l), \\quad
+            j_0 = \\max(0, j - M + 1), \\; j_1 = \\min(n - 1, j + L), \\qquad
         Q_j(l) = \\frac{P_j(l) / B_j(l)}{\\sum_{l'} P_j(l') / B_j(l')}
 
     (``P_j(l) / B_j(l) = 0`` where ``B_j(l) = 0``; a row that is then 0
     everywhere stays 0). A "hub" place that many consecutive frames vote for,
     whatever the true place, is discounted, while the true place, which moves
-    along the route, is not. Causal: frame ``j`` uses frames ``j0 .. j`` only.
-    ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
+    along the route, is not. With ``lag`` L = 0 (default) it is causal: frame
+    ``j`` uses frames ``j0 .. j`` only; a lag L lets it use the next L frames
+    too, so that the first frames of the stream are not divided by themselves
+    alone. ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
     """
     p = _prob2d(prob)
     if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 0:
         raise ValueError(f"background memory must be an integer >= 0, got {memory!r}")
+    lag = _check_lag(lag)
     if memory == 0:
         return p.copy()
     cumulative = np.concatenate([np.zeros((1, p.shape[1])), np.cumsum(p, axis=0)])
     j = np.arange(p.shape[0])
     first = np.maximum(0, j - int(memory) + 1)
-    background = (cumulative[j + 1] - cumulative[first]) / (j + 1 - first)[:, None]
+    last = np.minimum(p.shape[0] - 1, j + lag)
+    background = (cumulative[last + 1] - cumulative[first]) / (last + 1 - first)[:, None]
     ratio = np.divide(p, background, out=np.zeros_like(p), where=background > 0)
     total = ratio.sum(axis=1, keepdims=True)
     return np.divide(ratio, total, out=np.zeros_like(ratio), where=total > 0)
+
+
+def _check_lag(lag: int) -> int:
+    if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
+        raise ValueError(f"velocity lag must be an integer >= 0, got {lag!r}")
+    return int(lag)
+
+
+def _check_span(span: int) -> int:
+    if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
+        raise ValueError(f"velocity span must be an integer >= 1, got {span!r}")
+    return int(span)
+
+
+def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
+    """Sum of the rows from ``span`` - 1 before to ``lag`` after each row, shape of ``scores``.
+
+    .. math:: E_j = \\sum_{i=\\max(0,\\, j-S+1)}^{\\min(n-1,\\, j+L)} e_i
+
+    ``lag`` L = 0 is the causal sum over the S most recent rows (rows before
+    the start or after the end of the stream are left out).
+    """
+    e = np.asarray(scores, dtype=np.float64)
+    span, lag = _check_span(span), _check_lag(lag)
+    padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
+    return np.lib.stride_tricks.sliding_window_view(padded, span + lag, axis=0).sum(axis=-1)
+
+
+def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Per row, the mean of the candidates that reach the row's maximum, shape ``(n_rows,)``.
+
+    .. math:: \\hat v_j = \\operatorname{mean} \\{ v \\in \\mathcal{V} : E_j(v) = \\max_{v'} E_j(v') \\}
+
+    Trajectories through whole places cannot tell apart velocities that round
+    to the same shifts (over 10 frames, 0.95, 1.0 and 1.05 place per frame all
+    do): they tie exactly, and the centre of the tied run is the estimate,
+    where the first of them would be biased towards the start of the grid.
+    """
+    e = np.asarray(totals, dtype=np.float64)
+    cands = _candidates(candidates)
+    best = e == e.max(axis=1, keepdims=True)
+    return (best * cands[None, :]).sum(axis=1) / best.sum(axis=1)
 
 
 def track_velocity(
@@ -359,14 +417,65 @@ def track_velocity(
     stream order, ``frame_positions`` and the frames' distributions only (no
     ground truth).
     """
-    if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
-        raise ValueError(f"velocity span must be an integer >= 1, got {span!r}")
+    span = _check_span(span)
     k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
     scores = window_scores(
         stream_contrast(prob, memory), 2 * k if length is None else length, cands, rule, frame_positions, eps
     )
-    padded = np.concatenate([np.zeros((int(span) - 1, cands.size)), scores])
-    tracked = np.lib.stride_tricks.sliding_window_view(padded, int(span), axis=0).sum(axis=2)
-    velocity = cands[np.argmax(tracked, axis=1)]
+    velocity = cands[np.argmax(lagged_sum(scores, span, 0), axis=1)]
+    return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
+
+
+def smooth_velocity(
+    prob: np.ndarray,
+    k: int,
+    candidates: np.ndarray,
+    span: int = 10,
+    rule: str = "product",
+    frame_positions: np.ndarray | None = None,
+    eps: float = 1e-6,
+    *,
+    lag: int | None = None,
+    length: int | None = None,
+    memory: int = 50,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity smoothed over the recent and the next ``lag`` windows (fixed lag); returns ``(velocity, aggregated)``.
+
+    .. math::
+        Q = \\text{stream\\_contrast}(P, M, L), \\qquad
+        E_j(v) = \\sum_{i=\\max(0,\\, j-S+1)}^{\\min(n-1,\\, j+L)} e_i^{(Q, T, \\text{nearest})}(v),
+
+        \\hat v_j = \\operatorname{mean} \\{ v : E_j(v) = \\max_{v'} E_j(v') \\}, \\qquad
+        \\hat P_j = \\text{aggregate}(P, k, \\hat v)_j
+
+    :func:`track_velocity` with three changes, for its warm-up:
+
+    1. **Fixed lag** L (default ``2k - 1``): the decision for query ``j`` is
+       given once frame ``j + L`` has arrived, and its velocity also sums the
+       scores of the next L windows (:func:`lagged_sum`); the background of
+       :func:`stream_contrast` also takes the next L frames. The decision
+       itself still aggregates frames ``j-k+1 .. j`` only, like a given
+       velocity. At the start of the stream the causal tracker has a handful
+       of short windows to go on; with the lag the first decisions already see
+       L + 1 windows.
+    2. **Trajectories through whole places** (``window_scores(...,
+       nearest=True)``) of ``length`` T (default 3k) frames: interpolated
+       trajectories favour velocities slightly off the true one.
+    3. **The centre of the tied best velocities** (:func:`centre_of_best`).
+
+    The velocity is in places per unit of ``frame_positions`` (dropped frames
+    are handled as in :func:`aggregate`); negative candidates cover a reversed
+    traversal. ``lag=0`` is causal. Uses the stream order, ``frame_positions``
+    and the frames' distributions only (no ground truth).
+    """
+    span = _check_span(span)
+    k = _check_args(k, rule, eps)
+    lag = _check_lag(2 * k - 1 if lag is None else lag)
+    cands = _candidates(candidates)
+    contrast = stream_contrast(prob, memory, lag)
+    scores = window_scores(
+        contrast, 3 * k if length is None else length, cands, rule, frame_positions, eps, nearest=True
+    )
+    velocity = centre_of_best(lagged_sum(scores, span, lag), cands)
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
