@@ -21,7 +21,7 @@ from .encoding import calibration_spikes, query_spikes
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
-from .readout.aggregation import aggregate, estimate_velocity
+from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
 from .readout.assignment import decide, strategy_scores
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
@@ -100,6 +100,7 @@ __all__ = [
     "save_fixed_point",
     "select_places",
     "set_threads",
+    "smooth_velocity",
     "strategy_scores",
     "train_and_calibrate",
     "train_network",

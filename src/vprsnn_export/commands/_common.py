@@ -179,6 +179,7 @@ def parse_value(raw: str) -> Any:
 
 MAX_LIST_VALUE = 10_000  # --k, --bits: far above any meaningful value, low enough to fail before memory does
 MAX_VELOCITY_CANDIDATES = 10_000
+MAX_VELOCITY = 1000.0  # places per frame: beyond any camera rate along a route
 
 
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
@@ -206,8 +207,10 @@ def parse_velocity_grid(raw: str | None) -> tuple[float, ...] | None:
         lo, hi, step = (float(v) for v in raw.split(":"))
     except ValueError:
         raise InvalidValueError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
-    if not all(math.isfinite(v) for v in (lo, hi, step)):
-        raise InvalidValueError(f"--velocity-search expects finite numbers, got {raw!r}")
+    if not all(math.isfinite(v) for v in (lo, hi, step)) or max(abs(lo), abs(hi)) > MAX_VELOCITY:
+        raise InvalidValueError(
+            f"--velocity-search expects finite velocities from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, got {raw!r}"
+        )
     if step <= 0 or hi < lo:
         raise InvalidValueError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
     count = int(round((hi - lo) / step)) + 1
@@ -266,8 +269,11 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
         raise InvalidValueError(f"--velocity-lag expects an integer from 0 to 100000, got {args.velocity_lag}")
     if not 0 <= args.match_window <= 1_000_000:
         raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
-    if not math.isfinite(args.velocity) or args.velocity == 0:
-        raise InvalidValueError(f"--velocity expects a finite non-zero number of places per frame, got {args.velocity}")
+    if not math.isfinite(args.velocity) or args.velocity == 0 or abs(args.velocity) > MAX_VELOCITY:
+        raise InvalidValueError(
+            f"--velocity expects a non-zero number of places per frame from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, "
+            f"got {args.velocity}"
+        )
     return ReadoutOptions(
         gamma=gamma,
         ks=parse_int_list(args.k, "--k"),
