@@ -82,7 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
-        output = getattr(args, "report", None) or getattr(args, "out", None)
+        output = getattr(args, "report", None)
+        output = getattr(args, "out", None) if output is None else output
         if output is not None and getattr(args, "output_kind", "folder") == "folder":
             check_output_folder(output)  # a file output (train) is checked by its command, against its inputs
         with output_lock(output):

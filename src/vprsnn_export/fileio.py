@@ -78,6 +78,8 @@ def check_output_folder(path: str | Path) -> Path:
         if path.exists() and not path.is_dir():
             raise OutputError("is not a folder: give a new or existing folder", path)
         _check_ancestors(path)
+        if path.is_dir():
+            tempfile.TemporaryFile(dir=path).close()  # writable, whatever os.access says for root
     except OSError as exc:
         raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
     return path
