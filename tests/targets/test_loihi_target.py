@@ -232,10 +232,14 @@ def test_writer_validates_before_writing(tmp_path):
 # --- the conformance run in Lava (lava-nc 0.10, Python 3.10) --------------------------------------------
 
 
-def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path) -> torch.Tensor:
+def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path, *, wta: bool = False) -> torch.Tensor:
+    """Lava's raster (N, T, neurons); with ``wta`` the WtaReadout's raster, the LIF's candidates in candidates.npy."""
     np.save(tmp_path / "spikes.npy", spikes.numpy())
+    mode = ["--wta"] if wta else []
+    extra = [str(tmp_path / "candidates.npy")] if wta else []
     done = subprocess.run(
-        [str(python), str(RUN_LAVA), str(folder), str(tmp_path / "spikes.npy"), str(tmp_path / "raster.npy")],
+        [str(python), str(RUN_LAVA), *mode, str(folder), str(tmp_path / "spikes.npy"), str(tmp_path / "raster.npy")]
+        + extra,
         capture_output=True,
         text=True,
         timeout=1800,
@@ -252,15 +256,43 @@ def wta_select(candidates: torch.Tensor, spikes: torch.Tensor, model: FixedPoint
     return torch.zeros_like(candidates).scatter_(2, winner, candidates.any(dim=2, keepdim=True))
 
 
+def with_wta(model: FixedPointModel, wta: bool) -> FixedPointModel:
+    """``model`` with the WTA switched on or off."""
+    return dataclasses.replace(model, config=model.config.replace(**{"network.wta": wta}))
+
+
 def assert_lava_conforms(model: FixedPointModel, spikes: torch.Tensor, tmp_path: Path, python: Path) -> int:
     write_loihi(model, tmp_path / "desc")
     lava = run_in_lava(python, tmp_path / "desc", spikes, tmp_path)
-    wta_off = dataclasses.replace(model, config=model.config.replace(**{"network.wta": False}))
-    expected = simulate(wta_off, spikes, record=True).raster
+    expected = simulate(with_wta(model, False), spikes, record=True).raster
     assert torch.equal(lava, expected), f"{int((lava != expected).sum())} of {lava.numel()} spikes differ"
-    with_wta = dataclasses.replace(model, config=model.config.replace(**{"network.wta": True}))
-    assert torch.equal(wta_select(lava, spikes, model), simulate(with_wta, spikes, record=True).raster)
+    assert torch.equal(wta_select(lava, spikes, model), simulate(with_wta(model, True), spikes, record=True).raster)
     return int(lava.sum())
+
+
+def wta_steps(candidates: torch.Tensor, spikes: torch.Tensor, model: FixedPointModel) -> tuple[int, int]:
+    """(steps with two or more candidates, steps whose largest candidate score a_j m_j is shared: the tie rule decides)."""
+    currents = spikes.to(torch.int64) @ torch.as_tensor(model.weight_mantissa, dtype=torch.int64)
+    score = torch.where(candidates, currents * torch.as_tensor(model.scale_multiplier, dtype=torch.int64), -1)
+    top = score.max(dim=2, keepdim=True).values
+    contested = candidates.sum(dim=2) > 1
+    tied = ((score == top) & candidates).sum(dim=2) > 1
+    return int(contested.sum()), int(tied.sum())
+
+
+def assert_lava_wta_conforms(model: FixedPointModel, spikes: torch.Tensor, tmp_path: Path, python: Path) -> int:
+    """The network with Lava's WtaReadout process: its raster is the simulator's WTA-on raster, the LIF's the WTA-off."""
+    write_loihi(model, tmp_path / "desc")
+    winners = run_in_lava(python, tmp_path / "desc", spikes, tmp_path, wta=True)
+    candidates = torch.from_numpy(np.load(tmp_path / "candidates.npy").astype(bool))
+    expected_off = simulate(with_wta(model, False), spikes, record=True).raster
+    expected_on = simulate(with_wta(model, True), spikes, record=True).raster
+    assert torch.equal(candidates, expected_off), f"{int((candidates != expected_off).sum())} candidate spikes differ"
+    assert torch.equal(winners, expected_on), (
+        f"{int((winners != expected_on).sum())} of {winners.numel()} spikes differ"
+    )
+    assert int(winners.sum(dim=2).max()) <= 1
+    return int(winners.sum())
 
 
 @pytest.mark.slow
@@ -271,6 +303,14 @@ def test_lava_runs_the_description_spike_for_spike(tmp_path, bits, lava_python):
     model = make_model(np.random.default_rng(bits), n_inputs=784, n_neurons=400, bits=bits, p=0.12)
     spikes = random_spikes(bits, 3, 60, 784, p=0.12)
     assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
+
+
+@pytest.fixture(scope="module")
+def real_case() -> tuple[FixedPointModel, torch.Tensor]:
+    """The real model and queries of the real-data tests, built once (training takes a while)."""
+    if not NORDLAND.is_dir():
+        pytest.skip("the Nordland data folder is absent")
+    return real_model_and_queries(int(os.environ.get("VPRSNN_LAVA_QUERIES", "4")))
 
 
 def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
@@ -302,11 +342,41 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
-def test_lava_on_real_nordland_queries(tmp_path, lava_python):
+def test_lava_on_real_nordland_queries(tmp_path, lava_python, real_case):
     """Real winter queries at the model's T through Lava (WTA off) against the integer simulator.
 
     VPRSNN_LAVA_MODEL=path runs a given fixed-point model, VPRSNN_LAVA_QUERIES=n sets the number of queries (4).
     """
-    python = lava_python
-    model, spikes = real_model_and_queries(int(os.environ.get("VPRSNN_LAVA_QUERIES", "4")))
-    assert assert_lava_conforms(model, spikes, tmp_path, python) > 0
+    model, spikes = real_case
+    assert assert_lava_conforms(model, spikes, tmp_path, lava_python) > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bits", [8, 4, 2])
+def test_lava_wta_readout_emits_the_wta_on_raster(tmp_path, bits, lava_python):
+    """Full size (784 x 400): Dense + LIF + the WtaReadout process in Lava, spike for spike with WTA on."""
+    model = make_model(np.random.default_rng(bits), n_inputs=784, n_neurons=400, bits=bits, p=0.12)
+    spikes = random_spikes(bits, 3, 60, 784, p=0.12)
+    assert assert_lava_wta_conforms(model, spikes, tmp_path, lava_python) > 0
+    contested, _ = wta_steps(simulate(with_wta(model, False), spikes, record=True).raster, spikes, model)
+    assert contested > 0
+
+
+@pytest.mark.slow
+def test_lava_wta_readout_breaks_ties_to_the_lowest_index(tmp_path, lava_python):
+    """Equal multipliers and 2-bit weights make equal scores common: the readout keeps the lowest index."""
+    rng = np.random.default_rng(21)
+    model = make_model(rng, n_inputs=64, n_neurons=40, bits=2, p=0.3, uniform=True)
+    model = dataclasses.replace(model, scale_multiplier=np.full(40, 7, dtype=np.int32))
+    spikes = random_spikes(21, 4, 30, 64, p=0.3)
+    assert assert_lava_wta_conforms(model, spikes, tmp_path, lava_python) > 0
+    _, tied = wta_steps(simulate(with_wta(model, False), spikes, record=True).raster, spikes, model)
+    assert tied > 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
+def test_lava_wta_readout_on_real_nordland_queries(tmp_path, lava_python, real_case):
+    """Real winter queries through Dense + LIF + WtaReadout in Lava against the integer simulator with WTA on."""
+    model, spikes = real_case
+    assert assert_lava_wta_conforms(model, spikes, tmp_path, lava_python) > 0
