@@ -20,9 +20,11 @@ Mapping (Lava `Dense` + `LIF`, bit-accurate models, per step):
 
 Lava's LIF wraps u at 24 bits where the contract saturates v; the two agree while
 a_j << 6 < 2**23, i.e. a_j < 131072 (the header's ``current_bound`` says whether the
-model can reach it). Hard WTA is not a Lava process: the header describes the rule
-a Lava user adds after the LIF population (it only selects which candidate's spike is
-emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones).
+model can reach it). Hard WTA is not expressible with Dense and LIF: the header describes
+the rule as a readout after the LIF population (it only selects which candidate's spike is
+emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones), and
+``tests/targets/lava_conformance/run_lava.py --wta`` implements it as a Lava process
+(``WtaReadout``) fed by the LIF spikes and the Dense current.
 """
 
 from __future__ import annotations
@@ -185,8 +187,9 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
                 "with the largest a_j * m_j, ties to the lowest index; a_j = sum_i q_ij s_i of the same step"
             ),
             "score_multiplier": "wta_score_multiplier",
-            "in_lava": "not expressible with Dense/LIF: add a process that reads exc.s_out and a copy of the "
-            "Dense activation and forwards one spike (see docs/targets.md)",
+            "in_lava": "not expressible with Dense/LIF: a readout process that reads exc.s_out and the Dense "
+            "activation and forwards one spike (WtaReadout in tests/targets/lava_conformance/run_lava.py; "
+            "docs/targets.md section 2.4)",
         },
         "readout": {
             "calibration": "calibration (neurons, places): S^R of the deployed network",
