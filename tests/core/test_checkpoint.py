@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.fileio import write_container
 
 
 def _ckpt(cfg=None):
-    cfg = cfg or Config().replace(**{"network.n_neurons": 8})
+    cfg = cfg or preset("paper").replace(**{"network.n_neurons": 8})
     rng = np.random.default_rng(0)
     return Checkpoint(
         config=cfg,

@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.config import PreprocessConfig
+from vprsnn_export.config import preset
 from vprsnn_export.dataset import Dataset, load_dataset, parse_places
 from vprsnn_export.errors import DataError, InvalidValueError
 from vprsnn_export.preprocess import preprocess_images
 from vprsnn_export.synthetic import synthetic_fingerprint, synthetic_route
 
-CFG = PreprocessConfig()
+CFG = preset("paper").preprocess  # the patch-normalised intensity channel these tests pin
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "nordland_64x32_summer_winter"
 TRAVERSALS = ("summer", "winter")
 N_PLACES = 8
@@ -107,7 +108,7 @@ def test_progress_bar_goes_to_stderr(data_dir: Path, capsys: pytest.CaptureFixtu
 
 
 def test_patch_norm_off(data_dir: Path) -> None:
-    data = load_dataset(data_dir, ["summer"], PreprocessConfig(patch_norm=False), places="10:1")
+    data = load_dataset(data_dir, ["summer"], replace(CFG, patch_norm=False), places="10:1")
     grey = cv2.imread(str(data_dir / "summer" / "10.png"), cv2.IMREAD_GRAYSCALE)
     assert np.array_equal(
         data.traversal("summer")[0], cv2.resize(grey, (28, 28), interpolation=cv2.INTER_AREA).ravel() / np.float32(255)

@@ -37,14 +37,15 @@ def test_the_config_asks_for_twice_the_inputs():
     flat = normalise_resized(np.zeros((2, 28, 28), dtype=np.uint8), cfg.preprocess)
     assert flat.shape == (2, 1568)
     with pytest.raises(InvalidValueError, match="must equal 2 channel"):
-        Config().replace(**{"preprocess.channels": "dog_on_off"})
+        preset("paper").replace(**{"preprocess.channels": "dog_on_off"})
     with pytest.raises(InvalidValueError, match="channels"):
         Config().replace(**{"preprocess.channels": "edges"})
     with pytest.raises(InvalidValueError, match="below dog_sigma_surround"):
         preset("dog").replace(**{"preprocess.dog_sigma_centre": 3.0})
     with pytest.raises(InvalidValueError, match="unknown preset"):
         preset("nope")
-    assert preset("paper") == Config()
+    assert preset("dog") == Config() and preset("paper").network.n_inputs == 784
+    assert preset("paper").preprocess.channels == "intensity"
 
 
 def test_the_whole_chain_runs_with_dog_channels(tmp_path):

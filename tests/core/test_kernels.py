@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vprsnn_export import kernels
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, preset
 from vprsnn_export.dynamics import run_network
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.kernels import _blocked_currents, as_spike_array, blas_block, float_run, integer_run, stdp_window
@@ -33,7 +33,7 @@ def one_thread():
 def make_model(q, m, threshold, dv, bits, *, wta=True, per_neuron=True) -> FixedPointModel:
     n_inputs, n_neurons = q.shape
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(
+    cfg = preset("paper").replace(
         **{
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,
@@ -206,7 +206,7 @@ def test_spike_arrays_are_checked_and_bool_is_accepted():
 
 
 def tiny_training_config(wta: bool = True, weight_norm: bool = True) -> Config:
-    return Config().replace(
+    return preset("paper").replace(
         **{
             "preprocess.image_size": 4,
             "preprocess.patch_size": 1,

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.config import PreprocessConfig
+from vprsnn_export.config import PreprocessConfig, preset
 from vprsnn_export.errors import DataError
 from vprsnn_export.preprocess import patch_normalise, preprocess_images, read_grey_image, resize_image
 
-CFG = PreprocessConfig()
+CFG = preset("paper").preprocess  # the patch-normalised intensity channel these tests pin
 
 
 def _one(image: np.ndarray, cfg: PreprocessConfig = CFG) -> np.ndarray:
@@ -88,7 +89,7 @@ def test_resize_is_inter_area() -> None:
 
 
 def test_without_patch_norm_scales_by_255() -> None:
-    cfg = PreprocessConfig(patch_norm=False)
+    cfg = replace(CFG, patch_norm=False)
     image = np.full((28, 28), 51)
     image[0, 0] = 255
     out = _one(image, cfg)
@@ -96,7 +97,7 @@ def test_without_patch_norm_scales_by_255() -> None:
 
 
 def test_other_sizes() -> None:
-    cfg = PreprocessConfig(image_size=8, patch_size=4)
+    cfg = replace(CFG, image_size=8, patch_size=4)
     out = preprocess_images(np.random.default_rng(3).integers(0, 256, (2, 32, 64), dtype=np.uint8), cfg)
     assert out.shape == (2, 64)
     assert patch_normalise(np.zeros((0, 8, 8), np.uint8), 4).shape == (0, 8, 8)

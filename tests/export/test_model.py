@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import (
     FORMAT_VERSION,
@@ -25,7 +25,7 @@ SMALL = {"preprocess.image_size": 4, "preprocess.patch_size": 2, "network.n_inpu
 
 
 def small_model(bits: int = 4, per_neuron: bool = True, fold: bool = False):
-    cfg = Config().replace(**SMALL)
+    cfg = preset("paper").replace(**SMALL)
     rng = np.random.default_rng(3)
     ckpt = Checkpoint(
         config=cfg,

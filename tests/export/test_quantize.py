@@ -10,7 +10,7 @@ import torch
 
 from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
@@ -141,7 +141,7 @@ def test_a_dead_neuron_gets_a_representable_threshold():
 
 def small_checkpoint(n_places: int = 6) -> tuple[Checkpoint, dict]:
     """A float network (initial STDP weights) calibrated on the synthetic route."""
-    cfg = Config().replace(**SMALL)
+    cfg = preset("paper").replace(**SMALL)
     data = load_dataset(f"synthetic:{n_places}", ["summer", "winter"], cfg.preprocess)
     weights = initial_weights(784, 12, torch.Generator().manual_seed(0)).numpy()
     theta = thresholds()

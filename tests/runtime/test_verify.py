@@ -230,7 +230,7 @@ def test_cross_implementation_catches_a_corrupted_export(model_and_spikes, tmp_p
     def tampered(path):
         rebuilt = real(path)
         mantissa = rebuilt.weight_mantissa.copy()
-        mantissa[mantissa.argmax()] -= 1  # one weight one level lower
+        mantissa[np.unravel_index(mantissa.argmax(), mantissa.shape)] -= 1  # one weight one level lower
         return dataclasses.replace(rebuilt, weight_mantissa=mantissa)
 
     monkeypatch.setattr(conformance, "read_nir", tampered)

@@ -25,7 +25,7 @@ import pytest
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, preset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
@@ -71,7 +71,7 @@ MATRIX: dict[tuple[str, str], tuple[int, int] | str] = {
 
 
 def small_config(**overrides) -> Config:
-    return Config().replace(
+    return preset("paper").replace(
         **{
             "preprocess.image_size": 4,
             "preprocess.patch_size": 1,
@@ -252,7 +252,7 @@ def real_files(folder: Path) -> RealFiles:
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
-    cfg = Config().replace(**{"seed": 1})
+    cfg = preset("paper").replace(**{"seed": 1})
     subset = NORDLAND / "subset_100_places.csv"
     dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=subset)
     ckpt = train_and_calibrate(

@@ -10,7 +10,7 @@ import torch
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
@@ -38,7 +38,7 @@ def make_model(
 ) -> FixedPointModel:
     n_inputs, n_neurons = q.shape
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(
+    cfg = preset("paper").replace(
         **{
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,
@@ -188,7 +188,7 @@ def test_step_agreement():
 
 
 def test_eight_bit_per_neuron_model_reproduces_the_float_winners():
-    cfg = Config().replace(
+    cfg = preset("paper").replace(
         **{"network.n_neurons": 32, "encoder.timesteps": 60, "train.epochs": 3, "train.batch_size": 8}
     )
     data = load_dataset("synthetic:16", ["summer", "winter"], cfg.preprocess)
@@ -208,7 +208,7 @@ def test_eight_bit_per_neuron_model_reproduces_the_float_winners():
 def test_fast_equals_reference_on_the_real_nordland_subset():
     if not (NORDLAND / "subset_100_places.csv").is_file():
         pytest.skip(f"the Nordland subset is not at {NORDLAND}")
-    cfg = Config().replace(**{"train.epochs": 3})
+    cfg = preset("paper").replace(**{"train.epochs": 3})
     data = load_dataset(
         NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=NORDLAND / "subset_100_places.csv"
     )

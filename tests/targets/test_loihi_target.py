@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.fileio import sha256_bytes
@@ -40,7 +40,7 @@ NORDLAND = HERE.parents[1].parent / "shared/data/nordland_64x32_summer_winter"
 def make_model(rng, *, n_inputs=16, n_neurons=6, bits=8, wta=True, uniform=False, p=0.3, dv=205) -> FixedPointModel:
     """Random mantissas; thresholds 1.5-4 times each neuron's expected current (input rate p), so neurons integrate."""
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(
+    cfg = preset("paper").replace(
         **{
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,
@@ -324,7 +324,7 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
 
     given = os.environ.get("VPRSNN_LAVA_MODEL")
     model = load_fixed_point(given) if given else None
-    cfg = model.config if model else Config().replace(**{"train.epochs": 3, "seed": 1})
+    cfg = model.config if model else preset("paper").replace(**{"train.epochs": 3, "seed": 1})
     subset = NORDLAND / "subset_100_places.csv"
     dataset = load_dataset(NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=subset)
     if model is None:

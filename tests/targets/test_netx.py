@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_target import NETX_NAME, write_loihi
@@ -28,7 +28,7 @@ RUN_LAVA = Path(__file__).resolve().parent / "lava_conformance" / "run_lava.py"
 def full_size_model(bits: int, *, uniform: bool, p: float = 0.12) -> FixedPointModel:
     """784 x 400, random mantissas; thresholds 1.5-4 times each neuron's expected current at input rate p."""
     rng = np.random.default_rng(bits + 10 * uniform)
-    cfg = Config().replace(**{"network.wta": False, "encoder.timesteps": 40})
+    cfg = preset("paper").replace(**{"network.wta": False, "encoder.timesteps": 40})
     q = rng.integers(0, 2**bits, (784, 400)).astype(np.int32)
     expected = p * q.sum(axis=0)
     threshold = np.full(400, 2.5 * expected.mean()) if uniform else expected * rng.uniform(1.5, 4, 400)

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, preset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
@@ -34,7 +34,7 @@ NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64
 
 def small_config(n_inputs: int = 16, n_neurons: int = 6, **overrides) -> Config:
     side = int(round(n_inputs**0.5))
-    return Config().replace(
+    return preset("paper").replace(
         **{
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,

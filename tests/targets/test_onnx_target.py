@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
 from vprsnn_export.readout.assignment import strategy_scores, weighted_matrix
@@ -50,7 +50,7 @@ def make_model(
     places=4,
 ) -> FixedPointModel:
     side = int(round(n_inputs**0.5))
-    cfg = Config().replace(
+    cfg = preset("paper").replace(
         **{
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,
@@ -346,7 +346,7 @@ def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
-    cfg = Config().replace(**{"train.epochs": 3, "seed": 1})
+    cfg = preset("paper").replace(**{"train.epochs": 3, "seed": 1})
     dataset = load_dataset(
         NORDLAND / "places.csv", ["summer", "winter"], cfg.preprocess, subset=NORDLAND / "subset_100_places.csv"
     )

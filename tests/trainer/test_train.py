@@ -1,7 +1,7 @@
 import numpy as np
 import torch
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import preset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.train import Presentation, train_network
@@ -15,7 +15,7 @@ def _data(n=6):
 
 
 def test_same_seed_same_weights_and_different_seed_differs():
-    cfg = Config().replace(**SMALL)
+    cfg = preset("paper").replace(**SMALL)
     images, pres = _data()
     a = train_network(images, pres, cfg, device=torch.device("cpu"), progress=False)
     b = train_network(images, pres, cfg, device=torch.device("cpu"), progress=False)
@@ -25,7 +25,7 @@ def test_same_seed_same_weights_and_different_seed_differs():
 
 
 def test_training_keeps_weights_bounded_and_columns_normalised():
-    cfg = Config().replace(**SMALL)
+    cfg = preset("paper").replace(**SMALL)
     images, pres = _data()
     net = train_network(images, pres, cfg, device=torch.device("cpu"), progress=False)
     assert net.weights.min() >= 0 and net.weights.max() <= cfg.stdp.w_max
@@ -35,7 +35,7 @@ def test_training_keeps_weights_bounded_and_columns_normalised():
 
 
 def test_calibration_sums_reference_traversals():
-    cfg = Config().replace(**SMALL)
+    cfg = preset("paper").replace(**SMALL)
     images, pres = _data(4)
     net = train_network(images, pres, cfg, device=torch.device("cpu"), progress=False)
     network = FloatNetwork.from_arrays(net.weights.numpy(), net.thresholds.numpy(), cfg, torch.device("cpu"))

@@ -111,12 +111,12 @@ def add_readout_options(
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
-    group = parser.add_argument_group("configuration (defaults: the paper's text)")
+    group = parser.add_argument_group("configuration (defaults: the paper's text with DoG ON/OFF inputs)")
     group.add_argument(
         "--preset",
         choices=sorted(PRESETS),
-        help="starting configuration: paper (the default) or dog (illumination-invariant DoG ON/OFF input "
-        "channels, docs/model.md); the options below apply on top",
+        help="starting configuration: dog (the default: illumination-invariant DoG ON/OFF input channels, "
+        "docs/model.md) or paper (the paper's patch-normalised intensity input); the options below apply on top",
     )
     group.add_argument("--seed", type=int, help="seed for weights, shuffles and every spike")
     group.add_argument("--epochs", type=int, help="training epochs")

@@ -3,7 +3,7 @@
 train -> quantise (8, 4, 2 bits, per-neuron scales, deployed calibration) -> export (NIR,
 Loihi-style, ONNX) and read every file back -> verify against float -> report.
 
-The demo trains the paper's configuration (T = 300, 60 epochs, 400 neurons): about a
+The demo trains the default configuration (DoG ON/OFF inputs, T = 300, 60 epochs, 400 neurons): about a
 minute on one CPU core. Torch is limited to one CPU thread unless OMP_NUM_THREADS is
 set (see :mod:`vprsnn_export.threads`). ``--quick`` (for the tests) applies a
 tiny profile, which is written into the checkpoint's config and printed.
@@ -38,7 +38,7 @@ DEMO_REFERENCE = "summer"
 DEMO_QUERY = "winter"
 DEMO_KS = (1, 3, 5)
 DEMO_BITS = DEFAULT_BITS
-#: Config overrides of the demo: none, the paper's configuration runs in about a minute on one CPU core.
+#: Config overrides of the demo: none, the default configuration runs in about a minute on one CPU core.
 DEMO_PROFILE: dict = {}
 #: --quick (tests): a tiny network on a short route.
 QUICK_PROFILE = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 48}
@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def demo_config(seed: int, quick: bool = False) -> Config:
-    """The paper's configuration with the demo profile (or the test profile) applied."""
+    """The default configuration with the demo profile (or the test profile) applied."""
     return Config().replace(**{**(QUICK_PROFILE if quick else DEMO_PROFILE), "seed": seed})
 
 
@@ -79,11 +79,11 @@ def profile_text(profile: dict) -> str:
     if not profile:
         cfg = Config()
         return (
-            f"the paper's configuration: T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, "
-            f"{cfg.network.n_neurons} neurons"
+            f"the default configuration: DoG ON/OFF inputs, T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, "
+            f"{cfg.network.n_neurons} neurons; --preset paper in train for the paper's"
         )
     return (
-        "profile " + ", ".join(f"{k} = {v}" for k, v in profile.items()) + " (the paper: encoder.timesteps = "
+        "profile " + ", ".join(f"{k} = {v}" for k, v in profile.items()) + " (the default: encoder.timesteps = "
         f"{Config().encoder.timesteps}, train.epochs = {Config().train.epochs}, network.n_neurons = "
         f"{Config().network.n_neurons}; written into the checkpoint's config)"
     )

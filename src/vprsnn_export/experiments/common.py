@@ -14,7 +14,7 @@ from typing import Any
 import torch
 
 from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.device import resolve_device
 from vprsnn_export.stats import mean_std
@@ -48,6 +48,7 @@ class Settings:
     progress: bool = True
     overrides: dict = field(default_factory=dict)  # dotted config overrides
     grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
+    preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:
@@ -63,7 +64,7 @@ class Settings:
         return replace(quick, **changes)
 
     def config(self, seed: int, **extra) -> Config:
-        return Config().replace(**{**self.overrides, "seed": seed, **extra})
+        return preset(self.preset).replace(**{**self.overrides, "seed": seed, **extra})
 
 
 def load(settings: Settings, selection: str, cfg: Config) -> Dataset:
