@@ -740,7 +740,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     fx.mkdir(parents=True)
     for argv, needed in CLI_FIXTURES:
         raw = run(argv, fx)
-        if raw.rc != 0:
+        if raw.rc != 0 and not (argv[0] == "verify" and raw.rc == 1):  # a failed check still writes its report
             message = f"fixture {shlex.join(['vprsnn-export', *argv])} failed (rc {raw.rc}):\n{raw.stderr[-2000:]}"
             if needed:
                 raise SystemExit(message)
@@ -1439,7 +1439,13 @@ LEGAL_LINES: dict[str, str] = {
     "train-preset-dog": f"{T_TINY} --preset dog --out t.npz",
     "train-ablations": f"{T_TINY} --no-wta --no-homeostasis --no-patch-norm --no-weight-norm --no-state-isolation --out t.npz",
     "train-set-bounds": f"{T_TINY} --set homeostasis.eta=0 --set stdp.a_plus=0 --set assignment.gamma=1 --set network.beta=1 --out t.npz",
-    "train-small-image": f"{T_TINY} --set preprocess.image_size=7 --set preprocess.patch_size=7 --set network.n_inputs=49 --out t.npz",
+    "train-small-image": (
+        f"{T_TINY} --preset paper --set preprocess.image_size=7 --set preprocess.patch_size=7 "
+        "--set network.n_inputs=49 --out t.npz"
+    ),
+    "train-small-image-dog": (
+        f"{T_TINY} --set preprocess.image_size=7 --set preprocess.patch_size=7 --set network.n_inputs=98 --out t.npz"
+    ),
     "train-batch-one": f"{T_TINY} --set train.batch_size=1 --out t.npz",
     "train-quiet": f"{T_TINY} --quiet --out t.npz",
     "evaluate-edge-network": f"evaluate {EDGE} --query winter",
