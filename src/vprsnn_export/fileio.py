@@ -17,6 +17,7 @@ import os
 import shutil
 import stat
 import tempfile
+import tokenize
 import zipfile
 import zlib
 from collections.abc import Callable, Iterator
@@ -272,7 +273,19 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
         foreign = sorted(name for name, value in arrays.items() if not isinstance(value, np.ndarray))
         if foreign:
             raise ModelFileError(f"not a {kind}: members {foreign} are not .npy arrays", path)
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError, TypeError) as exc:
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        NotImplementedError,
+        RuntimeError,
+        SyntaxError,
+        tokenize.TokenError,
+    ) as exc:  # zipfile: corrupt flags read as "encrypted"/"patched data"; numpy: a corrupt .npy header
         raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
     if META_KEY not in arrays:
         raise ModelFileError(f"not a {kind}: the JSON header is missing", path)
