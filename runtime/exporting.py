@@ -34,6 +34,7 @@ from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_p
 from vprsnn_export.fileio import (
     OutputError,
     atomic_write_text,
+    check_output_folder,
     publish_folder,
     read_container,
     sha256_file,
@@ -325,15 +326,15 @@ def nir_consumer_rows(
     path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
 ) -> list[CheckRow]:
     """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
+    graph = load_graph(path)
     try:
-        consumer = CONSUMERS[consumer_name](load_graph(path), spikes)
+        consumer = CONSUMERS[consumer_name](graph, spikes)
     except (
         AssertionError,
         ValueError,
     ) as exc:  # snnTorch asserts, SpikingJelly raises ValueError on what they cannot express
         return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
     agreement = spike_agreement(raster, consumer)
-    graph = load_graph(path)
     rows: list[CheckRow] = []
     if "wta" not in graph.nodes:
         ruled = apply_readout_rule(graph, spikes, consumer)
@@ -508,14 +509,9 @@ def export_and_check(
 
 def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
     """OutputError unless ``out`` is new, an empty folder, or (``overwrite``) an earlier export's folder."""
-    if str(out).strip() == "":
-        raise OutputError("empty output path")
-    if out.is_symlink():
-        raise OutputError("is a symbolic link: give the path of the folder itself", out)
+    check_output_folder(out)
     if not out.exists():
         return
-    if not out.is_dir():
-        raise OutputError("is not a folder: export writes a folder of files (give a new folder name)", out)
     if (out / MANIFEST_NAME).is_file():
         if not overwrite:
             raise OutputError(f"holds an earlier export ({MANIFEST_NAME}): --force to replace it", out)
