@@ -29,6 +29,7 @@ from vprsnn_export.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.fileio import read_container, write_container
+from vprsnn_export.modules import ensemble_neurons
 from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-fixed-point"
@@ -280,10 +281,12 @@ def validate(model: FixedPointModel, path: Path) -> None:
     if model.bits not in SUPPORTED_BITS:
         fail(f"unsupported weight bit width {model.bits}")
     net = model.config.network
+    n_places = validate_reference_ids(model.reference_place_ids, path)
+    n_neurons = ensemble_neurons(model.config, n_places)  # M n: every module's neurons side by side
     shapes = {
-        "weight_mantissa": (net.n_inputs, net.n_neurons),
-        "scale_multiplier": (net.n_neurons,),
-        "threshold": (net.n_neurons,),
+        "weight_mantissa": (net.n_inputs, n_neurons),
+        "scale_multiplier": (n_neurons,),
+        "threshold": (n_neurons,),
     }
     for name, shape in shapes.items():
         array = getattr(model, name)
@@ -300,16 +303,16 @@ def validate(model: FixedPointModel, path: Path) -> None:
         array = getattr(model, name)
         if array.size and (array.min() < low or array.max() > high):
             fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")
-    if model.quantisation.per_neuron is False and np.unique(model.scale_multiplier).size > 1:
-        fail("per-tensor model with unequal scale multipliers")
+    per_module = model.scale_multiplier.reshape(-1, net.n_neurons)
+    if model.quantisation.per_neuron is False and np.any(per_module != per_module[:, :1]):
+        fail("per-tensor model with unequal scale multipliers within a module")
     if model.quantisation.threshold_folding and np.unique(model.threshold).size > 1:
         fail("threshold-folded model with unequal integer thresholds")
     if not 0 <= model.decay_dv < (1 << DECAY_BITS):
         fail(f"decay_dv {model.decay_dv} does not fit {DECAY_BITS} bits")
     if model.voltage_bits != VOLTAGE_BITS or not 0 <= model.voltage_shift < model.voltage_bits:
         fail(f"unsupported voltage format ({model.voltage_bits} bits, shift {model.voltage_shift})")
-    n_places = validate_reference_ids(model.reference_place_ids, path)
     for name in ("calibration", "float_calibration"):
         array = getattr(model, name)
-        if array.shape != (net.n_neurons, n_places) or not np.issubdtype(array.dtype, np.integer) or (array < 0).any():
-            fail(f"{name} must be non-negative integer counts of shape {(net.n_neurons, n_places)}")
+        if array.shape != (n_neurons, n_places) or not np.issubdtype(array.dtype, np.integer) or (array < 0).any():
+            fail(f"{name} must be non-negative integer counts of shape {(n_neurons, n_places)}")

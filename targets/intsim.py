@@ -74,6 +74,7 @@ class PreparedModel:
     limit: int  # 2**23 - 1
     shift: int
     wta: bool
+    group: int  # neurons per WTA group: one module of an ensemble (network.n_neurons)
     mantissas: np.ndarray  # (inputs, neurons) the unshifted q_ij, for the compiled CPU kernel
 
 
@@ -91,6 +92,7 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
         limit=model.voltage_limit,
         shift=model.voltage_shift,
         wta=model.config.network.wta,
+        group=model.config.network.n_neurons,
         mantissas=model.weight_mantissa,
     )
 
@@ -188,6 +190,7 @@ def run_prepared(
             wta=prep.wta,
             isolation=isolation,
             record=record,
+            group=prep.group,
         )
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
@@ -240,8 +243,9 @@ def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, re
     score_dtype = torch.int32 if multipliers is None else torch.int64
     minus_one = torch.tensor(-1, dtype=score_dtype, device=device)
     score = torch.empty((batch, n_neurons), dtype=score_dtype, device=device)
-    best: list[torch.Tensor] = []
-    winner: list[torch.Tensor] = []
+    best: list[torch.Tensor] = []  # per step: (B, modules) best score
+    winner: list[torch.Tensor] = []  # per step: (B, modules) winning neuron index
+    group_offsets = torch.arange(0, n_neurons, prep.group, device=device)
     counts = torch.zeros((batch, n_neurons), dtype=torch.int64, device=device)
     raster = torch.zeros((timesteps, batch, n_neurons), dtype=torch.bool, device=device) if record else None
     saturations = torch.zeros((), dtype=torch.int64, device=device)
@@ -258,19 +262,21 @@ def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, re
                 torch.where(candidates, current, minus_one, out=score)
             else:
                 torch.where(candidates, torch.mul(current, multipliers, out=score), minus_one, out=score)
-            value, index = score.max(dim=1)
+            value, index = score.view(batch, -1, prep.group).max(dim=2)  # one winner per module
             best.append(value)
-            winner.append(index)
+            winner.append(index + group_offsets)
         else:
             counts.add_(candidates)
             if raster is not None:
                 raster[t] = candidates
         voltage.masked_fill_(candidates, 0)
     if prep.wta and timesteps:
-        fired, winners = torch.stack(best) >= 0, torch.stack(winner)
-        counts.scatter_add_(1, winners.T, fired.T.to(torch.int64))
+        fired, winners = torch.stack(best) >= 0, torch.stack(winner)  # (T, B, modules)
+        counts.scatter_add_(
+            1, winners.transpose(0, 1).reshape(batch, -1), fired.transpose(0, 1).reshape(batch, -1).long()
+        )
         if raster is not None:
-            raster.scatter_(2, winners.unsqueeze(2), fired.unsqueeze(2))
+            raster.scatter_(2, winners, fired)
     return ChunkRun(voltage, counts, n_candidates.to(torch.int32), raster, int(saturations), int(peak.max()))
 
 

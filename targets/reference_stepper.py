@@ -30,6 +30,7 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
     m = [int(x) for x in model.scale_multiplier]
     vth = [int(x) << model.voltage_shift for x in model.threshold]
     keep, limit, neurons = 4096 - model.decay_dv, model.voltage_limit, range(model.n_neurons)
+    group = model.config.network.n_neurons  # one WTA per module of an ensemble
     raster = np.zeros((n, timesteps, model.n_neurons), dtype=bool)
     final = np.zeros((n, model.n_neurons), dtype=np.int64)
     n_candidates = np.zeros((n, timesteps), dtype=np.int64)
@@ -51,12 +52,15 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
                     v[j] = limit if v[j] > 0 else -limit
             candidates = [j for j in neurons if v[j] > vth[j]]
             n_candidates[p, t] = len(candidates)
-            if model.config.network.wta and candidates:
-                best = candidates[0]
-                for j in candidates[1:]:
-                    if a[j] * m[j] > a[best] * m[best]:
-                        best = j
-                raster[p, t, best] = True
+            if model.config.network.wta:
+                for module in range(model.n_neurons // group):
+                    rivals = [j for j in candidates if j // group == module]
+                    if rivals:
+                        best = rivals[0]
+                        for j in rivals[1:]:
+                            if a[j] * m[j] > a[best] * m[best]:
+                                best = j
+                        raster[p, t, best] = True
             else:
                 raster[p, t, candidates] = True
             for j in candidates:

@@ -20,6 +20,7 @@ from .config import Config
 from .dataset import MAX_PLACE_ID, parse_places, parse_synthetic
 from .errors import InvalidValueError, ModelFileError, VprError
 from .fileio import read_container, sha256_file, write_container
+from .modules import ensemble_neurons
 from .version import __version__
 
 FORMAT = "vprsnn-checkpoint"
@@ -153,9 +154,11 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
     """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
     path = Path(path)
     net = ckpt.config.network
+    n_places = validate_reference_ids(ckpt.reference_place_ids, path)
+    n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side
     expect = {
-        "weights": (net.n_inputs, net.n_neurons),
-        "thresholds": (net.n_neurons,),
+        "weights": (net.n_inputs, n_neurons),
+        "thresholds": (n_neurons,),
     }
     for name, shape in expect.items():
         array = getattr(ckpt, name)
@@ -174,11 +177,8 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
     ceiling = max(ckpt.config.homeostasis.theta_max, ckpt.config.network.theta_init)
     if np.any(ckpt.thresholds > ceiling * (1 + 1e-6)):
         raise ModelFileError(f"thresholds exceed the config's theta_max / theta_init ({ceiling})", path)
-    n_places = validate_reference_ids(ckpt.reference_place_ids, path)
-    if ckpt.calibration.shape != (net.n_neurons, n_places):
-        raise ModelFileError(
-            f"calibration has shape {ckpt.calibration.shape}, expected {(net.n_neurons, n_places)}", path
-        )
+    if ckpt.calibration.shape != (n_neurons, n_places):
+        raise ModelFileError(f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}", path)
     if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(ckpt.calibration < 0):
         raise ModelFileError("calibration must hold non-negative integer spike counts", path)
     if not ckpt.reference_traversals:

@@ -86,6 +86,7 @@ class HomeostasisConfig:
 class TrainConfig:
     epochs: int = 60  # chosen from the measured curve in docs/results/epochs.md
     batch_size: int = 64
+    module_size: int = 0  # places per module (src/vprsnn_export/modules.py); 0: one network for all places
 
 
 @dataclass(frozen=True)
@@ -185,6 +186,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "homeostasis.theta_max": (0.0, 1e9, False, True),
     "train.epochs": (0, 100_000, True, True),
     "train.batch_size": (1, 1_000_000, True, True),
+    "train.module_size": (0, 10_000_000, True, True),
     "assignment.gamma": (0.0, 1.0, True, True),
 }
 

@@ -6,7 +6,10 @@ Per time step t, for a batch of presentations (rows) and neurons j:
     V_j[t] = beta V_j[t-1] + I_j[t]
     C[t]   = {j : V_j[t] > theta_j}                       (candidates)
     WTA on:  S_j[t] = 1 for the one j in C[t] with the largest I_j[t]
-             (ties: lowest index); nothing fires if C[t] is empty
+             (ties: lowest index); nothing fires if C[t] is empty.
+             In an ensemble of modules (:mod:`vprsnn_export.modules`) this holds
+             within each group of n = network.n_neurons consecutive neurons:
+             one winner per module per step
     WTA off: S_j[t] = 1 for every j in C[t]
     V_j[t] <- 0 for every j in C[t]                        (reset to zero)
 
@@ -29,18 +32,29 @@ from .runs import SpikeRun
 
 
 def wta_step(
-    voltage: torch.Tensor, current: torch.Tensor, theta: torch.Tensor, beta: float, wta: bool
+    voltage: torch.Tensor,
+    current: torch.Tensor,
+    theta: torch.Tensor,
+    beta: float,
+    wta: bool,
+    group: int | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One step: V = beta V + I; C = {V > theta}; S = winner(C) or C; V[C] = 0.
 
-    Returns (new voltage, spikes as bool (B, neurons), candidates as bool (B, neurons)).
+    The winner is taken within each group of ``group`` consecutive neurons (``None``: all
+    neurons are one group). Returns (new voltage, spikes as bool (B, neurons), candidates
+    as bool (B, neurons)).
     """
     voltage = beta * voltage + current
     candidates = voltage > theta
     if wta:
-        masked = current.masked_fill(~candidates, float("-inf"))
-        winner = masked.argmax(dim=1, keepdim=True)  # first index on ties
-        spikes = torch.zeros_like(candidates).scatter_(1, winner, candidates.any(dim=1, keepdim=True))
+        batch, n_neurons = candidates.shape
+        size = n_neurons if group is None else group
+        grouped = candidates.reshape(batch, n_neurons // size, size)
+        masked = current.reshape(grouped.shape).masked_fill(~grouped, float("-inf"))
+        winner = masked.argmax(dim=2, keepdim=True)  # first index on ties
+        spikes = torch.zeros_like(grouped).scatter_(2, winner, grouped.any(dim=2, keepdim=True))
+        spikes = spikes.reshape(batch, n_neurons)
     else:
         spikes = candidates
     return voltage.masked_fill(candidates, 0.0), spikes, candidates
@@ -67,8 +81,11 @@ def run_network(
     state_isolation: bool = True,
     record: bool = False,
     compiled: bool = True,
+    group: int | None = None,
 ) -> SpikeRun:
     """Present N spike trains (N, T, inputs) to the network with plasticity off.
+
+    ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
     On the CPU (float32 weights) the compiled event-driven kernel runs it
     (:func:`vprsnn_export.kernels.float_run`: the same counts bit for bit, the currents summed
@@ -82,13 +99,15 @@ def run_network(
         and weights.dtype == torch.float32
         and _blas_order_known(spikes, weights)
     ):
-        run = float_run(spikes, weights, theta, beta=beta, wta=wta, isolation=state_isolation, record=record)
+        run = float_run(
+            spikes, weights, theta, beta=beta, wta=wta, isolation=state_isolation, record=record, group=group
+        )
         return run if state_isolation else SpikeRun(run.counts, run.candidates_per_step, run.raster, None)
     device = weights.device
     n_presentations, timesteps, _ = spikes.shape
     n_neurons = weights.shape[1]
     if not state_isolation:
-        return _run_sequential(spikes, weights, theta, beta=beta, wta=wta, record=record)
+        return _run_sequential(spikes, weights, theta, beta=beta, wta=wta, record=record, group=group)
     counts = torch.zeros((n_presentations, n_neurons), dtype=torch.int64)
     n_candidates = torch.zeros((n_presentations, timesteps), dtype=torch.int32)
     raster = torch.zeros((n_presentations, timesteps, n_neurons), dtype=torch.bool) if record else None
@@ -103,7 +122,7 @@ def run_network(
             torch.zeros((stop - start, timesteps, n_neurons), dtype=torch.bool, device=device) if record else None
         )
         for t in range(timesteps):
-            voltage, fired, candidates = wta_step(voltage, currents[:, t], theta, beta, wta)
+            voltage, fired, candidates = wta_step(voltage, currents[:, t], theta, beta, wta, group)
             chunk_counts += fired
             chunk_candidates[:, t] = candidates.sum(dim=1, dtype=torch.int32)
             if chunk_raster is not None:
@@ -117,12 +136,19 @@ def run_network(
 
 
 def _run_sequential(
-    spikes: torch.Tensor, weights: torch.Tensor, theta: torch.Tensor, *, beta: float, wta: bool, record: bool
+    spikes: torch.Tensor,
+    weights: torch.Tensor,
+    theta: torch.Tensor,
+    *,
+    beta: float,
+    wta: bool,
+    record: bool,
+    group: int | None = None,
 ) -> SpikeRun:
     """State isolation off: all presentations form one stream, in order (the spillover ablation)."""
     n_presentations, timesteps, n_inputs = spikes.shape
     stream = spikes.reshape(1, n_presentations * timesteps, n_inputs)
-    whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True)
+    whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True, group=group)
     assert whole.raster is not None and whole.candidates_per_step is not None  # recorded above
     raster = whole.raster.reshape(n_presentations, timesteps, -1)
     return SpikeRun(
@@ -162,6 +188,7 @@ class FloatNetwork:
             wta=self.cfg.network.wta,
             state_isolation=isolation,
             record=record,
+            group=self.cfg.network.n_neurons,
         )
 
     def counts(self, spikes: torch.Tensor) -> torch.Tensor:

@@ -127,6 +127,7 @@ def _integer_kernel(
     keep: int,
     limit: int,
     wta: bool,
+    group: int,  # neurons per WTA group (one module of an ensemble)
     isolation: bool,
     record: bool,
     current: np.ndarray,  # (T, neurons) scratch: int32 when every sum of q fits, else int64
@@ -150,34 +151,35 @@ def _integer_kernel(
         _step_currents(mantissas, index, offsets, n_inputs, current, partial)
         for t in range(timesteps):
             n_cand = 0
-            best = -1
-            best_score = np.int64(-1)
-            for j in range(n_neurons):
-                c = np.int64(current[t, j]) << shift
-                if c > peak:
-                    peak = c
-                v = ((voltage[j] * keep) >> DECAY_BITS) + c
-                if v > limit:
-                    saturations += 1
-                    v = limit
-                if v > threshold[j]:
-                    n_cand += 1
-                    v = 0
-                    if wta:
-                        score = c * multipliers[j] if use_multipliers else c
-                        if score > best_score:
-                            best_score = score
-                            best = j
-                    else:
-                        counts[p, j] += 1
-                        if record:
-                            raster[p, t, j] = True
-                voltage[j] = v
+            for g in range(0, n_neurons, group):
+                best = -1
+                best_score = np.int64(-1)
+                for j in range(g, g + group):
+                    c = np.int64(current[t, j]) << shift
+                    if c > peak:
+                        peak = c
+                    v = ((voltage[j] * keep) >> DECAY_BITS) + c
+                    if v > limit:
+                        saturations += 1
+                        v = limit
+                    if v > threshold[j]:
+                        n_cand += 1
+                        v = 0
+                        if wta:
+                            score = c * multipliers[j] if use_multipliers else c
+                            if score > best_score:
+                                best_score = score
+                                best = j
+                        else:
+                            counts[p, j] += 1
+                            if record:
+                                raster[p, t, j] = True
+                    voltage[j] = v
+                if wta and best >= 0:
+                    counts[p, best] += 1
+                    if record:
+                        raster[p, t, best] = True
             n_candidates[p, t] = n_cand
-            if wta and best >= 0:
-                counts[p, best] += 1
-                if record:
-                    raster[p, t, best] = True
         final[p] = voltage
     return counts, n_candidates, raster, final, saturations, peak
 
@@ -228,6 +230,7 @@ def _float_kernel(
     theta: np.ndarray,  # (neurons,) float32
     beta: np.float32,
     wta: bool,
+    group: int,  # neurons per WTA group (one module of an ensemble)
     isolation: bool,
     record: bool,
     block: int,
@@ -250,30 +253,39 @@ def _float_kernel(
         _step_currents(weights, index, offsets, block, current, partial)
         for t in range(timesteps):
             n_cand = 0
-            best = -1
-            best_current = np.float32(-np.inf)
-            for j in range(n_neurons):
-                c = current[t, j]
-                v = beta * voltage[j] + c
-                if v > theta[j]:
-                    n_cand += 1
-                    v = np.float32(0)
-                    if wta:
-                        if best < 0 or c > best_current:
-                            best_current = c
-                            best = j
-                    else:
-                        counts[p, j] += 1
-                        if record:
-                            raster[p, t, j] = True
-                voltage[j] = v
+            for g in range(0, n_neurons, group):
+                best = -1
+                best_current = np.float32(-np.inf)
+                for j in range(g, g + group):
+                    c = current[t, j]
+                    v = beta * voltage[j] + c
+                    if v > theta[j]:
+                        n_cand += 1
+                        v = np.float32(0)
+                        if wta:
+                            if best < 0 or c > best_current:
+                                best_current = c
+                                best = j
+                        else:
+                            counts[p, j] += 1
+                            if record:
+                                raster[p, t, j] = True
+                    voltage[j] = v
+                if wta and best >= 0:
+                    counts[p, best] += 1
+                    if record:
+                        raster[p, t, best] = True
             n_candidates[p, t] = n_cand
-            if wta and best >= 0:
-                counts[p, best] += 1
-                if record:
-                    raster[p, t, best] = True
         final[p] = voltage
     return counts, n_candidates, raster, final
+
+
+def check_group(n_neurons: int, group: int | None) -> int:
+    """The WTA group size: ``n_neurons`` for ``None``; ValueError unless it divides ``n_neurons``."""
+    size = n_neurons if group is None else int(group)
+    if size < 1 or n_neurons % size:
+        raise ValueError(f"WTA groups of {size} neurons do not divide {n_neurons} neurons")
+    return size
 
 
 def integer_run(
@@ -288,8 +300,11 @@ def integer_run(
     wta: bool,
     isolation: bool = True,
     record: bool = False,
+    group: int | None = None,
 ) -> SpikeRun:
     """The integer simulator's run, event-driven and compiled; bit-identical to ``targets.intsim.run_prepared``.
+
+    ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
 
     ``mantissas`` are the unshifted weights q_ij (inputs, neurons), non-negative; the kernel sums
     them in the narrowest dtype that holds them (uint8 for up to 8 bits: a quarter of the memory
@@ -320,6 +335,7 @@ def integer_run(
         int(keep),
         int(limit),
         bool(wta),
+        check_group(n_neurons, group),
         bool(isolation),
         bool(record),
         np.zeros((array.shape[1], n_neurons), dtype=np.int32 if bound <= INT32_SAFE else np.int64),
@@ -344,8 +360,11 @@ def float_run(
     isolation: bool = True,
     record: bool = False,
     block: int | None = None,
+    group: int | None = None,
 ) -> SpikeRun:
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
+
+    ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
 
     Same dynamics as :func:`vprsnn_export.dynamics.run_network`. Each step's currents are the
     active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
@@ -367,6 +386,7 @@ def float_run(
         np.ascontiguousarray(_numpy(theta), dtype=np.float32),
         np.float32(beta),
         bool(wta),
+        check_group(w.shape[1], group),
         bool(isolation),
         bool(record),
         max(1, int(block)),

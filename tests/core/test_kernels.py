@@ -159,13 +159,26 @@ def float_case(seed: int, n: int = 4, timesteps: int = 40, n_inputs: int = 30, n
 
 @pytest.mark.parametrize("wta", [True, False])
 @pytest.mark.parametrize("isolation", [True, False])
-def test_float_kernel_matches_run_network(wta, isolation):
+@pytest.mark.parametrize("group", [None, 3])
+def test_float_kernel_matches_run_network(wta, isolation, group):
+    """``group`` 3: an ensemble of three modules of three neurons, one WTA winner per module."""
     for seed in range(4):
         spikes, weights, theta = float_case(seed)
         slow = run_network(
-            spikes, weights, theta, beta=0.95, wta=wta, state_isolation=isolation, record=True, compiled=False
+            spikes,
+            weights,
+            theta,
+            beta=0.95,
+            wta=wta,
+            state_isolation=isolation,
+            record=True,
+            compiled=False,
+            group=group,
         )
-        fast = float_run(spikes, weights, theta, beta=0.95, wta=wta, isolation=isolation, record=True)
+        fast = float_run(spikes, weights, theta, beta=0.95, wta=wta, isolation=isolation, record=True, group=group)
+        if wta and group:
+            assert int(fast.raster.view(*fast.raster.shape[:2], 3, 3).sum(dim=3).max()) <= 1
+            assert int(fast.raster.sum(dim=2).max()) > 1  # several modules fire in one step
         assert torch.equal(fast.raster, slow.raster)
         assert torch.equal(fast.counts, slow.counts)
         assert torch.equal(fast.candidates_per_step, slow.candidates_per_step)
@@ -282,3 +295,15 @@ def test_read_only_install_compiles_in_memory_with_a_warning(monkeypatch):
     with pytest.warns(UserWarning, match="compiling them in memory"):
         function = kernels.compiled(abs)
     assert function is abs and calls == [{"cache": True, "nogil": True}, {"nogil": True}]
+
+
+def test_an_ensemble_runs_each_module_as_it_would_run_alone():
+    """Module m of an ensemble (grouped WTA) spikes exactly as the network of its neurons alone."""
+    spikes, weights, theta = float_case(11, n_neurons=12)
+    whole = float_run(spikes, weights, theta, beta=0.9, record=True, group=4)
+    for module in range(3):
+        cut = slice(4 * module, 4 * module + 4)
+        alone = float_run(spikes, weights[:, cut].contiguous(), theta[cut].contiguous(), beta=0.9, record=True)
+        assert torch.equal(whole.raster[:, :, cut], alone.raster)
+    with pytest.raises(ValueError, match="do not divide"):
+        float_run(spikes, weights, theta, beta=0.9, group=5)

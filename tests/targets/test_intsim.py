@@ -16,7 +16,7 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.targets.intsim import IntegerNetwork, matmul_dtype, simulate, step_agreement
+from vprsnn_export.targets.intsim import IntegerNetwork, matmul_dtype, prepare, run_prepared, simulate, step_agreement
 from vprsnn_export.targets.reference_stepper import reference_run, trunc_div
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -34,8 +34,9 @@ def one_thread():
 
 
 def make_model(
-    q, m, threshold, dv, bits, *, wta=True, isolation=True, per_neuron=True, timesteps=20
+    q, m, threshold, dv, bits, *, wta=True, isolation=True, per_neuron=True, timesteps=20, modules=1
 ) -> FixedPointModel:
+    """``modules`` > 1: an ensemble of that many modules side by side (one place per module)."""
     n_inputs, n_neurons = q.shape
     side = int(round(n_inputs**0.5))
     cfg = preset("paper").replace(
@@ -43,7 +44,8 @@ def make_model(
             "preprocess.image_size": side,
             "preprocess.patch_size": 1,
             "network.n_inputs": n_inputs,
-            "network.n_neurons": n_neurons,
+            "network.n_neurons": n_neurons // modules,
+            "train.module_size": 1 if modules > 1 else 0,
             "network.wta": wta,
             "network.state_isolation": isolation,
             "encoder.timesteps": timesteps,
@@ -57,9 +59,9 @@ def make_model(
         threshold=np.asarray(threshold, dtype=np.int32),
         decay_dv=int(dv),
         config=cfg,
-        calibration=np.zeros((n_neurons, 1), dtype=np.int64),
-        float_calibration=np.zeros((n_neurons, 1), dtype=np.int64),
-        reference_place_ids=np.zeros(1, dtype=np.int64),
+        calibration=np.zeros((n_neurons, modules), dtype=np.int64),
+        float_calibration=np.zeros((n_neurons, modules), dtype=np.int64),
+        reference_place_ids=np.arange(modules, dtype=np.int64),
         reference_traversals=["summer"],
         quantisation={"per_neuron": per_neuron},
         source_sha256="0" * 64,
@@ -70,21 +72,34 @@ def make_model(
 def cases(draw, saturating: bool = False):
     """A random small model and spike trains; ``saturating`` pushes voltages past 2**23 - 1."""
     side = 8 if saturating else draw(st.sampled_from([2, 3, 4]))
-    n_neurons = draw(st.integers(1, 6))
+    modules = draw(st.integers(1, 3))
+    n_neurons = modules * draw(st.integers(1, 4))
     bits = draw(st.integers(7, 8) if saturating else st.integers(2, 8))
     per_neuron = draw(st.booleans())
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     top = 2**bits
     q = rng.integers(top // 2 if saturating else 0, top, (side * side, n_neurons))
     multiplier_range = draw(st.sampled_from([4, 2**16]))  # small multipliers make a_j m_j ties likely
-    m = rng.integers(1, multiplier_range, n_neurons) if per_neuron else np.full(n_neurons, rng.integers(1, 2**16))
+    m = (
+        rng.integers(1, multiplier_range, n_neurons)
+        if per_neuron
+        else np.repeat(rng.integers(1, 2**16, modules), n_neurons // modules)
+    )
     if saturating:
         threshold, dv = rng.integers(2**17 - 2**10, 2**17, n_neurons), draw(st.integers(0, 8))
     else:
         threshold = rng.integers(1, draw(st.sampled_from([8, 300, 2**17])), n_neurons)
         dv = draw(st.integers(0, 4095))
     model = make_model(
-        q, m, threshold, dv, bits, wta=draw(st.booleans()), isolation=draw(st.booleans()), per_neuron=per_neuron
+        q,
+        m,
+        threshold,
+        dv,
+        bits,
+        wta=draw(st.booleans()),
+        isolation=draw(st.booleans()),
+        per_neuron=per_neuron,
+        modules=modules,
     )
     shape = (draw(st.integers(1, 3)), draw(st.integers(35, 50) if saturating else st.integers(1, 12)), side * side)
     spikes = (rng.random(shape) < draw(st.floats(0.6, 1.0) if saturating else st.floats(0.05, 0.95))).astype(np.uint8)
@@ -99,6 +114,15 @@ def assert_identical(model: FixedPointModel, spikes: np.ndarray) -> tuple:
     assert np.array_equal(fast.counts.numpy(), slow.counts)
     assert np.array_equal(fast.candidates_per_step.numpy(), slow.candidates_per_step)
     assert fast.saturations == slow.saturations
+    loop = run_prepared(
+        prepare(model, torch.device("cpu")),
+        torch.from_numpy(spikes),
+        isolation=model.config.network.state_isolation,
+        record=True,
+        compiled=False,
+    )
+    assert np.array_equal(loop.raster.numpy(), slow.raster)
+    assert np.array_equal(loop.final_voltage.numpy(), slow.final_voltage)
     return fast, slow
 
 
