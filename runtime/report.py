@@ -257,6 +257,7 @@ def blocks_of(report: VerifyReport) -> list[Block]:
         )
     )
     blocks += decision_blocks(summary, ks)
+    blocks += module_blocks(first, n_runs)
     blocks += cross_blocks(report)
     blocks += quantisation_blocks(first)
     blocks.append(
@@ -448,6 +449,58 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
     return blocks
 
 
+def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
+    """An ensemble's per-module table (whole-route accuracy on each region's queries) and its plot."""
+    if not any(result.modules for result in run.bits):
+        return []
+    first = next(result.modules for result in run.bits if result.modules)
+    k = first[0].k
+    headers = ["module", "places", "queries", "float k=1 %", f"float k={k} %"]
+    for result in run.bits:
+        headers += [f"{result.bits}-bit k={k} % (Δ)", f"{result.bits}-bit same winner %"]
+    rows = []
+    for index, module in enumerate(first):
+        cells = [
+            str(module.module),
+            f"{module.first_place}-{module.last_place}",
+            str(module.n_queries),
+            f"{100 * module.float_accuracy:.1f}",
+            f"{100 * module.float_accuracy_k:.1f}",
+        ]
+        for result in run.bits:
+            row = result.modules[index]
+            cells += [f"{100 * row.accuracy_k:.1f} ({signed_pct(row.delta_k)})", f"{100 * row.winner_agreement:.1f}"]
+        rows.append(cells)
+    worst = []
+    for result in run.bits:
+        low = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement))
+        worst.append(
+            f"{result.bits}-bit: module {low.module} (places {low.first_place}-{low.last_place}, "
+            f"{signed_pct(low.delta_k)} pts at k={k}, {100 * low.winner_agreement:.1f} % same winner)"
+        )
+    which = f" (network {run.label or 1} of {n_runs})" if n_runs > 1 else ""
+    return [
+        Block("h2", f"Modules of the ensemble{which}"),
+        Block(
+            "p",
+            f"{len(first)} modules. "
+            "Accuracy is the whole-route W+Prob decision (every module's neurons, every place) scored on the "
+            "queries whose true place lies in the module's region; same winner: the share of time steps on "
+            "which the module's WTA picks the float module's winner. The module that degrades most: "
+            + "; ".join(worst)
+            + ".",
+        ),
+        Block("table", headers=headers, rows=rows),
+        Block(
+            "figure",
+            title="Accuracy per module",
+            image=plot_modules(run),
+            name="modules.png",
+            text=f"Whole-route W+Prob accuracy at k={k} on each module's region, float (black) vs each bit width.",
+        ),
+    ]
+
+
 def quantisation_blocks(run: VerifiedRun) -> list[Block]:
     rows = []
     for result in run.bits:
@@ -623,6 +676,29 @@ def plot_pr(run: VerifiedRun) -> bytes:
         ax.set_title(name.replace("wprob", "W+Prob"))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower left")
+    return png(fig)
+
+
+def plot_modules(run: VerifiedRun) -> bytes:
+    plt = pyplot()
+    results = [result for result in run.bits if result.modules]
+    modules = results[0].modules
+    x = np.arange(len(modules))
+    fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 0.35 * len(modules) + 2), 5.2), sharex=True)
+    cmap = plt.get_cmap("viridis")
+    n = max(len(results) - 1, 1)
+    axes[0].plot(x, [100 * m.float_accuracy_k for m in modules], "o-", color="black", label="float")
+    for index, result in enumerate(results):
+        color = cmap(index / n)
+        axes[0].plot(x, [100 * m.accuracy_k for m in result.modules], ".-", color=color, label=f"{result.bits}-bit")
+        axes[1].plot(x, [100 * m.winner_agreement for m in result.modules], ".-", color=color)
+    axes[0].set_ylabel(f"accuracy k={modules[0].k} %")
+    axes[1].set_ylabel("same winner %")
+    axes[1].set_xlabel("module (region of consecutive places)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=len(results) + 1)
+    fig.tight_layout()
     return png(fig)
 
 

@@ -411,6 +411,60 @@ class LevelHistogram:
         return cls(int(data["levels"]), tuple(int(c) for c in data["counts"]), float(data["zero_fraction"]))
 
 
+# ---------------------------------------------------------------------------- modules of an ensemble
+
+
+@dataclass(frozen=True)
+class ModuleRow:
+    """One module of an ensemble at one bit width, against the float ensemble on the same queries.
+
+    Accuracies are the **whole-route** W+Prob decisions (every module's neurons, every place)
+    scored on the queries whose true place lies in this module's region, at k=1 and at the
+    largest k; ``winner_agreement`` is the share of (query, step) pairs on which this module's
+    WTA picks the same winner as the float module (or both stay silent), over all queries.
+    """
+
+    module: int
+    first_place: int  # place id of the region's first place
+    last_place: int  # place id of its last place
+    n_queries: int  # queries whose true place lies in the region
+    k: int  # the largest k of the run
+    float_accuracy: float  # k = 1
+    accuracy: float
+    float_accuracy_k: float  # at k
+    accuracy_k: float
+    winner_agreement: float
+    spikes_float: int  # this module's output spikes over all queries
+    spikes: int
+
+    @property
+    def delta_k(self) -> float:
+        """Accuracy at the largest k, quantised minus float."""
+        return self.accuracy_k - self.float_accuracy_k
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "module": self.module,
+            "first_place": self.first_place,
+            "last_place": self.last_place,
+            "n_queries": self.n_queries,
+            "k": self.k,
+            "float_accuracy": self.float_accuracy,
+            "accuracy": self.accuracy,
+            "float_accuracy_k": self.float_accuracy_k,
+            "accuracy_k": self.accuracy_k,
+            "winner_agreement": self.winner_agreement,
+            "spikes_float": self.spikes_float,
+            "spikes": self.spikes,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ModuleRow:
+        ints = ("module", "first_place", "last_place", "n_queries", "k", "spikes_float", "spikes")
+        floats = ("float_accuracy", "accuracy", "float_accuracy_k", "accuracy_k", "winner_agreement")
+        return cls(**{name: int(data[name]) for name in ints}, **{name: float(data[name]) for name in floats})
+
+
 # ---------------------------------------------------------------------------- one network
 
 
@@ -429,6 +483,7 @@ class BitsResult:
     weight_levels: LevelHistogram
     passed: bool
     seconds: Mapping[str, float] = field(default_factory=dict)
+    modules: tuple[ModuleRow, ...] = ()  # an ensemble's modules (empty for one network)
 
     def row(self, strategy: str, k: int) -> MetricRow:
         row = find_row(self.metrics, strategy, k)
@@ -449,6 +504,7 @@ class BitsResult:
             "weight_levels": self.weight_levels.to_dict(),
             "passed": self.passed,
             "seconds": dict(self.seconds),
+            "modules": [m.to_dict() for m in self.modules],
         }
 
     @classmethod
@@ -465,6 +521,7 @@ class BitsResult:
             weight_levels=LevelHistogram.from_dict(data["weight_levels"]),
             passed=bool(data["passed"]),
             seconds={str(k): float(v) for k, v in data.get("seconds", {}).items()},
+            modules=tuple(ModuleRow.from_dict(m) for m in data.get("modules", [])),
         )
 
 

@@ -48,6 +48,7 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, FixedPointModel, check_bits, save_fixed_point
+from vprsnn_export.modules import module_regions
 from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.stats import mean_std
@@ -66,6 +67,7 @@ from .results import (
     FloatResult,
     LevelHistogram,
     MetricRow,
+    ModuleRow,
     PrCurve,
     RunSummary,
     SpikeLevel,
@@ -229,6 +231,86 @@ def decision_level(
         aggregated_agreement={
             int(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
         },
+    )
+
+
+# ---------------------------------------------------------------------------- modules of an ensemble
+
+
+def query_regions(regions: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray) -> np.ndarray:
+    """The module whose region holds each query's true place (-1 where it is no reference place)."""
+    order = np.argsort(reference_place_ids, kind="stable")
+    ids = np.asarray(reference_place_ids)[order]
+    queries = np.asarray(query_place_ids)
+    where = np.clip(np.searchsorted(ids, queries), 0, max(ids.size - 1, 0))
+    index = np.where(ids[where] == queries, order[where], -1)
+    place_module = np.searchsorted(regions[:, 1], np.arange(int(regions[-1, 1])), side="right")
+    return np.where(index >= 0, place_module[np.maximum(index, 0)], -1)
+
+
+def correct_decisions(
+    distribution: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int
+) -> np.ndarray:
+    """Per query: whether the W+Prob decision of ``distribution`` (Q, places) is the true place (+-tolerance)."""
+    predicted, _ = decide(distribution, "wprob")
+    return np.asarray(is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance))
+
+
+def module_rows(
+    regions: np.ndarray,
+    group: int,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    float_aggregated: Mapping[int, np.ndarray],
+    int_aggregated: Mapping[int, np.ndarray],
+    float_raster: torch.Tensor,
+    int_raster: torch.Tensor,
+    tolerance: int,
+) -> tuple[ModuleRow, ...]:
+    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
+    and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
+
+    Vectorised over modules: region accuracy = bincount(module of query, correct) / bincount(module of query).
+    """
+    n_modules = len(regions)
+    top = max(float_aggregated)
+    module_of_query = query_regions(regions, reference_place_ids, query_place_ids)
+    known = module_of_query >= 0
+    n_queries = np.bincount(module_of_query[known], minlength=n_modules)
+
+    def region_accuracy(distribution: np.ndarray) -> np.ndarray:
+        correct = correct_decisions(distribution, reference_place_ids, query_place_ids, tolerance)
+        hits = np.bincount(module_of_query[known], weights=correct[known].astype(np.float64), minlength=n_modules)
+        return hits / np.maximum(n_queries, 1)
+
+    accuracy = {
+        name: (region_accuracy(agg[1]), region_accuracy(agg[top]))
+        for name, agg in (("float", float_aggregated), ("int", int_aggregated))
+    }
+    a = torch.as_tensor(float_raster)
+    b = torch.as_tensor(int_raster)
+    n, timesteps, _ = a.shape
+    a, b = a.reshape(n, timesteps, n_modules, group), b.reshape(n, timesteps, n_modules, group)
+    agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
+    spikes_float = a.sum(dim=(0, 1, 3)).numpy()
+    spikes = b.sum(dim=(0, 1, 3)).numpy()
+    ids = np.asarray(reference_place_ids)
+    return tuple(
+        ModuleRow(
+            module=m,
+            first_place=int(ids[regions[m, 0]]),
+            last_place=int(ids[regions[m, 1] - 1]),
+            n_queries=int(n_queries[m]),
+            k=int(top),
+            float_accuracy=float(accuracy["float"][0][m]),
+            accuracy=float(accuracy["int"][0][m]),
+            float_accuracy_k=float(accuracy["float"][1][m]),
+            accuracy_k=float(accuracy["int"][1][m]),
+            winner_agreement=float(agreement[m]),
+            spikes_float=int(spikes_float[m]),
+            spikes=int(spikes[m]),
+        )
+        for m in range(n_modules)
     )
 
 
@@ -398,6 +480,7 @@ def verify_checkpoint(
     float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device).run(spikes, record=True)
     float_counts = float_run.counts.numpy()
     ref_ids = ckpt.reference_place_ids
+    regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
     float_rows = metric_rows(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout))
     float_scores, float_agg = readout_scores(ckpt.calibration, float_counts, readout)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
@@ -465,6 +548,21 @@ def verify_checkpoint(
                 float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
             )
             checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks)
+            modules = (
+                module_rows(
+                    regions,
+                    ckpt.config.network.n_neurons,
+                    ref_ids,
+                    query_place_ids,
+                    float_agg,
+                    agg,
+                    float_run.raster,
+                    int_run.raster,
+                    readout.tolerance,
+                )
+                if len(regions) > 1
+                else ()
+            )
             seconds["readout"] = time.perf_counter() - clock
             results.append(
                 BitsResult(
@@ -479,6 +577,7 @@ def verify_checkpoint(
                     weight_levels=level_histogram(model),
                     passed=bool(cross.passed and all(c.passed for c in checks)),
                     seconds={k: round(v, 3) for k, v in seconds.items()},
+                    modules=modules,
                 )
             )
             stages.update(1)

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
+from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from vprsnn_export.cli import main
+from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
@@ -22,11 +23,13 @@ from vprsnn_export.runtime.conformance import (
     exact_comparison,
 )
 from vprsnn_export.runtime.evaluation import ReadoutOptions
+from vprsnn_export.runtime.report import write_report
 from vprsnn_export.runtime.results import (
     SCHEMA,
     ConformanceResult,
     DecisionLevel,
     MetricRow,
+    ModuleRow,
     SpikeLevel,
     VerifiedRun,
     VerifyReport,
@@ -37,6 +40,7 @@ from vprsnn_export.runtime.verify import (
     build_report,
     count_correlations,
     metric_deltas,
+    module_rows,
     parse_tolerances,
     summarise_runs,
     tolerance_checks,
@@ -45,6 +49,7 @@ from vprsnn_export.runtime.verify import (
     verify_checkpoint,
 )
 from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
 
@@ -352,3 +357,53 @@ def test_build_report_and_summary(verified):
     assert row.values["accuracy"].n == 2 and row.values["accuracy"].std == 0.0
     json.dumps(data, allow_nan=False)
     assert VerifyReport.from_dict(json.loads(json.dumps(data))) == report
+
+
+# ---------------------------------------------------------------- ensembles of modules
+
+
+def test_module_rows_score_each_region_on_its_own_queries():
+    """Two modules of two places; the quantised decision is wrong on place 3 only, module 1's winner differs once."""
+    regions = np.array([[0, 2], [2, 4]])
+    ids = np.array([10, 11, 12, 13])
+    right = np.eye(4)
+    wrong = right.copy()
+    wrong[3] = [0, 0, 1, 0]
+    float_raster = torch.zeros((4, 2, 4), dtype=torch.bool)
+    int_raster = float_raster.clone()
+    int_raster[0, 1, 2] = True
+    rows = module_rows(regions, 2, ids, ids, {1: right, 3: right}, {1: wrong, 3: wrong}, float_raster, int_raster, 0)
+    assert [(r.first_place, r.last_place, r.n_queries) for r in rows] == [(10, 11, 2), (12, 13, 2)]
+    assert [r.accuracy for r in rows] == [1.0, 0.5] and [r.float_accuracy_k for r in rows] == [1.0, 1.0]
+    assert rows[1].delta_k == -0.5 and rows[0].winner_agreement == 1.0 and rows[1].winner_agreement == 7 / 8
+    assert rows[1].spikes == 1 and rows[1].spikes_float == 0
+    assert ModuleRow.from_dict(json.loads(json.dumps(rows[1].to_dict()))) == rows[1]
+
+
+def test_an_ensemble_is_verified_per_module_and_reported(tmp_path):
+    cfg = Config().replace(
+        **{"train.module_size": 10, "train.epochs": 2, "encoder.timesteps": 40, "network.n_neurons": 16}
+    )
+    data = load_dataset("synthetic:30", ["summer", "winter"], cfg.preprocess)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False)
+    path = save_checkpoint(tmp_path / "ensemble.npz", ckpt)
+    options = VerifyOptions(readout=ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 3)), bits=(8, 2), targets=())
+    run = verify_checkpoint(
+        ckpt,
+        checkpoint_sha256(path),
+        data.traversal("winter"),
+        data.place_ids,
+        "winter",
+        options,
+        reference_images={"summer": data.traversal("summer")},
+        label="ensemble",
+    )
+    for result in run.bits:
+        assert [(m.module, m.n_queries, m.k) for m in result.modules] == [(0, 10, 3), (1, 10, 3), (2, 10, 3)]
+        assert all(0 <= m.winner_agreement <= 1 for m in result.modules)
+        assert sum(m.spikes for m in result.modules) == result.spike_level.total_spikes
+    assert VerifiedRun.from_dict(json.loads(json.dumps(run.to_dict()))).bits[1].modules == run.bits[1].modules
+    report = build_report([run], {**options.to_dict(), "query": "winter"}, command=["test"], seconds=1.0)
+    written = write_report(report, tmp_path / "report")
+    text = written["md"].read_text()
+    assert "## Modules of the ensemble" in text and "modules.png" in text
