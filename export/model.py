@@ -57,6 +57,9 @@ def check_bits(bits: int) -> int:
     return bits
 
 
+MODULE_FIELDS = ("module_weight_relative_rmse", "module_weights_clipped", "module_max_current")
+
+
 @dataclass(frozen=True)
 class QuantisationReport:
     """How a fixed-point model was quantised and calibrated, and how far it is from the float network.
@@ -84,13 +87,17 @@ class QuantisationReport:
     max_current: int | None = None  # max_j sum_i q_ij: the largest possible a_j
     calibration: str | None = None  # how S^R was obtained ("deployed (integer simulator)", "float (reused)", ...)
     calibration_saturations: int | None = None  # voltage clips while re-measuring S^R (None: not re-measured)
+    module_weight_relative_rmse: tuple[float, ...] | None = None  # per module of an ensemble (older files: None)
+    module_weights_clipped: tuple[int, ...] | None = None
+    module_max_current: tuple[int, ...] | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """The header's JSON object: the recorded fields (None ones included) and the extra keys."""
+        """The header's JSON object: the recorded fields (None ones included, except the per-module
+        lists, absent when not recorded so that older headers are written back unchanged) and the extra keys."""
         data: dict[str, Any] = {}
         for item in fields(self):
-            if item.name == "extra":
+            if item.name == "extra" or (item.name in MODULE_FIELDS and getattr(self, item.name) is None):
                 continue
             value = getattr(self, item.name)
             data[item.name] = list(value) if isinstance(value, tuple) else value
@@ -107,6 +114,13 @@ class QuantisationReport:
             if values.get(name) is not None:
                 low, high = values[name]
                 values[name] = (int(low), int(high))
+        for name, kind in (
+            ("module_weight_relative_rmse", float),
+            ("module_weights_clipped", int),
+            ("module_max_current", int),
+        ):
+            if values.get(name) is not None:
+                values[name] = tuple(kind(value) for value in values[name])
         extra = {key: value for key, value in data.items() if key not in known}
         return cls(**values, extra=extra)
 
