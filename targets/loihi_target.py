@@ -238,7 +238,10 @@ def module_populations(model: FixedPointModel) -> list[dict[str, Any]]:
                 "places": [int(start), int(stop)],
                 "vth_range": [int(vth.min()), int(vth.max())],
                 "vth_uniform": bool(np.all(vth == vth[0])),
-                "score_multiplier_range": [int(model.scale_multiplier[own].min()), int(model.scale_multiplier[own].max())],
+                "score_multiplier_range": [
+                    int(model.scale_multiplier[own].min()),
+                    int(model.scale_multiplier[own].max()),
+                ],
                 "current_bound": int(sums[own].max()),
                 "synapses": int(model.n_inputs * group),
             }
@@ -313,7 +316,9 @@ def axon_synapse_bits(limits: CoreLimits, neurons: int, bits: int) -> int:
 def neurons_per_core(limits: CoreLimits, inputs: int, bits: int) -> int:
     """The most neurons k of one module a core holds: k <= the neuron limit and inputs * axon_synapse_bits(k) <= memory."""
     if limits.fan_in_per_core is not None and inputs > limits.fan_in_per_core:
-        raise InvalidValueError(f"{inputs} inputs exceed {limits.chip}'s fan-in of {limits.fan_in_per_core} axons per core")
+        raise InvalidValueError(
+            f"{inputs} inputs exceed {limits.chip}'s fan-in of {limits.fan_in_per_core} axons per core"
+        )
     best = 0
     for k in range(1, limits.neurons_per_core + 1):
         if inputs * axon_synapse_bits(limits, k, bits) > limits.synapse_bits_per_core:
