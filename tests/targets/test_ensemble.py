@@ -279,3 +279,14 @@ def test_netx_runs_the_ensemble(route, queries, tmp_path, netx_python):
     netx = torch.from_numpy(np.load(tmp_path / "out.npy").astype(bool))
     off = dataclasses.replace(model, config=model.config.replace(**{"network.wta": False}))
     assert torch.equal(netx, simulate(off, queries, record=True).raster)
+
+
+def test_quantize_command_prints_the_modules(route, tmp_path, capsys):
+    from vprsnn_export.checkpoint import save_checkpoint
+
+    path = save_checkpoint(tmp_path / "ens.npz", route[0])
+    args = ["quantize", str(path), "--bits", "4", "--per-tensor", "--reuse-float-calibration", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "q")]) == 0
+    assert "4 bits, 3 modules: rel. RMSE per module" in capsys.readouterr().out
+    model = load_fixed_point(tmp_path / "q" / "model_4bit_per-tensor_max.npz")
+    assert np.all(model.scale_multiplier.reshape(MODULES, GROUP).std(axis=1) == 0)
