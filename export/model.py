@@ -5,7 +5,9 @@ Integer dynamics, per presentation, per step t (all integers; see docs/fixed-poi
     a_j[t] = sum_i q_ij s_i[t]                                   (weight mantissas q, unsigned, `bits` wide)
     V_j[t] = sat24( trunc0(V_j[t-1] (4096 - dv) / 4096) + (a_j[t] << voltage_shift) )
     C[t]   = { j : V_j[t] > theta_j << voltage_shift }
-    WTA:     S_j[t] = 1 for the j in C[t] maximising a_j[t] m_j   (ties: lowest index)
+    WTA:     S_j[t] = 1 for the j in C[t] maximising a_j[t] m_j   (ties: lowest index),
+             within each module's group of n = network.n_neurons neurons (an ensemble of M
+             modules stores M n neurons side by side; one network is one group)
     V_j[t] <- 0 for j in C[t]
 
 trunc0 rounds toward zero (Lava's decay); sat24 clips to [-(2**23 - 1), 2**23 - 1] and
@@ -57,6 +59,9 @@ def check_bits(bits: int) -> int:
     return bits
 
 
+MODULE_FIELDS = ("module_weight_relative_rmse", "module_weights_clipped", "module_max_current")
+
+
 @dataclass(frozen=True)
 class QuantisationReport:
     """How a fixed-point model was quantised and calibrated, and how far it is from the float network.
@@ -84,13 +89,17 @@ class QuantisationReport:
     max_current: int | None = None  # max_j sum_i q_ij: the largest possible a_j
     calibration: str | None = None  # how S^R was obtained ("deployed (integer simulator)", "float (reused)", ...)
     calibration_saturations: int | None = None  # voltage clips while re-measuring S^R (None: not re-measured)
+    module_weight_relative_rmse: tuple[float, ...] | None = None  # per module of an ensemble (older files: None)
+    module_weights_clipped: tuple[int, ...] | None = None
+    module_max_current: tuple[int, ...] | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """The header's JSON object: the recorded fields (None ones included) and the extra keys."""
+        """The header's JSON object: the recorded fields (None ones included, except the per-module
+        lists, absent when not recorded so that older headers are written back unchanged) and the extra keys."""
         data: dict[str, Any] = {}
         for item in fields(self):
-            if item.name == "extra":
+            if item.name == "extra" or (item.name in MODULE_FIELDS and getattr(self, item.name) is None):
                 continue
             value = getattr(self, item.name)
             data[item.name] = list(value) if isinstance(value, tuple) else value
@@ -107,6 +116,13 @@ class QuantisationReport:
             if values.get(name) is not None:
                 low, high = values[name]
                 values[name] = (int(low), int(high))
+        for name, kind in (
+            ("module_weight_relative_rmse", float),
+            ("module_weights_clipped", int),
+            ("module_max_current", int),
+        ):
+            if values.get(name) is not None:
+                values[name] = tuple(kind(value) for value in values[name])
         extra = {key: value for key, value in data.items() if key not in known}
         return cls(**values, extra=extra)
 
@@ -157,6 +173,18 @@ class FixedPointModel:
     def float_thresholds(self) -> np.ndarray:
         return self.threshold * self.scale_multiplier * 2.0**self.scale_exponent
 
+    def wta_description(self) -> str:
+        """The header's WTA rule in words (per module for an ensemble)."""
+        if not self.config.network.wta:
+            return "off: every candidate spikes"
+        group = self.config.network.n_neurons
+        if self.n_neurons == group:
+            return "one spike: argmax over C of a_j * m_j, ties to the lowest index"
+        return (
+            f"one spike per module (groups of {group} consecutive neurons, {self.n_neurons // group} modules): "
+            "argmax over the module's part of C of a_j * m_j, ties to the lowest index"
+        )
+
     def header(self) -> dict[str, Any]:
         """The JSON header: every width, rounding rule and scale, for humans and other tools."""
         return {
@@ -175,16 +203,15 @@ class FixedPointModel:
             "data": self.data,
             "arithmetic": {
                 "weights": f"unsigned {self.bits}-bit mantissas q_ij; w_ij ~= q_ij * m_j * 2**scale_exponent",
-                "scale_multiplier": f"unsigned {MULTIPLIER_BITS}-bit m_j per neuron (all equal when per-tensor)",
+                "scale_multiplier": f"unsigned {MULTIPLIER_BITS}-bit m_j per neuron (all equal within a module when "
+                "per-tensor)",
                 "threshold": f"unsigned {THRESHOLD_BITS}-bit vth mantissa, compared as vth << voltage_shift",
                 "current": "a_j[t] = sum_i q_ij s_i[t] (exact integer)",
                 "decay": "V <- trunc_toward_zero(V * (4096 - decay_dv) / 4096)",
                 "voltage": f"V <- clip(V + (a << voltage_shift), -(2**{self.voltage_bits - 1} - 1), "
                 f"2**{self.voltage_bits - 1} - 1), clips counted",
                 "candidates": "C = {j : V_j > threshold_j << voltage_shift}",
-                "wta": "one spike: argmax over C of a_j * m_j, ties to the lowest index"
-                if self.config.network.wta
-                else "off: every candidate spikes",
+                "wta": self.wta_description(),
                 "reset": "V_j <- 0 for every j in C",
                 "state": "V zeroed at the start of every presentation"
                 if self.config.network.state_isolation

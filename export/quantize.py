@@ -6,7 +6,9 @@ one exponent for the network); the float weight w_ij becomes the unsigned mantis
     q_ij = clip(floor(w_ij / s_j + 1/2), 0, 2**b - 1)            (round to nearest, ties up)
 
 and the float threshold becomes theta_int_j = clip(floor(theta_j / s_j + 1/2), 1, 2**17 - 1).
-Per-tensor quantisation uses one scale for all neurons; per-neuron one per column.
+Per-tensor quantisation uses one scale per module (per weight tensor: an ensemble of M
+modules, src/vprsnn_export/modules.py, stores M tensors side by side, module m owning the
+columns [m n, (m + 1) n)); per-neuron one per column.
 The scale method picks the desired s_j from the float weights:
 
     max:  s_j = max_i w_ij / (2**b - 1)                           (no weight clips)
@@ -15,7 +17,10 @@ The scale method picks the desired s_j from the float weights:
 
 Threshold folding (per-neuron only) gives every neuron the same integer threshold
 Theta by choosing s_j = theta_j / Theta, for hardware with one threshold per
-population. Everything is derived from the checkpoint; nothing is tuned by hand.
+population. One Theta serves the whole ensemble (every module's population then has
+the same vth, and the NIR file's one LIF node has one threshold, which snnTorch and
+SpikingJelly need); the scales stay per neuron. Everything is derived from the
+checkpoint; nothing is tuned by hand.
 """
 
 from __future__ import annotations
@@ -88,23 +93,39 @@ def mse_scales(weights: np.ndarray, bits: int) -> np.ndarray:
     return MSE_GRID[np.argmin(errors, axis=0)] * top
 
 
-def desired_scales(weights: np.ndarray, bits: int, method: str, per_neuron: bool) -> np.ndarray:
+def module_columns(n_neurons: int, group: int | None) -> int:
+    """The neurons per module (WTA group) n; ``None`` or 0: one module of all neurons."""
+    group = n_neurons if not group else group
+    if n_neurons % group:
+        raise InvalidValueError(f"{n_neurons} neurons do not split into modules of {group}")
+    return group
+
+
+def desired_scales(
+    weights: np.ndarray, bits: int, method: str, per_neuron: bool, group: int | None = None
+) -> np.ndarray:
     """The float scale s_j of every neuron before it is split into m_j 2**e.
 
-    Per-tensor: the method applied to all weights as one column, broadcast to every
-    neuron. A neuron whose weights are all zero never fires; it takes the
-    per-tensor scale so that its threshold still has a representable mantissa.
+    Per-tensor: the method applied to each module's weights as one column (module m:
+    columns [m n, (m + 1) n), n = ``group``; None: one module), broadcast to the
+    module's neurons. A neuron whose weights are all zero never fires; it takes its
+    module's per-tensor scale (a module of zeros the whole ensemble's, else 1) so
+    that its threshold still has a representable mantissa.
     """
     if method not in SCALE_METHODS:
         raise InvalidValueError(f"unknown scale method {method!r}: choose from {', '.join(SCALE_METHODS)}")
     choose = max_abs_scales if method == "max" else mse_scales
-    n_neurons = weights.shape[1]
+    n_inputs, n_neurons = weights.shape
+    group = module_columns(n_neurons, group)
     whole = float(choose(weights.reshape(-1, 1), bits)[0])
     whole = whole if whole > 0 else 1.0
+    per_module = weights.reshape(n_inputs, -1, group).transpose(0, 2, 1).reshape(n_inputs * group, -1)
+    modules = choose(per_module, bits)
+    module_scale = np.repeat(np.where(modules > 0, modules, whole), group)
     if not per_neuron:
-        return np.full(n_neurons, whole)
+        return module_scale
     scales = choose(weights, bits)
-    return np.where(scales > 0, scales, whole)
+    return np.where(scales > 0, scales, module_scale)
 
 
 def split_scales(scales: np.ndarray) -> tuple[np.ndarray, int]:
@@ -152,8 +173,13 @@ def quantise_arrays(
     per_neuron: bool,
     scale_method: str,
     fold_thresholds: bool,
+    group: int | None = None,
 ) -> QuantisedArrays:
-    """Float weights (inputs, neurons) and thresholds (neurons,) -> mantissas, scales, integer thresholds."""
+    """Float weights (inputs, neurons) and thresholds (neurons,) -> mantissas, scales, integer thresholds.
+
+    ``group`` is the neurons per module of an ensemble (None: one module): per-tensor
+    scales are per module, and the report adds each module's errors.
+    """
     check_bits(bits)
     if fold_thresholds and not per_neuron:
         raise InvalidValueError("threshold folding needs per-neuron scales (--per-neuron)")
@@ -161,7 +187,8 @@ def quantise_arrays(
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if fold_thresholds and np.any(thresholds <= 0):
         raise InvalidValueError("threshold folding needs positive float thresholds")
-    scales = desired_scales(weights, bits, scale_method, per_neuron)
+    group = module_columns(weights.shape[1], group)
+    scales = desired_scales(weights, bits, scale_method, per_neuron, group)
     theta_shared = None
     if fold_thresholds:
         theta_shared = shared_threshold(weights, thresholds, bits, scale_method, scales)
@@ -175,6 +202,7 @@ def quantise_arrays(
         else integer_thresholds(thresholds, actual)
     )
     report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits)
+    report.update(module_error_report(weights, mantissas, actual, bits, group))
     report.update(
         bits=bits,
         per_neuron=per_neuron,
@@ -220,6 +248,31 @@ def error_report(
     }
 
 
+def module_error_report(
+    weights: np.ndarray, mantissas: np.ndarray, scales: np.ndarray, bits: int, group: int
+) -> dict[str, list[float] | list[int]]:
+    """Each module's weight errors (lists of M; module m = columns [m n, (m + 1) n)).
+
+    module_weight_relative_rmse_m = sqrt(mean_m (w - q s)**2) / sqrt(mean_m w**2);
+    module_weights_clipped_m = #{w / s >= 2**bits - 1/2};  module_max_current_m = max_{j in m} sum_i q_ij
+    """
+    n_inputs = weights.shape[0]
+
+    def by_module(array: np.ndarray) -> np.ndarray:
+        return array.reshape(n_inputs, -1, group).transpose(1, 0, 2).reshape(array.shape[1] // group, -1)
+
+    error = by_module(weights - mantissas * scales)
+    power = np.sqrt(np.mean(by_module(weights) ** 2, axis=1))
+    rmse = np.sqrt(np.mean(error * error, axis=1)) / np.where(power > 0, power, 1.0)
+    clipped = np.sum(by_module(weights / scales) >= levels(bits) + 0.5, axis=1)
+    current = mantissas.astype(np.int64).sum(axis=0).reshape(-1, group).max(axis=1)
+    return {
+        "module_weight_relative_rmse": [float(x) for x in rmse],
+        "module_weights_clipped": [int(x) for x in clipped],
+        "module_max_current": [int(x) for x in current],
+    }
+
+
 def quantize_checkpoint(
     ckpt: Checkpoint,
     ckpt_sha256: str,
@@ -239,6 +292,7 @@ def quantize_checkpoint(
         per_neuron=per_neuron,
         scale_method=scale_method,
         fold_thresholds=fold_thresholds,
+        group=ckpt.config.network.n_neurons,
     )
     report = QuantisationReport.from_dict(
         dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)

@@ -40,8 +40,9 @@ from vprsnn_export.fileio import (
     sha256_file,
     staging_folder,
 )
+from vprsnn_export.modules import module_count
 from vprsnn_export.readout.assignment import decide, strategy_scores
-from vprsnn_export.targets.loihi_target import write_loihi
+from vprsnn_export.targets.loihi_target import model_budgets, write_loihi
 from vprsnn_export.targets.nir_target import (
     CONSUMERS,
     WTA_INHIBITION,
@@ -163,6 +164,15 @@ def consumer_statements(
     """What each consumer of each written file computes, in one sentence or three."""
     thresholds = source.thresholds
     uniform = bool(np.all(thresholds == thresholds[0]))
+    network = source.network
+    group = network.config.network.n_neurons
+    modules = module_count(len(network.reference_place_ids), network.config.train.module_size)
+    ensemble = (
+        f" The network is an ensemble of {modules} modules of {group} neurons side by side; the hard WTA runs "
+        f"within each module (one winner per module per step)."
+        if modules > 1
+        else ""
+    )
     notes: dict[str, str] = {}
     if "nir" in targets:
         arithmetic = (
@@ -197,16 +207,27 @@ def consumer_statements(
                 "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
             )
             + "."
+            + (
+                ensemble
+                and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is n."
+            )
         )
     if "onnx" in targets and model is not None:
         notes["onnx"] = (
             "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
-            "distribution, identical to the integer simulator."
+            "distribution, identical to the integer simulator." + ensemble
         )
     if "loihi" in targets and model is not None:
         notes["loihi"] = (
             "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
             "a_j < 2**17; the hard WTA is a rule in network.json that a Lava user adds after the LIF population."
+            + (ensemble and ensemble + " network.json's modules are the populations exc_m, one per module.")
+            + " Loihi-class cores: "
+            + "; ".join(
+                f"{budget.chip} {budget.cores} cores ({budget.cores_per_module} per module), {budget.synapses:,} synapses"
+                for budget in model_budgets(model)
+            )
+            + " (network.json resources; docs/targets.md §2.5)."
         )
     return notes
 

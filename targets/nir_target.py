@@ -49,6 +49,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-nir"
@@ -101,20 +102,64 @@ def wta_rule(source: Source) -> str:
 
 
 READOUT_RULE = "vprsnn-hard-wta"
-READOUT_RULE_VERSION = 1
+READOUT_RULE_VERSION = 2  # 2: the WTA runs within each group of group_size consecutive neurons (a module)
+READABLE_RULE_VERSIONS = (1, 2)  # 1: one group of all neurons
+
+
+def wta_group(source: Source) -> int:
+    """n = network.n_neurons: the neurons of one module, the WTA group (all neurons of a single network)."""
+    return int(source.config.network.n_neurons)
+
+
+def populations(source: Source) -> list[dict[str, Any]]:
+    """One entry per module of the lif node: its neurons [start, stop), its region of reference places, thresholds.
+
+    The documented grouping: module m is the population of neurons [m n, (m + 1) n) of the one
+    linear / lif pair, trained on the reference places [region start, region stop) (indices into
+    metadata['reference_place_ids']); a single network is one population.
+    """
+    n_places = len(source.reference_place_ids)
+    group = wta_group(source)
+    regions = module_regions(n_places, source.config.train.module_size)
+    thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)
+    rows = []
+    for m, (start, stop) in enumerate(regions.tolist()):
+        own = thresholds[m * group : (m + 1) * group]
+        rows.append(
+            {
+                "name": f"module_{m}",
+                "neurons": [m * group, (m + 1) * group],
+                "places": [int(start), int(stop)],
+                "place_ids": [int(source.reference_place_ids[start]), int(source.reference_place_ids[stop - 1])]
+                if stop > start
+                else [],
+                "v_threshold_range": [float(own.min()), float(own.max())],
+            }
+        )
+    return rows
+
+
+def module_count_of(source: Source) -> int:
+    """M: the modules of the source (1 for a single network)."""
+    return module_count(len(source.reference_place_ids), source.config.train.module_size)
 
 
 def readout_rule(source: Source) -> dict[str, Any]:
     """The hard WTA as a machine-readable rule over the lif node's WTA-off spikes (stored as JSON)."""
     if not source.config.network.wta:
         return {"name": "none", "version": READOUT_RULE_VERSION, "output": "the lif node's spikes as they are"}
+    group = wta_group(source)
     return {
         "name": READOUT_RULE,
         "version": READOUT_RULE_VERSION,
+        "group_size": group,
+        "groups": module_count_of(source),
         "candidates": "the lif node's spikes at a step (every neuron with v_j > v_threshold_j; all of them reset)",
         "score": "I_j * wta_score_multiplier_j, with I_j = sum_i linear.weight[j, i] s_i[t] the linear node's output",
-        "winner": "the candidate with the largest score; ties: the lowest index",
-        "output": "at most one spike per step: the winner's",
+        "groups_rule": "the neurons form groups of group_size consecutive indices (module m: [m group_size, "
+        "(m + 1) group_size)); the rule runs in every group independently",
+        "winner": "in each group, the candidate with the largest score; ties: the lowest index",
+        "output": "at most one spike per group per step: the group winner's",
         "arithmetic": "integer (exact) for kind fixed-point; float32 for kind float",
         "function": "vprsnn_export.targets.nir_target.apply_readout_rule",
     }
@@ -129,7 +174,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         multipliers = source.scale_multiplier.astype(np.int64)
     else:
         kind, header, recorded_sha256 = "float", checkpoint_header(source), "unknown"
-        multipliers = np.ones(cfg.network.n_neurons, dtype=np.int64)
+        multipliers = np.ones(source.weights.shape[1], dtype=np.int64)
     meta: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -152,6 +197,9 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta": "on" if cfg.network.wta else "off",
         "wta_rule": wta_rule(source),
         "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
+        "modules": module_count_of(source),
+        "wta_group": wta_group(source),
+        "populations": json.dumps(populations(source), sort_keys=True),
         "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),
         "wta_node": (
             "none (left out on request)"
@@ -587,18 +635,23 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
     consumer's output of the portable graph (every neuron over threshold). Per step:
 
         score_j = I_j m_j,  I = W s[t]   (W: the linear node's weight, m: wta_score_multiplier)
-        winner  = argmax_{j in candidates} score_j   (ties: lowest j)
+        winner  = argmax_{j in candidates of group g} score_j   (ties: lowest j), for every group g
 
-    Returns (N, T, neurons) bool with at most one spike per step. A graph whose rule is
-    ``none`` (WTA off) returns the candidates unchanged.
+    The rule runs within every group of ``group_size`` consecutive neurons (one module of an
+    ensemble; version 1 rules: one group of all neurons). Returns (N, T, neurons) bool with at
+    most one spike per group per step. A graph whose rule is ``none`` (WTA off) returns the
+    candidates unchanged.
     """
     meta = graph.metadata
     rule = json.loads(str(meta.get("readout_rule", "{}")))
     if rule.get("name") == "none":
         return candidates.to(torch.bool)
-    if rule.get("name") != READOUT_RULE or int(rule.get("version", -1)) != READOUT_RULE_VERSION:
+    if rule.get("name") != READOUT_RULE or int(rule.get("version", -1)) not in READABLE_RULE_VERSIONS:
         raise InvalidValueError(f"unknown readout rule {rule.get('name')!r} v{rule.get('version')!r} in the graph")
     weight = np.asarray(graph.nodes["linear"].weight)
+    group = int(rule.get("group_size", weight.shape[0]))
+    if group < 1 or weight.shape[0] % group:
+        raise InvalidValueError(f"the readout rule's group_size {group} does not divide {weight.shape[0]} neurons")
     flat = spikes.reshape(-1, spikes.shape[-1])
     if str(meta["kind"]) == "fixed-point":
         currents = flat.to(torch.float64) @ torch.as_tensor(weight.T, dtype=torch.float64)  # exact below 2**53
@@ -608,10 +661,10 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
     else:
         score_f = flat.to(torch.float32) @ torch.as_tensor(np.ascontiguousarray(weight.T), dtype=torch.float32)
         masked = torch.where(candidates.reshape(score_f.shape), score_f, -torch.inf)
-    winner = masked.argmax(dim=1)
-    raster = torch.zeros(masked.shape, dtype=torch.bool)
-    raster[torch.arange(masked.shape[0]), winner] = True
-    raster &= candidates.reshape(masked.shape).to(torch.bool).any(dim=1, keepdim=True)
+    grouped = masked.reshape(masked.shape[0], -1, group)
+    winner = grouped.argmax(dim=2, keepdim=True)  # per group; torch's first maximum: the lowest index
+    raster = torch.zeros(grouped.shape, dtype=torch.bool).scatter_(2, winner, True)
+    raster &= candidates.reshape(grouped.shape).to(torch.bool).any(dim=2, keepdim=True)
     return raster.reshape(candidates.shape)
 
 

@@ -16,7 +16,9 @@ Computation (every operation integer; the contract of :mod:`export.model`):
         Vn  = V + A[t] * 2**voltage_shift
         V   = Clip(Vn, -(2**23 - 1), 2**23 - 1);  saturations += #(Vn != V)
         C   = V > theta << voltage_shift
-        WTA on:  w = ArgMax(Where(C, A[t] m, -1)) (first index on ties); S = (j == w) and C
+        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/modules.py):
+                 w = ArgMax(Reshape(Where(C, A[t] m, -1), [batch, M, n]), axis 2) (first index on ties);
+                 S = (j mod n == w of j's module) and C
         WTA off: S = C
         V   = Where(C, 0, V);  counts += S
 
@@ -91,7 +93,8 @@ def check_exportable(model: FixedPointModel) -> None:
 def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """The per-neuron int64 vectors the step reads from the outer graph, stored narrow and widened once.
 
-    vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. neurons - 1 (Range)
+    vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. n - 1 (Range),
+    the index of a neuron within its module's WTA group of n = network.n_neurons
     """
     inits = [
         const("threshold_stored", smallest_unsigned(model.threshold)),
@@ -105,7 +108,7 @@ def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Ten
         inits += [
             const("multiplier_stored", smallest_unsigned(model.scale_multiplier)),
             const("index_start", np.int64(0)),
-            const("index_limit", np.int64(model.n_neurons)),
+            const("index_limit", np.int64(model.config.network.n_neurons)),
             const("index_step", np.int64(1)),
         ]
         nodes += [
@@ -149,14 +152,19 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
         helper.make_node("Where", ["cand", "zero", "v_clip"], ["v_out"]),
     ]
     if model.config.network.wta:
+        group = model.config.network.n_neurons
         inits += [
             const("minus_one", np.int64(-1)),
+            const("group_shape", np.array([0, n // group, group], dtype=np.int64)),  # (batch, M, n)
+            const("flat_state", np.array([0, n], dtype=np.int64)),
         ]
         nodes += [
             helper.make_node("Mul", ["a", "multiplier"], ["score"]),
             helper.make_node("Where", ["cand", "score", "minus_one"], ["masked"]),
-            helper.make_node("ArgMax", ["masked"], ["winner"], axis=1, keepdims=1, select_last_index=0),
-            helper.make_node("Equal", ["neuron_index", "winner"], ["is_winner"]),
+            helper.make_node("Reshape", ["masked", "group_shape"], ["grouped"]),
+            helper.make_node("ArgMax", ["grouped"], ["winner"], axis=2, keepdims=1, select_last_index=0),
+            helper.make_node("Equal", ["neuron_index", "winner"], ["is_winner_grouped"]),
+            helper.make_node("Reshape", ["is_winner_grouped", "flat_state"], ["is_winner"]),
             helper.make_node("And", ["is_winner", "cand"], ["fired"]),
         ]
     else:
@@ -426,6 +434,8 @@ def metadata_props(model: FixedPointModel) -> dict[str, str]:
         "vprsnn.voltage_bits": str(model.voltage_bits),
         "vprsnn.scale_exponent": str(model.scale_exponent),
         "vprsnn.wta": "on" if cfg.network.wta else "off",
+        "vprsnn.wta_group": str(cfg.network.n_neurons),
+        "vprsnn.modules": str(model.n_neurons // cfg.network.n_neurons),
         "vprsnn.timesteps": str(cfg.encoder.timesteps),
         "vprsnn.encoder": f"Bernoulli(clip({cfg.encoder.rate_scale} * pixel, 0, 1)), seed {cfg.seed}",
         "vprsnn.source_sha256": model.source_sha256,

@@ -249,11 +249,15 @@ def run_in_lava(python: Path, folder: Path, spikes: torch.Tensor, tmp_path: Path
 
 
 def wta_select(candidates: torch.Tensor, spikes: torch.Tensor, model: FixedPointModel) -> torch.Tensor:
-    """What a Lava user adds for hard WTA: of each step's candidates keep the largest a_j m_j (lowest index on ties)."""
+    """What a Lava user adds for hard WTA: of each step's candidates in each module (group of n neurons) keep the
+    largest a_j m_j (lowest index on ties)."""
     currents = spikes.to(torch.int64) @ torch.as_tensor(model.weight_mantissa, dtype=torch.int64)
     score = torch.where(candidates, currents * torch.as_tensor(model.scale_multiplier, dtype=torch.int64), -1)
-    winner = score.argmax(dim=2, keepdim=True)
-    return torch.zeros_like(candidates).scatter_(2, winner, candidates.any(dim=2, keepdim=True))
+    n, timesteps, neurons = candidates.shape
+    group = model.config.network.n_neurons
+    grouped, chosen = score.reshape(n, timesteps, -1, group), candidates.reshape(n, timesteps, -1, group)
+    winner = grouped.argmax(dim=3, keepdim=True)
+    return torch.zeros_like(chosen).scatter_(3, winner, chosen.any(dim=3, keepdim=True)).reshape(candidates.shape)
 
 
 def with_wta(model: FixedPointModel, wta: bool) -> FixedPointModel:

@@ -152,7 +152,8 @@ def test_the_default_graph_is_portable_and_states_its_readout_rule(tmp_path):
     graph = nir.read(write_nir(make_model(np.random.default_rng(3)), tmp_path / "m.nir"))
     assert sorted(graph.nodes) == ["input", "lif", "linear", "output"]
     rule = json.loads(graph.metadata["readout_rule"])
-    assert rule["name"] == "vprsnn-hard-wta" and rule["version"] == 1 and "lowest index" in rule["winner"]
+    assert rule["name"] == "vprsnn-hard-wta" and rule["version"] == 2 and "lowest index" in rule["winner"]
+    assert rule["group_size"] == 6 and rule["groups"] == 1 and graph.metadata["modules"] == 1
     off = nir.read(write_nir(make_model(np.random.default_rng(3), wta=False), tmp_path / "off.nir"))
     assert json.loads(off.metadata["readout_rule"])["name"] == "none"
 

@@ -9,17 +9,22 @@ with the command to run, unless ``--quantize BITS`` asks for an on-the-fly quant
 With ``--check`` every written file is read back and run beside the project's own
 simulators, on real query presentations (``--query`` and the data options) or on
 synthetic spike trains; the table states exact identities and measured agreements.
+
+``--loihi-cores MODULESxNEURONSxINPUTS`` (no MODEL, no --out) prints how many Loihi-class
+cores, chips and synapses such an ensemble needs at 8, 4 and 2 bits (docs/targets.md §2.5).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
 from ..dataset import MAX_PLACES
 from ..device import resolve_device
 from ..errors import InvalidValueError
+from ..export.model import DEFAULT_BITS
 from ..runtime.exporting import (
     MANIFEST_NAME,
     check_deploy_folder,
@@ -29,17 +34,38 @@ from ..runtime.exporting import (
     load_source,
     parse_export_targets,
 )
+from ..targets.loihi_target import budget_table
 from ..targets.nir_target import WTA_INHIBITION
 from ._common import add_data_options, add_runtime_options, format_table, print_json
 
 CHECK_COLUMNS = (("target", "target"), ("check", "check"), ("result", "result"), ("detail", "detail"))
+BUDGET_COLUMNS = (
+    ("chip", "chip"),
+    ("bits", "bits"),
+    ("modules", "modules"),
+    ("neurons_per_module", "neurons/module"),
+    ("inputs", "inputs"),
+    ("neurons_per_core", "neurons/core"),
+    ("cores_per_module", "cores/module"),
+    ("cores", "cores"),
+    ("chips", "chips"),
+    ("synapses", "synapses"),
+    ("synapse_bits_per_core", "synapse bits/core"),
+    ("synapse_bits_limit", "limit"),
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("export", help="export a model to NIR, a Loihi-style description and ONNX")
-    parser.add_argument("model", help="float checkpoint (train) or fixed-point model (quantize)")
+    parser.add_argument("model", nargs="?", help="float checkpoint (train) or fixed-point model (quantize)")
     parser.add_argument("--to", default="nir,loihi,onnx", help="comma-separated targets: nir, loihi, onnx")
-    parser.add_argument("--out", required=True, help="output folder (new or empty; built whole, then put in place)")
+    parser.add_argument("--out", help="output folder (new or empty; built whole, then put in place); required")
+    parser.add_argument(
+        "--loihi-cores",
+        metavar="MxNxI",
+        help="instead of exporting: the Loihi-class cores and synapses of M modules of N neurons with I inputs "
+        "at 8, 4 and 2 bits (e.g. 24x400x1568)",
+    )
     parser.add_argument("--force", action="store_true", help="replace an earlier export in --out")
     parser.add_argument(
         "--quantize",
@@ -83,7 +109,42 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+def parse_shape(raw: str) -> tuple[int, int, int]:
+    """'MxNxI' -> (modules, neurons per module, inputs), each a positive integer."""
+    parts = raw.lower().split("x")
+    if len(parts) != 3 or not all(part.strip().isdigit() and int(part) > 0 for part in parts):
+        raise InvalidValueError(f"--loihi-cores expects MODULESxNEURONSxINPUTS of positive integers, got {raw!r}")
+    modules, neurons, inputs = (int(part) for part in parts)
+    return modules, neurons, inputs
+
+
+def print_budget(raw: str, as_json: bool) -> int:
+    budgets = budget_table(*parse_shape(raw), DEFAULT_BITS)
+    rows = [dataclasses.asdict(budget) for budget in budgets]
+    if as_json:
+        print_json({"loihi_cores": rows})
+    else:
+        print(
+            format_table(
+                [
+                    {key: f"{row[key]:,}" if isinstance(row[key], int) else row[key] for key, _ in BUDGET_COLUMNS}
+                    for row in rows
+                ],
+                BUDGET_COLUMNS,
+            )
+        )
+        for source in dict.fromkeys(budget.source for budget in budgets):
+            print(f"  source: {source}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.loihi_cores:
+        if args.model or args.out:
+            raise InvalidValueError("--loihi-cores takes no MODEL and no --out (it only prints the core budget)")
+        return print_budget(args.loihi_cores, args.json)
+    if not args.model or not args.out:
+        raise InvalidValueError("export needs a MODEL and --out (or --loihi-cores MxNxI alone)")
     targets = parse_export_targets(args.to)
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)

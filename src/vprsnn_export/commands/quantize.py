@@ -37,7 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
     )
     scales = parser.add_mutually_exclusive_group()
-    scales.add_argument("--per-tensor", action="store_true", help="one weight scale for all neurons")
+    scales.add_argument(
+        "--per-tensor", action="store_true", help="one weight scale per module (for all neurons of a single network)"
+    )
     scales.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (the default)")
     parser.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice: max-abs or minimum MSE")
     parser.add_argument(
@@ -114,6 +116,15 @@ def run(args: argparse.Namespace) -> int:
         print_json({"checkpoint": str(args.checkpoint), "source_sha256": digest, "models": rows})
     else:
         print(format_table(rows, TABLE_COLUMNS))
+        for row in rows:
+            per_module = row.get("module_weight_relative_rmse") or []
+            if len(per_module) > 1:
+                worst = int(np.argmax(per_module))
+                print(
+                    f"  {row['bits']} bits, {len(per_module)} modules: rel. RMSE per module "
+                    f"{min(per_module):.4g} to {max(per_module):.4g} (worst: module {worst}), "
+                    f"clipped weights {sum(row['module_weights_clipped'])}"
+                )
         if not args.quiet:
             print(f"\nwrote {len(rows)} fixed-point model(s) to {args.out}", file=sys.stderr)
     return 0

@@ -23,7 +23,8 @@ With --wta the network gets the header's hard WTA as one more Lava process, WtaR
 
 Lava's LIF (WTA off) gives the candidates C[t] (every candidate resets, so its voltages are
 the WTA-on network's); the readout emits S_j[t] = 1 for the j in C[t] with the largest
-a_j[t] * m_j (ties to the lowest index), m_j the header's wta score multiplier. Dense sends
+a_j[t] * m_j (ties to the lowest index), m_j the header's wta score multiplier, within every
+group of the header's wta.group_size consecutive neurons (one module of an ensemble). Dense sends
 the current a[t] at Lava step t + 1, where the LIF integrates it and spikes, and ports
 between processes add no delay, so the readout receives the current and the candidates of
 the same presentation step in the same Lava step. RASTER_OUT gets the WTA-on raster,
@@ -63,22 +64,24 @@ class WtaReadout(AbstractProcess):
     s_out: one spike (or none) per step; score_multiplier: m_j, the header's wta_score_multiplier.
     """
 
-    def __init__(self, *, score_multiplier):
+    def __init__(self, *, score_multiplier, group_size=None):
         shape = (len(score_multiplier),)
         super().__init__(shape=shape)
         self.s_in = InPort(shape=shape)
         self.a_in = InPort(shape=shape)
         self.s_out = OutPort(shape=shape)
         self.score_multiplier = Var(shape=shape, init=np.asarray(score_multiplier, dtype=np.int32))
+        self.group_size = Var(shape=(1,), init=np.array([group_size or shape[0]], dtype=np.int32))
 
 
-def wta_winners(candidates, current, multiplier):
-    """One-hot of argmax_j over C of a_j m_j (int64: exact for int32 a_j and m_j), first index on ties; zeros if C is empty."""
-    score = np.where(candidates != 0, current.astype(np.int64) * multiplier.astype(np.int64), -1)
-    out = np.zeros(candidates.shape, dtype=np.int32)
-    if score.max() >= 0:
-        out[np.argmax(score)] = 1
-    return out
+def wta_winners(candidates, current, multiplier, group_size):
+    """Per group of group_size neurons (one module), one-hot of argmax_j over C of a_j m_j (int64: exact for
+    int32 a_j and m_j), first index on ties; zeros in a group with no candidate."""
+    score = np.where(candidates != 0, current.astype(np.int64) * multiplier.astype(np.int64), -1).reshape(-1, group_size)
+    out = np.zeros(score.shape, dtype=np.int32)
+    rows = np.flatnonzero(score.max(axis=1) >= 0)
+    out[rows, np.argmax(score[rows], axis=1)] = 1
+    return out.reshape(candidates.shape)
 
 
 @implements(proc=WtaReadout, protocol=LoihiProtocol)
@@ -91,9 +94,11 @@ class PyWtaReadoutModelFixed(PyLoihiProcessModel):
     a_in: PyInPort = LavaPyType(PyInPort.VEC_DENSE, np.int32, precision=24)
     s_out: PyOutPort = LavaPyType(PyOutPort.VEC_DENSE, np.int32, precision=1)
     score_multiplier: np.ndarray = LavaPyType(np.ndarray, np.int32, precision=32)
+    group_size: np.ndarray = LavaPyType(np.ndarray, np.int32, precision=32)
 
     def run_spk(self):
-        self.s_out.send(wta_winners(self.s_in.recv(), self.a_in.recv(), self.score_multiplier))
+        group = int(self.group_size[0])
+        self.s_out.send(wta_winners(self.s_in.recv(), self.a_in.recv(), self.score_multiplier, group))
 
 
 def load(folder):
@@ -157,7 +162,9 @@ def main(folder, spikes_path, out_path, wta=False, candidates_path=None):
     dense.a_out.connect(lif.a_in)
     lif.s_out.connect(sink.a_in)
     if wta:
-        readout = WtaReadout(score_multiplier=arrays[header["wta"]["score_multiplier"]])
+        readout = WtaReadout(
+            score_multiplier=arrays[header["wta"]["score_multiplier"]], group_size=header["wta"].get("group_size")
+        )
         winners = SpikeSink(shape=(neurons,), buffer=n * block)
         dense.a_out.connect(readout.a_in)
         lif.s_out.connect(readout.s_in)
