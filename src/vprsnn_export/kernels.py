@@ -36,6 +36,7 @@ from __future__ import annotations
 import functools
 import warnings
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar, cast
 
 import numpy as np
@@ -55,19 +56,22 @@ _uncached: list[str] = []
 
 
 def compiled(function: F) -> F:
-    """numba ``njit(nogil=True)``, cached on disk when a cache directory is writable.
+    """numba ``njit(nogil=True, error_model="numpy")``, cached on disk when a cache directory is writable.
+
+    numpy's error model: no Python zero-divisor check per division (the kernels never divide by
+    zero), so divisions in loops vectorise; the results of every other division are the same.
 
     numba caches next to this file, else in the user's cache directory (or ``NUMBA_CACHE_DIR``);
     when none is writable (a read-only install and home) numba refuses ``cache=True`` at import,
     so the kernels are compiled in memory on first call instead, with one warning.
     """
     try:
-        return cast(F, njit(cache=True, nogil=True)(function))
+        return cast(F, njit(cache=True, nogil=True, error_model="numpy")(function))
     except RuntimeError as exc:
         if not _uncached:
             warnings.warn(f"numba cannot cache the kernels ({exc}); compiling them in memory", stacklevel=2)
         _uncached.append(function.__name__)
-        return cast(F, njit(nogil=True)(function))
+        return cast(F, njit(nogil=True, error_model="numpy")(function))
 
 
 def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
@@ -194,20 +198,26 @@ def _blocked_sum(
     from zero in increasing order, and the block sums are added to the total in order
     (``block`` >= the number of inputs: one plain left-to-right sum).
     """
-    total[:] = 0
+    n = total.shape[0]
+    for j in range(n):
+        total[j] = 0
     a = 0
     first = True
     while a < k:
         stop = (index[a] // block + 1) * block
-        partial[:] = 0
+        sums = total if first else partial  # the first block's sum from zero is the total so far
+        if not first:
+            for j in range(n):
+                partial[j] = 0
         while a < k and index[a] < stop:
-            partial += weights[index[a]]
+            row = weights[index[a]]
+            for j in range(n):
+                sums[j] += row[j]
             a += 1
-        if first:
-            total[:] = partial
-            first = False
-        else:
-            total += partial
+        if not first:
+            for j in range(n):
+                total[j] += partial[j]
+        first = False
 
 
 @compiled
@@ -468,20 +478,22 @@ def _stdp_window(
     weight_norm: bool,
     block: int,
 ) -> np.ndarray:
-    """The training window, computing only the weight columns a step can change.
+    """The training window, each float32 operation in the torch loop's order, in one pass over W per step.
 
     dW_ij = A+ (w_max - w_ij) P_ij - A- w_ij D_ij with P_ij = sum_b x_bi S_bj and
-    D_ij = sum_b s_bi y_bj (b in order). y_bj is exactly 0 until neuron j has fired in row b and
-    S_bj is 0 unless it fires now, so both sums skip their zero terms (adding an exact 0 changes
-    no float) and dW_ij = +0 (W unchanged) outside the columns j some row has fired into
-    ("traced"). Column normalisation divides column j by its norm n_j every step; once n_j
-    is exactly 1.0f the division is the identity, so such a column ("settled") stays unchanged
-    until it is traced again. Every other column is updated and normalised as in the dense loop,
-    each float32 operation in the same order.
+    D_ij = sum_b s_bi y_bj (b in order). S_bj is 0 unless j fires now, so P is built only for this
+    step's winners (their rows of pre traces summed in row order); s_bi is 0 unless input i is active
+    in row b, so D is built only for the active inputs (their rows' post traces summed in row order;
+    y_bj is exactly 0 until j has fired in row b, and adding an exact 0 changes no float). W is then
+    updated row by row over all neurons (vectorised), with dW_ij = +0 (W unchanged) wherever P and D
+    are 0. Column normalisation divides column j by its norm n_j; a column no row has fired into
+    ("untraced") whose norm was exactly 1.0f ("settled") keeps its weights (the division is the
+    identity) and is divided by 1.
     """
     batch, timesteps, n_inputs = spikes.shape
     n_neurons = weights.shape[1]
     zero = np.float32(0)
+    one = np.float32(1)
     tiny = np.float32(np.finfo(np.float32).tiny)
     voltage = np.zeros((batch, n_neurons), dtype=np.float32)
     post_trace = np.zeros((batch, n_neurons), dtype=np.float32)
@@ -491,17 +503,21 @@ def _stdp_window(
     partial = np.empty(n_neurons, dtype=np.float32)
     index = np.empty((batch, n_inputs), dtype=np.int64)
     n_active = np.empty(batch, dtype=np.int64)
-    traced = np.empty((batch, n_neurons), dtype=np.int64)  # per row: the neurons that have fired, in first-firing order
-    n_traced = np.zeros(batch, dtype=np.int64)
+    row_traced = np.zeros(batch, dtype=np.bool_)  # some neuron has fired in row b (y_b != 0)
+    traced = np.zeros(n_neurons, dtype=np.bool_)  # neuron j has fired in some row
     winners = np.empty((batch, n_neurons), dtype=np.int64)  # per row: the neurons firing this step
     n_winners = np.zeros(batch, dtype=np.int64)
     settled = np.zeros(n_neurons, dtype=np.bool_)  # column norm exactly 1.0f and column unchanged since
-    column = np.full(n_neurons, -1, dtype=np.int64)  # neuron -> its slot among this step's columns
-    columns = np.empty(n_neurons, dtype=np.int64)
-    potentiation_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots)
-    depression_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots)
-    gathered_store = np.empty(n_inputs * n_neurons, dtype=np.float32)  # (inputs, slots): the columns' weights
+    win_slot = np.full(n_neurons, -1, dtype=np.int64)  # neuron -> its row of P^T this step
+    win_cols = np.empty(n_neurons, dtype=np.int64)
+    potentiation = np.empty((n_neurons, n_inputs), dtype=np.float32)  # P^T, one row per winning column
+    input_slot = np.full(n_inputs, -1, dtype=np.int64)  # input -> its row of D this step
+    inputs_used = np.empty(n_inputs, dtype=np.int64)
+    depression = np.empty((n_inputs, n_neurons), dtype=np.float32)  # one row per active input
+    p_row = np.zeros(n_neurons, dtype=np.float32)
+    zero_row = np.zeros(n_neurons, dtype=np.float32)
     squares = np.empty(n_neurons, dtype=np.float32)
+    scale = np.empty(n_neurons, dtype=np.float32)
     fired_total = np.zeros(n_neurons, dtype=np.float32)
     for t in range(timesteps):
         for b in range(batch):
@@ -533,68 +549,77 @@ def _stdp_window(
         for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
-            for q in range(n_traced[b]):  # y_bj = 0 (exactly, as 0 keep + 0) for every other neuron
-                j = traced[b, q]
-                post_trace[b, j] = post_trace[b, j] * post_keep + (np.float32(1) if fired[b, j] else zero)
+            if n_winners[b] > 0 or row_traced[b]:  # y_bj = 0 keep + 0 = 0 in a row that has never fired
+                for j in range(n_neurons):
+                    post_trace[b, j] = post_trace[b, j] * post_keep + (one if fired[b, j] else zero)
             for w in range(n_winners[b]):
                 j = winners[b, w]
-                fired_total[j] += np.float32(1)
-                if not _listed(traced[b], n_traced[b], j):  # first firing: y_bj = 0 keep + 1
-                    post_trace[b, j] = np.float32(1)
-                    traced[b, n_traced[b]] = j
-                    n_traced[b] += 1
-        m = 0
-        for b in range(batch):
-            for q in range(n_traced[b]):
-                j = traced[b, q]
-                if column[j] < 0:
-                    column[j] = m
-                    columns[m] = j
-                    m += 1
-        if weight_norm:
-            for j in range(n_neurons):
-                if column[j] < 0 and not settled[j]:
-                    column[j] = m
-                    columns[m] = j
-                    m += 1
-        potentiation = potentiation_store[: n_inputs * m].reshape((n_inputs, m))
-        depression = depression_store[: n_inputs * m].reshape((n_inputs, m))
-        gathered = gathered_store[: n_inputs * m].reshape((n_inputs, m))
-        potentiation[:] = zero
-        depression[:] = zero
+                fired_total[j] += one
+                traced[j] = True
+                row_traced[b] = True
+        n_win = 0
         for b in range(batch):
             for w in range(n_winners[b]):
-                slot = column[winners[b, w]]
+                j = winners[b, w]
+                if win_slot[j] < 0:
+                    win_slot[j] = n_win
+                    win_cols[n_win] = j
+                    potentiation[n_win] = zero
+                    n_win += 1
+                sums = potentiation[win_slot[j]]
+                trace = pre_trace[b]
                 for i in range(n_inputs):
-                    potentiation[i, slot] += pre_trace[b, i]
-            for a in range(n_active[b]):
-                row = depression[index[b, a]]
-                for q in range(n_traced[b]):
-                    j = traced[b, q]
-                    row[column[j]] += post_trace[b, j]
-        for i in range(n_inputs):  # gather, update in contiguous (vectorised) rows, scatter
-            for slot in range(m):
-                gathered[i, slot] = weights[i, columns[slot]]
-        squares[:m] = zero
-        for i in range(n_inputs):
-            for slot in range(m):
-                w = gathered[i, slot]
-                delta = a_plus * (w_max - w) * potentiation[i, slot] - a_minus * w * depression[i, slot]
-                w = min(max(w + delta, zero), w_max)
-                gathered[i, slot] = w
-                squares[slot] += w * w
-        if weight_norm:
-            for slot in range(m):
-                squares[slot] = max(np.sqrt(squares[slot]), tiny)
-                settled[columns[slot]] = squares[slot] == np.float32(1)
+                    sums[i] += trace[i]
+        n_used = 0
+        for b in range(batch):
+            if row_traced[b]:
+                for a in range(n_active[b]):
+                    i = index[b, a]
+                    if input_slot[i] < 0:
+                        input_slot[i] = n_used
+                        inputs_used[n_used] = i
+                        depression[n_used] = zero
+                        n_used += 1
+                    sums = depression[input_slot[i]]
+                    trace = post_trace[b]
+                    for j in range(n_neurons):
+                        sums[j] += trace[j]
+        n_columns = 0
+        for j in range(n_neurons):
+            if traced[j] or (weight_norm and not settled[j]):
+                n_columns += 1
+        if n_columns > 0:
+            squares[:] = zero
             for i in range(n_inputs):
-                for slot in range(m):
-                    gathered[i, slot] = gathered[i, slot] / squares[slot]
-        for i in range(n_inputs):
-            for slot in range(m):
-                weights[i, columns[slot]] = gathered[i, slot]
-        for slot in range(m):
-            column[columns[slot]] = -1
+                for q in range(n_win):
+                    p_row[win_cols[q]] = potentiation[q, i]
+                d_row = depression[input_slot[i]] if input_slot[i] >= 0 else zero_row
+                row = weights[i]
+                for j in range(n_neurons):
+                    w = row[j]
+                    delta = a_plus * (w_max - w) * p_row[j] - a_minus * w * d_row[j]
+                    w = min(max(w + delta, zero), w_max)
+                    row[j] = w
+                    squares[j] += w * w
+                for q in range(n_win):
+                    p_row[win_cols[q]] = zero
+            if weight_norm:
+                dividing = False
+                for j in range(n_neurons):
+                    scale[j] = one
+                    if traced[j] or not settled[j]:
+                        scale[j] = max(np.sqrt(squares[j]), tiny)
+                        settled[j] = scale[j] == one
+                        dividing = dividing or not settled[j]
+                if dividing:
+                    for i in range(n_inputs):
+                        row = weights[i]
+                        for j in range(n_neurons):
+                            row[j] = row[j] / scale[j]
+        for q in range(n_win):
+            win_slot[win_cols[q]] = -1
+        for u in range(n_used):
+            input_slot[inputs_used[u]] = -1
     return fired_total
 
 
@@ -717,9 +742,126 @@ def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> 
     p = np.asarray(prob, dtype=np.float32)
     if p.ndim != 2 or len(seeds) != p.shape[0]:
         raise ValueError(f"expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
-    scaled = np.ceil(np.nan_to_num(p.astype(np.float64), nan=0.0) * float(1 << MANTISSA_BITS))
-    limits = np.ascontiguousarray(np.clip(scaled, 0, 1 << MANTISSA_BITS), dtype=np.int32)
+    limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
-    masked = np.array([int(s) & 0xFFFFFFFF for s in seeds], dtype=np.int64)
-    _bernoulli_kernel(limits, masked, int(timesteps), out)
+    _bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)
     return out
+
+
+def bernoulli_limits(prob: np.ndarray) -> np.ndarray:
+    """The integer thresholds ceil(p 2^24), clipped to [0, 2^24], int32: u < p iff m < ceil(p 2^24) (NaN: 0)."""
+    p = np.asarray(prob, dtype=np.float32)
+    scaled = np.ceil(np.nan_to_num(p.astype(np.float64), nan=0.0) * float(1 << MANTISSA_BITS))
+    return np.ascontiguousarray(np.clip(scaled, 0, 1 << MANTISSA_BITS), dtype=np.int32)
+
+
+def generator_seeds(seeds: Sequence[int]) -> np.ndarray:
+    """The seeds as torch's CPU generator uses them: their low 32 bits, int64."""
+    return np.array([int(s) & 0xFFFFFFFF for s in seeds], dtype=np.int64)
+
+
+@compiled
+def _stdp_windows(
+    limits: np.ndarray,  # (M, B, inputs) int32: bernoulli_limits of each row's firing probabilities
+    seeds: np.ndarray,  # (M, B) int64: generator_seeds of each row's presentation seed
+    sizes: np.ndarray,  # (M,) int64: rows of module m in this batch (0: it sits the batch out)
+    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (blas_block of its rows)
+    timesteps: int,
+    weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
+    theta: np.ndarray,  # (M, neurons) float32
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+) -> np.ndarray:
+    """One training batch of every module: encode module m's rows, then its :func:`_stdp_window`.
+
+    The modules are independent networks, so each one's window is exactly the single network's;
+    returns the spikes per neuron of every module in this batch (M, neurons) float32.
+    """
+    n_modules, batch, n_inputs = limits.shape
+    fired = np.zeros((n_modules, weights.shape[2]), dtype=np.float32)
+    spikes = np.empty((batch, timesteps, n_inputs), dtype=np.uint8)
+    for m in range(n_modules):
+        rows = sizes[m]
+        if rows > 0:
+            _bernoulli_kernel(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows])
+            fired[m] = _stdp_window(
+                spikes[:rows],
+                weights[m],
+                theta[m],
+                beta,
+                wta,
+                pre_keep,
+                post_keep,
+                a_plus,
+                a_minus,
+                w_max,
+                weight_norm,
+                blocks[m],
+            )
+    return fired
+
+
+def module_slices(n_modules: int, parts: int) -> list[slice]:
+    """At most ``parts`` contiguous, non-empty, nearly equal slices of range(n_modules)."""
+    bounds = np.linspace(0, n_modules, max(1, min(parts, n_modules)) + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def stdp_windows(
+    weights: np.ndarray,
+    theta: np.ndarray,
+    limits: np.ndarray,
+    seeds: np.ndarray,
+    sizes: np.ndarray,
+    cfg: Config,
+    *,
+    threads: int = 1,
+) -> np.ndarray | None:
+    """One training batch of M independent modules, compiled: :func:`stdp_window` for each, side by side.
+
+    ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
+    module m's batch is its first ``sizes[m]`` rows of ``limits`` (M, B, inputs) int32
+    (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
+    kernel exactly as :func:`bernoulli_spikes` encodes them, so module m's weights are those of
+    ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
+    modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
+    not used). Returns the spikes per neuron (M, n) float32, or ``None`` when this machine's BLAS
+    order is not reproducible for some batch size (the caller then runs the torch loop).
+    """
+    n_modules, _, n_inputs = limits.shape
+    n_neurons = weights.shape[2]
+    blocks = np.zeros(n_modules, dtype=np.int64)
+    for size in sorted({int(s) for s in sizes if s > 0}):
+        block = blas_block(size, n_inputs, n_neurons)
+        if block is None or not batch_sums_in_order(size, n_inputs, n_neurons):
+            return None
+        blocks[np.asarray(sizes) == size] = block
+    args = (
+        np.float32(cfg.network.beta),
+        bool(cfg.network.wta),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
+        np.float32(cfg.stdp.a_plus),
+        np.float32(cfg.stdp.a_minus),
+        np.float32(cfg.stdp.w_max),
+        bool(cfg.stdp.weight_norm),
+    )
+    timesteps = int(cfg.encoder.timesteps)
+    sizes = np.ascontiguousarray(sizes, dtype=np.int64)
+
+    def run(part: slice) -> np.ndarray:
+        return _stdp_windows(
+            limits[part], seeds[part], sizes[part], blocks[part], timesteps, weights[part], theta[part], *args
+        )
+
+    parts = module_slices(n_modules, threads)
+    if len(parts) == 1:
+        return run(parts[0])
+    with ThreadPoolExecutor(max_workers=len(parts)) as pool:
+        return np.concatenate(list(pool.map(run, parts)))

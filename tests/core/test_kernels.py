@@ -294,7 +294,8 @@ def test_read_only_install_compiles_in_memory_with_a_warning(monkeypatch):
     monkeypatch.setattr(kernels, "_uncached", [])
     with pytest.warns(UserWarning, match="compiling them in memory"):
         function = kernels.compiled(abs)
-    assert function is abs and calls == [{"cache": True, "nogil": True}, {"nogil": True}]
+    numpy_errors = {"nogil": True, "error_model": "numpy"}
+    assert function is abs and calls == [{"cache": True, **numpy_errors}, numpy_errors]
 
 
 def test_an_ensemble_runs_each_module_as_it_would_run_alone():
