@@ -460,9 +460,20 @@ class ModuleRow:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> ModuleRow:
-        ints = ("module", "first_place", "last_place", "n_queries", "k", "spikes_float", "spikes")
-        floats = ("float_accuracy", "accuracy", "float_accuracy_k", "accuracy_k", "winner_agreement")
-        return cls(**{name: int(data[name]) for name in ints}, **{name: float(data[name]) for name in floats})
+        return cls(
+            module=int(data["module"]),
+            first_place=int(data["first_place"]),
+            last_place=int(data["last_place"]),
+            n_queries=int(data["n_queries"]),
+            k=int(data["k"]),
+            float_accuracy=float(data["float_accuracy"]),
+            accuracy=float(data["accuracy"]),
+            float_accuracy_k=float(data["float_accuracy_k"]),
+            accuracy_k=float(data["accuracy_k"]),
+            winner_agreement=float(data["winner_agreement"]),
+            spikes_float=int(data["spikes_float"]),
+            spikes=int(data["spikes"]),
+        )
 
 
 # ---------------------------------------------------------------------------- one network
