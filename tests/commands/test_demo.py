@@ -20,6 +20,7 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
         folder = out / "deploy" / f"{bits}bit"
         model = load_fixed_point(folder / "model.npz")
         assert model.bits == bits and model.quantisation.per_neuron
+        assert model.n_neurons == 2 * model.config.network.n_neurons  # the demo is an ensemble of two modules
         assert read_nir(folder / "model.nir").bits == bits
         assert read_loihi_model(folder / "loihi").bits == bits
         read_onnx(folder / "model.onnx")
@@ -28,4 +29,6 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
     assert all(r["cross_implementation"]["passed"] for r in report["runs"][0]["bits"])
     assert report["settings"]["demo_profile"]["train.epochs"] == 2
     assert report["runs"][0]["config"]["train"]["epochs"] == 2  # the profile is in the checkpoint's config
+    assert [len(r["modules"]) for r in report["runs"][0]["bits"]] == [2, 2, 2]
+    assert "## Modules of the ensemble" in (out / "report" / "report.md").read_text()
     assert (out / "report" / "report.html").is_file() and (out / "report" / "report.md").is_file()

@@ -26,6 +26,7 @@ from ..dataset import load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
+from ..modules import module_count
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.results import BitsResult, VerifiedRun
@@ -34,14 +35,16 @@ from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
 
 DEMO_DATA = "synthetic"
+DEMO_PLACES = 240
 DEMO_REFERENCE = "summer"
 DEMO_QUERY = "winter"
 DEMO_KS = (1, 3, 5)
 DEMO_BITS = DEFAULT_BITS
-#: Config overrides of the demo: none, the default configuration runs in about a minute on one CPU core.
-DEMO_PROFILE: dict = {}
-#: --quick (tests): a tiny network on a short route.
-QUICK_PROFILE = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 48}
+#: Config overrides of the demo: the default network as an ensemble of 4 modules of 60 places
+#: (the route is a whole route in miniature: each module learns its region side by side).
+DEMO_PROFILE: dict = {"train.module_size": 60}
+#: --quick (tests): a tiny ensemble of two modules on a short route.
+QUICK_PROFILE = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 48, "train.module_size": 8}
 QUICK_PLACES = 16
 SUMMARY_COLUMNS = (
     ("bits", "bits"),
@@ -51,6 +54,7 @@ SUMMARY_COLUMNS = (
     ("r_at_100p", "R@100P W+Prob k=5 %"),
     ("delta", "R@100P k=5 Δ vs float (pts)"),
     ("winner", "same winner %"),
+    ("module", "weakest module (k=5 Δ pts)"),
     ("failed", "failed checks"),
 )
 
@@ -75,18 +79,19 @@ def demo_config(seed: int, quick: bool = False) -> Config:
     return Config().replace(**{**(QUICK_PROFILE if quick else DEMO_PROFILE), "seed": seed})
 
 
-def profile_text(profile: dict) -> str:
-    if not profile:
-        cfg = Config()
-        return (
-            f"the default configuration: DoG ON/OFF inputs, T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, "
-            f"{cfg.network.n_neurons} neurons; --preset paper in train for the paper's"
-        )
-    return (
-        "profile " + ", ".join(f"{k} = {v}" for k, v in profile.items()) + " (the default: encoder.timesteps = "
-        f"{Config().encoder.timesteps}, train.epochs = {Config().train.epochs}, network.n_neurons = "
-        f"{Config().network.n_neurons}; written into the checkpoint's config)"
+def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
+    """What the demo trains: inputs, T, epochs and the ensemble's modules, and any profile changes."""
+    inputs = "DoG ON/OFF" if cfg.preprocess.channels == "dog_on_off" else "patch-normalised"
+    modules = module_count(n_places, cfg.train.module_size)
+    size = cfg.train.module_size or n_places
+    text = (
+        f"{inputs} inputs, T = {cfg.encoder.timesteps}, {cfg.train.epochs} epochs, an ensemble of {modules} "
+        f"modules of {size} places x {cfg.network.n_neurons} neurons"
     )
+    tiny = {k: v for k, v in profile.items() if k != "train.module_size"}
+    if tiny:
+        text += " (test profile: " + ", ".join(f"{k} = {v}" for k, v in tiny.items()) + ")"
+    return text
 
 
 def check_value(check: str, value: float) -> str:
@@ -111,6 +116,7 @@ def summary_rows(run_result: VerifiedRun) -> list[dict]:
         targets = [t for t in ("nir", "loihi", "onnx") if t in cross.files]
         wprob, aggregated = result.row("wprob", 1), result.row("wprob", top)
         delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
+        weakest = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement), default=None)
         rows.append(
             {
                 "bits": result.bits,
@@ -120,6 +126,7 @@ def summary_rows(run_result: VerifiedRun) -> list[dict]:
                 "r_at_100p": f"{100 * aggregated.r_at_100p:.1f}",
                 "delta": f"{100 * delta:+.1f}",
                 "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
+                "module": "-" if weakest is None else f"{weakest.module} ({100 * weakest.delta_k:+.1f})",
                 "failed": failed_checks(result),
             }
         )
@@ -134,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     progress = not args.quiet
     started = time.perf_counter()
-    data = f"{DEMO_DATA}:{QUICK_PLACES}" if args.quick else DEMO_DATA
+    data = f"{DEMO_DATA}:{QUICK_PLACES if args.quick else DEMO_PLACES}"
     profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
 
     def say(message: str) -> None:
@@ -146,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
         f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}; "
         f"{threads} CPU thread(s) (--threads N to change)"
     )
-    say(profile_text(profile))
+    say(profile_text(cfg, dataset.n_places, profile))
     ckpt = train_and_calibrate(
         dataset, [DEMO_REFERENCE], cfg, device=device, progress=progress, selection={"subset": None, "places": None}
     )
@@ -189,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     report = build_report([result], settings, command=command, seconds=time.perf_counter() - started)
     written = write_report(report, out / "report")
     say(f"4/4 report written ({written['json']})")
-    print(f"float network ({profile_text(profile)}):")
+    print(f"float network ({profile_text(cfg, dataset.n_places, profile)}):")
     print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
     print("\nquantised and deployed vs float (tolerances: docs/verify.md):")
     print(format_table(summary_rows(result), SUMMARY_COLUMNS))
