@@ -383,6 +383,8 @@ CHECKPOINT_EDITS: dict[str, Edit] = {
     "timesteps-string": header(lambda m: nested(m, "config.encoder.timesteps", "20")),
     "timesteps-zero": header(lambda m: nested(m, "config.encoder.timesteps", 0)),
     "neurons-mismatch": header(lambda m: nested(m, "config.network.n_neurons", 17)),
+    "module-size-mismatch": header(lambda m: nested(m, "config.train.module_size", 3)),
+    "module-size-negative": header(lambda m: nested(m, "config.train.module_size", -2)),
     "beta-nan": header(lambda m: nested(m, "config.network.beta", float("nan"))),
     "gamma-infinity": header(lambda m: nested(m, "config.assignment.gamma", float("inf"))),
     "wta-string": header(lambda m: nested(m, "config.network.wta", "yes")),
@@ -450,6 +452,7 @@ MODEL_EDITS: dict[str, Edit] = {
     "seed-string": header(lambda m: nested(m, "config.seed", "one")),
     "timesteps-null": header(lambda m: nested(m, "config.encoder.timesteps", None)),
     "neurons-mismatch": header(lambda m: nested(m, "config.network.n_neurons", 17)),
+    "module-size-mismatch": header(lambda m: nested(m, "config.train.module_size", 3)),
     "quantisation-list": header(lambda m: {**m, "quantisation": [1]}),
     "quantisation-missing": header(lambda m: without(m, "quantisation")),
     "quantisation-bits-differ": header(lambda m: nested(m, "quantisation.bits", 2)),
@@ -1019,6 +1022,7 @@ def train_cases() -> list[Case]:
     cases = numeric("train", TRAIN, "--epochs", ok={"zero"})
     cases += numeric("train", TRAIN, "--timesteps", values={**VALUES, "one": "1"}, ok={"one"})
     cases += numeric("train", TRAIN, "--neurons", values={**VALUES, "one": "1"}, ok={"one"})
+    cases += numeric("train", TRAIN, "--module-size", values={**VALUES, "one": "1"}, ok={"zero", "one"})
     cases += numeric(
         "train", TRAIN, "--seed", ok={"zero"}, values={**VALUES, "max": str(2**63 - 1), "above-max": str(2**63)}
     )
@@ -1427,6 +1431,8 @@ LEGAL_LINES: dict[str, str] = {
     "train-one-place": "train --data synthetic:1 --reference summer --timesteps 20 --epochs 1 --neurons 16 --out t.npz",
     "train-places-one": f"{T_TINY} --places 0:1 --out t.npz",
     "train-places-stride": f"{T_TINY} --places 3:2:2 --out t.npz",
+    "train-modules-uneven": f"{T_TINY} --module-size 4 --out t.npz",
+    "train-module-larger-than-route": f"{T_TINY} --module-size 50 --out t.npz",
     "train-synthetic-default": f"{T_TINY} --data synthetic --out t.npz",
     "train-two-references": f"{T_TINY} --reference summer,winter --out t.npz",
     "train-unicode-out": f"{T_TINY} --out 'Ünïcödé ñet 网络.npz'",
