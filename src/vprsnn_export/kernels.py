@@ -190,7 +190,12 @@ def _integer_kernel(
 
 @compiled
 def _blocked_sum(
-    weights: np.ndarray, index: np.ndarray, k: int, block: int, total: np.ndarray, partial: np.ndarray
+    weights: np.ndarray,
+    index: np.ndarray,
+    k: int,
+    block: int,
+    total: np.ndarray,
+    partial: np.ndarray,
 ) -> None:
     """total = sum over the active rows index[:k] of weights, the way a K-blocked GEMM adds them.
 
@@ -244,50 +249,122 @@ def _float_kernel(
     isolation: bool,
     record: bool,
     block: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    start: int,  # the neurons [start, stop) this call runs: whole WTA groups
+    stop: int,
+    tile: int,  # neurons per tile: whole WTA groups
+    counts: np.ndarray,  # (N, neurons) int64, written for [start, stop)
+    n_candidates: np.ndarray,  # (N, T) int32, this call's candidates added
+    raster: np.ndarray,  # (N or 0, T, neurons) bool
+    final: np.ndarray,  # (N, neurons) float32
+) -> None:
+    """The float network over the neurons [start, stop), tile by tile: each tile's currents and
+    state for every presentation before the next tile, so a tile's weights stay in cache.
+
+    Tiles hold whole WTA groups and groups never interact, so the order changes no number.
+    """
     n, timesteps, n_inputs = spikes.shape
-    n_neurons = weights.shape[1]
-    counts = np.zeros((n, n_neurons), dtype=np.int64)
-    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
-    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
-    final = np.zeros((n, n_neurons), dtype=np.float32)
-    voltage = np.zeros(n_neurons, dtype=np.float32)
-    current = np.empty((timesteps, n_neurons), dtype=np.float32)
-    partial = np.empty(n_neurons, dtype=np.float32)
-    index = np.empty(timesteps * n_inputs + 1, dtype=np.int64)
-    offsets = np.empty(timesteps + 1, dtype=np.int64)
+    index, offsets = _all_step_lists(spikes)
+    voltage = np.zeros(tile, dtype=np.float32)
+    current_store = np.empty(timesteps * tile, dtype=np.float32)
+    partial_store = np.empty(tile, dtype=np.float32)
+    tile_store = np.empty(n_inputs * tile, dtype=np.float32)
+    for g0 in range(start, stop, tile):
+        width = min(tile, stop - g0)
+        current = current_store[: timesteps * width].reshape((timesteps, width))
+        partial = partial_store[:width]
+        tile_weights = tile_store[: n_inputs * width].reshape((n_inputs, width))  # contiguous rows
+        for i in range(n_inputs):
+            for jj in range(width):
+                tile_weights[i, jj] = weights[i, g0 + jj]
+        voltage[:] = 0
+        for p in range(n):
+            if isolation:
+                voltage[:] = 0
+            for t in range(timesteps):
+                first, last = offsets[p, t], offsets[p, t + 1]
+                _blocked_sum(tile_weights, index[first:last], last - first, block, current[t], partial)
+            for t in range(timesteps):
+                n_cand = 0
+                for g in range(0, width, group):
+                    best = -1
+                    best_current = np.float32(-np.inf)
+                    for jj in range(g, g + group):
+                        c = current[t, jj]
+                        v = beta * voltage[jj] + c
+                        if v > theta[g0 + jj]:
+                            n_cand += 1
+                            v = np.float32(0)
+                            if wta:
+                                if best < 0 or c > best_current:
+                                    best_current = c
+                                    best = jj
+                            else:
+                                counts[p, g0 + jj] += 1
+                                if record:
+                                    raster[p, t, g0 + jj] = True
+                        voltage[jj] = v
+                    if wta and best >= 0:
+                        counts[p, g0 + best] += 1
+                        if record:
+                            raster[p, t, g0 + best] = True
+                n_candidates[p, t] += n_cand
+            final[p, g0 : g0 + width] = voltage[:width]
+
+
+@compiled
+def _all_step_lists(spikes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every presentation's per-step lists: step (p, t)'s active inputs are index[offsets[p, t]:offsets[p, t + 1]]."""
+    n, timesteps, n_inputs = spikes.shape
+    total = 0
     for p in range(n):
-        if isolation:
-            voltage[:] = 0
-        _step_lists(spikes[p], index, offsets)
-        _step_currents(weights, index, offsets, block, current, partial)
         for t in range(timesteps):
-            n_cand = 0
-            for g in range(0, n_neurons, group):
-                best = -1
-                best_current = np.float32(-np.inf)
-                for j in range(g, g + group):
-                    c = current[t, j]
-                    v = beta * voltage[j] + c
-                    if v > theta[j]:
-                        n_cand += 1
-                        v = np.float32(0)
-                        if wta:
-                            if best < 0 or c > best_current:
-                                best_current = c
-                                best = j
-                        else:
-                            counts[p, j] += 1
-                            if record:
-                                raster[p, t, j] = True
-                    voltage[j] = v
-                if wta and best >= 0:
-                    counts[p, best] += 1
-                    if record:
-                        raster[p, t, best] = True
-            n_candidates[p, t] = n_cand
-        final[p] = voltage
-    return counts, n_candidates, raster, final
+            for i in range(n_inputs):
+                total += spikes[p, t, i] != 0
+    index = np.empty(total + 1, dtype=np.int32)
+    offsets = np.empty((n, timesteps + 1), dtype=np.int64)
+    k = 0
+    for p in range(n):
+        _step_lists(spikes[p], index[k:], offsets[p])
+        for t in range(timesteps + 1):
+            offsets[p, t] += k
+        k = offsets[p, timesteps]
+    return index, offsets
+
+
+TILE_NEURONS = 400  # neurons per tile of the float kernel: one module; its weights stay in L2/L3 across presentations
+
+
+def neuron_tile(n_neurons: int, group: int) -> int:
+    """Whole WTA groups, about :data:`TILE_NEURONS` neurons (at least one group, at most all)."""
+    return min(n_neurons, group * max(1, TILE_NEURONS // group))
+
+
+def run_parts(
+    n_presentations: int, n_neurons: int, group: int, threads: int, isolation: bool
+) -> list[tuple[slice, int, int]]:
+    """How ``threads`` threads share a run: (presentations, start, stop) per thread.
+
+    Neurons in whole WTA groups when there are enough groups (any isolation), else presentations
+    (state isolation only: otherwise presentations are one stream and run in order).
+    """
+    groups = n_neurons // group
+    if threads > 1 and groups >= threads:
+        cuts = np.linspace(0, groups, threads + 1).round().astype(np.int64) * group
+        return [(slice(0, n_presentations), int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    if threads > 1 and isolation and n_presentations > 1:
+        cuts = np.linspace(0, n_presentations, min(threads, n_presentations) + 1).round().astype(np.int64)
+        return [(slice(int(a), int(b)), 0, n_neurons) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    return [(slice(0, n_presentations), 0, n_neurons)]
+
+
+def run_threads(tasks: Sequence[Callable[[], object]]) -> None:
+    """Run the (GIL-releasing) tasks, on a pool of Python threads when there are several."""
+    if len(tasks) == 1:
+        tasks[0]()
+        return
+    with ThreadPoolExecutor(max_workers=len(tasks)) as pool:
+        for future in [pool.submit(task) for task in tasks]:
+            future.result()
 
 
 def check_group(n_neurons: int, group: int | None) -> int:
@@ -371,10 +448,15 @@ def float_run(
     record: bool = False,
     block: int | None = None,
     group: int | None = None,
+    threads: int | None = None,
 ) -> SpikeRun:
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
 
     ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
+    ``threads`` (default: torch's thread count): Python threads sharing the run, by whole WTA
+    groups of neurons (an ensemble) or by presentations (:func:`run_parts`); the kernel runs
+    the neurons in tiles of whole groups (:func:`neuron_tile`) so that a tile's weights stay
+    in cache across the presentations.
 
     Same dynamics as :func:`vprsnn_export.dynamics.run_network`. Each step's currents are the
     active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
@@ -390,17 +472,40 @@ def float_run(
     n, timesteps, n_inputs = array.shape
     if block is None:
         block = blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1]) or n_inputs
-    counts, n_candidates, raster, final = _float_kernel(
-        array,
-        w,
-        np.ascontiguousarray(_numpy(theta), dtype=np.float32),
-        np.float32(beta),
-        bool(wta),
-        check_group(w.shape[1], group),
-        bool(isolation),
-        bool(record),
-        max(1, int(block)),
-    )
+    n_neurons = w.shape[1]
+    size = check_group(n_neurons, group)
+    counts = np.zeros((n, n_neurons), dtype=np.int64)
+    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
+    final = np.zeros((n, n_neurons), dtype=np.float32)
+    theta_array = np.ascontiguousarray(_numpy(theta), dtype=np.float32)
+    parts = run_parts(n, n_neurons, size, torch.get_num_threads() if threads is None else threads, isolation)
+    candidates = [np.zeros((len(range(n)[rows]), timesteps), dtype=np.int32) for rows, _, _ in parts]
+
+    def task(k: int) -> Callable[[], None]:
+        rows, start, stop = parts[k]
+        return lambda: _float_kernel(
+            array[rows],
+            w,
+            theta_array,
+            np.float32(beta),
+            bool(wta),
+            size,
+            bool(isolation),
+            bool(record),
+            max(1, int(block)),
+            start,
+            stop,
+            neuron_tile(n_neurons, size),
+            counts[rows],
+            candidates[k],
+            raster[rows] if record else raster,
+            final[rows],
+        )
+
+    run_threads([task(k) for k in range(len(parts))])
+    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
+    for (rows, _, _), part in zip(parts, candidates, strict=True):
+        n_candidates[rows] += part
     return SpikeRun(
         counts=torch.from_numpy(counts),
         candidates_per_step=torch.from_numpy(n_candidates),

@@ -308,3 +308,16 @@ def test_an_ensemble_runs_each_module_as_it_would_run_alone():
         assert torch.equal(whole.raster[:, :, cut], alone.raster)
     with pytest.raises(ValueError, match="do not divide"):
         float_run(spikes, weights, theta, beta=0.9, group=5)
+
+
+@pytest.mark.parametrize("isolation", [True, False])
+@pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3), (1000, 2)])
+def test_float_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
+    """Tiles of whole WTA groups, threads over groups or presentations: the same run as one thread, one tile."""
+    n_neurons = 1000 if group == 1000 else 12
+    spikes, weights, theta = float_case(13, n=5, n_neurons=n_neurons)
+    one = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=1)
+    monkeypatch.setattr(kernels, "TILE_NEURONS", 4)
+    many = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=threads)
+    for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
+        assert torch.equal(getattr(one, field), getattr(many, field)), field
