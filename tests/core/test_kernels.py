@@ -321,3 +321,20 @@ def test_float_kernel_tiles_and_threads_change_no_number(isolation, group, threa
     many = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=threads)
     for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
         assert torch.equal(getattr(one, field), getattr(many, field)), field
+
+
+@pytest.mark.parametrize("isolation", [True, False])
+@pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3)])
+def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
+    """The integer kernel in tiles and on threads: the same run as one thread, one tile (saturations and peak too)."""
+    gen = np.random.default_rng(5)
+    q = gen.integers(0, 16, size=(30, 12))
+    spikes = (gen.random((5, 40, 30)) < 0.2).astype(np.uint8)
+    args = dict(shift=2, keep=4096 - 300, limit=900, wta=True, isolation=isolation, record=True, group=group)
+    threshold = gen.integers(50, 200, size=12) << 2
+    one = integer_run(spikes, q, threshold, None, threads=1, **args)
+    monkeypatch.setattr(kernels, "TILE_NEURONS", 4)
+    many = integer_run(spikes, q, threshold, None, threads=threads, **args)
+    for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
+        assert torch.equal(getattr(one, field), getattr(many, field)), field
+    assert (one.saturations, one.max_current) == (many.saturations, many.max_current) and one.saturations > 0
