@@ -453,7 +453,7 @@ def integer_run(
         rows, start, stop = parts[k]
 
         def run() -> None:
-            extremes[k] = _integer_kernel(
+            saturations, peak = _integer_kernel(
                 array[rows],
                 weights,
                 int(shift),
@@ -475,6 +475,7 @@ def integer_run(
                 raster[rows] if record else raster,
                 final[rows],
             )
+            extremes[k] = (int(saturations), int(peak))
 
         return run
 
@@ -487,8 +488,8 @@ def integer_run(
         candidates_per_step=torch.from_numpy(n_candidates),
         raster=torch.from_numpy(raster) if record else None,
         final_voltage=torch.from_numpy(final),
-        saturations=int(sum(int(e[0]) for e in extremes)),
-        max_current=int(max(int(e[1]) for e in extremes)) >> shift,
+        saturations=sum(e[0] for e in extremes),
+        max_current=max(e[1] for e in extremes) >> shift,
     )
 
 
