@@ -24,11 +24,16 @@ a current may differ in its last bit and, rarely, a threshold decision with it.
 :func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column
 normalisation) with every float32 operation in the torch loop's order.
 
+:func:`stdp_windows` runs that window for M independent modules of an ensemble in one call.
+
 Compilation is lazy (first call, about a second per signature) and cached next to this
 file (numba ``cache=True``); on a read-only install without a writable cache directory the
-kernels are compiled in memory with one warning (:func:`compiled`). The kernels are serial:
-numba's threading layer is never launched (once launched, its OpenMP workers slowed torch's
-training loop sevenfold here).
+kernels are compiled in memory with one warning (:func:`compiled`). Each kernel call is
+serial and releases the GIL: ``threads`` > 1 runs parts of a call (contiguous slices of
+modules; whole WTA groups of neurons or presentations, :func:`run_parts`) on a pool of Python
+threads. numba's threading layer is never launched (once launched, its OpenMP workers slowed
+torch's training loop sevenfold here). Inference runs the neurons in tiles of whole WTA groups
+(:func:`neuron_tile`): a tile's weights, copied contiguous, stay in cache across presentations.
 """
 
 from __future__ import annotations
@@ -279,6 +284,9 @@ def _float_kernel(
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
     zero = np.float32(0)
+    lowest = np.float32(-np.inf)
+    lane_value = np.empty(LANES, dtype=np.float32)
+    lane_index = np.empty(LANES, dtype=np.int64)
     current_store = np.empty(timesteps * tile, dtype=np.float32)
     partial_store = np.empty(tile, dtype=np.float32)
     tile_store = np.empty(n_inputs * tile, dtype=np.float32)
@@ -293,6 +301,7 @@ def _float_kernel(
         tile_theta = theta[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.float32)
         candidate = np.zeros(width, dtype=np.bool_)
+        masked = np.empty(width, dtype=np.float32)  # I_j of the candidates, -inf elsewhere
         for p in range(n):
             if isolation:
                 voltage[:] = 0
@@ -306,27 +315,62 @@ def _float_kernel(
                     v = beta * voltage[jj] + step[jj]
                     fire = v > tile_theta[jj]
                     candidate[jj] = fire
+                    masked[jj] = step[jj] if fire else lowest
                     voltage[jj] = zero if fire else v
                     n_cand += fire
                 n_candidates[p, t] += n_cand
-                if n_cand > 0:
+                if n_cand > 0 and wta:
                     for g in range(0, width, group):
-                        best = -1
-                        best_current = np.float32(-np.inf)
-                        for jj in range(g, g + group):
-                            if candidate[jj]:
-                                if not wta:
-                                    counts[p, g0 + jj] += 1
-                                    if record:
-                                        raster[p, t, g0 + jj] = True
-                                elif best < 0 or step[jj] > best_current:
-                                    best_current = step[jj]
-                                    best = jj
+                        best = _first_argmax(masked, g, g + group, lane_value, lane_index)
                         if best >= 0:
                             counts[p, g0 + best] += 1
                             if record:
                                 raster[p, t, g0 + best] = True
+                elif n_cand > 0:
+                    for jj in range(width):
+                        if candidate[jj]:
+                            counts[p, g0 + jj] += 1
+                            if record:
+                                raster[p, t, g0 + jj] = True
             final[p, g0 : g0 + width] = voltage[:width]
+
+
+LANES = 16  # independent running maxima of _first_argmax (one AVX-512 register of float32)
+
+
+@compiled
+def _first_argmax(values: np.ndarray, start: int, stop: int, lane_value: np.ndarray, lane_index: np.ndarray) -> int:
+    """The first j in [start, stop) with the largest values[j] > -inf, or -1: the WTA winner, branch-free.
+
+    Lane l keeps the first maximum among j = start + l (mod LANES) (strictly greater replaces);
+    the lanes' largest value with its smallest index is the first maximum of the whole range,
+    and the tail (indices above every lane's) replaces it only when strictly greater.
+    """
+    lowest = np.float32(-np.inf)
+    for lane in range(LANES):
+        lane_value[lane] = lowest
+        lane_index[lane] = -1
+    j = start
+    while j + LANES <= stop:
+        for lane in range(LANES):
+            x = values[j + lane]
+            better = x > lane_value[lane]
+            lane_value[lane] = x if better else lane_value[lane]
+            lane_index[lane] = j + lane if better else lane_index[lane]
+        j += LANES
+    best = -1
+    best_value = lowest
+    for lane in range(LANES):
+        if lane_index[lane] >= 0 and (
+            best < 0 or lane_value[lane] > best_value or (lane_value[lane] == best_value and lane_index[lane] < best)
+        ):
+            best_value = lane_value[lane]
+            best = lane_index[lane]
+    for k in range(j, stop):
+        if values[k] > best_value:
+            best_value = values[k]
+            best = k
+    return best
 
 
 @compiled

@@ -338,3 +338,16 @@ def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, thr
     for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
         assert torch.equal(getattr(one, field), getattr(many, field)), field
     assert (one.saturations, one.max_current) == (many.saturations, many.max_current) and one.saturations > 0
+
+
+@pytest.mark.parametrize("group", [None, 40, 37])
+def test_wide_wta_groups_pick_the_first_largest_candidate_as_run_network(group):
+    """Groups wider than the 16 lanes of the branch-free argmax (and a ragged tail), with ties: run_network's winners."""
+    for seed in range(3):
+        spikes, weights, theta = float_case(seed, n=3, timesteps=60, n_neurons=(80 if group != 37 else 74))
+        weights = torch.floor(weights * 4) / 8  # dyadic: exact sums, many tied currents
+        theta = theta * 0.3
+        slow = run_network(spikes, weights, theta, beta=0.95, record=True, compiled=False, group=group)
+        fast = float_run(spikes, weights, theta, beta=0.95, record=True, group=group)
+        assert int(slow.candidates_per_step.max()) > 16
+        assert torch.equal(fast.raster, slow.raster) and torch.equal(fast.counts, slow.counts)
