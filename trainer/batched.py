@@ -106,8 +106,8 @@ def _torch_batch(
         members = np.flatnonzero(sizes == size)
         spikes = torch.stack(
             [
-                encode(images[batch_rows[m]], _train_seeds(cfg, presentations, batch_rows[m], epoch), cfg.encoder)
-                for m in members
+                encode(images[rows], _train_seeds(cfg, presentations, rows, epoch), cfg.encoder)
+                for rows in (batch_rows[int(m)] for m in members)
             ]
         ).to(weights.device)
         index = torch.from_numpy(members).to(weights.device)

@@ -24,11 +24,16 @@ a current may differ in its last bit and, rarely, a threshold decision with it.
 :func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column
 normalisation) with every float32 operation in the torch loop's order.
 
+:func:`stdp_windows` runs that window for M independent modules of an ensemble in one call.
+
 Compilation is lazy (first call, about a second per signature) and cached next to this
 file (numba ``cache=True``); on a read-only install without a writable cache directory the
-kernels are compiled in memory with one warning (:func:`compiled`). The kernels are serial:
-numba's threading layer is never launched (once launched, its OpenMP workers slowed torch's
-training loop sevenfold here).
+kernels are compiled in memory with one warning (:func:`compiled`). Each kernel call is
+serial and releases the GIL: ``threads`` > 1 runs parts of a call (contiguous slices of
+modules; whole WTA groups of neurons or presentations, :func:`run_parts`) on a pool of Python
+threads. numba's threading layer is never launched (once launched, its OpenMP workers slowed
+torch's training loop sevenfold here). Inference runs the neurons in tiles of whole WTA groups
+(:func:`neuron_tile`): a tile's weights, copied contiguous, stay in cache across presentations.
 """
 
 from __future__ import annotations
@@ -107,20 +112,6 @@ def _step_lists(spikes: np.ndarray, index: np.ndarray, offsets: np.ndarray) -> N
 
 
 @compiled
-def _step_currents(
-    weights: np.ndarray, index: np.ndarray, offsets: np.ndarray, block: int, out: np.ndarray, partial: np.ndarray
-) -> None:
-    """out[t] = sum of the weight rows listed for step t, summed as :func:`_blocked_sum` does.
-
-    Whole rows at a time (numba vectorises the row additions; tiling the neurons to keep
-    weight rows in L2 measured slower here: the per-tile overhead outweighs the misses).
-    """
-    for t in range(out.shape[0]):
-        start, end = offsets[t], offsets[t + 1]
-        _blocked_sum(weights, index[start:end], end - start, block, out[t], partial)
-
-
-@compiled
 def _integer_kernel(
     spikes: np.ndarray,  # (N, T, inputs) uint8
     mantissas: np.ndarray,  # (inputs, neurons) q_ij, unsigned, in the narrowest integer dtype that holds them
@@ -134,63 +125,90 @@ def _integer_kernel(
     group: int,  # neurons per WTA group (one module of an ensemble)
     isolation: bool,
     record: bool,
-    current: np.ndarray,  # (T, neurons) scratch: int32 when every sum of q fits, else int64
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, np.int64]:
+    current_store: np.ndarray,  # (T tile,) scratch: int32 when every sum of q fits, else int64
+    start: int,  # the neurons [start, stop) this call runs: whole WTA groups
+    stop: int,
+    tile: int,  # neurons per tile: whole WTA groups
+    counts: np.ndarray,  # (N, neurons) int64, written for [start, stop)
+    n_candidates: np.ndarray,  # (N, T) int32, this call's candidates added
+    raster: np.ndarray,  # (N or 0, T, neurons) bool
+    final: np.ndarray,  # (N, neurons) int64
+) -> tuple[int, np.int64]:
+    """The integer network over the neurons [start, stop), tile by tile (as :func:`_float_kernel`).
+
+    Returns (saturations, the largest shifted current) of these neurons.
+    """
     n, timesteps, n_inputs = spikes.shape
-    n_neurons = mantissas.shape[1]
-    counts = np.zeros((n, n_neurons), dtype=np.int64)
-    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
-    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
-    final = np.zeros((n, n_neurons), dtype=np.int64)
-    voltage = np.zeros(n_neurons, dtype=np.int64)
-    index = np.empty(timesteps * n_inputs + 1, dtype=np.int64)
-    offsets = np.empty(timesteps + 1, dtype=np.int64)
-    partial = np.empty(n_neurons, dtype=current.dtype)
+    index, offsets = _all_step_lists(spikes)
+    partial_store = np.empty(tile, dtype=current_store.dtype)
+    tile_store = np.empty(n_inputs * tile, dtype=mantissas.dtype)
     saturations = 0
     peak = np.int64(0)
-    for p in range(n):
-        if isolation:
-            voltage[:] = 0
-        _step_lists(spikes[p], index, offsets)
-        _step_currents(mantissas, index, offsets, n_inputs, current, partial)
-        for t in range(timesteps):
-            n_cand = 0
-            for g in range(0, n_neurons, group):
-                best = -1
-                best_score = np.int64(-1)
-                for j in range(g, g + group):
-                    c = np.int64(current[t, j]) << shift
-                    if c > peak:
-                        peak = c
-                    v = ((voltage[j] * keep) >> DECAY_BITS) + c
-                    if v > limit:
-                        saturations += 1
-                        v = limit
-                    if v > threshold[j]:
-                        n_cand += 1
-                        v = 0
-                        if wta:
-                            score = c * multipliers[j] if use_multipliers else c
-                            if score > best_score:
-                                best_score = score
-                                best = j
-                        else:
-                            counts[p, j] += 1
+    for g0 in range(start, stop, tile):
+        width = min(tile, stop - g0)
+        current = current_store[: timesteps * width].reshape((timesteps, width))
+        partial = partial_store[:width]
+        tile_weights = tile_store[: n_inputs * width].reshape((n_inputs, width))  # contiguous rows
+        for i in range(n_inputs):
+            for jj in range(width):
+                tile_weights[i, jj] = mantissas[i, g0 + jj]
+        tile_threshold = threshold[g0 : g0 + width].copy()
+        voltage = np.zeros(width, dtype=np.int64)
+        candidate = np.zeros(width, dtype=np.bool_)
+        for p in range(n):
+            if isolation:
+                voltage[:] = 0
+            for t in range(timesteps):
+                first, last = offsets[p, t], offsets[p, t + 1]
+                _blocked_sum(tile_weights, index[first:last], last - first, n_inputs, current[t], partial)
+            for t in range(timesteps):
+                step = current[t]
+                n_cand = 0
+                for jj in range(width):  # branch-free: vectorised
+                    c = np.int64(step[jj]) << shift
+                    peak = max(peak, c)
+                    v = ((voltage[jj] * keep) >> DECAY_BITS) + c
+                    clipped = v > limit
+                    saturations += clipped
+                    v = limit if clipped else v
+                    fire = v > tile_threshold[jj]
+                    candidate[jj] = fire
+                    voltage[jj] = 0 if fire else v
+                    n_cand += fire
+                n_candidates[p, t] += n_cand
+                if n_cand > 0:
+                    for g in range(0, width, group):
+                        best = -1
+                        best_score = np.int64(-1)
+                        for jj in range(g, g + group):
+                            if candidate[jj]:
+                                j = g0 + jj
+                                if not wta:
+                                    counts[p, j] += 1
+                                    if record:
+                                        raster[p, t, j] = True
+                                else:
+                                    c = np.int64(step[jj]) << shift
+                                    score = c * multipliers[j] if use_multipliers else c
+                                    if score > best_score:
+                                        best_score = score
+                                        best = j
+                        if best >= 0:
+                            counts[p, best] += 1
                             if record:
-                                raster[p, t, j] = True
-                    voltage[j] = v
-                if wta and best >= 0:
-                    counts[p, best] += 1
-                    if record:
-                        raster[p, t, best] = True
-            n_candidates[p, t] = n_cand
-        final[p] = voltage
-    return counts, n_candidates, raster, final, saturations, peak
+                                raster[p, t, best] = True
+            final[p, g0 : g0 + width] = voltage[:width]
+    return saturations, peak
 
 
 @compiled
 def _blocked_sum(
-    weights: np.ndarray, index: np.ndarray, k: int, block: int, total: np.ndarray, partial: np.ndarray
+    weights: np.ndarray,
+    index: np.ndarray,
+    k: int,
+    block: int,
+    total: np.ndarray,
+    partial: np.ndarray,
 ) -> None:
     """total = sum over the active rows index[:k] of weights, the way a K-blocked GEMM adds them.
 
@@ -199,16 +217,19 @@ def _blocked_sum(
     (``block`` >= the number of inputs: one plain left-to-right sum).
     """
     n = total.shape[0]
-    for j in range(n):
-        total[j] = 0
+    if k == 0:
+        for j in range(n):
+            total[j] = 0
+        return
     a = 0
     first = True
     while a < k:
         stop = (index[a] // block + 1) * block
         sums = total if first else partial  # the first block's sum from zero is the total so far
-        if not first:
-            for j in range(n):
-                partial[j] = 0
+        row = weights[index[a]]
+        for j in range(n):
+            sums[j] = 0 + row[j]  # the block's sum from zero: 0 + w (as a zeroed sum adds it)
+        a += 1
         while a < k and index[a] < stop:
             row = weights[index[a]]
             for j in range(n):
@@ -244,50 +265,172 @@ def _float_kernel(
     isolation: bool,
     record: bool,
     block: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    start: int,  # the neurons [start, stop) this call runs: whole WTA groups
+    stop: int,
+    tile: int,  # neurons per tile: whole WTA groups
+    counts: np.ndarray,  # (N, neurons) int64, written for [start, stop)
+    n_candidates: np.ndarray,  # (N, T) int32, this call's candidates added
+    raster: np.ndarray,  # (N or 0, T, neurons) bool
+    final: np.ndarray,  # (N, neurons) float32
+) -> None:
+    """The float network over the neurons [start, stop), tile by tile: each tile's currents and
+    state for every presentation before the next tile.
+
+    Tiles hold whole WTA groups and groups never interact, so the order changes no number. A
+    tile's weights are copied into contiguous rows (they stay in cache across presentations); the
+    state update runs branch-free over the tile (vectorised), the WTA only on steps with candidates.
+    (Summing the currents of a chunk of presentations in column blocks that fit in L2 measured slower.)
+    """
     n, timesteps, n_inputs = spikes.shape
-    n_neurons = weights.shape[1]
-    counts = np.zeros((n, n_neurons), dtype=np.int64)
-    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
-    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
-    final = np.zeros((n, n_neurons), dtype=np.float32)
-    voltage = np.zeros(n_neurons, dtype=np.float32)
-    current = np.empty((timesteps, n_neurons), dtype=np.float32)
-    partial = np.empty(n_neurons, dtype=np.float32)
-    index = np.empty(timesteps * n_inputs + 1, dtype=np.int64)
-    offsets = np.empty(timesteps + 1, dtype=np.int64)
-    for p in range(n):
-        if isolation:
-            voltage[:] = 0
-        _step_lists(spikes[p], index, offsets)
-        _step_currents(weights, index, offsets, block, current, partial)
-        for t in range(timesteps):
-            n_cand = 0
-            for g in range(0, n_neurons, group):
-                best = -1
-                best_current = np.float32(-np.inf)
-                for j in range(g, g + group):
-                    c = current[t, j]
-                    v = beta * voltage[j] + c
-                    if v > theta[j]:
-                        n_cand += 1
-                        v = np.float32(0)
-                        if wta:
-                            if best < 0 or c > best_current:
-                                best_current = c
-                                best = j
-                        else:
-                            counts[p, j] += 1
+    index, offsets = _all_step_lists(spikes)
+    zero = np.float32(0)
+    lowest = np.float32(-np.inf)
+    lane_value = np.empty(LANES, dtype=np.float32)
+    lane_index = np.empty(LANES, dtype=np.int64)
+    current_store = np.empty(timesteps * tile, dtype=np.float32)
+    partial_store = np.empty(tile, dtype=np.float32)
+    tile_store = np.empty(n_inputs * tile, dtype=np.float32)
+    for g0 in range(start, stop, tile):
+        width = min(tile, stop - g0)
+        current = current_store[: timesteps * width].reshape((timesteps, width))
+        partial = partial_store[:width]
+        tile_weights = tile_store[: n_inputs * width].reshape((n_inputs, width))  # contiguous rows
+        for i in range(n_inputs):
+            for jj in range(width):
+                tile_weights[i, jj] = weights[i, g0 + jj]
+        tile_theta = theta[g0 : g0 + width].copy()
+        voltage = np.zeros(width, dtype=np.float32)
+        candidate = np.zeros(width, dtype=np.bool_)
+        masked = np.empty(width, dtype=np.float32)  # I_j of the candidates, -inf elsewhere
+        for p in range(n):
+            if isolation:
+                voltage[:] = 0
+            for t in range(timesteps):
+                first, last = offsets[p, t], offsets[p, t + 1]
+                _blocked_sum(tile_weights, index[first:last], last - first, block, current[t], partial)
+            for t in range(timesteps):
+                step = current[t]
+                n_cand = 0
+                for jj in range(width):  # branch-free: vectorised
+                    v = beta * voltage[jj] + step[jj]
+                    fire = v > tile_theta[jj]
+                    candidate[jj] = fire
+                    masked[jj] = step[jj] if fire else lowest
+                    voltage[jj] = zero if fire else v
+                    n_cand += fire
+                n_candidates[p, t] += n_cand
+                if n_cand > 0 and wta:
+                    for g in range(0, width, group):
+                        best = _first_argmax(masked, g, g + group, lane_value, lane_index)
+                        if best >= 0:
+                            counts[p, g0 + best] += 1
                             if record:
-                                raster[p, t, j] = True
-                    voltage[j] = v
-                if wta and best >= 0:
-                    counts[p, best] += 1
-                    if record:
-                        raster[p, t, best] = True
-            n_candidates[p, t] = n_cand
-        final[p] = voltage
-    return counts, n_candidates, raster, final
+                                raster[p, t, g0 + best] = True
+                elif n_cand > 0:
+                    for jj in range(width):
+                        if candidate[jj]:
+                            counts[p, g0 + jj] += 1
+                            if record:
+                                raster[p, t, g0 + jj] = True
+            final[p, g0 : g0 + width] = voltage[:width]
+
+
+LANES = 16  # independent running maxima of _first_argmax (one AVX-512 register of float32)
+
+
+@compiled
+def _first_argmax(values: np.ndarray, start: int, stop: int, lane_value: np.ndarray, lane_index: np.ndarray) -> int:
+    """The first j in [start, stop) with the largest values[j] > -inf, or -1: the WTA winner, branch-free.
+
+    Lane l keeps the first maximum among j = start + l (mod LANES) (strictly greater replaces);
+    the lanes' largest value with its smallest index is the first maximum of the whole range,
+    and the tail (indices above every lane's) replaces it only when strictly greater.
+    """
+    lowest = np.float32(-np.inf)
+    for lane in range(LANES):
+        lane_value[lane] = lowest
+        lane_index[lane] = -1
+    j = start
+    while j + LANES <= stop:
+        for lane in range(LANES):
+            x = values[j + lane]
+            better = x > lane_value[lane]
+            lane_value[lane] = x if better else lane_value[lane]
+            lane_index[lane] = j + lane if better else lane_index[lane]
+        j += LANES
+    best = -1
+    best_value = lowest
+    for lane in range(LANES):
+        if lane_index[lane] >= 0 and (
+            best < 0 or lane_value[lane] > best_value or (lane_value[lane] == best_value and lane_index[lane] < best)
+        ):
+            best_value = lane_value[lane]
+            best = lane_index[lane]
+    for k in range(j, stop):
+        if values[k] > best_value:
+            best_value = values[k]
+            best = k
+    return best
+
+
+@compiled
+def _all_step_lists(spikes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every presentation's per-step lists: step (p, t)'s active inputs are index[offsets[p, t]:offsets[p, t + 1]]."""
+    n, timesteps, n_inputs = spikes.shape
+    total = 0
+    for p in range(n):
+        for t in range(timesteps):
+            for i in range(n_inputs):
+                total += spikes[p, t, i] != 0
+    index = np.empty(total + 1, dtype=np.int32)
+    offsets = np.empty((n, timesteps + 1), dtype=np.int64)
+    k = 0
+    for p in range(n):
+        _step_lists(spikes[p], index[k:], offsets[p])
+        for t in range(timesteps + 1):
+            offsets[p, t] += k
+        k = offsets[p, timesteps]
+    return index, offsets
+
+
+TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default size
+L2_WEIGHT_BYTES = (
+    640 * 1024
+)  # the float kernel sums currents in column blocks whose weights fit in this (1 MiB L2 here)
+PRESENTATION_CHUNK = 16  # presentations whose currents the float kernel sums per column block before their steps
+
+
+def neuron_tile(n_neurons: int, group: int) -> int:
+    """Whole WTA groups, about :data:`TILE_NEURONS` neurons (at least one group, at most all)."""
+    return min(n_neurons, group * max(1, TILE_NEURONS // group))
+
+
+def run_parts(
+    n_presentations: int, n_neurons: int, group: int, threads: int, isolation: bool
+) -> list[tuple[slice, int, int]]:
+    """How ``threads`` threads share a run: (presentations, start, stop) per thread.
+
+    Neurons in whole WTA groups when there are enough groups (any isolation), else presentations
+    (state isolation only: otherwise presentations are one stream and run in order).
+    """
+    groups = n_neurons // group
+    if threads > 1 and groups >= threads:
+        cuts = np.linspace(0, groups, threads + 1).round().astype(np.int64) * group
+        return [(slice(0, n_presentations), int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    if threads > 1 and isolation and n_presentations > 1:
+        cuts = np.linspace(0, n_presentations, min(threads, n_presentations) + 1).round().astype(np.int64)
+        return [(slice(int(a), int(b)), 0, n_neurons) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    return [(slice(0, n_presentations), 0, n_neurons)]
+
+
+def run_threads(tasks: Sequence[Callable[[], object]]) -> None:
+    """Run the (GIL-releasing) tasks, on a pool of Python threads when there are several."""
+    if len(tasks) == 1:
+        tasks[0]()
+        return
+    with ThreadPoolExecutor(max_workers=len(tasks)) as pool:
+        for future in [pool.submit(task) for task in tasks]:
+            future.result()
 
 
 def check_group(n_neurons: int, group: int | None) -> int:
@@ -311,10 +454,12 @@ def integer_run(
     isolation: bool = True,
     record: bool = False,
     group: int | None = None,
+    threads: int | None = None,
 ) -> SpikeRun:
     """The integer simulator's run, event-driven and compiled; bit-identical to ``targets.intsim.run_prepared``.
 
     ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
+    ``threads`` and the tiles of neurons as in :func:`float_run`.
 
     ``mantissas`` are the unshifted weights q_ij (inputs, neurons), non-negative; the kernel sums
     them in the narrowest dtype that holds them (uint8 for up to 8 bits: a quarter of the memory
@@ -334,29 +479,61 @@ def integer_run(
     if (bound << shift) >= (1 << 62):
         raise ValueError(f"current sums up to {bound} << {shift} overflow 64-bit voltages")
     storage = np.uint8 if top < (1 << 8) else np.uint16 if top < (1 << 16) else np.int64
+    n, timesteps, _ = array.shape
     n_neurons = q.shape[1]
-    counts, n_candidates, raster, final, saturations, peak = _integer_kernel(
-        array,
-        np.ascontiguousarray(q, dtype=storage),
-        int(shift),
-        np.ascontiguousarray(threshold, dtype=np.int64),
-        np.ones(n_neurons, dtype=np.int64) if multipliers is None else np.ascontiguousarray(multipliers, np.int64),
-        multipliers is not None,
-        int(keep),
-        int(limit),
-        bool(wta),
-        check_group(n_neurons, group),
-        bool(isolation),
-        bool(record),
-        np.zeros((array.shape[1], n_neurons), dtype=np.int32 if bound <= INT32_SAFE else np.int64),
-    )
+    size = check_group(n_neurons, group)
+    weights = np.ascontiguousarray(q, dtype=storage)
+    thresholds = np.ascontiguousarray(threshold, dtype=np.int64)
+    scores = np.ones(n_neurons, dtype=np.int64) if multipliers is None else np.ascontiguousarray(multipliers, np.int64)
+    counts = np.zeros((n, n_neurons), dtype=np.int64)
+    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
+    final = np.zeros((n, n_neurons), dtype=np.int64)
+    tile = neuron_tile(n_neurons, size)
+    parts = run_parts(n, n_neurons, size, torch.get_num_threads() if threads is None else threads, isolation)
+    candidates = [np.zeros((len(range(n)[rows]), timesteps), dtype=np.int32) for rows, _, _ in parts]
+    extremes: list[tuple[int, int]] = [(0, 0)] * len(parts)
+
+    def task(k: int) -> Callable[[], None]:
+        rows, start, stop = parts[k]
+
+        def run() -> None:
+            saturations, peak = _integer_kernel(
+                array[rows],
+                weights,
+                int(shift),
+                thresholds,
+                scores,
+                multipliers is not None,
+                int(keep),
+                int(limit),
+                bool(wta),
+                size,
+                bool(isolation),
+                bool(record),
+                np.zeros(timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64),
+                start,
+                stop,
+                tile,
+                counts[rows],
+                candidates[k],
+                raster[rows] if record else raster,
+                final[rows],
+            )
+            extremes[k] = (int(saturations), int(peak))
+
+        return run
+
+    run_threads([task(k) for k in range(len(parts))])
+    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
+    for (rows, _, _), part in zip(parts, candidates, strict=True):
+        n_candidates[rows] += part
     return SpikeRun(
         counts=torch.from_numpy(counts),
         candidates_per_step=torch.from_numpy(n_candidates),
         raster=torch.from_numpy(raster) if record else None,
         final_voltage=torch.from_numpy(final),
-        saturations=int(saturations),
-        max_current=int(peak) >> shift,
+        saturations=sum(e[0] for e in extremes),
+        max_current=max(e[1] for e in extremes) >> shift,
     )
 
 
@@ -371,10 +548,15 @@ def float_run(
     record: bool = False,
     block: int | None = None,
     group: int | None = None,
+    threads: int | None = None,
 ) -> SpikeRun:
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
 
     ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
+    ``threads`` (default: torch's thread count): Python threads sharing the run, by whole WTA
+    groups of neurons (an ensemble) or by presentations (:func:`run_parts`); the kernel runs
+    the neurons in tiles of whole groups (:func:`neuron_tile`) so that a tile's weights stay
+    in cache across the presentations.
 
     Same dynamics as :func:`vprsnn_export.dynamics.run_network`. Each step's currents are the
     active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
@@ -390,17 +572,40 @@ def float_run(
     n, timesteps, n_inputs = array.shape
     if block is None:
         block = blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1]) or n_inputs
-    counts, n_candidates, raster, final = _float_kernel(
-        array,
-        w,
-        np.ascontiguousarray(_numpy(theta), dtype=np.float32),
-        np.float32(beta),
-        bool(wta),
-        check_group(w.shape[1], group),
-        bool(isolation),
-        bool(record),
-        max(1, int(block)),
-    )
+    n_neurons = w.shape[1]
+    size = check_group(n_neurons, group)
+    counts = np.zeros((n, n_neurons), dtype=np.int64)
+    raster = np.zeros((n if record else 0, timesteps, n_neurons), dtype=np.bool_)
+    final = np.zeros((n, n_neurons), dtype=np.float32)
+    theta_array = np.ascontiguousarray(_numpy(theta), dtype=np.float32)
+    parts = run_parts(n, n_neurons, size, torch.get_num_threads() if threads is None else threads, isolation)
+    candidates = [np.zeros((len(range(n)[rows]), timesteps), dtype=np.int32) for rows, _, _ in parts]
+
+    def task(k: int) -> Callable[[], None]:
+        rows, start, stop = parts[k]
+        return lambda: _float_kernel(
+            array[rows],
+            w,
+            theta_array,
+            np.float32(beta),
+            bool(wta),
+            size,
+            bool(isolation),
+            bool(record),
+            max(1, int(block)),
+            start,
+            stop,
+            neuron_tile(n_neurons, size),
+            counts[rows],
+            candidates[k],
+            raster[rows] if record else raster,
+            final[rows],
+        )
+
+    run_threads([task(k) for k in range(len(parts))])
+    n_candidates = np.zeros((n, timesteps), dtype=np.int32)
+    for (rows, _, _), part in zip(parts, candidates, strict=True):
+        n_candidates[rows] += part
     return SpikeRun(
         counts=torch.from_numpy(counts),
         candidates_per_step=torch.from_numpy(n_candidates),
@@ -519,33 +724,43 @@ def _stdp_window(
     squares = np.empty(n_neurons, dtype=np.float32)
     scale = np.empty(n_neurons, dtype=np.float32)
     fired_total = np.zeros(n_neurons, dtype=np.float32)
+    partials = np.empty((batch, n_neurons), dtype=np.float32)
+    starts = np.empty(n_inputs + 1, dtype=np.int64)
+    members = np.empty(batch * n_inputs, dtype=np.int64)
+    ready = False  # this step's lists and currents were made while normalising the last step's weights
     for t in range(timesteps):
+        if not ready:
+            for b in range(batch):
+                n_active[b] = _active_inputs(spikes[b, t], index[b])
+                _blocked_sum(weights, index[b], n_active[b], block, current[b], partial)
+        ready = False
         for b in range(batch):
-            n_active[b] = _active_inputs(spikes[b, t], index[b])
-            _blocked_sum(weights, index[b], n_active[b], block, current[b], partial)
-        for b in range(batch):
-            best = -1
-            best_current = np.float32(-np.inf)
-            n_winners[b] = 0
-            for j in range(n_neurons):
-                c = current[b, j]
-                v = beta * voltage[b, j] + c
+            row_voltage, row_current, row_fired = voltage[b], current[b], fired[b]
+            n_cand = 0
+            for j in range(n_neurons):  # branch-free: vectorised
+                v = beta * row_voltage[j] + row_current[j]
                 candidate = v > theta[j]
-                fired[b, j] = candidate and not wta
-                if candidate:
-                    voltage[b, j] = zero
-                    if not wta:
-                        winners[b, n_winners[b]] = j
-                        n_winners[b] += 1
-                    if best < 0 or c > best_current:
-                        best_current = c
-                        best = j
-                else:
-                    voltage[b, j] = v
-            if wta and best >= 0:
-                fired[b, best] = True
+                row_fired[j] = candidate
+                row_voltage[j] = zero if candidate else v
+                n_cand += candidate
+            n_winners[b] = 0
+            if n_cand > 0 and wta:  # the first candidate with the largest current fires
+                best = -1
+                best_current = np.float32(-np.inf)
+                for j in range(n_neurons):
+                    if row_fired[j]:
+                        row_fired[j] = False
+                        if best < 0 or row_current[j] > best_current:
+                            best_current = row_current[j]
+                            best = j
+                row_fired[best] = True
                 winners[b, 0] = best
                 n_winners[b] = 1
+            elif n_cand > 0:
+                for j in range(n_neurons):
+                    if row_fired[j]:
+                        winners[b, n_winners[b]] = j
+                        n_winners[b] += 1
         for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
@@ -611,7 +826,12 @@ def _stdp_window(
                         scale[j] = max(np.sqrt(squares[j]), tiny)
                         settled[j] = scale[j] == one
                         dividing = dividing or not settled[j]
-                if dividing:
+                if dividing and t + 1 < timesteps:
+                    _divide_and_sum(
+                        weights, scale, spikes[:, t + 1], index, n_active, block, current, partials, starts, members
+                    )
+                    ready = True
+                elif dividing:
                     for i in range(n_inputs):
                         row = weights[i]
                         for j in range(n_neurons):
@@ -624,12 +844,76 @@ def _stdp_window(
 
 
 @compiled
-def _listed(values: np.ndarray, n: int, value: int) -> bool:
-    """Whether value is among values[:n]."""
-    for k in range(n):
-        if values[k] == value:
-            return True
-    return False
+def _divide_and_sum(
+    weights: np.ndarray,  # (inputs, neurons) float32: divided by scale in place
+    scale: np.ndarray,  # (neurons,) float32
+    spikes: np.ndarray,  # (B, inputs) the next step's input spikes
+    index: np.ndarray,  # (B, inputs) out: the next step's active inputs per row
+    n_active: np.ndarray,  # (B,) out
+    block: int,
+    current: np.ndarray,  # (B, neurons) out: the next step's currents, as _blocked_sum sums them
+    partials: np.ndarray,  # (B, neurons) scratch
+    starts: np.ndarray,  # (inputs + 1,) scratch
+    members: np.ndarray,  # (B inputs,) scratch
+) -> None:
+    """Column normalisation w_ij <- w_ij / n_j fused with the next step's currents, in one pass over W.
+
+    Each row of W, once divided, is added (still in L1) to the currents of the rows b whose input
+    is active next: row b's inputs arrive in increasing order, its first block summed into the
+    total from zero and every later block from zero into a partial added to the total when the
+    block ends, exactly the additions of :func:`_blocked_sum`.
+    """
+    batch, n_inputs = spikes.shape
+    n = weights.shape[1]
+    starts[:] = 0
+    for b in range(batch):
+        n_active[b] = _active_inputs(spikes[b], index[b])
+        for a in range(n_active[b]):
+            starts[index[b, a] + 1] += 1
+    for i in range(n_inputs):
+        starts[i + 1] += starts[i]
+    for b in range(batch):  # rows of each input, increasing (starts[i] is the cursor, restored below)
+        for a in range(n_active[b]):
+            i = index[b, a]
+            members[starts[i]] = b
+            starts[i] += 1
+    for i in range(n_inputs - 1, 0, -1):
+        starts[i] = starts[i - 1]
+    starts[0] = 0
+    open_block = np.full(batch, -1, dtype=np.int64)  # per row: the block being summed (-1: none yet)
+    into_total = np.ones(batch, dtype=np.bool_)  # the open block is the row's first: summed into the total
+    for i in range(n_inputs):
+        row = weights[i]
+        for j in range(n):
+            row[j] = row[j] / scale[j]
+        here = i // block
+        for m in range(starts[i], starts[i + 1]):
+            b = members[m]
+            if open_block[b] == here:
+                sums = current[b] if into_total[b] else partials[b]
+                for j in range(n):
+                    sums[j] += row[j]
+                continue
+            if open_block[b] >= 0:  # a later block starts: the last one ends
+                if not into_total[b]:
+                    total = current[b]
+                    part = partials[b]
+                    for j in range(n):
+                        total[j] += part[j]
+                into_total[b] = False
+            open_block[b] = here
+            sums = current[b] if into_total[b] else partials[b]
+            for j in range(n):
+                sums[j] = 0 + row[j]
+    for b in range(batch):
+        total = current[b]
+        if open_block[b] < 0:
+            for j in range(n):
+                total[j] = 0
+        elif not into_total[b]:
+            part = partials[b]
+            for j in range(n):
+                total[j] += part[j]
 
 
 def stdp_window(

@@ -108,3 +108,18 @@ def test_expected_errors_are_one_line_and_exit_2(argv, message, trained, capsys,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and message in err[0]
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_module_size_trains_an_ensemble_whose_modules_are_the_regions_trained_alone(tmp_path, capsys):
+    """train --module-size P: M = ceil(places / P) modules side by side; module m is `train --places` of its region."""
+    tiny = ["--timesteps", "30", "--epochs", "2", "--neurons", "8", "--seed", "5", "--quiet"]
+    ensemble, alone = tmp_path / "ensemble.npz", tmp_path / "alone.npz"
+    base = ["train", "--data", "synthetic:30", "--reference", "summer", *tiny]
+    assert main([*base, "--module-size", "12", "--out", str(ensemble)]) == 0
+    assert main([*base, "--places", "24:6", "--out", str(alone)]) == 0
+    whole, last = load_checkpoint(ensemble), load_checkpoint(alone)
+    assert whole.config.train.module_size == 12
+    assert whole.weights.shape[1] == 3 * 8 and whole.calibration.shape == (24, 30)
+    assert np.array_equal(whole.weights[:, 16:], last.weights)
+    assert np.array_equal(whole.thresholds[16:], last.thresholds)
+    assert len(whole.history[0]["module_active_neurons"]) == 3

@@ -308,3 +308,46 @@ def test_an_ensemble_runs_each_module_as_it_would_run_alone():
         assert torch.equal(whole.raster[:, :, cut], alone.raster)
     with pytest.raises(ValueError, match="do not divide"):
         float_run(spikes, weights, theta, beta=0.9, group=5)
+
+
+@pytest.mark.parametrize("isolation", [True, False])
+@pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3), (1000, 2)])
+def test_float_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
+    """Tiles of whole WTA groups, threads over groups or presentations: the same run as one thread, one tile."""
+    n_neurons = 1000 if group == 1000 else 12
+    spikes, weights, theta = float_case(13, n=5, n_neurons=n_neurons)
+    one = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=1)
+    monkeypatch.setattr(kernels, "TILE_NEURONS", 4)
+    many = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=threads)
+    for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
+        assert torch.equal(getattr(one, field), getattr(many, field)), field
+
+
+@pytest.mark.parametrize("isolation", [True, False])
+@pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3)])
+def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
+    """The integer kernel in tiles and on threads: the same run as one thread, one tile (saturations and peak too)."""
+    gen = np.random.default_rng(5)
+    q = gen.integers(0, 16, size=(30, 12))
+    spikes = (gen.random((5, 40, 30)) < 0.2).astype(np.uint8)
+    args = dict(shift=2, keep=4096 - 300, limit=900, wta=True, isolation=isolation, record=True, group=group)
+    threshold = gen.integers(50, 200, size=12) << 2
+    one = integer_run(spikes, q, threshold, None, threads=1, **args)
+    monkeypatch.setattr(kernels, "TILE_NEURONS", 4)
+    many = integer_run(spikes, q, threshold, None, threads=threads, **args)
+    for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
+        assert torch.equal(getattr(one, field), getattr(many, field)), field
+    assert (one.saturations, one.max_current) == (many.saturations, many.max_current) and one.saturations > 0
+
+
+@pytest.mark.parametrize("group", [None, 40, 37])
+def test_wide_wta_groups_pick_the_first_largest_candidate_as_run_network(group):
+    """Groups wider than the 16 lanes of the branch-free argmax (and a ragged tail), with ties: run_network's winners."""
+    for seed in range(3):
+        spikes, weights, theta = float_case(seed, n=3, timesteps=60, n_neurons=(80 if group != 37 else 74))
+        weights = torch.floor(weights * 4) / 8  # dyadic: exact sums, many tied currents
+        theta = theta * 0.3
+        slow = run_network(spikes, weights, theta, beta=0.95, record=True, compiled=False, group=group)
+        fast = float_run(spikes, weights, theta, beta=0.95, record=True, group=group)
+        assert int(slow.candidates_per_step.max()) > 16
+        assert torch.equal(fast.raster, slow.raster) and torch.equal(fast.counts, slow.counts)
