@@ -91,9 +91,15 @@ class TrainConfig:
 
 @dataclass(frozen=True)
 class AssignmentConfig:
-    """Weighted assignment involvement threshold gamma (paper eq. 9)."""
+    """Weighted assignment involvement threshold gamma (paper eq. 9); the ensemble's region regularisation.
+
+    ``hyperactive_share`` = rho: a neuron of an ensemble that fires, during calibration, for more than
+    this share of the places outside its module's region is silenced in the readout (1: none is;
+    src/vprsnn_export/readout/regions.py, docs/readout.md). A single network is never changed.
+    """
 
     gamma: float = 0.02
+    hyperactive_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +194,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "train.batch_size": (1, 1_000_000, True, True),
     "train.module_size": (0, 10_000_000, True, True),
     "assignment.gamma": (0.0, 1.0, True, True),
+    "assignment.hyperactive_share": (0.0, 1.0, True, True),
 }
 
 
