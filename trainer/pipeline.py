@@ -11,10 +11,10 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
 from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.modules import module_regions
 
+from .batched import module_rows, train_modules
 from .calibrate import calibrate
-from .train import Presentation, train_network
+from .train import Presentation
 
 
 def train_and_calibrate(
@@ -25,18 +25,21 @@ def train_and_calibrate(
     device: torch.device | None = None,
     progress: bool = True,
     selection: dict | None = None,
+    threads: int | None = None,
 ) -> Checkpoint:
-    """Train on every image of the reference traversals, calibrate S^R, return the checkpoint (CPU by default)."""
+    """Train on every image of the reference traversals, calibrate S^R, return the checkpoint (CPU by default).
+
+    With ``train.module_size`` = P the places are cut into regions of P and one module per region
+    is trained, all side by side (:func:`.batched.train_modules`); calibration presents every
+    reference place to the whole ensemble (the hard WTA within each module). ``threads``: CPU
+    threads for training and calibration (default: torch's thread count).
+    """
     device = torch.device("cpu") if device is None else device
-    weights, thresholds, history = [], [], []
-    for start, stop in module_regions(len(dataset.place_ids), cfg.train.module_size):
-        images = np.concatenate([dataset.traversal(name)[start:stop] for name in references])
-        presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids[start:stop]]
-        trained = train_network(images, presentations, cfg, device=device, progress=progress)
-        weights.append(trained.weights.numpy())
-        thresholds.append(trained.thresholds.numpy())
-        history = history or trained.history
-    network = FloatNetwork.from_arrays(np.concatenate(weights, axis=1), np.concatenate(thresholds), cfg, device)
+    images = np.concatenate([dataset.traversal(name) for name in references])
+    presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]
+    rows = module_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
+    trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
+    network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
     calibration = calibrate(
         network.counts, {name: dataset.traversal(name) for name in references}, dataset.place_ids, cfg
     )
@@ -48,5 +51,5 @@ def train_and_calibrate(
         reference_place_ids=np.asarray(dataset.place_ids, dtype=np.int64),
         reference_traversals=list(references),
         data={"source": dataset.source, "manifest_sha256": dataset.manifest_sha256, **(selection or {})},
-        history=history,
+        history=trained.history,
     )

@@ -26,15 +26,17 @@ def stdp_delta(
     """dW = A+ (w_max - W) * (x^T S) - A- W * (s^T y), summed over the batch (eq. 7).
 
     pre_trace x and pre_spikes s are (B, inputs); post_trace y and post_spikes S are (B, neurons).
+    With leading module dimensions (M, B, ...) and weights (M, inputs, neurons), one batched
+    matmul computes every module's terms.
     """
-    potentiation = pre_trace.transpose(0, 1) @ post_spikes
-    depression = pre_spikes.transpose(0, 1) @ post_trace
+    potentiation = pre_trace.transpose(-2, -1) @ post_spikes
+    depression = pre_spikes.transpose(-2, -1) @ post_trace
     return cfg.a_plus * (cfg.w_max - weights) * potentiation - cfg.a_minus * weights * depression
 
 
 def normalise_columns(weights: torch.Tensor) -> torch.Tensor:
-    """w_ij <- w_ij / sqrt(sum_k w_kj^2); an all-zero column stays zero."""
-    norms = torch.linalg.vector_norm(weights, dim=0, keepdim=True)
+    """w_ij <- w_ij / sqrt(sum_k w_kj^2); an all-zero column stays zero (any leading module dimensions)."""
+    norms = torch.linalg.vector_norm(weights, dim=-2, keepdim=True)
     return weights / torch.clamp(norms, min=torch.finfo(weights.dtype).tiny)
 
 

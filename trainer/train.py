@@ -44,28 +44,34 @@ def train_batch(
     homeostasis with rbar_j = (spikes of j in the batch) / (B T).
     Returns (weights, thresholds, per-neuron spike counts of the batch).
 
-    On the CPU the compiled kernel (:func:`vprsnn_export.kernels.stdp_window`) runs the window
-    when it can reproduce torch's summation order here (identical weights); otherwise, or with
-    ``compiled=False``, the torch loop below.
+    With a leading module dimension (spikes (M, B, T, inputs), weights (M, inputs, neurons),
+    theta (M, neurons)) the torch loop trains M independent networks side by side, one
+    batched matmul per step for all of them (:mod:`vprsnn_export.trainer.batched`).
+
+    On the CPU the compiled kernel (:func:`vprsnn_export.kernels.stdp_window`) runs a single
+    network's window when it can reproduce torch's summation order here (identical weights);
+    otherwise, or with ``compiled=False``, the torch loop below.
     """
-    batch, timesteps, n_inputs = spikes.shape
-    window = stdp_window(weights, theta, spikes, cfg) if compiled else None
+    *_, batch, timesteps, n_inputs = spikes.shape
+    window = stdp_window(weights, theta, spikes, cfg) if compiled and spikes.dim() == 3 else None
     if window is not None:
         weights, fired_total = window
         return weights, homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis), fired_total
-    n_neurons = weights.shape[1]
-    voltage = torch.zeros((batch, n_neurons), dtype=weights.dtype, device=weights.device)
+    n_neurons = weights.shape[-1]
+    lead = tuple(spikes.shape[:-2])
+    voltage = torch.zeros((*lead, n_neurons), dtype=weights.dtype, device=weights.device)
     post_trace = torch.zeros_like(voltage)
-    pre_trace = torch.zeros((batch, n_inputs), dtype=weights.dtype, device=weights.device)
-    fired_total = torch.zeros(n_neurons, dtype=weights.dtype, device=weights.device)
+    pre_trace = torch.zeros((*lead, n_inputs), dtype=weights.dtype, device=weights.device)
+    fired_total = torch.zeros((*lead[:-1], n_neurons), dtype=weights.dtype, device=weights.device)
+    row_theta = theta.unsqueeze(-2)
     for t in range(timesteps):
-        pre = spikes[:, t].to(weights.dtype)
-        voltage, fired, _ = wta_step(voltage, pre @ weights, theta, cfg.network.beta, cfg.network.wta)
+        pre = spikes[..., t, :].to(weights.dtype)
+        voltage, fired, _ = wta_step(voltage, pre @ weights, row_theta, cfg.network.beta, cfg.network.wta)
         post = fired.to(weights.dtype)
         pre_trace = decay_trace(pre_trace, pre, cfg.stdp.tau_pre)
         post_trace = decay_trace(post_trace, post, cfg.stdp.tau_post)
         weights = apply_update(weights, stdp_delta(weights, pre_trace, pre, post_trace, post, cfg.stdp), cfg.stdp)
-        fired_total += post.sum(dim=0)
+        fired_total += post.sum(dim=-2)
     theta = homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis)
     return weights, theta, fired_total
 
@@ -84,12 +90,14 @@ def train_network(
     device: torch.device,
     progress: bool = True,
     on_epoch: Callable[[int, torch.Tensor, torch.Tensor], dict | None] | None = None,
+    compiled: bool = True,
 ) -> TrainedNetwork:
     """Train from the preprocessed reference images (rows aligned with ``presentations``).
 
     Everything random derives from ``cfg.seed``: initial weights, the shuffle of
     each epoch and every spike. ``on_epoch(epoch, weights, theta)`` may return
     extra numbers to store in the history (used by the epoch-curve experiment).
+    ``compiled=False`` runs every batch through the torch loop (see :func:`train_batch`).
     """
     if len(images) == 0:
         raise ValueError("no training images")
@@ -109,7 +117,10 @@ def train_network(
                 for r in rows
             ]
             spikes = encode(images[rows], seeds, cfg.encoder).to(device)
-            weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
+            if compiled:
+                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
+            else:
+                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=False)
             fired += batch_fired
         entry = {
             "epoch": epoch + 1,

@@ -43,18 +43,18 @@ def wta_step(
 
     The winner is taken within each group of ``group`` consecutive neurons (``None``: all
     neurons are one group). Returns (new voltage, spikes as bool (B, neurons), candidates
-    as bool (B, neurons)).
+    as bool (B, neurons)); any leading dimensions (M, B, neurons) are kept (``theta`` broadcasts).
     """
     voltage = beta * voltage + current
     candidates = voltage > theta
     if wta:
-        batch, n_neurons = candidates.shape
+        *lead, n_neurons = candidates.shape
         size = n_neurons if group is None else group
-        grouped = candidates.reshape(batch, n_neurons // size, size)
+        grouped = candidates.reshape(*lead, n_neurons // size, size)
         masked = current.reshape(grouped.shape).masked_fill(~grouped, float("-inf"))
-        winner = masked.argmax(dim=2, keepdim=True)  # first index on ties
-        spikes = torch.zeros_like(grouped).scatter_(2, winner, grouped.any(dim=2, keepdim=True))
-        spikes = spikes.reshape(batch, n_neurons)
+        winner = masked.argmax(dim=-1, keepdim=True)  # first index on ties
+        spikes = torch.zeros_like(grouped).scatter_(-1, winner, grouped.any(dim=-1, keepdim=True))
+        spikes = spikes.reshape(*lead, n_neurons)
     else:
         spikes = candidates
     return voltage.masked_fill(candidates, 0.0), spikes, candidates

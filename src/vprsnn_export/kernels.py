@@ -36,6 +36,7 @@ from __future__ import annotations
 import functools
 import warnings
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar, cast
 
 import numpy as np
@@ -717,9 +718,126 @@ def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> 
     p = np.asarray(prob, dtype=np.float32)
     if p.ndim != 2 or len(seeds) != p.shape[0]:
         raise ValueError(f"expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
-    scaled = np.ceil(np.nan_to_num(p.astype(np.float64), nan=0.0) * float(1 << MANTISSA_BITS))
-    limits = np.ascontiguousarray(np.clip(scaled, 0, 1 << MANTISSA_BITS), dtype=np.int32)
+    limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
-    masked = np.array([int(s) & 0xFFFFFFFF for s in seeds], dtype=np.int64)
-    _bernoulli_kernel(limits, masked, int(timesteps), out)
+    _bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)
     return out
+
+
+def bernoulli_limits(prob: np.ndarray) -> np.ndarray:
+    """The integer thresholds ceil(p 2^24), clipped to [0, 2^24], int32: u < p iff m < ceil(p 2^24) (NaN: 0)."""
+    p = np.asarray(prob, dtype=np.float32)
+    scaled = np.ceil(np.nan_to_num(p.astype(np.float64), nan=0.0) * float(1 << MANTISSA_BITS))
+    return np.ascontiguousarray(np.clip(scaled, 0, 1 << MANTISSA_BITS), dtype=np.int32)
+
+
+def generator_seeds(seeds: Sequence[int]) -> np.ndarray:
+    """The seeds as torch's CPU generator uses them: their low 32 bits, int64."""
+    return np.array([int(s) & 0xFFFFFFFF for s in seeds], dtype=np.int64)
+
+
+@compiled
+def _stdp_windows(
+    limits: np.ndarray,  # (M, B, inputs) int32: bernoulli_limits of each row's firing probabilities
+    seeds: np.ndarray,  # (M, B) int64: generator_seeds of each row's presentation seed
+    sizes: np.ndarray,  # (M,) int64: rows of module m in this batch (0: it sits the batch out)
+    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (blas_block of its rows)
+    timesteps: int,
+    weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
+    theta: np.ndarray,  # (M, neurons) float32
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+) -> np.ndarray:
+    """One training batch of every module: encode module m's rows, then its :func:`_stdp_window`.
+
+    The modules are independent networks, so each one's window is exactly the single network's;
+    returns the spikes per neuron of every module in this batch (M, neurons) float32.
+    """
+    n_modules, batch, n_inputs = limits.shape
+    fired = np.zeros((n_modules, weights.shape[2]), dtype=np.float32)
+    spikes = np.empty((batch, timesteps, n_inputs), dtype=np.uint8)
+    for m in range(n_modules):
+        rows = sizes[m]
+        if rows > 0:
+            _bernoulli_kernel(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows])
+            fired[m] = _stdp_window(
+                spikes[:rows],
+                weights[m],
+                theta[m],
+                beta,
+                wta,
+                pre_keep,
+                post_keep,
+                a_plus,
+                a_minus,
+                w_max,
+                weight_norm,
+                blocks[m],
+            )
+    return fired
+
+
+def module_slices(n_modules: int, parts: int) -> list[slice]:
+    """At most ``parts`` contiguous, non-empty, nearly equal slices of range(n_modules)."""
+    bounds = np.linspace(0, n_modules, max(1, min(parts, n_modules)) + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def stdp_windows(
+    weights: np.ndarray,
+    theta: np.ndarray,
+    limits: np.ndarray,
+    seeds: np.ndarray,
+    sizes: np.ndarray,
+    cfg: Config,
+    *,
+    threads: int = 1,
+) -> np.ndarray | None:
+    """One training batch of M independent modules, compiled: :func:`stdp_window` for each, side by side.
+
+    ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
+    module m's batch is its first ``sizes[m]`` rows of ``limits`` (M, B, inputs) int32
+    (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
+    kernel exactly as :func:`bernoulli_spikes` encodes them, so module m's weights are those of
+    ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
+    modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
+    not used). Returns the spikes per neuron (M, n) float32, or ``None`` when this machine's BLAS
+    order is not reproducible for some batch size (the caller then runs the torch loop).
+    """
+    n_modules, _, n_inputs = limits.shape
+    n_neurons = weights.shape[2]
+    blocks = np.zeros(n_modules, dtype=np.int64)
+    for size in sorted({int(s) for s in sizes if s > 0}):
+        block = blas_block(size, n_inputs, n_neurons)
+        if block is None or not batch_sums_in_order(size, n_inputs, n_neurons):
+            return None
+        blocks[np.asarray(sizes) == size] = block
+    args = (
+        np.float32(cfg.network.beta),
+        bool(cfg.network.wta),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
+        np.float32(cfg.stdp.a_plus),
+        np.float32(cfg.stdp.a_minus),
+        np.float32(cfg.stdp.w_max),
+        bool(cfg.stdp.weight_norm),
+    )
+    timesteps = int(cfg.encoder.timesteps)
+    sizes = np.ascontiguousarray(sizes, dtype=np.int64)
+
+    def run(part: slice) -> np.ndarray:
+        return _stdp_windows(
+            limits[part], seeds[part], sizes[part], blocks[part], timesteps, weights[part], theta[part], *args
+        )
+
+    parts = module_slices(n_modules, threads)
+    if len(parts) == 1:
+        return run(parts[0])
+    with ThreadPoolExecutor(max_workers=len(parts)) as pool:
+        return np.concatenate(list(pool.map(run, parts)))

@@ -123,6 +123,12 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--timesteps", type=int, help="presentation window T")
     group.add_argument("--neurons", type=int, help="excitatory neurons N_exc")
     group.add_argument(
+        "--module-size",
+        type=int,
+        help="places per module: one network per region of this many consecutive places, trained side by side "
+        "(0, the default: one network for all places)",
+    )
+    group.add_argument(
         "--set",
         action="append",
         default=[],
@@ -147,6 +153,7 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
         ("epochs", "train.epochs"),
         ("timesteps", "encoder.timesteps"),
         ("neurons", "network.n_neurons"),
+        ("module_size", "train.module_size"),
     ):
         value = getattr(args, name, None)
         if value is not None:

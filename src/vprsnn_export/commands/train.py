@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
         device=device,
         progress=not args.quiet,
         selection=selection_record(args.subset, args.places),
+        threads=args.threads,
     )
     path = save_checkpoint(args.out, ckpt)
     print(

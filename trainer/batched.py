@@ -1,0 +1,201 @@
+"""Modules trained side by side: M independent networks as one batched computation.
+
+An ensemble (:mod:`vprsnn_export.modules`) has one network per region of consecutive places.
+Module m trains on its own rows only (its region's places in every reference traversal), with
+everything random derived from the run's one seed exactly as :func:`.train.train_network` derives
+it for that region alone:
+
+    W_m[0]      = initial_weights(seed)                      (the same for every module)
+    order_m[e]  = epoch_order(seed, e, rows_m)               (its own row count)
+    batch k     = rows order_m[e][k B : (k + 1) B]           (modules with fewer rows have fewer batches)
+    spikes      = encode(images, presentation_seed(seed, "train", traversal, place, e))
+
+so module m's weights and thresholds are bit for bit those of ``train_network`` on its region
+with the same seed. A module without a batch k sits it out (no update, no homeostasis).
+
+The weights are held as (M, inputs, n). On the CPU the compiled kernel
+(:func:`vprsnn_export.kernels.stdp_windows`) runs every module's batch in one call, in
+contiguous slices of modules on ``threads`` Python threads; elsewhere (a GPU, ``compiled=False``
+or a BLAS whose order the kernel cannot reproduce) the torch loop of :func:`.train.train_batch`
+runs all modules with the same batch size at once, one batched matmul per step.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from vprsnn_export.config import Config
+from vprsnn_export.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.kernels import bernoulli_limits, generator_seeds, stdp_windows
+from vprsnn_export.modules import module_regions
+
+from .homeostasis import homeostasis_update
+from .stdp import initial_weights
+from .train import Presentation, TrainedNetwork, epoch_order, train_batch
+
+
+def module_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
+    """Module m's training rows: r N + [start_m, stop_m) for each reference traversal r in order.
+
+    Rows index the reference images stacked traversal after traversal (N places each), the
+    order in which ``train_network`` sees one region's images.
+    """
+    return [
+        np.concatenate([np.arange(start, stop, dtype=np.int64) + r * n_places for r in range(n_traversals)])
+        for start, stop in module_regions(n_places, module_size)
+    ]
+
+
+def _train_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.ndarray, epoch: int) -> list[int]:
+    return [
+        presentation_seed(cfg.seed, "train", presentations[r].traversal, presentations[r].place_id, epoch) for r in rows
+    ]
+
+
+def _kernel_batch(
+    weights: torch.Tensor,
+    theta: torch.Tensor,
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    batch_rows: Sequence[np.ndarray],
+    cfg: Config,
+    epoch: int,
+    threads: int,
+) -> torch.Tensor | None:
+    """Every module's batch through the compiled kernel (weights updated in place); None if it cannot run."""
+    sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
+    limits = np.zeros((len(batch_rows), int(sizes.max()), images.shape[1]), dtype=np.int32)
+    seeds = np.zeros(limits.shape[:2], dtype=np.int64)
+    for m, rows in enumerate(batch_rows):
+        if len(rows):
+            limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.encoder).numpy())
+            seeds[m, : len(rows)] = generator_seeds(_train_seeds(cfg, presentations, rows, epoch))
+    fired = stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads)
+    return None if fired is None else torch.from_numpy(fired)
+
+
+def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cfg: Config) -> torch.Tensor:
+    """theta_m <- homeostasis_update(theta_m, fired_m / (B_m T)) for every module with a batch (B_m > 0)."""
+    theta = theta.clone()
+    for size in sorted({int(s) for s in sizes if s > 0}):
+        index = torch.from_numpy(np.flatnonzero(sizes == size)).to(theta.device)
+        rate = fired[index] / (size * cfg.encoder.timesteps)
+        theta[index] = homeostasis_update(theta[index], rate, cfg.homeostasis)
+    return theta
+
+
+def _torch_batch(
+    weights: torch.Tensor,
+    theta: torch.Tensor,
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    batch_rows: Sequence[np.ndarray],
+    cfg: Config,
+    epoch: int,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The torch loop for all modules with the same batch size at once (one batched matmul per step)."""
+    sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
+    weights, theta = weights.clone(), theta.clone()
+    fired = torch.zeros_like(theta)
+    for size in sorted({int(s) for s in sizes if s > 0}):
+        members = np.flatnonzero(sizes == size)
+        spikes = torch.stack(
+            [
+                encode(images[batch_rows[m]], _train_seeds(cfg, presentations, batch_rows[m], epoch), cfg.encoder)
+                for m in members
+            ]
+        ).to(weights.device)
+        index = torch.from_numpy(members).to(weights.device)
+        weights[index], theta[index], fired[index] = train_batch(
+            weights[index], theta[index], spikes, cfg, compiled=False
+        )
+    return weights, theta, fired
+
+
+def train_modules(
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    rows: Sequence[np.ndarray],
+    cfg: Config,
+    *,
+    device: torch.device,
+    progress: bool = True,
+    threads: int | None = None,
+    compiled: bool = True,
+    on_epoch: Callable[[int, torch.Tensor, torch.Tensor], dict | None] | None = None,
+) -> TrainedNetwork:
+    """Train M modules side by side; module m on ``images[rows[m]]`` (rows aligned with ``presentations``).
+
+    Returns one network of M n neurons side by side, module m's neurons [m n, (m + 1) n): weights
+    (inputs, M n) and thresholds (M n,), each module's bit for bit ``train_network`` on its rows
+    with ``cfg.seed``. ``threads``: Python threads for the compiled kernel (default: torch's thread
+    count, i.e. ``--threads``). History: one entry per epoch over all modules (spikes per
+    presentation, active neurons, mean threshold), with per-module lists when M > 1.
+    ``on_epoch(epoch, weights (inputs, M n), theta (M n,))`` may add numbers to the entry.
+    """
+    if not rows or any(len(r) == 0 for r in rows):
+        raise ValueError("no training images for a module")
+    n_modules, n_neurons, batch = len(rows), cfg.network.n_neurons, cfg.train.batch_size
+    threads = torch.get_num_threads() if threads is None else max(1, int(threads))
+    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
+    start = initial_weights(cfg.network.n_inputs, n_neurons, generator)
+    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
+    theta = torch.full((n_modules, n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
+    use_kernel = compiled and device.type == "cpu"
+    n_rows = np.array([len(r) for r in rows])
+    history: list[dict] = []
+    epochs = tqdm(range(cfg.train.epochs), desc="train", unit="epoch", disable=not progress, leave=False)
+    for epoch in epochs:
+        started = time.perf_counter()
+        orders = {int(count): epoch_order(cfg.seed, epoch, int(count)).numpy() for count in set(n_rows)}
+        fired = torch.zeros((n_modules, n_neurons), dtype=torch.float32, device=device)
+        for first in range(0, int(n_rows.max()), batch):
+            batch_rows = [r[orders[len(r)][first : first + batch]] for r in rows]
+            sizes = np.array([len(b) for b in batch_rows], dtype=np.int64)
+            batch_fired = (
+                _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
+                if use_kernel
+                else None
+            )
+            if batch_fired is None:
+                weights, theta, batch_fired = _torch_batch(
+                    weights, theta, images, presentations, batch_rows, cfg, epoch
+                )
+            else:
+                theta = _homeostasis(theta, batch_fired, sizes, cfg)
+            fired += batch_fired
+        entry = _history_entry(epoch, started, fired, theta, n_rows)
+        if on_epoch is not None:
+            entry.update(on_epoch(epoch + 1, _side_by_side(weights), theta.reshape(-1)) or {})
+        history.append(entry)
+        epochs.set_postfix(active=entry["active_neurons"], theta=f"{entry['theta_mean']:.3f}")
+    return TrainedNetwork(_side_by_side(weights).cpu(), theta.reshape(-1).cpu(), history)
+
+
+def _side_by_side(weights: torch.Tensor) -> torch.Tensor:
+    """(M, inputs, n) -> (inputs, M n): module m's columns [m n, (m + 1) n)."""
+    n_modules, n_inputs, n_neurons = weights.shape
+    return weights.permute(1, 0, 2).reshape(n_inputs, n_modules * n_neurons).contiguous()
+
+
+def _history_entry(epoch: int, started: float, fired: torch.Tensor, theta: torch.Tensor, n_rows: np.ndarray) -> dict:
+    """One epoch over all modules; with M > 1 also each module's spikes per presentation and active neurons."""
+    counts = fired.cpu().to(torch.float64)
+    entry: dict = {
+        "epoch": epoch + 1,
+        "seconds": time.perf_counter() - started,
+        "spikes_per_presentation": float(counts.sum()) / int(n_rows.sum()),
+        "active_neurons": int((counts > 0).sum()),
+        "theta_mean": float(theta.reshape(-1).mean()),
+    }
+    if len(n_rows) > 1:
+        entry["module_spikes_per_presentation"] = [
+            round(float(c) / int(r), 4) for c, r in zip(counts.sum(dim=1), n_rows, strict=True)
+        ]
+        entry["module_active_neurons"] = [int(a) for a in (counts > 0).sum(dim=1)]
+    return entry
