@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import platform
@@ -11,13 +12,16 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.device import resolve_device
-from vprsnn_export.fileio import atomic_write_text
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
@@ -178,6 +182,39 @@ def timed_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_k
     save_checkpoint(path, ckpt)
     atomic_write_text(timing, json.dumps({"train_seconds": seconds, "trained_on": machine}))
     return TimedCheckpoint(ckpt, seconds, machine, False)
+
+
+@dataclass(frozen=True)
+class TimedCounts:
+    """Spike counts of a cached network on a query traversal and the seconds that run took."""
+
+    counts: np.ndarray  # (queries, neurons) int64
+    seconds: float
+    cached: bool
+
+
+def timed_query_counts(
+    settings: Settings, data: Dataset, cfg: Config, selection_key: str, ckpt: Checkpoint
+) -> TimedCounts:
+    """The float network's spike counts on ``settings.query`` (state isolation on), cached beside the
+    checkpoint of :func:`checkpoint_path` with the seconds the run took when it ran (a network run on
+    thousands of images at thousands of neurons takes minutes; the readouts that follow take seconds)."""
+    path = checkpoint_path(settings, data, cfg, selection_key)
+    stem = path.name.removesuffix(".npz")
+    counts_path = path.with_name(f"{stem}.{settings.query}.counts.npy")
+    timing = path.with_name(f"{stem}.{settings.query}.counts.json")
+    if counts_path.exists() and timing.exists():
+        return TimedCounts(np.load(counts_path), float(json.loads(timing.read_text())["seconds"]), True)
+    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, resolve_device(settings.device))
+    started = time.perf_counter()
+    run = network.run(query_spikes(data.traversal(settings.query), data.place_ids, settings.query, ckpt.config))
+    seconds = time.perf_counter() - started
+    counts = run.counts.numpy().astype(np.int64)
+    buffer = io.BytesIO()
+    np.save(buffer, counts)
+    atomic_write_bytes(counts_path, buffer.getvalue())
+    atomic_write_text(timing, json.dumps({"seconds": seconds}))
+    return TimedCounts(counts, seconds, False)
 
 
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")

@@ -22,9 +22,6 @@ import numpy as np
 
 from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
-from vprsnn_export.device import resolve_device
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.runtime.evaluation import (
@@ -34,11 +31,18 @@ from vprsnn_export.runtime.evaluation import (
     module_rows,
     readout_scores,
     score_rows,
-    spike_statistics,
 )
 from vprsnn_export.stats import mean_std
 
-from .common import Settings, TimedCheckpoint, pct, provenance, summarise_rows, timed_checkpoint
+from .common import (
+    Settings,
+    TimedCheckpoint,
+    pct,
+    provenance,
+    summarise_rows,
+    timed_checkpoint,
+    timed_query_counts,
+)
 from .plots import route_plot
 
 NAME = "route"
@@ -135,11 +139,8 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
     """Train (or reuse) one ensemble, run it on the query traversal, read it out at every rho."""
     cfg, data, timed = route_network(settings, seed, module_size)
     ckpt = timed.checkpoint
-    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, resolve_device(settings.device))
-    started = time.perf_counter()
-    run = network.run(query_spikes(data.traversal(settings.query), data.place_ids, settings.query, ckpt.config))
-    query_seconds = time.perf_counter() - started
-    counts = run.counts.numpy()
+    query = timed_query_counts(settings, data, cfg, f"route{module_size}", ckpt)
+    counts = query.counts
     rows: list[dict] = []
     per_share: dict[float, dict[str, Any]] = {}
     for share in SHARES:
@@ -152,8 +153,6 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
             "readout_peak_mib": round(peak, 1),
             "modules": [m.to_dict() for m in module_rows(wprob, data.place_ids, data.place_ids, layout)],
         }
-    assert run.candidates_per_step is not None
-    stats = spike_statistics(run.candidates_per_step.numpy(), counts)
     model_bytes = ckpt.weights.astype(np.float32).nbytes + ckpt.thresholds.astype(np.float32).nbytes
     return {
         "module_size": module_size,
@@ -163,12 +162,11 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
         "train_seconds": round(timed.train_seconds, 1),
         "trained_on": timed.trained_on,
         "cached": timed.cached,
-        "query_seconds": round(query_seconds, 2),
-        "query_ms_per_image": round(1000 * query_seconds / len(data.place_ids), 2),
+        "query_seconds": round(query.seconds, 2),
+        "query_ms_per_image": round(1000 * query.seconds / len(data.place_ids), 2),
         "weights_mib": round(model_bytes / 2**20, 2),
         "calibration_mib": round(ckpt.calibration.astype(np.int64).nbytes / 2**20, 2),
-        "mean_candidates_per_step": stats.mean_candidates_per_step,
-        "mean_spikes_per_query": stats.mean_spikes_per_query,
+        "mean_spikes_per_query": float(counts.sum(axis=1).mean()),
         "readouts": list(per_share.values()),
         "rows": rows,
     }
@@ -228,7 +226,7 @@ def cost_summary(networks: list[dict], sizes) -> list[dict]:
                 "readout_peak_mib": max(r["readout_peak_mib"] for n in mine for r in n["readouts"]),
                 "weights_mib": mine[0]["weights_mib"],
                 "calibration_mib": mine[0]["calibration_mib"],
-                "mean_candidates_per_step": mean_std(n["mean_candidates_per_step"] for n in mine).to_dict(),
+                "mean_spikes_per_query": mean_std(n["mean_spikes_per_query"] for n in mine).to_dict(),
             }
         )
     return out
@@ -339,7 +337,7 @@ def _summary_table(summary: list[dict], sizes: list[int], shares: list[float]) -
 def _cost_table(cost: list[dict]) -> str:
     lines = [
         "| module size | modules | neurons | seeds | training s | query run s | ms / query | readout s | "
-        "readout peak MiB | weights MiB | S^R MiB | candidates / step |",
+        "readout peak MiB | weights MiB | S^R MiB | spikes / query |",
         "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in cost:
@@ -351,7 +349,7 @@ def _cost_table(cost: list[dict]) -> str:
             f"| {c['module_size']} | {c['modules']} | {c['neurons']} | {', '.join(map(str, c['seeds']))} | "
             f"{ms('train_seconds')} | {ms('query_seconds')} | {ms('query_ms_per_image')} | {ms('readout_seconds')} | "
             f"{c['readout_peak_mib']:.0f} | {c['weights_mib']:.1f} | {c['calibration_mib']:.1f} | "
-            f"{ms('mean_candidates_per_step')} |"
+            f"{ms('mean_spikes_per_query')} |"
         )
     return "\n".join(lines) + (
         "\n\nTraining includes calibration (every reference place shown to the whole ensemble); it is the time of "
