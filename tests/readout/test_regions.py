@@ -13,6 +13,7 @@ from vprsnn_export.readout.regions import (
     module_accuracy,
     module_layout,
     outside_involvement,
+    region_weighting,
     regularise,
     silence,
 )
@@ -46,9 +47,30 @@ def test_hyperactive_neurons_exceed_rho(rho, silent):
     np.testing.assert_array_equal(hyperactive_neurons(SR, layout(rho)), np.array(silent, dtype=bool))
 
 
+def test_region_weighting_scales_the_outside():
+    np.testing.assert_array_equal(region_weighting(SR, REGIONS, 2, 1.0), SR)
+    region_only = region_weighting(SR, REGIONS, 2, 0.0)
+    np.testing.assert_array_equal(region_only[:2, 3:], 0)
+    np.testing.assert_array_equal(region_only[2:, :3], 0)
+    np.testing.assert_array_equal(region_only[:2, :3], SR[:2, :3])
+    half = region_weighting(SR, REGIONS, 2, 0.5)
+    assert half[1, 3] == 1.0 and half[1, 0] == 3.0 and half[3, 0] == 0.5
+    with pytest.raises(ValueError, match="outside_weight"):
+        region_weighting(SR, REGIONS, 2, -0.5)
+
+
+def test_regularise_weights_then_silences_from_the_raw_responses():
+    sq = np.ones((2, 4))
+    out_sr, out_sq = regularise(SR, sq, ModuleLayout(REGIONS, 2, 0.5, 0.0))
+    expected = region_weighting(SR, REGIONS, 2, 0.0)
+    expected[1] = 0  # o_1 = 1 > 0.5, measured on S^R before the outside is scaled away
+    np.testing.assert_array_equal(out_sr, expected)
+    np.testing.assert_array_equal(out_sq[:, 1], 0)
+
+
 def test_single_network_is_never_changed():
     sr = np.array([[1, 2, 3], [0, 0, 4]])
-    one = ModuleLayout(module_regions(3, 0), 2, 0.0)
+    one = ModuleLayout(module_regions(3, 0), 2, 0.0, 0.0)
     assert not hyperactive_neurons(sr, one).any()
     sq = np.array([[1, 0], [2, 3]])
     out_sr, out_sq = regularise(sr, sq, one)
@@ -103,15 +125,16 @@ def test_silenced_neurons_do_not_vote():
 def test_module_layout_from_config():
     cfg = Config().replace(**{"train.module_size": 100, "network.n_neurons": 10, "assignment.hyperactive_share": 0.3})
     lay = module_layout(cfg, 250)
-    assert lay.group == 10 and lay.hyperactive_share == 0.3 and lay.n_neurons == 30
+    assert lay.group == 10 and lay.hyperactive_share == 0.3 and lay.n_neurons == 30 and lay.outside_weight == 0.0
     np.testing.assert_array_equal(lay.regions, [[0, 100], [100, 200], [200, 250]])
     assert module_layout(cfg, 250, 1.0).hyperactive_share == 1.0
 
 
+@pytest.mark.parametrize("key", ["assignment.hyperactive_share", "assignment.outside_weight"])
 @pytest.mark.parametrize("value", [-0.1, 1.5, float("nan")])
-def test_config_refuses_shares_outside_the_unit_interval(value):
-    with pytest.raises(InvalidValueError, match="assignment.hyperactive_share"):
-        Config().replace(**{"assignment.hyperactive_share": value})
+def test_config_refuses_values_outside_the_unit_interval(key, value):
+    with pytest.raises(InvalidValueError, match=key):
+        Config().replace(**{key: value})
 
 
 def test_module_accuracy_counts_each_region():

@@ -7,6 +7,7 @@ import pytest
 
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
+from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
@@ -29,22 +30,31 @@ def evaluate(ckpt, data, **changes):
 def test_whole_route_rows_and_per_module_accuracy(ensemble):
     ckpt, data = ensemble
     assert ckpt.calibration.shape == (3 * 16, 24)
-    result = evaluate(ckpt, data)
+    off = {"assignment.hyperactive_share": 1.0, "assignment.outside_weight": 1.0}
+    result = evaluate(ckpt, data, **off)
     assert [r["n_queries"] for r in result.rows] == [24] * 4
     assert result.silenced == 0
     assert result.modules is not None and [m.n_queries for m in result.modules] == [8, 8, 8]
     wprob = next(r for r in result.rows if r["strategy"] == "wprob" and r["k"] == 1)
     assert np.mean([m.accuracy for m in result.modules]) == pytest.approx(wprob["accuracy"])
-    plain = readout_rows(
-        ckpt.calibration,
-        result.query_counts,
-        ckpt.reference_place_ids,
-        data.place_ids,
-        ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
-    )
-    assert result.rows == plain  # rho = 1 (the default) changes nothing
+    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
+    plain = readout_rows(ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options)
+    assert result.rows == plain  # lambda = rho = 1: exactly the unregularised whole-route readout
     payload = result.to_dict()
     assert len(payload["modules"]) == 3 and payload["silenced_neurons"] == 0
+
+
+def test_the_default_readout_is_regularised(ensemble):
+    ckpt, data = ensemble
+    result = evaluate(ckpt, data)
+    layout = module_layout(ckpt.config, 24)
+    assert (layout.outside_weight, layout.hyperactive_share) == (0.0, 0.5)
+    assert result.silenced == int(hyperactive_neurons(ckpt.calibration, layout).sum())
+    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
+    rows = readout_rows(
+        ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options, modules=layout
+    )
+    assert result.rows == rows
 
 
 def test_the_config_limit_silences_neurons(ensemble):

@@ -54,6 +54,7 @@ class Settings:
     overrides: dict = field(default_factory=dict)  # dotted config overrides
     grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
     preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
+    module_sizes: tuple[int, ...] = ()  # experiment route's module sizes (empty: its default sizes)
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:
@@ -117,8 +118,9 @@ def checkpoint_path(settings: Settings, data: Dataset, cfg: Config, selection_ke
     """Where the checkpoint of ``cfg`` trained on ``data`` is cached: a hash of everything that determines it
     (config, data manifest hash, selected places, reference, version)."""
     config = cfg.to_dict()
-    # a readout-only key added after networks were cached: left out, so those networks keep their keys
-    config["assignment"].pop("hyperactive_share")
+    # readout-only keys added after networks were cached: left out, so those networks keep their keys
+    for key in ("hyperactive_share", "outside_weight"):
+        config["assignment"].pop(key)
     key = json.dumps(
         {
             "config": config,

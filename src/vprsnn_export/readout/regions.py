@@ -1,22 +1,27 @@
-"""Region regularisation of an ensemble: silence neurons that also fire for places outside their region.
+"""Region regularisation of an ensemble: region-specific assignment and silencing of hyperactive neurons.
 
 An ensemble of modules (``src/vprsnn_export/modules.py``) applies the hard WTA within each module, so
 every module has a winner for every image, including the images of the other modules' regions. The
 calibration S^R spans every module's neurons over every reference place, so it shows which neurons
 also respond outside their own module's region. Hussaini et al. (RA-L 2022, "Ensembles of compact,
 region-specific & regularized SNNs") call the neurons that respond to many places outside their region
-*hyperactive* and silence them at deployment, using the reference (calibration) responses only. Here:
+*hyperactive* and silence them at deployment, and assign each module's neurons to the places of
+its own region; both use the reference (calibration) responses only. Here:
 
-    R(i)     = the region (consecutive reference places) of neuron i's module         modules.region_mask
-    o_i      = #{ l not in R(i) : S^R[i, l] > 0 } / #{ l not in R(i) }                 outside_involvement
-    silent_i = o_i > rho                                                               hyperactive_neurons
-    S^R[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silence
+    R(i)      = the region (consecutive reference places) of neuron i's module        modules.region_mask
+    S~[i, l]  = S^R[i, l] if l in R(i), else lambda S^R[i, l]                         region_weighting
+    o_i       = #{ l not in R(i) : S^R[i, l] > 0 } / #{ l not in R(i) }               outside_involvement
+    silent_i  = o_i > rho                                                             hyperactive_neurons
+    S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silence
 
-rho = ``assignment.hyperactive_share`` in [0, 1]. With rho = 1 no neuron is silenced (o_i <= 1), and a
-single network (one module: no place lies outside its region, o_i = 0) is never changed. A silenced
-neuron neither votes nor counts as active in the missing-spikes penalty (eq. 11): it is removed from
-the readout as if it had not been there; its module's WTA is unchanged. Everything is computed on
-whole (neurons, places) arrays, without a loop over neurons or modules.
+and the readout (Standard, Weighted, W+Prob, aggregation) then runs on S~ in place of S^R.
+lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1];
+lambda = 0 is Hussaini's region-specific assignment (a neuron votes only for places of its region),
+lambda = 1 the whole-route assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one
+module: no place lies outside its region, o_i = 0) is never changed. A silenced neuron neither votes
+nor counts as active in the missing-spikes penalty (eq. 11): it is removed from the readout as if it
+had not been there; its module's WTA is unchanged. Everything is computed on whole (neurons, places)
+arrays, without a loop over neurons or modules.
 """
 
 from __future__ import annotations
@@ -33,26 +38,56 @@ from .assignment import _counts
 
 @dataclass(frozen=True)
 class ModuleLayout:
-    """Which reference places each neuron's module was trained on, and the regularisation limit rho.
+    """Which reference places each neuron's module was trained on, and the regularisation (lambda, rho).
 
     ``regions`` (M, 2) [start, stop) indices into the reference places (``modules.module_regions``);
-    ``group`` = n neurons per module; ``hyperactive_share`` = rho.
+    ``group`` = n neurons per module; ``hyperactive_share`` = rho; ``outside_weight`` = lambda.
     """
 
     regions: np.ndarray
     group: int
     hyperactive_share: float
+    outside_weight: float = 1.0
 
     @property
     def n_neurons(self) -> int:
         return len(self.regions) * self.group
 
 
-def module_layout(cfg: Config, n_places: int, hyperactive_share: float | None = None) -> ModuleLayout:
-    """The layout of the ensemble ``cfg`` describes over ``n_places`` reference places (rho from the config
-    unless given)."""
+def module_layout(
+    cfg: Config, n_places: int, hyperactive_share: float | None = None, outside_weight: float | None = None
+) -> ModuleLayout:
+    """The layout of the ensemble ``cfg`` describes over ``n_places`` reference places (rho and lambda from
+    the config unless given)."""
     rho = cfg.assignment.hyperactive_share if hyperactive_share is None else hyperactive_share
-    return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho))
+    lam = cfg.assignment.outside_weight if outside_weight is None else outside_weight
+    return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
+
+
+def _inside(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
+    inside = region_mask(np.asarray(regions, dtype=np.int64), group)
+    if inside.shape != sr.shape:
+        raise ValueError(
+            f"sr has shape {sr.shape} but the module layout describes {inside.shape[0]} neurons x "
+            f"{inside.shape[1]} places"
+        )
+    return inside
+
+
+def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_weight: float) -> np.ndarray:
+    """S^R with every response outside the neuron's own region scaled by lambda, shape ``(neurons, places)``.
+
+    .. math:: \\tilde S_{il} = \\begin{cases} S^R_{il} & l \\in R(i) \\\\ \\lambda\\, S^R_{il} & l \\notin R(i) \\end{cases}
+
+    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged.
+    """
+    sr_ = _counts("sr", sr)
+    lam = float(outside_weight)
+    if not 0.0 <= lam <= 1.0:
+        raise ValueError(f"outside_weight must lie in [0, 1], got {lam}")
+    if lam == 1.0:
+        return sr_
+    return np.where(_inside(sr_, regions, group), sr_, lam * sr_)
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -63,12 +98,7 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
     0 for a neuron whose region covers every place (a single network).
     """
     sr_ = _counts("sr", sr)
-    inside = region_mask(np.asarray(regions, dtype=np.int64), group)
-    if inside.shape != sr_.shape:
-        raise ValueError(
-            f"sr has shape {sr_.shape} but the module layout describes {inside.shape[0]} neurons x "
-            f"{inside.shape[1]} places"
-        )
+    inside = _inside(sr_, regions, group)
     fires_outside = np.count_nonzero((sr_ > 0) & ~inside, axis=1)
     outside = np.count_nonzero(~inside, axis=1)
     return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
@@ -101,16 +131,19 @@ def silence(sr: np.ndarray, sq: np.ndarray, silent: np.ndarray) -> tuple[np.ndar
 
 
 def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
-    """S^R and S^Q with the hyperactive neurons of ``layout`` silenced (unchanged when ``layout`` is None).
+    """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
+    (both unchanged when ``layout`` is None).
 
     .. math:: \\mathrm{silent}_i = o_i > \\rho, \\quad
-              o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}
+              o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}, \\quad
+              \\tilde S_{il} = S^R_{il} \\,(1 \\text{ if } l \\in R(i) \\text{ else } \\lambda)
 
-    Only S^R (reference data) decides which neurons are silenced; the queries are not looked at.
+    Only S^R (reference data) decides; the queries are not looked at.
     """
     if layout is None:
         return np.asarray(sr, dtype=np.float64), np.asarray(sq, dtype=np.float64)
-    return silence(sr, sq, hyperactive_neurons(sr, layout))
+    weighted = region_weighting(sr, layout.regions, layout.group, layout.outside_weight)
+    return silence(weighted, sq, hyperactive_neurons(sr, layout))
 
 
 @dataclass(frozen=True)
