@@ -87,7 +87,10 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
         raise ValueError(f"outside_weight must lie in [0, 1], got {lam}")
     if lam == 1.0:
         return sr_
-    return np.where(_inside(sr_, regions, group), sr_, lam * sr_)
+    inside = _inside(sr_, regions, group)
+    if lam == 0.0:
+        return sr_ * inside
+    return sr_ * np.where(inside, 1.0, lam)
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -142,8 +145,15 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
     """
     if layout is None:
         return np.asarray(sr, dtype=np.float64), np.asarray(sq, dtype=np.float64)
-    weighted = region_weighting(sr, layout.regions, layout.group, layout.outside_weight)
-    return silence(weighted, sq, hyperactive_neurons(sr, layout))
+    sr_ = _counts("sr", sr)
+    silent = hyperactive_neurons(sr_, layout)
+    weighted = region_weighting(sr_, layout.regions, layout.group, layout.outside_weight)
+    if weighted is sr_:
+        weighted = sr_.copy()
+    weighted[silent, :] = 0.0
+    sq_ = np.array(sq, dtype=np.float64)
+    sq_[:, silent] = 0.0
+    return weighted, sq_
 
 
 @dataclass(frozen=True)
