@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
@@ -21,9 +22,17 @@ from vprsnn_export.readout.aggregation import (
     smooth_velocity,
     track_velocity,
 )
-from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
+from vprsnn_export.readout.assignment import STRATEGIES, decide, standard_scores, weighted_scores, wprob_distribution
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.readout.regions import (
+    ModuleAccuracy,
+    ModuleLayout,
+    hyperactive_neurons,
+    module_accuracy,
+    module_layout,
+    regularise,
+)
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 
@@ -151,6 +160,20 @@ def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.nd
         )
 
 
+def readout_scores(
+    calibration: np.ndarray, query_counts: np.ndarray, gamma: float, modules: ModuleLayout | None = None
+) -> dict[str, np.ndarray]:
+    """The k=1 scores of every strategy {standard, weighted, wprob}, (Q, places) each.
+
+    With ``modules`` (an ensemble) the hyperactive neurons are silenced first
+    (``readout.regions.regularise``: decided from S^R alone). The weighted scores are computed once
+    and W+Prob is derived from them.
+    """
+    sr, sq = regularise(calibration, query_counts, modules)
+    weighted = weighted_scores(sr, sq, gamma)
+    return {"standard": standard_scores(sr, sq), "weighted": weighted, "wprob": wprob_distribution(weighted)}
+
+
 def readout_rows(
     calibration: np.ndarray,
     query_counts: np.ndarray,
@@ -158,14 +181,28 @@ def readout_rows(
     query_place_ids: np.ndarray,
     options: ReadoutOptions,
     frame_positions: np.ndarray | None = None,
+    *,
+    modules: ModuleLayout | None = None,
 ) -> list[dict]:
-    """Rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries} for one network."""
+    """Rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries} for one network.
+
+    ``modules``: the layout of an ensemble, whose hyperactive neurons are silenced (None: no regularisation).
+    """
     check_sequence_length(options, len(query_place_ids))
     check_places_overlap(reference_place_ids, query_place_ids, options.tolerance)
-    sr = np.asarray(calibration, dtype=np.float64)
-    sq = np.asarray(query_counts, dtype=np.float64)
+    scores = readout_scores(calibration, query_counts, options.gamma, modules)
+    return score_rows(scores, reference_place_ids, query_place_ids, options, frame_positions)
+
+
+def score_rows(
+    scores: Mapping[str, np.ndarray],
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: ReadoutOptions,
+    frame_positions: np.ndarray | None = None,
+) -> list[dict]:
+    """The rows of :func:`readout_rows` from the scores of :func:`readout_scores`."""
     rows = []
-    scores = {s: strategy_scores(sr, sq, s, options.gamma) for s in STRATEGIES}
     for strategy in STRATEGIES:
         metrics = decision_metrics(scores[strategy], strategy, reference_place_ids, query_place_ids, options.tolerance)
         rows.append({"strategy": strategy, "k": 1, **metrics})
@@ -174,6 +211,24 @@ def readout_rows(
         metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
         rows.append({"strategy": "wprob", "k": k, **metrics})
     return rows
+
+
+def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
+    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
+    return module_layout(config, n_places) if config.train.module_size > 0 else None
+
+
+def module_rows(
+    wprob: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    modules: ModuleLayout,
+    tolerance: int = 0,
+) -> list[ModuleAccuracy]:
+    """Per module: accuracy and in-region share of the whole-route W+Prob (k=1) decisions on its region's queries."""
+    predicted, _ = decide(wprob, "wprob")
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
+    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, modules.regions)
 
 
 def baseline_rows(
@@ -231,12 +286,19 @@ class Evaluation:
     saturations: int = 0
     max_current: int = 0
     winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
+    modules: list[ModuleAccuracy] | None = field(default=None)  # an ensemble: per module, W+Prob k=1
+    silenced: int | None = None  # an ensemble: neurons silenced by the region regularisation
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON of `evaluate --json` / `simulate --json` (without the spike counts)."""
+        """The JSON of `evaluate --json` / `simulate --json` (without the spike counts).
+
+        An ensemble adds ``modules`` (per-module accuracy) and ``silenced_neurons``."""
         out: dict[str, Any] = {"results": self.rows, "spike_stats": self.spike_stats.to_dict()}
         if self.winner_agreement is not None:
             out["winner_agreement"] = self.winner_agreement
+        if self.modules is not None:
+            out["modules"] = [m.to_dict() for m in self.modules]
+            out["silenced_neurons"] = self.silenced
         return out
 
 
@@ -254,7 +316,9 @@ def evaluate_float(
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
-    the no-learning SAD baseline is added as rows with strategy "sad".
+    the no-learning SAD baseline is added as rows with strategy "sad". An ensemble
+    (``train.module_size`` > 0) is read out over the whole route with its hyperactive
+    neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
     """
     device = torch.device("cpu") if device is None else device
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
@@ -263,14 +327,26 @@ def evaluate_float(
     )
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
-    rows = readout_rows(ckpt.calibration, counts, reference_ids, query_place_ids, options)
+    layout = ensemble_layout(ckpt.config, len(reference_ids))
+    check_sequence_length(options, len(query_place_ids))
+    check_places_overlap(reference_ids, query_place_ids, options.tolerance)
+    scores = readout_scores(ckpt.calibration, counts, options.gamma, layout)
+    rows = score_rows(scores, reference_ids, query_place_ids, options)
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
         rows += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
     candidates = run.candidates_per_step
     assert candidates is not None  # the float network always reports them
-    return Evaluation(rows=rows, spike_stats=spike_statistics(candidates.numpy(), counts), query_counts=counts)
+    return Evaluation(
+        rows=rows,
+        spike_stats=spike_statistics(candidates.numpy(), counts),
+        query_counts=counts,
+        modules=None
+        if layout is None
+        else module_rows(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
+        silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
+    )
 
 
 CALIBRATIONS = ("deployed", "float")
@@ -298,8 +374,11 @@ def evaluate_fixed_point(
     run = IntegerNetwork(model, device).run(spikes, record=compare, state_isolation=state_isolation)
     counts = run.counts.numpy()
     rows = []
+    layout = ensemble_layout(model.config, len(model.reference_place_ids))
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
-        for row in readout_rows(calibration, counts, model.reference_place_ids, query_place_ids, options):
+        for row in readout_rows(
+            calibration, counts, model.reference_place_ids, query_place_ids, options, modules=layout
+        ):
             rows.append({"calibration": name, **row})
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
@@ -331,4 +410,5 @@ def calibrate_and_evaluate(
 
     calibration = calibrate(network.counts, reference_images, reference_place_ids, network.cfg)
     counts = network.counts(query_spikes(query_images, query_place_ids, query_traversal, network.cfg)).numpy()
-    return readout_rows(calibration, counts, reference_place_ids, query_place_ids, options)
+    layout = ensemble_layout(network.cfg, len(reference_place_ids))
+    return readout_rows(calibration, counts, reference_place_ids, query_place_ids, options, modules=layout)

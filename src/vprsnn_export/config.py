@@ -91,9 +91,18 @@ class TrainConfig:
 
 @dataclass(frozen=True)
 class AssignmentConfig:
-    """Weighted assignment involvement threshold gamma (paper eq. 9)."""
+    """Weighted assignment involvement threshold gamma (paper eq. 9); the ensemble's region regularisation.
+
+    An ensemble's readout (src/vprsnn_export/readout/regions.py, docs/readout.md; a single network is
+    never changed): ``outside_weight`` = lambda scales each neuron's calibration responses to places
+    outside its module's region (0: region-specific assignment, 1: whole route); ``hyperactive_share``
+    = rho: a neuron that fires, during calibration, for more than this share of the places outside its
+    region is silenced (1: none is). Chosen on the whole route (docs/results/route.md).
+    """
 
     gamma: float = 0.02
+    hyperactive_share: float = 0.5
+    outside_weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +197,8 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "train.batch_size": (1, 1_000_000, True, True),
     "train.module_size": (0, 10_000_000, True, True),
     "assignment.gamma": (0.0, 1.0, True, True),
+    "assignment.hyperactive_share": (0.0, 1.0, True, True),
+    "assignment.outside_weight": (0.0, 1.0, True, True),
 }
 
 

@@ -21,6 +21,25 @@ from ._common import (
     readout_options,
 )
 
+MODULE_COLUMNS = (
+    ("module", "module"),
+    ("places", "places"),
+    ("n_queries", "queries"),
+    ("accuracy", "acc %"),
+    ("in_region", "in region %"),
+)
+
+
+def module_cells(row: dict) -> dict:
+    """One per-module row as table cells (percentages as text)."""
+    return {
+        "module": row["module"],
+        "places": f"{row['first_place']}-{row['last_place']}",
+        "n_queries": row["n_queries"],
+        "accuracy": f"{100 * row['accuracy']:6.2f}",
+        "in_region": f"{100 * row['in_region']:6.2f}",
+    }
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("evaluate", help="evaluate a float checkpoint on a query traversal")
@@ -63,6 +82,9 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(format_table(result.rows, RESULT_COLUMNS))
+        if result.modules is not None:
+            print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")
+            print(format_table([module_cells(m.to_dict()) for m in result.modules], MODULE_COLUMNS))
         stats = result.spike_stats
         print(
             f"\nthreshold candidates per step: {stats.mean_candidates_per_step:.1f} on average; "

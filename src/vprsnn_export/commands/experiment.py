@@ -16,7 +16,7 @@ from .. import experiments
 from ..errors import InvalidValueError
 from ..experiments.common import Settings, Variant, document
 from ..fileio import atomic_write_text
-from ._common import parse_value
+from ._common import parse_int_list, parse_value
 
 HELPER_MODULES = {"common", "plots"}
 
@@ -42,6 +42,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="NAME=PRESET[,KEY=VALUE...]",
         help="experiment sweep: one variant of the grid (repeatable; default paper, paper+gamma=0.1, dog, dog+gamma=0.1)",
     )
+    parser.add_argument(
+        "--module-sizes",
+        metavar="P[,P...]",
+        help="experiment route: the module sizes to measure, the first one with every seed (default 100,50,200)",
+    )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)
 
@@ -62,6 +67,12 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     extra: dict[str, Any] = {"overrides": overrides, "grid": tuple(parse_grid_entry(item) for item in args.grid)}
     if args.data:
         extra.update(data=args.data, subset=None)
+    if args.module_sizes is not None:
+        if args.name != "route":
+            raise InvalidValueError(f"--module-sizes applies only to experiment route, not {args.name!r}")
+        extra["module_sizes"] = parse_int_list(args.module_sizes, "--module-sizes")
+        if len(set(extra["module_sizes"])) != len(extra["module_sizes"]):
+            raise InvalidValueError(f"--module-sizes names a size twice: {args.module_sizes!r}")
     return replace(settings, **extra)
 
 

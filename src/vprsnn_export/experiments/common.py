@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import platform
@@ -11,12 +12,16 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import load_checkpoint, save_checkpoint
+from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.device import resolve_device
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import query_spikes
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
@@ -49,6 +54,7 @@ class Settings:
     overrides: dict = field(default_factory=dict)  # dotted config overrides
     grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
     preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
+    module_sizes: tuple[int, ...] = ()  # experiment route's module sizes (empty: its default sizes)
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:
@@ -108,16 +114,16 @@ def cache_dir() -> Path:
     return Path(os.environ.get("VPRSNN_CACHE", Path.home() / ".cache" / "vprsnn-export" / "checkpoints"))
 
 
-def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_key: str):
-    """Train (or reuse) the float checkpoint of ``cfg`` on ``data``'s reference traversal.
-
-    Training is deterministic, so a checkpoint is cached under a hash of everything
-    that determines it (config, data manifest hash, selected places, reference, version).
-    """
-
+def checkpoint_path(settings: Settings, data: Dataset, cfg: Config, selection_key: str) -> Path:
+    """Where the checkpoint of ``cfg`` trained on ``data`` is cached: a hash of everything that determines it
+    (config, data manifest hash, selected places, reference, version)."""
+    config = cfg.to_dict()
+    # readout-only keys added after networks were cached: left out, so those networks keep their keys
+    for key in ("hyperactive_share", "outside_weight"):
+        config["assignment"].pop(key)
     key = json.dumps(
         {
-            "config": cfg.to_dict(),
+            "config": config,
             "manifest": data.manifest_sha256,
             "places": data.place_ids.tolist(),
             "reference": settings.reference,
@@ -125,10 +131,11 @@ def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection
         },
         sort_keys=True,
     )
-    path = cache_dir() / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
-    if path.exists():
-        return load_checkpoint(path)
-    ckpt = train_and_calibrate(
+    return cache_dir() / f"{selection_key}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+
+
+def _train(settings: Settings, data: Dataset, cfg: Config):
+    return train_and_calibrate(
         data,
         [settings.reference],
         cfg,
@@ -136,8 +143,80 @@ def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection
         progress=settings.progress,
         selection={"subset": None, "places": None},
     )
+
+
+def trained_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_key: str):
+    """Train (or reuse) the float checkpoint of ``cfg`` on ``data``'s reference traversal.
+
+    Training is deterministic, so a checkpoint is cached under :func:`checkpoint_path`.
+    """
+
+    path = checkpoint_path(settings, data, cfg, selection_key)
+    if path.exists():
+        return load_checkpoint(path)
+    ckpt = _train(settings, data, cfg)
     save_checkpoint(path, ckpt)
     return ckpt
+
+
+@dataclass(frozen=True)
+class TimedCheckpoint:
+    """A cached checkpoint and the wall-clock seconds its training and calibration took when it was trained."""
+
+    checkpoint: Checkpoint
+    train_seconds: float
+    trained_on: str  # the machine and thread count of that run
+    cached: bool  # True: read from the cache by this run
+
+
+def timed_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_key: str) -> TimedCheckpoint:
+    """:func:`trained_checkpoint` that also keeps the training time beside the cached file (``<file>.time.json``),
+    so that a rerun that trains nothing still reports how long training took."""
+    path = checkpoint_path(settings, data, cfg, selection_key)
+    timing = path.with_name(path.name + ".time.json")
+    if path.exists() and timing.exists():
+        saved = json.loads(timing.read_text())
+        return TimedCheckpoint(load_checkpoint(path), float(saved["train_seconds"]), str(saved["trained_on"]), True)
+    started = time.perf_counter()
+    ckpt = _train(settings, data, cfg)
+    seconds = time.perf_counter() - started
+    machine = f"{platform.machine()}, {torch.get_num_threads()} torch threads"
+    save_checkpoint(path, ckpt)
+    atomic_write_text(timing, json.dumps({"train_seconds": seconds, "trained_on": machine}))
+    return TimedCheckpoint(ckpt, seconds, machine, False)
+
+
+@dataclass(frozen=True)
+class TimedCounts:
+    """Spike counts of a cached network on a query traversal and the seconds that run took."""
+
+    counts: np.ndarray  # (queries, neurons) int64
+    seconds: float
+    cached: bool
+
+
+def timed_query_counts(
+    settings: Settings, data: Dataset, cfg: Config, selection_key: str, ckpt: Checkpoint
+) -> TimedCounts:
+    """The float network's spike counts on ``settings.query`` (state isolation on), cached beside the
+    checkpoint of :func:`checkpoint_path` with the seconds the run took when it ran (a network run on
+    thousands of images at thousands of neurons takes minutes; the readouts that follow take seconds)."""
+    path = checkpoint_path(settings, data, cfg, selection_key)
+    stem = path.name.removesuffix(".npz")
+    counts_path = path.with_name(f"{stem}.{settings.query}.counts.npy")
+    timing = path.with_name(f"{stem}.{settings.query}.counts.json")
+    if counts_path.exists() and timing.exists():
+        return TimedCounts(np.load(counts_path), float(json.loads(timing.read_text())["seconds"]), True)
+    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, resolve_device(settings.device))
+    started = time.perf_counter()
+    run = network.run(query_spikes(data.traversal(settings.query), data.place_ids, settings.query, ckpt.config))
+    seconds = time.perf_counter() - started
+    counts = run.counts.numpy().astype(np.int64)
+    buffer = io.BytesIO()
+    np.save(buffer, counts)
+    atomic_write_bytes(counts_path, buffer.getvalue())
+    atomic_write_text(timing, json.dumps({"seconds": seconds}))
+    return TimedCounts(counts, seconds, False)
 
 
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")

@@ -45,3 +45,25 @@ def line_plot(
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return save_figure(fig, path)
+
+
+def route_plot(path: Path, *, ks, curves: dict, modules: dict, module_size: int) -> Path:
+    """Left: accuracy vs k per curve (curves[label] = accuracies). Right: accuracy per module along the route
+    (modules[label] = accuracies, one per module)."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, values in curves.items():
+        left.plot(ks, values, marker="o", label=label, linestyle="--" if label.startswith("SAD") else "-")
+    left.set_xlabel("sequence length k (frames)")
+    left.set_ylabel("accuracy % (whole route)")
+    left.set_title("Whole route: W+Prob vs SAD")
+    left.set_xticks(list(ks))
+    left.grid(alpha=0.3)
+    left.legend(fontsize=8)
+    for label, values in modules.items():
+        right.plot(range(len(values)), values, marker=".", label=label)
+    right.set_xlabel(f"module ({module_size} places each, along the route)")
+    right.set_ylabel("accuracy % (W+Prob, k=1)")
+    right.set_title("Per module, first seed")
+    right.grid(alpha=0.3)
+    right.legend(fontsize=8)
+    return save_figure(fig, path)

@@ -90,9 +90,23 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     with ``A = standard_assignment(sr)`` (ties to the lowest place index;
     neurons silent during calibration belong to no place and never vote).
+    The product with the one-hot A is a sum of the columns of S^Q grouped by
+    place (``np.add.reduceat``): O(queries x neurons), not a dense matrix product;
+    the counts are integers, so the sums are exact either way.
     """
     sr_, sq_ = _pair(sr, sq)
-    return sq_ @ standard_assignment(sr_)
+    scores = np.zeros((sq_.shape[0], sr_.shape[1]), dtype=np.float64)
+    if sr_.size == 0:
+        return scores
+    voters = np.flatnonzero(sr_.sum(axis=1) > 0)
+    if voters.size == 0:
+        return scores
+    best = np.argmax(sr_[voters], axis=1)
+    order = np.argsort(best, kind="stable")
+    voters, best = voters[order], best[order]
+    places, starts = np.unique(best, return_index=True)
+    scores[:, places] = np.add.reduceat(sq_[:, voters], starts, axis=1)
+    return scores
 
 
 def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray:

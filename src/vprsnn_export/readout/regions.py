@@ -1,0 +1,216 @@
+"""Region regularisation of an ensemble: region-specific assignment and silencing of hyperactive neurons.
+
+An ensemble of modules (``src/vprsnn_export/modules.py``) applies the hard WTA within each module, so
+every module has a winner for every image, including the images of the other modules' regions. The
+calibration S^R spans every module's neurons over every reference place, so it shows which neurons
+also respond outside their own module's region. Hussaini et al. (RA-L 2022, "Ensembles of compact,
+region-specific & regularized SNNs") call the neurons that respond to many places outside their region
+*hyperactive* and silence them at deployment, and assign each module's neurons to the places of
+its own region; both use the reference (calibration) responses only. Here:
+
+    R(i)      = the region (consecutive reference places) of neuron i's module        modules.region_mask
+    S~[i, l]  = S^R[i, l] if l in R(i), else lambda S^R[i, l]                         region_weighting
+    o_i       = #{ l not in R(i) : S^R[i, l] > 0 } / #{ l not in R(i) }               outside_involvement
+    silent_i  = o_i > rho                                                             hyperactive_neurons
+    S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silence
+
+and the readout (Standard, Weighted, W+Prob, aggregation) then runs on S~ in place of S^R.
+lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1];
+lambda = 0 is Hussaini's region-specific assignment (a neuron votes only for places of its region),
+lambda = 1 the whole-route assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one
+module: no place lies outside its region, o_i = 0) is never changed. A silenced neuron neither votes
+nor counts as active in the missing-spikes penalty (eq. 11): it is removed from the readout as if it
+had not been there; its module's WTA is unchanged. Everything is computed on whole (neurons, places)
+arrays, without a loop over neurons or modules.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vprsnn_export.config import Config
+from vprsnn_export.modules import module_regions, region_mask
+
+from .assignment import _counts
+
+
+@dataclass(frozen=True)
+class ModuleLayout:
+    """Which reference places each neuron's module was trained on, and the regularisation (lambda, rho).
+
+    ``regions`` (M, 2) [start, stop) indices into the reference places (``modules.module_regions``);
+    ``group`` = n neurons per module; ``hyperactive_share`` = rho; ``outside_weight`` = lambda.
+    """
+
+    regions: np.ndarray
+    group: int
+    hyperactive_share: float
+    outside_weight: float = 1.0
+
+    @property
+    def n_neurons(self) -> int:
+        return len(self.regions) * self.group
+
+
+def module_layout(
+    cfg: Config, n_places: int, hyperactive_share: float | None = None, outside_weight: float | None = None
+) -> ModuleLayout:
+    """The layout of the ensemble ``cfg`` describes over ``n_places`` reference places (rho and lambda from
+    the config unless given)."""
+    rho = cfg.assignment.hyperactive_share if hyperactive_share is None else hyperactive_share
+    lam = cfg.assignment.outside_weight if outside_weight is None else outside_weight
+    return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
+
+
+def _inside(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
+    inside = region_mask(np.asarray(regions, dtype=np.int64), group)
+    if inside.shape != sr.shape:
+        raise ValueError(
+            f"sr has shape {sr.shape} but the module layout describes {inside.shape[0]} neurons x "
+            f"{inside.shape[1]} places"
+        )
+    return inside
+
+
+def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_weight: float) -> np.ndarray:
+    """S^R with every response outside the neuron's own region scaled by lambda, shape ``(neurons, places)``.
+
+    .. math:: \\tilde S_{il} = \\begin{cases} S^R_{il} & l \\in R(i) \\\\ \\lambda\\, S^R_{il} & l \\notin R(i) \\end{cases}
+
+    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged.
+    """
+    sr_ = _counts("sr", sr)
+    lam = float(outside_weight)
+    if not 0.0 <= lam <= 1.0:
+        raise ValueError(f"outside_weight must lie in [0, 1], got {lam}")
+    if lam == 1.0:
+        return sr_
+    inside = _inside(sr_, regions, group)
+    if lam == 0.0:
+        return sr_ * inside
+    return sr_ * np.where(inside, 1.0, lam)
+
+
+def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
+    """Share of the places outside its module's region that each neuron fires for, shape ``(neurons,)``.
+
+    .. math:: o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}
+
+    0 for a neuron whose region covers every place (a single network).
+    """
+    sr_ = _counts("sr", sr)
+    inside = _inside(sr_, regions, group)
+    fires_outside = np.count_nonzero((sr_ > 0) & ~inside, axis=1)
+    outside = np.count_nonzero(~inside, axis=1)
+    return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
+
+
+def hyperactive_neurons(sr: np.ndarray, layout: ModuleLayout) -> np.ndarray:
+    """Boolean mask of the neurons to silence, shape ``(neurons,)``.
+
+    .. math:: \\mathrm{silent}_i = o_i > \\rho
+
+    with :math:`o_i` from :func:`outside_involvement` and :math:`\\rho` = ``layout.hyperactive_share``.
+    """
+    rho = float(layout.hyperactive_share)
+    if not 0.0 <= rho <= 1.0:
+        raise ValueError(f"hyperactive_share must lie in [0, 1], got {rho}")
+    return outside_involvement(sr, layout.regions, layout.group) > rho
+
+
+def silence(sr: np.ndarray, sq: np.ndarray, silent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """S^R and S^Q without the silent neurons' responses (copies; the inputs are not changed).
+
+    .. math:: S^R_{i\\cdot} \\leftarrow 0, \\quad S^Q_{\\cdot i} \\leftarrow 0 \\qquad \\text{for every silent } i
+    """
+    sr_ = np.array(sr, dtype=np.float64)
+    sq_ = np.array(sq, dtype=np.float64)
+    mask = np.asarray(silent, dtype=bool)
+    sr_[mask, :] = 0.0
+    sq_[:, mask] = 0.0
+    return sr_, sq_
+
+
+def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
+    """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
+    (both unchanged when ``layout`` is None).
+
+    .. math:: \\mathrm{silent}_i = o_i > \\rho, \\quad
+              o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}, \\quad
+              \\tilde S_{il} = S^R_{il} \\,(1 \\text{ if } l \\in R(i) \\text{ else } \\lambda)
+
+    Only S^R (reference data) decides; the queries are not looked at.
+    """
+    if layout is None:
+        return np.asarray(sr, dtype=np.float64), np.asarray(sq, dtype=np.float64)
+    sr_ = _counts("sr", sr)
+    silent = hyperactive_neurons(sr_, layout)
+    weighted = region_weighting(sr_, layout.regions, layout.group, layout.outside_weight)
+    if weighted is sr_:
+        weighted = sr_.copy()
+    weighted[silent, :] = 0.0
+    sq_ = np.array(sq, dtype=np.float64)
+    sq_[:, silent] = 0.0
+    return weighted, sq_
+
+
+@dataclass(frozen=True)
+class ModuleAccuracy:
+    """How the whole-route decisions fare on the queries of one module's region."""
+
+    module: int
+    first_place: int  # reference place ids of the region, inclusive
+    last_place: int
+    n_queries: int
+    accuracy: float  # correct decisions / queries of the region
+    in_region: float  # decisions that name a place of the region / queries of the region (the right module won)
+
+    def to_dict(self) -> dict[str, float | int]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def module_accuracy(
+    pred_index: np.ndarray,
+    correct: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    regions: np.ndarray,
+) -> list[ModuleAccuracy]:
+    """Per module m, over the queries whose true place lies in region m (a query of no reference place is left out):
+
+    .. math:: \\mathrm{acc}_m = \\frac{\\#\\{q : \\mathrm{correct}_q\\}}{\\#\\{q\\}}, \\qquad
+              \\mathrm{in}_m = \\frac{\\#\\{q : \\hat l_q \\in R_m\\}}{\\#\\{q\\}}
+
+    ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the
+    booleans of ``metrics.is_correct``. Computed with one ``bincount`` per quantity.
+    """
+    regions_ = np.asarray(regions, dtype=np.int64)
+    reference = np.asarray(reference_place_ids, dtype=np.int64)
+    queries = np.asarray(query_place_ids, dtype=np.int64)
+    order = np.argsort(reference, kind="stable")
+    position = np.clip(np.searchsorted(reference[order], queries), 0, max(len(reference) - 1, 0))
+    known = reference[order][position] == queries
+    true_index = order[position]
+    n_modules = len(regions_)
+    true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
+    pred = np.asarray(pred_index, dtype=np.int64)
+    pred_module = np.where(pred >= 0, np.searchsorted(regions_[:, 1], np.maximum(pred, 0), side="right"), -1)
+    modules = true_module[known]
+    totals = np.bincount(modules, minlength=n_modules)
+    hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
+    inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
+    share = np.divide(hits, totals, out=np.zeros(n_modules), where=totals > 0)
+    routed = np.divide(inside, totals, out=np.zeros(n_modules), where=totals > 0)
+    return [
+        ModuleAccuracy(
+            module=m,
+            first_place=int(reference[regions_[m, 0]]),
+            last_place=int(reference[regions_[m, 1] - 1]),
+            n_queries=int(totals[m]),
+            accuracy=float(share[m]),
+            in_region=float(routed[m]),
+        )
+        for m in range(n_modules)
+    ]

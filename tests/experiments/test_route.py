@@ -1,0 +1,58 @@
+"""experiment route on the tiny synthetic route: every readout, the SAD rows, the cost, --module-sizes."""
+
+import pytest
+
+from vprsnn_export.cli import main
+from vprsnn_export.experiments import route
+from vprsnn_export.experiments.common import Settings
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("VPRSNN_CACHE", str(tmp_path_factory.getbasetemp() / "route-cache"))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    cache = tmp_path_factory.getbasetemp() / "route-cache"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("VPRSNN_CACHE", str(cache))
+        return route.run(Settings.quick_settings(progress=False, module_sizes=(8, 12)))
+
+
+def test_every_network_is_read_out_every_way(results):
+    assert [(n["module_size"], n["seed"]) for n in results["networks"]] == [(8, 1), (8, 2), (12, 1)]
+    names = [r["readout"] for r in results["readouts"]]
+    assert names == [name for name, _, _ in route.READOUTS] and results["default_readout"] in names
+    for network in results["networks"]:
+        assert network["modules"] == -(-24 // network["module_size"])
+        assert {r["readout"] for r in network["rows"]} == set(names)
+        estimated = [r for r in network["rows"] if r["strategy"] == "wprob-est"]
+        assert {(r["readout"], r["k"]) for r in estimated} == {(route.DEFAULT_READOUT, 5), (route.DEFAULT_READOUT, 10)}
+        none = next(r for r in network["readouts"] if r["readout"] == "none")
+        assert none["silenced"] == 0 and len(none["modules"]) == network["modules"]
+
+
+def test_sad_rows_and_cost(results):
+    assert set(results["baselines"]) == {"intensity", "dog_on_off"}
+    assert [r["k"] for r in results["baselines"]["intensity"]] == list(route.KS)
+    assert [c["module_size"] for c in results["cost"]] == [8, 12]
+    assert all(c["train_seconds"]["mean"] >= 0 for c in results["cost"])
+
+
+def test_rerun_from_the_cache_gives_the_same_rows(results):
+    again = route.run(Settings.quick_settings(progress=False, module_sizes=(8, 12)))
+    assert [n["rows"] for n in again["networks"]] == [n["rows"] for n in results["networks"]]
+    assert all(n["cached"] for n in again["networks"])
+
+
+def test_render_names_the_goals(results, tmp_path):
+    page = route.render(dict(results, command="vprsnn-export experiment route --quick"), tmp_path, "r")
+    assert "## Goals (issue 13)" in page and (tmp_path / "r.png").stat().st_size > 1000
+
+
+def test_module_sizes_option_is_checked(capsys):
+    assert main(["experiment", "epochs", "--quick", "--module-sizes", "10"]) == 2
+    assert "--module-sizes applies only to experiment route" in capsys.readouterr().err
+    assert main(["experiment", "route", "--quick", "--module-sizes", "8,8"]) == 2
+    assert "names a size twice" in capsys.readouterr().err
