@@ -28,7 +28,7 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.assignment import decide, strategy_scores
+from vprsnn_export.readout.assignment import decide
 from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
@@ -36,6 +36,7 @@ from vprsnn_export.targets.nir_target import read_nir, write_nir
 from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 
+from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult
 
 TARGETS = ("onnx", "nir", "loihi")
@@ -157,10 +158,13 @@ def backend_of(source: Source, device: torch.device | None = None) -> Backend:
 
 
 def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
-    """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration."""
+    """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration
+    (an ensemble's with its region regularisation, as every evaluation reads it out)."""
+
+    layout = ensemble_layout(source.config, source.calibration.shape[1])
 
     def readout(counts: np.ndarray) -> np.ndarray:
-        return strategy_scores(source.calibration, counts, "wprob", source.config.assignment.gamma)
+        return readout_scores(source.calibration, counts, source.config.assignment.gamma, layout)["wprob"]
 
     return readout
 

@@ -41,7 +41,7 @@ from vprsnn_export.fileio import (
     staging_folder,
 )
 from vprsnn_export.modules import module_count
-from vprsnn_export.readout.assignment import decide, strategy_scores
+from vprsnn_export.readout.assignment import decide
 from vprsnn_export.targets.loihi_target import model_budgets, write_loihi
 from vprsnn_export.targets.nir_target import (
     CONSUMERS,
@@ -63,6 +63,7 @@ from .conformance import (
     wprob_readout,
 )
 from .deployment import deploy
+from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison
 
 EXPORT_TARGETS = ("nir", "loihi", "onnx")
@@ -339,8 +340,11 @@ def check_presentations(
 
 
 def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
-    """W+Prob decision (k = 1) of each presentation with the network's own calibration."""
-    return decide(strategy_scores(network.calibration, counts, "wprob", network.config.assignment.gamma), "wprob")[0]
+    """W+Prob decision (k = 1) of each presentation with the network's own calibration (an ensemble's
+    with its region regularisation)."""
+    layout = ensemble_layout(network.config, network.calibration.shape[1])
+    wprob = readout_scores(network.calibration, counts, network.config.assignment.gamma, layout)["wprob"]
+    return decide(wprob, "wprob")[0]
 
 
 def nir_consumer_rows(

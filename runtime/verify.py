@@ -49,15 +49,16 @@ from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, FixedPointModel, check_bits, save_fixed_point
 from vprsnn_export.modules import module_regions
-from vprsnn_export.readout.assignment import STRATEGIES, decide, strategy_scores
+from vprsnn_export.readout.assignment import STRATEGIES, decide
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.readout.regions import ModuleLayout
 from vprsnn_export.stats import mean_std
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.version import __version__
 
 from .conformance import TARGETS, cross_implementation
 from .deployment import CALIBRATIONS, deploy
-from .evaluation import ReadoutOptions, aggregated, readout_rows
+from .evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_rows, readout_scores
 from .results import (
     METRICS,
     SCHEMA,
@@ -317,9 +318,12 @@ def module_rows(
 # ---------------------------------------------------------------------------- metric level
 
 
-def readout_scores(calibration: np.ndarray, counts: np.ndarray, options: ReadoutOptions) -> tuple[dict, dict]:
-    """Scores of every strategy at k=1 and the W+Prob aggregate at every k (k=1 included)."""
-    scores = {s: strategy_scores(calibration, counts, s, options.gamma) for s in STRATEGIES}
+def decision_scores(
+    calibration: np.ndarray, counts: np.ndarray, options: ReadoutOptions, modules: ModuleLayout | None = None
+) -> tuple[dict, dict]:
+    """Scores of every strategy at k=1 and the W+Prob aggregate at every k (k=1 included); an ensemble's
+    (``modules``) with its region regularisation, as :func:`runtime.evaluation.readout_rows` scores it."""
+    scores = readout_scores(calibration, counts, options.gamma, modules)
     agg = {k: aggregated(scores["wprob"], k, options, None) for k in sorted(set(options.ks) | {1})}
     return scores, agg
 
@@ -481,8 +485,11 @@ def verify_checkpoint(
     float_counts = float_run.counts.numpy()
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
-    float_rows = metric_rows(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout))
-    float_scores, float_agg = readout_scores(ckpt.calibration, float_counts, readout)
+    layout = ensemble_layout(ckpt.config, len(ref_ids))
+    float_rows = metric_rows(
+        readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, modules=layout)
+    )
+    float_scores, float_agg = decision_scores(ckpt.calibration, float_counts, readout, layout)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
     results: list[BitsResult] = []
@@ -531,9 +538,11 @@ def verify_checkpoint(
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            int_rows = metric_rows(readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout))
+            int_rows = metric_rows(
+                readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout, modules=layout)
+            )
             rows = metric_deltas(float_rows, int_rows)
-            scores, agg = readout_scores(model.calibration, int_counts, readout)
+            scores, agg = decision_scores(model.calibration, int_counts, readout, layout)
             if float_run.raster is None or int_run.raster is None:
                 raise InvalidValueError("verify needs the recorded rasters of both networks")
             spike = spike_level(

@@ -52,6 +52,7 @@ from onnx import TensorProto, helper, numpy_helper
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.readout.regions import hyperactive_neurons, module_layout, region_weighting
 from vprsnn_export.runs import SpikeRun
 from vprsnn_export.targets.packing import PACKING, pack_bits
 
@@ -299,6 +300,21 @@ def calibration_nodes(counts: np.ndarray) -> tuple[list[onnx.NodeProto], list[Te
     return nodes, inits
 
 
+def readout_calibration(model: FixedPointModel) -> tuple[np.ndarray, np.ndarray | None]:
+    """The S^R the readout uses and the neurons it keeps: for an ensemble the region regularisation of
+    :mod:`vprsnn_export.readout.regions` (S~ = S^R scaled by lambda outside each neuron's region, the
+    hyperactive neurons' rows zeroed; keep = not silent), else (S^R, None). Decided from S^R alone."""
+    if model.config.train.module_size <= 0:
+        return model.calibration, None
+    layout = module_layout(model.config, model.calibration.shape[1])
+    silent = hyperactive_neurons(model.calibration, layout)
+    weighted = np.array(
+        region_weighting(model.calibration.astype(np.float64), layout.regions, layout.group, layout.outside_weight)
+    )
+    weighted[silent, :] = 0.0
+    return weighted, ~silent
+
+
 def readout_matrix_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """``s_r``, ``s_double_prime`` and ``inv_colsum`` (float64) from the integer counts S^R (eq. 9-10).
 
@@ -307,7 +323,11 @@ def readout_matrix_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], 
     Each is one correctly rounded float64 operation on exact integers, as in weighted_matrix.
     """
     n_places = model.calibration.shape[1]
-    nodes, inits = calibration_nodes(model.calibration)
+    matrix, _ = readout_calibration(model)
+    if np.array_equal(matrix, np.round(matrix)):  # counts (a single network, lambda 0 or 1): stored exactly as integers
+        nodes, inits = calibration_nodes(np.round(matrix).astype(np.int64))
+    else:
+        nodes, inits = [helper.make_node("Identity", ["s_r_weighted"], ["s_r"])], [const("s_r_weighted", matrix)]
     inits += [
         const("involvement", np.float64(float(model.config.assignment.gamma) * n_places)),
         const("axis0_outer", np.array([0], dtype=np.int64)),
@@ -339,6 +359,8 @@ def readout_matrix_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], 
 def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
 
+    An ensemble's head reads out with its region regularisation (:func:`readout_calibration`).
+
     scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
     P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
     """
@@ -348,10 +370,16 @@ def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Tens
         const("uniform", np.float64(1.0 / n_places)),
         const("i_zero", np.int64(0)),
     ]
+    _, keep = readout_calibration(model)
+    head_counts = "counts"
+    if keep is not None:  # an ensemble: the silenced neurons' counts do not reach the readout
+        inits.append(const("readout_keep", keep.astype(np.int64)))
+        nodes.append(helper.make_node("Mul", ["counts", "readout_keep"], ["readout_counts"]))
+        head_counts = "readout_counts"
     nodes += [
-        helper.make_node("Cast", ["counts"], ["sq"], to=TensorProto.DOUBLE),
+        helper.make_node("Cast", [head_counts], ["sq"], to=TensorProto.DOUBLE),
         helper.make_node("MatMul", ["sq", "s_double_prime"], ["raw"]),
-        helper.make_node("Greater", ["counts", "i_zero"], ["active_b"]),
+        helper.make_node("Greater", [head_counts, "i_zero"], ["active_b"]),
         helper.make_node("Cast", ["active_b"], ["active"], to=TensorProto.DOUBLE),
         helper.make_node("MatMul", ["active", "s_r"], ["covered"]),
         helper.make_node("Mul", ["covered", "inv_colsum"], ["penalty"]),

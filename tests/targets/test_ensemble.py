@@ -23,7 +23,10 @@ from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.readout.assignment import strategy_scores
+from vprsnn_export.readout.regions import hyperactive_neurons
 from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.runtime.evaluation import ensemble_layout, readout_scores
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_target import (
@@ -290,3 +293,22 @@ def test_quantize_command_prints_the_modules(route, tmp_path, capsys):
     assert "4 bits, 3 modules: rel. RMSE per module" in capsys.readouterr().out
     model = load_fixed_point(tmp_path / "q" / "model_4bit_per-tensor_max.npz")
     assert np.all(model.scale_multiplier.reshape(MODULES, GROUP).std(axis=1) == 0)
+
+
+@pytest.mark.parametrize("outside_weight", [0.0, 0.5])
+def test_the_onnx_wprob_head_reads_out_with_the_region_regularisation(route, queries, tmp_path, outside_weight):
+    """The head embeds S~ (lambda outside each region, hyperactive rows zeroed) and drops silenced counts."""
+    model = quantised(route, 8, per_neuron=True)
+    model = dataclasses.replace(
+        model,
+        config=model.config.replace(
+            **{"assignment.outside_weight": outside_weight, "assignment.hyperactive_share": 0.3}
+        ),
+    )
+    onnx_run = run_onnx_outputs(write_onnx(model, tmp_path / "m.onnx"), queries)
+    layout = ensemble_layout(model.config, model.calibration.shape[1])
+    assert hyperactive_neurons(model.calibration, layout).any()  # the rule silences someone here
+    expected = readout_scores(model.calibration, onnx_run.counts, model.config.assignment.gamma, layout)["wprob"]
+    assert np.abs(onnx_run.wprob - expected).max() <= 1e-12
+    plain = strategy_scores(model.calibration, onnx_run.counts, "wprob", model.config.assignment.gamma)
+    assert np.abs(onnx_run.wprob - plain).max() > 1e-6  # and the rule changes the distribution
