@@ -4,6 +4,7 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
 
     data = vx.load_dataset("synthetic:24", ["summer", "winter"], vx.Config().preprocess)
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
+    cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
     model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
     vx.export_and_check(vx.ExportSource.of(model, sha), model, ("nir", "onnx", "loihi"), "deploy/")
@@ -21,10 +22,12 @@ from .encoding import calibration_spikes, query_spikes
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
+from .modules import module_count, module_regions
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
 from .readout.assignment import decide, strategy_scores
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
+from .readout.regions import ModuleLayout, module_layout, regularise
 from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
@@ -39,6 +42,7 @@ from .targets.nir_target import apply_readout_rule, read_nir, write_nir
 from .targets.onnx_target import OnnxBackend, write_onnx
 from .targets.reference_stepper import ReferenceStepper
 from .threads import set_threads
+from .trainer.batched import train_modules
 from .trainer.calibrate import calibrate
 from .trainer.pipeline import train_and_calibrate
 from .trainer.train import train_network
@@ -59,6 +63,7 @@ __all__ = [
     "IntegerNetwork",
     "InvalidValueError",
     "ModelFileError",
+    "ModuleLayout",
     "OnnxBackend",
     "ReadoutOptions",
     "ReferenceStepper",
@@ -83,6 +88,9 @@ __all__ = [
     "evaluate_float",
     "export_and_check",
     "load_checkpoint",
+    "module_count",
+    "module_layout",
+    "module_regions",
     "load_dataset",
     "load_fixed_point",
     "load_source",
@@ -92,6 +100,7 @@ __all__ = [
     "read_export",
     "read_loihi_model",
     "read_nir",
+    "regularise",
     "readout_rows",
     "recalibrate",
     "sad_distances",
@@ -103,6 +112,7 @@ __all__ = [
     "smooth_velocity",
     "strategy_scores",
     "train_and_calibrate",
+    "train_modules",
     "train_network",
     "verify_checkpoint",
     "write_loihi",
