@@ -244,7 +244,7 @@ def blocks_of(report: VerifyReport) -> list[Block]:
             + (f"; network {first.label or 1} of {n_runs}." if n_runs > 1 else "."),
         )
     )
-    blocks += spike_blocks(summary)
+    blocks += spike_blocks(summary, runs)
     blocks.append(
         Block(
             "figure",
@@ -351,7 +351,7 @@ def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     return blocks
 
 
-def spike_blocks(summary: RunSummary) -> list[Block]:
+def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun] = ()) -> list[Block]:
     rows = [
         [
             f"{b.bits}",
@@ -368,10 +368,24 @@ def spike_blocks(summary: RunSummary) -> list[Block]:
             "p",
             "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
             "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
-            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries.",
+            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries."
+            + recorded_note(runs),
         ),
         Block("table", headers=["bits", "same winner %", "count correlation", "spike ratio", "saturations"], rows=rows),
     ]
+
+
+def recorded_note(runs: Sequence[VerifiedRun]) -> str:
+    """The sentence saying that step-level checks ran on the first queries only (a large network)."""
+    partial = [run for run in runs if run.recorded_queries is not None and run.recorded_queries < run.n_queries]
+    if not partial:
+        return ""
+    run = partial[0]
+    return (
+        f" Same winner, the per-module agreement and the exported files' rasters are compared on the first "
+        f"{run.recorded_queries} of {run.n_queries} queries (a recorded raster of every query would not fit in "
+        "memory); counts, correlations, saturations and every metric use all queries."
+    )
 
 
 def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:

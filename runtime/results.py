@@ -580,6 +580,7 @@ class VerifiedRun:
     float: FloatResult
     bits: tuple[BitsResult, ...]
     checkpoint: str | None = None  # the checkpoint file, when the caller names it
+    recorded_queries: int | None = None  # queries of the step-level checks (None: all; runtime.verify.RASTER_BUDGET)
 
     @property
     def passed(self) -> bool:
@@ -607,6 +608,8 @@ class VerifiedRun:
         }
         if self.checkpoint is not None:
             data["checkpoint"] = self.checkpoint
+        if self.recorded_queries is not None:
+            data["recorded_queries"] = self.recorded_queries
         return data
 
     @classmethod
@@ -625,6 +628,7 @@ class VerifiedRun:
             float=FloatResult.from_dict(data["float"]),
             bits=tuple(BitsResult.from_dict(r) for r in data["bits"]),
             checkpoint=data.get("checkpoint"),
+            recorded_queries=_int_or_none(data.get("recorded_queries")),
         )
 
 

@@ -156,6 +156,18 @@ class VerifyOptions:
 # ---------------------------------------------------------------------------- spike level
 
 
+#: Most raster entries (queries x steps x neurons, one byte each) a recorded run may hold: the
+#: step-level checks (winner agreement, the exported files' rasters) run on the first queries that
+#: fit, the metrics on all of them (a whole route: 2400 queries x 300 steps x 9600 neurons would be
+#: 6.9 GB per raster).
+RASTER_BUDGET = 1 << 29
+
+
+def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int = RASTER_BUDGET) -> int:
+    """How many of the first queries the step-level checks record: all, or as many as ``budget`` holds (>= 1)."""
+    return int(min(n_queries, max(1, budget // max(1, timesteps * n_neurons))))
+
+
 def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.ndarray:
     """Pearson correlation of the float and integer spike-count vectors (over neurons), one per query.
 
@@ -481,8 +493,10 @@ def verify_checkpoint(
     readout = options.readout
     query_place_ids = np.asarray(query_place_ids, dtype=np.int64)
     spikes = query_spikes(query_images, query_place_ids, query_traversal, ckpt.config)
-    float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device).run(spikes, record=True)
-    float_counts = float_run.counts.numpy()
+    recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
+    float_network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
+    float_run = float_network.run(spikes[:recorded], record=True)
+    float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
     layout = ensemble_layout(ckpt.config, len(ref_ids))
@@ -521,14 +535,16 @@ def verify_checkpoint(
             seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="simulate")
-            int_run = IntegerNetwork(model, device).run(spikes, record=True)
-            int_counts = int_run.counts.numpy()
+            int_network = IntegerNetwork(model, device)
+            int_run = int_network.run(spikes[:recorded], record=True)
+            int_all = int_run if recorded == spikes.shape[0] else int_network.run(spikes)
+            int_counts = int_all.counts.numpy()
             seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="targets")
             cross = cross_implementation(
                 model,
-                spikes,
+                spikes[:recorded],
                 int_run,
                 folder=folder,
                 targets=options.targets,
@@ -550,7 +566,7 @@ def verify_checkpoint(
                 int_run.raster,
                 float_counts,
                 int_counts,
-                int_run.saturations,
+                int_all.saturations,
                 model.quantisation.calibration_saturations,
             )
             decision = decision_level(
@@ -613,6 +629,7 @@ def verify_checkpoint(
         ),
         bits=tuple(results),
         checkpoint=checkpoint,
+        recorded_queries=recorded,
     )
 
 

@@ -16,6 +16,7 @@ from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runs import SpikeRun
 from vprsnn_export.runtime import conformance
+from vprsnn_export.runtime import verify as verify_module
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,
@@ -380,7 +381,15 @@ def test_module_rows_score_each_region_on_its_own_queries():
     assert ModuleRow.from_dict(json.loads(json.dumps(rows[1].to_dict()))) == rows[1]
 
 
-def test_an_ensemble_is_verified_per_module_and_reported(tmp_path):
+@pytest.mark.parametrize("budget", [None, 7 * 40 * 48])
+def test_an_ensemble_is_verified_per_module_and_reported(tmp_path, monkeypatch, budget):
+    verify_ensemble(tmp_path, monkeypatch, budget)
+
+
+def verify_ensemble(tmp_path, monkeypatch, budget):
+    """``budget``: rasters of 7 queries only (a whole route's would not fit in memory): same metrics."""
+    if budget is not None:
+        monkeypatch.setattr(verify_module, "RASTER_BUDGET", budget)
     cfg = Config().replace(
         **{"train.module_size": 10, "train.epochs": 2, "encoder.timesteps": 40, "network.n_neurons": 16}
     )
@@ -398,12 +407,27 @@ def test_an_ensemble_is_verified_per_module_and_reported(tmp_path):
         reference_images={"summer": data.traversal("summer")},
         label="ensemble",
     )
+    recorded = 30 if budget is None else 7
+    assert (run.recorded_queries, run.n_queries) == (recorded, 30)
     for result in run.bits:
         assert [(m.module, m.n_queries, m.k) for m in result.modules] == [(0, 10, 3), (1, 10, 3), (2, 10, 3)]
         assert all(0 <= m.winner_agreement <= 1 for m in result.modules)
-        assert sum(m.spikes for m in result.modules) == result.spike_level.total_spikes
+        assert result.spike_level.n_steps == recorded * 40 and len(result.spike_level.spikes_per_query) == 30
+        if budget is None:
+            assert sum(m.spikes for m in result.modules) == result.spike_level.total_spikes
     assert VerifiedRun.from_dict(json.loads(json.dumps(run.to_dict()))).bits[1].modules == run.bits[1].modules
     report = build_report([run], {**options.to_dict(), "query": "winter"}, command=["test"], seconds=1.0)
     written = write_report(report, tmp_path / "report")
     text = written["md"].read_text()
     assert "## Modules of the ensemble" in text and "modules.png" in text
+    assert ("on the first 7 of 30 queries" in text) == (budget is not None)
+    return run
+
+
+def test_step_checks_on_the_first_queries_leave_the_metrics_alone(tmp_path, monkeypatch):
+    whole = verify_ensemble(tmp_path / "a", monkeypatch, None)
+    part = verify_ensemble(tmp_path / "b", monkeypatch, 7 * 40 * 48)
+    assert whole.float.metrics == part.float.metrics
+    for a, b in zip(whole.bits, part.bits, strict=True):
+        assert a.metrics == b.metrics and a.spike_level.count_correlation == b.spike_level.count_correlation
+        assert [m.accuracy_k for m in a.modules] == [m.accuracy_k for m in b.modules]
