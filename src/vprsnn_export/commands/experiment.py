@@ -47,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="P[,P...]",
         help="experiment route: the module sizes to measure, the first one with every seed (default 100,50,200)",
     )
+    parser.add_argument(
+        "--threads", type=int, default=None, metavar="N", help="CPU threads (default: OMP_NUM_THREADS, else 1)"
+    )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)
 
