@@ -318,7 +318,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             lines.append(
                 f"| {label} | {k} | {100 * r['accuracy']:.1f} | {100 * r['r_at_100p']:.1f} | {100 * r['auc_pr']:.1f} |"
             )
-    lines += ["", "## Cost", "", _cost_table(results["cost"], default), ""]
+    lines += ["", "## Cost", "", _cost_table(results["cost"], results["networks"], default), ""]
     lines += ["", "## Per module", "", _module_table(results, main), ""]
     first = next(n for n in results["networks"] if n["module_size"] == main)
     curves = {
@@ -360,27 +360,32 @@ def _summary_table(summary: list[dict], sizes: list[int], names: list[str]) -> s
     return "\n".join(lines)
 
 
-def _cost_table(cost: list[dict], default: str) -> str:
+def _cost_table(cost: list[dict], networks: list[dict], default: str) -> str:
     lines = [
-        "| module size | modules | neurons | seeds | training s | query run s | ms / query | readout s | "
-        "readout peak MiB | weights MiB | S^R MiB | spikes / query |",
-        "|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| module size | modules | neurons | seeds | training s per seed (threads) | query run s per seed | "
+        "readout s | readout peak MiB | weights MiB | S^R MiB | spikes / query |",
+        "|---:|---:|---:|---|---|---|---:|---:|---:|---:|---:|",
     ]
     for c in cost:
 
         def ms(key: str, c: dict = c) -> str:
             return f"{c[key]['mean']:.1f} ± {c[key]['std']:.1f}"
 
+        mine = [n for n in networks if n["module_size"] == c["module_size"]]
+        threads = [str(n.get("trained_on", "")).split(", ")[-1].replace(" torch threads", "") for n in mine]
+        training = " / ".join(f"{n['train_seconds']:.0f} ({t})" for n, t in zip(mine, threads, strict=True))
+        query = " / ".join(f"{n['query_seconds']:.0f}" for n in mine)
         lines.append(
             f"| {c['module_size']} | {c['modules']} | {c['neurons']} | {', '.join(map(str, c['seeds']))} | "
-            f"{ms('train_seconds')} | {ms('query_seconds')} | {ms('query_ms_per_image')} | {ms('readout_seconds')} | "
+            f"{training} | {query} | {ms('readout_seconds')} | "
             f"{c['readout_peak_mib']:.0f} | {c['weights_mib']:.1f} | {c['calibration_mib']:.1f} | "
             f"{ms('mean_spikes_per_query')} |"
         )
     return "\n".join(lines) + (
         "\n\nTraining includes calibration (every reference place shown to the whole ensemble) and is the time of "
-        "the run that trained the cached network (one thread, on a machine shared with other work); the query "
-        "run (the float ensemble on every winter image, one thread) likewise. Readout: every strategy at "
+        "the run that trained the cached network, with the torch/kernel threads it ran with, on this shared 2-core "
+        "machine (how loaded it was differs from run to run: docs/experiments.md gives the conditions of these runs); "
+        "the query run (the float ensemble on every winter image) likewise. Readout: every strategy at "
         f"k = 1, 5, 10 over the whole route, {default}, velocity given; readout peak: the numpy memory traced "
         "during any readout. Weights: float32 weights and thresholds; S^R as int64."
     )
