@@ -51,7 +51,7 @@ from vprsnn_export.export.model import DEFAULT_BITS, FixedPointModel, check_bits
 from vprsnn_export.modules import module_regions
 from vprsnn_export.readout.assignment import STRATEGIES, decide
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
-from vprsnn_export.readout.regions import ModuleLayout
+from vprsnn_export.readout.regions import ModuleAccuracy, ModuleLayout, module_accuracy
 from vprsnn_export.stats import mean_std
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.version import __version__
@@ -250,23 +250,18 @@ def decision_level(
 # ---------------------------------------------------------------------------- modules of an ensemble
 
 
-def query_regions(regions: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray) -> np.ndarray:
-    """The module whose region holds each query's true place (-1 where it is no reference place)."""
-    order = np.argsort(reference_place_ids, kind="stable")
-    ids = np.asarray(reference_place_ids)[order]
-    queries = np.asarray(query_place_ids)
-    where = np.clip(np.searchsorted(ids, queries), 0, max(ids.size - 1, 0))
-    index = np.where(ids[where] == queries, order[where], -1)
-    place_module = np.searchsorted(regions[:, 1], np.arange(int(regions[-1, 1])), side="right")
-    return np.where(index >= 0, place_module[np.maximum(index, 0)], -1)
-
-
-def correct_decisions(
-    distribution: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int
-) -> np.ndarray:
-    """Per query: whether the W+Prob decision of ``distribution`` (Q, places) is the true place (+-tolerance)."""
+def region_accuracies(
+    distribution: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    regions: np.ndarray,
+    tolerance: int,
+) -> list[ModuleAccuracy]:
+    """Per module: the W+Prob decisions of ``distribution`` (Q, places) scored on its region's queries
+    (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
     predicted, _ = decide(distribution, "wprob")
-    return np.asarray(is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance))
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
+    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
 
 
 def module_rows(
@@ -283,23 +278,15 @@ def module_rows(
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
     and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
 
-    Vectorised over modules: region accuracy = bincount(module of query, correct) / bincount(module of query).
+    Vectorised over modules (one bincount per quantity in ``module_accuracy``, one raster reshape).
     """
     n_modules = len(regions)
     top = max(float_aggregated)
-    module_of_query = query_regions(regions, reference_place_ids, query_place_ids)
-    known = module_of_query >= 0
-    n_queries = np.bincount(module_of_query[known], minlength=n_modules)
-
-    def region_accuracy(distribution: np.ndarray) -> np.ndarray:
-        correct = correct_decisions(distribution, reference_place_ids, query_place_ids, tolerance)
-        hits = np.bincount(module_of_query[known], weights=correct[known].astype(np.float64), minlength=n_modules)
-        return hits / np.maximum(n_queries, 1)
-
     accuracy = {
-        name: (region_accuracy(agg[1]), region_accuracy(agg[top]))
+        name: [region_accuracies(agg[k], reference_place_ids, query_place_ids, regions, tolerance) for k in (1, top)]
         for name, agg in (("float", float_aggregated), ("int", int_aggregated))
     }
+    by_region = accuracy["float"][0]
     a = torch.as_tensor(float_raster)
     b = torch.as_tensor(int_raster)
     n, timesteps, _ = a.shape
@@ -307,23 +294,22 @@ def module_rows(
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
     spikes_float = a.sum(dim=(0, 1, 3)).numpy()
     spikes = b.sum(dim=(0, 1, 3)).numpy()
-    ids = np.asarray(reference_place_ids)
     return tuple(
         ModuleRow(
-            module=m,
-            first_place=int(ids[regions[m, 0]]),
-            last_place=int(ids[regions[m, 1] - 1]),
-            n_queries=int(n_queries[m]),
+            module=region.module,
+            first_place=region.first_place,
+            last_place=region.last_place,
+            n_queries=region.n_queries,
             k=int(top),
-            float_accuracy=float(accuracy["float"][0][m]),
-            accuracy=float(accuracy["int"][0][m]),
-            float_accuracy_k=float(accuracy["float"][1][m]),
-            accuracy_k=float(accuracy["int"][1][m]),
+            float_accuracy=accuracy["float"][0][m].accuracy,
+            accuracy=accuracy["int"][0][m].accuracy,
+            float_accuracy_k=accuracy["float"][1][m].accuracy,
+            accuracy_k=accuracy["int"][1][m].accuracy,
             winner_agreement=float(agreement[m]),
             spikes_float=int(spikes_float[m]),
             spikes=int(spikes[m]),
         )
-        for m in range(n_modules)
+        for m, region in enumerate(by_region)
     )
 
 

@@ -52,7 +52,7 @@ from onnx import TensorProto, helper, numpy_helper
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
-from vprsnn_export.readout.regions import hyperactive_neurons, module_layout, region_weighting
+from vprsnn_export.readout.regions import module_layout, regularised_calibration
 from vprsnn_export.runs import SpikeRun
 from vprsnn_export.targets.packing import PACKING, pack_bits
 
@@ -306,12 +306,9 @@ def readout_calibration(model: FixedPointModel) -> tuple[np.ndarray, np.ndarray 
     hyperactive neurons' rows zeroed; keep = not silent), else (S^R, None). Decided from S^R alone."""
     if model.config.train.module_size <= 0:
         return model.calibration, None
-    layout = module_layout(model.config, model.calibration.shape[1])
-    silent = hyperactive_neurons(model.calibration, layout)
-    weighted = np.array(
-        region_weighting(model.calibration.astype(np.float64), layout.regions, layout.group, layout.outside_weight)
+    weighted, silent = regularised_calibration(
+        model.calibration, module_layout(model.config, model.calibration.shape[1])
     )
-    weighted[silent, :] = 0.0
     return weighted, ~silent
 
 

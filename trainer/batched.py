@@ -36,7 +36,7 @@ from vprsnn_export.modules import module_regions
 
 from .homeostasis import homeostasis_update
 from .stdp import initial_weights
-from .train import Presentation, TrainedNetwork, epoch_order, train_batch
+from .train import Presentation, TrainedNetwork, epoch_order, train_batch, training_seeds
 
 
 def module_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
@@ -48,12 +48,6 @@ def module_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.n
     return [
         np.concatenate([np.arange(start, stop, dtype=np.int64) + r * n_places for r in range(n_traversals)])
         for start, stop in module_regions(n_places, module_size)
-    ]
-
-
-def _train_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.ndarray, epoch: int) -> list[int]:
-    return [
-        presentation_seed(cfg.seed, "train", presentations[r].traversal, presentations[r].place_id, epoch) for r in rows
     ]
 
 
@@ -74,7 +68,7 @@ def _kernel_batch(
     for m, rows in enumerate(batch_rows):
         if len(rows):
             limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.encoder).numpy())
-            seeds[m, : len(rows)] = generator_seeds(_train_seeds(cfg, presentations, rows, epoch))
+            seeds[m, : len(rows)] = generator_seeds(training_seeds(cfg, presentations, rows, epoch))
     fired = stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads)
     return None if fired is None else torch.from_numpy(fired)
 
@@ -106,7 +100,7 @@ def _torch_batch(
         members = np.flatnonzero(sizes == size)
         spikes = torch.stack(
             [
-                encode(images[rows], _train_seeds(cfg, presentations, rows, epoch), cfg.encoder)
+                encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.encoder)
                 for rows in (batch_rows[int(m)] for m in members)
             ]
         ).to(weights.device)

@@ -76,6 +76,13 @@ def train_batch(
     return weights, theta, fired_total
 
 
+def training_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.ndarray, epoch: int) -> list[int]:
+    """The encoder key of each training row in one epoch: presentation_seed(seed, "train", traversal, place, epoch)."""
+    return [
+        presentation_seed(cfg.seed, "train", presentations[r].traversal, presentations[r].place_id, epoch) for r in rows
+    ]
+
+
 def epoch_order(seed: int, epoch: int, n_rows: int) -> torch.Tensor:
     """The seeded shuffle of the training rows for one epoch."""
     generator = torch.Generator().manual_seed(presentation_seed(seed, "shuffle", "", 0, epoch))
@@ -112,11 +119,7 @@ def train_network(
         fired = torch.zeros(cfg.network.n_neurons, dtype=torch.float32, device=device)
         for start in range(0, len(order), cfg.train.batch_size):
             rows = order[start : start + cfg.train.batch_size]
-            seeds = [
-                presentation_seed(cfg.seed, "train", presentations[r].traversal, presentations[r].place_id, epoch)
-                for r in rows
-            ]
-            spikes = encode(images[rows], seeds, cfg.encoder).to(device)
+            spikes = encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.encoder).to(device)
             if compiled:
                 weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
             else:

@@ -145,15 +145,22 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
     """
     if layout is None:
         return np.asarray(sr, dtype=np.float64), np.asarray(sq, dtype=np.float64)
+    weighted, silent = regularised_calibration(sr, layout)
+    sq_ = np.array(sq, dtype=np.float64)
+    sq_[:, silent] = 0.0
+    return weighted, sq_
+
+
+def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.ndarray, np.ndarray]:
+    """S~ (float64: region-weighted, the silenced rows zeroed) and the silenced neurons (bool, (neurons,)),
+    the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
     sr_ = _counts("sr", sr)
     silent = hyperactive_neurons(sr_, layout)
     weighted = region_weighting(sr_, layout.regions, layout.group, layout.outside_weight)
     if weighted is sr_:
         weighted = sr_.copy()
     weighted[silent, :] = 0.0
-    sq_ = np.array(sq, dtype=np.float64)
-    sq_[:, silent] = 0.0
-    return weighted, sq_
+    return weighted, silent
 
 
 @dataclass(frozen=True)
