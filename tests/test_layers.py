@@ -7,6 +7,7 @@ point to the same layer or an earlier one; and first-party imports sit at module
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -16,14 +17,12 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Layers in dependency order: a module may import from its own layer or an earlier one.
 LAYERS = ("core", "trainer", "export", "targets", "runtime", "experiments", "api", "commands")
 
-#: Where each subpackage's files live (setuptools package-dir in pyproject.toml).
-FOLDERS = {
-    "vprsnn_export": ROOT / "src" / "vprsnn_export",
-    "vprsnn_export.trainer": ROOT / "trainer",
-    "vprsnn_export.export": ROOT / "export",
-    "vprsnn_export.targets": ROOT / "targets",
-    "vprsnn_export.runtime": ROOT / "runtime",
-}
+
+def package_root() -> Path:
+    """The folder that holds ``vprsnn_export``, read from pyproject.toml (the one place that names it)."""
+    with (ROOT / "pyproject.toml").open("rb") as handle:
+        where = tomllib.load(handle)["tool"]["setuptools"]["packages"]["find"]["where"]
+    return ROOT / where[0] / "vprsnn_export"
 
 
 def layer_of(module: str) -> str:
@@ -41,13 +40,11 @@ def layer_of(module: str) -> str:
 def package_modules() -> dict[str, Path]:
     """Every module of the package with its file."""
     modules: dict[str, Path] = {}
-    for package, folder in FOLDERS.items():
-        for path in sorted(folder.rglob("*.py")):
-            relative = path.relative_to(folder).with_suffix("")
-            if package == "vprsnn_export" and relative.parts[0] in ("trainer", "export", "targets", "runtime"):
-                continue
-            parts = [p for p in relative.parts if p != "__init__"]
-            modules[".".join([package, *parts])] = path
+    folder = package_root()
+    for path in sorted(folder.rglob("*.py")):
+        relative = path.relative_to(folder).with_suffix("")
+        parts = [p for p in relative.parts if p != "__init__"]
+        modules[".".join(["vprsnn_export", *parts])] = path
     return modules
 
 
