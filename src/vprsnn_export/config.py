@@ -24,6 +24,7 @@ class EncoderConfig:
 
 
 CHANNELS = ("intensity", "dog_on_off")
+WTA_SCOPES = ("ensemble", "module")
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,12 @@ class NetworkConfig:
     beta: float = 0.95
     theta_init: float = 1.5
     wta: bool = True  # ablation switch: False lets every candidate spike
+    #: Where the hard WTA picks its one winner per step when an ensemble runs (calibration, queries, every
+    #: deployment target): "ensemble" = over all neurons of all modules, so modules compete and a query's
+    #: spikes go to the modules that match it; "module" = within each module's n neurons. Training always
+    #: uses one WTA per module (each module learns its own region). Same thing for a single network.
+    #: Chosen on the whole route (docs/research/route-recognition.md): a file without this key is "module".
+    wta_scope: str = "ensemble"
     state_isolation: bool = True  # ablation switch: False carries V across presentations in order
 
 
@@ -141,6 +148,10 @@ class Config:
                 f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "
                 f"image_size**2 = {inputs} (preprocess.channels = {self.preprocess.channels!r})"
             )
+        if self.network.wta_scope not in WTA_SCOPES:
+            raise InvalidValueError(
+                f"config.network.wta_scope: {self.network.wta_scope!r} is not one of {', '.join(WTA_SCOPES)}"
+            )
         if self.homeostasis.theta_min > self.homeostasis.theta_max:
             raise InvalidValueError(
                 f"homeostasis.theta_min {self.homeostasis.theta_min} exceeds theta_max {self.homeostasis.theta_max}"
@@ -151,7 +162,13 @@ class Config:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
-        """Rebuild a Config; unknown keys are an error, missing keys take the defaults."""
+        """Rebuild a Config; unknown keys are an error, missing keys take the defaults.
+
+        Except ``network.wta_scope``: a file written before it existed ran every ensemble with one WTA per
+        module (its calibration S^R was counted that way), so a missing key reads as ``"module"``.
+        """
+        if isinstance(data, dict) and isinstance(data.get("network"), dict) and "wta_scope" not in data["network"]:
+            data = {**data, "network": {**data["network"], "wta_scope": "module"}}
         return _build(cls, data, "config")
 
     def replace(self, **dotted: Any) -> Config:
@@ -200,6 +217,17 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "assignment.hyperactive_share": (0.0, 1.0, True, True),
     "assignment.outside_weight": (0.0, 1.0, True, True),
 }
+
+
+def wta_group(cfg: Config, n_neurons: int) -> int:
+    """The neurons among which the hard WTA picks one winner per step when ``n_neurons`` neurons run.
+
+    .. math:: G = \\begin{cases} M n & \\text{wta\\_scope = ensemble (all neurons)} \\\\
+                                  n & \\text{wta\\_scope = module (n = network.n\\_neurons)} \\end{cases}
+
+    Calibration, queries and every deployed implementation use this group; training always uses n.
+    """
+    return n_neurons if cfg.network.wta_scope == "ensemble" else cfg.network.n_neurons
 
 
 def check_range(key: str, value: Any) -> None:

@@ -8,8 +8,8 @@ Per time step t, for a batch of presentations (rows) and neurons j:
     WTA on:  S_j[t] = 1 for the one j in C[t] with the largest I_j[t]
              (ties: lowest index); nothing fires if C[t] is empty.
              In an ensemble of modules (:mod:`vprsnn_export.modules`) this holds
-             within each group of n = network.n_neurons consecutive neurons:
-             one winner per module per step
+             within each WTA group (:func:`vprsnn_export.config.wta_group`): all
+             neurons (network.wta_scope = ensemble) or each module's n neurons
     WTA off: S_j[t] = 1 for every j in C[t]
     V_j[t] <- 0 for every j in C[t]                        (reset to zero)
 
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .config import Config
+from .config import Config, wta_group
 from .kernels import QUERY_CHUNK, blas_block, float_run
 from .runs import SpikeRun
 
@@ -188,7 +188,7 @@ class FloatNetwork:
             wta=self.cfg.network.wta,
             state_isolation=isolation,
             record=record,
-            group=self.cfg.network.n_neurons,
+            group=wta_group(self.cfg, int(self.weights.shape[1])),
         )
 
     def counts(self, spikes: torch.Tensor) -> torch.Tensor:

@@ -4,9 +4,12 @@
 places, in their order, into regions of P consecutive places; module m is trained on
 region m alone. The ensemble is stored as **one** network whose neurons are the modules'
 neurons side by side: module m owns neurons [m n, (m + 1) n) with n = ``network.n_neurons``,
-so the weights are (inputs, M n), the thresholds (M n,) and S^R (M n, places). Every
-implementation applies the hard WTA **within each group of n consecutive neurons** (one
-winner per module per step); with one module this is the single network's WTA, unchanged.
+so the weights are (inputs, M n), the thresholds (M n,) and S^R (M n, places). Training
+applies the hard WTA within each module (one winner per module per step: each module learns
+its region). Calibration, queries and every deployed implementation apply it within the WTA
+group of ``network.wta_scope``: the whole ensemble (the default; modules compete, so a query's
+spikes go to the modules that match it) or each module. With one module both are the single
+network's WTA, unchanged.
 
     M        = ceil(places / P)                 (1 when P = 0)
     region_m = places [m P, min((m + 1) P, places))

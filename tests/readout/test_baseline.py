@@ -47,3 +47,52 @@ def test_baseline_pipeline_with_aggregation() -> None:
     pred, _ = decide(agg, "wprob")
     assert np.mean(pred[4:] == true[4:]) >= np.mean(dist.argmax(axis=1)[4:] == true[4:])
     assert np.mean(pred[4:] == true[4:]) >= 0.9
+
+
+def test_cosine_similarities_hand_example_and_zero_image() -> None:
+    from vprsnn_export.readout.baseline import cosine_similarities
+
+    ref = np.array([[1.0, 0.0], [1.0, 1.0], [0.0, 0.0]])
+    qry = np.array([[2.0, 0.0], [0.0, 3.0]])
+    expected = [[1.0, 1 / np.sqrt(2), 0.0], [0.0, 1 / np.sqrt(2), 0.0]]
+    np.testing.assert_allclose(cosine_similarities(ref, qry), expected)
+    with pytest.raises(ValueError, match="pixels"):
+        cosine_similarities(ref, qry[:, :1])
+
+
+def test_diagonal_sums_add_the_previous_frames_shifted_by_the_velocity() -> None:
+    from vprsnn_export.readout.baseline import diagonal_sums
+
+    scores = np.arange(12, dtype=np.float64).reshape(3, 4)
+    out = diagonal_sums(scores, 2)
+    # query 0 has no previous frame; query j adds frame j-1 at place l-1 (0 beyond the map)
+    np.testing.assert_allclose(out[0], scores[0])
+    np.testing.assert_allclose(out[2], scores[2] + np.concatenate([[0.0], scores[1, :3]]))
+    np.testing.assert_allclose(diagonal_sums(scores, 1), scores)
+    np.testing.assert_allclose(diagonal_sums(scores, 2, velocity=0.0)[1], scores[1] + scores[0])
+    with pytest.raises(ValueError, match="k must be"):
+        diagonal_sums(scores, 0)
+
+
+def test_nearest_neighbour_margin_confidence_ties_and_flat_rows() -> None:
+    from vprsnn_export.readout.baseline import nearest_neighbour
+
+    pred, conf = nearest_neighbour(np.array([[0.1, 0.9, 0.5], [0.3, 0.3, 0.3], [0.7, 0.7, 0.1]]))
+    assert pred.tolist() == [1, -1, 0]
+    np.testing.assert_allclose(conf, [0.4, 0.0, 0.0])
+
+
+def test_cosine_baseline_rows_in_an_evaluation_equal_the_direct_computation() -> None:
+    from vprsnn_export.readout.baseline import cosine_similarities, nearest_neighbour
+    from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+    from vprsnn_export.runtime.evaluation import ReadoutOptions, nearest_neighbour_rows
+
+    rng = np.random.default_rng(3)
+    ref = rng.random((12, 20))
+    qry = ref + 3.0 * rng.random((12, 20))
+    ids = np.arange(100, 112)
+    rows = nearest_neighbour_rows(cosine_similarities(ref, qry), "cosine", ids, ids, ReadoutOptions(gamma=0.02), [1])
+    pred, conf = nearest_neighbour(cosine_similarities(ref, qry))
+    direct = pr_metrics(is_correct(predicted_place_ids(pred, ids), ids, 0), conf)
+    assert rows == [{"strategy": "cosine", "k": 1, **direct}]
+    assert 0.0 < rows[0]["accuracy"] < 1.0

@@ -60,12 +60,13 @@ ENSEMBLE = {
 RUN_LAVA = Path(__file__).resolve().parent / "lava_conformance" / "run_lava.py"
 
 
-@pytest.fixture(scope="module")
-def route():
-    """(checkpoint, dataset) of the 3-module ensemble on synthetic:60 (about a second)."""
+@pytest.fixture(scope="module", params=["ensemble", "module"])
+def route(request):
+    """(checkpoint, dataset) of the 3-module ensemble on synthetic:60 (about a second), for each WTA scope
+    at inference (network.wta_scope: one winner per step over the ensemble, or one per module)."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
-    cfg = Config().replace(**ENSEMBLE)
+    cfg = Config().replace(**ENSEMBLE, **{"network.wta_scope": request.param})
     dataset = load_dataset("synthetic:60", ["summer", "winter"], cfg.preprocess)
     ckpt = train_and_calibrate(dataset, ["summer"], cfg, progress=False)
     torch.set_num_threads(threads)
@@ -120,10 +121,14 @@ def test_deployed_calibration_runs_the_whole_ensemble_on_the_integer_simulator(r
     model = deploy(ckpt, "0" * 64, 4, reference_images=images)
     assert model.calibration.shape == (MODULES * GROUP, 60)
     assert model.quantisation.calibration == "deployed (integer simulator)"
-    # every place's T spikes per traversal: one winner per module per step
-    assert np.all(model.calibration.sum(axis=0) <= MODULES * ckpt.config.encoder.timesteps)
+    # every place's T spikes per traversal: one winner per WTA group per step
+    steps = ckpt.config.encoder.timesteps
     per_module = model.calibration.reshape(MODULES, GROUP, -1).sum(axis=1)
-    assert np.all(per_module <= ckpt.config.encoder.timesteps)
+    assert np.all(per_module <= steps)
+    if ckpt.config.network.wta_scope == "ensemble":
+        assert np.all(model.calibration.sum(axis=0) <= steps) and np.any(per_module.min(axis=0) == 0)
+    else:
+        assert np.all(model.calibration.sum(axis=0) <= MODULES * steps)
 
 
 @pytest.mark.parametrize("bits", [8, 4, 2])
@@ -133,7 +138,11 @@ def test_every_target_runs_the_ensemble_bit_for_bit(route, queries, tmp_path, bi
     reference = simulate(model, queries, record=True)
     raster = reference.raster
     assert int(raster.reshape(*raster.shape[:2], MODULES, GROUP).sum(dim=3).max()) == 1  # one winner per module
-    assert int(raster.sum()) > raster.shape[0] * raster.shape[1]  # several modules spike in one step
+    if model.config.network.wta_scope == "ensemble":
+        assert int(raster.sum(dim=2).max()) == 1  # one winner per step over the whole ensemble
+        assert len(np.unique(np.nonzero(raster.numpy())[2] // GROUP)) > 1  # the winners come from several modules
+    else:
+        assert int(raster.sum()) > raster.shape[0] * raster.shape[1]  # several modules spike in one step
     stepper = reference_run(model, queries.numpy())
     assert torch.equal(stepper.raster, raster) and torch.equal(stepper.counts, reference.counts)
     assert torch.equal(stepper.final_voltage, reference.final_voltage)
@@ -156,7 +165,9 @@ def test_the_readout_rule_runs_per_module(route, queries, tmp_path):
     model = quantised(route, 4, per_neuron=True)
     graph = build_graph(model)
     rule = json.loads(graph.metadata["readout_rule"])
-    assert rule["group_size"] == GROUP and rule["groups"] == MODULES and graph.metadata["modules"] == MODULES
+    groups = 1 if model.config.network.wta_scope == "ensemble" else MODULES
+    assert rule["group_size"] == MODULES * GROUP // groups and rule["groups"] == groups
+    assert graph.metadata["modules"] == MODULES and rule["scope"] == model.config.network.wta_scope
     populations = json.loads(graph.metadata["populations"])
     assert [p["neurons"] for p in populations] == [[0, 8], [8, 16], [16, 24]]
     assert [p["places"] for p in populations] == [[0, 20], [20, 40], [40, 60]]
@@ -170,7 +181,9 @@ def test_the_loihi_description_has_one_population_per_module(route, tmp_path):
     model = quantised(route, 2, per_neuron=True)
     write_loihi(model, tmp_path / "loihi")
     header = read_loihi(tmp_path / "loihi").header
-    assert header["wta"]["group_size"] == GROUP
+    scope = model.config.network.wta_scope
+    assert header["wta"]["group_size"] == (MODULES * GROUP if scope == "ensemble" else GROUP)
+    assert header["wta"]["scope"] == scope
     assert [m["name"] for m in header["modules"]] == ["exc_0", "exc_1", "exc_2"]
     for m, module in enumerate(header["modules"]):
         own = slice(m * GROUP, (m + 1) * GROUP)

@@ -45,7 +45,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("evaluate", help="evaluate a float checkpoint on a query traversal")
     parser.add_argument("checkpoint", help="checkpoint written by train")
     add_query_options(parser)
-    parser.add_argument("--baseline", action="store_true", help="add the no-learning SAD baseline rows")
+    parser.add_argument(
+        "--baseline",
+        action="store_true",
+        help="add the no-learning baseline rows: SAD, and cosine nearest neighbour on the same images (the template ceiling)",
+    )
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 

@@ -23,6 +23,7 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.stats import mean_std
+from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
 
@@ -184,6 +185,25 @@ def timed_checkpoint(settings: Settings, data: Dataset, cfg: Config, selection_k
     save_checkpoint(path, ckpt)
     atomic_write_text(timing, json.dumps({"train_seconds": seconds, "trained_on": machine}))
     return TimedCheckpoint(ckpt, seconds, machine, False)
+
+
+def rescoped_checkpoint(
+    settings: Settings, data: Dataset, ckpt: Checkpoint, scope: str, selection_key: str
+) -> tuple[Config, Checkpoint]:
+    """The same trained network read with another ``network.wta_scope``: training never depends on the
+    scope (each module is trained with its own WTA), so only the calibration S^R is recounted with the
+    new WTA group; cached like a trained checkpoint under the config with that scope."""
+    cfg = ckpt.config.replace(**{"network.wta_scope": scope})
+    if cfg == ckpt.config:
+        return cfg, ckpt
+    path = checkpoint_path(settings, data, cfg, selection_key)
+    if path.exists():
+        return cfg, load_checkpoint(path)
+    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, resolve_device(settings.device))
+    references = {name: data.traversal(name) for name in ckpt.reference_traversals}
+    rescoped = replace(ckpt, config=cfg, calibration=calibrate(network.counts, references, data.place_ids, cfg))
+    save_checkpoint(path, rescoped)
+    return cfg, rescoped
 
 
 @dataclass(frozen=True)

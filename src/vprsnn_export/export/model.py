@@ -6,8 +6,8 @@ Integer dynamics, per presentation, per step t (all integers; see docs/fixed-poi
     V_j[t] = sat24( trunc0(V_j[t-1] (4096 - dv) / 4096) + (a_j[t] << voltage_shift) )
     C[t]   = { j : V_j[t] > theta_j << voltage_shift }
     WTA:     S_j[t] = 1 for the j in C[t] maximising a_j[t] m_j   (ties: lowest index),
-             within each module's group of n = network.n_neurons neurons (an ensemble of M
-             modules stores M n neurons side by side; one network is one group)
+             within each WTA group (config.wta_group: all M n neurons of an ensemble when
+             network.wta_scope = ensemble, else each module's n = network.n_neurons)
     V_j[t] <- 0 for j in C[t]
 
 trunc0 rounds toward zero (Lava's decay); sat24 clips to [-(2**23 - 1), 2**23 - 1] and
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.checkpoint import reference_header, validate_reference_ids
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.fileio import read_container, write_container
 from vprsnn_export.modules import ensemble_neurons
@@ -177,7 +177,7 @@ class FixedPointModel:
         """The header's WTA rule in words (per module for an ensemble)."""
         if not self.config.network.wta:
             return "off: every candidate spikes"
-        group = self.config.network.n_neurons
+        group = wta_group(self.config, self.n_neurons)
         if self.n_neurons == group:
             return "one spike: argmax over C of a_j * m_j, ties to the lowest index"
         return (

@@ -1,11 +1,17 @@
-"""The no-learning baseline: sum of absolute differences (SAD) between images.
+"""The no-learning baselines: storing the reference images and matching queries against them.
 
-The same preprocessed (e.g. patch-normalised, flattened) images that the
-network sees are compared pixel by pixel with every reference image. The
-distances are turned into the same kind of per-query distribution as W+Prob,
-so :func:`vprsnn_export.readout.assignment.decide` (strategy ``"wprob"``) and
-:func:`vprsnn_export.readout.aggregation.aggregate` serve the baseline
-unchanged, and the baseline is scored with exactly the same metrics.
+The same preprocessed (e.g. DoG ON/OFF, flattened) images that the network sees are compared with
+every reference image, two ways:
+
+* **cosine nearest neighbour** (:func:`cosine_similarities`): the template ceiling. With hard WTA and
+  L2-normalised weights the network is a Poisson-noisy cosine matcher over learnt templates, so this
+  is the baseline the network must beat to be worth learning (docs/research/route-recognition.md).
+* **SAD** (:func:`sad_distances`): sum of absolute differences, the paper's reference.
+
+Both are read out as **nearest neighbour** (:func:`nearest_neighbour`): the best place, the margin
+between the best and the second-best score as the confidence, and sequences of k frames as the
+scores summed along the velocity-shifted diagonal (:func:`diagonal_sums`). SAD can also be read out
+like W+Prob (:func:`sad_distribution`), the protocol of the earlier route pages.
 """
 
 from __future__ import annotations
@@ -14,7 +20,8 @@ from typing import Final
 
 import numpy as np
 
-from .assignment import wprob_distribution
+from .aggregation import shift_window
+from .assignment import NO_MATCH, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
 _MAX_ELEMENTS: Final[int] = 4_000_000
@@ -70,3 +77,73 @@ def sad_distribution(distances: np.ndarray) -> np.ndarray:
     if d.ndim != 2:
         raise ValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
     return wprob_distribution(-d)
+
+
+def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """Cosine similarity of every query with every reference image, shape ``(n_queries, n_places)``.
+
+    .. math:: C_{ql} = \\frac{Q_q \\cdot R_l}{\\lVert Q_q \\rVert \\, \\lVert R_l \\rVert}
+              \\quad (0 \\text{ for an all-zero image})
+    """
+    ref = _images("reference", reference)
+    qry = _images("queries", queries)
+    if ref.shape[1] != qry.shape[1]:
+        raise ValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+
+    def unit(a: np.ndarray) -> np.ndarray:
+        norm = np.linalg.norm(a, axis=1, keepdims=True)
+        return a / np.where(norm > 0, norm, 1.0)
+
+    return unit(qry) @ unit(ref).T
+
+
+def diagonal_sums(
+    scores: np.ndarray, k: int, velocity: float = 1.0, frame_positions: np.ndarray | None = None
+) -> np.ndarray:
+    """Sequence scores of the k most recent frames summed along the velocity-shifted diagonal, ``(n_queries, n_places)``.
+
+    .. math:: A_j(l) = \\sum_{m \\in W_j} S_m\\big(l - v (t_j - t_m)\\big)
+
+    with the window ``W_j`` and the shift (linear interpolation, 0 beyond the map) of
+    :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores).
+    ``k == 1`` returns a copy of ``scores``.
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    if s.ndim != 2 or not np.all(np.isfinite(s)):
+        raise ValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
+    if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
+        raise ValueError(f"k must be an integer >= 1, got {k!r}")
+    if k == 1:
+        return s.copy()
+    n_queries, n_places = s.shape
+    t = np.arange(n_queries, dtype=np.float64) if frame_positions is None else np.asarray(frame_positions, np.float64)
+    v = np.full(n_queries, float(velocity))
+    out = np.empty_like(s)
+    chunk = max(1, _MAX_ELEMENTS // (int(k) * max(1, n_places)))
+    for start in range(0, n_queries, chunk):
+        queries = np.arange(start, min(start + chunk, n_queries))
+        shifted, _ = shift_window(s, queries, int(k), v, t)
+        out[queries] = shifted.sum(axis=1)
+    return out
+
+
+def nearest_neighbour(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted place index and margin confidence per query from similarity scores (larger = closer).
+
+    .. math:: \\hat l_q = \\arg\\max_l S_{ql}, \\qquad c_q = S_{q \\hat l_q} - \\max_{l \\ne \\hat l_q} S_{ql}
+
+    Ties go to the lowest index; a query whose scores are all equal is a no-match (index -1,
+    confidence 0); with one place the confidence is 0.
+    """
+    s = np.asarray(scores, dtype=np.float64)
+    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
+        raise ValueError(f"scores must be a finite 2-D array with at least one place, got shape {s.shape}")
+    pred = np.argmax(s, axis=1).astype(np.int64)
+    if s.shape[1] == 1:
+        return pred, np.zeros(s.shape[0])
+    top2 = np.partition(s, -2, axis=1)[:, -2:]
+    confidence = top2[:, 1] - top2[:, 0]
+    flat = s.max(axis=1) == s.min(axis=1)
+    pred[flat] = NO_MATCH
+    confidence[flat] = 0.0
+    return pred, confidence

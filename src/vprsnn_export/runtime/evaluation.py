@@ -23,7 +23,13 @@ from vprsnn_export.readout.aggregation import (
     track_velocity,
 )
 from vprsnn_export.readout.assignment import STRATEGIES, decide, standard_scores, weighted_scores, wprob_distribution
-from vprsnn_export.readout.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout.baseline import (
+    cosine_similarities,
+    diagonal_sums,
+    nearest_neighbour,
+    sad_distances,
+    sad_distribution,
+)
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
 from vprsnn_export.readout.regions import (
     ModuleAccuracy,
@@ -248,6 +254,27 @@ def baseline_rows(
     return rows
 
 
+def nearest_neighbour_rows(
+    similarities: np.ndarray,
+    name: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: ReadoutOptions,
+    ks: Sequence[int],
+    frame_positions: np.ndarray | None = None,
+) -> list[dict]:
+    """A no-learning baseline read out as nearest neighbour at every k: the best place, the margin between
+    the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
+    (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
+    rows = []
+    for k in sorted(set(ks)):
+        summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
+        predicted, confidence = nearest_neighbour(summed)
+        correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
+        rows.append({"strategy": name, "k": k, **pr_metrics(correct, confidence)})
+    return rows
+
+
 @dataclass(frozen=True)
 class SpikeStatistics:
     """How the WTA is exercised on the queries: mean |C[t]|, steps with |C[t]| > 1 or 0, spikes per query."""
@@ -316,7 +343,8 @@ def evaluate_float(
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
-    the no-learning SAD baseline is added as rows with strategy "sad". An ensemble
+    the no-learning baselines are added: SAD read out like W+Prob (strategy "sad") and the template
+    ceiling, cosine nearest neighbour on the same images (strategy "cosine", margin confidence). An ensemble
     (``train.module_size`` > 0) is read out over the whole route with its hyperactive
     neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
     """
@@ -336,6 +364,8 @@ def evaluate_float(
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
         rows += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
+        similarities = cosine_similarities(reference, query_images)
+        rows += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, options.ks)
     candidates = run.candidates_per_step
     assert candidates is not None  # the float network always reports them
     return Evaluation(

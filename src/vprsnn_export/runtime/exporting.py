@@ -170,7 +170,11 @@ def consumer_statements(
     modules = module_count(len(network.reference_place_ids), network.config.train.module_size)
     ensemble = (
         f" The network is an ensemble of {modules} modules of {group} neurons side by side; the hard WTA runs "
-        f"within each module (one winner per module per step)."
+        + (
+            "over the whole ensemble (one winner per step among all neurons)."
+            if network.config.network.wta_scope == "ensemble"
+            else "within each module (one winner per module per step)."
+        )
         if modules > 1
         else ""
     )
@@ -210,7 +214,8 @@ def consumer_statements(
             + "."
             + (
                 ensemble
-                and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is n."
+                and ensemble
+                + " metadata['populations'] lists the modules; the readout rule's group_size is the WTA group (network.wta_scope)."
             )
         )
     if "onnx" in targets and model is not None:

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from vprsnn_export.config import wta_group
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.kernels import integer_run
 from vprsnn_export.runs import SpikeRun
@@ -92,7 +93,7 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
         limit=model.voltage_limit,
         shift=model.voltage_shift,
         wta=model.config.network.wta,
-        group=model.config.network.n_neurons,
+        group=wta_group(model.config, model.n_neurons),
         mantissas=model.weight_mantissa,
     )
 

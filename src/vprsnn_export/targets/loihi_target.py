@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, sha256_bytes
@@ -194,9 +194,11 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
         "resources": [asdict(budget) for budget in model_budgets(model)],
         "wta": {
             "enabled": cfg.network.wta,
-            "group_size": cfg.network.n_neurons,
+            "group_size": wta_group(cfg, model.n_neurons),
+            "scope": cfg.network.wta_scope,
             "rule": (
-                "per step and per module (group of group_size consecutive exc neurons), of the neurons that spiked "
+                "per step and per group of group_size consecutive exc neurons (the whole ensemble, or one module), "
+                "of the neurons that spiked "
                 "in Lava (all candidates, all reset), emit only the one with the largest a_j * m_j, ties to the "
                 "lowest index; a_j = sum_i q_ij s_i of the same step"
             ),

@@ -45,7 +45,7 @@ import torch
 
 from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write_bytes
@@ -106,9 +106,11 @@ READOUT_RULE_VERSION = 2  # 2: the WTA runs within each group of group_size cons
 READABLE_RULE_VERSIONS = (1, 2)  # 1: one group of all neurons
 
 
-def wta_group(source: Source) -> int:
-    """n = network.n_neurons: the neurons of one module, the WTA group (all neurons of a single network)."""
-    return int(source.config.network.n_neurons)
+def readout_group(source: Source) -> int:
+    """The WTA group of the readout rule: every neuron (``network.wta_scope`` = ensemble, or a single
+    network), or one module's n = network.n_neurons (scope = module); :func:`vprsnn_export.config.wta_group`."""
+    thresholds = source.threshold if isinstance(source, FixedPointModel) else source.thresholds
+    return wta_group(source.config, len(thresholds))
 
 
 def populations(source: Source) -> list[dict[str, Any]]:
@@ -119,7 +121,7 @@ def populations(source: Source) -> list[dict[str, Any]]:
     metadata['reference_place_ids']); a single network is one population.
     """
     n_places = len(source.reference_place_ids)
-    group = wta_group(source)
+    group = source.config.network.n_neurons  # one module's neurons
     regions = module_regions(n_places, source.config.train.module_size)
     thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)
     rows = []
@@ -148,16 +150,18 @@ def readout_rule(source: Source) -> dict[str, Any]:
     """The hard WTA as a machine-readable rule over the lif node's WTA-off spikes (stored as JSON)."""
     if not source.config.network.wta:
         return {"name": "none", "version": READOUT_RULE_VERSION, "output": "the lif node's spikes as they are"}
-    group = wta_group(source)
+    group = readout_group(source)
     return {
         "name": READOUT_RULE,
         "version": READOUT_RULE_VERSION,
         "group_size": group,
-        "groups": module_count_of(source),
+        "scope": source.config.network.wta_scope,
+        "groups": len(source.calibration) // group,
         "candidates": "the lif node's spikes at a step (every neuron with v_j > v_threshold_j; all of them reset)",
         "score": "I_j * wta_score_multiplier_j, with I_j = sum_i linear.weight[j, i] s_i[t] the linear node's output",
-        "groups_rule": "the neurons form groups of group_size consecutive indices (module m: [m group_size, "
-        "(m + 1) group_size)); the rule runs in every group independently",
+        "groups_rule": "the neurons form groups of group_size consecutive indices (group g: [g group_size, "
+        "(g + 1) group_size): the whole ensemble for scope 'ensemble', one module each for scope 'module'); the "
+        "rule runs in every group independently",
         "winner": "in each group, the candidate with the largest score; ties: the lowest index",
         "output": "at most one spike per group per step: the group winner's",
         "arithmetic": "integer (exact) for kind fixed-point; float32 for kind float",
@@ -198,7 +202,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_rule": wta_rule(source),
         "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
         "modules": module_count_of(source),
-        "wta_group": wta_group(source),
+        "wta_group": readout_group(source),
         "populations": json.dumps(populations(source), sort_keys=True),
         "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),
         "wta_node": (

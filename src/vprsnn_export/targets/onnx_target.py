@@ -49,6 +49,7 @@ import onnx
 import torch
 from onnx import TensorProto, helper, numpy_helper
 
+from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes
@@ -95,7 +96,7 @@ def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Ten
     """The per-neuron int64 vectors the step reads from the outer graph, stored narrow and widened once.
 
     vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. n - 1 (Range),
-    the index of a neuron within its module's WTA group of n = network.n_neurons
+    the index of a neuron within its WTA group (config.wta_group: the ensemble, or one module's n neurons)
     """
     inits = [
         const("threshold_stored", smallest_unsigned(model.threshold)),
@@ -109,7 +110,7 @@ def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Ten
         inits += [
             const("multiplier_stored", smallest_unsigned(model.scale_multiplier)),
             const("index_start", np.int64(0)),
-            const("index_limit", np.int64(model.config.network.n_neurons)),
+            const("index_limit", np.int64(wta_group(model.config, model.n_neurons))),
             const("index_step", np.int64(1)),
         ]
         nodes += [
@@ -153,7 +154,7 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
         helper.make_node("Where", ["cand", "zero", "v_clip"], ["v_out"]),
     ]
     if model.config.network.wta:
-        group = model.config.network.n_neurons
+        group = wta_group(model.config, n)
         inits += [
             const("minus_one", np.int64(-1)),
             const("group_shape", np.array([0, n // group, group], dtype=np.int64)),  # (batch, M, n)
@@ -459,7 +460,7 @@ def metadata_props(model: FixedPointModel) -> dict[str, str]:
         "vprsnn.voltage_bits": str(model.voltage_bits),
         "vprsnn.scale_exponent": str(model.scale_exponent),
         "vprsnn.wta": "on" if cfg.network.wta else "off",
-        "vprsnn.wta_group": str(cfg.network.n_neurons),
+        "vprsnn.wta_group": str(wta_group(cfg, model.n_neurons)),
         "vprsnn.modules": str(model.n_neurons // cfg.network.n_neurons),
         "vprsnn.timesteps": str(cfg.encoder.timesteps),
         "vprsnn.encoder": f"Bernoulli(clip({cfg.encoder.rate_scale} * pixel, 0, 1)), seed {cfg.seed}",

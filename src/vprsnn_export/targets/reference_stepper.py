@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from vprsnn_export.config import wta_group
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.runs import SpikeRun
 
@@ -30,7 +31,7 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
     m = [int(x) for x in model.scale_multiplier]
     vth = [int(x) << model.voltage_shift for x in model.threshold]
     keep, limit, neurons = 4096 - model.decay_dv, model.voltage_limit, range(model.n_neurons)
-    group = model.config.network.n_neurons  # one WTA per module of an ensemble
+    group = wta_group(model.config, model.n_neurons)  # the WTA group: the ensemble or one module
     raster = np.zeros((n, timesteps, model.n_neurons), dtype=bool)
     final = np.zeros((n, model.n_neurons), dtype=np.int64)
     n_candidates = np.zeros((n, timesteps), dtype=np.int64)

@@ -31,7 +31,7 @@ def train_and_calibrate(
 
     With ``train.module_size`` = P the places are cut into regions of P and one module per region
     is trained, all side by side (:func:`.batched.train_modules`); calibration presents every
-    reference place to the whole ensemble (the hard WTA within each module). ``threads``: CPU
+    reference place to the whole ensemble (the hard WTA within config.wta_group). ``threads``: CPU
     threads for training and calibration (default: torch's thread count).
     """
     device = torch.device("cpu") if device is None else device
