@@ -72,6 +72,18 @@ def test_diagonal_sums_add_the_previous_frames_shifted_by_the_velocity() -> None
     np.testing.assert_allclose(diagonal_sums(scores, 2, velocity=0.0)[1], scores[1] + scores[0])
     with pytest.raises(ValueError, match="k must be"):
         diagonal_sums(scores, 0)
+    with pytest.raises(ValueError, match="non-negative"):
+        diagonal_sums(-scores, 2)
+
+
+def test_sad_similarities_keep_the_nearest_place_and_the_margin() -> None:
+    from vprsnn_export.readout.baseline import nearest_neighbour, sad_similarities
+
+    d = np.array([[3.0, 1.0, 2.0], [5.0, 5.0, 4.0]])
+    s = sad_similarities(d)
+    assert np.all(s >= 0)
+    for a, b in zip(nearest_neighbour(s), nearest_neighbour(-d), strict=True):
+        np.testing.assert_allclose(a, b)
 
 
 def test_nearest_neighbour_margin_confidence_ties_and_flat_rows() -> None:

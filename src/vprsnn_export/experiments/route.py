@@ -28,7 +28,7 @@ import numpy as np
 
 from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
-from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
+from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.runtime.evaluation import (
     ReadoutOptions,
@@ -113,7 +113,7 @@ def template_baselines(settings: Settings) -> dict[str, list[dict]]:
     ids = data.place_ids
     return {
         "cosine": nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS),
-        "sad_nn": nearest_neighbour_rows(-sad_distances(reference, query), "sad", ids, ids, opts, KS),
+        "sad_nn": nearest_neighbour_rows(sad_similarities(sad_distances(reference, query)), "sad", ids, ids, opts, KS),
     }
 
 

@@ -97,6 +97,21 @@ def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarra
     return unit(qry) @ unit(ref).T
 
 
+def sad_similarities(distances: np.ndarray) -> np.ndarray:
+    """SAD distances as non-negative similarities for :func:`diagonal_sums`, shape ``(n_queries, n_places)``.
+
+    .. math:: S_{ql} = \\max_m D_{qm} - D_{ql}
+
+    The shift is one constant per query frame, so the nearest place and the margin of
+    :func:`nearest_neighbour` are those of ``-D``; but a window that reaches beyond the map adds 0 for
+    the missing frame, which must not beat a real (negative) score.
+    """
+    d = np.asarray(distances, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] == 0 or not np.all(np.isfinite(d)):
+        raise ValueError(f"distances must be a finite 2-D array with at least one place, got shape {d.shape}")
+    return d.max(axis=1, keepdims=True) - d
+
+
 def diagonal_sums(
     scores: np.ndarray, k: int, velocity: float = 1.0, frame_positions: np.ndarray | None = None
 ) -> np.ndarray:
@@ -106,6 +121,8 @@ def diagonal_sums(
 
     with the window ``W_j`` and the shift (linear interpolation, 0 beyond the map) of
     :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores).
+    A frame whose shifted place lies beyond the map adds 0, so the scores must be non-negative
+    similarities (cosine of non-negative images; SAD through :func:`sad_similarities`).
     ``k == 1`` returns a copy of ``scores``.
     """
     s = np.asarray(scores, dtype=np.float64)
@@ -113,6 +130,8 @@ def diagonal_sums(
         raise ValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
         raise ValueError(f"k must be an integer >= 1, got {k!r}")
+    if np.any(s < 0):
+        raise ValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
     if k == 1:
         return s.copy()
     n_queries, n_places = s.shape
