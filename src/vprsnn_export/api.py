@@ -24,10 +24,10 @@ from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
 from .modules import module_count, module_regions
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
-from .readout.assignment import decide, strategy_scores
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
 from .readout.regions import ModuleLayout, module_layout, regularise
+from .readout.strategies import decide, strategy_scores
 from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate

@@ -27,6 +27,7 @@ from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..modules import module_count
+from ..preprocess import CHANNELS
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.results import BitsResult, VerifiedRun
@@ -81,7 +82,7 @@ def demo_config(seed: int, quick: bool = False) -> Config:
 
 def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
     """What the demo trains: inputs, T, epochs and the ensemble's modules, and any profile changes."""
-    inputs = "DoG ON/OFF" if cfg.preprocess.channels == "dog_on_off" else "patch-normalised"
+    inputs = CHANNELS.get(cfg.preprocess.channels).label
     modules = module_count(n_places, cfg.train.module_size)
     size = cfg.train.module_size or n_places
     text = (

@@ -26,6 +26,7 @@ from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
+from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.runtime.evaluation import (
     ReadoutOptions,
     aggregated,
@@ -249,7 +250,7 @@ def cost_summary(networks: list[dict], sizes) -> list[dict]:
 
 
 def _label(strategy: str, k: int) -> str:
-    names = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob", "wprob-est": "W+Prob, v estimated"}
+    names = {s.name: s.title for s in STRATEGIES.values()} | {"wprob-est": "W+Prob, v estimated"}
     return f"{names.get(strategy, strategy)} k={k}"
 
 

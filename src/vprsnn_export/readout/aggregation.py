@@ -20,14 +20,13 @@ Sec. 1, which cuts windows where the true labels stop being consecutive).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 
-RULES: Final[tuple[str, ...]] = ("product", "sum")
-#: How a velocity is estimated from the query stream: each window alone, tracked over the recent windows
-#: (causal), or smoothed over the recent and the next few windows (fixed lag; the default).
-VELOCITY_ESTIMATES: Final[tuple[str, ...]] = ("smooth", "window", "track")
+from vprsnn_export.registry import Registry
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
@@ -72,8 +71,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
 def _check_args(k: int, rule: str, eps: float) -> int:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"window size k must be an integer >= 1, got {k!r}")
-    if rule not in RULES:
-        raise ValueError(f"unknown aggregation rule {rule!r}; expected one of {RULES}")
+    RULES.get(rule)  # InvalidValueError naming the registered rules
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be a finite value > 0, got {eps}")
     return int(k)
@@ -141,19 +139,37 @@ def _shift_rows(
 
 
 def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Combine the window (product: softmax of summed logs; sum: L1 of the sum).
+    """Combine the window with the registered ``rule`` (:data:`RULES`).
 
-    Also returns the window score max_l A_j(l) of the un-normalised aggregate
-    (the best joint log-likelihood for the product rule, the best summed
-    probability for the sum rule), which the velocity search maximises.
+    Also returns the window score max_l A_j(l) of the un-normalised aggregate,
+    which the velocity search maximises.
+    """
+    return RULES.get(rule).combine(shifted, valid, eps)
+
+
+def product_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Softmax of the summed logs of the shifted window (``shifted`` (Q, k, places), ``valid`` (Q, k)).
+
+    .. math:: A_j(l) = \\sum_m \\log(\\tilde P_m(l) + \\varepsilon), \\quad
+              \\hat P_j(l) = e^{A_j(l)} / \\sum_{l'} e^{A_j(l')}
+
+    Returns ``(hat P, max_l A_j(l))``: the score is the best joint log-likelihood.
+    """
+    logs = np.log(shifted + eps) * valid[:, :, None]
+    a = logs.sum(axis=1)
+    peak = a.max(axis=1, keepdims=True)
+    e = np.exp(a - peak)
+    return e / e.sum(axis=1, keepdims=True), peak[:, 0]
+
+
+def sum_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """L1 normalisation of the summed shifted window (a window that is 0 everywhere gives the uniform distribution).
+
+    .. math:: A_j(l) = \\sum_m \\tilde P_m(l), \\quad \\hat P_j(l) = A_j(l) / \\sum_{l'} A_j(l')
+
+    Returns ``(hat P, max_l A_j(l))``: the score is the best summed probability.
     """
     n_places = shifted.shape[2]
-    if rule == "product":
-        logs = np.log(shifted + eps) * valid[:, :, None]
-        a = logs.sum(axis=1)
-        peak = a.max(axis=1, keepdims=True)
-        e = np.exp(a - peak)
-        return e / e.sum(axis=1, keepdims=True), peak[:, 0]
     a = shifted.sum(axis=1)
     total = a.sum(axis=1, keepdims=True)
     out = a / np.where(total > 0, total, 1.0)
@@ -479,3 +495,19 @@ def smooth_velocity(
     )
     velocity = centre_of_best(lagged_sum(scores, span, lag), cands)
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
+
+
+@dataclass(frozen=True)
+class AggregationRule:
+    """How a shifted window is combined: ``combine(shifted (Q, k, places), valid (Q, k), eps)`` ->
+    (aggregated distribution (Q, places), window score (Q,))."""
+
+    name: str
+    combine: Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+    description: str
+
+
+#: The aggregation rules (the CLI's --rule; the first is the default).
+RULES: Registry[AggregationRule] = Registry("aggregation rule")
+RULES.register(AggregationRule("product", product_rule, "product of the frames' probabilities (softmax of log sums)"))
+RULES.register(AggregationRule("sum", sum_rule, "sum of the frames' probabilities"))
