@@ -209,16 +209,9 @@ def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_t
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:8", ["summer", "winter"], ckpt.config.preprocess)
     options = VerifyOptions(readout=ReadoutOptions(gamma=0.5), bits=(4,), targets=("npz",), reference_queries=0)
-    run = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
-        options,
-        reference_images={"summer": data.traversal("summer")},
-        export_dir=tmp_path / "exports",
-    )
+    query = (data.traversal("winter"), data.place_ids, "winter")
+    references = {"summer": data.traversal("summer")}
+    run = verify_checkpoint(ckpt, checkpoint_sha256(path), *query, options, reference_images=references)
     assert "anyplace" in run.bits[0].decision_level.top1_agreement
     assert {c.check.split(":")[0] for c in run.bits[0].cross_implementation.comparisons} == {"npz read back"}
     write_report(build_report([run], {**options.to_dict(), "query": "winter"}), tmp_path / "report")

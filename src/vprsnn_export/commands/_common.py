@@ -12,7 +12,7 @@ from typing import Any
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
-from ..readout.aggregation import RULES
+from ..readout.rules import RULES
 from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 from ..runtime.evaluation import ReadoutOptions
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.readout.aggregation import RULES as AGGREGATION_RULES
+from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 
 from . import envelope

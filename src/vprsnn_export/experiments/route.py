@@ -31,7 +31,7 @@ from vprsnn_export.runtime.evaluation import (
     ReadoutOptions,
     aggregated,
     decision_metrics,
-    module_rows,
+    module_accuracies,
     readout_scores,
     score_rows,
 )
@@ -164,7 +164,7 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
                 "silenced": int(hyperactive_neurons(ckpt.calibration, layout).sum()),
                 "readout_seconds": round(seconds, 2),
                 "readout_peak_mib": round(peak, 1),
-                "modules": [m.to_dict() for m in module_rows(wprob, data.place_ids, data.place_ids, layout)],
+                "modules": [m.to_dict() for m in module_accuracies(wprob, data.place_ids, data.place_ids, layout)],
             }
         )
     model_bytes = ckpt.weights.astype(np.float32).nbytes + ckpt.thresholds.astype(np.float32).nbytes

@@ -20,13 +20,11 @@ Sec. 1, which cuts windows where the true labels stop being consecutive).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 
-from vprsnn_export.registry import Registry
+from .rules import RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
@@ -145,36 +143,6 @@ def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> t
     which the velocity search maximises.
     """
     return RULES.get(rule).combine(shifted, valid, eps)
-
-
-def product_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Softmax of the summed logs of the shifted window (``shifted`` (Q, k, places), ``valid`` (Q, k)).
-
-    .. math:: A_j(l) = \\sum_m \\log(\\tilde P_m(l) + \\varepsilon), \\quad
-              \\hat P_j(l) = e^{A_j(l)} / \\sum_{l'} e^{A_j(l')}
-
-    Returns ``(hat P, max_l A_j(l))``: the score is the best joint log-likelihood.
-    """
-    logs = np.log(shifted + eps) * valid[:, :, None]
-    a = logs.sum(axis=1)
-    peak = a.max(axis=1, keepdims=True)
-    e = np.exp(a - peak)
-    return e / e.sum(axis=1, keepdims=True), peak[:, 0]
-
-
-def sum_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """L1 normalisation of the summed shifted window (a window that is 0 everywhere gives the uniform distribution).
-
-    .. math:: A_j(l) = \\sum_m \\tilde P_m(l), \\quad \\hat P_j(l) = A_j(l) / \\sum_{l'} A_j(l')
-
-    Returns ``(hat P, max_l A_j(l))``: the score is the best summed probability.
-    """
-    n_places = shifted.shape[2]
-    a = shifted.sum(axis=1)
-    total = a.sum(axis=1, keepdims=True)
-    out = a / np.where(total > 0, total, 1.0)
-    out[total[:, 0] <= 0, :] = 1.0 / n_places
-    return out, a.max(axis=1)
 
 
 def aggregate(
@@ -495,19 +463,3 @@ def smooth_velocity(
     )
     velocity = centre_of_best(lagged_sum(scores, span, lag), cands)
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
-
-
-@dataclass(frozen=True)
-class AggregationRule:
-    """How a shifted window is combined: ``combine(shifted (Q, k, places), valid (Q, k), eps)`` ->
-    (aggregated distribution (Q, places), window score (Q,))."""
-
-    name: str
-    combine: Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
-    description: str
-
-
-#: The aggregation rules (the CLI's --rule; the first is the default).
-RULES: Registry[AggregationRule] = Registry("aggregation rule")
-RULES.register(AggregationRule("product", product_rule, "product of the frames' probabilities (softmax of log sums)"))
-RULES.register(AggregationRule("sum", sum_rule, "sum of the frames' probabilities"))

@@ -71,10 +71,11 @@ def decision_metrics(
 def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positions: np.ndarray | None) -> np.ndarray:
     """W+Prob aggregated over k frames: the given velocity, or one estimated from the query stream.
 
-    With ``velocity_candidates`` the velocity is estimated over that grid, per
-    window (``velocity_estimate="window"``), tracked over the ``velocity_span``
-    most recent windows (``"track"``) or over those and the next
-    ``velocity_lag`` windows (``"smooth"``); otherwise ``options.velocity`` is used.
+    With ``velocity_candidates`` the velocity is estimated over that grid by the registered
+    estimator ``velocity_estimate`` (``readout.velocity.VELOCITY_ESTIMATES``): per window
+    (``"window"``), tracked over the ``velocity_span`` most recent windows (``"track"``) or over
+    those and the next ``velocity_lag`` windows (``"smooth"``, the default); otherwise
+    ``options.velocity`` is used.
     """
     estimator = VELOCITY_ESTIMATES.get(options.velocity_estimate) if options.velocity_candidates else None
     if k == 1:
@@ -192,7 +193,7 @@ def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
     return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
-def module_rows(
+def module_accuracies(
     wprob: np.ndarray,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
@@ -318,7 +319,7 @@ def evaluate_float(
         query_counts=counts,
         modules=None
         if layout is None
-        else module_rows(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
+        else module_accuracies(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
     )
 
