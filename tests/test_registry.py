@@ -50,8 +50,8 @@ def any_place_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray
     return np.asarray(sq, dtype=np.float64) @ (np.asarray(sr) > 0).astype(np.float64)
 
 
-def toy_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
-    """The toy channels: the image and its negative side by side."""
+def pair_channels(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """The toy channels: the image and its negative side by side, (N, S, 2 S)."""
     image = resized.astype(np.float32) / 255
     return np.concatenate([image, 1 - image], axis=2)
 
@@ -74,7 +74,7 @@ def toy_strategy():
 
 @pytest.fixture
 def toy_channel_entry():
-    CHANNELS.register(Channel("pair", 2, toy_channel, "image and negative"))
+    CHANNELS.register(Channel("pair", 2, pair_channels, "image and negative"))
     yield CHANNELS.get("pair")
     CHANNELS.unregister("pair")
 
@@ -94,14 +94,14 @@ def spikes_of():
 
 def test_a_registry_keeps_order_and_names_the_known_entries_on_an_unknown_one():
     registry: Registry[Channel] = Registry("colour")
-    registry.register(Channel("red", 1, toy_channel, "r"))
-    registry.register(Channel("blue", 1, toy_channel, "b"))
+    registry.register(Channel("red", 1, pair_channels, "r"))
+    registry.register(Channel("blue", 1, pair_channels, "b"))
     assert registry.names() == ("red", "blue") and list(registry) == ["red", "blue"] and len(registry) == 2
     assert "red" in registry and "green" not in registry
     with pytest.raises(InvalidValueError, match="colour: unknown 'green'; choose from red, blue"):
         registry.get("green")
     with pytest.raises(ValueError, match="registered already"):
-        registry.register(Channel("red", 1, toy_channel, "again"))
+        registry.register(Channel("red", 1, pair_channels, "again"))
     assert registry.parse_list("BLUE, red,,blue", "--colours") == ("blue", "red")
     assert registry.parse_list("none", "--colours", allow_none=True) == ()
     for raw in ("", "green", "red,green", "none"):
@@ -228,3 +228,13 @@ def test_a_toy_channel_sets_the_inputs(toy_channel_entry):
     out = normalise_resized(images, cfg.preprocess)
     assert out.shape == (3, cfg.network.n_inputs)
     np.testing.assert_allclose(out[:, :28] + out[:, 28:56], 1.0, atol=1e-6)  # row 0: the image, then its negative
+
+
+def test_the_walkthrough_registers_what_these_tests_register():
+    """Every registry line of docs/architecture.md's walkthrough is one of this file's (but for line breaks)."""
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text(encoding="utf-8")
+    lines = [line.strip() for line in docs.splitlines() if ".register(" in line and line.strip().endswith("))")]
+    assert len(lines) == 3  # a target, a strategy, a channel
+    source = "".join(Path(__file__).read_text(encoding="utf-8").split())
+    for line in lines:
+        assert "".join(line.split()) in source, line
