@@ -28,7 +28,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.kernels import float_run
-from vprsnn_export.trainer.batched import module_rows, train_modules
+from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.train import Presentation, train_network
 
 NORDLAND = Path(__file__).resolve().parents[1].parent.parent / "shared/data/nordland_64x32_summer_winter"
@@ -62,7 +62,7 @@ def main() -> None:
     n_places = args.modules * args.module_size
     images, place_ids = images_of(args.data, n_places, "summer", cfg)
     presentations = [Presentation("summer", int(p)) for p in place_ids]
-    rows = module_rows(len(images), args.module_size, 1)
+    rows = module_training_rows(len(images), args.module_size, 1)
     cpu = torch.device("cpu")
     train_modules(
         images[:4], presentations[:4], [np.arange(4)], cfg.replace(**{"train.epochs": 1}), device=cpu, progress=False

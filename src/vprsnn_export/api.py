@@ -7,9 +7,12 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
     model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
-    vx.export_and_check(vx.ExportSource.of(model, sha), model, ("nir", "onnx", "loihi"), "deploy/")
+    vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
     run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
+
+The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx.STRATEGIES``,
+``vx.CHANNELS``, ``vx.VELOCITY_ESTIMATES``; ``vx.TARGETS.register(vx.Target(...))`` adds one.
 """
 
 from __future__ import annotations
@@ -23,11 +26,13 @@ from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
 from .modules import module_count, module_regions
+from .preprocess import CHANNELS, Channel
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
-from .readout.assignment import decide, strategy_scores
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
 from .readout.regions import ModuleLayout, module_layout, regularise
+from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
+from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
 from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
@@ -41,6 +46,7 @@ from .targets.loihi_target import read_loihi_model, write_loihi
 from .targets.nir_target import apply_readout_rule, read_nir, write_nir
 from .targets.onnx_target import OnnxBackend, write_onnx
 from .targets.reference_stepper import ReferenceStepper
+from .targets.registry import TARGETS, Target
 from .threads import set_threads
 from .trainer.batched import train_modules
 from .trainer.calibrate import calibrate
@@ -49,7 +55,12 @@ from .trainer.train import train_network
 from .version import __version__
 
 __all__ = [
+    "CHANNELS",
+    "STRATEGIES",
+    "TARGETS",
+    "VELOCITY_ESTIMATES",
     "Backend",
+    "Channel",
     "Checkpoint",
     "Config",
     "ConformanceResult",
@@ -68,6 +79,9 @@ __all__ = [
     "ReadoutOptions",
     "ReferenceStepper",
     "SpikeRun",
+    "Strategy",
+    "Target",
+    "VelocityEstimator",
     "VerifiedRun",
     "VerifyOptions",
     "VerifyReport",

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
 from .errors import InvalidValueError
+from .preprocess import CHANNELS
 
 
 @dataclass(frozen=True)
@@ -23,7 +24,6 @@ class EncoderConfig:
     timesteps: int = 300
 
 
-CHANNELS = ("intensity", "dog_on_off")
 WTA_SCOPES = ("ensemble", "module")
 
 
@@ -34,6 +34,7 @@ class PreprocessConfig:
     ``channels="intensity"`` (the paper): patch min-max normalisation, image_size**2 inputs.
     ``channels="dog_on_off"``: centre-surround (difference of Gaussians) ON and OFF channels,
     2 * image_size**2 inputs (docs/model.md, docs/research/recognition-quality.md).
+    The choices are the registered channels (``preprocess.CHANNELS``).
     """
 
     image_size: int = 28
@@ -45,7 +46,13 @@ class PreprocessConfig:
 
     @property
     def n_channels(self) -> int:
-        return 2 if self.channels == "dog_on_off" else 1
+        """The registered channel's number of channels (InvalidValueError for an unknown one)."""
+        return CHANNELS.get(self.channels).n_channels
+
+    @property
+    def n_inputs(self) -> int:
+        """What ``network.n_inputs`` must be: n_channels x image_size**2."""
+        return self.n_channels * self.image_size * self.image_size
 
 
 @dataclass(frozen=True)
@@ -142,7 +149,7 @@ class Config:
             raise InvalidValueError(
                 f"preprocess.image_size {side} is not a multiple of preprocess.patch_size {self.preprocess.patch_size}"
             )
-        inputs = self.preprocess.n_channels * side * side
+        inputs = self.preprocess.n_inputs
         if self.network.n_inputs != inputs:
             raise InvalidValueError(
                 f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "

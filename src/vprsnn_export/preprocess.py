@@ -19,17 +19,28 @@ channels (the retina's, and an event camera's, split of a signed response):
 
 and the image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input
 ``r * 2S + c`` (ON) and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
+
+The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function
+(step 2) and its number of channels, from which ``network.n_inputs`` follows
+(``n_channels * S * S``, checked by the config). Adding one is a function and one
+``CHANNELS.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
-from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
+from .registry import Registry
+
+if TYPE_CHECKING:
+    from .config import PreprocessConfig
 
 
 def read_grey_image(path: Path, context: str = "") -> np.ndarray:
@@ -101,16 +112,42 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
     return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
 
 
+def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """The paper's one channel: patch min-max normalisation (``R / 255`` without ``patch_norm``), (N, S, S)."""
+    return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else scale_unit(resized)
+
+
+def dog_channels(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """DoG ON and OFF channels with the config's sigmas, (N, S, 2S) (:func:`dog_on_off`)."""
+    return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One choice of input channels (``preprocess.channels``).
+
+    ``normalise(resized, cfg)``: ``(N, S, S)`` uint8 -> ``(N, S, n_channels * S)`` float32 in [0, 1]
+    (each image row holds the channels side by side); ``label`` names the inputs in summaries.
+    """
+
+    name: str
+    n_channels: int
+    normalise: Callable[[np.ndarray, PreprocessConfig], np.ndarray]
+    label: str
+
+
+CHANNELS: Registry[Channel] = Registry("config.preprocess.channels")
+CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised"))
+CHANNELS.register(Channel("dog_on_off", 2, dog_channels, "DoG ON/OFF"))
+
+
 def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
     if resized.ndim != 3 or resized.dtype != np.uint8:
         raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
     if len(resized) == 0:
         raise DataError("no images to preprocess")
-    if cfg.channels == "dog_on_off":
-        scaled = dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
-    else:
-        scaled = patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else scale_unit(resized)
+    scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 

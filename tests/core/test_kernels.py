@@ -21,13 +21,7 @@ from vprsnn_export.trainer.homeostasis import homeostasis_update
 from vprsnn_export.trainer.stdp import initial_weights
 from vprsnn_export.trainer.train import Presentation, train_batch, train_network
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 def make_model(q, m, threshold, dv, bits, *, wta=True, per_neuron=True) -> FixedPointModel:

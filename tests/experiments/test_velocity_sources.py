@@ -26,7 +26,7 @@ def test_aggregated_routes_each_velocity_source() -> None:
     prob = _route(30, seed=1)
     given = aggregated(prob, 5, ReadoutOptions(gamma=0.5, velocity=1.0), None)
     np.testing.assert_array_equal(given, aggregate(prob, 5, 1.0))
-    window = aggregated(prob, 5, ReadoutOptions(gamma=0.5, velocity_candidates=GRID), None)
+    window = aggregated(prob, 5, ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="window"), None)
     np.testing.assert_array_equal(window, estimate_velocity(prob, 5, np.asarray(GRID))[1])
     options = ReadoutOptions(
         gamma=0.5,
@@ -47,7 +47,9 @@ def test_aggregated_routes_each_velocity_source() -> None:
 
 def test_unknown_velocity_estimate_is_a_clear_error() -> None:
     options = ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="oracle")
-    with pytest.raises(InvalidValueError, match="unknown velocity estimate 'oracle'"):
+    with pytest.raises(
+        InvalidValueError, match="velocity estimate: unknown 'oracle'; choose from smooth, track, window"
+    ):
         aggregated(_route(10, seed=2), 5, options, None)
 
 

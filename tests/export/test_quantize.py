@@ -29,13 +29,7 @@ from vprsnn_export.trainer.stdp import initial_weights
 SMALL = {"network.n_neurons": 12, "encoder.timesteps": 24}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small tensors: one intra-op thread avoids oversubscribing the shared cores."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 def stdp_like_weights(n_inputs: int = 784, n_neurons: int = 12, seed: int = 0) -> np.ndarray:

@@ -7,6 +7,7 @@ import inspect
 import numpy as np
 import pytest
 
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout import aggregation
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, shift_window
 
@@ -168,7 +169,7 @@ def test_invalid_arguments() -> None:
     prob = np.full((3, 4), 0.25)
     with pytest.raises(ValueError):
         aggregate(prob, 0, 1.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(InvalidValueError, match="aggregation rule: unknown 'max'; choose from product, sum"):
         aggregate(prob, 2, 1.0, "max")
     with pytest.raises(ValueError):
         aggregate(prob, 2, 1.0, frame_positions=np.array([0.0, 2.0, 1.0]))

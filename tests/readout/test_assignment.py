@@ -5,19 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout.assignment import (
     NO_MATCH,
-    STRATEGIES,
-    decide,
     missing_spikes_penalty,
     share_confidence,
     standard_assignment,
     standard_scores,
-    strategy_scores,
     weighted_matrix,
     weighted_scores,
     wprob_distribution,
 )
+from vprsnn_export.readout.strategies import STRATEGIES, decide, strategy_scores
 
 # Hand example used below: 3 neurons x 3 places.
 SR = np.array([[2, 0, 2], [0, 3, 0], [1, 1, 1]], dtype=float)
@@ -112,7 +111,7 @@ def test_strategy_scores_dispatch() -> None:
     np.testing.assert_array_equal(strategy_scores(SR, sq, "weighted", 0.5), weighted_scores(SR, sq, 0.5))
     dist = strategy_scores(SR, sq, "wprob", 0.5)
     np.testing.assert_array_equal(dist, wprob_distribution(weighted_scores(SR, sq, 0.5)))
-    assert STRATEGIES == ("standard", "weighted", "wprob")
+    assert STRATEGIES.names() == ("standard", "weighted", "wprob")
     for strategy in STRATEGIES:
         pred, _ = decide(strategy_scores(SR, sq, strategy, 0.5), strategy)
         assert pred[1] == NO_MATCH  # a silent query never matches
@@ -122,9 +121,9 @@ def test_invalid_inputs() -> None:
     sq = np.ones((2, 3))
     with pytest.raises(ValueError):
         strategy_scores(SR, sq, "weighted")  # gamma missing
-    with pytest.raises(ValueError):
+    with pytest.raises(InvalidValueError, match="unknown 'argmax'; choose from standard, weighted, wprob"):
         strategy_scores(SR, sq, "argmax", 0.5)
-    with pytest.raises(ValueError):
+    with pytest.raises(InvalidValueError, match="strategy: unknown 'bogus'"):
         decide(np.ones((2, 3)), "bogus")
     with pytest.raises(ValueError):
         weighted_scores(SR, sq, 1.5)

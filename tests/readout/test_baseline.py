@@ -7,8 +7,9 @@ import pytest
 
 from vprsnn_export.readout import baseline
 from vprsnn_export.readout.aggregation import aggregate
-from vprsnn_export.readout.assignment import NO_MATCH, decide
+from vprsnn_export.readout.assignment import NO_MATCH
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout.strategies import decide
 
 
 def test_sad_distances_hand_and_brute_force(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -8,8 +8,8 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
-from vprsnn_export.runtime import exporting
 from vprsnn_export.runtime.exporting import MANIFEST_NAME, read_export
+from vprsnn_export.targets import registry as target_registry
 
 TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
 
@@ -61,7 +61,7 @@ def test_an_interrupted_export_leaves_the_previous_folder_as_it_was(model, tmp_p
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(exporting, "write_onnx", interrupted)
+    monkeypatch.setattr(target_registry, "write_onnx", interrupted)
     assert export(model, out, "--force") == 130
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     assert [p.name for p in tmp_path.iterdir()] == ["deploy"]

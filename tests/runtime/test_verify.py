@@ -15,7 +15,6 @@ from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runs import SpikeRun
-from vprsnn_export.runtime import conformance
 from vprsnn_export.runtime import verify as verify_module
 from vprsnn_export.runtime.conformance import (
     Contender,
@@ -50,6 +49,7 @@ from vprsnn_export.runtime.verify import (
     verify_checkpoint,
 )
 from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.registry import TARGETS
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
@@ -231,7 +231,7 @@ def test_cross_implementation_catches_one_corrupted_spike(model_and_spikes, tmp_
 
 def test_cross_implementation_catches_a_corrupted_export(model_and_spikes, tmp_path, monkeypatch):
     model, spikes = model_and_spikes
-    real = conformance.read_nir
+    real = TARGETS.get("nir").read
 
     def tampered(path):
         rebuilt = real(path)
@@ -239,7 +239,7 @@ def test_cross_implementation_catches_a_corrupted_export(model_and_spikes, tmp_p
         mantissa[np.unravel_index(mantissa.argmax(), mantissa.shape)] -= 1  # one weight one level lower
         return dataclasses.replace(rebuilt, weight_mantissa=mantissa)
 
-    monkeypatch.setattr(conformance, "read_nir", tampered)
+    monkeypatch.setitem(TARGETS._entries, "nir", dataclasses.replace(TARGETS.get("nir"), read=tampered))
     run = IntegerNetwork(model).run(spikes, record=True)
     cross = cross_implementation(model, spikes, run, folder=tmp_path, targets=("nir",), reference_queries=0)
     failed = {c.check for c in cross.failures}

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import nir
@@ -301,16 +302,47 @@ def test_matrix_cell(real, file, consumer):
         assert got == expected, f"{file} in {consumer}: measured {got}, documented {expected}"
 
 
+#: The row and column titles of the table in docs/targets.md section 1.4.
+FILE_TITLES = {
+    "float": "float checkpoint",
+    **{f"{b}bit": f"{b}-bit per-neuron" for b in (8, 4, 2)},
+    **{f"{b}bit-folded": f"{b}-bit per-neuron, thresholds folded" for b in (8, 4, 2)},
+}
+CONSUMER_TITLES = {
+    "nirtorch": "nirtorch",
+    "snntorch": "snnTorch",
+    "norse": "Norse",
+    "norse-plain": "Norse plain",
+    "spikingjelly": "SpikingJelly",
+    "spikingjelly-plain": "SpikingJelly plain",
+}
+
+
+def matrix_table(cells: Mapping[tuple[str, str], tuple[int, int] | str], consumers: Sequence[str]) -> list[str]:
+    """The markdown lines of the matrix as docs/targets.md section 1.4 prints it ("refuses" for any refusal)."""
+    lines = [
+        "| file | " + " | ".join(f"{CONSUMER_TITLES[c]} + rule" for c in consumers) + " |",
+        "|---" * (len(consumers) + 1) + "|",
+    ]
+    for file in FILES:
+        row = [cells[file, c] for c in consumers]
+        text = ["refuses" if isinstance(cell, str) else f"{cell[0]:,} / {cell[1]:,}" for cell in row]
+        lines.append(f"| {FILE_TITLES[file]} | " + " | ".join(text) + " |")
+    return lines
+
+
+def test_the_documented_matrix_is_the_one_the_slow_tests_assert():
+    """docs/targets.md section 1.4 prints MATRIX, the counts test_matrix_cell measures, line for line."""
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "targets.md").read_text(encoding="utf-8")
+    table = "\n".join(matrix_table(MATRIX, list(PACKAGE)))
+    assert table in docs
+
+
 @pytest.mark.slow
 def test_print_matrix(real):
-    """Print the matrix as the markdown table of docs/targets.md section 1.4 (run with -s)."""
+    """The measured matrix renders as the documented one (docs/targets.md section 1.4); printed with -s."""
     consumers = [c for c in PACKAGE if importlib.util.find_spec(PACKAGE[c]) is not None]
-    lines = ["| file | " + " | ".join(consumers) + " |", "|---" * (len(consumers) + 1) + "|"]
-    for file in FILES:
-        cells = []
-        for consumer in consumers:
-            got = real.cell(file, consumer)
-            cells.append("refuses" if isinstance(got, str) else f"{got[0]} / {got[1]}")
-        lines.append(f"| {file} | " + " | ".join(cells) + " |")
+    measured = matrix_table({(f, c): real.cell(f, c) for f in FILES for c in consumers}, consumers)
     print("\n(WTA-off raster vs network WTA-off / after the readout rule vs network), differing entries of 12,000,000")
-    print("\n".join(lines))
+    print("\n".join(measured))
+    assert measured == matrix_table(MATRIX, consumers)

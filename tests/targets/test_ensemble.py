@@ -23,8 +23,8 @@ from vprsnn_export.dataset import load_dataset
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.readout.regions import hyperactive_neurons
+from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.evaluation import ensemble_layout, readout_scores
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check

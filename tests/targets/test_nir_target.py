@@ -13,7 +13,6 @@ import pytest
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.config import Config, preset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
@@ -32,42 +31,7 @@ from vprsnn_export.targets.nir_target import (
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 
 
-def small_config(n_inputs: int = 16, n_neurons: int = 6, **overrides) -> Config:
-    side = int(round(n_inputs**0.5))
-    return preset("paper").replace(
-        **{
-            "preprocess.image_size": side,
-            "preprocess.patch_size": 1,
-            "network.n_inputs": n_inputs,
-            "network.n_neurons": n_neurons,
-            "encoder.timesteps": 20,
-            **overrides,
-        }
-    )
-
-
-def make_model(rng, *, bits=8, wta=True, dv=205, uniform=False, n_inputs=16, n_neurons=6) -> FixedPointModel:
-    cfg = small_config(n_inputs, n_neurons, **{"network.wta": wta})
-    threshold = np.full(n_neurons, 300) if uniform else rng.integers(50, 600, n_neurons)
-    return FixedPointModel(
-        bits=bits,
-        weight_mantissa=rng.integers(0, 2**bits, (n_inputs, n_neurons)).astype(np.int32),
-        scale_multiplier=rng.integers(1, 2**16, n_neurons).astype(np.int32),
-        scale_exponent=-20,
-        threshold=threshold.astype(np.int32),
-        decay_dv=dv,
-        config=cfg,
-        calibration=rng.integers(0, 4, (n_neurons, 3)).astype(np.int64),
-        float_calibration=rng.integers(0, 4, (n_neurons, 3)).astype(np.int64),
-        reference_place_ids=np.array([5, 7, 9], dtype=np.int64),
-        reference_traversals=["summer"],
-        quantisation={"per_neuron": True, "scale_method": "max"},
-        source_sha256="ab" * 32,
-        data={"source": "synthetic"},
-    )
-
-
-def make_checkpoint(rng, *, beta=0.95, wta=True, dyadic=False, uniform=False) -> Checkpoint:
+def make_checkpoint(rng, small_config, *, beta=0.95, wta=True, dyadic=False, uniform=False) -> Checkpoint:
     """dyadic: weights on a 1/16 grid, thresholds on a 1/4 grid, beta 0.5: every float32 sum is exact."""
     cfg = small_config(**{"network.beta": 0.5 if dyadic else beta, "network.wta": wta})
     weights = rng.integers(0, 16, (16, 6)) / 16.0 if dyadic else rng.random((16, 6)) * 0.5
@@ -105,7 +69,7 @@ def int_raster(model: FixedPointModel, spikes: torch.Tensor, wta: bool | None = 
 
 
 @pytest.mark.parametrize("bits,wta", [(8, True), (4, False), (2, True)])
-def test_fixed_point_round_trip_is_exact(tmp_path, bits, wta):
+def test_fixed_point_round_trip_is_exact(tmp_path, bits, wta, make_model):
     model = make_model(np.random.default_rng(bits), bits=bits, wta=wta)
     rebuilt = read_nir(write_nir(model, tmp_path / "m.nir"))
     assert isinstance(rebuilt, FixedPointModel)
@@ -117,8 +81,8 @@ def test_fixed_point_round_trip_is_exact(tmp_path, bits, wta):
 
 
 @pytest.mark.parametrize("wta", [True, False])
-def test_float_round_trip_is_exact(tmp_path, wta):
-    ckpt = make_checkpoint(np.random.default_rng(1), wta=wta)
+def test_float_round_trip_is_exact(tmp_path, wta, small_config):
+    ckpt = make_checkpoint(np.random.default_rng(1), small_config, wta=wta)
     rebuilt = read_nir(write_nir(ckpt, tmp_path / "f.nir", source_sha256="cd" * 32))
     assert isinstance(rebuilt, Checkpoint)
     assert np.array_equal(rebuilt.weights, ckpt.weights) and rebuilt.weights.dtype == np.float32
@@ -128,7 +92,7 @@ def test_float_round_trip_is_exact(tmp_path, wta):
     assert torch.equal(float_raster(ckpt, spikes), float_raster(rebuilt, spikes))
 
 
-def test_nir_read_sees_the_documented_graph(tmp_path):
+def test_nir_read_sees_the_documented_graph(tmp_path, make_model):
     model = make_model(np.random.default_rng(3))
     graph = nir.read(write_nir(model, tmp_path / "m.nir", wta_inhibition=0.5, wta_node=True))
     assert isinstance(graph.nodes["linear"], nir.Linear) and graph.nodes["linear"].weight.shape == (6, 16)
@@ -148,7 +112,7 @@ def test_nir_read_sees_the_documented_graph(tmp_path):
     )
 
 
-def test_the_default_graph_is_portable_and_states_its_readout_rule(tmp_path):
+def test_the_default_graph_is_portable_and_states_its_readout_rule(tmp_path, make_model):
     graph = nir.read(write_nir(make_model(np.random.default_rng(3)), tmp_path / "m.nir"))
     assert sorted(graph.nodes) == ["input", "lif", "linear", "output"]
     rule = json.loads(graph.metadata["readout_rule"])
@@ -159,7 +123,7 @@ def test_the_default_graph_is_portable_and_states_its_readout_rule(tmp_path):
 
 
 @pytest.mark.parametrize("bits", [8, 4, 2])
-def test_readout_rule_on_the_wta_off_raster_gives_the_integer_network(tmp_path, bits):
+def test_readout_rule_on_the_wta_off_raster_gives_the_integer_network(tmp_path, bits, make_model):
     """Integer currents are exact: the rule applied to the WTA-off raster is the WTA-on raster, spike for spike."""
     model = make_model(np.random.default_rng(8), bits=bits)
     graph = nir.read(write_nir(model, tmp_path / "m.nir"))
@@ -168,8 +132,8 @@ def test_readout_rule_on_the_wta_off_raster_gives_the_integer_network(tmp_path, 
     assert torch.equal(ruled, int_raster(model, spikes)) and int(ruled.sum()) > 0
 
 
-def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path):
-    ckpt = make_checkpoint(np.random.default_rng(9), dyadic=True)
+def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path, small_config):
+    ckpt = make_checkpoint(np.random.default_rng(9), small_config, dyadic=True)
     graph = nir.read(write_nir(ckpt, tmp_path / "f.nir"))
     spikes = random_spikes(9)
     consumer = generic_consumer_raster(graph, spikes)
@@ -177,7 +141,7 @@ def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path):
     assert torch.equal(apply_readout_rule(graph, spikes, consumer), float_raster(ckpt, spikes))
 
 
-def test_no_leak_becomes_an_if_node(tmp_path):
+def test_no_leak_becomes_an_if_node(tmp_path, make_model):
     model = make_model(np.random.default_rng(4), dv=0)
     path = write_nir(model, tmp_path / "if.nir")
     assert isinstance(nir.read(path).nodes["lif"], nir.IF)
@@ -185,9 +149,9 @@ def test_no_leak_becomes_an_if_node(tmp_path):
     assert torch.equal(int_raster(model, spikes), int_raster(read_nir(path), spikes))
 
 
-def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path):
+def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path, small_config):
     """Inhibition 0 and exact float sums (dyadic values): nirtorch with NIR's LIF equals the WTA-off network."""
-    ckpt = make_checkpoint(np.random.default_rng(5), dyadic=True)
+    ckpt = make_checkpoint(np.random.default_rng(5), small_config, dyadic=True)
     graph = nir.read(write_nir(ckpt, tmp_path / "d.nir", wta_inhibition=0.0))
     spikes = random_spikes(5)
     consumer = generic_consumer_raster(graph, spikes)
@@ -196,7 +160,7 @@ def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path):
     assert with_wta["recall"] == 1.0 and with_wta["precision"] < 1.0  # WTA spikes are a subset of the candidates
 
 
-def test_generic_consumer_on_a_fixed_point_file_is_close_to_the_integer_network(tmp_path):
+def test_generic_consumer_on_a_fixed_point_file_is_close_to_the_integer_network(tmp_path, make_model):
     model = make_model(np.random.default_rng(6), bits=4)
     spikes = random_spikes(6)
     consumer = generic_consumer_raster(nir.read(write_nir(model, tmp_path / "m.nir", wta_inhibition=0.0)), spikes)
@@ -204,19 +168,19 @@ def test_generic_consumer_on_a_fixed_point_file_is_close_to_the_integer_network(
     assert agreement["recall"] > 0.9 and agreement["precision"] > 0.9  # float vs round-toward-zero decay
 
 
-def test_snntorch_importer_runs_a_single_threshold_file_without_the_wta_node(tmp_path):
-    ckpt = make_checkpoint(np.random.default_rng(7), dyadic=True, uniform=True)
+def test_snntorch_importer_runs_a_single_threshold_file_without_the_wta_node(tmp_path, small_config):
+    ckpt = make_checkpoint(np.random.default_rng(7), small_config, dyadic=True, uniform=True)
     graph = nir.read(write_nir(ckpt, tmp_path / "s.nir", wta_node=False))
     spikes = random_spikes(7)
     assert torch.equal(snntorch_consumer_raster(graph, spikes), float_raster(ckpt, spikes, wta=False))
     assert isinstance(read_nir(tmp_path / "s.nir"), Checkpoint)
 
 
-def test_writer_validates_its_input(tmp_path):
+def test_writer_validates_its_input(tmp_path, make_model, small_config):
     model = make_model(np.random.default_rng(8))
     with pytest.raises(ModelFileError, match="weight_mantissa"):
         write_nir(dataclasses.replace(model, weight_mantissa=model.weight_mantissa + 300), tmp_path / "x.nir")
-    ckpt = make_checkpoint(np.random.default_rng(8))
+    ckpt = make_checkpoint(np.random.default_rng(8), small_config)
     with pytest.raises(ModelFileError, match="NaN"):
         write_nir(dataclasses.replace(ckpt, thresholds=np.full(6, np.nan, dtype=np.float32)), tmp_path / "x.nir")
     with pytest.raises(InvalidValueError, match="wta_inhibition"):
@@ -224,7 +188,7 @@ def test_writer_validates_its_input(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_reader_rejects_missing_truncated_foreign_and_tampered_files(tmp_path):
+def test_reader_rejects_missing_truncated_foreign_and_tampered_files(tmp_path, make_model):
     with pytest.raises(ModelFileError, match="no such NIR file"):
         read_nir(tmp_path / "absent.nir")
     path = write_nir(make_model(np.random.default_rng(9)), tmp_path / "m.nir")

@@ -18,7 +18,8 @@ from vprsnn_export.cli import main
 from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
-from vprsnn_export.readout.assignment import strategy_scores, weighted_matrix
+from vprsnn_export.readout.assignment import weighted_matrix
+from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_target import (

@@ -8,19 +8,14 @@ import torch
 
 from vprsnn_export.config import preset
 from vprsnn_export.modules import module_regions
-from vprsnn_export.trainer.batched import module_rows, train_modules
+from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.train import Presentation, train_network
 
 SMALL = {"network.n_neurons": 12, "encoder.timesteps": 20, "train.epochs": 2, "train.batch_size": 8}
 CPU = torch.device("cpu")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 def route(n_places: int, traversals: tuple[str, ...]) -> tuple[np.ndarray, list[Presentation]]:
@@ -43,7 +38,7 @@ def alone(images, presentations, rows, cfg, *, compiled: bool):
 def test_each_module_is_bit_for_bit_the_module_trained_alone(compiled, threads, traversals):
     cfg = preset("paper").replace(**SMALL, **{"train.module_size": 20})
     images, presentations = route(50, traversals)  # regions of 20, 20 and an unequal last one of 10
-    rows = module_rows(50, 20, len(traversals))
+    rows = module_training_rows(50, 20, len(traversals))
     assert [len(r) for r in rows] == [20 * len(traversals)] * 2 + [10 * len(traversals)]
     together = train_modules(
         images, presentations, rows, cfg, device=CPU, progress=False, threads=threads, compiled=compiled
@@ -60,7 +55,7 @@ def test_each_module_is_bit_for_bit_the_module_trained_alone(compiled, threads, 
 def test_one_module_is_train_network_with_the_same_history():
     cfg = preset("paper").replace(**SMALL)
     images, presentations = route(30, ("summer",))
-    rows = module_rows(30, 0, 1)
+    rows = module_training_rows(30, 0, 1)
     together = train_modules(images, presentations, rows, cfg, device=CPU, progress=False)
     single = train_network(images, presentations, cfg, device=CPU, progress=False)
     assert torch.equal(together.weights, single.weights) and torch.equal(together.thresholds, single.thresholds)
@@ -69,6 +64,6 @@ def test_one_module_is_train_network_with_the_same_history():
 
 
 def test_module_rows_follow_the_regions_in_every_traversal():
-    rows = module_rows(5, 2, 2)
+    rows = module_training_rows(5, 2, 2)
     assert [r.tolist() for r in rows] == [[0, 1, 5, 6], [2, 3, 7, 8], [4, 9]]
     assert len(rows) == len(module_regions(5, 2))

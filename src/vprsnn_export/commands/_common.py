@@ -12,6 +12,8 @@ from typing import Any
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
+from ..readout.rules import RULES
+from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 from ..runtime.evaluation import ReadoutOptions
 
 
@@ -68,7 +70,12 @@ def add_readout_options(
         default=default_k,
         help=f"sequence lengths, e.g. 1,3,5 (W+Prob aggregated for k > 1; default {default_k})",
     )
-    group.add_argument("--rule", choices=("product", "sum"), default="product", help="aggregation rule")
+    group.add_argument(
+        "--rule",
+        choices=RULES.names(),
+        default=RULES.names()[0],
+        help="aggregation rule: " + "; ".join(f"{r.name}: {r.description}" for r in RULES.values()),
+    )
     group.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
     group.add_argument(
         "--velocity-search",
@@ -78,11 +85,11 @@ def add_readout_options(
     )
     group.add_argument(
         "--velocity-estimate",
-        choices=("smooth", "track", "window"),
-        default="smooth",
-        help="with --velocity-search: smooth the velocity over the recent and the next --velocity-lag windows "
-        "(default; each decision waits for that many frames), track it over the recent windows only, or choose "
-        "it per window on its own (the older, noisier search)",
+        choices=VELOCITY_ESTIMATES.names(),
+        default=DEFAULT_VELOCITY_ESTIMATE,
+        help="with --velocity-search: "
+        + "; ".join(f"{e.name}: {e.description}" for e in VELOCITY_ESTIMATES.values())
+        + f" (default {DEFAULT_VELOCITY_ESTIMATE})",
     )
     group.add_argument(
         "--velocity-span",

@@ -27,10 +27,12 @@ from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..modules import module_count
+from ..preprocess import CHANNELS
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.results import BitsResult, VerifiedRun
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from ..targets.registry import TARGETS
 from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table
 
@@ -81,7 +83,7 @@ def demo_config(seed: int, quick: bool = False) -> Config:
 
 def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
     """What the demo trains: inputs, T, epochs and the ensemble's modules, and any profile changes."""
-    inputs = "DoG ON/OFF" if cfg.preprocess.channels == "dog_on_off" else "patch-normalised"
+    inputs = CHANNELS.get(cfg.preprocess.channels).label
     modules = module_count(n_places, cfg.train.module_size)
     size = cfg.train.module_size or n_places
     text = (
@@ -113,7 +115,7 @@ def summary_rows(run_result: VerifiedRun) -> list[dict]:
     rows = []
     for result in run_result.bits:
         cross = result.cross_implementation
-        targets = [t for t in ("nir", "loihi", "onnx") if t in cross.files]
+        targets = [t for t in TARGETS if t in cross.files]
         wprob, aggregated = result.row("wprob", 1), result.row("wprob", top)
         delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
         weakest = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement), default=None)

@@ -36,6 +36,7 @@ from ..runtime.exporting import (
 )
 from ..targets.loihi_target import budget_table
 from ..targets.nir_target import WTA_INHIBITION
+from ..targets.registry import TARGETS
 from ._common import add_data_options, add_runtime_options, format_table, print_json
 
 CHECK_COLUMNS = (("target", "target"), ("check", "check"), ("result", "result"), ("detail", "detail"))
@@ -58,7 +59,9 @@ BUDGET_COLUMNS = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("export", help="export a model to NIR, a Loihi-style description and ONNX")
     parser.add_argument("model", nargs="?", help="float checkpoint (train) or fixed-point model (quantize)")
-    parser.add_argument("--to", default="nir,loihi,onnx", help="comma-separated targets: nir, loihi, onnx")
+    parser.add_argument(
+        "--to", default=",".join(TARGETS), help=f"comma-separated targets: {TARGETS.choices()} (default all)"
+    )
     parser.add_argument("--out", help="output folder (new or empty; built whole, then put in place); required")
     parser.add_argument(
         "--loihi-cores",

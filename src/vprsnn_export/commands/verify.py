@@ -20,10 +20,12 @@ from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
+from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
 from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
+from ..targets.registry import TARGETS
 from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     add_data_options,
@@ -36,6 +38,7 @@ from ._common import (
 )
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
+ALL_TARGETS = ",".join(TARGETS)
 TABLE_COLUMNS = (
     ("network", "network"),
     ("bits", "bits"),
@@ -79,7 +82,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="queries also run on the slow reference stepper (default 3; 0 = none)",
     )
     checks.add_argument(
-        "--targets", default="onnx,nir,loihi", help="exported targets to read back and run (default all; or none)"
+        "--targets",
+        default=ALL_TARGETS,
+        help=f"exported targets to read back and run: some of {TARGETS.choices()} (default all; or none)",
     )
     quant = parser.add_argument_group("quantisation")
     quant.add_argument(
@@ -231,7 +236,7 @@ def command_line(args: argparse.Namespace) -> list[str]:
         line.append("--reuse-float-calibration")
     if args.reference_queries != 3:
         line += ["--reference-queries", str(args.reference_queries)]
-    if args.targets != "onnx,nir,loihi":
+    if args.targets != ALL_TARGETS:
         line += ["--targets", args.targets]
     return line + ["--report", args.report]
 
@@ -248,7 +253,7 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
     for index, run in enumerate(report.runs):
         top = max(run.ks)
         for result in run.bits:
-            worst = min(_delta(result.row(s, 1), "accuracy") for s in ("standard", "weighted", "wprob"))
+            worst = min(_delta(result.row(s, 1), "accuracy") for s in STRATEGIES)
             cross = result.cross_implementation
             rows.append(
                 {

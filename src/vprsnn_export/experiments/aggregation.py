@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.device import resolve_device
+from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 
 from . import envelope
@@ -26,7 +27,7 @@ DESCRIPTION = (
     "beside SAD on the same windows"
 )
 KS = (1, 3, 5, 7, 10, 15)
-RULES = ("product", "sum")
+RULES = AGGREGATION_RULES.names()
 
 
 def run(settings: Settings) -> dict:

@@ -15,8 +15,8 @@ import numpy as np
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
-from vprsnn_export.readout.assignment import strategy_scores
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
 
 from .common import Settings, consecutive_networks, mean_std, pct, provenance, rows_table, summarise_rows

@@ -30,11 +30,12 @@ from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
+from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.runtime.evaluation import (
     ReadoutOptions,
     aggregated,
     decision_metrics,
-    module_rows,
+    module_accuracies,
     nearest_neighbour_rows,
     readout_scores,
     score_rows,
@@ -193,7 +194,7 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
                 "silenced": int(hyperactive_neurons(ckpt.calibration, layout).sum()),
                 "readout_seconds": round(seconds, 2),
                 "readout_peak_mib": round(peak, 1),
-                "modules": [m.to_dict() for m in module_rows(wprob, data.place_ids, data.place_ids, layout)],
+                "modules": [m.to_dict() for m in module_accuracies(wprob, data.place_ids, data.place_ids, layout)],
             }
         )
     ckpt = timed.checkpoint
@@ -285,7 +286,7 @@ def cost_summary(networks: list[dict], sizes) -> list[dict]:
 
 
 def _label(strategy: str, k: int) -> str:
-    names = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob", "wprob-est": "W+Prob, v estimated"}
+    names = {s.name: s.title for s in STRATEGIES.values()} | {"wprob-est": "W+Prob, v estimated"}
     return f"{names.get(strategy, strategy)} k={k}"
 
 

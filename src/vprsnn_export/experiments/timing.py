@@ -16,7 +16,7 @@ from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.kernels import QUERY_CHUNK
 from vprsnn_export.readout.aggregation import aggregate
-from vprsnn_export.readout.assignment import strategy_scores
+from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
 from vprsnn_export.trainer.train import Presentation, train_network

@@ -24,10 +24,7 @@ from typing import Final
 
 import numpy as np
 
-RULES: Final[tuple[str, ...]] = ("product", "sum")
-#: How a velocity is estimated from the query stream: each window alone, tracked over the recent windows
-#: (causal), or smoothed over the recent and the next few windows (fixed lag; the default).
-VELOCITY_ESTIMATES: Final[tuple[str, ...]] = ("smooth", "window", "track")
+from .rules import RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
@@ -72,8 +69,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
 def _check_args(k: int, rule: str, eps: float) -> int:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"window size k must be an integer >= 1, got {k!r}")
-    if rule not in RULES:
-        raise ValueError(f"unknown aggregation rule {rule!r}; expected one of {RULES}")
+    RULES.get(rule)  # InvalidValueError naming the registered rules
     if not (np.isfinite(eps) and eps > 0):
         raise ValueError(f"eps must be a finite value > 0, got {eps}")
     return int(k)
@@ -141,24 +137,12 @@ def _shift_rows(
 
 
 def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Combine the window (product: softmax of summed logs; sum: L1 of the sum).
+    """Combine the window with the registered ``rule`` (:data:`RULES`).
 
-    Also returns the window score max_l A_j(l) of the un-normalised aggregate
-    (the best joint log-likelihood for the product rule, the best summed
-    probability for the sum rule), which the velocity search maximises.
+    Also returns the window score max_l A_j(l) of the un-normalised aggregate,
+    which the velocity search maximises.
     """
-    n_places = shifted.shape[2]
-    if rule == "product":
-        logs = np.log(shifted + eps) * valid[:, :, None]
-        a = logs.sum(axis=1)
-        peak = a.max(axis=1, keepdims=True)
-        e = np.exp(a - peak)
-        return e / e.sum(axis=1, keepdims=True), peak[:, 0]
-    a = shifted.sum(axis=1)
-    total = a.sum(axis=1, keepdims=True)
-    out = a / np.where(total > 0, total, 1.0)
-    out[total[:, 0] <= 0, :] = 1.0 / n_places
-    return out, a.max(axis=1)
+    return RULES.get(rule).combine(shifted, valid, eps)
 
 
 def aggregate(

@@ -16,8 +16,9 @@ Three strategies turn them into one row of place scores per query:
 * ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then
   L1-normalised into a distribution P(l | Q).
 
-:func:`decide` turns scores into a predicted place index (``-1`` = no match)
-and a confidence. Everything is float64 numpy, vectorised over queries,
+:mod:`readout.strategies` registers them (scores, confidence, title) and
+:func:`~vprsnn_export.readout.strategies.decide` turns scores into a predicted place
+index (``-1`` = no match) and a confidence. Everything is float64 numpy, vectorised over queries,
 neurons and places (matrix products and fancy indexing only).
 """
 
@@ -26,8 +27,6 @@ from __future__ import annotations
 from typing import Final
 
 import numpy as np
-
-STRATEGIES: Final[tuple[str, ...]] = ("standard", "weighted", "wprob")
 
 #: Predicted place index that means "no match" (the query is rejected).
 NO_MATCH: Final[int] = -1
@@ -178,7 +177,7 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
 
     Choice: when ``max == min`` for a query (all scores equal, e.g. a query
     that produced no spike) eq. 12 is 0/0; that query gets the uniform
-    distribution ``1/n_places``, which :func:`decide` reports as a no-match.
+    distribution ``1/n_places``, which ``strategies.decide`` reports as a no-match.
     Otherwise the best place has normalised score 1, so the L1 sum is >= 1
     and never 0.
     """
@@ -200,7 +199,7 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     .. math:: c_q = \\frac{\\max_l \\mathrm{Score}_{ql}}{\\sum_l \\mathrm{Score}_{ql}}
 
     (0 when the sum is 0). Scores must be non-negative, so c lies in [0, 1].
-    For W+Prob the confidence is ``max_l P(l | Q)`` instead (see :func:`decide`).
+    For W+Prob the confidence is ``max_l P(l | Q)`` instead (:func:`distribution_decision`).
     """
     s = _scores2d(scores)
     if np.any(s < 0):
@@ -210,57 +209,25 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)
 
 
-def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted place index and confidence per query.
+def share_decision(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """No-match mask and confidence of score rows (Standard, Weighted).
 
-    .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\qquad
-              c_q = \\begin{cases} \\max_l P(l \\mid Q_q) & \\text{wprob} \\\\
-                     \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql} & \\text{standard, weighted}
-                     \\end{cases}
-
-    Returns ``(pred, confidence)``: ``pred`` int64 of shape ``(n_queries,)``,
-    ties to the lowest place index; ``confidence`` float64. A query is a
-    no-match (``pred == -1``, confidence 0) when its scores are all zero
-    (standard / weighted) or when its distribution is flat, i.e. every entry
-    equal (wprob; this covers the uniform distribution of
-    :func:`wprob_distribution` and any flat aggregated distribution). For
-    ``"wprob"`` pass the distribution (``wprob_distribution``, an aggregated
-    distribution or ``baseline.sad_distribution``) as ``scores``.
+    .. math:: \\mathrm{no\\ match}_q = [\\forall l: \\mathrm{Score}_{ql} = 0], \\qquad
+              c_q = \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql}
     """
-    if strategy not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy!r}; expected one of {STRATEGIES}")
     s = _scores2d(scores)
-    pred = np.argmax(s, axis=1).astype(np.int64)
-    if strategy == "wprob":
-        top = s.max(axis=1)
-        no_match = top == s.min(axis=1)
-        conf = top.copy()
-    else:
-        no_match = np.all(s == 0, axis=1)
-        conf = share_confidence(s)
-    pred[no_match] = NO_MATCH
-    conf[no_match] = 0.0
-    return pred, conf
+    return np.all(s == 0, axis=1), share_confidence(s)
 
 
-def strategy_scores(sr: np.ndarray, sq: np.ndarray, strategy: str, gamma: float | None = None) -> np.ndarray:
-    """Scores (standard, weighted) or distribution (wprob), shape ``(n_queries, n_places)``.
+def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """No-match mask and confidence of distribution rows (W+Prob, aggregated, SAD).
 
-    .. math::
-        \\text{standard}: S^Q A, \\quad \\text{weighted}: \\text{eq. 9-11}, \\quad
-        \\text{wprob}: \\text{eq. 12-13 applied to the weighted scores}
+    .. math:: \\mathrm{no\\ match}_q = [\\max_l P(l \\mid Q_q) = \\min_l P(l \\mid Q_q)], \\qquad
+              c_q = \\max_l P(l \\mid Q_q)
 
-    ``gamma`` (eq. 9) is required for ``"weighted"`` and ``"wprob"`` and
-    ignored for ``"standard"``. Feed the result to :func:`decide` with the
-    same ``strategy``.
+    A flat row (every entry equal, e.g. the uniform distribution of
+    :func:`wprob_distribution`) is a no-match.
     """
-    if strategy not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy!r}; expected one of {STRATEGIES}")
-    if strategy == "standard":
-        return standard_scores(sr, sq)
-    if gamma is None:
-        raise ValueError(f"strategy {strategy!r} needs the involvement threshold gamma")
-    weighted = weighted_scores(sr, sq, gamma)
-    if strategy == "weighted":
-        return weighted
-    return wprob_distribution(weighted)
+    s = _scores2d(distribution)
+    top = s.max(axis=1)
+    return top == s.min(axis=1), top.copy()

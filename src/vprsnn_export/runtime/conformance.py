@@ -28,18 +28,15 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.assignment import decide
+from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
-from vprsnn_export.targets.nir_target import read_nir, write_nir
-from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
+from vprsnn_export.targets.registry import TARGETS, WriteOptions, target_labels
 
 from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult
 
-TARGETS = ("onnx", "nir", "loihi")
 WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
 RUN_FIELDS = {
@@ -49,18 +46,12 @@ RUN_FIELDS = {
     "final_voltage": "final_voltage",
     "saturations": "saturations",
 }
-#: The label of each target's checks.
-TARGET_LABELS = {"onnx": "ONNX (onnxruntime)", "nir": "NIR read back", "loihi": "Loihi read back"}
 
 
 def parse_targets(raw: str, option: str = "--targets", *, allow_none: bool = True) -> tuple[str, ...]:
-    """``"onnx,nir"`` -> ("onnx", "nir"); "none" (when allowed) gives (); InvalidValueError on anything else."""
-    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
-    unknown = [n for n in names if n not in TARGETS and not (allow_none and n == "none")]
-    if unknown or (not allow_none and not names):
-        allowed = ", ".join(TARGETS) + (" (or none)" if allow_none else "")
-        raise InvalidValueError(f"{option} expects some of {allowed}, got {raw!r}")
-    return tuple(n for n in names if n != "none")
+    """``"onnx,nir"`` -> ("onnx", "nir"); "none" (when allowed) gives (); InvalidValueError on anything else
+    (the names are the registered targets, ``targets.registry.TARGETS``)."""
+    return TARGETS.parse_list(raw, option, allow_none=allow_none)
 
 
 # ---------------------------------------------------------------------------- comparisons
@@ -178,7 +169,7 @@ class Contender:
     from it, compared integer by integer before the read-back model is run.
     """
 
-    target: str  # "reference", "onnx", "nir", "loihi"
+    target: str  # "reference" or a registered target's name
     label: str
     backend: Backend
     n_queries: int | None = None
@@ -187,14 +178,17 @@ class Contender:
 
 
 def read_back(target: str, path: Path, written: Source | None, device: torch.device | None = None) -> Contender:
-    """The contender of one exported file: read it back and run it (onnxruntime runs the graph itself)."""
-    label = TARGET_LABELS[target]
-    if target == "onnx":
-        return Contender(target, label, OnnxBackend(Path(path)))
-    rebuilt: Source = read_nir(path) if target == "nir" else read_loihi_model(path)
+    """The contender of one exported file: read it back and run it (onnxruntime runs the graph itself).
+
+    InvalidValueError for a target that is not registered."""
+    entry = TARGETS.get(target)
+    label = entry.label
+    rebuilt = entry.read(Path(path))
+    if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
+        return Contender(target, label, rebuilt)
     backend = backend_of(rebuilt, device)
     runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(backend, f"{'NIR' if target == 'nir' else 'Loihi'} model on the {runs_on}")
+    backend = _Renamed(backend, f"{entry.title} model on the {runs_on}")
     pair = isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel)
     return Contender(
         target,
@@ -255,28 +249,29 @@ def compare_backends(
 def write_targets(
     model: FixedPointModel, folder: Path, targets: Sequence[str]
 ) -> tuple[dict[str, list[Path]], dict[str, str]]:
-    """Write each target of ``model`` into ``folder`` (ONNX with its W+Prob head and raster).
+    """Write each target of ``model`` into ``folder``, in the registry's order (ONNX with its W+Prob head and raster).
 
-    Returns (files per target, targets skipped with the reason: e.g. ONNX cannot express
-    a network without state isolation).
+    Returns (files per target, targets skipped with the reason: a writer's InvalidValueError,
+    e.g. ONNX cannot express a network without state isolation). InvalidValueError for a
+    target that is not registered.
     """
+    wanted = {TARGETS.get(name).name for name in targets}
+    options = WriteOptions(source_sha256=model.source_sha256, conformance=True)
     files: dict[str, list[Path]] = {}
     skipped: dict[str, str] = {}
-    if "onnx" in targets:
+    for entry in TARGETS.values():
+        if entry.name not in wanted:
+            continue
         try:
-            files["onnx"] = [write_onnx(model, folder / "model.onnx", with_wprob=True, with_raster=True)]
+            files[entry.name] = entry.write(model, folder / entry.filename, options)
         except InvalidValueError as exc:
-            skipped["onnx"] = str(exc)
-    if "nir" in targets:
-        files["nir"] = [write_nir(model, folder / "model.nir", source_sha256=model.source_sha256)]
-    if "loihi" in targets:
-        files["loihi"] = list(write_loihi(model, folder / "loihi", source_sha256=model.source_sha256).values())
+            skipped[entry.name] = str(exc)
     return files, skipped
 
 
 def target_path(target: str, paths: Sequence[Path]) -> Path:
-    """What a target's reader takes: the file (ONNX, NIR) or the folder of the Loihi-style files."""
-    return Path(paths[0]).parent if target == "loihi" else Path(paths[0])
+    """What a target's reader takes: the file (ONNX, NIR) or the folder of the files (Loihi-style)."""
+    return TARGETS.get(target).reader_path(paths)
 
 
 def cross_implementation(
@@ -285,7 +280,7 @@ def cross_implementation(
     int_run: SpikeRun | None = None,
     *,
     folder: Path,
-    targets: Sequence[str] = TARGETS,
+    targets: Sequence[str] | None = None,
     reference_queries: int = 3,
     device: torch.device | None = None,
     extra: Sequence[Contender] = (),
@@ -295,13 +290,14 @@ def cross_implementation(
     The baseline is the integer simulator (``int_run``: its recorded run of ``spikes``,
     when already made); the reference stepper runs the first ``reference_queries``
     presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
+    ``targets``: names of registered targets (None: all of them).
     """
-    files, skipped = write_targets(model, Path(folder), targets)
+    files, skipped = write_targets(model, Path(folder), TARGETS.names() if targets is None else targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
     contenders: list[Contender] = []
     if n_ref:
         contenders.append(Contender("reference", "reference stepper", ReferenceStepper(model), n_queries=n_ref))
-    contenders += [read_back(t, target_path(t, files[t]), model, device) for t in TARGETS if t in files]
+    contenders += [read_back(t, target_path(t, paths), model, device) for t, paths in files.items()]
     contenders += list(extra)
     checks = compare_backends(
         IntegerNetwork(model, device), contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model)
@@ -316,7 +312,7 @@ def cross_implementation(
 
 def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
     """Table rows {target, check, result, detail} of comparisons (the target is the label before ':')."""
-    names = {v: k for k, v in (labels or TARGET_LABELS).items()}
+    names = {v: k for k, v in (labels or target_labels()).items()}
     rows = []
     for check in checks:
         prefix, _, what = check.check.partition(": ")
@@ -333,7 +329,6 @@ def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | N
 
 __all__ = [
     "RUN_FIELDS",
-    "TARGETS",
     "WPROB_ROUNDING",
     "Contender",
     "backend_of",

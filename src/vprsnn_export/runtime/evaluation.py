@@ -15,14 +15,7 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.aggregation import (
-    VELOCITY_ESTIMATES,
-    aggregate,
-    estimate_velocity,
-    smooth_velocity,
-    track_velocity,
-)
-from vprsnn_export.readout.assignment import STRATEGIES, decide, standard_scores, weighted_scores, wprob_distribution
+from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.baseline import (
     cosine_similarities,
     diagonal_sums,
@@ -39,6 +32,8 @@ from vprsnn_export.readout.regions import (
     module_layout,
     regularise,
 )
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, all_scores, decide
+from vprsnn_export.readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES, VelocitySettings
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 
@@ -56,8 +51,9 @@ class ReadoutOptions:
     rule: str = "product"
     velocity: float = 1.0
     velocity_candidates: tuple[float, ...] | None = None  # estimate the velocity over this grid instead
-    # with candidates: "window" (each window alone), "track" (over the stream) or "smooth" (track with a fixed lag)
-    velocity_estimate: str = "window"
+    # with candidates: a registered estimator (readout.velocity): "smooth" (track with a fixed lag; the default),
+    # "track" (over the stream) or "window" (each window alone)
+    velocity_estimate: str = DEFAULT_VELOCITY_ESTIMATE
     velocity_span: int = 10  # "track", "smooth": windows whose scores are summed before the velocity is chosen
     velocity_length: int | None = None  # "track", "smooth": frames per scored trajectory (None: 2k, 3k)
     velocity_memory: int = 50  # "track", "smooth": recent frames whose mean is divided out (0: none)
@@ -81,44 +77,24 @@ def decision_metrics(
 def aggregated(wprob: np.ndarray, k: int, options: ReadoutOptions, frame_positions: np.ndarray | None) -> np.ndarray:
     """W+Prob aggregated over k frames: the given velocity, or one estimated from the query stream.
 
-    With ``velocity_candidates`` the velocity is estimated over that grid, per
-    window (``velocity_estimate="window"``), tracked over the ``velocity_span``
-    most recent windows (``"track"``) or over those and the next
-    ``velocity_lag`` windows (``"smooth"``); otherwise ``options.velocity`` is used.
+    With ``velocity_candidates`` the velocity is estimated over that grid by the registered
+    estimator ``velocity_estimate`` (``readout.velocity.VELOCITY_ESTIMATES``): per window
+    (``"window"``), tracked over the ``velocity_span`` most recent windows (``"track"``) or over
+    those and the next ``velocity_lag`` windows (``"smooth"``, the default); otherwise
+    ``options.velocity`` is used.
     """
-    if options.velocity_candidates and options.velocity_estimate not in VELOCITY_ESTIMATES:
-        raise InvalidValueError(
-            f"unknown velocity estimate {options.velocity_estimate!r}; choose from {', '.join(VELOCITY_ESTIMATES)}"
-        )
+    estimator = VELOCITY_ESTIMATES.get(options.velocity_estimate) if options.velocity_candidates else None
     if k == 1:
         return wprob
-    if options.velocity_candidates:
-        candidates = np.asarray(options.velocity_candidates)
-        if options.velocity_estimate == "smooth":
-            return smooth_velocity(
-                wprob,
-                k,
-                candidates,
-                options.velocity_span,
-                options.rule,
-                frame_positions,
-                lag=options.velocity_lag,
-                length=options.velocity_length,
-                memory=options.velocity_memory,
-            )[1]
-        if options.velocity_estimate == "track":
-            _, result = track_velocity(
-                wprob,
-                k,
-                candidates,
-                options.velocity_span,
-                options.rule,
-                frame_positions,
-                length=options.velocity_length,
-                memory=options.velocity_memory,
-            )
-            return result
-        return estimate_velocity(wprob, k, candidates, options.rule, frame_positions)[1]
+    if estimator is not None and options.velocity_candidates:
+        settings = VelocitySettings(
+            rule=options.rule,
+            span=options.velocity_span,
+            length=options.velocity_length,
+            memory=options.velocity_memory,
+            lag=options.velocity_lag,
+        )
+        return estimator.estimate(wprob, k, np.asarray(options.velocity_candidates), frame_positions, settings)[1]
     return aggregate(wprob, k, options.velocity, rule=options.rule, frame_positions=frame_positions)
 
 
@@ -169,15 +145,14 @@ def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.nd
 def readout_scores(
     calibration: np.ndarray, query_counts: np.ndarray, gamma: float, modules: ModuleLayout | None = None
 ) -> dict[str, np.ndarray]:
-    """The k=1 scores of every strategy {standard, weighted, wprob}, (Q, places) each.
+    """The k=1 scores of every registered strategy (``readout.strategies.STRATEGIES``), (Q, places) each.
 
     With ``modules`` (an ensemble) the hyperactive neurons are silenced first
     (``readout.regions.regularise``: decided from S^R alone). The weighted scores are computed once
-    and W+Prob is derived from them.
+    and W+Prob is derived from them (:func:`~vprsnn_export.readout.strategies.all_scores`).
     """
     sr, sq = regularise(calibration, query_counts, modules)
-    weighted = weighted_scores(sr, sq, gamma)
-    return {"standard": standard_scores(sr, sq), "weighted": weighted, "wprob": wprob_distribution(weighted)}
+    return all_scores(sr, sq, gamma)
 
 
 def readout_rows(
@@ -213,9 +188,9 @@ def score_rows(
         metrics = decision_metrics(scores[strategy], strategy, reference_place_ids, query_place_ids, options.tolerance)
         rows.append({"strategy": strategy, "k": 1, **metrics})
     for k in sorted(set(options.ks) - {1}):
-        dist = aggregated(scores["wprob"], k, options, frame_positions)
-        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
-        rows.append({"strategy": "wprob", "k": k, **metrics})
+        dist = aggregated(scores[SEQUENCE_STRATEGY], k, options, frame_positions)
+        metrics = decision_metrics(dist, SEQUENCE_STRATEGY, reference_place_ids, query_place_ids, options.tolerance)
+        rows.append({"strategy": SEQUENCE_STRATEGY, "k": k, **metrics})
     return rows
 
 
@@ -224,7 +199,7 @@ def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
     return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
-def module_rows(
+def module_accuracies(
     wprob: np.ndarray,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
@@ -374,7 +349,7 @@ def evaluate_float(
         query_counts=counts,
         modules=None
         if layout is None
-        else module_rows(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
+        else module_accuracies(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
     )
 

@@ -40,18 +40,15 @@ from vprsnn_export.fileio import (
     sha256_file,
     staging_folder,
 )
-from vprsnn_export.modules import module_count
-from vprsnn_export.readout.assignment import decide
-from vprsnn_export.targets.loihi_target import model_budgets, write_loihi
+from vprsnn_export.readout.strategies import decide
 from vprsnn_export.targets.nir_target import (
     CONSUMERS,
     WTA_INHIBITION,
     apply_readout_rule,
     load_graph,
     spike_agreement,
-    write_nir,
 )
-from vprsnn_export.targets.onnx_target import write_onnx
+from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
 from .conformance import (
     Contender,
@@ -66,11 +63,6 @@ from .deployment import deploy
 from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison
 
-EXPORT_TARGETS = ("nir", "loihi", "onnx")
-INTEGER_TARGETS = ("loihi", "onnx")
-NIR_NAME = "model.nir"
-ONNX_NAME = "model.onnx"
-LOIHI_DIR = "loihi"
 MANIFEST_NAME = "export.json"
 
 
@@ -131,11 +123,8 @@ def load_source(path: str | Path) -> ExportSource:
 
 
 def parse_export_targets(raw: str) -> tuple[str, ...]:
-    """``--to``: some of nir, loihi, onnx (at least one); InvalidValueError otherwise."""
-    names = tuple(dict.fromkeys(v.strip().lower() for v in raw.split(",") if v.strip()))
-    if not names or any(n not in EXPORT_TARGETS for n in names):
-        raise InvalidValueError(f"--to expects some of {', '.join(EXPORT_TARGETS)}, got {raw!r}")
-    return names
+    """``--to``: some of the registered targets (at least one); InvalidValueError otherwise."""
+    return TARGETS.parse_list(raw, "--to")
 
 
 def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
@@ -148,7 +137,7 @@ def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]
         if bits is not None:
             raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")
         return source.fixed_point
-    wanted = [t for t in targets if t in INTEGER_TARGETS]
+    wanted = [t for t in targets if TARGETS.get(t).integer_only]
     if not wanted or source.checkpoint is None:
         return None
     if bits is None:
@@ -162,79 +151,14 @@ def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]
 def consumer_statements(
     source: ExportSource, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
 ) -> dict[str, str]:
-    """What each consumer of each written file computes, in one sentence or three."""
-    thresholds = source.thresholds
-    uniform = bool(np.all(thresholds == thresholds[0]))
-    network = source.network
-    group = network.config.network.n_neurons
-    modules = module_count(len(network.reference_place_ids), network.config.train.module_size)
-    ensemble = (
-        f" The network is an ensemble of {modules} modules of {group} neurons side by side; the hard WTA runs "
-        + (
-            "over the whole ensemble (one winner per step among all neurons)."
-            if network.config.network.wta_scope == "ensemble"
-            else "within each module (one winner per module per step)."
-        )
-        if modules > 1
-        else ""
-    )
+    """What each consumer of each written file computes, in one sentence or three (each target's ``statement``)."""
+    options = WriteOptions(source.sha256, inhibition, wta_node)
     notes: dict[str, str] = {}
-    if "nir" in targets:
-        arithmetic = (
-            "the float network's own arithmetic"
-            if source.is_float
-            else "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
-        )
-        inhibit = (
-            f"plus lateral inhibition ({inhibition} of its threshold per other spike, one step later)"
-            if wta_node and inhibition > 0
-            else "with no inhibition"
-        )
-        notes["nir"] = (
-            "vprsnn-export's read_nir rebuilds the network exactly (WTA from the metadata). A consumer that reads "
-            f"only the nodes (nirtorch with NIR's LIF, snnTorch, Norse) computes {arithmetic}, every neuron over "
-            f"threshold spiking (no WTA) {inhibit}"
-            + (
-                ""
-                if wta_node
-                else "; vx.apply_readout_rule(graph, input spikes, its spikes) turns that into the network's raster "
-                "(the hard WTA, stated as metadata['readout_rule'])"
-            )
-            + ". At dt = 1e-4 s Euler gives "
-            "v <- beta v + I; Norse ignores r (multiply v_threshold by its gain dt/tau before from_nir(graph, "
-            "dt=1e-4)); SpikingJelly fires at v >= threshold (set the threshold to the next float32 above it); "
-            "metadata['consumer_settings'] states both; snnTorch's and SpikingJelly's importers need one threshold "
-            f"for all neurons ({'met' if uniform else 'not met by this model'})"
-            + (
-                ""
-                if not wta_node
-                else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
-                "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
-            )
-            + "."
-            + (
-                ensemble
-                and ensemble
-                + " metadata['populations'] lists the modules; the readout rule's group_size is the WTA group (network.wta_scope)."
-            )
-        )
-    if "onnx" in targets and model is not None:
-        notes["onnx"] = (
-            "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
-            "distribution, identical to the integer simulator." + ensemble
-        )
-    if "loihi" in targets and model is not None:
-        notes["loihi"] = (
-            "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
-            "a_j < 2**17; the hard WTA is a rule in network.json that a Lava user adds after the LIF population."
-            + (ensemble and ensemble + " network.json's modules are the populations exc_m, one per module.")
-            + " Loihi-class cores: "
-            + "; ".join(
-                f"{budget.chip} {budget.cores} cores ({budget.cores_per_module} per module), {budget.synapses:,} synapses"
-                for budget in model_budgets(model)
-            )
-            + " (network.json resources; docs/targets.md §2.5)."
-        )
+    for entry in TARGETS.values():
+        if entry.name in targets and (model is not None or not entry.integer_only):
+            note = entry.statement(source.network, model, options)
+            if note is not None:
+                notes[entry.name] = note
     return notes
 
 
@@ -247,25 +171,21 @@ def export_all(
     inhibition: float = WTA_INHIBITION,
     wta_node: bool = False,
 ) -> dict[str, list[Path]]:
-    """Write each target into ``out``: NIR of the source, ONNX and Loihi-style files of the fixed-point model."""
-    written: dict[str, list[Path]] = {}
-    integer = [t for t in targets if t in INTEGER_TARGETS]
+    """Write each target into ``out`` in the registry's order: the source itself to a target that takes
+    either (NIR), the fixed-point model to an integer-only one (ONNX, Loihi-style files).
+
+    InvalidValueError for a target that is not registered, or an integer-only one without ``model``.
+    """
+    wanted = {TARGETS.get(name).name for name in targets}
+    integer = [name for name in TARGETS if name in wanted and TARGETS.get(name).integer_only]
     if integer and model is None:
         raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
-    if "nir" in targets:
-        written["nir"] = [
-            write_nir(
-                source.network,
-                out / NIR_NAME,
-                source_sha256=source.sha256,
-                wta_inhibition=inhibition,
-                wta_node=wta_node,
-            )
-        ]
-    if "onnx" in targets and model is not None:
-        written["onnx"] = [write_onnx(model, out / ONNX_NAME)]
-    if "loihi" in targets and model is not None:
-        written["loihi"] = list(write_loihi(model, out / LOIHI_DIR, source_sha256=source.sha256).values())
+    options = WriteOptions(source.sha256, inhibition, wta_node)
+    written: dict[str, list[Path]] = {}
+    for entry in TARGETS.values():
+        if entry.name in wanted:
+            network = model if entry.integer_only and model is not None else source.network
+            written[entry.name] = entry.write(network, out / entry.filename, options)
     return written
 
 
@@ -411,7 +331,7 @@ def check_exports(
     """Read every written file back and run it against the project's simulator of what it was written from."""
     comparisons: list[Comparison] = []
     measurements: list[CheckRow] = []
-    integer = [t for t in ("onnx", "loihi") if t in written]
+    integer = [t for t in TARGETS if t in written and TARGETS.get(t).integer_only]
     stages = ["nir"] * ("nir" in written) + ["integer"] * bool(integer and model is not None)
     for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
         if stage == "nir":
@@ -591,8 +511,6 @@ def read_export(folder: str | Path) -> ExportResult:
 
 
 __all__ = [
-    "EXPORT_TARGETS",
-    "INTEGER_TARGETS",
     "MANIFEST_NAME",
     "CheckRow",
     "ExportChecks",

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 from vprsnn_export.stats import MeanStd
 
 from .results import (
@@ -39,7 +40,6 @@ REPORT_MD = "report.md"
 REPORT_HTML = "report.html"
 PLOTS_DIR = "plots"
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
-STRATEGY_TITLES = {"standard": "Standard", "weighted": "Weighted", "wprob": "W+Prob"}
 
 
 def pyplot() -> Any:
@@ -158,8 +158,13 @@ def data_note(settings: Mapping[str, Any]) -> str:
     return f" from {settings['data']} ({selection})"
 
 
+def strategy_title(strategy: str) -> str:
+    """A strategy's title in the report (its registry entry's; a name not registered stays as it is)."""
+    return STRATEGIES.get(strategy).title if strategy in STRATEGIES else strategy
+
+
 def row_label(strategy: str, k: int) -> str:
-    return f"{STRATEGY_TITLES.get(strategy, strategy)} k={k}"
+    return f"{strategy_title(strategy)} k={k}"
 
 
 def verdict(passed: bool) -> str:
@@ -283,7 +288,7 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
         worst_acc = min(
             (
                 row.delta["accuracy"].mean
-                for s in STRATEGY_TITLES
+                for s in STRATEGIES
                 if (row := bits.row(s, 1)) is not None
                 and row.delta is not None
                 and row.delta["accuracy"].mean is not None
@@ -334,7 +339,7 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
 def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     blocks = [Block("h2", "Metric level")]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
-    labels = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
+    labels = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
     for metric in METRICS:
         headers = ["readout", "float %"] + [f"{b.bits}-bit % (Δ)" for b in summary.bits]
         rows = []
@@ -392,7 +397,7 @@ def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     agg_ks = [k for k in ks if k > 1]
     headers = (
         ["bits"]
-        + [f"top-1 {STRATEGY_TITLES[s]} %" for s in STRATEGY_TITLES]
+        + [f"top-1 {strategy_title(s)} %" for s in STRATEGIES]
         + ["W+Prob TV distance"]
         + [f"agreement k={k} %" for k in agg_ks]
     )
@@ -400,7 +405,7 @@ def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     for b in summary.bits:
         rows.append(
             [f"{b.bits}"]
-            + [ms(b.top1_agreement.get(s)) for s in STRATEGY_TITLES]
+            + [ms(b.top1_agreement.get(s)) for s in STRATEGIES]
             + [ms(b.wprob_tv_mean, percent=False, digits=3)]
             + [ms(b.aggregated_agreement.get(k)) for k in agg_ks]
         )
@@ -632,7 +637,7 @@ def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[lis
 
 def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
     plt = pyplot()
-    keys = [(s, 1) for s in STRATEGY_TITLES] + [("wprob", k) for k in ks if k > 1]
+    keys = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -687,7 +692,7 @@ def plot_pr(run: VerifiedRun) -> bytes:
         ax.set_ylim(0, 1.05)
         ax.set_xlabel("recall")
         ax.set_ylabel("precision")
-        ax.set_title(name.replace("wprob", "W+Prob"))
+        ax.set_title(name.replace(SEQUENCE_STRATEGY, strategy_title(SEQUENCE_STRATEGY)))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower left")
     return png(fig)

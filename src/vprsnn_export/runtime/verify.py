@@ -49,14 +49,15 @@ from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, FixedPointModel, check_bits, save_fixed_point
 from vprsnn_export.modules import module_regions
-from vprsnn_export.readout.assignment import STRATEGIES, decide
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.readout.regions import ModuleAccuracy, ModuleLayout, module_accuracy
+from vprsnn_export.readout.strategies import STRATEGIES, decide
 from vprsnn_export.stats import mean_std
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
+from vprsnn_export.targets.registry import TARGETS
 from vprsnn_export.version import __version__
 
-from .conformance import TARGETS, cross_implementation
+from .conformance import cross_implementation
 from .deployment import CALIBRATIONS, deploy
 from .evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_rows, readout_scores
 from .results import (
@@ -144,7 +145,7 @@ class VerifyOptions:
     scale_method: str = "max"
     calibration: str = "deployed"  # "deployed": S^R re-measured on the integer simulator; "float": reused
     reference_queries: int = 3  # presentations run on the slow reference stepper
-    targets: tuple[str, ...] = TARGETS
+    targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
 
     def to_dict(self) -> dict[str, Any]:

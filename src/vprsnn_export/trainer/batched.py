@@ -39,7 +39,7 @@ from .stdp import initial_weights
 from .train import Presentation, TrainedNetwork, epoch_order, train_batch, training_seeds
 
 
-def module_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
+def module_training_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
     """Module m's training rows: r N + [start_m, stop_m) for each reference traversal r in order.
 
     Rows index the reference images stacked traversal after traversal (N places each), the

@@ -12,7 +12,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
 from vprsnn_export.dynamics import FloatNetwork
 
-from .batched import module_rows, train_modules
+from .batched import module_training_rows, train_modules
 from .calibrate import calibrate
 from .train import Presentation
 
@@ -37,7 +37,7 @@ def train_and_calibrate(
     device = torch.device("cpu") if device is None else device
     images = np.concatenate([dataset.traversal(name) for name in references])
     presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]
-    rows = module_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
+    rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
     trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
     network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
     calibration = calibrate(

@@ -1,0 +1,103 @@
+"""The deployment targets' registry: how each is written, read back, checked and described.
+
+One :class:`Target` per format. `export` writes the targets asked for (``--to``),
+`verify` and `export --check` read every written file back and run it beside the
+project's simulators (:mod:`runtime.conformance`), export.json states what each
+consumer computes; all of them iterate :data:`TARGETS` in registration order (the
+default order of ``--to``, ``--targets``, the written files and the checks). Adding a
+target is a writer/reader module in this folder and one ``TARGETS.register`` line
+(docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.registry import Registry
+from vprsnn_export.runs import Backend
+from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
+from vprsnn_export.targets.nir_target import WTA_INHIBITION, read_nir, write_nir
+from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
+from vprsnn_export.targets.statements import loihi_statement, nir_statement, onnx_statement
+
+Network = Checkpoint | FixedPointModel
+
+
+@dataclass(frozen=True)
+class WriteOptions:
+    """How the targets are written: the source's sha256 (provenance), NIR's WTA node, and whether the files
+    are written for the conformance checks (ONNX with its W+Prob head and raster outputs)."""
+
+    source_sha256: str | None = None
+    inhibition: float = WTA_INHIBITION
+    wta_node: bool = False
+    conformance: bool = False
+
+
+@dataclass(frozen=True)
+class Target:
+    """One deployment target.
+
+    ``write(network, path, options)`` writes ``path`` (= output folder / ``filename``) and
+    returns the files; ``read(path)`` gives back a network that the project's simulators run
+    (compared integer by integer with the one written) or a backend of its own (onnxruntime).
+    ``integer_only``: it takes a fixed-point model only (a float checkpoint is quantised first).
+    ``label`` names its checks, ``title`` the read-back network's backend; ``statement`` says what
+    its consumers compute (export.json). ``reads_folder``: the reader takes the folder of the files.
+    """
+
+    name: str
+    title: str
+    label: str
+    integer_only: bool
+    filename: str
+    write: Callable[[Network, Path, WriteOptions], list[Path]]
+    read: Callable[[Path], Network | Backend]
+    statement: Callable[[Network, FixedPointModel | None, WriteOptions], str | None]
+    reads_folder: bool = False
+
+    def reader_path(self, files: Sequence[Path]) -> Path:
+        """What the reader takes: the (first) file written, or their folder."""
+        return Path(files[0]).parent if self.reads_folder else Path(files[0])
+
+
+def integer(network: Network, target: str) -> FixedPointModel:
+    """The fixed-point model an integer target writes (TypeError for a float checkpoint: callers quantise first)."""
+    if not isinstance(network, FixedPointModel):
+        raise TypeError(f"{target} writes a fixed-point model, not a float checkpoint")
+    return network
+
+
+def _write_nir(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    sha = options.source_sha256
+    return [write_nir(network, path, source_sha256=sha, wta_inhibition=options.inhibition, wta_node=options.wta_node)]
+
+
+def _write_onnx(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    return [write_onnx(integer(network, "onnx"), path, with_wprob=True, with_raster=options.conformance)]
+
+
+def _write_loihi(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    return list(write_loihi(integer(network, "loihi"), path, source_sha256=options.source_sha256).values())
+
+
+TARGETS: Registry[Target] = Registry("target")
+TARGETS.register(Target("nir", "NIR", "NIR read back", False, "model.nir", _write_nir, read_nir, nir_statement))
+TARGETS.register(
+    Target("onnx", "ONNX", "ONNX (onnxruntime)", True, "model.onnx", _write_onnx, OnnxBackend, onnx_statement)
+)
+TARGETS.register(
+    Target("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, read_loihi_model, loihi_statement, True)
+)
+
+
+def target_labels() -> dict[str, str]:
+    """{name: label} of every target (the check tables' first column)."""
+    return {entry.name: entry.label for entry in TARGETS.values()}
+
+
+__all__ = ["TARGETS", "Network", "Target", "WriteOptions", "integer", "target_labels"]

@@ -1,0 +1,113 @@
+"""What each consumer of a written file computes, in one sentence or three (export.json's ``consumers``).
+
+One function per deployment target, named by its registry entry (:mod:`targets.registry`):
+``statement(network, model, options)`` with ``network`` what was exported (a float
+checkpoint or a fixed-point model) and ``model`` the fixed-point model the integer targets got.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.modules import module_count
+from vprsnn_export.targets.loihi_target import model_budgets
+
+if TYPE_CHECKING:
+    from vprsnn_export.targets.registry import WriteOptions
+
+
+def ensemble_sentence(network: Checkpoint | FixedPointModel) -> str:
+    """The sentence an ensemble adds to every statement ("" for a single network)."""
+    group = network.config.network.n_neurons
+    modules = module_count(len(network.reference_place_ids), network.config.train.module_size)
+    where = (
+        "over the whole ensemble (one winner per step among all neurons; network.wta_scope = ensemble)."
+        if network.config.network.wta_scope == "ensemble"
+        else "within each module (one winner per module per step; network.wta_scope = module)."
+    )
+    return (
+        f" The network is an ensemble of {modules} modules of {group} neurons side by side; the hard WTA runs {where}"
+        if modules > 1
+        else ""
+    )
+
+
+def nir_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions) -> str:
+    """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
+    is_float = isinstance(network, Checkpoint)
+    thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
+    uniform = bool(np.all(thresholds == thresholds[0]))
+    ensemble = ensemble_sentence(network)
+    wta_node, inhibition = options.wta_node, options.inhibition
+    arithmetic = (
+        "the float network's own arithmetic"
+        if is_float
+        else "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
+    )
+    inhibit = (
+        f"plus lateral inhibition ({inhibition} of its threshold per other spike, one step later)"
+        if wta_node and inhibition > 0
+        else "with no inhibition"
+    )
+    return (
+        "vprsnn-export's read_nir rebuilds the network exactly (WTA from the metadata). A consumer that reads "
+        f"only the nodes (nirtorch with NIR's LIF, snnTorch, Norse) computes {arithmetic}, every neuron over "
+        f"threshold spiking (no WTA) {inhibit}"
+        + (
+            ""
+            if wta_node
+            else "; vx.apply_readout_rule(graph, input spikes, its spikes) turns that into the network's raster "
+            "(the hard WTA, stated as metadata['readout_rule'])"
+        )
+        + ". At dt = 1e-4 s Euler gives "
+        "v <- beta v + I; Norse ignores r (multiply v_threshold by its gain dt/tau before from_nir(graph, "
+        "dt=1e-4)); SpikingJelly fires at v >= threshold (set the threshold to the next float32 above it); "
+        "metadata['consumer_settings'] states both; snnTorch's and SpikingJelly's importers need one threshold "
+        f"for all neurons ({'met' if uniform else 'not met by this model'})"
+        + (
+            ""
+            if not wta_node
+            else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
+            "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
+        )
+        + "."
+        + (
+            ensemble
+            and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is the WTA group."
+        )
+    )
+
+
+def onnx_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions) -> str:
+    """ONNX: onnxruntime computes the integer network exactly."""
+    return (
+        "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
+        "distribution, identical to the integer simulator." + ensemble_sentence(network)
+    )
+
+
+def loihi_statement(
+    network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions
+) -> str | None:
+    """Loihi-style description: what Lava's Dense + LIF compute, and the cores the network needs."""
+    if model is None:
+        return None
+    ensemble = ensemble_sentence(network)
+    return (
+        "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
+        "a_j < 2**17; the hard WTA is a rule in network.json that a Lava user adds after the LIF population."
+        + (ensemble and ensemble + " network.json's modules are the populations exc_m, one per module.")
+        + " Loihi-class cores: "
+        + "; ".join(
+            f"{budget.chip} {budget.cores} cores ({budget.cores_per_module} per module), {budget.synapses:,} synapses"
+            for budget in model_budgets(model)
+        )
+        + " (network.json resources; docs/targets.md §2.5)."
+    )
+
+
+__all__ = ["ensemble_sentence", "loihi_statement", "nir_statement", "onnx_statement"]
