@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from .config import Config, EncoderConfig
+from .errors import InvalidValueError
 from .kernels import bernoulli_spikes
 
 STREAM_QUERY = "query"
@@ -37,10 +38,26 @@ def presentation_seeds(
     return [presentation_seed(seed, stream, traversal, int(p), epoch) for p in place_ids]
 
 
+def pixel_array(images: np.ndarray | torch.Tensor, name: str = "images") -> np.ndarray:
+    """The pixels as float32 when every one is a finite real number; InvalidValueError naming ``name`` otherwise
+    (a NaN pixel would otherwise become a silent zero-rate input)."""
+    values = images.detach().cpu().numpy() if isinstance(images, torch.Tensor) else images
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError) as exc:
+        raise InvalidValueError(f"{name} must be an array of pixel values ({exc})") from None
+    if array.dtype.kind not in "biuf":
+        raise InvalidValueError(f"{name} must hold real pixel values, got dtype {array.dtype}")
+    if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
+        raise InvalidValueError(f"{name} contain NaN or infinite pixels")
+    with np.errstate(over="ignore"):  # beyond float32: +-inf, clipped to rate 0 or 1 as any large pixel
+        return np.asarray(array, dtype=np.float32)
+
+
 def firing_probabilities(images: np.ndarray | torch.Tensor, cfg: EncoderConfig) -> torch.Tensor:
     """p_i = clip(rate_scale * pixel_i, 0, 1), shape (N, D), float32."""
-    pixels = torch.as_tensor(np.asarray(images, dtype=np.float32))
-    return torch.clamp(cfg.rate_scale * pixels, 0.0, 1.0)
+    pixels = torch.as_tensor(pixel_array(images))
+    return torch.clamp(cfg.rate_scale * pixels, 0.0, 1.0).nan_to_num(nan=0.0)
 
 
 def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torch.Tensor:
@@ -50,9 +67,9 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
     with u drawn from ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced by
     the compiled :func:`vprsnn_export.kernels.bernoulli_spikes` without building u.
     """
-    images = np.asarray(images, dtype=np.float32)
+    images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:
-        raise ValueError(f"expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
+        raise InvalidValueError(f"images: expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
     prob = firing_probabilities(images, cfg).numpy()
     return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps))
 
@@ -68,7 +85,31 @@ def encode_presentations(
     epoch: int = 0,
 ) -> torch.Tensor:
     """Encode a traversal's images under their presentation keys (see module docstring)."""
+    place_ids = check_place_ids(place_ids)
+    if not isinstance(traversal, str):
+        raise InvalidValueError(f"traversal must be a name (str), got {type(traversal).__name__}")
     return encode(images, presentation_seeds(seed, stream, traversal, place_ids, epoch), cfg)
+
+
+MAX_PLACE_ID = 1 << 53
+
+
+def check_place_ids(place_ids: Sequence[int] | np.ndarray, name: str = "place_ids") -> np.ndarray:
+    """Place ids as a 1-D int64 array when each is an integer in [0, 2**53]; InvalidValueError naming ``name``."""
+    try:
+        values = np.asarray(place_ids)
+    except (TypeError, ValueError) as exc:
+        raise InvalidValueError(f"{name} must be a 1-D array of integers ({exc})") from None
+    if values.ndim != 1 or (values.size and values.dtype.kind not in "iuf"):
+        raise InvalidValueError(f"{name} must be a 1-D array of integers, got shape {values.shape} {values.dtype}")
+    if values.size and (
+        values.dtype.kind == "f"
+        and not np.all(np.isfinite(values) & (values == np.round(values)))
+        or values.min() < 0
+        or values.max() > MAX_PLACE_ID
+    ):
+        raise InvalidValueError(f"{name} must be whole numbers in [0, 2**53]")
+    return values.astype(np.int64)
 
 
 def query_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:

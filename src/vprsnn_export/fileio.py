@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ModelFileError, VprError
+from .errors import InvalidValueError, ModelFileError, VprError
 
 
 class OutputError(VprError):
@@ -241,7 +241,7 @@ def publish_folder(staging: Path, out: Path) -> Path:
 def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
     """Write arrays plus a JSON header into one ``.npz`` atomically."""
     if META_KEY in arrays:
-        raise ValueError(f"array name {META_KEY!r} is reserved")
+        raise InvalidValueError(f"array name {META_KEY!r} is reserved")
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
     members: dict[str, Any] = {META_KEY: header, **arrays}

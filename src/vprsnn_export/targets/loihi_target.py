@@ -509,7 +509,7 @@ def lava_weight_matrix(desc: LoihiDescription) -> np.ndarray:
     storage = conn["weights_storage"]
     bits, shape = int(storage["bits"]), tuple(int(n) for n in storage["shape"])
     if storage.get("packing") != PACKING or bits != int(conn["num_weight_bits"]):
-        raise ValueError(
+        raise InvalidValueError(
             f"weights_storage must be {PACKING!r} at num_weight_bits = {conn['num_weight_bits']}, "
             f"got {storage.get('packing')!r} at {bits} bits"
         )

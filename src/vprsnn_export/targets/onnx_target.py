@@ -511,7 +511,7 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
     """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs]."""
     array = np.asarray(spikes.numpy() if isinstance(spikes, torch.Tensor) else spikes)
     if array.ndim != 3 or array.dtype not in (np.uint8, np.bool_):
-        raise ValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
+        raise InvalidValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
     names = [o.name for o in sess.get_outputs()]
     pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
     seconds = 0.0
