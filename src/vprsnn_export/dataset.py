@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .arguments import check_place_ids
 from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
 from .fileio import is_readable_file, sha256_bytes
@@ -141,7 +142,9 @@ def load_selection(
 
 def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
     """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
-    wanted = np.asarray(place_ids, dtype=np.int64)
+    if not isinstance(dataset, Dataset):
+        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    wanted = check_place_ids(place_ids)
     position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
     missing = [int(pid) for pid in wanted if int(pid) not in position]
     if missing:

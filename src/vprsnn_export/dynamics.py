@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .arguments import real_array, require_type
 from .config import Config
 from .errors import InvalidValueError
 from .kernels import QUERY_CHUNK, blas_block, float_run
@@ -187,6 +188,7 @@ class FloatNetwork:
     name: str = "float"
 
     def __post_init__(self) -> None:
+        require_type("cfg", self.cfg, Config)
         check_network(None, self.weights, self.thresholds)
         group = self.cfg.network.n_neurons
         if self.weights.shape[1] == 0 or self.weights.shape[1] % group:
@@ -199,8 +201,8 @@ class FloatNetwork:
         cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device
     ) -> FloatNetwork:
         return cls(
-            torch.as_tensor(weights, dtype=torch.float32).to(device),
-            torch.as_tensor(thresholds, dtype=torch.float32).to(device),
+            torch.as_tensor(real_array("weights", weights), dtype=torch.float32).to(device),
+            torch.as_tensor(real_array("thresholds", thresholds), dtype=torch.float32).to(device),
             cfg,
         )
 

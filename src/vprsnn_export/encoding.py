@@ -18,6 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from .arguments import check_place_ids, require_type
 from .config import Config, EncoderConfig
 from .errors import InvalidValueError
 from .kernels import bernoulli_spikes
@@ -91,34 +92,15 @@ def encode_presentations(
     return encode(images, presentation_seeds(seed, stream, traversal, place_ids, epoch), cfg)
 
 
-MAX_PLACE_ID = 1 << 53
-
-
-def check_place_ids(place_ids: Sequence[int] | np.ndarray, name: str = "place_ids") -> np.ndarray:
-    """Place ids as a 1-D int64 array when each is an integer in [0, 2**53]; InvalidValueError naming ``name``."""
-    try:
-        values = np.asarray(place_ids)
-    except (TypeError, ValueError) as exc:
-        raise InvalidValueError(f"{name} must be a 1-D array of integers ({exc})") from None
-    if values.ndim != 1 or (values.size and values.dtype.kind not in "iuf"):
-        raise InvalidValueError(f"{name} must be a 1-D array of integers, got shape {values.shape} {values.dtype}")
-    if values.size and (
-        values.dtype.kind == "f"
-        and not np.all(np.isfinite(values) & (values == np.round(values)))
-        or values.min() < 0
-        or values.max() > MAX_PLACE_ID
-    ):
-        raise InvalidValueError(f"{name} must be whole numbers in [0, 2**53]")
-    return values.astype(np.int64)
-
-
 def query_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
     """The query presentations (N, T, inputs) uint8; every backend is fed exactly these."""
+    require_type("cfg", cfg, Config)
     return encode_presentations(images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_QUERY, traversal=traversal)
 
 
 def calibration_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:
     """The calibration presentations of one reference traversal (identical for every backend)."""
+    require_type("cfg", cfg, Config)
     return encode_presentations(
         images, place_ids, cfg.encoder, seed=cfg.seed, stream=STREAM_CALIBRATE, traversal=traversal
     )

@@ -17,11 +17,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from .arguments import require_integer
 from .config import Config
+
+MAX_COUNT = 1 << 53  # places and module sizes: exact in float64, far beyond any route
 
 
 def module_count(n_places: int, module_size: int) -> int:
     """M = ceil(places / P); 1 when P = 0 (one network) or when there are no places yet."""
+    n_places = require_integer("n_places", n_places, 0, MAX_COUNT)
+    module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
     if module_size <= 0 or n_places <= 0:
         return 1
     return -(-n_places // module_size)
@@ -29,6 +34,8 @@ def module_count(n_places: int, module_size: int) -> int:
 
 def module_regions(n_places: int, module_size: int) -> np.ndarray:
     """(M, 2) int64 [start, stop) indices into the reference places: region m = [m P, min((m + 1) P, places))."""
+    n_places = require_integer("n_places", n_places, 0, MAX_COUNT)
+    module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
     if module_size <= 0:
         return np.array([[0, n_places]], dtype=np.int64)
     starts = np.arange(0, n_places, module_size, dtype=np.int64)

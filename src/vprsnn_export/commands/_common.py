@@ -12,6 +12,7 @@ from typing import Any
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
+from ..fileio import parse_json
 from ..runtime.evaluation import ReadoutOptions
 
 
@@ -177,9 +178,10 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
 
 
 def parse_value(raw: str) -> Any:
-    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string."""
+    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string
+    (:func:`~vprsnn_export.fileio.parse_json`: a value beyond its limits is an InvalidValueError)."""
     try:
-        return json.loads(raw)
+        return parse_json(raw, f"--set/--grid value {raw[:40]!r}")
     except json.JSONDecodeError:
         return raw
 

@@ -14,6 +14,9 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array
+from vprsnn_export.errors import InvalidValueError
+
 from .assignment import wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
@@ -21,11 +24,11 @@ _MAX_ELEMENTS: Final[int] = 4_000_000
 
 
 def _images(name: str, a: np.ndarray) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
+    arr = real_array(name, a)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
+        raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values")
+        raise InvalidValueError(f"{name} contains NaN or infinite values")
     return arr
 
 
@@ -41,7 +44,7 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     ref = _images("reference", reference)
     qry = _images("queries", queries)
     if ref.shape[1] != qry.shape[1]:
-        raise ValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
     n_q, n_p = qry.shape[0], ref.shape[0]
     out = np.empty((n_q, n_p), dtype=np.float64)
     per_query = max(1, n_p * ref.shape[1])
@@ -66,7 +69,7 @@ def sad_distribution(distances: np.ndarray) -> np.ndarray:
     query at equal distance from every place gets the uniform distribution,
     which ``decide(..., "wprob")`` reports as a no-match.
     """
-    d = np.asarray(distances, dtype=np.float64)
+    d = real_array("distances", distances)
     if d.ndim != 2:
-        raise ValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
+        raise InvalidValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
     return wprob_distribution(-d)

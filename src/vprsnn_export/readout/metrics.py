@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
 
@@ -80,7 +81,7 @@ def is_correct(
 
 def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.asarray(correct)
-    conf = np.asarray(confidence, dtype=np.float64)
+    conf = real_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
         raise InvalidValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
     if c.shape[0] == 0:

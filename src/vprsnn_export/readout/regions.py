@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.modules import module_regions, region_mask
@@ -92,6 +93,7 @@ def module_layout(
 ) -> ModuleLayout:
     """The layout of the ensemble ``cfg`` describes over ``n_places`` reference places (rho and lambda from
     the config unless given)."""
+    require_type("cfg", cfg, Config)
     rho = cfg.assignment.hyperactive_share if hyperactive_share is None else hyperactive_share
     lam = cfg.assignment.outside_weight if outside_weight is None else outside_weight
     return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
@@ -176,6 +178,7 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
 
     Only S^R (reference data) decides; the queries are not looked at.
     """
+    require_type("layout", layout, (ModuleLayout, type(None)))
     sr_, sq_ = _counts("sr", sr), _counts("sq", sq).copy()
     if sq_.shape[1] != sr_.shape[0]:
         raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")

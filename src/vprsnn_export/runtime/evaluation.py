@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
@@ -210,6 +211,7 @@ def readout_rows(
 
     ``modules``: the layout of an ensemble, whose hyperactive neurons are silenced (None: no regularisation).
     """
+    require_type("options", options, ReadoutOptions)
     check_readout_arrays(calibration, query_counts, reference_place_ids, query_place_ids)
     check_sequence_length(options, len(query_place_ids))
     check_places_overlap(reference_place_ids, query_place_ids, options.tolerance)
@@ -343,6 +345,8 @@ def evaluate_float(
     (``train.module_size`` > 0) is read out over the whole route with its hyperactive
     neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
     """
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("options", options, ReadoutOptions)
     device = torch.device("cpu") if device is None else device
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     run = network.run(
@@ -392,6 +396,8 @@ def evaluate_fixed_point(
     With ``float_checkpoint`` the float network runs on the same spike trains and the
     per-step agreement of the two rasters is added as ``winner_agreement``.
     """
+    require_type("model", model, FixedPointModel)
+    require_type("options", options, ReadoutOptions)
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.kernels import integer_run
@@ -134,6 +135,7 @@ class IntegerNetwork:
     prepared: PreparedModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        require_type("model", self.model, FixedPointModel)
         self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
         self.prepared = prepare(self.model, self.device)
 
