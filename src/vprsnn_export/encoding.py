@@ -29,7 +29,7 @@ STREAM_CALIBRATE = "calibrate"
 
 def presentation_seed(seed: int, stream: str, traversal: str, place_id: int, epoch: int = 0) -> int:
     """Hash a presentation key to a 63-bit generator seed (sha256, first 8 bytes)."""
-    key = f"vprsnn/v1|{seed}|{stream}|{traversal}|{int(place_id)}|{epoch}".encode()
+    key = f"vprsnn/v1|{seed}|{stream}|{traversal}|{int(place_id)}|{epoch}".encode("utf-8", "surrogateescape")
     return int.from_bytes(hashlib.sha256(key).digest()[:8], "little") & ((1 << 63) - 1)
 
 

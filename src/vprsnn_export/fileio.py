@@ -94,7 +94,7 @@ def _check_ancestors(path: Path) -> None:
             if not parent.is_dir():
                 raise OutputError(f"{parent} is not a folder", path)
             break
-    if len(path.name.encode()) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
+    if len(os.fsencode(path.name)) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
         raise OutputError("the file name is too long for this file system", path)
 
 
@@ -259,6 +259,8 @@ def parse_json(text: str | bytes, what: str) -> Any:
         value = json.loads(text, parse_int=_json_int)
     except RecursionError:
         raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels") from None
+    except InvalidValueError as exc:  # an integer literal beyond the limit
+        raise InvalidValueError(f"{what}: {exc}") from None
     stack: list[tuple[Any, int]] = [(value, 1)]
     while stack:
         item, depth = stack.pop()

@@ -19,8 +19,10 @@ import numpy as np
 
 from .arguments import require_integer
 from .config import Config
+from .errors import InvalidValueError
 
 MAX_COUNT = 1 << 53  # places and module sizes: exact in float64, far beyond any route
+MAX_MODULES = 1 << 20  # modules of one ensemble: beyond any route, before the (M, 2) regions exhaust memory
 
 
 def module_count(n_places: int, module_size: int) -> int:
@@ -38,6 +40,11 @@ def module_regions(n_places: int, module_size: int) -> np.ndarray:
     module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
     if module_size <= 0:
         return np.array([[0, n_places]], dtype=np.int64)
+    if module_count(n_places, module_size) > MAX_MODULES:
+        raise InvalidValueError(
+            f"{n_places} places in modules of {module_size} make more than {MAX_MODULES} modules "
+            "(train.module_size sets the places per module)"
+        )
     starts = np.arange(0, n_places, module_size, dtype=np.int64)
     return np.stack([starts, np.minimum(starts + module_size, n_places)], axis=1)
 

@@ -9,11 +9,20 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
 from ..fileio import parse_json
 from ..runtime.evaluation import ReadoutOptions
+
+
+def integer(text: str) -> int:
+    """An option's integer: ASCII decimal digits with an optional '-' (``int()`` also takes '٣' and '1_0')."""
+    value = ascii_int(text.strip())
+    if value is None:
+        raise ValueError(text)  # argparse: "invalid integer value"
+    return value
 
 
 def non_empty(text: str) -> str:
@@ -50,7 +59,7 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
     parser.add_argument(
         "--threads",
-        type=int,
+        type=integer,
         default=None,
         metavar="N",
         help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
@@ -87,20 +96,20 @@ def add_readout_options(
     )
     group.add_argument(
         "--velocity-span",
-        type=int,
+        type=integer,
         default=10,
         metavar="N",
         help="smooth, track: recent windows whose scores are summed (10)",
     )
     group.add_argument(
         "--velocity-lag",
-        type=int,
+        type=integer,
         metavar="N",
         help="smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
     )
     group.add_argument(
         "--match-window",
-        type=int,
+        type=integer,
         default=0,
         metavar="N",
         help="a prediction within +-N places of the truth is correct",
@@ -119,13 +128,13 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         help="starting configuration: dog (the default: illumination-invariant DoG ON/OFF input channels, "
         "docs/model.md) or paper (the paper's patch-normalised intensity input); the options below apply on top",
     )
-    group.add_argument("--seed", type=int, help="seed for weights, shuffles and every spike")
-    group.add_argument("--epochs", type=int, help="training epochs")
-    group.add_argument("--timesteps", type=int, help="presentation window T")
-    group.add_argument("--neurons", type=int, help="excitatory neurons N_exc")
+    group.add_argument("--seed", type=integer, help="seed for weights, shuffles and every spike")
+    group.add_argument("--epochs", type=integer, help="training epochs")
+    group.add_argument("--timesteps", type=integer, help="presentation window T")
+    group.add_argument("--neurons", type=integer, help="excitatory neurons N_exc")
     group.add_argument(
         "--module-size",
-        type=int,
+        type=integer,
         help="places per module: one network per region of this many consecutive places, trained side by side "
         "(0, the default: one network for all places)",
     )
@@ -193,10 +202,10 @@ MAX_VELOCITY = 1000.0  # places per frame: beyond any camera rate along a route
 
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
     """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
-    try:
-        values = tuple(int(v) for v in raw.split(",") if v.strip())
-    except ValueError:
-        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}") from None
+    parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
+    if None in parsed:
+        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}")
+    values = tuple(int(v or 0) for v in parsed)
     if not values or min(values) < 1 or max(values) > maximum:
         raise InvalidValueError(f"{option} expects integers from 1 to {maximum}, got {raw!r}")
     return values

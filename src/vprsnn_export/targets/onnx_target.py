@@ -79,6 +79,9 @@ def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
     return numpy_helper.from_array(np.asarray(value), name=name)
 
 
+INT32_MAX = (1 << 31) - 1  # MatMulInteger accumulates in int32: max_j sum_i q_ij must not exceed this
+
+
 def check_exportable(model: FixedPointModel) -> None:
     """The graph implements state isolation (V = 0 at t = 0 of every presentation) and 8-bit-or-less mantissas."""
     validate(model, Path("<fixed-point model>"))
@@ -89,6 +92,12 @@ def check_exportable(model: FixedPointModel) -> None:
         )
     if model.bits > 8:
         raise InvalidValueError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
+    bound = int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) if model.weight_mantissa.size else 0
+    if bound > INT32_MAX:
+        raise InvalidValueError(
+            f"a current sum reaches {bound} (max_j sum_i q_ij), beyond MatMulInteger's int32 accumulator "
+            f"({INT32_MAX}): the graph would wrap (about 8.4 M inputs at 8 bits); use fewer inputs or another target"
+        )
 
 
 def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
