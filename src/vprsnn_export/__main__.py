@@ -6,6 +6,8 @@ the command line is imported, then Python's own handler is back and
 :func:`vprsnn_export.cli.main` turns the interrupt into the same line after cleaning up.
 """
 
+import errno
+import os
 import signal
 import sys
 
@@ -22,8 +24,32 @@ from .cli import main  # noqa: E402  (imported under the guard above)
 signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+EXIT_BROKEN_PIPE = 128 + signal.SIGPIPE  # what a shell reports for a writer killed by SIGPIPE (`| head`)
+EXIT_WRITE_ERROR = 1
+
+
 def run() -> None:
-    sys.exit(main())
+    """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly."""
+    try:
+        code = main()
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _silence_stdout()
+        code = EXIT_BROKEN_PIPE
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EIO, errno.EFBIG):
+            raise
+        _silence_stdout()
+        print(f"error: cannot write the standard output ({exc.strerror})", file=sys.stderr)
+        code = EXIT_WRITE_ERROR
+    sys.exit(code)
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that Python's own flush at exit does not fail a second time."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 if __name__ == "__main__":

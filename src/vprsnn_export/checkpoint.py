@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from .arguments import require_path
 from .config import Config
 from .dataset import MAX_PLACE_ID, parse_places, parse_synthetic
 from .errors import InvalidValueError, ModelFileError, VprError
@@ -66,8 +67,10 @@ def reproducible(entry: dict[str, Any]) -> dict[str, Any]:
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     """Validate and write a checkpoint atomically (npz arrays + JSON header with the whole config); returns the path."""
+    path = require_path("path", path)
     validate_checkpoint(ckpt, path)
     meta = checkpoint_header(ckpt)
+    check_header(meta, path)  # the reader's own checks: nothing is written that load_checkpoint refuses
     arrays: dict[str, np.ndarray] = {
         "weights": ckpt.weights.astype(np.float32),
         "thresholds": ckpt.thresholds.astype(np.float32),
@@ -81,21 +84,10 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     """Read and validate a checkpoint (shapes, dtypes, finiteness, config); ModelFileError names the file and the problem."""
     meta, arrays = read_container(path, "checkpoint")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    config, traversals, data, history = check_header(meta, path)
     missing = {"weights", "thresholds", "calibration", "reference_place_ids"} - set(arrays)
     if missing:
         raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
-    try:
-        config = Config.from_dict(meta["config"])
-    except (KeyError, VprError) as exc:
-        raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
-    traversals, data = reference_header(meta, path)
-    history = meta.get("history", [])
-    if not isinstance(history, list) or not all(isinstance(entry, dict) for entry in history):
-        raise ModelFileError("history must be a list of per-epoch mappings", path)
     ckpt = Checkpoint(
         config=config,
         weights=arrays["weights"],
@@ -111,6 +103,28 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     return ckpt
 
 
+def check_header(
+    meta: dict[str, Any], path: str | Path
+) -> tuple[Config, list[str], dict[str, str | None], list[dict[str, Any]]]:
+    """A checkpoint header's config, reference traversals, data record and history; ModelFileError naming ``path``.
+
+    Run by the reader on what it reads and by the writer on what it is about to write.
+    """
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    try:
+        config = Config.from_dict(meta["config"])
+    except (KeyError, VprError) as exc:
+        raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
+    traversals, data = reference_header(meta, path)
+    history = meta.get("history", [])
+    if not isinstance(history, list) or not all(isinstance(entry, dict) for entry in history):
+        raise ModelFileError("history must be a list of per-epoch mappings", path)
+    return config, traversals, data, history
+
+
 def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
     """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
 
@@ -120,8 +134,13 @@ def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str],
     if not isinstance(meta.get("package_version", "unknown"), str):
         raise ModelFileError(f"package_version must be a version string, got {meta['package_version']!r}", path)
     traversals = meta.get("reference_traversals", [])
-    if not isinstance(traversals, list) or not traversals or not all(isinstance(t, str) and t for t in traversals):
-        raise ModelFileError("reference_traversals must be a non-empty list of traversal names", path)
+    if (
+        not isinstance(traversals, list)
+        or not traversals
+        or not all(isinstance(t, str) and t for t in traversals)
+        or len(set(traversals)) != len(traversals)
+    ):
+        raise ModelFileError("reference_traversals must be a non-empty list of distinct traversal names", path)
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
         raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
@@ -153,6 +172,12 @@ def checkpoint_sha256(path: str | Path) -> str:
 def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> None:
     """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
     path = Path(path)
+    if not isinstance(ckpt, Checkpoint):
+        raise ModelFileError(f"not a Checkpoint: a {type(ckpt).__name__}", path)
+    if isinstance(ckpt.reference_traversals, str) or not isinstance(ckpt.reference_traversals, list | tuple):
+        raise ModelFileError(
+            f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}", path
+        )
     net = ckpt.config.network
     n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side

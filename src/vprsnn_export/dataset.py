@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .arguments import ascii_uint, check_place_ids
 from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
 from .fileio import is_readable_file, sha256_bytes
@@ -85,10 +86,10 @@ def parse_places(spec: str) -> tuple[int, int, int]:
     usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
     if len(parts) not in (2, 3):
         raise InvalidValueError(usage)
-    try:
-        values = [int(part) for part in parts]
-    except ValueError:
-        raise InvalidValueError(usage) from None
+    numbers = [ascii_uint(part.strip()) for part in parts]
+    if None in numbers:
+        raise InvalidValueError(usage)
+    values = [int(number or 0) for number in numbers]
     start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
     if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
         raise InvalidValueError(usage)
@@ -102,11 +103,12 @@ def parse_synthetic(data: str) -> int | None:
     if not data.startswith(SYNTHETIC + ":"):
         return None
     text = data[len(SYNTHETIC) + 1 :]
-    if not text.isdigit() or not 1 <= int(text) <= MAX_SYNTHETIC_PLACES:
+    count = ascii_uint(text)
+    if count is None or not 1 <= count <= MAX_SYNTHETIC_PLACES:
         raise InvalidValueError(
             f"--data {data!r}: expected synthetic or synthetic:N with N from 1 to {MAX_SYNTHETIC_PLACES}"
         )
-    return int(text)
+    return count
 
 
 def selection_record(subset: str | Path | None, places: str | None) -> dict[str, str | None]:
@@ -141,7 +143,9 @@ def load_selection(
 
 def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
     """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
-    wanted = np.asarray(place_ids, dtype=np.int64)
+    if not isinstance(dataset, Dataset):
+        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    wanted = check_place_ids(place_ids)
     position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
     missing = [int(pid) for pid in wanted if int(pid) not in position]
     if missing:
@@ -280,9 +284,8 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[
 
 
 def _place_id(value: str | None, line: int, path: Path) -> int:
-    try:
-        place = int(value or "")
-    except ValueError:
+    place = ascii_uint((value or "").strip(" \t"))
+    if place is None:
         raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
     if not 0 <= place <= MAX_PLACE_ID:
         raise DataError(f"line {line}: place_id {place} is outside 0..2**53", path)

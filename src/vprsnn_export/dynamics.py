@@ -26,7 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from .arguments import real_array, require_type
 from .config import Config, wta_group
+from .errors import InvalidValueError
 from .kernels import QUERY_CHUNK, blas_block, float_run
 from .runs import SpikeRun
 
@@ -93,6 +95,7 @@ def run_network(
     one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
     moved to ``weights.device`` chunk by chunk.
     """
+    check_network(spikes, weights, theta)
     if (
         compiled
         and weights.device.type == "cpu"
@@ -159,6 +162,22 @@ def _run_sequential(
     )
 
 
+def check_network(spikes: torch.Tensor | None, weights: torch.Tensor, theta: torch.Tensor) -> None:
+    """Weights (inputs, neurons), thresholds (neurons,) and spikes (N, T, inputs); InvalidValueError naming the one
+    that does not fit (a short threshold vector would broadcast or be read past its end)."""
+    for name, value in (("weights", weights), ("thresholds", theta), ("spikes", spikes)):
+        if value is not None and not isinstance(value, torch.Tensor):
+            raise InvalidValueError(f"{name} must be a torch tensor, got {type(value).__name__}")
+    if weights.ndim != 2:
+        raise InvalidValueError(f"weights must be (inputs, neurons), got shape {tuple(weights.shape)}")
+    if tuple(theta.shape) != (weights.shape[1],):
+        raise InvalidValueError(
+            f"thresholds have shape {tuple(theta.shape)}, expected ({weights.shape[1]},): one per neuron"
+        )
+    if spikes is not None and (spikes.ndim != 3 or spikes.shape[2] != weights.shape[0]):
+        raise InvalidValueError(f"spikes must be (N, T, {weights.shape[0]}), got shape {tuple(spikes.shape)}")
+
+
 @dataclass
 class FloatNetwork:
     """The float reference network: float32 weights and thresholds on a device (a :class:`~vprsnn_export.runs.Backend`)."""
@@ -168,13 +187,22 @@ class FloatNetwork:
     cfg: Config
     name: str = "float"
 
+    def __post_init__(self) -> None:
+        require_type("cfg", self.cfg, Config)
+        check_network(None, self.weights, self.thresholds)
+        group = self.cfg.network.n_neurons
+        if self.weights.shape[1] == 0 or self.weights.shape[1] % group:
+            raise InvalidValueError(
+                f"weights: {self.weights.shape[1]} neurons are not whole modules of network.n_neurons = {group}"
+            )
+
     @classmethod
     def from_arrays(
         cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device
     ) -> FloatNetwork:
         return cls(
-            torch.as_tensor(weights, dtype=torch.float32).to(device),
-            torch.as_tensor(thresholds, dtype=torch.float32).to(device),
+            torch.as_tensor(real_array("weights", weights), dtype=torch.float32).to(device),
+            torch.as_tensor(real_array("thresholds", thresholds), dtype=torch.float32).to(device),
             cfg,
         )
 

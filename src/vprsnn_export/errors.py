@@ -29,8 +29,10 @@ class ModelFileError(VprError):
     """A missing, truncated or invalid checkpoint, fixed-point model or exported file."""
 
 
-class InvalidValueError(VprError):
+class InvalidValueError(VprError, ValueError):
     """An unsupported value: a command-line option, a library argument or a config setting.
 
     The message names what was given (the option, argument or config key) and what is allowed.
+    It is also a ``ValueError``, so callers that caught the bare ``ValueError`` the library once
+    raised for a bad argument still catch it.
     """

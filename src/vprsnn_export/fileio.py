@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ModelFileError, VprError
+from .arguments import require_path
+from .errors import InvalidValueError, ModelFileError, VprError
 
 
 class OutputError(VprError):
@@ -93,7 +94,7 @@ def _check_ancestors(path: Path) -> None:
             if not parent.is_dir():
                 raise OutputError(f"{parent} is not a folder", path)
             break
-    if len(path.name.encode()) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
+    if len(os.fsencode(path.name)) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
         raise OutputError("the file name is too long for this file system", path)
 
 
@@ -238,10 +239,49 @@ def publish_folder(staging: Path, out: Path) -> Path:
     return out
 
 
+JSON_MAX_BYTES = 256 << 20  # a header, option or report.json larger than this is refused before parsing
+JSON_MAX_DEPTH = 64  # nesting of objects and lists (the files written here nest at most 6 deep)
+JSON_MAX_DIGITS = 40  # digits of an integer literal (the counts written here have at most 20)
+
+
+def parse_json(text: str | bytes, what: str) -> Any:
+    """JSON parsed within limits: size (:data:`JSON_MAX_BYTES`), nesting (:data:`JSON_MAX_DEPTH`) and integer
+    length (:data:`JSON_MAX_DIGITS`); InvalidValueError naming ``what`` beyond them.
+
+    The one JSON reader for every header, option and report. Malformed JSON raises ``json.JSONDecodeError``
+    (bytes that are not UTF-8: ``UnicodeDecodeError``), which callers turn into their own error.
+    """
+    if len(text) > JSON_MAX_BYTES:
+        raise InvalidValueError(f"{what}: {len(text)} bytes of JSON exceed the limit of {JSON_MAX_BYTES}")
+    if isinstance(text, bytes):
+        text = text.decode("utf-8")
+    try:
+        value = json.loads(text, parse_int=_json_int)
+    except RecursionError:
+        raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels") from None
+    except InvalidValueError as exc:  # an integer literal beyond the limit
+        raise InvalidValueError(f"{what}: {exc}") from None
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            if depth > JSON_MAX_DEPTH:
+                raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
+            stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
+    return value
+
+
+def _json_int(literal: str) -> int:
+    if len(literal.lstrip("-")) > JSON_MAX_DIGITS:
+        raise InvalidValueError(f"JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
+    return int(literal)
+
+
 def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
     """Write arrays plus a JSON header into one ``.npz`` atomically."""
+    require_path("path", path)
     if META_KEY in arrays:
-        raise ValueError(f"array name {META_KEY!r} is reserved")
+        raise InvalidValueError(f"array name {META_KEY!r} is reserved")
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
     members: dict[str, Any] = {META_KEY: header, **arrays}
@@ -259,6 +299,7 @@ def is_readable_file(path: str | Path) -> bool:
 
 def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Read a container written by :func:`write_container`; any defect is a ModelFileError naming the file."""
+    require_path("path", path)
     if not str(path).strip():
         raise ModelFileError(f"empty {kind} path")
     path = Path(path)
@@ -290,8 +331,8 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
     if META_KEY not in arrays:
         raise ModelFileError(f"not a {kind}: the JSON header is missing", path)
     try:
-        meta = json.loads(arrays.pop(META_KEY).tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        meta = parse_json(arrays.pop(META_KEY).tobytes(), "header")
+    except (UnicodeDecodeError, json.JSONDecodeError, InvalidValueError) as exc:
         raise ModelFileError(f"the JSON header of this {kind} is corrupt ({exc})", path) from None
     if not isinstance(meta, dict):
         raise ModelFileError(f"the JSON header of this {kind} is a {type(meta).__name__}, not a mapping", path)

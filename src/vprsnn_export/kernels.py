@@ -42,13 +42,15 @@ import functools
 import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar, cast
+from typing import Any, TypeVar, cast
 
 import numpy as np
 import torch
 from numba import njit
 
 from .config import Config
+from .errors import InvalidValueError
+from .kernel_checks import require_array, require_groups, require_int
 from .runs import SpikeRun
 
 DECAY_BITS = 12  # V <- (V keep) >> 12: the integer decay's 12-bit fraction (export/model.py DECAY_BITS)
@@ -83,11 +85,11 @@ def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
     """Spikes (N, T, inputs) of 0/1 uint8 or bool as a C-contiguous uint8 numpy array (no copy when possible)."""
     array = spikes.detach().cpu().numpy() if isinstance(spikes, torch.Tensor) else np.asarray(spikes)
     if array.ndim != 3:
-        raise ValueError(f"expected spikes of shape (N, T, inputs), got {array.shape}")
+        raise InvalidValueError(f"spikes: expected shape (N, T, inputs), got {array.shape}")
     if array.dtype == np.bool_:
         array = array.view(np.uint8)
     if array.dtype != np.uint8:
-        raise ValueError(f"expected uint8 or bool spikes, got {array.dtype}")
+        raise InvalidValueError(f"spikes: expected uint8 or bool, got {array.dtype}")
     return np.ascontiguousarray(array)
 
 
@@ -437,7 +439,7 @@ def check_group(n_neurons: int, group: int | None) -> int:
     """The WTA group size: ``n_neurons`` for ``None``; ValueError unless it divides ``n_neurons``."""
     size = n_neurons if group is None else int(group)
     if size < 1 or n_neurons % size:
-        raise ValueError(f"WTA groups of {size} neurons do not divide {n_neurons} neurons")
+        raise InvalidValueError(f"group: WTA groups of {size} neurons do not divide {n_neurons} neurons")
     return size
 
 
@@ -471,13 +473,13 @@ def integer_run(
     array = as_spike_array(spikes)
     q = np.asarray(mantissas)
     if q.ndim != 2 or array.shape[2] != q.shape[0]:
-        raise ValueError(f"spikes {array.shape} do not match weights {q.shape}")
+        raise InvalidValueError(f"mantissas: spikes {array.shape} do not match weights {q.shape}")
     if q.size and int(q.min()) < 0:
-        raise ValueError("integer weights must be non-negative (the kernel relies on V >= 0)")
+        raise InvalidValueError("mantissas: integer weights must be non-negative (the kernel relies on V >= 0)")
     top = int(q.max()) if q.size else 0
     bound = int(q.astype(np.int64).sum(axis=0).max()) if q.size else 0
     if (bound << shift) >= (1 << 62):
-        raise ValueError(f"current sums up to {bound} << {shift} overflow 64-bit voltages")
+        raise InvalidValueError(f"shift: current sums up to {bound} << {shift} overflow 64-bit voltages")
     storage = np.uint8 if top < (1 << 8) else np.uint16 if top < (1 << 16) else np.int64
     n, timesteps, _ = array.shape
     n_neurons = q.shape[1]
@@ -497,7 +499,7 @@ def integer_run(
         rows, start, stop = parts[k]
 
         def run() -> None:
-            saturations, peak = _integer_kernel(
+            saturations, peak = integer_kernel(
                 array[rows],
                 weights,
                 int(shift),
@@ -568,7 +570,7 @@ def float_run(
     array = as_spike_array(spikes)
     w = np.ascontiguousarray(_numpy(weights), dtype=np.float32)
     if w.ndim != 2 or array.shape[2] != w.shape[0]:
-        raise ValueError(f"spikes {array.shape} do not match weights {w.shape}")
+        raise InvalidValueError(f"weights: spikes {array.shape} do not match weights {w.shape}")
     n, timesteps, n_inputs = array.shape
     if block is None:
         block = blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1]) or n_inputs
@@ -583,7 +585,7 @@ def float_run(
 
     def task(k: int) -> Callable[[], None]:
         rows, start, stop = parts[k]
-        return lambda: _float_kernel(
+        return lambda: float_kernel(
             array[rows],
             w,
             theta_array,
@@ -629,7 +631,7 @@ def _probe_block(rows: int, n_inputs: int, n_neurons: int, threads: int) -> int 
         size = block or n_inputs
         if block and block >= n_inputs:
             continue
-        if np.array_equal(_blocked_currents(packed, weights, max(size, 1)), expected):
+        if np.array_equal(blocked_currents(packed, weights, max(size, 1)), expected):
             return size
     return None
 
@@ -936,7 +938,7 @@ def stdp_window(
     if block is None or not batch_sums_in_order(batch, n_inputs, n_neurons):
         return None
     updated = weights.detach().clone().contiguous()
-    fired = _stdp_window(
+    fired = stdp_window_kernel(
         as_spike_array(spikes),
         updated.numpy(),
         np.ascontiguousarray(theta.detach().numpy()),
@@ -1025,10 +1027,10 @@ def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> 
     """
     p = np.asarray(prob, dtype=np.float32)
     if p.ndim != 2 or len(seeds) != p.shape[0]:
-        raise ValueError(f"expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
+        raise InvalidValueError(f"prob: expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
     limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
-    _bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)
+    bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)
     return out
 
 
@@ -1091,6 +1093,172 @@ def _stdp_windows(
     return fired
 
 
+# The checked entry points: every compiled kernel is called from Python only through these,
+# which refuse any array the kernel would index out of bounds (numba checks no bounds).
+SPIKES = (np.uint8,)
+ANY3 = (None, None, None)
+
+
+def integer_kernel(
+    spikes: np.ndarray,
+    mantissas: np.ndarray,
+    shift: int,
+    threshold: np.ndarray,
+    multipliers: np.ndarray,
+    use_multipliers: bool,
+    keep: int,
+    limit: int,
+    wta: bool,
+    group: int,
+    isolation: bool,
+    record: bool,
+    current_store: np.ndarray,
+    start: int,
+    stop: int,
+    tile: int,
+    counts: np.ndarray,
+    n_candidates: np.ndarray,
+    raster: np.ndarray,
+    final: np.ndarray,
+) -> tuple[int, np.int64]:
+    """:func:`_integer_kernel` once every array it indexes is checked (InvalidValueError naming it)."""
+    k = "integer kernel"
+    require_array(k, "spikes", spikes, SPIKES, ANY3)
+    n, timesteps, n_inputs = spikes.shape
+    require_array(k, "mantissas", mantissas, (np.uint8, np.uint16, np.int64), (n_inputs, None))
+    n_neurons = mantissas.shape[1]
+    require_array(k, "threshold", threshold, (np.int64,), (n_neurons,))
+    require_array(k, "multipliers", multipliers, (np.int64,), (n_neurons,))
+    require_groups(k, n_neurons, group, start, stop, tile)
+    require_int(k, "shift", shift, 0, 62)
+    require_array(k, "current_store", current_store, (np.int32, np.int64), (None,), writable=True)
+    if current_store.shape[0] < timesteps * tile:
+        raise InvalidValueError(f"{k}: current_store holds {current_store.shape[0]} values, needs {timesteps * tile}")
+    require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
+    require_array(k, "n_candidates", n_candidates, (np.int32,), (n, timesteps), writable=True)
+    require_array(k, "raster", raster, (np.bool_,), (n if record else None, timesteps, n_neurons), writable=True)
+    require_array(k, "final", final, (np.int64,), (n, n_neurons), writable=True)
+    return _integer_kernel(
+        spikes, mantissas, int(shift), threshold, multipliers, bool(use_multipliers), int(keep), int(limit),
+        bool(wta), int(group), bool(isolation), bool(record), current_store, int(start), int(stop), int(tile),
+        counts, n_candidates, raster, final,
+    )  # fmt: skip
+
+
+def float_kernel(
+    spikes: np.ndarray,
+    weights: np.ndarray,
+    theta: np.ndarray,
+    beta: np.float32,
+    wta: bool,
+    group: int,
+    isolation: bool,
+    record: bool,
+    block: int,
+    start: int,
+    stop: int,
+    tile: int,
+    counts: np.ndarray,
+    n_candidates: np.ndarray,
+    raster: np.ndarray,
+    final: np.ndarray,
+) -> None:
+    """:func:`_float_kernel` once every array it indexes is checked (InvalidValueError naming it)."""
+    k = "float kernel"
+    require_array(k, "spikes", spikes, SPIKES, ANY3)
+    n, timesteps, n_inputs = spikes.shape
+    require_array(k, "weights", weights, (np.float32,), (n_inputs, None))
+    n_neurons = weights.shape[1]
+    require_array(k, "theta", theta, (np.float32,), (n_neurons,))
+    require_groups(k, n_neurons, group, start, stop, tile)
+    require_int(k, "block", block, 1)
+    require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
+    require_array(k, "n_candidates", n_candidates, (np.int32,), (n, timesteps), writable=True)
+    require_array(k, "raster", raster, (np.bool_,), (n if record else None, timesteps, n_neurons), writable=True)
+    require_array(k, "final", final, (np.float32,), (n, n_neurons), writable=True)
+    _float_kernel(
+        spikes, weights, theta, np.float32(beta), bool(wta), int(group), bool(isolation), bool(record), int(block),
+        int(start), int(stop), int(tile), counts, n_candidates, raster, final,
+    )  # fmt: skip
+
+
+def blocked_currents(spikes: np.ndarray, weights: np.ndarray, block: int) -> np.ndarray:
+    """:func:`_blocked_currents` once its arrays are checked (InvalidValueError naming them)."""
+    k = "blocked currents"
+    require_array(k, "spikes", spikes, SPIKES, (None, None))
+    require_array(k, "weights", weights, (np.float32,), (spikes.shape[1], None))
+    return _blocked_currents(spikes, weights, require_int(k, "block", block, 1))
+
+
+def stdp_window_kernel(
+    spikes: np.ndarray,
+    weights: np.ndarray,
+    theta: np.ndarray,
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+    block: int,
+) -> np.ndarray:
+    """:func:`_stdp_window` once every array it indexes is checked (InvalidValueError naming it)."""
+    k = "STDP window kernel"
+    require_array(k, "spikes", spikes, SPIKES, ANY3)
+    require_array(k, "weights", weights, (np.float32,), (spikes.shape[2], None), writable=True)
+    require_array(k, "theta", theta, (np.float32,), (weights.shape[1],))
+    require_int(k, "block", block, 1)
+    return _stdp_window(
+        spikes, weights, theta, beta, bool(wta), pre_keep, post_keep, a_plus, a_minus, w_max, bool(weight_norm),
+        int(block),
+    )  # fmt: skip
+
+
+def bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int, out: np.ndarray) -> None:
+    """:func:`_bernoulli_kernel` once its arrays are checked (InvalidValueError naming them)."""
+    k = "Bernoulli kernel"
+    require_array(k, "thresholds", thresholds, (np.int32,), (None, None))
+    n_rows, n_inputs = thresholds.shape
+    require_array(k, "seeds", seeds, (np.int64,), (n_rows,))
+    steps = require_int(k, "timesteps", timesteps, 0)
+    require_array(k, "out", out, SPIKES, (n_rows, steps, n_inputs), writable=True)
+    _bernoulli_kernel(thresholds, seeds, steps, out)
+
+
+def stdp_windows_kernel(
+    limits: np.ndarray,
+    seeds: np.ndarray,
+    sizes: np.ndarray,
+    blocks: np.ndarray,
+    timesteps: int,
+    weights: np.ndarray,
+    theta: np.ndarray,
+    *args: Any,
+) -> np.ndarray:
+    """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it).
+
+    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm.
+    """
+    k = "STDP windows kernel"
+    require_array(k, "limits", limits, (np.int32,), ANY3)
+    n_modules, batch, n_inputs = limits.shape
+    require_array(k, "seeds", seeds, (np.int64,), (n_modules, batch))
+    require_array(k, "sizes", sizes, (np.int64,), (n_modules,))
+    require_array(k, "blocks", blocks, (np.int64,), (n_modules,))
+    if sizes.size and (sizes.min() < 0 or sizes.max() > batch):
+        raise InvalidValueError(f"{k}: sizes must lie in [0, {batch}], got [{sizes.min()}, {sizes.max()}]")
+    if (blocks[sizes > 0] < 1).any():
+        raise InvalidValueError(f"{k}: blocks must be >= 1 for every module with a batch")
+    steps = require_int(k, "timesteps", timesteps, 0)
+    require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
+    require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
+    if len(args) != 8:
+        raise InvalidValueError(f"{k}: expected 8 scalar parameters, got {len(args)}")
+    return _stdp_windows(limits, seeds, sizes, blocks, steps, weights, theta, *args)
+
+
 def module_slices(n_modules: int, parts: int) -> list[slice]:
     """At most ``parts`` contiguous, non-empty, nearly equal slices of range(n_modules)."""
     bounds = np.linspace(0, n_modules, max(1, min(parts, n_modules)) + 1).round().astype(int)
@@ -1140,7 +1308,7 @@ def stdp_windows(
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
     def run(part: slice) -> np.ndarray:
-        return _stdp_windows(
+        return stdp_windows_kernel(
             limits[part], seeds[part], sizes[part], blocks[part], timesteps, weights[part], theta[part], *args
         )
 

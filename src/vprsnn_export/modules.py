@@ -20,11 +20,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from .arguments import require_integer
 from .config import Config
+from .errors import InvalidValueError
+
+MAX_COUNT = 1 << 53  # places and module sizes: exact in float64, far beyond any route
+MAX_MODULES = 1 << 20  # modules of one ensemble: beyond any route, before the (M, 2) regions exhaust memory
 
 
 def module_count(n_places: int, module_size: int) -> int:
     """M = ceil(places / P); 1 when P = 0 (one network) or when there are no places yet."""
+    n_places = require_integer("n_places", n_places, 0, MAX_COUNT)
+    module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
     if module_size <= 0 or n_places <= 0:
         return 1
     return -(-n_places // module_size)
@@ -32,8 +39,15 @@ def module_count(n_places: int, module_size: int) -> int:
 
 def module_regions(n_places: int, module_size: int) -> np.ndarray:
     """(M, 2) int64 [start, stop) indices into the reference places: region m = [m P, min((m + 1) P, places))."""
+    n_places = require_integer("n_places", n_places, 0, MAX_COUNT)
+    module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
     if module_size <= 0:
         return np.array([[0, n_places]], dtype=np.int64)
+    if module_count(n_places, module_size) > MAX_MODULES:
+        raise InvalidValueError(
+            f"{n_places} places in modules of {module_size} make more than {MAX_MODULES} modules "
+            "(train.module_size sets the places per module)"
+        )
     starts = np.arange(0, n_places, module_size, dtype=np.int64)
     return np.stack([starts, np.minimum(starts + module_size, n_places)], axis=1)
 

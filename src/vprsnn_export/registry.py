@@ -35,7 +35,7 @@ class Registry(Generic[EntryT]):
     def register(self, entry: EntryT) -> EntryT:
         """Add ``entry`` under its name (ValueError when the name is taken); returns it."""
         if entry.name in self._entries:
-            raise ValueError(f"{self.kind}: {entry.name!r} is registered already")
+            raise InvalidValueError(f"{self.kind}: {entry.name!r} is registered already")
         self._entries[entry.name] = entry
         return entry
 

@@ -15,6 +15,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import torch
 
+from vprsnn_export.errors import InvalidValueError
+
 
 @dataclass(frozen=True)
 class SpikeRun:
@@ -36,14 +38,14 @@ class SpikeRun:
     def mean_candidates(self) -> float:
         """Mean |C[t]| over presentations and steps."""
         if self.candidates_per_step is None:
-            raise ValueError("this backend does not report candidates per step")
+            raise InvalidValueError("this backend does not report candidates per step")
         return float(self.candidates_per_step.float().mean())
 
     @property
     def multi_candidate_fraction(self) -> float:
         """Fraction of steps where more than one neuron crossed its threshold."""
         if self.candidates_per_step is None:
-            raise ValueError("this backend does not report candidates per step")
+            raise InvalidValueError("this backend does not report candidates per step")
         return float((self.candidates_per_step > 1).float().mean())
 
     def head(self, n: int) -> SpikeRun:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 
+from .arguments import ascii_uint
 from .errors import InvalidValueError
 
 DEFAULT_THREADS = 1
@@ -16,14 +17,14 @@ DEFAULT_THREADS = 1
 
 def default_threads() -> int:
     """``OMP_NUM_THREADS`` when set to a positive integer, else :data:`DEFAULT_THREADS`."""
-    raw = os.environ.get("OMP_NUM_THREADS", "").strip()
-    return int(raw) if raw.isdigit() and int(raw) > 0 else DEFAULT_THREADS
+    count = ascii_uint(os.environ.get("OMP_NUM_THREADS", "").strip())
+    return count if count is not None and count > 0 else DEFAULT_THREADS
 
 
 def set_threads(threads: int | None = None) -> int:
     """Use ``threads`` CPU threads for torch (the default when None); returns the number in use."""
     count = default_threads() if threads is None else threads
-    if not isinstance(count, int) or count < 1 or count > 1024:
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1 or count > 1024:
         raise InvalidValueError(f"--threads: expected an integer from 1 to 1024, got {threads!r}")
     import torch  # here, not at module top: the CLI imports this module before it can catch an interrupt
 

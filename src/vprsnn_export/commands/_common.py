@@ -9,12 +9,22 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..dataset import Dataset, load_selection
 from ..errors import InvalidValueError
+from ..fileio import parse_json
 from ..readout.rules import RULES
 from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 from ..runtime.evaluation import ReadoutOptions
+
+
+def integer(text: str) -> int:
+    """An option's integer: ASCII decimal digits with an optional '-' (``int()`` also takes '٣' and '1_0')."""
+    value = ascii_int(text.strip())
+    if value is None:
+        raise ValueError(text)  # argparse: "invalid integer value"
+    return value
 
 
 def non_empty(text: str) -> str:
@@ -51,7 +61,7 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
     parser.add_argument(
         "--threads",
-        type=int,
+        type=integer,
         default=None,
         metavar="N",
         help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
@@ -93,20 +103,20 @@ def add_readout_options(
     )
     group.add_argument(
         "--velocity-span",
-        type=int,
+        type=integer,
         default=10,
         metavar="N",
         help="smooth, track: recent windows whose scores are summed (10)",
     )
     group.add_argument(
         "--velocity-lag",
-        type=int,
+        type=integer,
         metavar="N",
         help="smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
     )
     group.add_argument(
         "--match-window",
-        type=int,
+        type=integer,
         default=0,
         metavar="N",
         help="a prediction within +-N places of the truth is correct",
@@ -125,13 +135,13 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         help="starting configuration: dog (the default: illumination-invariant DoG ON/OFF input channels, "
         "docs/model.md) or paper (the paper's patch-normalised intensity input); the options below apply on top",
     )
-    group.add_argument("--seed", type=int, help="seed for weights, shuffles and every spike")
-    group.add_argument("--epochs", type=int, help="training epochs")
-    group.add_argument("--timesteps", type=int, help="presentation window T")
-    group.add_argument("--neurons", type=int, help="excitatory neurons N_exc")
+    group.add_argument("--seed", type=integer, help="seed for weights, shuffles and every spike")
+    group.add_argument("--epochs", type=integer, help="training epochs")
+    group.add_argument("--timesteps", type=integer, help="presentation window T")
+    group.add_argument("--neurons", type=integer, help="excitatory neurons N_exc")
     group.add_argument(
         "--module-size",
-        type=int,
+        type=integer,
         help="places per module: one network per region of this many consecutive places, trained side by side "
         "(0, the default: one network for all places)",
     )
@@ -184,9 +194,10 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
 
 
 def parse_value(raw: str) -> Any:
-    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string."""
+    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string
+    (:func:`~vprsnn_export.fileio.parse_json`: a value beyond its limits is an InvalidValueError)."""
     try:
-        return json.loads(raw)
+        return parse_json(raw, f"--set/--grid value {raw[:40]!r}")
     except json.JSONDecodeError:
         return raw
 
@@ -198,10 +209,10 @@ MAX_VELOCITY = 1000.0  # places per frame: beyond any camera rate along a route
 
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
     """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
-    try:
-        values = tuple(int(v) for v in raw.split(",") if v.strip())
-    except ValueError:
-        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}") from None
+    parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
+    if None in parsed:
+        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}")
+    values = tuple(int(v or 0) for v in parsed)
     if not values or min(values) < 1 or max(values) > maximum:
         raise InvalidValueError(f"{option} expects integers from 1 to {maximum}, got {raw!r}")
     return values

@@ -34,7 +34,7 @@ from ..runtime.results import BitsResult, VerifiedRun
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..targets.registry import TARGETS
 from ..trainer.pipeline import train_and_calibrate
-from ._common import RESULT_COLUMNS, add_runtime_options, format_table
+from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
 DEMO_DATA = "synthetic"
 DEMO_PLACES = 240
@@ -70,7 +70,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="vprsnn-demo",
         help="output folder (default: ./vprsnn-demo; its files are regenerated on each run)",
     )
-    parser.add_argument("--seed", type=int, default=Config().seed, help="seed")
+    parser.add_argument("--seed", type=integer, default=Config().seed, help="seed")
     parser.add_argument("--quick", action="store_true", help=argparse.SUPPRESS)  # tiny run for the tests
     add_runtime_options(parser)
     parser.set_defaults(handler=run)

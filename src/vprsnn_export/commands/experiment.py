@@ -16,7 +16,7 @@ from .. import experiments
 from ..errors import InvalidValueError
 from ..experiments.common import Settings, Variant, document
 from ..fileio import atomic_write_text
-from ._common import parse_int_list, parse_value
+from ._common import integer, parse_int_list, parse_value
 
 HELPER_MODULES = {"common", "plots"}
 
@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--quick", action="store_true", help="tiny synthetic size (CI); otherwise the real data")
     parser.add_argument("--out", default="docs/results", help="output folder (default docs/results)")
     parser.add_argument("--data", help="place manifest (default ../shared/data/nordland_64x32_summer_winter)")
-    parser.add_argument("--seeds", type=int, help="number of independently trained networks (seeds 1..N)")
+    parser.add_argument("--seeds", type=integer, help="number of independently trained networks (seeds 1..N)")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
     parser.add_argument(
@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="experiment route: the module sizes to measure, the first one with every seed (default 100,50,200)",
     )
     parser.add_argument(
-        "--threads", type=int, default=None, metavar="N", help="CPU threads (default: OMP_NUM_THREADS, else 1)"
+        "--threads", type=integer, default=None, metavar="N", help="CPU threads (default: OMP_NUM_THREADS, else 1)"
     )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)

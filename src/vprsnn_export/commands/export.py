@@ -21,6 +21,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from ..arguments import ascii_uint
 from ..dataset import MAX_PLACES
 from ..device import resolve_device
 from ..errors import InvalidValueError
@@ -37,7 +38,7 @@ from ..runtime.exporting import (
 from ..targets.loihi_target import budget_table
 from ..targets.nir_target import WTA_INHIBITION
 from ..targets.registry import TARGETS
-from ._common import add_data_options, add_runtime_options, format_table, print_json
+from ._common import add_data_options, add_runtime_options, format_table, integer, print_json
 
 CHECK_COLUMNS = (("target", "target"), ("check", "check"), ("result", "result"), ("detail", "detail"))
 BUDGET_COLUMNS = (
@@ -72,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--force", action="store_true", help="replace an earlier export in --out")
     parser.add_argument(
         "--quantize",
-        type=int,
+        type=integer,
         metavar="BITS",
         help="float checkpoint only: quantise on the fly for loihi/onnx (per-neuron max-abs scales, float calibration)",
     )
@@ -104,7 +105,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--query", help="with --check: query traversal to present (default: synthetic spike trains)")
     parser.add_argument(
-        "--check-samples", type=int, default=16, help="with --check: presentations to run (0 = all queries)"
+        "--check-samples", type=integer, default=16, help="with --check: presentations to run (0 = all queries)"
     )
     add_data_options(parser, data_required=False)
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
@@ -115,9 +116,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def parse_shape(raw: str) -> tuple[int, int, int]:
     """'MxNxI' -> (modules, neurons per module, inputs), each a positive integer."""
     parts = raw.lower().split("x")
-    if len(parts) != 3 or not all(part.strip().isdigit() and int(part) > 0 for part in parts):
+    numbers = [ascii_uint(part.strip()) for part in parts]
+    if len(numbers) != 3 or not all(numbers):
         raise InvalidValueError(f"--loihi-cores expects MODULESxNEURONSxINPUTS of positive integers, got {raw!r}")
-    modules, neurons, inputs = (int(part) for part in parts)
+    modules, neurons, inputs = (int(number or 0) for number in numbers)
     return modules, neurons, inputs
 
 

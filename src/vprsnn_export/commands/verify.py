@@ -32,6 +32,7 @@ from ._common import (
     add_readout_options,
     add_runtime_options,
     format_table,
+    integer,
     parse_int_list,
     print_json,
     readout_options,
@@ -77,7 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     checks.add_argument(
         "--reference-queries",
-        type=int,
+        type=integer,
         default=3,
         help="queries also run on the slow reference stepper (default 3; 0 = none)",
     )
@@ -97,7 +98,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="read the quantised networks out with the float S^R instead of re-measuring it",
     )
     parser.add_argument(
-        "--seeds", type=int, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std"
+        "--seeds", type=integer, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std"
     )
     parser.add_argument(
         "--report",

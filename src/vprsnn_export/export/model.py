@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from vprsnn_export.arguments import require_path
 from vprsnn_export.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
@@ -52,7 +53,7 @@ def decay_mantissa(beta: float) -> int:
 
 
 def check_bits(bits: int) -> int:
-    if bits not in SUPPORTED_BITS:
+    if isinstance(bits, bool) or not isinstance(bits, int | np.integer) or int(bits) not in SUPPORTED_BITS:
         raise InvalidValueError(
             f"unsupported weight bit width {bits}: choose from {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}"
         )
@@ -224,7 +225,9 @@ class FixedPointModel:
 
 def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
     """Validate and write a fixed-point model atomically (integer arrays + JSON header); returns the path."""
-    validate(model, Path(path))
+    path = require_path("path", path)
+    validate(model, path)
+    check_header(model.header(), path)  # the reader's own checks: nothing is written that it refuses
     arrays: dict[str, np.ndarray] = {
         "weight_mantissa": model.weight_mantissa.astype(np.int32),
         "scale_multiplier": model.scale_multiplier.astype(np.int32),
@@ -240,10 +243,7 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     """Read and validate a fixed-point model; ModelFileError names the file and the problem."""
     meta, arrays = read_container(path, "fixed-point model")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn fixed-point model (format {meta.get('format')!r})", path)
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported fixed-point format version {meta.get('format_version')!r}", path)
+    traversals, data = check_header(meta, path)
     needed = {
         "weight_mantissa",
         "scale_multiplier",
@@ -254,21 +254,6 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     }
     if needed - set(arrays):
         raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
-    traversals, data = reference_header(meta, path)
-    for key in ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits"):
-        if not isinstance(meta.get(key), int) or isinstance(meta.get(key), bool):
-            raise ModelFileError(f"invalid fixed-point header: {key} must be an integer, got {meta.get(key)!r}", path)
-    if not MIN_EXPONENT <= meta["scale_exponent"] <= MAX_EXPONENT:
-        raise ModelFileError(
-            f"scale_exponent {meta['scale_exponent']} is outside [{MIN_EXPONENT}, {MAX_EXPONENT}] "
-            "(weights <= w_max give negative exponents)",
-            path,
-        )
-    sha = meta.get("source_sha256")
-    if not isinstance(sha, str) or not re.fullmatch(r"[!-~]{1,128}", sha):
-        raise ModelFileError(f"source_sha256 must be a digest or label (1-128 printable characters), got {sha!r}", path)
-    if not isinstance(meta.get("arithmetic", {}), dict) or not isinstance(meta.get("quantisation"), dict):
-        raise ModelFileError("invalid fixed-point header: arithmetic and quantisation must be mappings", path)
     try:
         model = FixedPointModel(
             bits=int(meta["bits"]),
@@ -292,11 +277,39 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
     except (KeyError, TypeError, ValueError, VprError) as exc:
         raise ModelFileError(f"invalid fixed-point header ({exc})", path) from None
     validate(model, path)
+    return model
+
+
+def check_header(meta: dict[str, Any], path: Path) -> tuple[list[str], dict[str, str | None]]:
+    """A fixed-point header's checks (format, integer fields, exponent range, source label, mappings, bits
+    record); returns its reference traversals and data record. Run by the reader on what it reads and by
+    the writer on what it is about to write; ModelFileError naming ``path``."""
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn fixed-point model (format {meta.get('format')!r})", path)
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported fixed-point format version {meta.get('format_version')!r}", path)
+    traversals, data = reference_header(meta, path)
+    for key in ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits"):
+        if not isinstance(meta.get(key), int) or isinstance(meta.get(key), bool):
+            raise ModelFileError(f"invalid fixed-point header: {key} must be an integer, got {meta.get(key)!r}", path)
+    if meta["bits"] not in SUPPORTED_BITS:
+        raise ModelFileError(f"unsupported weight bit width {meta['bits']}", path)
+    if not MIN_EXPONENT <= meta["scale_exponent"] <= MAX_EXPONENT:
+        raise ModelFileError(
+            f"scale_exponent {meta['scale_exponent']} is outside [{MIN_EXPONENT}, {MAX_EXPONENT}] "
+            "(weights <= w_max give negative exponents)",
+            path,
+        )
+    sha = meta.get("source_sha256")
+    if not isinstance(sha, str) or not re.fullmatch(r"[!-~]{1,128}", sha):
+        raise ModelFileError(f"source_sha256 must be a digest or label (1-128 printable characters), got {sha!r}", path)
+    if not isinstance(meta.get("arithmetic", {}), dict) or not isinstance(meta.get("quantisation"), dict):
+        raise ModelFileError("invalid fixed-point header: arithmetic and quantisation must be mappings", path)
     if meta["quantisation"].get("bits") not in (None, meta["bits"]):
         raise ModelFileError(
             f"the quantisation record says {meta['quantisation'].get('bits')!r} bits, the header {meta['bits']}", path
         )
-    return model
+    return traversals, data
 
 
 def validate(model: FixedPointModel, path: Path) -> None:
@@ -305,6 +318,10 @@ def validate(model: FixedPointModel, path: Path) -> None:
     def fail(message: str) -> None:
         raise ModelFileError(message, path)
 
+    if not isinstance(model, FixedPointModel):
+        fail(f"not a FixedPointModel: a {type(model).__name__}")
+    if isinstance(model.reference_traversals, str) or not isinstance(model.reference_traversals, list | tuple):
+        fail(f"reference_traversals must be a list of traversal names, got {model.reference_traversals!r}")
     if model.bits not in SUPPORTED_BITS:
         fail(f"unsupported weight bit width {model.bits}")
     net = model.config.network

@@ -26,12 +26,14 @@ checkpoint; nothing is tuned by hand.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from vprsnn_export.arguments import require_bool, require_choice, require_type
 from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.errors import InvalidValueError, ModelFileError
 
 from .model import (
     MULTIPLIER_BITS,
@@ -39,7 +41,9 @@ from .model import (
     FixedPointModel,
     QuantisationReport,
     check_bits,
+    check_header,
     decay_mantissa,
+    validate,
 )
 
 SCALE_METHODS = ("max", "mse")
@@ -285,6 +289,12 @@ def quantize_checkpoint(
 
     ``calibration`` is a copy of the float S^R until :func:`recalibrate` replaces it.
     """
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("ckpt_sha256", ckpt_sha256, str)
+    require_bool("per_neuron", per_neuron)
+    require_bool("fold_thresholds", fold_thresholds)
+    require_choice("scale_method", scale_method, SCALE_METHODS)
+    check_bits(bits)
     arrays = quantise_arrays(
         ckpt.weights,
         ckpt.thresholds,
@@ -297,8 +307,8 @@ def quantize_checkpoint(
     report = QuantisationReport.from_dict(
         dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
     )
-    return FixedPointModel(
-        bits=bits,
+    model = FixedPointModel(
+        bits=int(bits),
         weight_mantissa=arrays.weight_mantissa,
         scale_multiplier=arrays.scale_multiplier,
         scale_exponent=arrays.scale_exponent,
@@ -313,3 +323,9 @@ def quantize_checkpoint(
         source_sha256=ckpt_sha256,
         data=dict(ckpt.data),
     )
+    try:  # the writer's and reader's checks, so that every model made here can be saved and read back
+        validate(model, Path("quantize_checkpoint"))
+        check_header(model.header(), Path("quantize_checkpoint"))
+    except ModelFileError as exc:
+        raise InvalidValueError(f"this checkpoint cannot be quantised to a valid model ({exc})") from None
+    return model

@@ -24,6 +24,9 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array
+from vprsnn_export.errors import InvalidValueError
+
 from .rules import RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
@@ -32,46 +35,46 @@ _MAX_ELEMENTS: Final[int] = 4_000_000
 
 
 def _prob2d(prob: np.ndarray) -> np.ndarray:
-    p = np.asarray(prob, dtype=np.float64)
+    p = real_array("prob", prob)
     if p.ndim != 2 or p.shape[1] == 0:
-        raise ValueError(f"prob must be 2-D (n_queries, n_places>0), got shape {p.shape}")
+        raise InvalidValueError(f"prob must be 2-D (n_queries, n_places>0), got shape {p.shape}")
     if not np.all(np.isfinite(p)):
-        raise ValueError("prob contains NaN or infinite values")
+        raise InvalidValueError("prob contains NaN or infinite values")
     if np.any(p < 0):
-        raise ValueError("prob contains negative values")
+        raise InvalidValueError("prob contains negative values")
     return p
 
 
 def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
     if frame_positions is None:
         return np.arange(n, dtype=np.float64)
-    t = np.asarray(frame_positions, dtype=np.float64)
+    t = real_array("frame_positions", frame_positions)
     if t.shape != (n,):
-        raise ValueError(f"frame_positions must have shape ({n},), got {t.shape}")
+        raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
     if not np.all(np.isfinite(t)):
-        raise ValueError("frame_positions contains NaN or infinite values")
+        raise InvalidValueError("frame_positions contains NaN or infinite values")
     if np.any(np.diff(t) < 0):
-        raise ValueError("frame_positions must be non-decreasing in stream order")
+        raise InvalidValueError("frame_positions must be non-decreasing in stream order")
     return t
 
 
 def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
-    v = np.asarray(velocity, dtype=np.float64)
+    v = real_array("velocity", velocity)
     if v.ndim == 0:
         v = np.full(n, float(v))
     if v.shape != (n,):
-        raise ValueError(f"velocity must be a float or have shape ({n},), got {v.shape}")
+        raise InvalidValueError(f"velocity must be a float or have shape ({n},), got {v.shape}")
     if not np.all(np.isfinite(v)):
-        raise ValueError("velocity contains NaN or infinite values")
+        raise InvalidValueError("velocity contains NaN or infinite values")
     return v
 
 
 def _check_args(k: int, rule: str, eps: float) -> int:
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"window size k must be an integer >= 1, got {k!r}")
+        raise InvalidValueError(f"window size k must be an integer >= 1, got {k!r}")
     RULES.get(rule)  # InvalidValueError naming the registered rules
     if not (np.isfinite(eps) and eps > 0):
-        raise ValueError(f"eps must be a finite value > 0, got {eps}")
+        raise InvalidValueError(f"eps must be a finite value > 0, got {eps}")
     return int(k)
 
 
@@ -252,11 +255,11 @@ def window_scores(
 
 
 def _candidates(candidates: np.ndarray) -> np.ndarray:
-    cands = np.asarray(candidates, dtype=np.float64).ravel()
+    cands = real_array("candidates", candidates).ravel()
     if cands.size == 0:
-        raise ValueError("candidates must contain at least one velocity")
+        raise InvalidValueError("candidates must contain at least one velocity")
     if not np.all(np.isfinite(cands)):
-        raise ValueError("candidates contains NaN or infinite values")
+        raise InvalidValueError("candidates contains NaN or infinite values")
     return cands
 
 
@@ -304,7 +307,7 @@ def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
     """
     p = _prob2d(prob)
     if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 0:
-        raise ValueError(f"background memory must be an integer >= 0, got {memory!r}")
+        raise InvalidValueError(f"background memory must be an integer >= 0, got {memory!r}")
     lag = _check_lag(lag)
     if memory == 0:
         return p.copy()
@@ -320,13 +323,13 @@ def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
 
 def _check_lag(lag: int) -> int:
     if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
-        raise ValueError(f"velocity lag must be an integer >= 0, got {lag!r}")
+        raise InvalidValueError(f"velocity lag must be an integer >= 0, got {lag!r}")
     return int(lag)
 
 
 def _check_span(span: int) -> int:
     if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
-        raise ValueError(f"velocity span must be an integer >= 1, got {span!r}")
+        raise InvalidValueError(f"velocity span must be an integer >= 1, got {span!r}")
     return int(span)
 
 

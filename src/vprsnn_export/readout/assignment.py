@@ -28,19 +28,22 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array, real_number
+from vprsnn_export.errors import InvalidValueError
+
 #: Predicted place index that means "no match" (the query is rejected).
 NO_MATCH: Final[int] = -1
 
 
 def _counts(name: str, a: np.ndarray) -> np.ndarray:
     """Validate a 2-D, finite, non-negative count array and return it as float64."""
-    arr = np.asarray(a, dtype=np.float64)
+    arr = real_array(name, a)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be 2-D, got shape {arr.shape}")
+        raise InvalidValueError(f"{name} must be 2-D, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values")
+        raise InvalidValueError(f"{name} contains NaN or infinite values")
     if np.any(arr < 0):
-        raise ValueError(f"{name} contains negative spike counts")
+        raise InvalidValueError(f"{name} contains negative spike counts")
     return arr
 
 
@@ -48,16 +51,16 @@ def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sr_ = _counts("sr", sr)
     sq_ = _counts("sq", sq)
     if sq_.shape[1] != sr_.shape[0]:
-        raise ValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
+        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
     return sr_, sq_
 
 
 def _scores2d(scores: np.ndarray) -> np.ndarray:
-    arr = np.asarray(scores, dtype=np.float64)
+    arr = real_array("scores", scores)
     if arr.ndim != 2 or arr.shape[1] == 0:
-        raise ValueError(f"scores must be 2-D (n_queries, n_places>0), got shape {arr.shape}")
+        raise InvalidValueError(f"scores must be 2-D (n_queries, n_places>0), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError("scores contain NaN or infinite values")
+        raise InvalidValueError("scores contain NaN or infinite values")
     return arr
 
 
@@ -122,9 +125,9 @@ def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray:
     ``gamma`` is the involvement threshold, in [0, 1] (the paper: (0, 1)).
     """
     sr_ = _counts("sr", sr)
-    gamma = float(gamma)
+    gamma = real_number("gamma", gamma)
     if not (0.0 <= gamma <= 1.0):
-        raise ValueError(f"gamma must lie in [0, 1], got {gamma}")
+        raise InvalidValueError(f"gamma must lie in [0, 1], got {gamma}")
     n_places = sr_.shape[1]
     omega = np.count_nonzero(sr_ > 0, axis=1).astype(np.float64)
     penalised = omega > gamma * n_places  # implies omega >= 1
@@ -203,7 +206,7 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     """
     s = _scores2d(scores)
     if np.any(s < 0):
-        raise ValueError("share_confidence needs non-negative scores")
+        raise InvalidValueError("share_confidence needs non-negative scores")
     total = s.sum(axis=1)
     top = s.max(axis=1)
     return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)

@@ -20,6 +20,9 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array
+from vprsnn_export.errors import InvalidValueError
+
 from .aggregation import shift_window
 from .assignment import NO_MATCH, wprob_distribution
 
@@ -28,11 +31,11 @@ _MAX_ELEMENTS: Final[int] = 4_000_000
 
 
 def _images(name: str, a: np.ndarray) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
+    arr = real_array(name, a)
     if arr.ndim != 2:
-        raise ValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
+        raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values")
+        raise InvalidValueError(f"{name} contains NaN or infinite values")
     return arr
 
 
@@ -48,7 +51,7 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     ref = _images("reference", reference)
     qry = _images("queries", queries)
     if ref.shape[1] != qry.shape[1]:
-        raise ValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
     n_q, n_p = qry.shape[0], ref.shape[0]
     out = np.empty((n_q, n_p), dtype=np.float64)
     per_query = max(1, n_p * ref.shape[1])
@@ -73,9 +76,9 @@ def sad_distribution(distances: np.ndarray) -> np.ndarray:
     query at equal distance from every place gets the uniform distribution,
     which ``decide(..., "wprob")`` reports as a no-match.
     """
-    d = np.asarray(distances, dtype=np.float64)
+    d = real_array("distances", distances)
     if d.ndim != 2:
-        raise ValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
+        raise InvalidValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
     return wprob_distribution(-d)
 
 
@@ -88,7 +91,7 @@ def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarra
     ref = _images("reference", reference)
     qry = _images("queries", queries)
     if ref.shape[1] != qry.shape[1]:
-        raise ValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
 
     def unit(a: np.ndarray) -> np.ndarray:
         norm = np.linalg.norm(a, axis=1, keepdims=True)
@@ -108,7 +111,7 @@ def sad_similarities(distances: np.ndarray) -> np.ndarray:
     """
     d = np.asarray(distances, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] == 0 or not np.all(np.isfinite(d)):
-        raise ValueError(f"distances must be a finite 2-D array with at least one place, got shape {d.shape}")
+        raise InvalidValueError(f"distances must be a finite 2-D array with at least one place, got shape {d.shape}")
     return d.max(axis=1, keepdims=True) - d
 
 
@@ -127,11 +130,11 @@ def diagonal_sums(
     """
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or not np.all(np.isfinite(s)):
-        raise ValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
+        raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
     if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
-        raise ValueError(f"k must be an integer >= 1, got {k!r}")
+        raise InvalidValueError(f"k must be an integer >= 1, got {k!r}")
     if np.any(s < 0):
-        raise ValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
+        raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
     if k == 1:
         return s.copy()
     n_queries, n_places = s.shape
@@ -156,7 +159,7 @@ def nearest_neighbour(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
-        raise ValueError(f"scores must be a finite 2-D array with at least one place, got shape {s.shape}")
+        raise InvalidValueError(f"scores must be a finite 2-D array with at least one place, got shape {s.shape}")
     pred = np.argmax(s, axis=1).astype(np.int64)
     if s.shape[1] == 1:
         return pred, np.zeros(s.shape[0])

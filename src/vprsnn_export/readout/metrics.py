@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from vprsnn_export.arguments import real_array
+from vprsnn_export.errors import InvalidValueError
+
 
 def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.MaskedArray:
     """Map predicted place indices to place ids; no-matches (index -1) are masked.
@@ -26,11 +29,11 @@ def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.
     idx = np.asarray(pred_index)
     ids = np.asarray(place_ids)
     if idx.ndim != 1 or ids.ndim != 1:
-        raise ValueError("pred_index and place_ids must be 1-D")
+        raise InvalidValueError("pred_index and place_ids must be 1-D")
     if not np.issubdtype(idx.dtype, np.integer):
-        raise ValueError("pred_index must be an integer array")
+        raise InvalidValueError("pred_index must be an integer array")
     if np.any(idx < -1) or np.any(idx >= ids.shape[0]):
-        raise ValueError(f"pred_index must lie in [-1, {ids.shape[0] - 1}]")
+        raise InvalidValueError(f"pred_index must lie in [-1, {ids.shape[0] - 1}]")
     matched = idx >= 0
     values = ids[np.where(matched, idx, 0)] if ids.shape[0] else np.zeros(idx.shape, ids.dtype)
     return np.ma.MaskedArray(values, mask=~matched)
@@ -55,7 +58,7 @@ def is_correct(
     AND. With neither, every prediction counts as a match.
     """
     if tolerance < 0 or not np.isfinite(tolerance):
-        raise ValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
+        raise InvalidValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
     ok = np.ones(np.shape(pred_place_ids), dtype=bool)
     if isinstance(pred_place_ids, np.ma.MaskedArray):
         ok &= ~np.ma.getmaskarray(pred_place_ids)
@@ -64,11 +67,13 @@ def is_correct(
         pred = np.asarray(pred_place_ids)
     true = np.asarray(true_place_ids)
     if pred.ndim != 1 or pred.shape != true.shape:
-        raise ValueError(f"pred_place_ids {pred.shape} and true_place_ids {true.shape} must be 1-D of equal length")
+        raise InvalidValueError(
+            f"pred_place_ids {pred.shape} and true_place_ids {true.shape} must be 1-D of equal length"
+        )
     if matched is not None:
         m = np.asarray(matched)
         if m.dtype != np.bool_ or m.shape != pred.shape:
-            raise ValueError("matched must be a boolean array with one entry per query")
+            raise InvalidValueError("matched must be a boolean array with one entry per query")
         ok &= m
     diff = np.abs(pred.astype(np.float64) - true.astype(np.float64))
     return ok & (diff <= tolerance)
@@ -76,17 +81,17 @@ def is_correct(
 
 def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c = np.asarray(correct)
-    conf = np.asarray(confidence, dtype=np.float64)
+    conf = real_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
-        raise ValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
+        raise InvalidValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
     if c.shape[0] == 0:
-        raise ValueError("no queries: precision and recall are undefined")
+        raise InvalidValueError("no queries: precision and recall are undefined")
     if c.dtype != np.bool_:
         if not np.all((c == 0) | (c == 1)):
-            raise ValueError("correct must be boolean (or 0/1)")
+            raise InvalidValueError("correct must be boolean (or 0/1)")
         c = c.astype(bool)
     if not np.all(np.isfinite(conf)):
-        raise ValueError("confidence contains NaN or infinite values")
+        raise InvalidValueError("confidence contains NaN or infinite values")
     return c, conf
 
 

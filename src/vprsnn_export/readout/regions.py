@@ -30,7 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.modules import module_regions, region_mask
 
 from .assignment import _counts
@@ -49,9 +51,41 @@ class ModuleLayout:
     hyperactive_share: float
     outside_weight: float = 1.0
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "regions", check_regions(self.regions))
+        if isinstance(self.group, bool) or not isinstance(self.group, int | np.integer) or self.group < 1:
+            raise InvalidValueError(f"module layout: group must be an integer >= 1, got {self.group!r}")
+        for name in ("hyperactive_share", "outside_weight"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
+                raise InvalidValueError(f"module layout: {name} must lie in [0, 1], got {value!r}")
+
     @property
     def n_neurons(self) -> int:
         return len(self.regions) * self.group
+
+
+MAX_PLACE_INDEX = 1 << 53
+
+
+def check_regions(regions: np.ndarray) -> np.ndarray:
+    """Regions (M, 2) [start, stop) as int64 when they tile the places 0..stop: integers, non-empty, in order,
+    each starting where the last one stopped (no gap, no overlap); InvalidValueError naming ``regions`` otherwise."""
+    try:
+        values = np.asarray(regions, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidValueError(f"regions must be an (M, 2) array of integers, got {type(regions).__name__}") from None
+    if values.ndim != 2 or values.shape[1] != 2 or values.shape[0] == 0:
+        raise InvalidValueError(f"regions must be an (M, 2) array of [start, stop) rows, M >= 1, got {values.shape}")
+    if not np.all(np.isfinite(values)) or np.any(values != np.round(values)) or np.abs(values).max() > MAX_PLACE_INDEX:
+        raise InvalidValueError("regions must hold integer place indices (no fractions, NaN or infinities)")
+    starts, stops = values[:, 0].astype(np.int64), values[:, 1].astype(np.int64)
+    if starts[0] != 0 or np.any(stops <= starts) or np.any(starts[1:] != stops[:-1]):
+        raise InvalidValueError(
+            "regions must tile the places from 0 in order: non-empty [start, stop) rows, each starting where the "
+            f"last one stopped (no gap, no overlap), got {values.astype(np.int64).tolist()[:6]}"
+        )
+    return np.stack([starts, stops], axis=1)
 
 
 def module_layout(
@@ -59,15 +93,16 @@ def module_layout(
 ) -> ModuleLayout:
     """The layout of the ensemble ``cfg`` describes over ``n_places`` reference places (rho and lambda from
     the config unless given)."""
+    require_type("cfg", cfg, Config)
     rho = cfg.assignment.hyperactive_share if hyperactive_share is None else hyperactive_share
     lam = cfg.assignment.outside_weight if outside_weight is None else outside_weight
     return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
 
 
 def _inside(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
-    inside = region_mask(np.asarray(regions, dtype=np.int64), group)
+    inside = region_mask(check_regions(regions), group)
     if inside.shape != sr.shape:
-        raise ValueError(
+        raise InvalidValueError(
             f"sr has shape {sr.shape} but the module layout describes {inside.shape[0]} neurons x "
             f"{inside.shape[1]} places"
         )
@@ -84,7 +119,7 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
     sr_ = _counts("sr", sr)
     lam = float(outside_weight)
     if not 0.0 <= lam <= 1.0:
-        raise ValueError(f"outside_weight must lie in [0, 1], got {lam}")
+        raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
     if lam == 1.0:
         return sr_
     inside = _inside(sr_, regions, group)
@@ -116,7 +151,7 @@ def hyperactive_neurons(sr: np.ndarray, layout: ModuleLayout) -> np.ndarray:
     """
     rho = float(layout.hyperactive_share)
     if not 0.0 <= rho <= 1.0:
-        raise ValueError(f"hyperactive_share must lie in [0, 1], got {rho}")
+        raise InvalidValueError(f"hyperactive_share must lie in [0, 1], got {rho}")
     return outside_involvement(sr, layout.regions, layout.group) > rho
 
 
@@ -143,10 +178,13 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
 
     Only S^R (reference data) decides; the queries are not looked at.
     """
+    require_type("layout", layout, (ModuleLayout, type(None)))
+    sr_, sq_ = _counts("sr", sr), _counts("sq", sq).copy()
+    if sq_.shape[1] != sr_.shape[0]:
+        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
     if layout is None:
-        return np.asarray(sr, dtype=np.float64), np.asarray(sq, dtype=np.float64)
-    weighted, silent = regularised_calibration(sr, layout)
-    sq_ = np.array(sq, dtype=np.float64)
+        return sr_, sq_
+    weighted, silent = regularised_calibration(sr_, layout)
     sq_[:, silent] = 0.0
     return weighted, sq_
 

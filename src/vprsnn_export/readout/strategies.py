@@ -16,6 +16,7 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.registry import Registry
 
 from .assignment import (
@@ -111,7 +112,7 @@ def strategy_scores(sr: np.ndarray, sq: np.ndarray, strategy: str, gamma: float 
     """
     entry = STRATEGIES.get(strategy)
     if gamma is None and entry.needs_gamma:
-        raise ValueError(f"strategy {strategy!r} needs the involvement threshold gamma")
+        raise InvalidValueError(f"strategy {strategy!r} needs the involvement threshold gamma")
     return entry.scores(sr, sq, 0.0 if gamma is None else float(gamma))
 
 

@@ -14,6 +14,7 @@ from collections.abc import Mapping
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
@@ -37,6 +38,7 @@ def recalibrate(
     With ``reuse_float_calibration`` the float S^R is kept instead (no simulation).
     The saturation events counted during calibration go into the quantisation report.
     """
+    require_type("model", model, FixedPointModel)
     if reuse_float_calibration:
         report = dataclasses.replace(model.quantisation, calibration="float (reused)", calibration_saturations=None)
         return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
@@ -71,7 +73,9 @@ def deploy(
     ``calibration="deployed"`` re-measures S^R on the integer simulator (needs the
     checkpoint's reference images); ``"float"`` keeps the float network's S^R.
     """
-    if calibration not in CALIBRATIONS:
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("reference_images", reference_images, (Mapping, type(None)))
+    if not isinstance(calibration, str) or calibration not in CALIBRATIONS:
         raise InvalidValueError(f"calibration must be one of {', '.join(CALIBRATIONS)}, got {calibration!r}")
     if calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
@@ -155,6 +156,28 @@ def readout_scores(
     return all_scores(sr, sq, gamma)
 
 
+def check_readout_arrays(
+    calibration: np.ndarray, query_counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
+) -> None:
+    """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
+    id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
+    shapes = {name: np.shape(value) for name, value in (("calibration", calibration), ("query_counts", query_counts))}
+    ids = {"reference_place_ids": np.shape(reference_place_ids), "query_place_ids": np.shape(query_place_ids)}
+    for name, shape in {**shapes, **ids}.items():
+        if len(shape) != (2 if name in shapes else 1):
+            raise InvalidValueError(f"{name} has shape {shape}, expected {2 if name in shapes else 1}-D")
+    if shapes["calibration"][1] != ids["reference_place_ids"][0]:
+        raise InvalidValueError(
+            f"calibration covers {shapes['calibration'][1]} places but reference_place_ids names "
+            f"{ids['reference_place_ids'][0]}"
+        )
+    if shapes["query_counts"] != (ids["query_place_ids"][0], shapes["calibration"][0]):
+        raise InvalidValueError(
+            f"query_counts has shape {shapes['query_counts']}, expected ({ids['query_place_ids'][0]}, "
+            f"{shapes['calibration'][0]}): one row per query id, one column per neuron of the calibration"
+        )
+
+
 def readout_rows(
     calibration: np.ndarray,
     query_counts: np.ndarray,
@@ -169,6 +192,8 @@ def readout_rows(
 
     ``modules``: the layout of an ensemble, whose hyperactive neurons are silenced (None: no regularisation).
     """
+    require_type("options", options, ReadoutOptions)
+    check_readout_arrays(calibration, query_counts, reference_place_ids, query_place_ids)
     check_sequence_length(options, len(query_place_ids))
     check_places_overlap(reference_place_ids, query_place_ids, options.tolerance)
     scores = readout_scores(calibration, query_counts, options.gamma, modules)
@@ -323,6 +348,8 @@ def evaluate_float(
     (``train.module_size`` > 0) is read out over the whole route with its hyperactive
     neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
     """
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("options", options, ReadoutOptions)
     device = torch.device("cpu") if device is None else device
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     run = network.run(
@@ -331,6 +358,7 @@ def evaluate_float(
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     layout = ensemble_layout(ckpt.config, len(reference_ids))
+    check_readout_arrays(ckpt.calibration, counts, reference_ids, query_place_ids)
     check_sequence_length(options, len(query_place_ids))
     check_places_overlap(reference_ids, query_place_ids, options.tolerance)
     scores = readout_scores(ckpt.calibration, counts, options.gamma, layout)
@@ -373,6 +401,8 @@ def evaluate_fixed_point(
     With ``float_checkpoint`` the float network runs on the same spike trains and the
     per-step agreement of the two rasters is added as ``winner_agreement``.
     """
+    require_type("model", model, FixedPointModel)
+    require_type("options", options, ReadoutOptions)
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None

@@ -35,6 +35,7 @@ from vprsnn_export.fileio import (
     OutputError,
     atomic_write_text,
     check_output_folder,
+    parse_json,
     publish_folder,
     read_container,
     sha256_file,
@@ -77,7 +78,7 @@ class ExportSource:
 
     def __post_init__(self) -> None:
         if (self.checkpoint is None) == (self.fixed_point is None):
-            raise ValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
+            raise InvalidValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
 
     @classmethod
     def of(cls, network: Checkpoint | FixedPointModel, sha256: str, path: str | Path = "<in memory>") -> ExportSource:
@@ -106,7 +107,7 @@ class ExportSource:
 
     def _fixed(self) -> FixedPointModel:
         if self.fixed_point is None:
-            raise ValueError("not a fixed-point model")
+            raise InvalidValueError("not a fixed-point model")
         return self.fixed_point
 
 
@@ -481,7 +482,7 @@ def read_export(folder: str | Path) -> ExportResult:
     if not manifest.is_file():
         raise ModelFileError(f"not a deploy folder: no {MANIFEST_NAME}", folder)
     try:
-        data = json.loads(manifest.read_text(encoding="utf-8"))
+        data = parse_json(manifest.read_bytes(), MANIFEST_NAME)
         files = {
             target: tuple(WrittenFile(Path(f["path"]), str(f["sha256"])) for f in entries)
             for target, entries in data["files"].items()
@@ -494,7 +495,15 @@ def read_export(folder: str | Path) -> ExportResult:
             files=files,
             consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
         )
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
+    except (
+        OSError,
+        UnicodeDecodeError,
+        json.JSONDecodeError,
+        InvalidValueError,
+        KeyError,
+        TypeError,
+        AttributeError,
+    ) as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
     base = Path(str(data.get("folder", "")))
     for entries in files.values():

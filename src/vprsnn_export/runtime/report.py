@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text, parse_json
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 from vprsnn_export.stats import MeanStd
 
@@ -67,8 +68,8 @@ def load_report(path: str | Path) -> VerifyReport:
     if not file.is_file():
         raise ReportError(f"no {REPORT_JSON} here (give a folder written by verify, or its {REPORT_JSON})", file)
     try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = parse_json(file.read_bytes(), REPORT_JSON)
+    except (UnicodeDecodeError, json.JSONDecodeError, InvalidValueError) as exc:
         raise ReportError(f"not valid JSON ({exc})", file) from None
     return VerifyReport.from_dict(data, str(file))
 

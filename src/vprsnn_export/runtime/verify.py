@@ -43,6 +43,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
@@ -471,6 +472,8 @@ def verify_checkpoint(
     width's fixed-point model and exported files (a temporary folder when None).
     ``checkpoint`` names the checkpoint's file in the result.
     """
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("options", options, VerifyOptions)
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
     if options.calibration not in CALIBRATIONS:

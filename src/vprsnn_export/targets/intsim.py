@@ -36,7 +36,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.kernels import integer_run
 from vprsnn_export.runs import SpikeRun
@@ -58,7 +60,7 @@ def matmul_dtype(model: FixedPointModel, device: torch.device) -> torch.dtype:
     """
     bound = current_bound(model)
     if bound >= FLOAT64_EXACT:
-        raise ValueError(f"current sums up to {bound} cannot be computed exactly in float64")
+        raise InvalidValueError(f"fixed-point model: current sums up to {bound} cannot be computed exactly in float64")
     if bound < FLOAT32_EXACT and device.type == "cpu":
         return torch.float32
     return torch.float64
@@ -79,7 +81,29 @@ class PreparedModel:
     mantissas: np.ndarray  # (inputs, neurons) the unshifted q_ij, for the compiled CPU kernel
 
 
+def check_arrays(model: FixedPointModel) -> None:
+    """The arrays the simulator indexes: mantissas (inputs, neurons) and thresholds and multipliers
+    (neurons,), all integers, neurons in whole WTA groups; InvalidValueError naming the array otherwise."""
+    arrays = {name: getattr(model, name) for name in ("weight_mantissa", "threshold", "scale_multiplier")}
+    for name, array in arrays.items():
+        if not isinstance(array, np.ndarray) or not np.issubdtype(array.dtype, np.integer):
+            raise InvalidValueError(f"fixed-point model: {name} must be an integer numpy array")
+    if model.weight_mantissa.ndim != 2:
+        raise InvalidValueError(f"fixed-point model: weight_mantissa has shape {model.weight_mantissa.shape}, not 2-D")
+    for name in ("threshold", "scale_multiplier"):
+        if arrays[name].shape != (model.n_neurons,):
+            raise InvalidValueError(
+                f"fixed-point model: {name} has shape {arrays[name].shape}, expected ({model.n_neurons},)"
+            )
+    group = model.config.network.n_neurons
+    if model.n_neurons == 0 or model.n_neurons % group:
+        raise InvalidValueError(
+            f"fixed-point model: {model.n_neurons} neurons are not whole modules of network.n_neurons = {group}"
+        )
+
+
 def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
+    check_arrays(model)
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
@@ -112,6 +136,7 @@ class IntegerNetwork:
     prepared: PreparedModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        require_type("model", self.model, FixedPointModel)
         self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
         self.prepared = prepare(self.model, self.device)
 
@@ -146,11 +171,11 @@ def counts_runner(model: FixedPointModel, device: torch.device | None = None) ->
 
 def check_spikes(spikes: torch.Tensor, n_inputs: int) -> None:
     if spikes.ndim != 3 or spikes.shape[2] != n_inputs:
-        raise ValueError(f"expected spikes of shape (N, T, {n_inputs}), got {tuple(spikes.shape)}")
+        raise InvalidValueError(f"spikes: expected spikes of shape (N, T, {n_inputs}), got {tuple(spikes.shape)}")
     if spikes.dtype not in (torch.uint8, torch.bool):
-        raise ValueError(f"expected uint8 or bool spikes, got {spikes.dtype}")
+        raise InvalidValueError(f"spikes: expected uint8 or bool spikes, got {spikes.dtype}")
     if spikes.numel() and spikes.dtype == torch.uint8 and int(spikes.max()) > 1:
-        raise ValueError("spikes must be 0 or 1")
+        raise InvalidValueError("spikes: spikes must be 0 or 1")
 
 
 def shifted_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:

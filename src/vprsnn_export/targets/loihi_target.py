@@ -49,7 +49,7 @@ import numpy as np
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
-from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, sha256_bytes
+from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.targets.packing import PACKING, describe_packing, pack_bits, unpack_bits
 from vprsnn_export.version import __version__
@@ -462,8 +462,8 @@ def read_loihi(path: str | Path) -> LoihiDescription:
     if not head.is_file():
         raise ModelFileError("no Loihi description here (network.json missing)", head)
     try:
-        header = json.loads(head.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        header = parse_json(head.read_bytes(), "network.json")
+    except (UnicodeDecodeError, json.JSONDecodeError, InvalidValueError) as exc:
         raise ModelFileError(f"the description header is not valid JSON (truncated or corrupt: {exc})", head) from None
     if not isinstance(header, dict) or header.get("format") != FORMAT:
         found = header.get("format") if isinstance(header, dict) else None
@@ -511,7 +511,7 @@ def lava_weight_matrix(desc: LoihiDescription) -> np.ndarray:
     storage = conn["weights_storage"]
     bits, shape = int(storage["bits"]), tuple(int(n) for n in storage["shape"])
     if storage.get("packing") != PACKING or bits != int(conn["num_weight_bits"]):
-        raise ValueError(
+        raise InvalidValueError(
             f"weights_storage must be {PACKING!r} at num_weight_bits = {conn['num_weight_bits']}, "
             f"got {storage.get('packing')!r} at {bits} bits"
         )

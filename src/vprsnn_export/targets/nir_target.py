@@ -48,7 +48,7 @@ from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_che
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
-from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.version import __version__
 
@@ -353,7 +353,7 @@ def graph_to_source(graph, path: Path) -> Source:
     linear, lif = graph.nodes["linear"], graph.nodes["lif"]
     if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
         raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
-    header = json.loads(str(meta["header_json"]))
+    header = parse_json(str(meta["header_json"]), "header_json")
     weight = np.asarray(linear.weight).T
     thresholds = np.asarray(lif.v_threshold)
     if str(meta["kind"]) == "fixed-point":
@@ -647,7 +647,7 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
     candidates unchanged.
     """
     meta = graph.metadata
-    rule = json.loads(str(meta.get("readout_rule", "{}")))
+    rule = parse_json(str(meta.get("readout_rule", "{}")), "readout_rule")
     if rule.get("name") == "none":
         return candidates.to(torch.bool)
     if rule.get("name") != READOUT_RULE or int(rule.get("version", -1)) not in READABLE_RULE_VERSIONS:

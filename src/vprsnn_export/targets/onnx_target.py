@@ -80,6 +80,9 @@ def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
     return numpy_helper.from_array(np.asarray(value), name=name)
 
 
+INT32_MAX = (1 << 31) - 1  # MatMulInteger accumulates in int32: max_j sum_i q_ij must not exceed this
+
+
 def check_exportable(model: FixedPointModel) -> None:
     """The graph implements state isolation (V = 0 at t = 0 of every presentation) and 8-bit-or-less mantissas."""
     validate(model, Path("<fixed-point model>"))
@@ -90,6 +93,12 @@ def check_exportable(model: FixedPointModel) -> None:
         )
     if model.bits > 8:
         raise InvalidValueError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
+    bound = int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) if model.weight_mantissa.size else 0
+    if bound > INT32_MAX:
+        raise InvalidValueError(
+            f"a current sum reaches {bound} (max_j sum_i q_ij), beyond MatMulInteger's int32 accumulator "
+            f"({INT32_MAX}): the graph would wrap (about 8.4 M inputs at 8 bits); use fewer inputs or another target"
+        )
 
 
 def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
@@ -512,7 +521,7 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
     """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs]."""
     array = np.asarray(spikes.numpy() if isinstance(spikes, torch.Tensor) else spikes)
     if array.ndim != 3 or array.dtype not in (np.uint8, np.bool_):
-        raise ValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
+        raise InvalidValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
     names = [o.name for o in sess.get_outputs()]
     pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
     seconds = 0.0

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from vprsnn_export.errors import InvalidValueError
+
 PACKING = "lsb-first-bitstream"
 MAX_BITS = 8
 
@@ -30,7 +32,7 @@ def packed_size(count: int, bits: int) -> int:
 
 def check_width(bits: int) -> int:
     if not 1 <= bits <= MAX_BITS:
-        raise ValueError(f"packed widths are 1 to {MAX_BITS} bits, got {bits}")
+        raise InvalidValueError(f"packed widths are 1 to {MAX_BITS} bits, got {bits}")
     return bits
 
 
@@ -39,7 +41,7 @@ def pack_bits(values: np.ndarray, bits: int) -> np.ndarray:
     check_width(bits)
     flat = np.asarray(values).reshape(-1)
     if flat.size and (not np.issubdtype(flat.dtype, np.integer) or flat.min() < 0 or flat.max() >= 1 << bits):
-        raise ValueError(f"values must be integers in [0, {(1 << bits) - 1}] to pack into {bits} bits")
+        raise InvalidValueError(f"values must be integers in [0, {(1 << bits) - 1}] to pack into {bits} bits")
     planes = np.unpackbits(flat.astype(np.uint8)[:, None], axis=1, bitorder="little")[:, :bits]
     return np.packbits(planes.reshape(-1), bitorder="little")
 
@@ -50,13 +52,13 @@ def unpack_bits(packed: np.ndarray, bits: int, shape: Sequence[int]) -> np.ndarr
     stream = np.asarray(packed)
     count = prod(shape)
     if stream.dtype != np.uint8 or stream.ndim != 1 or stream.size != packed_size(count, bits):
-        raise ValueError(
+        raise InvalidValueError(
             f"expected {packed_size(count, bits)} packed uint8 bytes for {count} values of {bits} bits, "
             f"got {stream.size} of {stream.dtype} (shape {stream.shape})"
         )
     plane = np.unpackbits(stream, bitorder="little")
     if plane[count * bits :].any():
-        raise ValueError("the padding bits after the last packed value are not zero")
+        raise InvalidValueError("the padding bits after the last packed value are not zero")
     digits = plane[: count * bits].reshape(count, bits).astype(np.uint8)
     weights = (1 << np.arange(bits)).astype(np.uint8)
     return (digits * weights).sum(axis=1, dtype=np.uint8).reshape(tuple(shape))

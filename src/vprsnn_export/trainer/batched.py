@@ -31,6 +31,7 @@ from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
 from vprsnn_export.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.kernels import bernoulli_limits, generator_seeds, stdp_windows
 from vprsnn_export.modules import module_regions
 
@@ -133,7 +134,7 @@ def train_modules(
     ``on_epoch(epoch, weights (inputs, M n), theta (M n,))`` may add numbers to the entry.
     """
     if not rows or any(len(r) == 0 for r in rows):
-        raise ValueError("no training images for a module")
+        raise InvalidValueError("no training images for a module")
     n_modules, n_neurons, batch = len(rows), cfg.network.n_neurons, cfg.train.batch_size
     threads = torch.get_num_threads() if threads is None else max(1, int(threads))
     generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))

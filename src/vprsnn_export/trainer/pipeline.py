@@ -7,10 +7,12 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import require_names, require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
 from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.errors import InvalidValueError
 
 from .batched import module_training_rows, train_modules
 from .calibrate import calibrate
@@ -34,6 +36,12 @@ def train_and_calibrate(
     reference place to the whole ensemble (the hard WTA within config.wta_group). ``threads``: CPU
     threads for training and calibration (default: torch's thread count).
     """
+    require_type("dataset", dataset, Dataset)
+    require_type("cfg", cfg, Config)
+    if any(name not in dataset.images for name in require_names("references", references)):
+        raise InvalidValueError(
+            f"references must name traversals of the data set ({', '.join(dataset.images)}), got {references!r}"
+        )
     device = torch.device("cpu") if device is None else device
     images = np.concatenate([dataset.traversal(name) for name in references])
     presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]

@@ -13,6 +13,7 @@ from tqdm.auto import tqdm
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import wta_step
 from vprsnn_export.encoding import encode, presentation_seed
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.kernels import stdp_window
 
 from .homeostasis import homeostasis_update
@@ -107,7 +108,7 @@ def train_network(
     ``compiled=False`` runs every batch through the torch loop (see :func:`train_batch`).
     """
     if len(images) == 0:
-        raise ValueError("no training images")
+        raise InvalidValueError("no training images")
     generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
     weights = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator).to(device)
     theta = torch.full((cfg.network.n_neurons,), cfg.network.theta_init, dtype=torch.float32, device=device)

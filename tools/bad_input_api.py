@@ -1,0 +1,128 @@
+"""Bad arguments to the public API (issue 24), reproducible: each call either works or raises the project's error.
+
+Builds a tiny network (synthetic:6, T = 8, 8 neurons, one epoch) and its 4-bit model, then calls
+each public function with one argument replaced by each of 14 bad values (None, a string, NaN,
+inf, -1, 10**30, empty arrays, an all-NaN array, a 3-D array, an object, a list, True, 1.5).
+Classes: ``project`` (a VprError), ``foreign`` (any other exception: numpy, torch, AttributeError,
+a bare ValueError), ``accepted`` (returned; legitimate for some values, e.g. the string as a label).
+Run from the repository root with the project's environment active (writes into a temp folder):
+
+    OMP_NUM_THREADS=1 nice -n 15 python tools/bad_input_api.py
+
+Prints one line per foreign or accepted case and the counts; exit status 1 when any case is foreign.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import traceback
+import warnings
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import torch
+
+import vprsnn_export as vx
+from vprsnn_export.errors import VprError
+
+BAD = {
+    "none": None,
+    "str": "x",
+    "nan": float("nan"),
+    "inf": float("inf"),
+    "neg": -1,
+    "huge": 10**30,
+    "emptyarr": np.zeros((0,)),
+    "empty2": np.zeros((0, 0)),
+    "nanarr": np.full((3, 6), np.nan),
+    "wrongshape": np.zeros((2, 3, 4)),
+    "obj": object(),
+    "list": [1, 2],
+    "bool": True,
+    "float": 1.5,
+}
+
+
+def calls(folder: Path) -> dict:
+    cfg = vx.Config().replace(**{"encoder.timesteps": 8, "train.epochs": 1, "network.n_neurons": 8})
+    data = vx.load_dataset("synthetic:6", ["summer", "winter"], cfg.preprocess)
+    ckpt = vx.train_and_calibrate(data, ["summer"], cfg, progress=False)
+    winter, places = data.traversal("winter"), data.place_ids
+    ref = {"summer": data.traversal("summer")}
+    readout = vx.ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1,))
+    model = vx.deploy(ckpt, "probe", 4, reference_images=ref)
+    vx.save_checkpoint(folder / "ckpt.npz", ckpt)
+    vx.save_fixed_point(folder / "model.npz", model)
+    sr = ckpt.calibration
+    scores = np.random.default_rng(0).random((3, 6))
+    return {
+        "evaluate_float": (vx.evaluate_float, dict(ckpt=ckpt, query_images=winter, query_place_ids=places,
+                                                   traversal="winter", options=readout)),
+        "evaluate_fixed_point": (vx.evaluate_fixed_point, dict(model=model, query_images=winter,
+                                                               query_place_ids=places, traversal="winter",
+                                                               options=readout)),
+        "query_spikes": (vx.query_spikes, dict(images=winter, place_ids=places, traversal="winter", cfg=cfg)),
+        "calibration_spikes": (vx.calibration_spikes, dict(images=winter, place_ids=places, traversal="winter",
+                                                           cfg=cfg)),
+        "readout_rows": (vx.readout_rows, dict(calibration=sr, query_counts=np.ones((6, sr.shape[0])),
+                                               reference_place_ids=places, query_place_ids=places, options=readout)),
+        "decide": (vx.decide, dict(scores=scores, strategy="wprob")),
+        "strategy_scores": (vx.strategy_scores, dict(sr=sr, sq=np.ones((3, sr.shape[0])), strategy="weighted",
+                                                     gamma=0.5)),
+        "pr_metrics": (vx.pr_metrics, dict(correct=np.array([True, False]), confidence=np.array([0.5, 0.2]))),
+        "aggregate": (vx.aggregate, dict(prob=scores / scores.sum(1, keepdims=True), k=2, velocity=1.0)),
+        "sad_distances": (vx.sad_distances, dict(reference=scores, queries=scores)),
+        "sad_distribution": (vx.sad_distribution, dict(distances=scores)),
+        "module_count": (vx.module_count, dict(n_places=10, module_size=3)),
+        "module_regions": (vx.module_regions, dict(n_places=10, module_size=3)),
+        "module_layout": (vx.module_layout, dict(cfg=cfg, n_places=6)),
+        "regularise": (vx.regularise, dict(sr=sr, sq=np.ones((3, sr.shape[0])), layout=None)),
+        "select_places": (vx.select_places, dict(dataset=data, place_ids=places[:2])),
+        "set_threads": (vx.set_threads, dict(threads=1)),
+        "quantize_checkpoint": (vx.quantize_checkpoint, dict(ckpt=ckpt, ckpt_sha256="probe", bits=4,
+                                                             per_neuron=True, scale_method="max")),
+        "deploy": (vx.deploy, dict(ckpt=ckpt, ckpt_sha256="probe", bits=4, reference_images=ref)),
+        "train_and_calibrate": (vx.train_and_calibrate, dict(dataset=data, references=["summer"], cfg=cfg,
+                                                             progress=False)),
+        "IntegerNetwork": (vx.IntegerNetwork, dict(model=model)),
+        "FloatNetwork.from_arrays": (vx.FloatNetwork.from_arrays, dict(weights=ckpt.weights,
+                                                                       thresholds=ckpt.thresholds, cfg=cfg,
+                                                                       device=torch.device("cpu"))),
+        "save_fixed_point": (vx.save_fixed_point, dict(path=folder / "out_model.npz", model=model)),
+        "save_checkpoint": (vx.save_checkpoint, dict(path=folder / "out_ckpt.npz", ckpt=ckpt)),
+        "load_checkpoint": (vx.load_checkpoint, dict(path=folder / "ckpt.npz")),
+        "load_fixed_point": (vx.load_fixed_point, dict(path=folder / "model.npz")),
+    }  # fmt: skip
+
+
+def main() -> int:
+    warnings.simplefilter("ignore")
+    vx.set_threads(1)
+    tally: Counter[str] = Counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chdir(tmp)  # a drawn string is a path for save_* and load_*: written here
+        for name, (function, kwargs) in calls(Path(tmp)).items():
+            for arg in kwargs:
+                for label, value in BAD.items():
+                    case = f"{name}({arg}={label})"
+                    try:
+                        function(**{**kwargs, arg: value})
+                        tally["accepted"] += 1
+                        print(f"accepted {case}")
+                    except VprError:
+                        tally["project"] += 1
+                    except Exception as exc:  # noqa: BLE001  (the point: any other exception is a defect)
+                        tally["foreign"] += 1
+                        where = traceback.extract_tb(exc.__traceback__)[-1]
+                        print(f"foreign  {case}: {type(exc).__name__}: {str(exc)[:90]} "
+                              f"@ {Path(where.filename).name}:{where.lineno}")  # fmt: skip
+    total = sum(tally.values())
+    print(f"{total} calls: {tally['project']} project error, {tally['foreign']} foreign, {tally['accepted']} accepted")
+    return 1 if tally["foreign"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
