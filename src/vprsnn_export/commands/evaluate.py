@@ -60,6 +60,13 @@ def run(args: argparse.Namespace) -> int:
     warning = sequence_warning(dataset.place_ids, options)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
+    window = dataset.match_window(args.query)
+    if window is not None and window > options.tolerance:
+        print(
+            f"warning: the ground truth of {args.query!r} matches some queries only {window} places from their "
+            f"own index: give --match-window {window} to score against it",
+            file=sys.stderr,
+        )
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),
