@@ -37,6 +37,7 @@ from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
 from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
 from .runtime.localize import LocalizeOptions, Localizer, OperatingPoint, operating_point
+from .runtime.predictions import Predictions, network_predictions
 from .runtime.report import write_report
 from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
@@ -72,6 +73,7 @@ __all__ = [
     "ModuleLayout",
     "OnnxBackend",
     "OperatingPoint",
+    "Predictions",
     "ReadoutOptions",
     "ReferenceStepper",
     "SpikeRun",
@@ -102,6 +104,7 @@ __all__ = [
     "load_dataset",
     "load_fixed_point",
     "load_source",
+    "network_predictions",
     "operating_point",
     "pr_metrics",
     "quantize_checkpoint",

@@ -10,7 +10,9 @@ import numpy as np
 from ..checkpoint import load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
+from ..fileio import check_output
 from ..runtime.evaluation import evaluate_float, sequence_warning
+from ..runtime.predictions import network_predictions
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -46,12 +48,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("checkpoint", help="checkpoint written by train")
     add_query_options(parser)
     parser.add_argument("--baseline", action="store_true", help="add the no-learning SAD baseline rows")
+    parser.add_argument(
+        "--predictions",
+        metavar="FILE",
+        help="also write every query's decision per strategy and k (query, truth, place_id, confidence, correct) "
+        "to FILE: .csv or .jsonl",
+    )
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     ckpt = load_checkpoint(args.checkpoint)
+    if args.predictions is not None:
+        if not args.predictions.lower().endswith((".csv", ".jsonl")):
+            raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
+        check_output(args.predictions, inputs=(args.checkpoint,))
     options = readout_options(args, ckpt.config.assignment.gamma)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
@@ -77,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
         state_isolation=False if args.no_state_isolation else None,
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
     )
+    if args.predictions is not None:
+        written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)
+        print(f"wrote per-query predictions to {written}", file=sys.stderr)
     if args.json:
         print_json(
             {
