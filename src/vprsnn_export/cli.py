@@ -61,6 +61,19 @@ def summary(name: str) -> str:
     return first.split(": ", 1)[-1].rstrip(".")
 
 
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` names (its first word that is not an option), None for ``--help``/``--version``."""
+    return next((token for token in argv if not token.startswith("-")), None)
+
+
+def import_command(argv: Sequence[str]) -> None:
+    """Import the module of the command ``argv`` names (torch, numba and the library come with it):
+    ``__main__`` calls this under its interrupt guard, so a Ctrl-C while they load exits cleanly."""
+    name = chosen_command(argv)
+    if name in command_names():
+        importlib.import_module(f"{commands.__name__}.{name}")
+
+
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The parser for ``argv``: only the command it names is imported (its options), the others are
     listed by name and summary, so ``--help`` and ``--version`` start in well under a second
@@ -71,7 +84,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    chosen = None if argv is None else next((token for token in argv if not token.startswith("-")), None)
+    chosen = None if argv is None else chosen_command(argv)
     for name in command_names():
         if argv is None or name == chosen:
             importlib.import_module(f"{commands.__name__}.{name}").register(subparsers)
