@@ -19,7 +19,9 @@ def _interrupted_while_loading(signum: int, frame: object) -> None:
 
 signal.signal(signal.SIGINT, _interrupted_while_loading)
 
-from .cli import main  # noqa: E402  (imported under the guard above)
+from .cli import import_command, main  # noqa: E402  (imported under the guard above)
+
+import_command(sys.argv[1:])  # the command's module, torch and numba load under the guard too
 
 signal.signal(signal.SIGINT, signal.default_int_handler)
 

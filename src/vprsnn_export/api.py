@@ -10,6 +10,8 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
     run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
+    robot = vx.Localizer(model, options=vx.LocalizeOptions(k=5), threshold=theta)  # one frame at a time
+    decision = robot.push(grey_frame)                                         # place, confidence, accepted
 
 The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx.STRATEGIES``,
 ``vx.CHANNELS``, ``vx.VELOCITY_ESTIMATES``; ``vx.TARGETS.register(vx.Target(...))`` adds one.
@@ -25,6 +27,7 @@ from .encoding import calibration_spikes, query_spikes
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
+from .frames import iter_frames
 from .modules import module_count, module_regions
 from .preprocess import CHANNELS, Channel
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
@@ -38,6 +41,8 @@ from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
 from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
+from .runtime.localize import LocalizeOptions, Localizer, OperatingPoint, operating_point
+from .runtime.predictions import Predictions, network_predictions
 from .runtime.report import write_report
 from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
@@ -73,9 +78,13 @@ __all__ = [
     "FloatNetwork",
     "IntegerNetwork",
     "InvalidValueError",
+    "LocalizeOptions",
+    "Localizer",
     "ModelFileError",
     "ModuleLayout",
     "OnnxBackend",
+    "OperatingPoint",
+    "Predictions",
     "ReadoutOptions",
     "ReferenceStepper",
     "SpikeRun",
@@ -101,6 +110,7 @@ __all__ = [
     "evaluate_fixed_point",
     "evaluate_float",
     "export_and_check",
+    "iter_frames",
     "load_checkpoint",
     "module_count",
     "module_layout",
@@ -108,6 +118,8 @@ __all__ = [
     "load_dataset",
     "load_fixed_point",
     "load_source",
+    "network_predictions",
+    "operating_point",
     "pr_metrics",
     "quantize_checkpoint",
     "query_spikes",

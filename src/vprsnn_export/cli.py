@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import pkgutil
 import re
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 from . import commands
@@ -44,16 +47,49 @@ def join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_names() -> list[str]:
+    """The subcommands: the public modules of :mod:`vprsnn_export.commands`, sorted."""
+    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def summary(name: str) -> str:
+    """A command's one-line help: its module docstring's first line after "`vprsnn-export NAME`: ",
+    read from the source without importing it (the commands import torch and the whole library)."""
+    spec = importlib.util.find_spec(f"{commands.__name__}.{name}")
+    source = Path(spec.origin).read_text(encoding="utf-8") if spec and spec.origin else ""
+    first = (ast.get_docstring(ast.parse(source)) or "").split("\n")[0]
+    return first.split(": ", 1)[-1].rstrip(".")
+
+
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The command ``argv`` names (its first word that is not an option), None for ``--help``/``--version``."""
+    return next((token for token in argv if not token.startswith("-")), None)
+
+
+def import_command(argv: Sequence[str]) -> None:
+    """Import the module of the command ``argv`` names (torch, numba and the library come with it):
+    ``__main__`` calls this under its interrupt guard, so a Ctrl-C while they load exits cleanly."""
+    name = chosen_command(argv)
+    if name in command_names():
+        importlib.import_module(f"{commands.__name__}.{name}")
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser for ``argv``: only the command it names is imported (its options), the others are
+    listed by name and summary, so ``--help`` and ``--version`` start in well under a second
+    (bench/bench_cli.py). ``argv=None``: every command's full parser."""
     parser = Parser(
         prog="vprsnn-export",
-        description="STDP place-recognition SNNs: train, quantise, export, verify.",
+        description="STDP place-recognition SNNs: train, quantise, export, verify, localise.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if not info.name.startswith("_"):
-            importlib.import_module(f"{commands.__name__}.{info.name}").register(subparsers)
+    chosen = None if argv is None else chosen_command(argv)
+    for name in command_names():
+        if argv is None or name == chosen:
+            importlib.import_module(f"{commands.__name__}.{name}").register(subparsers)
+        else:
+            subparsers.add_parser(name, help=summary(name), add_help=False)
     return parser
 
 
@@ -74,8 +110,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminate)
     try:
-        parser = build_parser()
         argv = list(sys.argv[1:] if argv is None else argv)
+        parser = build_parser(argv)
         try:
             args = parser.parse_args(join_negative_values(argv))
         except SystemExit as exc:  # --help, --version, or a one-line parse error already printed

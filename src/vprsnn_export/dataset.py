@@ -1,11 +1,14 @@
 """Place manifests, place selection and the preprocessed image set.
 
+A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.folders`: frames in
+time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`).
+
 A place manifest is a CSV with one row per place: an integer ``place_id`` column and
 one column per traversal holding an image path relative to the CSV's folder. The
 same place id in two traversals is the same place (the ground truth).
 
-``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, or
-``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
+``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of
+traversal folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
 START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
 """
 
@@ -25,6 +28,14 @@ from .arguments import ascii_uint, check_place_ids
 from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
 from .fileio import is_readable_file, sha256_bytes
+from .folders import (
+    FolderGroundTruth,
+    decode_frames,
+    folder_files,
+    folder_fingerprint,
+    ground_truths,
+    is_folder_dataset,
+)
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
@@ -44,6 +55,40 @@ class Dataset:
     manifest_sha256: str  # sha256 of the manifest file bytes, or the synthetic fingerprint
     place_ids: np.ndarray  # (N,) int64, in selection order
     images: dict[str, np.ndarray]  # traversal -> (N, image_size**2) float32, row k is place_ids[k]
+    ground_truth: tuple[FolderGroundTruth, ...] = ()  # a folder data set's checked ground-truth files
+
+    @classmethod
+    def from_arrays(
+        cls,
+        images: Mapping[str, np.ndarray],
+        cfg: PreprocessConfig,
+        place_ids: Sequence[int] | np.ndarray | None = None,
+        *,
+        source: str = "arrays",
+    ) -> Dataset:
+        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)``
+        uint8 frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1); they are
+        preprocessed with ``cfg`` like loaded images. ``manifest_sha256`` hashes the pixels and ids.
+
+        ``vx.Dataset.from_arrays({"day": day, "night": night}, vx.Config().preprocess)``
+        """
+        names = _check_traversals(list(images))
+        arrays = {name: np.asarray(images[name]) for name in names}
+        counts = {name: len(array) for name, array in arrays.items()}
+        if len(set(counts.values())) != 1 or 0 in counts.values():
+            raise DataError(f"every traversal needs the same, non-zero number of frames; got {counts}", source)
+        n = next(iter(counts.values()))
+        ids = np.arange(n, dtype=np.int64) if place_ids is None else np.asarray(place_ids, dtype=np.int64).reshape(-1)
+        if ids.shape != (n,) or len(np.unique(ids)) != n or (ids.size and ids.min() < 0):
+            raise InvalidValueError(f"place_ids must be {n} distinct non-negative integers, got shape {ids.shape}")
+        digest = sha256_bytes(b"".join(arrays[name].tobytes() for name in names) + ids.tobytes())
+        processed = {name: preprocess_images(array, cfg) for name, array in arrays.items()}
+        return cls(source=source, manifest_sha256=digest, place_ids=ids, images=processed)
+
+    def match_window(self, query: str) -> int | None:
+        """The ground-truth files' window for ``query`` (the largest over its files), None without one."""
+        windows = [truth.window for truth in self.ground_truth if truth.query == query]
+        return max(windows) if windows else None
 
     @property
     def n_places(self) -> int:
@@ -174,6 +219,8 @@ def load_dataset(
     n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
     if n_synthetic is not None:
         return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
+    if is_folder_dataset(Path(data)) and not (Path(data) / MANIFEST_NAME).is_file():
+        return _load_folder(Path(data), names, cfg, subset, places, progress)
     manifest = read_manifest(data)
     missing = [name for name in names if name not in manifest.columns]
     if missing:
@@ -197,12 +244,31 @@ def load_dataset(
     )
 
 
+def _load_folder(
+    folder: Path, names: tuple[str, ...], cfg: PreprocessConfig, subset: Selection, places: str | None, progress: bool
+) -> Dataset:
+    """A folder of traversal folders (:mod:`vprsnn_export.folders`): place j is frame j of each traversal."""
+    files = folder_files(folder, names)
+    n_frames = len(next(iter(files.values())))
+    truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
+    selected = _select(np.arange(n_frames, dtype=np.int64), subset, places, str(folder))
+    return Dataset(
+        source=str(folder.resolve()),
+        manifest_sha256=folder_fingerprint(files, truths),
+        place_ids=selected,
+        images=decode_frames(files, selected, cfg, progress),
+        ground_truth=tuple(truths),
+    )
+
+
 def read_manifest(data: str | Path) -> Manifest:
     """Resolve ``data`` (a CSV, or a folder holding ``places.csv``) and parse it; DataError on any defect."""
     path = Path(data)
     if path.is_dir():
         if not (path / MANIFEST_NAME).is_file():
-            raise DataError(f"this folder has no {MANIFEST_NAME} place manifest", path)
+            raise DataError(
+                f"this folder has no {MANIFEST_NAME} place manifest and no traversal folders of images", path
+            )
         path = path / MANIFEST_NAME
     elif not is_readable_file(path):
         hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""

@@ -11,10 +11,15 @@ from vprsnn_export.targets.onnx_target import read_onnx
 
 def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["demo", "--quick", "--out", str(out), "--quiet"]) == 0
+    code = main(["demo", "--quick", "--out", str(out), "--quiet"])
     printed = capsys.readouterr().out.strip().splitlines()
-    assert printed[-1].startswith("report: ") and printed[-1].endswith("report.html")
-    assert any("PASS" in line or "FAIL" in line for line in printed)
+    assert printed[-2].startswith("report: ") and printed[-2].endswith("report.html")
+    passed = json.loads((out / "report" / "report.json").read_text())["passed"]
+    assert code == (0 if passed else 1)  # the exit code, the verdict line and the HTML agree
+    assert printed[-1].startswith(f"Verdict: {'PASS' if passed else 'FAIL'}")
+    html = (out / "report" / "report.html").read_text()
+    assert f"Verdict: {'PASS' if passed else 'FAIL'}" in html
+    assert not any(" = 0.0" in line for line in printed if "limit" in line)  # points, never fractions
     assert (out / "float.npz").is_file()
     for bits in (8, 4, 2):
         folder = out / "deploy" / f"{bits}bit"

@@ -184,6 +184,17 @@ def test_tolerance_checks_bound_drops_only():
     }
 
 
+def test_r_at_100p_is_judged_at_every_k_and_sequences_only_on_consecutive_queries():
+    tol = parse_tolerances("query_slack=0")
+    spike, decision = _levels(1.0, 0, 1.0)
+    rows = _rows([0.5, 0.5, 0.5, 0.8], [0.5, 0.5, 0.27, 0.8])  # W+Prob k=1 R@100P drops 23 points
+    judged = {c.what: c.passed for c in tolerance_checks(rows, spike, decision, tol, (1, 5))}
+    assert judged["r_at_100p drop, wprob k=1"] is False and judged["r_at_100p drop, wprob k=5"] is True
+    scattered = tolerance_checks(rows, spike, decision, tol, (1, 5), sequences=False)
+    assert not any("k=5" in c.what for c in scattered)
+    assert "r_at_100p drop, wprob k=1" in {c.what for c in scattered}
+
+
 def test_query_slack_allows_one_query_of_a_short_route():
     rows = _rows([0.5, 0.5, 0.5, 0.8], [0.5, 0.5, 0.5, 0.8 - 1 / 30], n=30)
     spike, decision = _levels(1.0, 0, 1.0)

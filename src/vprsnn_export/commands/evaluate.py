@@ -10,7 +10,9 @@ import numpy as np
 from ..checkpoint import load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
+from ..fileio import check_output
 from ..runtime.evaluation import evaluate_float, sequence_warning
+from ..runtime.predictions import network_predictions
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -50,12 +52,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="add the no-learning baseline rows: SAD, and cosine nearest neighbour on the same images (the template ceiling)",
     )
+    parser.add_argument(
+        "--predictions",
+        metavar="FILE",
+        help="also write every query's decision per strategy and k (query, truth, place_id, confidence, correct) "
+        "to FILE: .csv or .jsonl",
+    )
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     ckpt = load_checkpoint(args.checkpoint)
+    if args.predictions is not None:
+        if not args.predictions.lower().endswith((".csv", ".jsonl")):
+            raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
+        check_output(args.predictions, inputs=(args.checkpoint,))
     options = readout_options(args, ckpt.config.assignment.gamma)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
@@ -64,6 +76,13 @@ def run(args: argparse.Namespace) -> int:
     warning = sequence_warning(dataset.place_ids, options)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
+    window = dataset.match_window(args.query)
+    if window is not None and window > options.tolerance:
+        print(
+            f"warning: the ground truth of {args.query!r} matches some queries only {window} places from their "
+            f"own index: give --match-window {window} to score against it",
+            file=sys.stderr,
+        )
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),
@@ -74,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
         state_isolation=False if args.no_state_isolation else None,
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
     )
+    if args.predictions is not None:
+        written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)
+        print(f"wrote per-query predictions to {written}", file=sys.stderr)
     if args.json:
         print_json(
             {

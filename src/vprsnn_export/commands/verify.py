@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -22,6 +23,7 @@ from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
 from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
+from ..runtime.evaluation import sequence_warning
 from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
@@ -312,6 +314,12 @@ def run(args: argparse.Namespace) -> int:
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = selection(args, ckpt)
         dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
+        if index == 0 and sequence_warning(dataset.place_ids, options.readout):
+            print(
+                "note: the queries are not consecutive places: k > 1 metrics are reported but not judged "
+                "(their windows mix unrelated places)",
+                file=sys.stderr,
+            )
         gamma_options = dataclasses.replace(
             options, readout=dataclasses.replace(options.readout, gamma=ckpt.config.assignment.gamma)
         )

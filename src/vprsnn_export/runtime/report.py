@@ -176,6 +176,11 @@ def network_label(run: VerifiedRun, index: int) -> str:
     return run.label or str(index + 1)
 
 
+def points(check: str, value: float) -> str:
+    """A tolerance value in the unit the terminal also uses: percentage points, or a count (saturations)."""
+    return str(int(value)) if check == "saturations" else f"{100 * value:.1f} pts"
+
+
 def failure_lines(report: VerifyReport) -> list[str]:
     """Each failed check, named with its network and bit width: what the verdict line's FAIL means."""
     lines = []
@@ -188,9 +193,8 @@ def failure_lines(report: VerifyReport) -> list[str]:
                 )
             for check in result.tolerance_checks:
                 if not check.passed:
-                    lines.append(
-                        f"{network}, {result.bits} bits: {check.what} = {check.value:.4g} (limit {check.applied_limit:.4g})"
-                    )
+                    value, limit = points(check.check, check.value), points(check.check, check.applied_limit)
+                    lines.append(f"{network}, {result.bits} bits: {check.what} = {value} (limit {limit})")
     return lines
 
 

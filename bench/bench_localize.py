@@ -1,0 +1,118 @@
+"""Per-frame latency and memory of `localize` (runtime.localize.Localizer) for one module and an ensemble.
+
+    OMP_NUM_THREADS=1 python bench/bench_localize.py [--frames 30] [--modules 24] [--module-size 100]
+                                                   [--backends float,integer,onnx] [--k 1,5]
+
+SYNTHETIC networks and frames (no training, no data set): the default configuration
+(``network.n_neurons`` neurons per module, DoG inputs, T = ``encoder.timesteps``) with random
+weights in [0, w_max], thresholds 2.0 and random calibration counts, as (a) one module of
+--module-size places and (b) an ensemble of --modules modules (--modules x --module-size places,
+WTA per module, the region regularisation in the readout). Latency depends on the network's
+size, not on what it learnt; accuracy is not measured here. Frames are random 32 x 64 greyscale
+images pushed one at a time (``Localizer.push``: preprocessing, encoding, the network, the
+readout and the sequence aggregation; k = 5 tracks the velocity over 0.5:1.5:0.1). The first
+--warmup frames are dropped. Memory: the process's resident set (VmRSS) after the localiser
+is built and its peak (VmHWM) after the frames, in MiB (the process holds every network built
+before: read the growth). The machine may be shared: the load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.config import Config
+from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.runtime.localize import LocalizeOptions, Localizer
+from vprsnn_export.targets.onnx_target import write_onnx
+from vprsnn_export.threads import set_threads
+
+
+def memory_mib(field: str) -> float:
+    """VmRSS / VmHWM of this process in MiB (Linux), NaN elsewhere."""
+    status = Path("/proc/self/status")
+    if not status.exists():
+        return float("nan")
+    for line in status.read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def random_checkpoint(modules: int, module_size: int, seed: int = 0) -> Checkpoint:
+    cfg = Config().replace(**{"train.module_size": module_size if modules > 1 else 0})
+    rng = np.random.default_rng(seed)
+    n_places = modules * module_size
+    neurons = modules * cfg.network.n_neurons
+    weights = rng.uniform(0, cfg.stdp.w_max, (cfg.network.n_inputs, neurons)).astype(np.float32)
+    return Checkpoint(
+        config=cfg,
+        weights=weights,
+        thresholds=np.full(neurons, 2.0, dtype=np.float32),
+        calibration=rng.poisson(0.3, (neurons, n_places)).astype(np.int64),
+        reference_place_ids=np.arange(n_places, dtype=np.int64),
+        reference_traversals=["summer"],
+        data={"source": "synthetic (random weights)"},
+    )
+
+
+def bench(localizer: Localizer, frames: np.ndarray, warmup: int) -> tuple[float, float, float]:
+    """Median and 95th percentile latency (ms) over the frames after ``warmup``, and the mean wall time per frame."""
+    began = time.perf_counter()
+    latencies = [localizer.push(frame).latency_ms for frame in frames]
+    wall = 1000 * (time.perf_counter() - began) / len(frames)
+    kept = np.asarray(latencies[warmup:])
+    return float(np.median(kept)), float(np.percentile(kept, 95)), wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--modules", type=int, default=24)
+    parser.add_argument("--module-size", type=int, default=100)
+    parser.add_argument("--backends", default="float,integer,onnx")
+    parser.add_argument("--k", default="1,5")
+    args = parser.parse_args()
+    set_threads(1)
+    backends = args.backends.split(",")
+    ks = [int(k) for k in args.k.split(",")]
+    rng = np.random.default_rng(1)
+    frames = rng.integers(0, 256, (args.frames, 32, 64), dtype=np.uint8)
+    print(f"load average {os.getloadavg()[0]:.1f}; {args.frames} synthetic frames, first {args.warmup} dropped")
+    header = (
+        f"{'network':<26} {'backend':<8} {'k':>2} {'median ms':>10} {'p95 ms':>8} {'wall ms':>8} "
+        f"{'RSS MiB':>8} {'peak MiB':>9}"
+    )
+    print(header)
+    print("-" * len(header))
+    with tempfile.TemporaryDirectory() as tmp:
+        for modules in (1, args.modules):
+            ckpt = random_checkpoint(modules, args.module_size)
+            model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+            graph = write_onnx(model, Path(tmp) / f"m{modules}.onnx") if "onnx" in backends else None
+            label = f"{modules} x {ckpt.config.network.n_neurons} n, {modules * args.module_size} places"
+            for backend in backends:
+                for k in ks:
+                    options = LocalizeOptions(
+                        k=k, velocity_candidates=None if k == 1 else tuple(np.round(np.arange(0.5, 1.51, 0.1), 2))
+                    )
+                    network = ckpt if backend == "float" else model
+                    onnx = graph if backend == "onnx" else None
+                    localizer = Localizer(network, backend=backend, options=options, onnx_path=onnx, threads=1)
+                    rss = memory_mib("VmRSS")
+                    median, p95, wall = bench(localizer, frames, args.warmup)
+                    print(
+                        f"{label:<26} {backend:<8} {k:>2} {median:>10.1f} {p95:>8.1f} {wall:>8.1f} "
+                        f"{rss:>8.0f} {memory_mib('VmHWM'):>9.0f}"
+                    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,207 @@
+"""`vprsnn-export localize`: a trained or deployed network over a stream of frames, one JSON line per frame.
+
+Two modes:
+
+* ``localize MODEL --frames DIR|VIDEO|-``: causal, one frame at a time (a folder in name order, a
+  video file, or image paths on stdin, one per line); prints one JSON object per frame
+  ``{frame, name, place_id, confidence, accepted, velocity, latency_ms}``.
+* ``localize MODEL --calibrate QUERY``: runs the same localiser over a labelled query traversal
+  and stores the operating point (the confidence threshold that reached ``--precision`` there)
+  beside the model, ``<model>.operating-point.json``; ``--frames`` then accepts at that threshold.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from ..device import resolve_device
+from ..errors import InvalidValueError
+from ..frames import iter_frames
+from ..runtime.exporting import load_source, read_export
+from ..runtime.localize import (
+    BACKENDS,
+    LocalizeOptions,
+    Localizer,
+    OperatingPoint,
+    load_operating_point,
+    operating_point,
+    operating_point_path,
+    save_operating_point,
+)
+from ._common import add_data_options, add_runtime_options, parse_velocity_grid, query_data
+
+DEFAULTS = {"k": 1, "rule": "product", "velocity": 1.0, "velocity_span": 10, "velocity_memory": 50}
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "localize",
+        help="localise frame by frame (folder, video or stdin) with a confidence and an operating point",
+        description="Run a checkpoint (float network), a fixed-point model (integer simulator) or its exported "
+        "ONNX graph over a stream of frames, causally, and print one JSON line per frame. --calibrate QUERY "
+        "first picks the confidence threshold for --precision on a labelled query traversal.",
+    )
+    parser.add_argument("model", help="checkpoint (train) or fixed-point model (quantize)")
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument(
+        "--frames",
+        metavar="DIR|VIDEO|-",
+        help="a folder of images (name order), a video, or - (image paths on stdin, one per line)",
+    )
+    mode.add_argument("--calibrate", metavar="QUERY", help="labelled query traversal: store the operating point")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="auto",
+        help="auto (default: float for a checkpoint, integer for a fixed-point model, onnx with --onnx)",
+    )
+    parser.add_argument(
+        "--onnx", metavar="FILE|DEPLOY", help="the ONNX graph exported from MODEL (or its deploy folder)"
+    )
+    group = parser.add_argument_group("sequence")
+    group.add_argument("--k", type=int, help=f"frames aggregated per decision (default {DEFAULTS['k']})")
+    group.add_argument("--rule", choices=("product", "sum"), help="aggregation rule (default product)")
+    group.add_argument("--velocity", type=float, help="places per frame (default 1.0)")
+    group.add_argument(
+        "--velocity-search",
+        metavar="LO:HI:STEP",
+        help="track the velocity causally over this grid instead of using --velocity",
+    )
+    group.add_argument("--velocity-span", type=int, metavar="N", help="windows summed by the tracker (default 10)")
+    group.add_argument(
+        "--velocity-memory", type=int, metavar="N", help="frames of stream contrast for the tracker (default 50)"
+    )
+    point = parser.add_argument_group("operating point")
+    accept = point.add_mutually_exclusive_group()
+    accept.add_argument(
+        "--precision",
+        type=float,
+        metavar="P",
+        help="--calibrate: the precision to reach (default 1.0); --frames: use the stored point "
+        "calibrated for P (default: the stored point when there is one)",
+    )
+    accept.add_argument("--threshold", type=float, metavar="C", help="--frames: accept at this confidence instead")
+    point.add_argument(
+        "--operating-point",
+        metavar="FILE",
+        help="where the operating point is stored (default: MODEL's name + .operating-point.json)",
+    )
+    point.add_argument(
+        "--match-window",
+        type=int,
+        default=0,
+        metavar="N",
+        help="--calibrate: a place within +-N of the truth is right (default 0)",
+    )
+    add_data_options(parser, data_required=False)
+    add_runtime_options(parser)
+    parser.set_defaults(handler=run)
+
+
+def given_options(args: argparse.Namespace) -> dict:
+    """The sequence options given on the command line (None: not given)."""
+    return {
+        "k": args.k,
+        "rule": args.rule,
+        "velocity": args.velocity,
+        "velocity_candidates": parse_velocity_grid(args.velocity_search),
+        "velocity_span": args.velocity_span,
+        "velocity_memory": args.velocity_memory,
+    }
+
+
+def options_from(given: dict, stored: LocalizeOptions | None, where: Path | None) -> LocalizeOptions:
+    """The given options over the stored (or default) ones; a stored point's options cannot be changed."""
+    base = stored.to_dict() if stored is not None else {**DEFAULTS, "velocity_candidates": None}
+    for name, value in given.items():
+        if value is None:
+            continue
+        if stored is not None and (list(value) if isinstance(value, tuple) else value) != base[name]:
+            raise InvalidValueError(
+                f"--{name.replace('_', '-').replace('candidates', 'search')} differs from the operating point's "
+                f"{base[name]!r} ({where}): its threshold holds for its own options; recalibrate or give --threshold"
+            )
+        base[name] = value
+    return LocalizeOptions.from_dict(base)
+
+
+def onnx_file(raw: str | None) -> Path | None:
+    if raw is None:
+        return None
+    path = Path(raw)
+    return read_export(path).written("onnx") if path.is_dir() else path
+
+
+def run(args: argparse.Namespace) -> int:
+    source = load_source(args.model)
+    frames = None if args.frames is None else iter_frames(args.frames)  # a bad source fails before any output
+    point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
+    onnx = onnx_file(args.onnx)
+    device = resolve_device(args.device)
+    if args.calibrate:
+        return calibrate(args, source, point_path, onnx, device)
+    if args.threshold is not None and not math.isfinite(args.threshold):
+        raise InvalidValueError(f"--threshold expects a finite confidence, got {args.threshold}")
+    stored: OperatingPoint | None = None
+    if args.threshold is None and (args.precision is not None or point_path.is_file()):
+        stored = load_operating_point(point_path, source.sha256)
+        if args.precision is not None and stored.precision_target != args.precision:
+            raise InvalidValueError(
+                f"--precision {args.precision}: the operating point {point_path} was calibrated for "
+                f"{stored.precision_target}; run --calibrate with --precision {args.precision}"
+            )
+    options = options_from(given_options(args), None if stored is None else stored.options, point_path)
+    threshold = args.threshold if stored is None else stored.threshold
+    if args.threshold is None and stored is None:
+        print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
+    elif stored is not None and not args.quiet:
+        print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
+    localizer = Localizer(
+        source.network,
+        backend=args.backend,
+        options=options,
+        threshold=threshold,
+        onnx_path=onnx,
+        device=device,
+        threads=args.threads,
+    )
+    assert frames is not None
+    for decision in localizer.run(frames):
+        sys.stdout.write(json.dumps(decision.to_dict()) + "\n")
+        sys.stdout.flush()
+    return 0
+
+
+def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
+    if args.threshold is not None:
+        raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
+    if not 0 <= args.match_window <= 1_000_000:
+        raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
+    network = source.network
+    options = options_from(given_options(args), None, None)
+    dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
+    localizer = Localizer(
+        network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
+    )
+    point, _ = operating_point(
+        localizer,
+        dataset.traversal(args.calibrate),
+        dataset.place_ids,
+        precision=1.0 if args.precision is None else args.precision,
+        match_window=args.match_window,
+        model_sha256=source.sha256,
+        query=args.calibrate,
+    )
+    save_operating_point(point, point_path)
+    threshold = "none qualified: nothing will be accepted" if point.threshold is None else f"{point.threshold:.6f}"
+    print(
+        f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
+        f"({localizer.backend}, k={options.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
+        f"recall {100 * point.recall:.1f} %"
+    )
+    print(f"wrote {point_path}")
+    return 0

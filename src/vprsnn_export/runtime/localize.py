@@ -1,0 +1,476 @@
+"""Online localisation: one frame at a time, causal, on any backend (`vprsnn-export localize`).
+
+Each frame ``j`` (a greyscale image of any size) is resized and preprocessed like the training
+data, encoded under the presentation key ``(seed, "localize", stream, j)`` and presented to the
+network alone (state isolation, as in evaluation). Its spike counts give the W+Prob distribution
+``P_j`` over the reference places (an ensemble's with its region regularisation,
+:class:`Readout`, the readout of :func:`vprsnn_export.runtime.evaluation.readout_scores` with its
+query-independent half computed once). The decision aggregates the ``k`` most
+recent frames only (:func:`vprsnn_export.readout.aggregation.aggregate`):
+
+.. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
+          \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l),
+          \\quad \\text{accepted}_j = c_j \\ge \\theta
+
+at a given velocity ``v``, or with ``velocity_candidates`` the causal tracker of
+:func:`vprsnn_export.readout.aggregation.track_velocity`: ``v_j`` maximises the window scores of
+the ``span`` most recent windows of ``2k`` frames on the stream contrast of the ``memory`` most
+recent frames. **Lag**: the decision for frame ``j`` is given as soon as frame ``j`` arrives
+(0 frames of delay; the fixed-lag "smooth" estimate of ``evaluate`` waits ``2k - 1`` frames and is
+not offered here); the velocity it uses is fitted to frames ``j - span - 2k + 2 .. j``, so it
+follows a change of speed with a delay of about ``span`` frames.
+
+The operating point ``theta`` comes from a labelled calibration run (:func:`operating_point`):
+with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
+decision was right. It is stored beside the model (:func:`save_operating_point`).
+
+Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.dynamics.FloatNetwork`), ``integer``
+(a fixed-point model, :class:`~vprsnn_export.targets.intsim.IntegerNetwork`) and ``onnx`` (the
+graph exported from that fixed-point model, one onnxruntime session). Every backend returns the
+spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
+which agree count for count, give the same decisions.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.config import Config
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import encode, presentation_seed
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.fileio import atomic_write_text, is_readable_file
+from vprsnn_export.preprocess import normalise_resized, resize_image
+from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
+from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
+from vprsnn_export.readout.metrics import is_correct
+from vprsnn_export.readout.regions import ModuleLayout, regularised_calibration
+from vprsnn_export.readout.strategies import decide
+from vprsnn_export.runtime.evaluation import ensemble_layout
+from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.onnx_target import read_onnx, run_session, session
+
+BACKENDS = ("auto", "float", "integer", "onnx")
+STREAM = "localize"
+OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
+OPERATING_POINT_SUFFIX = ".operating-point.json"
+
+
+@dataclass(frozen=True)
+class LocalizeOptions:
+    """How the frames are aggregated: ``k`` frames at ``velocity`` places per frame, or the velocity
+    tracked over ``velocity_candidates`` (``velocity_span`` windows, ``velocity_memory`` frames of
+    stream contrast)."""
+
+    k: int = 1
+    rule: str = "product"
+    velocity: float = 1.0
+    velocity_candidates: tuple[float, ...] | None = None
+    velocity_span: int = 10
+    velocity_memory: int = 50
+
+    def __post_init__(self) -> None:
+        if isinstance(self.k, bool) or not isinstance(self.k, int) or not 1 <= self.k <= 10_000:
+            raise InvalidValueError(f"k must be an integer from 1 to 10000, got {self.k!r}")
+        if self.rule not in RULES:
+            raise InvalidValueError(f"rule must be one of {', '.join(RULES)}, got {self.rule!r}")
+        if not math.isfinite(self.velocity):
+            raise InvalidValueError(f"velocity must be finite, got {self.velocity!r}")
+        if not 1 <= self.velocity_span <= 100_000 or not 0 <= self.velocity_memory <= 100_000:
+            raise InvalidValueError("velocity_span must lie in 1..100000 and velocity_memory in 0..100000")
+        if self.velocity_candidates is not None and not self.velocity_candidates:
+            raise InvalidValueError("velocity_candidates must hold at least one velocity")
+
+    @property
+    def tracking(self) -> bool:
+        return self.velocity_candidates is not None and self.k > 1
+
+    @property
+    def history(self) -> int:
+        """Frames of W+Prob kept: the window, the tracker's trajectories (2k) and its contrast memory."""
+        return max(self.k, 2 * self.k, self.velocity_memory) if self.tracking else self.k
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["velocity_candidates"] = None if self.velocity_candidates is None else list(self.velocity_candidates)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> LocalizeOptions:
+        cands = data.get("velocity_candidates")
+        return cls(**{**data, "velocity_candidates": None if cands is None else tuple(float(v) for v in cands)})
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One frame's answer: the place (None: no match), its confidence, whether it is accepted, the
+    velocity used and the latency from the decoded frame to the decision."""
+
+    frame: int
+    name: str
+    place_id: int | None
+    confidence: float
+    accepted: bool
+    velocity: float
+    latency_ms: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """A confidence threshold chosen on labelled calibration queries (``threshold`` None: none qualified,
+    nothing is accepted)."""
+
+    threshold: float | None
+    precision_target: float
+    precision: float  # achieved on the calibration queries (1.0 when nothing is accepted)
+    recall: float  # accepted and correct / all calibration queries
+    n_queries: int
+    options: LocalizeOptions
+    model_sha256: str
+    backend: str
+    query: str
+    match_window: int
+
+    def accepts(self, confidence: float, place_id: int | None) -> bool:
+        return self.threshold is not None and place_id is not None and confidence >= self.threshold
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": OPERATING_POINT_FORMAT, **asdict(self), "options": self.options.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> OperatingPoint:
+        fields = {k: v for k, v in data.items() if k != "format"}
+        return cls(**{**fields, "options": LocalizeOptions.from_dict(fields["options"])})
+
+
+@dataclass(frozen=True)
+class Readout:
+    """The query-independent half of the W+Prob readout, computed once per network (eq. 9-11).
+
+    ``calibration``: S^R (an ensemble's region-weighted S~, hyperactive rows zeroed); ``weighting``:
+    S'' of :func:`~vprsnn_export.readout.assignment.weighted_matrix`; ``column_sum``: sum_m S^R_ml;
+    ``silent``: neurons whose query counts are ignored (None: none).
+    """
+
+    calibration: np.ndarray
+    weighting: np.ndarray
+    column_sum: np.ndarray
+    silent: np.ndarray | None
+
+    @classmethod
+    def of(cls, calibration: np.ndarray, gamma: float, layout: ModuleLayout | None) -> Readout:
+        silent = None
+        sr = np.asarray(calibration, dtype=np.float64)
+        if layout is not None:
+            sr, silent = regularised_calibration(calibration, layout)
+        return cls(sr, weighted_matrix(sr, gamma), sr.sum(axis=0), silent)
+
+    def wprob(self, counts: np.ndarray) -> np.ndarray:
+        """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.
+
+        .. math:: \\mathrm{Score}_l = \\Big(\\sum_{i \\in A} S^Q_i S''_{il}\\Big)
+                  \\frac{\\sum_{i \\in A} S^R_{il}}{\\sum_m S^R_{ml}}, \\quad
+                  A = \\{i : S^Q_i > 0, \\text{not silent}\\}, \\quad P = \\text{wprob\\_distribution}(\\mathrm{Score})
+
+        the readout of :func:`vprsnn_export.runtime.evaluation.readout_scores` (equal up to the order of
+        the float sums), at the cost of the few neurons that fired rather than all of them.
+        """
+        sq = np.asarray(counts, dtype=np.float64)
+        active = sq > 0
+        if self.silent is not None:
+            active &= ~self.silent
+        rows = np.flatnonzero(active)
+        safe = np.where(self.column_sum > 0, self.column_sum, 1.0)
+        penalty = np.where(self.column_sum > 0, self.calibration[rows].sum(axis=0) / safe, 0.0)
+        return wprob_distribution(((sq[rows] @ self.weighting[rows]) * penalty)[None])[0]
+
+
+def causal_velocity(
+    contrast: np.ndarray, scores: deque, options: LocalizeOptions, candidates: np.ndarray
+) -> tuple[np.ndarray, float]:
+    """The newest window's scores e_j(v) and the tracked velocity.
+
+    .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } 2k \\text{ frames of } Q, \\quad
+              v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
+
+    ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
+    previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
+    """
+    length = 2 * options.k
+    newest = window_scores(contrast[-length:], length, candidates, options.rule)[-1]
+    total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
+    return newest, float(candidates[int(np.argmax(total))])
+
+
+class Localizer:
+    """A trained or deployed network answering one frame at a time (``push``), causally.
+
+    ``network``: a float checkpoint (backend ``float``) or a fixed-point model (``integer``, or
+    ``onnx`` with ``onnx_path``, the graph exported from that model). ``threshold``: accept a
+    decision when its confidence reaches it (None: accept none), e.g. an :class:`OperatingPoint`'s.
+    """
+
+    def __init__(
+        self,
+        network: Checkpoint | FixedPointModel,
+        *,
+        backend: str = "auto",
+        options: LocalizeOptions | None = None,
+        threshold: float | None = None,
+        onnx_path: str | Path | None = None,
+        device: torch.device | None = None,
+        threads: int | None = None,
+    ) -> None:
+        self.network = network
+        self.options = LocalizeOptions() if options is None else options
+        self.threshold = threshold
+        self.config: Config = network.config
+        self.backend = resolve_backend(network, backend, onnx_path)
+        self._counts = counts_runner(network, self.backend, onnx_path, device, threads)
+        layout = ensemble_layout(self.config, len(network.reference_place_ids))
+        self.readout = Readout.of(network.calibration, self.config.assignment.gamma, layout)
+        self._candidates = None if not self.options.tracking else np.asarray(self.options.velocity_candidates)
+        self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
+        self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
+
+    def reset(self) -> None:
+        """Forget the stream: the next frame is frame 0."""
+        self.frame = 0
+        self._wprob: deque[np.ndarray] = deque(maxlen=self.options.history)
+        self._contrast: deque[np.ndarray] = deque(maxlen=2 * self.options.k)
+        self._scores: deque[np.ndarray] = deque(maxlen=max(self.options.velocity_span - 1, 1))
+
+    def preprocess(self, grey: np.ndarray) -> np.ndarray:
+        """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
+        size = self.config.preprocess.image_size
+        return normalise_resized(resize_image(np.asarray(grey), size)[None], self.config.preprocess)
+
+    def spikes(self, images: np.ndarray, first_frame: int) -> torch.Tensor:
+        """Spike trains of preprocessed frames numbered from ``first_frame`` (N, T, inputs) uint8."""
+        seeds = [presentation_seed(self.config.seed, STREAM, STREAM, first_frame + i) for i in range(len(images))]
+        return encode(images, seeds, self.config.encoder)
+
+    def counts(self, images: np.ndarray, first_frame: int) -> np.ndarray:
+        """Spike counts (N, neurons) of preprocessed frames numbered from ``first_frame`` (one network run)."""
+        return self._counts(self.spikes(images, first_frame))
+
+    def wprob(self, counts: np.ndarray) -> np.ndarray:
+        """The k = 1 W+Prob distribution (places,) of one frame's spike counts (neurons,)."""
+        return self.readout.wprob(counts)
+
+    def push(self, grey: np.ndarray, name: str = "") -> Decision:
+        """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
+        began = time.perf_counter()
+        counts = self.counts(self.preprocess(grey), self.frame)[0]
+        return self._decide(counts, name, began)
+
+    def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
+        """``push`` over ``(name, grey)`` frames as they come."""
+        for name, grey in frames:
+            yield self.push(grey, name)
+
+    def run_batch(self, grey_frames: np.ndarray | list[np.ndarray], names: list[str] | None = None) -> list[Decision]:
+        """The decisions ``push`` would give on these greyscale frames (in order, from frame 0), with the
+        network run once over all of them; ``latency_ms`` is the per-frame share."""
+        size = self.config.preprocess.image_size
+        resized = np.stack([resize_image(np.asarray(g), size) for g in grey_frames])
+        return self.run_inputs(normalise_resized(resized, self.config.preprocess), names)
+
+    def run_inputs(self, inputs: np.ndarray, names: list[str] | None = None) -> list[Decision]:
+        """:meth:`run_batch` on preprocessed frames (N, inputs), e.g. a :class:`~vprsnn_export.dataset.Dataset`'s.
+
+        The integer simulator and the ONNX graph give exactly ``push``'s decisions. The float network
+        sums its input currents in this machine's BLAS order, which depends on the batch size, so a
+        batched float run may differ from ``push`` in the last bit of a current (rarely a spike).
+        """
+        self.reset()
+        began = time.perf_counter()
+        counts = self.counts(np.asarray(inputs, dtype=np.float32), 0)
+        share = (time.perf_counter() - began) / max(len(counts), 1)
+        labels = names if names is not None else [str(i) for i in range(len(counts))]
+        return [self._decide(row, name, time.perf_counter() - share) for row, name in zip(counts, labels, strict=True)]
+
+    def _decide(self, counts: np.ndarray, name: str, began: float) -> Decision:
+        options = self.options
+        row = self.wprob(counts)
+        self._wprob.append(row)
+        velocity = options.velocity
+        if self._candidates is not None:
+            recent = np.asarray(self._wprob)
+            memory = options.velocity_memory
+            self._contrast.append(stream_contrast(recent[-max(memory, 1) :], memory)[-1])
+            newest, velocity = causal_velocity(np.asarray(self._contrast), self._scores, options, self._candidates)
+            if options.velocity_span > 1:
+                self._scores.append(newest)
+        window = np.asarray(self._wprob)[-options.k :]
+        final = aggregate(window, options.k, velocity, options.rule)[-1:] if options.k > 1 else row[None]
+        index, confidence = decide(final, "wprob")
+        place = None if index[0] < 0 else int(self.network.reference_place_ids[index[0]])
+        conf = float(confidence[0])
+        decision = Decision(
+            frame=self.frame,
+            name=name,
+            place_id=place,
+            confidence=conf,
+            accepted=self.threshold is not None and place is not None and conf >= self.threshold,
+            velocity=float(velocity),
+            latency_ms=1000 * (time.perf_counter() - began),
+        )
+        self.frame += 1
+        return decision
+
+
+def resolve_backend(network: Checkpoint | FixedPointModel, backend: str, onnx_path: str | Path | None) -> str:
+    """``auto`` -> float for a checkpoint, integer for a fixed-point model; a mismatch is an InvalidValueError."""
+    if backend not in BACKENDS:
+        raise InvalidValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    fixed = isinstance(network, FixedPointModel)
+    if backend == "auto":
+        backend = "onnx" if onnx_path is not None else ("integer" if fixed else "float")
+    if backend == "float" and fixed:
+        raise InvalidValueError("--backend float needs a float checkpoint; this is a fixed-point model")
+    if backend in ("integer", "onnx") and not fixed:
+        raise InvalidValueError(f"--backend {backend} needs a fixed-point model (vprsnn-export quantize)")
+    if backend == "onnx" and onnx_path is None:
+        raise InvalidValueError("--backend onnx needs --onnx: the graph exported from this model")
+    return backend
+
+
+def counts_runner(
+    network: Checkpoint | FixedPointModel,
+    backend: str,
+    onnx_path: str | Path | None,
+    device: torch.device | None,
+    threads: int | None,
+):
+    """A function spikes (N, T, inputs) -> spike counts (N, neurons) int64 on the chosen backend."""
+    device = torch.device("cpu") if device is None else device
+    if isinstance(network, Checkpoint):
+        floating = FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
+        return lambda spikes: floating.run(spikes, state_isolation=True).counts.cpu().numpy()
+    if backend == "integer":
+        integer = IntegerNetwork(network, device)
+        return lambda spikes: integer.run(spikes, state_isolation=True).counts.cpu().numpy()
+    assert onnx_path is not None
+    check_graph(network, onnx_path)
+    sess = session(onnx_path, threads)
+    return lambda spikes: np.asarray(run_session(sess, spikes).counts, dtype=np.int64)
+
+
+def check_graph(model: FixedPointModel, path: str | Path) -> None:
+    """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
+    props = {p.key: p.value for p in read_onnx(path).metadata_props}
+    if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
+        raise ModelFileError(
+            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
+            f"{props.get('vprsnn.bits')} bits; model: source {model.source_sha256}, {model.bits} bits)",
+            path,
+        )
+
+
+def precision_threshold(confidence: np.ndarray, correct: np.ndarray, precision: float) -> float | None:
+    """The lowest confidence threshold whose accepted decisions reach ``precision``.
+
+    .. math:: \\theta = \\min \\{ c_i : \\frac{|\\{j : c_j \\ge c_i, \\text{correct}_j\\}|}
+                                        {|\\{j : c_j \\ge c_i\\}|} \\ge p \\}
+
+    over the decisions with a place (confidence > 0); None when no threshold qualifies.
+    """
+    c = np.asarray(confidence, dtype=np.float64)
+    ok = np.asarray(correct, dtype=bool)
+    keep = c > 0
+    c, ok = c[keep], ok[keep]
+    if c.size == 0:
+        return None
+    order = np.argsort(-c, kind="stable")
+    c, ok = c[order], ok[order]
+    hits = np.cumsum(ok)
+    group_end = np.r_[c[1:] != c[:-1], True]  # the last decision of each run of equal confidences
+    reached = (hits / np.arange(1, c.size + 1) >= precision - 1e-12) & group_end
+    if not reached.any():
+        return None
+    return float(c[np.flatnonzero(reached)[-1]])
+
+
+def operating_point(
+    localizer: Localizer,
+    inputs: np.ndarray,
+    place_ids: np.ndarray,
+    *,
+    precision: float = 1.0,
+    match_window: int = 0,
+    model_sha256: str = "",
+    query: str = "",
+) -> tuple[OperatingPoint, list[Decision]]:
+    """Run the localiser over labelled preprocessed frames (N, inputs) in stream order (a query traversal)
+    and choose the threshold for ``precision``; a decision within ``match_window`` places is right."""
+    if not 0 < precision <= 1:
+        raise InvalidValueError(f"--precision must lie in (0, 1], got {precision}")
+    decisions = localizer.run_inputs(inputs)
+    predicted = np.ma.MaskedArray(
+        np.asarray([-1 if d.place_id is None else d.place_id for d in decisions], dtype=np.int64),
+        mask=np.asarray([d.place_id is None for d in decisions], dtype=bool),
+    )
+    correct = is_correct(predicted, np.asarray(place_ids), match_window)
+    confidence = np.asarray([d.confidence for d in decisions])
+    threshold = precision_threshold(confidence, correct, precision)
+    accepted = (
+        (confidence >= threshold) & ~np.ma.getmaskarray(predicted)
+        if threshold is not None
+        else np.zeros(len(decisions), bool)
+    )
+    point = OperatingPoint(
+        threshold=threshold,
+        precision_target=float(precision),
+        precision=float(correct[accepted].mean()) if accepted.any() else 1.0,
+        recall=float((correct & accepted).sum() / len(decisions)),
+        n_queries=len(decisions),
+        options=localizer.options,
+        model_sha256=model_sha256,
+        backend=localizer.backend,
+        query=query,
+        match_window=int(match_window),
+    )
+    return point, decisions
+
+
+def operating_point_path(model_path: str | Path) -> Path:
+    """Where a model's operating point is stored: beside it, ``<model stem>.operating-point.json``."""
+    path = Path(model_path)
+    return path.with_name(path.stem + OPERATING_POINT_SUFFIX)
+
+
+def save_operating_point(point: OperatingPoint, path: str | Path) -> Path:
+    return atomic_write_text(path, json.dumps(point.to_dict(), indent=2) + "\n")
+
+
+def load_operating_point(path: str | Path, model_sha256: str | None = None) -> OperatingPoint:
+    """Read an operating point; ModelFileError when it is missing, malformed or made for another model."""
+    path = Path(path)
+    if not is_readable_file(path):
+        raise ModelFileError("no operating point here: run `localize MODEL --calibrate QUERY` first", path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.get("format") != OPERATING_POINT_FORMAT:
+            raise ModelFileError(f"not an operating point (format {data.get('format')!r})", path)
+        point = OperatingPoint.from_dict(data)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, KeyError, AttributeError) as exc:
+        raise ModelFileError(f"corrupt operating point ({exc})", path) from None
+    if model_sha256 is not None and point.model_sha256 != model_sha256:
+        raise ModelFileError("this operating point was calibrated on another model file (sha256 differs)", path)
+    return point

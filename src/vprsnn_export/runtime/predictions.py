@@ -1,0 +1,132 @@
+"""Per-query results: what each strategy and sequence length decided for every query (`evaluate --predictions`).
+
+For query ``q`` (in stream order), strategy ``s`` and sequence length ``k``:
+
+.. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}^{(s, k)}_{ql}, \\quad c_q = \\text{confidence of } \\hat l_q,
+          \\quad \\text{correct}_q = |\\mathrm{id}(\\hat l_q) - \\text{truth}_q| \\le \\text{match window}
+
+with the very scores the metric rows are computed from (``runtime.evaluation``: every strategy
+at k = 1, W+Prob aggregated at each k > 1), so the accuracy of a (strategy, k) column of
+:class:`Predictions` equals that row's accuracy.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.fileio import atomic_write_text
+from vprsnn_export.readout.metrics import is_correct, predicted_place_ids
+from vprsnn_export.readout.strategies import STRATEGIES, decide
+from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_scores
+
+FORMATS = (".csv", ".jsonl")
+FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct")
+
+
+@dataclass(frozen=True)
+class Decided:
+    """One (strategy, k) column: the decided place id per query (-1: no match), its confidence, correct or not."""
+
+    strategy: str
+    k: int
+    place_id: np.ndarray  # (Q,) int64, -1 for a no-match
+    confidence: np.ndarray  # (Q,) float64
+    correct: np.ndarray | None  # (Q,) bool; None without ground truth
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """Every query's decision under every strategy and k; ``truth`` None when the queries are unlabelled."""
+
+    truth: np.ndarray | None  # (Q,) int64 true place ids
+    decided: tuple[Decided, ...]
+
+    @property
+    def n_queries(self) -> int:
+        return len(self.decided[0].place_id) if self.decided else 0
+
+    def column(self, strategy: str, k: int = 1) -> Decided:
+        for entry in self.decided:
+            if (entry.strategy, entry.k) == (strategy, k):
+                return entry
+        raise InvalidValueError(f"no predictions for {strategy} at k={k}")
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Long format: one row per (query, strategy, k), queries in stream order."""
+        out = []
+        for q in range(self.n_queries):
+            for entry in self.decided:
+                place = int(entry.place_id[q])
+                out.append(
+                    {
+                        "query": q,
+                        "truth": None if self.truth is None else int(self.truth[q]),
+                        "strategy": entry.strategy,
+                        "k": entry.k,
+                        "place_id": None if place < 0 else place,
+                        "confidence": float(entry.confidence[q]),
+                        "correct": None if entry.correct is None else bool(entry.correct[q]),
+                    }
+                )
+        return out
+
+    def to_csv(self) -> str:
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=FIELDS, lineterminator="\n")
+        writer.writeheader()
+        for row in self.rows():
+            writer.writerow({k: "" if v is None else v for k, v in row.items()})
+        return buffer.getvalue()
+
+    def to_jsonl(self) -> str:
+        return "".join(json.dumps(row) + "\n" for row in self.rows())
+
+    def write(self, path: str | Path) -> Path:
+        """Write as CSV or JSON lines, chosen by the suffix (.csv, .jsonl), atomically."""
+        suffix = Path(path).suffix.lower()
+        if suffix not in FORMATS:
+            raise InvalidValueError(f"--predictions {path}: give a .csv or .jsonl file name")
+        return atomic_write_text(path, self.to_csv() if suffix == ".csv" else self.to_jsonl())
+
+
+def predictions(
+    scores: Mapping[str, np.ndarray],
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray | None,
+    options: ReadoutOptions,
+) -> Predictions:
+    """The decisions behind :func:`vprsnn_export.runtime.evaluation.score_rows`, per query."""
+    columns = [(strategy, 1, scores[strategy]) for strategy in STRATEGIES]
+    columns += [("wprob", k, aggregated(scores["wprob"], k, options, None)) for k in sorted(set(options.ks) - {1})]
+    decided = []
+    for strategy, k, matrix in columns:
+        index, confidence = decide(matrix, strategy)
+        ids = predicted_place_ids(index, reference_place_ids)
+        correct = None if query_place_ids is None else is_correct(ids, query_place_ids, options.tolerance)
+        decided.append(Decided(strategy, k, np.asarray(ids.filled(-1), dtype=np.int64), confidence, correct))
+    truth = None if query_place_ids is None else np.asarray(query_place_ids, dtype=np.int64)
+    return Predictions(truth=truth, decided=tuple(decided))
+
+
+def network_predictions(
+    network: Checkpoint | FixedPointModel,
+    query_counts: np.ndarray,
+    query_place_ids: np.ndarray | None,
+    options: ReadoutOptions,
+) -> Predictions:
+    """Per-query decisions from an evaluation's spike counts (``Evaluation.query_counts``), read out with
+    the network's own calibration (an ensemble's with its region regularisation), like its metric rows."""
+    layout = ensemble_layout(network.config, len(network.reference_place_ids))
+    scores = readout_scores(network.calibration, query_counts, options.gamma, layout)
+    return predictions(scores, network.reference_place_ids, query_place_ids, options)

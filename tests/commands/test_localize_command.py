@@ -1,0 +1,142 @@
+"""`vprsnn-export localize`: folders, a video and stdin; --calibrate and the stored operating point; real frames."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from vprsnn_export.checkpoint import checkpoint_sha256, save_checkpoint
+from vprsnn_export.cli import main
+from vprsnn_export.config import Config
+from vprsnn_export.dataset import load_dataset, read_manifest
+from vprsnn_export.export.model import save_fixed_point
+from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.synthetic import synthetic_route
+from vprsnn_export.targets.onnx_target import write_onnx
+from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+
+def shared_data(name: str) -> Path:
+    """``shared/data/<name>`` beside the repository or beside one of its parents (a worktree sits deeper)."""
+    for folder in Path(__file__).resolve().parents[2].parents:
+        if (folder / "shared/data" / name).is_dir():
+            return folder / "shared/data" / name
+    return Path(__file__).resolve().parents[3] / "shared/data" / name
+
+
+NORDLAND = shared_data("nordland_64x32_summer_winter")
+TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
+
+
+def write_models(folder: Path, data_source: str, places: str | None, n_places: int) -> tuple[Path, Path, Path]:
+    """A tiny checkpoint, its 4-bit model and that model's ONNX graph in ``folder``."""
+    cfg = Config().replace(**TINY)
+    data = load_dataset(data_source, ["summer", "winter"], cfg.preprocess, places=places)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": places})
+    net = save_checkpoint(folder / "net.npz", ckpt)
+    model = deploy(ckpt, checkpoint_sha256(net), 4, reference_images={"summer": data.traversal("summer")})
+    fixed = save_fixed_point(folder / "q4.npz", model)
+    return net, fixed, write_onnx(model, folder / "q4.onnx")
+
+
+def video(frames: list[np.ndarray], path: Path) -> Path:
+    """An MJPEG .avi of greyscale frames (lossy: the frames differ slightly from the images)."""
+    height, width = frames[0].shape
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (width, height), isColor=True)
+    for frame in frames:
+        writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    return path
+
+
+def localize(capsys, *argv) -> list[dict]:
+    assert main(["localize", *map(str, argv), "--quiet"]) == 0
+    return [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+
+
+def decisions(lines: list[dict]) -> list[tuple]:
+    return [(d["frame"], d["place_id"], d["confidence"], d["accepted"]) for d in lines]
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("localize")
+    net, fixed, graph = write_models(folder, "synthetic:24", None, 24)
+    frames = folder / "frames"
+    frames.mkdir()
+    grey = synthetic_route(24, ("winter",))["winter"]
+    for index, image in enumerate(grey):  # natural order: f2 before f10
+        cv2.imwrite(str(frames / f"f{index}.png"), image)
+    return net, fixed, graph, frames, grey
+
+
+def test_folder_stdin_and_backends(synthetic, capsys, monkeypatch):
+    net, fixed, graph, frames, _ = synthetic
+    integer = localize(capsys, fixed, "--frames", frames, "--k", "3", "--threshold", "0.5")
+    assert [d["name"] for d in integer[:3]] == ["f0.png", "f1.png", "f2.png"] and len(integer) == 24
+    assert set(integer[0]) == {"frame", "name", "place_id", "confidence", "accepted", "velocity", "latency_ms"}
+    onnx = localize(capsys, fixed, "--frames", frames, "--k", "3", "--threshold", "0.5", "--onnx", graph)
+    assert decisions(onnx) == decisions(integer)
+    assert any(d["accepted"] for d in integer) and not all(d["accepted"] for d in integer)
+    floating = localize(capsys, net, "--frames", frames, "--k", "3")
+    assert len(floating) == 24 and not any(d["accepted"] for d in floating)  # no operating point: none accepted
+    paths = "\n".join(str(frames / f"f{i}.png") for i in range(5)) + "\n\n"
+    monkeypatch.setattr("sys.stdin", io.StringIO(paths))
+    piped = localize(capsys, fixed, "--frames", "-", "--k", "3", "--threshold", "0.5")
+    assert decisions(piped) == decisions(integer)[:5]
+
+
+def test_calibrate_stores_the_operating_point_beside_the_model(synthetic, capsys):
+    _, fixed, graph, frames, _ = synthetic
+    assert main(["localize", str(fixed), "--calibrate", "winter", "--k", "3", "--precision", "1.0"]) == 0
+    assert "precision 100.0 %" in capsys.readouterr().out
+    stored = json.loads(fixed.with_name("q4.operating-point.json").read_text())
+    assert stored["options"]["k"] == 3 and stored["precision"] == 1.0
+    lines = localize(capsys, fixed, "--frames", frames, "--precision", "1.0", "--onnx", graph)
+    assert all(d["accepted"] == (d["place_id"] is not None and d["confidence"] >= stored["threshold"]) for d in lines)
+    accepted = [d for d in lines if d["accepted"]]
+    assert accepted and all(d["place_id"] == d["frame"] for d in accepted)  # the synthetic frames are places 0..23
+    assert main(["localize", str(fixed), "--frames", str(frames), "--k", "5"]) == 2
+    assert "differs from the operating point" in capsys.readouterr().err
+
+
+def test_bad_frames_are_one_line(synthetic, capsys, tmp_path):
+    _, fixed, _, _, _ = synthetic
+    (tmp_path / "notes.txt").write_text("x")
+    for frames, message in (
+        (tmp_path, "no image files"),
+        (tmp_path / "notes.txt", "not a video"),
+        (tmp_path / "x", "no such"),
+    ):
+        assert main(["localize", str(fixed), "--frames", str(frames)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason=f"the shared Nordland data is absent ({NORDLAND})")
+def test_real_frames_from_a_folder_and_a_video(tmp_path, capsys):
+    net, fixed, graph = write_models(tmp_path, str(NORDLAND), "100:12", 12)
+    manifest = read_manifest(NORDLAND)
+    frames = tmp_path / "winter"
+    frames.mkdir()
+    grey = []
+    for place in range(100, 112):
+        source = NORDLAND / manifest.rows[place][1]["winter"]
+        shutil.copy(source, frames / f"frame{place - 100}.png")
+        grey.append(cv2.imread(str(source), cv2.IMREAD_GRAYSCALE))
+    clip = video(grey, tmp_path / "winter.avi")
+    for source in (frames, clip):
+        lines = {
+            name: localize(capsys, model, "--frames", source, "--k", "3", "--threshold", "0.5", *extra)
+            for name, model, extra in (("float", net, ()), ("integer", fixed, ()), ("onnx", fixed, ("--onnx", graph)))
+        }
+        assert all(len(found) == 12 for found in lines.values())
+        assert decisions(lines["integer"]) == decisions(lines["onnx"])
+        assert all(d["place_id"] is None or 100 <= d["place_id"] < 112 for d in lines["float"])
+    assert lines["integer"][0]["name"] == "winter.avi#0"

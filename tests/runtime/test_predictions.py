@@ -1,0 +1,65 @@
+"""Per-query predictions: the decisions behind the metric rows, as a typed result, CSV and JSON lines."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from vprsnn_export.checkpoint import save_checkpoint
+from vprsnn_export.cli import main
+from vprsnn_export.config import Config
+from vprsnn_export.dataset import load_dataset
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.runtime.predictions import network_predictions
+from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
+
+
+@pytest.fixture(scope="module")
+def trained():
+    cfg = Config().replace(**TINY)
+    data = load_dataset("synthetic:24", ["summer", "winter"], cfg.preprocess)
+    return train_and_calibrate(data, ["summer"], cfg, progress=False), data
+
+
+def test_each_column_reproduces_its_metric_row(trained, tmp_path):
+    ckpt, data = trained
+    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3), tolerance=1)
+    result = evaluate_float(ckpt, data.traversal("winter"), data.place_ids, "winter", options)
+    found = network_predictions(ckpt, result.query_counts, data.place_ids, options)
+    assert found.n_queries == 24 and [(d.strategy, d.k) for d in found.decided] == [
+        (r["strategy"], r["k"]) for r in result.rows
+    ]
+    for row in result.rows:
+        column = found.column(row["strategy"], row["k"])
+        assert column.correct is not None and column.correct.mean() == pytest.approx(row["accuracy"])
+        assert np.all((column.place_id >= 0) | (column.confidence == 0))
+    rows = list(csv.DictReader(found.write(tmp_path / "p.csv").open()))
+    lines = [json.loads(line) for line in found.write(tmp_path / "p.jsonl").read_text().splitlines()]
+    assert len(rows) == len(lines) == 24 * 4
+    assert lines[0] == {**found.rows()[0]} and rows[0]["strategy"] == "standard" and rows[0]["query"] == "0"
+    unlabelled = network_predictions(ckpt, result.query_counts, None, options)
+    assert unlabelled.truth is None and unlabelled.rows()[0]["correct"] is None
+    with pytest.raises(InvalidValueError, match=".csv or .jsonl"):
+        found.write(tmp_path / "p.txt")
+
+
+def test_evaluate_writes_predictions(trained, tmp_path, capsys):
+    ckpt, _ = trained
+    path = save_checkpoint(tmp_path / "net.npz", ckpt)
+    out = tmp_path / "winter.jsonl"
+    argv = ["evaluate", str(path), "--query", "winter", "--k", "1,3", "--quiet", "--json"]
+    assert main([*argv, "--predictions", str(out)]) == 0
+    rows = json.loads(capsys.readouterr().out)["results"]
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    wprob3 = [line for line in lines if (line["strategy"], line["k"]) == ("wprob", 3)]
+    assert len(wprob3) == 24 and all(line["truth"] == line["query"] for line in wprob3)
+    expected = next(r["accuracy"] for r in rows if (r["strategy"], r["k"]) == ("wprob", 3))
+    assert np.mean([line["correct"] for line in wprob3]) == pytest.approx(expected)
+    assert main([*argv, "--predictions", str(tmp_path / "p.txt")]) == 2
+    assert ".csv or .jsonl" in capsys.readouterr().err
