@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from ..checkpoint import load_checkpoint
+from ..cluster import CLUSTER_HELP, parse_cluster
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..runtime.evaluation import evaluate_float, sequence_warning
@@ -47,11 +48,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_query_options(parser)
     parser.add_argument("--baseline", action="store_true", help="add the no-learning SAD baseline rows")
     add_runtime_options(parser)
+    parser.add_argument(
+        "--cluster", help=f"run the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP})"
+    )
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
     ckpt = load_checkpoint(args.checkpoint)
+    cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = readout_options(args, ckpt.config.assignment.gamma)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
@@ -69,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         device=resolve_device(args.device),
         state_isolation=False if args.no_state_isolation else None,
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
+        cluster=cluster,
     )
     if args.json:
         print_json(

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
@@ -35,6 +36,7 @@ from vprsnn_export.readout.regions import (
 )
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
+from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
 
 @dataclass(frozen=True)
@@ -312,8 +314,12 @@ def evaluate_float(
     device: torch.device | None = None,
     state_isolation: bool | None = None,
     reference_images: Mapping[str, np.ndarray] | None = None,
+    cluster: Cluster | None = None,
 ) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
+
+    ``cluster``: the modules' spike counts are computed in tasks there (CPU workers) and gathered
+    for the whole-route readout; the same counts bit for bit (:mod:`vprsnn_export.trainer.sharded`).
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
     the no-learning SAD baseline is added as rows with strategy "sad". An ensemble
@@ -321,10 +327,22 @@ def evaluate_float(
     neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
     """
     device = torch.device("cpu") if device is None else device
-    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
-    run = network.run(
-        query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
-    )
+    if cluster is None:
+        network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
+        run = network.run(
+            query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
+        )
+    else:
+        run = float_runs_on_cluster(
+            ckpt.weights,
+            ckpt.thresholds,
+            ckpt.config,
+            {traversal: query_images},
+            query_place_ids,
+            "query",
+            cluster,
+            state_isolation=state_isolation,
+        )[traversal]
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     layout = ensemble_layout(ckpt.config, len(reference_ids))
