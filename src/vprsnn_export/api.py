@@ -15,6 +15,7 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
 from __future__ import annotations
 
 from .checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from .cluster import Cluster, parse_cluster
 from .config import Config
 from .dataset import Dataset, load_dataset, select_places
 from .dynamics import FloatNetwork
@@ -45,12 +46,14 @@ from .threads import set_threads
 from .trainer.batched import train_modules
 from .trainer.calibrate import calibrate
 from .trainer.pipeline import train_and_calibrate
+from .trainer.sharded import train_modules_on_cluster
 from .trainer.train import train_network
 from .version import __version__
 
 __all__ = [
     "Backend",
     "Checkpoint",
+    "Cluster",
     "Config",
     "ConformanceResult",
     "DataError",
@@ -94,6 +97,7 @@ __all__ = [
     "load_dataset",
     "load_fixed_point",
     "load_source",
+    "parse_cluster",
     "pr_metrics",
     "quantize_checkpoint",
     "query_spikes",
@@ -113,6 +117,7 @@ __all__ = [
     "strategy_scores",
     "train_and_calibrate",
     "train_modules",
+    "train_modules_on_cluster",
     "train_network",
     "verify_checkpoint",
     "write_loihi",

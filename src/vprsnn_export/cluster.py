@@ -49,6 +49,10 @@ def parse_cluster(text: str, *, threads: int | None = None, option: str = "--clu
         workers = None if match.group(1) is None else int(match.group(1))
         if workers is not None and not 1 <= workers <= 4096:
             raise InvalidValueError(f"{option}: local:N needs N from 1 to 4096, got {value!r}")
+        if workers is not None and count > workers:
+            raise InvalidValueError(
+                f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
+            )
         return Cluster("local", workers, count)
     if value == "auto" or re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:\d{1,5}", value):
         return Cluster(value, None, count)
@@ -142,7 +146,7 @@ def connect(cluster: Cluster) -> None:
     try:
         if cluster.is_local:
             ray.init(
-                num_cpus=cluster.workers or os.cpu_count() or 1,
+                num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
                 include_dashboard=False,
                 log_to_driver=False,
                 configure_logging=False,

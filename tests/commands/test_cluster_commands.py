@@ -48,3 +48,11 @@ def test_a_two_process_local_cluster_started_by_the_command_gives_the_same_bytes
     alone = train(tmp_path / "alone.npz")
     assert train(tmp_path / "ray.npz", "--cluster", "local:2") == alone
     assert not ray.is_initialized()  # the command shut down the runtime it started
+
+
+@pytest.mark.parametrize("address", ["nope", "local:0", "ray://head"])
+def test_a_bad_cluster_address_is_one_line_and_exit_2(tmp_path, capsys, address):
+    args = ["train", "--data", "synthetic:10", "--reference", "summer", "--out", str(tmp_path / "x.npz"), *TINY]
+    assert main([*args, "--cluster", address]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --cluster") and not (tmp_path / "x.npz").exists()

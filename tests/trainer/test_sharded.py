@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.cluster import Cluster, TaskTiming, parse_cluster
+from vprsnn_export.cluster import TaskTiming
 from vprsnn_export.config import preset
 from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.encoding import query_spikes
 from vprsnn_export.trainer.batched import module_rows, train_modules
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import (
@@ -68,8 +68,6 @@ def test_float_runs_and_calibration_of_module_groups_equal_the_whole_network():
     got = calibrate_on_cluster(weights, thresholds, cfg, images, place_ids, None, modules_per_task=2)
     assert np.array_equal(got, expected)
     runs = float_runs_on_cluster(weights, thresholds, cfg, {"winter": images["winter"]}, place_ids, "query", None)
-    from vprsnn_export.encoding import query_spikes
-
     whole = network.run(query_spikes(images["winter"], place_ids, "winter", cfg))
     assert torch.equal(runs["winter"].counts, whole.counts)
     assert torch.equal(runs["winter"].candidates_per_step, whole.candidates_per_step)
@@ -81,21 +79,3 @@ def test_group_inputs_renumber_rows_into_the_group_images():
     sub, subp, rows = group_inputs(images, presentations, [np.array([7, 2]), np.array([9])])
     assert sub[:, 0].tolist() == [2, 7, 9] and [p.place_id for p in subp] == [2, 7, 9]
     assert [r.tolist() for r in rows] == [[1, 0], [2]]
-
-
-@pytest.mark.parametrize(
-    ("text", "expected"),
-    [
-        ("local", Cluster("local", None)),
-        ("local:2", Cluster("local", 2)),
-        ("ray://head:10001", Cluster("ray://head:10001")),
-    ],
-)
-def test_cluster_addresses_parse(text, expected):
-    assert parse_cluster(text) == expected
-
-
-@pytest.mark.parametrize("text", ["", "ray", "local:0", "local:x", "ray://head", "http://head:1"])
-def test_bad_cluster_addresses_name_the_option(text):
-    with pytest.raises(InvalidValueError, match="--cluster"):
-        parse_cluster(text)
