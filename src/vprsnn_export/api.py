@@ -20,6 +20,7 @@ The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx
 from __future__ import annotations
 
 from .checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from .cluster import Cluster, parse_cluster
 from .config import Config
 from .dataset import Dataset, load_dataset, select_places
 from .dynamics import FloatNetwork
@@ -56,6 +57,7 @@ from .threads import set_threads
 from .trainer.batched import train_modules
 from .trainer.calibrate import calibrate
 from .trainer.pipeline import train_and_calibrate
+from .trainer.sharded import train_modules_on_cluster
 from .trainer.train import train_network
 from .version import __version__
 
@@ -67,6 +69,7 @@ __all__ = [
     "Backend",
     "Channel",
     "Checkpoint",
+    "Cluster",
     "Config",
     "ConformanceResult",
     "DataError",
@@ -120,6 +123,7 @@ __all__ = [
     "load_source",
     "network_predictions",
     "operating_point",
+    "parse_cluster",
     "pr_metrics",
     "quantize_checkpoint",
     "query_spikes",
@@ -139,6 +143,7 @@ __all__ = [
     "strategy_scores",
     "train_and_calibrate",
     "train_modules",
+    "train_modules_on_cluster",
     "train_network",
     "verify_checkpoint",
     "write_loihi",

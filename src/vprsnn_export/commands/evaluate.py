@@ -8,6 +8,7 @@ import sys
 import numpy as np
 
 from ..checkpoint import load_checkpoint
+from ..cluster import CLUSTER_HELP, parse_cluster
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..fileio import check_output
@@ -59,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "to FILE: .csv or .jsonl",
     )
     add_runtime_options(parser)
+    parser.add_argument(
+        "--cluster", help=f"run the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP})"
+    )
     parser.set_defaults(handler=run)
 
 
@@ -68,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.predictions.lower().endswith((".csv", ".jsonl")):
             raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
         check_output(args.predictions, inputs=(args.checkpoint,))
+    cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = readout_options(args, ckpt.config.assignment.gamma)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
@@ -92,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         device=resolve_device(args.device),
         state_isolation=False if args.no_state_isolation else None,
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
+        cluster=cluster,
     )
     if args.predictions is not None:
         written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from ..checkpoint import save_checkpoint
+from ..cluster import CLUSTER_HELP, parse_cluster
 from ..dataset import load_dataset, selection_record
 from ..device import resolve_device
 from ..fileio import check_output
@@ -22,6 +23,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     add_config_options(parser)
     add_runtime_options(parser)
+    parser.add_argument(
+        "--cluster",
+        help=f"train the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP}); "
+        "the checkpoint is byte-identical to the single-process one",
+    )
     parser.set_defaults(handler=run, output_kind="file")
 
 
@@ -31,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     references = parse_names(args.reference, "--reference")
     device = resolve_device(args.device)
+    cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     dataset = load_dataset(
         args.data, references, cfg.preprocess, subset=args.subset, places=args.places, progress=not args.quiet
     )
@@ -43,10 +50,12 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         selection=selection_record(args.subset, args.places),
         threads=args.threads,
+        cluster=cluster,
     )
     path = save_checkpoint(args.out, ckpt)
+    where = device if cluster is None else f"cluster {cluster.address}"
     print(
         f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
-        f"in {time.perf_counter() - started:.1f} s on {device} ({args.threads} thread(s)); wrote {path}"
+        f"in {time.perf_counter() - started:.1f} s on {where} ({args.threads} thread(s)); wrote {path}"
     )
     return 0

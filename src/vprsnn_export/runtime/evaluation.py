@@ -11,6 +11,7 @@ import torch
 
 from vprsnn_export.arguments import require_type
 from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
@@ -37,6 +38,7 @@ from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, all_
 from vprsnn_export.readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES, VelocitySettings
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
+from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
 
 @dataclass(frozen=True)
@@ -339,8 +341,12 @@ def evaluate_float(
     device: torch.device | None = None,
     state_isolation: bool | None = None,
     reference_images: Mapping[str, np.ndarray] | None = None,
+    cluster: Cluster | None = None,
 ) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
+
+    ``cluster``: the modules' spike counts are computed in tasks there (CPU workers) and gathered
+    for the whole-route readout; the same counts bit for bit (:mod:`vprsnn_export.trainer.sharded`).
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
     the no-learning baselines are added: SAD read out like W+Prob (strategy "sad") and the template
@@ -351,10 +357,22 @@ def evaluate_float(
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, ReadoutOptions)
     device = torch.device("cpu") if device is None else device
-    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
-    run = network.run(
-        query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
-    )
+    if cluster is None:
+        network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
+        run = network.run(
+            query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
+        )
+    else:
+        run = float_runs_on_cluster(
+            ckpt.weights,
+            ckpt.thresholds,
+            ckpt.config,
+            {traversal: query_images},
+            query_place_ids,
+            "query",
+            cluster,
+            state_isolation=state_isolation,
+        )[traversal]
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     layout = ensemble_layout(ckpt.config, len(reference_ids))

@@ -23,7 +23,8 @@ runs all modules with the same batch size at once, one batched matmul per step.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -112,6 +113,73 @@ def _torch_batch(
     return weights, theta, fired
 
 
+@dataclass(frozen=True)
+class EpochState:
+    """Where training stands after one epoch: what fired and the thresholds, per module (M, n).
+
+    ``weights`` (M, inputs, n) is the live training tensor: read it before the next epoch runs.
+    """
+
+    epoch: int  # 0-based
+    seconds: float
+    fired: torch.Tensor  # (M, n) float32 spikes of each neuron over the epoch
+    theta: torch.Tensor  # (M, n) float32 thresholds after the epoch
+    weights: torch.Tensor  # (M, inputs, n)
+
+
+def module_epochs(
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    rows: Sequence[np.ndarray],
+    cfg: Config,
+    *,
+    device: torch.device,
+    threads: int | None = None,
+    compiled: bool = True,
+) -> Iterator[EpochState]:
+    """Train M modules side by side (module m on ``images[rows[m]]``), yielding the state after each epoch.
+
+    Module m's trajectory depends on its rows and ``cfg`` alone (see the module docstring), so
+    any subset of modules trained here, in this process or on a worker, follows it bit for bit.
+    """
+    if not rows or any(len(r) == 0 for r in rows):
+        raise InvalidValueError("no training images for a module")
+    n_modules, n_neurons, batch = len(rows), cfg.network.n_neurons, cfg.train.batch_size
+    threads = torch.get_num_threads() if threads is None else max(1, int(threads))
+    weights, theta = initial_state(cfg, n_modules, device)
+    use_kernel = compiled and device.type == "cpu"
+    n_rows = np.array([len(r) for r in rows])
+    for epoch in range(cfg.train.epochs):
+        started = time.perf_counter()
+        orders = {int(count): epoch_order(cfg.seed, epoch, int(count)).numpy() for count in set(n_rows)}
+        fired = torch.zeros((n_modules, n_neurons), dtype=torch.float32, device=device)
+        for first in range(0, int(n_rows.max()), batch):
+            batch_rows = [r[orders[len(r)][first : first + batch]] for r in rows]
+            sizes = np.array([len(b) for b in batch_rows], dtype=np.int64)
+            batch_fired = (
+                _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
+                if use_kernel
+                else None
+            )
+            if batch_fired is None:
+                weights, theta, batch_fired = _torch_batch(
+                    weights, theta, images, presentations, batch_rows, cfg, epoch
+                )
+            else:
+                theta = _homeostasis(theta, batch_fired, sizes, cfg)
+            fired += batch_fired
+        yield EpochState(epoch, time.perf_counter() - started, fired, theta, weights)
+
+
+def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every module starts from initial_weights(seed) (M, inputs, n) and theta_init (M, n)."""
+    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
+    start = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator)
+    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
+    theta = torch.full((n_modules, cfg.network.n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
+    return weights, theta
+
+
 def train_modules(
     images: np.ndarray,
     presentations: Sequence[Presentation],
@@ -133,57 +201,33 @@ def train_modules(
     presentation, active neurons, mean threshold), with per-module lists when M > 1.
     ``on_epoch(epoch, weights (inputs, M n), theta (M n,))`` may add numbers to the entry.
     """
-    if not rows or any(len(r) == 0 for r in rows):
-        raise InvalidValueError("no training images for a module")
-    n_modules, n_neurons, batch = len(rows), cfg.network.n_neurons, cfg.train.batch_size
-    threads = torch.get_num_threads() if threads is None else max(1, int(threads))
-    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
-    start = initial_weights(cfg.network.n_inputs, n_neurons, generator)
-    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
-    theta = torch.full((n_modules, n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
-    use_kernel = compiled and device.type == "cpu"
     n_rows = np.array([len(r) for r in rows])
+    states = module_epochs(images, presentations, rows, cfg, device=device, threads=threads, compiled=compiled)
+    epochs = tqdm(states, total=cfg.train.epochs, desc="train", unit="epoch", disable=not progress, leave=False)
     history: list[dict] = []
-    epochs = tqdm(range(cfg.train.epochs), desc="train", unit="epoch", disable=not progress, leave=False)
-    for epoch in epochs:
-        started = time.perf_counter()
-        orders = {int(count): epoch_order(cfg.seed, epoch, int(count)).numpy() for count in set(n_rows)}
-        fired = torch.zeros((n_modules, n_neurons), dtype=torch.float32, device=device)
-        for first in range(0, int(n_rows.max()), batch):
-            batch_rows = [r[orders[len(r)][first : first + batch]] for r in rows]
-            sizes = np.array([len(b) for b in batch_rows], dtype=np.int64)
-            batch_fired = (
-                _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
-                if use_kernel
-                else None
-            )
-            if batch_fired is None:
-                weights, theta, batch_fired = _torch_batch(
-                    weights, theta, images, presentations, batch_rows, cfg, epoch
-                )
-            else:
-                theta = _homeostasis(theta, batch_fired, sizes, cfg)
-            fired += batch_fired
-        entry = _history_entry(epoch, started, fired, theta, n_rows)
+    weights, theta = initial_state(cfg, len(rows), device)
+    for state in epochs:
+        weights, theta = state.weights, state.theta
+        entry = history_entry(state.epoch, state.seconds, state.fired, theta, n_rows)
         if on_epoch is not None:
-            entry.update(on_epoch(epoch + 1, _side_by_side(weights), theta.reshape(-1)) or {})
+            entry.update(on_epoch(state.epoch + 1, side_by_side(weights), theta.reshape(-1)) or {})
         history.append(entry)
         epochs.set_postfix(active=entry["active_neurons"], theta=f"{entry['theta_mean']:.3f}")
-    return TrainedNetwork(_side_by_side(weights).cpu(), theta.reshape(-1).cpu(), history)
+    return TrainedNetwork(side_by_side(weights).cpu(), theta.reshape(-1).cpu(), history)
 
 
-def _side_by_side(weights: torch.Tensor) -> torch.Tensor:
+def side_by_side(weights: torch.Tensor) -> torch.Tensor:
     """(M, inputs, n) -> (inputs, M n): module m's columns [m n, (m + 1) n)."""
     n_modules, n_inputs, n_neurons = weights.shape
     return weights.permute(1, 0, 2).reshape(n_inputs, n_modules * n_neurons).contiguous()
 
 
-def _history_entry(epoch: int, started: float, fired: torch.Tensor, theta: torch.Tensor, n_rows: np.ndarray) -> dict:
+def history_entry(epoch: int, seconds: float, fired: torch.Tensor, theta: torch.Tensor, n_rows: np.ndarray) -> dict:
     """One epoch over all modules; with M > 1 also each module's spikes per presentation and active neurons."""
     counts = fired.cpu().to(torch.float64)
     entry: dict = {
         "epoch": epoch + 1,
-        "seconds": time.perf_counter() - started,
+        "seconds": seconds,
         "spikes_per_presentation": float(counts.sum()) / int(n_rows.sum()),
         "active_neurons": int((counts > 0).sum()),
         "theta_mean": float(theta.reshape(-1).mean()),

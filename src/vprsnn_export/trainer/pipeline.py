@@ -9,6 +9,7 @@ import torch
 
 from vprsnn_export.arguments import require_names, require_type
 from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
 from vprsnn_export.dynamics import FloatNetwork
@@ -16,6 +17,7 @@ from vprsnn_export.errors import InvalidValueError
 
 from .batched import module_training_rows, train_modules
 from .calibrate import calibrate
+from .sharded import calibrate_on_cluster, train_modules_on_cluster
 from .train import Presentation
 
 
@@ -28,13 +30,15 @@ def train_and_calibrate(
     progress: bool = True,
     selection: dict | None = None,
     threads: int | None = None,
+    cluster: Cluster | None = None,
 ) -> Checkpoint:
     """Train on every image of the reference traversals, calibrate S^R, return the checkpoint (CPU by default).
 
     With ``train.module_size`` = P the places are cut into regions of P and one module per region
     is trained, all side by side (:func:`.batched.train_modules`); calibration presents every
     reference place to the whole ensemble (the hard WTA within config.wta_group). ``threads``: CPU
-    threads for training and calibration (default: torch's thread count).
+    threads for training and calibration (default: torch's thread count). ``cluster``: one task
+    per module on that cluster (:mod:`.sharded`), the same checkpoint bit for bit; CPU workers.
     """
     require_type("dataset", dataset, Dataset)
     require_type("cfg", cfg, Config)
@@ -46,11 +50,19 @@ def train_and_calibrate(
     images = np.concatenate([dataset.traversal(name) for name in references])
     presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]
     rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
-    trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
-    network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
-    calibration = calibrate(
-        network.counts, {name: dataset.traversal(name) for name in references}, dataset.place_ids, cfg
-    )
+    reference_images = {name: dataset.traversal(name) for name in references}
+    if cluster is not None:
+        trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster)
+        network = FloatNetwork.from_arrays(
+            trained.weights.numpy(), trained.thresholds.numpy(), cfg, torch.device("cpu")
+        )
+        calibration = calibrate_on_cluster(
+            trained.weights.numpy(), trained.thresholds.numpy(), cfg, reference_images, dataset.place_ids, cluster
+        )
+    else:
+        trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
+        network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
+        calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg)
     return Checkpoint(
         config=cfg,
         weights=network.weights.cpu().numpy(),

@@ -1,0 +1,157 @@
+"""Independent tasks on a cluster engine (Ray) or in this process: the `--cluster` option.
+
+Modules of an ensemble are independent until the readout, so training and spike counting
+split into one task per module. A task is a module-level function and its arguments; it runs
+
+    in this process               (no cluster: the plain loop, the reference)
+    on a local Ray cluster        ("local" or "local:N": N worker processes on this machine)
+    on a running Ray cluster      ("ray://HOST:PORT" through Ray Client, or "auto" on a node
+                                   of a cluster started with `ray start`)
+
+and the results come back in the order of the tasks. Every worker needs this package (the
+same version) importable; the data travel with the tasks, so workers need no data path.
+Ray is optional (``pip install "vprsnn-export[cluster]"``) and imported only when a cluster is used.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .errors import InvalidValueError
+
+CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
+
+
+@dataclass(frozen=True)
+class Cluster:
+    """Where tasks run: ``address`` is "local" (a Ray cluster started here), "auto" or "ray://HOST:PORT"."""
+
+    address: str
+    workers: int | None = None  # local: worker processes (None: the CPU count)
+    threads: int = 1  # torch threads in each task
+
+    @property
+    def is_local(self) -> bool:
+        return self.address == "local"
+
+
+def parse_cluster(text: str, *, threads: int | None = None, option: str = "--cluster") -> Cluster:
+    """'local', 'local:N', 'auto' or 'ray://HOST:PORT' -> Cluster; InvalidValueError naming ``option`` otherwise."""
+    value = str(text).strip()
+    count = 1 if threads is None else threads
+    match = re.fullmatch(r"local(?::(\d+))?", value)
+    if match:
+        workers = None if match.group(1) is None else int(match.group(1))
+        if workers is not None and not 1 <= workers <= 4096:
+            raise InvalidValueError(f"{option}: local:N needs N from 1 to 4096, got {value!r}")
+        if workers is not None and count > workers:
+            raise InvalidValueError(
+                f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
+            )
+        return Cluster("local", workers, count)
+    if value == "auto" or re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:\d{1,5}", value):
+        return Cluster(value, None, count)
+    raise InvalidValueError(f"{option}: expected {CLUSTER_HELP}, got {text!r}")
+
+
+def _ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise InvalidValueError(
+            '--cluster needs Ray: pip install -c constraints.txt "vprsnn-export[cluster]"'
+        ) from None
+    return ray
+
+
+def _run_task(threads: int, function: Callable[..., Any], *args: Any) -> Any:
+    """On a worker: fix the torch thread count, then run the task."""
+    import torch  # a worker process starts bare
+
+    torch.set_num_threads(threads)
+    return function(*args)
+
+
+@dataclass(frozen=True)
+class TaskTiming:
+    """Wall time of one map: the whole map and the sum of the tasks' own run times."""
+
+    wall_seconds: float
+    task_seconds: tuple[float, ...]
+
+
+def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any, float]:
+    started = time.perf_counter()
+    result = _run_task(threads, function, *args)
+    return result, time.perf_counter() - started
+
+
+def map_tasks(
+    cluster: Cluster | None, function: Callable[..., Any], tasks: Sequence[tuple], *, timing: list | None = None
+) -> list[Any]:
+    """[function(*task) for task in tasks], on the cluster's workers (in parallel) or here when ``cluster`` is None.
+
+    Arguments shared by several tasks should be the same object: Ray stores each once. A Ray
+    runtime this call starts is shut down before it returns; one already running (``ray.init``
+    by the caller) is used and left running. ``timing``: a TaskTiming is appended.
+    """
+    started = time.perf_counter()
+    if cluster is None:
+        pairs = [_timed(torch_threads(), function, *task) for task in tasks]
+    else:
+        pairs = _ray_map(cluster, function, tasks)
+    if timing is not None:
+        timing.append(TaskTiming(time.perf_counter() - started, tuple(seconds for _, seconds in pairs)))
+    return [result for result, _ in pairs]
+
+
+def torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def _ray_map(cluster: Cluster, function: Callable[..., Any], tasks: Sequence[tuple]) -> list[tuple[Any, float]]:
+    ray = _ray()
+    started_here = not ray.is_initialized()
+    if started_here:
+        connect(cluster)
+    try:
+        remote = ray.remote(num_cpus=cluster.threads)(_timed)
+        shared: dict[int, Any] = {}
+
+        def stored(value: Any) -> Any:
+            """Large arrays go to the object store once, however many tasks share them."""
+            if getattr(value, "nbytes", 0) < 1 << 16:
+                return value
+            if id(value) not in shared:
+                shared[id(value)] = ray.put(value)
+            return shared[id(value)]
+
+        refs = [remote.remote(cluster.threads, function, *(stored(a) for a in task)) for task in tasks]
+        return list(ray.get(refs))
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def connect(cluster: Cluster) -> None:
+    """Start (local) or join (auto, ray://) a Ray runtime for this process."""
+    ray = _ray()
+    try:
+        if cluster.is_local:
+            ray.init(
+                num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
+                include_dashboard=False,
+                log_to_driver=False,
+                configure_logging=False,
+            )
+        else:
+            ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+    except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
+        raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({exc})") from None

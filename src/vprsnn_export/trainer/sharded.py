@@ -1,0 +1,217 @@
+"""An ensemble trained, calibrated and run on a cluster: tasks of modules, gathered into one network.
+
+Module m's training depends on its own rows and the config alone (:mod:`.batched`), and its
+spikes on its own weights, thresholds and the input spikes (the WTA acts within a module). So
+a task trains or runs a contiguous group of modules [a, b) anywhere, and the driver gathers
+
+    weights    = [W_a | ... | W_b-1]  side by side, in module order      (inputs, M n)
+    thresholds = [theta_a, ..., theta_b-1]                               (M n,)
+    history    = history_entry over the gathered per-epoch fired and theta (as train_modules)
+    counts     = [c_a | ... | c_b-1]  side by side                        (N, M n)
+    |C[t]|     = sum over groups of each group's candidates per step     (N, T)
+
+which is what one process computes, bit for bit (tests/trainer/test_sharded.py). Each task
+receives the images of its rows (training) or the images of every presentation (counting) and
+encodes them itself with the seeded encoder, so workers need no data path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from vprsnn_export.cluster import Cluster, map_tasks
+from vprsnn_export.config import Config, wta_group
+from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.encoding import calibration_spikes, query_spikes
+from vprsnn_export.runs import SpikeRun
+
+from .batched import history_entry, initial_state, module_epochs, side_by_side
+from .train import Presentation, TrainedNetwork
+
+STREAMS = {"query": query_spikes, "calibrate": calibration_spikes}
+CPU = torch.device("cpu")
+
+
+@dataclass(frozen=True)
+class GroupTraining:
+    """One task's modules after training: final weights and every epoch's fired and theta."""
+
+    weights: np.ndarray  # (modules, inputs, n) float32
+    fired: np.ndarray  # (epochs, modules, n) float32
+    theta: np.ndarray  # (epochs, modules, n) float32
+    seconds: np.ndarray  # (epochs,) wall time of each epoch on the worker
+
+
+def module_groups(n_modules: int, modules_per_task: int) -> list[range]:
+    """Contiguous groups [a, a + k) of modules, one per task (the last may be shorter)."""
+    step = max(1, int(modules_per_task))
+    return [range(a, min(a + step, n_modules)) for a in range(0, n_modules, step)]
+
+
+def group_inputs(
+    images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray]
+) -> tuple[np.ndarray, list[Presentation], list[np.ndarray]]:
+    """The images and presentations a group of modules trains on, with its rows renumbered into them."""
+    used = np.unique(np.concatenate(rows))
+    return images[used], [presentations[int(r)] for r in used], [np.searchsorted(used, r) for r in rows]
+
+
+def train_group(
+    images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
+) -> GroupTraining:
+    """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
+    weights, theta = initial_state(cfg, len(rows), CPU)
+    fired: list[np.ndarray] = []
+    thetas: list[np.ndarray] = []
+    seconds: list[float] = []
+    for state in module_epochs(images, presentations, rows, cfg, device=CPU):
+        weights = state.weights
+        fired.append(state.fired.numpy().copy())
+        thetas.append(state.theta.numpy().copy())
+        seconds.append(state.seconds)
+    shape = (0, len(rows), cfg.network.n_neurons)
+    return GroupTraining(
+        weights=weights.numpy().copy(),
+        fired=np.stack(fired) if fired else np.zeros(shape, np.float32),
+        theta=np.stack(thetas) if thetas else np.zeros(shape, np.float32),
+        seconds=np.asarray(seconds, dtype=np.float64),
+    )
+
+
+def train_modules_on_cluster(
+    images: np.ndarray,
+    presentations: Sequence[Presentation],
+    rows: Sequence[np.ndarray],
+    cfg: Config,
+    cluster: Cluster | None,
+    *,
+    modules_per_task: int = 1,
+    timing: list | None = None,
+) -> TrainedNetwork:
+    """:func:`.batched.train_modules` with its modules split into tasks on ``cluster`` (None: here, one by one).
+
+    Same weights, thresholds and history (less wall-clock seconds: an epoch's is its slowest task's).
+    ``timing``: the map's :class:`~vprsnn_export.cluster.TaskTiming` is appended.
+    """
+    if not rows or any(len(r) == 0 for r in rows):
+        raise ValueError("no training images for a module")
+    groups = module_groups(len(rows), modules_per_task)
+    tasks = [(*group_inputs(images, presentations, [rows[m] for m in group]), cfg) for group in groups]
+    done: list[GroupTraining] = map_tasks(cluster, train_group, tasks, timing=timing)
+    weights = torch.from_numpy(np.concatenate([g.weights for g in done]))
+    fired = np.concatenate([g.fired for g in done], axis=1)
+    theta = np.concatenate([g.theta for g in done], axis=1)
+    seconds = np.max(np.stack([g.seconds for g in done]), axis=0) if len(fired) else np.zeros(0)
+    n_rows = np.array([len(r) for r in rows])
+    history = [
+        history_entry(e, float(seconds[e]), torch.from_numpy(fired[e]), torch.from_numpy(theta[e]), n_rows)
+        for e in range(len(fired))
+    ]
+    final = torch.from_numpy(theta[-1]) if len(theta) else initial_state(cfg, len(rows), CPU)[1]
+    return TrainedNetwork(side_by_side(weights), final.reshape(-1).contiguous(), history)
+
+
+def run_group(
+    weights: np.ndarray,
+    thresholds: np.ndarray,
+    cfg: Config,
+    images: np.ndarray,
+    place_ids: np.ndarray,
+    traversal: str,
+    stream: str,
+    state_isolation: bool | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A task: encode the presentations, run a group of modules (float, CPU); (counts (N, neurons), |C[t]| (N, T))."""
+    spikes = STREAMS[stream](images, place_ids, traversal, cfg)
+    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes, state_isolation=state_isolation)
+    assert run.candidates_per_step is not None  # the float network always reports them
+    return run.counts.numpy(), run.candidates_per_step.numpy()
+
+
+def float_runs_on_cluster(
+    weights: np.ndarray,
+    thresholds: np.ndarray,
+    cfg: Config,
+    presentations: Mapping[str, np.ndarray],
+    place_ids: np.ndarray,
+    stream: str,
+    cluster: Cluster | None,
+    *,
+    state_isolation: bool | None = None,
+    modules_per_task: int = 1,
+    timing: list | None = None,
+) -> dict[str, SpikeRun]:
+    """The float ensemble on each traversal's images, split into tasks: one SpikeRun per traversal.
+
+    Counts and candidates per step equal ``FloatNetwork(weights, thresholds).run`` on the same
+    spikes (``stream``: "query" or "calibrate" presentations). With one WTA per module
+    (``network.wta_scope = module``) the modules run apart, a group of ``modules_per_task`` per task.
+    With one WTA over the ensemble they compete at every step and cannot run apart, so the
+    presentations are split instead (as many slices as module groups; one slice without state
+    isolation, where each presentation starts from the previous one's voltage): every task runs the
+    whole network on its slice, and each presentation's spikes are a pure function of its key.
+    """
+    n = cfg.network.n_neurons
+    groups = module_groups(weights.shape[1] // n, modules_per_task)
+    isolated = cfg.network.state_isolation if state_isolation is None else state_isolation
+    if wta_group(cfg, weights.shape[1]) == n or len(groups) == 1:
+        tasks = [
+            (
+                np.ascontiguousarray(weights[:, group.start * n : group.stop * n]),
+                np.ascontiguousarray(thresholds[group.start * n : group.stop * n]),
+                cfg,
+                images,
+                place_ids,
+                traversal,
+                stream,
+                state_isolation,
+            )
+            for traversal, images in presentations.items()
+            for group in groups
+        ]
+        axis, parts_per_traversal = 1, len(groups)
+    else:
+        slices = [np.arange(len(place_ids))] if not isolated else np.array_split(np.arange(len(place_ids)), len(groups))
+        slices = [piece for piece in slices if len(piece)]
+        tasks = [
+            (weights, thresholds, cfg, images[piece], place_ids[piece], traversal, stream, state_isolation)
+            for traversal, images in presentations.items()
+            for piece in slices
+        ]
+        axis, parts_per_traversal = 0, len(slices)
+    done = map_tasks(cluster, run_group, tasks, timing=timing)
+    runs: dict[str, SpikeRun] = {}
+    for k, traversal in enumerate(presentations):
+        parts = done[k * parts_per_traversal : (k + 1) * parts_per_traversal]
+        counts = np.concatenate([c for c, _ in parts], axis=axis)
+        if axis == 1:
+            candidates = np.sum([c.astype(np.int64) for _, c in parts], axis=0).astype(np.int32)
+        else:
+            candidates = np.concatenate([c for _, c in parts], axis=0)
+        runs[traversal] = SpikeRun(torch.from_numpy(counts), torch.from_numpy(candidates))
+    return runs
+
+
+def calibrate_on_cluster(
+    weights: np.ndarray,
+    thresholds: np.ndarray,
+    cfg: Config,
+    reference_images: Mapping[str, np.ndarray],
+    place_ids: np.ndarray,
+    cluster: Cluster | None,
+    *,
+    modules_per_task: int = 1,
+) -> np.ndarray:
+    """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network."""
+    runs = float_runs_on_cluster(
+        weights, thresholds, cfg, reference_images, place_ids, "calibrate", cluster, modules_per_task=modules_per_task
+    )
+    total = np.zeros((0, 0), dtype=np.int64)
+    for traversal in reference_images:
+        counts = runs[traversal].counts.numpy().astype(np.int64)
+        total = counts.T if total.size == 0 else total + counts.T
+    return total

@@ -1,0 +1,58 @@
+"""`train --cluster` and `evaluate --cluster` on Ray: the same checkpoint bytes and the same results."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import ray
+
+from vprsnn_export.cli import main
+
+TINY = ["--timesteps", "20", "--epochs", "2", "--neurons", "16", "--module-size", "10", "--seed", "4", "--quiet"]
+
+
+def train(out, *extra: str) -> bytes:
+    args = ["train", "--data", "synthetic:30", "--reference", "summer", "--out", str(out), *TINY, *extra]
+    assert main([*args, "--threads", "1"]) == 0
+    return out.read_bytes()
+
+
+def evaluate(path, capsys, *extra: str) -> dict:
+    assert main(["evaluate", str(path), "--query", "winter", "--json", "--quiet", "--threads", "1", *extra]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.fixture
+def two_workers():
+    """A local Ray runtime of two worker slots, started by the test (the commands join it)."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+def test_train_and_evaluate_on_ray_equal_one_process(two_workers, tmp_path, capsys):
+    alone = train(tmp_path / "alone.npz")
+    sharded = train(tmp_path / "ray.npz", "--cluster", "local")
+    assert sharded == alone  # three modules trained in three tasks: byte for byte the same file
+    capsys.readouterr()
+    here = evaluate(tmp_path / "alone.npz", capsys)
+    there = evaluate(tmp_path / "alone.npz", capsys, "--cluster", "local")
+    assert there["results"] == here["results"] and there["modules"] == here["modules"]
+    assert there["spike_stats"] == here["spike_stats"]
+
+
+@pytest.mark.slow
+def test_a_two_process_local_cluster_started_by_the_command_gives_the_same_bytes(tmp_path):
+    assert not ray.is_initialized()
+    alone = train(tmp_path / "alone.npz")
+    assert train(tmp_path / "ray.npz", "--cluster", "local:2") == alone
+    assert not ray.is_initialized()  # the command shut down the runtime it started
+
+
+@pytest.mark.parametrize("address", ["nope", "local:0", "ray://head"])
+def test_a_bad_cluster_address_is_one_line_and_exit_2(tmp_path, capsys, address):
+    args = ["train", "--data", "synthetic:10", "--reference", "summer", "--out", str(tmp_path / "x.npz"), *TINY]
+    assert main([*args, "--cluster", address]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --cluster") and not (tmp_path / "x.npz").exists()
