@@ -3,6 +3,7 @@
 import json
 
 from vprsnn_export.cli import main
+from vprsnn_export.commands.demo import DEMO_BITS
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.targets.loihi_target import read_loihi_model
 from vprsnn_export.targets.nir_target import read_nir
@@ -21,7 +22,7 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
     assert f"Verdict: {'PASS' if passed else 'FAIL'}" in html
     assert not any(" = 0.0" in line for line in printed if "limit" in line)  # points, never fractions
     assert (out / "float.npz").is_file()
-    for bits in (8, 4, 2):
+    for bits in DEMO_BITS:
         folder = out / "deploy" / f"{bits}bit"
         model = load_fixed_point(folder / "model.npz")
         assert model.bits == bits and model.quantisation.per_neuron
@@ -30,10 +31,10 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
         assert read_loihi_model(folder / "loihi").bits == bits
         read_onnx(folder / "model.onnx")
     report = json.loads((out / "report" / "report.json").read_text())
-    assert [r["bits"] for r in report["runs"][0]["bits"]] == [8, 4, 2]
+    assert [r["bits"] for r in report["runs"][0]["bits"]] == list(DEMO_BITS)
     assert all(r["cross_implementation"]["passed"] for r in report["runs"][0]["bits"])
     assert report["settings"]["demo_profile"]["train.epochs"] == 2
     assert report["runs"][0]["config"]["train"]["epochs"] == 2  # the profile is in the checkpoint's config
-    assert [len(r["modules"]) for r in report["runs"][0]["bits"]] == [2, 2, 2]
+    assert [len(r["modules"]) for r in report["runs"][0]["bits"]] == [2] * len(DEMO_BITS)
     assert "## Modules of the ensemble" in (out / "report" / "report.md").read_text()
     assert (out / "report" / "report.html").is_file() and (out / "report" / "report.md").is_file()
