@@ -109,6 +109,23 @@ def consumer_gate(
     return tuple(rows)
 
 
+def float_consumer_note(network: Checkpoint | FixedPointModel) -> str:
+    """The file's float_consumers statement in words: exact or not, why, and the tolerance export --check applies."""
+    statement = float_consumers(network)
+    verdict = (
+        f"Float NIR consumers (NIR's LIF/IF in float32 or float64, Norse, SpikingJelly) compute this {statement['mode']} "
+        "file exactly: " + statement["cause"]
+        if statement["exact"]
+        else f"Float NIR consumers do not compute this {statement['mode']} file exactly: {statement['cause']} "
+        "(docs/targets.md section 1.4 gives the measured raster differences and decision agreement per bit width; "
+        "quantize --non-leaky gives a file they compute exactly)"
+    )
+    return (
+        f"{verdict}. export --check fails when a consumer's decisions (+ readout rule) agree with the network's on "
+        f"fewer than {statement['decision_tolerance']:.0%} of the queries (metadata['float_consumers'])."
+    )
+
+
 def with_consumer_gate(
     result: ConformanceResult,
     model: FixedPointModel,
@@ -125,4 +142,11 @@ def with_consumer_gate(
     return dataclasses.replace(result, comparisons=result.comparisons + gate)
 
 
-__all__ = ["GATE_LABEL", "check_tolerance", "consumer_gate", "decided_places", "with_consumer_gate"]
+__all__ = [
+    "GATE_LABEL",
+    "check_tolerance",
+    "consumer_gate",
+    "decided_places",
+    "float_consumer_note",
+    "with_consumer_gate",
+]

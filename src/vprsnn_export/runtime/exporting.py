@@ -54,6 +54,7 @@ from vprsnn_export.targets.nir_target import (
 from vprsnn_export.targets.onnx_target import write_onnx
 
 from .conformance import (
+    WPROB_ROUNDING,
     Contender,
     backend_of,
     compare_backends,
@@ -62,7 +63,7 @@ from .conformance import (
     target_path,
     wprob_readout,
 )
-from .consumer_gate import consumer_gate, decided_places
+from .consumer_gate import consumer_gate, decided_places, float_consumer_note
 from .deployment import deploy
 from .results import Comparison
 
@@ -207,7 +208,8 @@ def consumer_statements(
                 else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
                 "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
             )
-            + "."
+            + ". "
+            + float_consumer_note(source.network)
             + (
                 ensemble
                 and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is n."
@@ -215,8 +217,9 @@ def consumer_statements(
         )
     if "onnx" in targets and model is not None:
         notes["onnx"] = (
-            "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
-            "distribution, identical to the integer simulator." + ensemble
+            "onnxruntime computes the integer network exactly: spike counts, raster and saturations identical to the "
+            "integer simulator; the W+Prob head (float64, another summation order) gives the same decisions, its "
+            f"probabilities within {WPROB_ROUNDING:g} of the numpy readout (measured: below 1e-15)." + ensemble
         )
     if "loihi" in targets and model is not None:
         notes["loihi"] = (
