@@ -71,7 +71,8 @@ def consumer_gate(
     if "wta" in graph.nodes:
         return ()
     statement = float_consumers(network)
-    limit = statement["decision_tolerance"] if check_tolerance(tolerance) is None else tolerance
+    given = check_tolerance(tolerance)
+    limit = float(statement["decision_tolerance"]) if given is None else given
     truth = raster.to(torch.bool)
     places = decided_places(network, truth.sum(dim=1).numpy())
     rows: list[Comparison] = []

@@ -77,10 +77,11 @@ def _installed(package: str) -> bool:
 
 
 def rockpool_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
-    """Rockpool 3.1 ``rockpool.nn.modules.from_nir``: measured to fail on every ``nir.LIF`` (reads ``tau_mem``)."""
+    """Rockpool 3.1 ``rockpool.nn.modules.from_nir``: measured to fail on ``nir.LIF`` (AttributeError: no
+    ``tau_mem``) and on ``nir.IF`` (NotImplementedError); the failure is reported as the cause."""
     if not _installed("rockpool"):
         raise ConsumerUnavailable("rockpool is not installed")
-    from rockpool.nn.modules import from_nir  # type: ignore[import-not-found]
+    from rockpool.nn.modules import from_nir
 
     try:
         module = from_nir(graph)
