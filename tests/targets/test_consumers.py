@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import importlib.util
 import json
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -331,18 +332,67 @@ def matrix_table(cells: Mapping[tuple[str, str], tuple[int, int] | str], consume
     return lines
 
 
-def test_the_documented_matrix_is_the_one_the_slow_tests_assert():
-    """docs/targets.md section 1.4 prints MATRIX, the counts test_matrix_cell measures, line for line."""
-    docs = (Path(__file__).resolve().parents[2] / "docs" / "targets.md").read_text(encoding="utf-8")
-    table = "\n".join(matrix_table(MATRIX, list(PACKAGE)))
-    assert table in docs
-
-
 @pytest.mark.slow
 def test_print_matrix(real):
-    """The measured matrix renders as the documented one (docs/targets.md section 1.4); printed with -s."""
+    """The measured paper-preset matrix renders as MATRIX (the counts test_matrix_cell asserts); printed with -s.
+    docs/targets.md section 1.4 prints the matrix of tools/consumer_matrix.py (default network and paper preset)."""
     consumers = [c for c in PACKAGE if importlib.util.find_spec(PACKAGE[c]) is not None]
     measured = matrix_table({(f, c): real.cell(f, c) for f in FILES for c in consumers}, consumers)
     print("\n(WTA-off raster vs network WTA-off / after the readout rule vs network), differing entries of 12,000,000")
     print("\n".join(measured))
     assert measured == matrix_table(MATRIX, consumers)
+
+
+@pytest.fixture(scope="module")
+def default_network():
+    """The default (DoG) config, seed 7, places 1000-1099 (never used elsewhere), 40 epochs; 100 winter queries."""
+    from vprsnn_export.dataset import load_dataset
+    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+    folder = Path(os.environ.get("VPRSNN_NORDLAND", NORDLAND))  # a worktree elsewhere names the data folder
+    if not folder.is_dir():
+        pytest.skip("the Nordland data folder is absent (set VPRSNN_NORDLAND)")
+    cfg = preset("dog").replace(**{"seed": 7, "train.epochs": 40})
+    dataset = load_dataset(folder / "places.csv", ["summer", "winter"], cfg.preprocess, places="1000:100")
+    ckpt = train_and_calibrate(
+        dataset,
+        ["summer"],
+        cfg,
+        device=torch.device("cpu"),
+        progress=False,
+        selection={"subset": None, "places": "1000:100"},
+    )
+    spikes = query_spikes(dataset.traversal("winter"), dataset.place_ids, "winter", cfg)
+    return ckpt, dataset, spikes
+
+
+@pytest.mark.slow
+def test_default_network_float_consumers_differ_with_the_leak_and_are_exact_without(default_network, tmp_path):
+    """docs/targets.md §1.4: 2 bits, thresholds folded, deployed calibration. Leaky: the truncation moves
+    crossings (raster entries differ after the rule) and decisions fall below the stated 95 % (the gate
+    fails the file); --non-leaky: 0 / 0 and 100 % in every consumer (the gate passes)."""
+    from vprsnn_export.runtime.consumer_gate import consumer_gate
+    from vprsnn_export.runtime.deployment import deploy
+    from vprsnn_export.targets.nir_consumers import run_consumer
+
+    ckpt, dataset, spikes = default_network
+    images = {"summer": dataset.traversal("summer")}
+    for non_leaky in (False, True):
+        model = deploy(ckpt, "0" * 64, 2, fold_thresholds=True, reference_images=images, non_leaky=non_leaky)
+        path = write_nir(model, tmp_path / f"m{non_leaky}.nir")
+        graph = nir.read(path)
+        off_net, on_net = network_raster(model, spikes, wta=False), network_raster(model, spikes, wta=True)
+        for consumer in ("nir-spec-f64", "norse"):
+            if consumer == "norse" and importlib.util.find_spec("norse") is None:
+                continue
+            raster = run_consumer(consumer, graph, spikes)
+            ruled = int((apply_readout_rule(graph, spikes, raster) != on_net).sum())
+            off = int((raster != off_net).sum())
+            assert (off, ruled) == (0, 0) if non_leaky else (off > 1000 and ruled > 0), (consumer, off, ruled)
+        rows = [r for r in consumer_gate(path, model, on_net, spikes) if r.n_elements]
+        agreement = [1 - r.n_differences / r.n_elements for r in rows if r.n_differences is not None]
+        if non_leaky:
+            assert rows and all(r.equal for r in rows) and min(agreement) == 1.0
+        else:  # measured 91 % with the deployed calibration: below the stated 95 %, so export --check fails it
+            assert rows and not all(r.equal for r in rows) and 0.8 <= min(agreement) < 0.95, agreement

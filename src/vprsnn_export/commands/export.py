@@ -26,6 +26,7 @@ from ..dataset import MAX_PLACES
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS
+from ..runtime.consumer_gate import check_tolerance
 from ..runtime.exporting import (
     MANIFEST_NAME,
     check_deploy_folder,
@@ -102,6 +103,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="nirtorch",
         help="with --check: the metadata-blind NIR consumer to measure (norse, spikingjelly: the consumers extra; "
         "-plain: without the file's consumer_settings)",
+    )
+    parser.add_argument(
+        "--nir-tolerance",
+        type=float,
+        metavar="FRACTION",
+        help="with --check: the share of decisions every installed float NIR consumer (+ readout rule) must share "
+        "with the network, else the check fails (default: the file's float_consumers.decision_tolerance, 1.0 for "
+        "files stated exact, 0.95 otherwise)",
     )
     parser.add_argument("--query", help="with --check: query traversal to present (default: synthetic spike trains)")
     parser.add_argument(
@@ -183,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
         spikes=spikes,
         spikes_label=label,
         nir_consumer=args.nir_consumer,
+        nir_tolerance=check_tolerance(args.nir_tolerance),
         device=resolve_device(args.device),
         overwrite=args.force,
         progress=not args.quiet,

@@ -52,6 +52,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="keep the float network's S^R instead of recalibrating on the integer simulator (needs no data)",
     )
+    parser.add_argument(
+        "--non-leaky",
+        action="store_true",
+        help="deploy without the leak (beta = 1, decay_dv = 0: V <- V + a): every float NIR consumer then computes "
+        "the model exactly; recalibrated on the integer simulator (docs/targets.md section 1.4 gives its cost)",
+    )
     parser.add_argument("--out", required=True, help="folder for the model files")
     parser.add_argument("--force", action="store_true", help="replace model files that exist in --out")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -60,15 +66,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def model_filename(bits: int, per_neuron: bool, scale_method: str, fold_thresholds: bool) -> str:
-    """e.g. model_8bit_per-neuron_max.npz, model_4bit_per-neuron_mse_folded.npz."""
+def model_filename(
+    bits: int, per_neuron: bool, scale_method: str, fold_thresholds: bool, non_leaky: bool = False
+) -> str:
+    """e.g. model_8bit_per-neuron_max.npz, model_4bit_per-neuron_mse_folded.npz, model_8bit_per-neuron_max_non-leaky.npz."""
     scheme = "per-neuron" if per_neuron else "per-tensor"
-    return f"model_{bits}bit_{scheme}_{scale_method}{'_folded' if fold_thresholds else ''}.npz"
+    suffix = ("_folded" if fold_thresholds else "") + ("_non-leaky" if non_leaky else "")
+    return f"model_{bits}bit_{scheme}_{scale_method}{suffix}.npz"
 
 
 def run(args: argparse.Namespace) -> int:
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
     per_neuron = not args.per_tensor
+    if args.non_leaky and args.reuse_float_calibration:
+        raise InvalidValueError("--non-leaky needs the deployed calibration (drop --reuse-float-calibration)")
     if args.fold_thresholds and not per_neuron:
         raise InvalidValueError("--fold-thresholds needs per-neuron scales (drop --per-tensor)")
     ckpt = load_checkpoint(args.checkpoint)
@@ -82,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
     for bits in bit_widths:  # every output is checked before any quantisation runs
         check_output(
-            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds), overwrite=args.force
+            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky),
+            overwrite=args.force,
         )
     rows = []
     for bits in bit_widths:
@@ -96,9 +108,10 @@ def run(args: argparse.Namespace) -> int:
             calibration="float" if args.reuse_float_calibration else "deployed",
             reference_images=reference_images,
             device=device,
+            non_leaky=args.non_leaky,
         )
         path = save_fixed_point(
-            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds), model
+            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky), model
         )
         report = model.quantisation.to_dict()
         rows.append(

@@ -31,13 +31,13 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 from vprsnn_export.targets.registry import TARGETS, WriteOptions, target_labels
 
 from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult
 
-WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
 RUN_FIELDS = {
     "raster": "raster",

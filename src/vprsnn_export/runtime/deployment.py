@@ -67,16 +67,24 @@ def deploy(
     calibration: str = "deployed",
     reference_images: Mapping[str, np.ndarray] | None = None,
     device: torch.device | None = None,
+    non_leaky: bool = False,
 ) -> FixedPointModel:
     """Quantise ``ckpt`` to ``bits`` and calibrate it: the model that `quantize` writes and `verify` checks.
 
     ``calibration="deployed"`` re-measures S^R on the integer simulator (needs the
     checkpoint's reference images); ``"float"`` keeps the float network's S^R.
+    ``non_leaky`` deploys the trained weights and thresholds without the leak (network.beta = 1,
+    decay_dv = 0: V <- V + a), the mode every float NIR consumer computes exactly
+    (docs/targets.md section 1.4); it needs the deployed calibration, since S^R changes with the dynamics.
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("reference_images", reference_images, (Mapping, type(None)))
     if not isinstance(calibration, str) or calibration not in CALIBRATIONS:
         raise InvalidValueError(f"calibration must be one of {', '.join(CALIBRATIONS)}, got {calibration!r}")
+    if non_leaky and calibration != "deployed":
+        raise InvalidValueError("a non-leaky deployment needs the deployed calibration (the float S^R has a leak)")
+    if non_leaky:
+        ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
     if calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
     model = quantize_checkpoint(

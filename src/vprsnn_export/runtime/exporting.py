@@ -7,7 +7,8 @@ a float checkpoint gets only on request (:func:`integer_model`: per-neuron max-a
 scales, the float calibration kept). :func:`check_exports` reads every written file
 back and runs it beside the project's own simulators with the conformance harness of
 :mod:`runtime.conformance` (exact), plus the measured agreement of a metadata-blind NIR
-consumer (a measurement, not a check).
+consumer (a measurement), and the NIR consumer gate (:mod:`runtime.consumer_gate`): every
+installed float consumer must decide as the network does within the file's stated tolerance.
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ from vprsnn_export.fileio import (
     sha256_file,
     staging_folder,
 )
-from vprsnn_export.readout.strategies import decide
 from vprsnn_export.targets.nir_target import (
     CONSUMERS,
     WTA_INHIBITION,
@@ -60,8 +60,8 @@ from .conformance import (
     target_path,
     wprob_readout,
 )
+from .consumer_gate import consumer_gate, decided_places
 from .deployment import deploy
-from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison
 
 MANIFEST_NAME = "export.json"
@@ -265,14 +265,6 @@ def check_presentations(
     return spikes, f"{n} synthetic presentations (uniform random pixels)"
 
 
-def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
-    """W+Prob decision (k = 1) of each presentation with the network's own calibration (an ensemble's
-    with its region regularisation)."""
-    layout = ensemble_layout(network.config, network.calibration.shape[1])
-    wprob = readout_scores(network.calibration, counts, network.config.assignment.gamma, layout)["wprob"]
-    return decide(wprob, "wprob")[0]
-
-
 def nir_consumer_rows(
     path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
 ) -> list[CheckRow]:
@@ -326,6 +318,7 @@ def check_exports(
     *,
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",
+    nir_tolerance: float | None = None,
     device: torch.device | None = None,
     progress: bool = False,
 ) -> ExportChecks:
@@ -344,6 +337,7 @@ def check_exports(
             comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
             if base_run.raster is not None:
                 measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
+                comparisons += consumer_gate(path, network, base_run.raster, spikes, tolerance=nir_tolerance)
         elif model is not None:
             contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
             comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
@@ -409,6 +403,7 @@ def export_and_check(
     spikes: torch.Tensor | None = None,
     spikes_label: str = "",
     nir_consumer: str = "nirtorch",
+    nir_tolerance: float | None = None,
     device: torch.device | None = None,
     overwrite: bool = True,
     progress: bool = False,
@@ -435,6 +430,7 @@ def export_and_check(
                 spikes,
                 spikes_label=spikes_label,
                 nir_consumer=nir_consumer,
+                nir_tolerance=nir_tolerance,
                 device=device,
                 progress=progress,
             )

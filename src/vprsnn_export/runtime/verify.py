@@ -59,6 +59,7 @@ from vprsnn_export.targets.registry import TARGETS
 from vprsnn_export.version import __version__
 
 from .conformance import cross_implementation
+from .consumer_gate import with_consumer_gate
 from .deployment import CALIBRATIONS, deploy
 from .evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_rows, readout_scores, sequence_warning
 from .results import (
@@ -549,6 +550,7 @@ def verify_checkpoint(
                 reference_queries=options.reference_queries,
                 device=device,
             ).with_files("model", [str(model_path)])
+            cross = with_consumer_gate(cross, model, int_run.raster, spikes[:recorded])
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")

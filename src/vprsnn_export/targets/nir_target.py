@@ -10,7 +10,7 @@ Parameters, with dt = DT_SECONDS (the value snnTorch uses) stated in the metadat
 
     tau = dt / (1 - beta),  r = 1 / (1 - beta),  v_leak = 0,  v_reset = 0
     forward Euler at dt:    v <- v + dt/tau ((v_leak - v) + r I) = beta v + I      (exactly the network)
-    beta = 1 (no leak):     an IF node (r = 1) instead of a LIF
+    beta = 1 (no leak):     an IF node (dv/dt = r I, r = 1 / dt) instead of a LIF: v <- v + I
 
 Float checkpoint: the Linear holds the float32 weights w_ij and the LIF the float32
 thresholds theta_j. Fixed-point model: the Linear holds the integer mantissas q_ij and the
@@ -50,6 +50,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
 from vprsnn_export.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.modules import module_count, module_regions
+from vprsnn_export.targets.nir_semantics import float_consumers, integer_semantics
 from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-nir"
@@ -71,13 +72,17 @@ def effective_beta(source: Source) -> float:
 
 
 def lif_node(beta: float, thresholds: np.ndarray, dt: float):
-    """LIF with tau = dt / (1 - beta), r = 1 / (1 - beta); an IF (r = 1) when beta = 1."""
+    """LIF with tau = dt / (1 - beta), r = 1 / (1 - beta); an IF with r = 1 / dt when beta = 1.
+
+    NIR's IF is dv/dt = r I: forward Euler at dt gives v <- v + (dt r) I = v + I, since
+    dt * (1 / dt) == 1 exactly in float32 and float64 for dt = 1e-4.
+    """
     import nir
 
     n = thresholds.shape[0]
     zeros = np.zeros(n, dtype=np.float64)
     if beta >= 1.0:
-        return nir.IF(r=np.ones(n), v_threshold=thresholds, v_reset=zeros)
+        return nir.IF(r=np.full(n, 1.0 / dt), v_threshold=thresholds, v_reset=zeros)
     return nir.LIF(
         tau=np.full(n, dt / (1.0 - beta)),
         r=np.full(n, 1.0 / (1.0 - beta)),
@@ -205,6 +210,8 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_group": readout_group(source),
         "populations": json.dumps(populations(source), sort_keys=True),
         "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),
+        "integer_semantics": json.dumps(integer_semantics(source), sort_keys=True),
+        "float_consumers": json.dumps(float_consumers(source), sort_keys=True),
         "wta_node": (
             "none (left out on request)"
             if inhibition is None
@@ -435,7 +442,7 @@ def checkpoint_from_graph(
 class EulerLIF(torch.nn.Module):
     """NIR's LIF (or IF) as written in the file, stepped by forward Euler at ``dt``: no metadata used.
 
-    v <- v + dt/tau ((v_leak - v) + r I)      (IF: v <- v + r I)
+    v <- v + dt/tau ((v_leak - v) + r I)      (IF, dv/dt = r I: v <- v + (dt r) I)
     z = v > v_threshold;  v <- v_reset where z
     """
 
@@ -446,7 +453,7 @@ class EulerLIF(torch.nn.Module):
         n = np.asarray(node.v_threshold).shape
         leaky = isinstance(node, nir.LIF)
         gain = dt / np.asarray(node.tau, dtype=np.float64) if leaky else np.zeros(n)
-        drive = gain * np.asarray(node.r, dtype=np.float64) if leaky else np.asarray(node.r, dtype=np.float64)
+        drive = (gain if leaky else dt) * np.asarray(node.r, dtype=np.float64)
         self.register_buffer("gain", torch.as_tensor(gain))
         self.register_buffer("drive", torch.as_tensor(drive))
         self.register_buffer(

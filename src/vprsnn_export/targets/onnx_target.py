@@ -76,6 +76,9 @@ class OnnxRun:
     seconds: float  # wall time of the session.run calls
 
 
+WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
+
+
 def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
     return numpy_helper.from_array(np.asarray(value), name=name)
 

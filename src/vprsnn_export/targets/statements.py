@@ -15,6 +15,8 @@ from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.modules import module_count
 from vprsnn_export.targets.loihi_target import model_budgets
+from vprsnn_export.targets.nir_semantics import float_consumers
+from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 
 if TYPE_CHECKING:
     from vprsnn_export.targets.registry import WriteOptions
@@ -33,6 +35,23 @@ def ensemble_sentence(network: Checkpoint | FixedPointModel) -> str:
         f" The network is an ensemble of {modules} modules of {group} neurons side by side; the hard WTA runs {where}"
         if modules > 1
         else ""
+    )
+
+
+def float_consumer_note(network: Checkpoint | FixedPointModel) -> str:
+    """The file's float_consumers statement in words: exact or not, why, and the tolerance export --check applies."""
+    statement = float_consumers(network)
+    verdict = (
+        f"Float NIR consumers (NIR's LIF/IF in float32 or float64, Norse, SpikingJelly) compute this {statement['mode']} "
+        "file exactly: " + statement["cause"]
+        if statement["exact"]
+        else f"Float NIR consumers do not compute this {statement['mode']} file exactly: {statement['cause']} "
+        "(docs/targets.md section 1.4 gives the measured raster differences and decision agreement per bit width; "
+        "quantize --non-leaky gives a file they compute exactly)"
+    )
+    return (
+        f"{verdict}. export --check fails when a consumer's decisions (+ readout rule) agree with the network's on "
+        f"fewer than {statement['decision_tolerance']:.0%} of the queries (metadata['float_consumers'])."
     )
 
 
@@ -74,7 +93,8 @@ def nir_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel 
             else "; snnTorch's importer starves a LIF with a recurrent Linear and Norse returns "
             "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
         )
-        + "."
+        + ". "
+        + float_consumer_note(network)
         + (
             ensemble
             and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is the WTA group."
@@ -85,8 +105,10 @@ def nir_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel 
 def onnx_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions) -> str:
     """ONNX: onnxruntime computes the integer network exactly."""
     return (
-        "onnxruntime computes the integer network exactly: spike counts, saturations and the W+Prob "
-        "distribution, identical to the integer simulator." + ensemble_sentence(network)
+        "onnxruntime computes the integer network exactly: spike counts, raster and saturations identical to the "
+        "integer simulator; the W+Prob head (float64, another summation order) gives the same decisions, its "
+        f"probabilities within {WPROB_ROUNDING:g} of the numpy readout (measured: below 1e-15)."
+        + ensemble_sentence(network)
     )
 
 

@@ -1,0 +1,135 @@
+"""The NIR consumer gate: the field's float consumers must decide as the network does, within a stated tolerance.
+
+``export --check`` and ``verify --targets nir`` run every float NIR consumer that is installed
+and accepts the file (:data:`~vprsnn_export.targets.nir_consumers.GATE_CONSUMERS`), apply the
+file's readout rule to each consumer's WTA-off raster and compare decisions:
+
+    agreement = mean over queries of [ place(consumer + rule) == place(network) ]
+    passes when agreement >= tolerance
+
+where place is the W+Prob decision (k = 1) with the network's own calibration, and the
+tolerance is the file's stated ``float_consumers.decision_tolerance`` (100 % for files stated
+exact, :data:`~vprsnn_export.targets.nir_semantics.LEAKY_DECISION_TOLERANCE` otherwise) unless
+the caller gives one. Each consumer gives one :class:`~vprsnn_export.runtime.results.Comparison`
+(target "NIR read back"), so the gate fails the export or the verification like any other check;
+its detail states the measured agreement, the raster differences and the tolerance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.readout.strategies import decide
+from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavailable, available, run_consumer
+from vprsnn_export.targets.nir_semantics import float_consumers
+from vprsnn_export.targets.nir_target import apply_readout_rule, load_graph
+
+from .evaluation import ensemble_layout, readout_scores
+from .results import Comparison, ConformanceResult
+
+GATE_LABEL = "NIR read back"  # the conformance label of the nir target: the rows land under "nir"
+
+
+def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
+    """W+Prob decision (k = 1) of each presentation with the network's own calibration (an ensemble's
+    with its region regularisation)."""
+    layout = ensemble_layout(network.config, network.calibration.shape[1])
+    wprob = readout_scores(network.calibration, counts, network.config.assignment.gamma, layout)["wprob"]
+    return decide(wprob, "wprob")[0]
+
+
+def check_tolerance(tolerance: float | None) -> float | None:
+    if tolerance is not None and not 0.0 <= tolerance <= 1.0:
+        raise InvalidValueError(f"the NIR consumer tolerance must be a fraction in [0, 1], got {tolerance}")
+    return tolerance
+
+
+def consumer_gate(
+    path: str | Path,
+    network: Checkpoint | FixedPointModel,
+    raster: torch.Tensor,
+    spikes: torch.Tensor,
+    *,
+    tolerance: float | None = None,
+    consumers: Sequence[str] = GATE_CONSUMERS,
+) -> tuple[Comparison, ...]:
+    """One comparison per installed consumer: decisions of consumer + readout rule vs the network's.
+
+    ``raster`` is the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting.
+    A consumer that refuses the file (one threshold only, ...) gives a passing row saying so;
+    a graph with the recurrent ``wta`` node (no readout rule to apply) is not gated.
+    """
+    graph = load_graph(path)
+    if "wta" in graph.nodes:
+        return ()
+    statement = float_consumers(network)
+    given = check_tolerance(tolerance)
+    limit = float(statement["decision_tolerance"]) if given is None else given
+    truth = raster.to(torch.bool)
+    places = decided_places(network, truth.sum(dim=1).numpy())
+    rows: list[Comparison] = []
+    for consumer in consumers:
+        if not available(consumer):
+            continue
+        kind = f"decision agreement >= {limit:.1%}"
+        try:
+            candidates = run_consumer(consumer, graph, spikes)
+        except (AssertionError, ValueError, ConsumerUnavailable) as exc:  # snnTorch asserts, SpikingJelly raises
+            detail = f"not gated: the consumer refuses the file ({type(exc).__name__}: {str(exc).splitlines()[0]})"
+            rows.append(Comparison(f"{GATE_LABEL}: {consumer} + readout rule", consumer, "network", kind, True, detail))
+            continue
+        ruled = apply_readout_rule(graph, spikes, candidates)
+        agree = decided_places(network, ruled.sum(dim=1).numpy()) == places
+        share = float(agree.mean()) if agree.size else 1.0
+        differing = int((ruled != truth).sum())
+        detail = (
+            f"{share:.1%} of {agree.size} decisions agree (tolerance {limit:.1%}); {differing} of {truth.numel()} "
+            f"raster entries differ after the rule; file mode {statement['mode']}, "
+            + ("stated exact" if statement["exact"] else f"not exact: {statement['cause']}")
+        )
+        rows.append(
+            Comparison(
+                f"{GATE_LABEL}: {consumer} + readout rule",
+                consumer,
+                "network",
+                kind,
+                share >= limit,
+                detail,
+                n_differences=int((~agree).sum()),
+                n_elements=int(agree.size),
+            )
+        )
+    return tuple(rows)
+
+
+def with_consumer_gate(
+    result: ConformanceResult,
+    model: FixedPointModel,
+    raster: torch.Tensor | None,
+    spikes: torch.Tensor,
+    *,
+    tolerance: float | None = None,
+) -> ConformanceResult:
+    """``result`` (a verification's cross-implementation checks) plus the gate on its NIR file, when it has one."""
+    files = result.files.get("nir", ())
+    if not files or raster is None:
+        return result
+    gate = consumer_gate(files[0], model, raster, spikes, tolerance=tolerance)
+    return dataclasses.replace(result, comparisons=result.comparisons + gate)
+
+
+__all__ = [
+    "GATE_LABEL",
+    "check_tolerance",
+    "consumer_gate",
+    "decided_places",
+    "with_consumer_gate",
+]
