@@ -10,9 +10,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import settings
 
 from vprsnn_export.config import Config, preset
 from vprsnn_export.export.model import FixedPointModel
+
+#: Property tests are judged on their examples, never on time: the 2-core machine is shared, and a
+#: per-example deadline fails a correct test under load. One profile for every test module.
+settings.register_profile("vprsnn", deadline=None)
+settings.load_profile("vprsnn")
 
 
 @pytest.fixture
