@@ -56,3 +56,24 @@ def test_a_bad_cluster_address_is_one_line_and_exit_2(tmp_path, capsys, address)
     assert main([*args, "--cluster", address]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: --cluster") and not (tmp_path / "x.npz").exists()
+
+
+def test_experiment_route_on_ray_trains_the_same_networks(two_workers, tmp_path, monkeypatch):
+    """experiment --cluster: every network's modules train in Ray tasks; the cached checkpoints and the rows
+    equal a single-process run of the same experiment (separate caches)."""
+    rows = {}
+    for name, extra in (("alone", []), ("ray", ["--cluster", "local"])):
+        monkeypatch.setenv("VPRSNN_CACHE", str(tmp_path / f"cache-{name}"))
+        out = tmp_path / name
+        args = ["experiment", "route", "--quick", "--module-sizes", "12", "--seeds", "1", "--out", str(out)]
+        assert main([*args, "--quiet", "--threads", "1", *extra]) == 0
+        rows[name] = json.loads((out / "route_quick.json").read_text())["networks"][0]["rows"]
+        checkpoints = sorted((tmp_path / f"cache-{name}").glob("route12-*.npz"))
+        rows[name + "-bytes"] = [p.read_bytes() for p in checkpoints]
+    assert rows["ray"] == rows["alone"] and rows["ray-bytes"] == rows["alone-bytes"]
+    assert len(rows["ray-bytes"]) == 2  # the ensemble-WTA network and its module-WTA recount
+
+
+def test_experiment_cluster_option_is_parsed_and_checked(capsys):
+    assert main(["experiment", "route", "--quick", "--cluster", "nowhere"]) == 2
+    assert "--cluster" in capsys.readouterr().err

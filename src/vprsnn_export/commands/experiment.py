@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import experiments
+from ..cluster import CLUSTER_HELP, parse_cluster
 from ..errors import InvalidValueError
 from ..experiments.common import Settings, Variant, document
 from ..fileio import atomic_write_text
@@ -50,12 +51,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--threads", type=integer, default=None, metavar="N", help="CPU threads (default: OMP_NUM_THREADS, else 1)"
     )
+    parser.add_argument(
+        "--cluster",
+        help=f"train each network's modules on a Ray cluster, one task per module ({CLUSTER_HELP}); the same "
+        "networks bit for bit (experiment sweep, route and the others)",
+    )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     changes: dict[str, Any] = {"device": args.device, "progress": not args.quiet}
+    if args.cluster is not None:
+        changes["cluster"] = parse_cluster(args.cluster, threads=args.threads)
     if args.seeds is not None:
         if not 1 <= args.seeds <= 1000:
             raise InvalidValueError(f"--seeds expects an integer from 1 to 1000, got {args.seeds}")

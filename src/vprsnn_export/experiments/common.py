@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config, preset
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.device import resolve_device
@@ -56,6 +57,7 @@ class Settings:
     grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
     preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
     module_sizes: tuple[int, ...] = ()  # experiment route's module sizes (empty: its default sizes)
+    cluster: Cluster | None = None  # train every network's modules on this Ray cluster (--cluster)
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:
@@ -143,6 +145,7 @@ def _train(settings: Settings, data: Dataset, cfg: Config):
         device=resolve_device(settings.device),
         progress=settings.progress,
         selection={"subset": None, "places": None},
+        cluster=settings.cluster,
     )
 
 
