@@ -41,6 +41,10 @@ def test_every_network_is_read_out_every_way(results):
         ]
 
 
+def test_the_provenance_names_the_preset_the_route_runs(results):
+    assert results["provenance"]["settings"]["preset"] == route.ROUTE_PRESET == "dog"
+
+
 def test_sad_rows_and_cost(results):
     assert set(results["baselines"]) == {"intensity", "dog_on_off", "cosine", "sad_nn"}
     for name in results["baselines"]:

@@ -84,7 +84,9 @@ GOALS = {1: (0.45, None), 5: (0.88, 0.80), 10: (0.92, 0.92)}
 
 def route_settings(settings: Settings) -> Settings:
     """The route's selection: the manifest's first 2400 places (quick: 24 synthetic places)."""
-    return replace(settings, consecutive=QUICK_PLACES if settings.quick else FULL_PLACES, subset=None)
+    return replace(
+        settings, consecutive=QUICK_PLACES if settings.quick else FULL_PLACES, subset=None, preset=ROUTE_PRESET
+    )
 
 
 def route_config(settings: Settings, seed: int, module_size: int) -> Config:
