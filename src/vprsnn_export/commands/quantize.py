@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
             reference_images=reference_images,
             device=device,
             non_leaky=args.non_leaky,
+            progress=not args.quiet,
         )
         path = save_fixed_point(
             Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky), model
