@@ -12,7 +12,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
@@ -23,8 +23,27 @@ from .version import __version__
 NEGATIVE_VALUE = re.compile(r"^-\.?\d")  # "-2:2:0.1", "-0.5": a value, not an option
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that shows every option's default: ``(default: X)`` is appended unless the help already
+    names it (``%(default)s`` or the word "default") or there is none (None, False, an empty list, a suppressed default)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if default in (None, False, [], ()) or default is argparse.SUPPRESS or not action.option_strings:
+            return text
+        if "%(default)" in text or "default" in text.lower():
+            return text
+        return f"{text} (default: %(default)s)" if text else "default: %(default)s"
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``error: <problem>`` and exit code 2, no usage block."""
+    """argparse with one-line errors: ``error: <problem>`` and exit code 2, no usage block; every
+    option's default in ``--help`` (:class:`DefaultsFormatter`)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         print(f"error: {self.prog}: {message}", file=sys.stderr)

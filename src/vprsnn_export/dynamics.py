@@ -30,7 +30,7 @@ from .arguments import real_array, require_type
 from .config import Config, wta_group
 from .errors import InvalidValueError
 from .kernels import QUERY_CHUNK, blas_block, float_run
-from .runs import SpikeRun
+from .runs import SpikeRun, run_in_chunks
 
 
 def wta_step(
@@ -186,6 +186,7 @@ class FloatNetwork:
     thresholds: torch.Tensor
     cfg: Config
     name: str = "float"
+    progress: bool = False  # a bar on stderr over the chunks of state-isolated presentations
 
     def __post_init__(self) -> None:
         require_type("cfg", self.cfg, Config)
@@ -208,16 +209,22 @@ class FloatNetwork:
 
     def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> SpikeRun:
         isolation = self.cfg.network.state_isolation if state_isolation is None else state_isolation
-        return run_network(
-            spikes,
-            self.weights,
-            self.thresholds,
-            beta=self.cfg.network.beta,
-            wta=self.cfg.network.wta,
-            state_isolation=isolation,
-            record=record,
-            group=wta_group(self.cfg, int(self.weights.shape[1])),
-        )
+
+        def whole(part: torch.Tensor) -> SpikeRun:
+            return run_network(
+                part,
+                self.weights,
+                self.thresholds,
+                beta=self.cfg.network.beta,
+                wta=self.cfg.network.wta,
+                state_isolation=isolation,
+                record=record,
+                group=wta_group(self.cfg, int(self.weights.shape[1])),
+            )
+
+        if not isolation:
+            return whole(spikes)
+        return run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress, desc=self.name)
 
     def counts(self, spikes: torch.Tensor) -> torch.Tensor:
         """Output spike counts (N, neurons): the ``run_counts`` callable of calibration."""

@@ -9,11 +9,14 @@ backends instead of special-casing each one.
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from vprsnn_export.errors import InvalidValueError
 
@@ -59,6 +62,41 @@ class SpikeRun:
             max_current=self.max_current,
             wprob=None if self.wprob is None else self.wprob[:n],
         )
+
+
+def _joined(parts: list[torch.Tensor | None]) -> torch.Tensor | None:
+    return None if any(p is None for p in parts) else torch.cat([p for p in parts if p is not None])
+
+
+def run_in_chunks(
+    run: Callable[[torch.Tensor], SpikeRun], spikes: torch.Tensor, *, chunk: int, progress: bool, desc: str
+) -> SpikeRun:
+    """``run`` on consecutive chunks of ``chunk`` presentations, with a progress bar on stderr when ``progress``.
+
+    Only for state-isolated runs: each presentation starts from V = 0, so its spikes are a pure
+    function of its own spike train and run(spikes) == concat(run(spikes[a:b]) for each chunk).
+    Without ``progress`` it is one call, run(spikes). The bar is closed on any exception (``leave=False``),
+    so no bar is left above the error line.
+    """
+    n = int(spikes.shape[0])
+    if not progress or n <= chunk:
+        return run(spikes)
+    runs: list[SpikeRun] = []
+    with tqdm(total=n, desc=desc, unit="presentation", file=sys.stderr, leave=False) as bar:
+        for start in range(0, n, chunk):
+            runs.append(run(spikes[start : start + chunk]))
+            bar.update(min(chunk, n - start))
+    return SpikeRun(
+        counts=torch.cat([r.counts for r in runs]),
+        candidates_per_step=_joined([r.candidates_per_step for r in runs]),
+        raster=_joined([r.raster for r in runs]),
+        final_voltage=_joined([r.final_voltage for r in runs]),
+        saturations=sum(r.saturations for r in runs),
+        max_current=max(r.max_current for r in runs),
+        wprob=None
+        if any(r.wprob is None for r in runs)
+        else np.concatenate([r.wprob for r in runs if r.wprob is not None]),
+    )
 
 
 @runtime_checkable

@@ -57,8 +57,10 @@ def add_query_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_runtime_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
+PER_TENSOR_HELP = "one weight scale per module, shared by its neurons (a single network: one for all its neurons)"
+
+
+def add_threads_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--threads",
         type=integer,
@@ -67,6 +69,11 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
         help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
         "slow a shared machine down 10-20x)",
     )
+
+
+def add_runtime_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--device", default="auto", help="auto (GPU when present), cpu or cuda")
+    add_threads_option(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -135,10 +142,17 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         help="starting configuration: dog (the default: illumination-invariant DoG ON/OFF input channels, "
         "docs/model.md) or paper (the paper's patch-normalised intensity input); the options below apply on top",
     )
-    group.add_argument("--seed", type=integer, help="seed for weights, shuffles and every spike")
-    group.add_argument("--epochs", type=integer, help="training epochs")
-    group.add_argument("--timesteps", type=integer, help="presentation window T")
-    group.add_argument("--neurons", type=integer, help="excitatory neurons N_exc")
+    base = Config()
+    group.add_argument(
+        "--seed", type=integer, help=f"seed for weights, shuffles and every spike (default: the preset's, {base.seed})"
+    )
+    group.add_argument("--epochs", type=integer, help=f"training epochs (default: the preset's, {base.train.epochs})")
+    group.add_argument(
+        "--timesteps", type=integer, help=f"presentation window T (default: the preset's, {base.encoder.timesteps})"
+    )
+    group.add_argument(
+        "--neurons", type=integer, help=f"excitatory neurons N_exc (default: the preset's, {base.network.n_neurons})"
+    )
     group.add_argument(
         "--module-size",
         type=integer,

@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--out",
         default="vprsnn-demo",
-        help="output folder (default: ./vprsnn-demo; its files are regenerated on each run)",
+        help="output folder (default: %(default)s; its files are regenerated on each run)",
     )
     parser.add_argument("--seed", type=integer, default=Config().seed, help="seed")
     parser.add_argument("--quick", action="store_true", help=argparse.SUPPRESS)  # tiny run for the tests

@@ -98,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
         state_isolation=False if args.no_state_isolation else None,
         reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
         cluster=cluster,
+        progress=not args.quiet,
     )
     if args.predictions is not None:
         written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)

@@ -33,7 +33,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--quick", action="store_true", help="tiny synthetic size (CI); otherwise the real data")
     parser.add_argument("--out", default="docs/results", help="output folder (default docs/results)")
     parser.add_argument("--data", help="place manifest (default ../shared/data/nordland_64x32_summer_winter)")
-    parser.add_argument("--seeds", type=integer, help="number of independently trained networks (seeds 1..N)")
+    parser.add_argument(
+        "--seeds",
+        type=integer,
+        help="number of independently trained networks (seeds 1..N; default: "
+        f"{len(Settings().seeds)}; with --quick {len(Settings.quick_settings().seeds)})",
+    )
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
     parser.add_argument(

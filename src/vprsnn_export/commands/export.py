@@ -62,9 +62,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("export", help="export a model to NIR, a Loihi-style description and ONNX")
     parser.add_argument("model", nargs="?", help="float checkpoint (train) or fixed-point model (quantize)")
     parser.add_argument(
-        "--to", default=",".join(TARGETS), help=f"comma-separated targets: {TARGETS.choices()} (default all)"
+        "--to", default=",".join(TARGETS), help=f"comma-separated targets: {TARGETS.choices()} (default: %(default)s)"
     )
-    parser.add_argument("--out", help="output folder (new or empty; built whole, then put in place); required")
+    parser.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output folder (new or empty; built whole, then put in place); required unless --loihi-cores",
+    )
     parser.add_argument(
         "--loihi-cores",
         metavar="MxNxI",

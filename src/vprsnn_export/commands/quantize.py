@@ -14,7 +14,15 @@ from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from ..fileio import check_output
 from ..runtime.deployment import deploy
-from ._common import add_data_options, add_runtime_options, format_table, parse_int_list, print_json, query_data
+from ._common import (
+    PER_TENSOR_HELP,
+    add_data_options,
+    add_runtime_options,
+    format_table,
+    parse_int_list,
+    print_json,
+    query_data,
+)
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 TABLE_COLUMNS = (
@@ -37,9 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
     )
     scales = parser.add_mutually_exclusive_group()
-    scales.add_argument(
-        "--per-tensor", action="store_true", help="one weight scale per module (for all neurons of a single network)"
-    )
+    scales.add_argument("--per-tensor", action="store_true", help=PER_TENSOR_HELP)
     scales.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (the default)")
     parser.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice: max-abs or minimum MSE")
     parser.add_argument(
@@ -109,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
             reference_images=reference_images,
             device=device,
             non_leaky=args.non_leaky,
+            progress=not args.quiet,
         )
         path = save_fixed_point(
             Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky), model

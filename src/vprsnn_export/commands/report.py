@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import InvalidValueError
 from ..runtime.report import combine_reports, load_report, report_path, write_report
+from ._common import add_threads_option
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -29,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="pool reports made on other data, bit widths or readout settings (refused otherwise)",
     )
     parser.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_threads_option(parser)
     parser.set_defaults(handler=run)
 
 

@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         device=resolve_device(args.device),
         state_isolation=False if args.no_state_isolation else None,
         float_checkpoint=float_checkpoint,
+        progress=not args.quiet,
     )
     if args.json:
         print_json(

@@ -30,6 +30,7 @@ from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, veri
 from ..targets.registry import TARGETS
 from ..trainer.pipeline import train_and_calibrate
 from ._common import (
+    PER_TENSOR_HELP,
     add_data_options,
     add_readout_options,
     add_runtime_options,
@@ -87,13 +88,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     checks.add_argument(
         "--targets",
         default=ALL_TARGETS,
-        help=f"exported targets to read back and run: some of {TARGETS.choices()} (default all; or none)",
+        help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
     quant = parser.add_argument_group("quantisation")
     quant.add_argument(
-        "--per-tensor", action="store_true", help="one weight scale for all neurons (default: per neuron)"
+        "--per-tensor",
+        action="store_true",
+        help=PER_TENSOR_HELP + " (default: one per neuron)",
     )
-    quant.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice (default max)")
+    quant.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice (default: %(default)s)")
     quant.add_argument(
         "--reuse-float-calibration",
         action="store_true",

@@ -32,6 +32,7 @@ def recalibrate(
     *,
     reuse_float_calibration: bool = False,
     device: torch.device | None = None,
+    progress: bool = False,
 ) -> FixedPointModel:
     """S^R of the deployed network: the reference presentations run on the integer simulator.
 
@@ -47,7 +48,7 @@ def recalibrate(
     missing = [name for name in model.reference_traversals if name not in reference_images]
     if missing:
         raise InvalidValueError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
-    network = IntegerNetwork(model, device=device)
+    network = IntegerNetwork(model, device=device, progress=progress)
     images = {name: reference_images[name] for name in model.reference_traversals}
     calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
     report = dataclasses.replace(
@@ -68,6 +69,7 @@ def deploy(
     reference_images: Mapping[str, np.ndarray] | None = None,
     device: torch.device | None = None,
     non_leaky: bool = False,
+    progress: bool = False,
 ) -> FixedPointModel:
     """Quantise ``ckpt`` to ``bits`` and calibrate it: the model that `quantize` writes and `verify` checks.
 
@@ -96,4 +98,5 @@ def deploy(
         ckpt.reference_place_ids,
         reuse_float_calibration=calibration == "float",
         device=device,
+        progress=progress,
     )

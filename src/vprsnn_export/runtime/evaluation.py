@@ -342,6 +342,7 @@ def evaluate_float(
     state_isolation: bool | None = None,
     reference_images: Mapping[str, np.ndarray] | None = None,
     cluster: Cluster | None = None,
+    progress: bool = False,
 ) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
@@ -359,6 +360,7 @@ def evaluate_float(
     device = torch.device("cpu") if device is None else device
     if cluster is None:
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
+        network.progress = progress
         run = network.run(
             query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
         )
@@ -413,6 +415,7 @@ def evaluate_fixed_point(
     device: torch.device | None = None,
     state_isolation: bool | None = None,
     float_checkpoint: Checkpoint | None = None,
+    progress: bool = False,
 ) -> Evaluation:
     """The integer simulator on one query traversal, read out with both calibrations (deployed and float S^R).
 
@@ -424,7 +427,7 @@ def evaluate_fixed_point(
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None
-    run = IntegerNetwork(model, device).run(spikes, record=compare, state_isolation=state_isolation)
+    run = IntegerNetwork(model, device, progress=progress).run(spikes, record=compare, state_isolation=state_isolation)
     counts = run.counts.numpy()
     rows = []
     layout = ensemble_layout(model.config, len(model.reference_place_ids))
@@ -436,6 +439,7 @@ def evaluate_fixed_point(
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
         network = FloatNetwork.from_arrays(float_checkpoint.weights, float_checkpoint.thresholds, model.config, device)
+        network.progress = progress
         float_run = network.run(spikes, record=True, state_isolation=state_isolation)
         assert float_run.raster is not None
         agreement = step_agreement(float_run.raster, run.raster)

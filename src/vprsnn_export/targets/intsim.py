@@ -41,7 +41,7 @@ from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.kernels import integer_run
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.runs import SpikeRun, run_in_chunks
 
 QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
 FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
@@ -133,6 +133,7 @@ class IntegerNetwork:
     device: torch.device | None = None
     saturations: int = 0
     name: str = "integer simulator"
+    progress: bool = False  # a bar on stderr over the chunks of state-isolated presentations
     prepared: PreparedModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -144,7 +145,16 @@ class IntegerNetwork:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
-        run = run_prepared(self.prepared, spikes, isolation=isolation, record=record)
+        if isolation:
+            run = run_in_chunks(
+                lambda part: run_prepared(self.prepared, part, isolation=True, record=record),
+                spikes,
+                chunk=QUERY_CHUNK,
+                progress=self.progress,
+                desc=self.name,
+            )
+        else:
+            run = run_prepared(self.prepared, spikes, isolation=False, record=record)
         self.saturations += run.saturations
         return run
 
