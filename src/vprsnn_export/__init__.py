@@ -7,11 +7,18 @@ a test) does not import onnx, nir and matplotlib.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-from typing import TYPE_CHECKING, Any
+import sys
 
-from .version import __version__ as __version__
+from .startup import install_guard, started_as_command
+
+if started_as_command(sys.argv[0] if sys.argv else "", getattr(sys, "orig_argv", ())):
+    install_guard()  # first: a Ctrl-C while the command loads is one line and exit 130 (startup.py)
+
+import importlib  # noqa: E402  (after the guard above)
+import importlib.util  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
+
+from .version import __version__ as __version__  # noqa: E402
 
 if TYPE_CHECKING:
     from .api import *  # noqa: F403

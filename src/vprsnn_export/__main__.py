@@ -1,9 +1,10 @@
 """The ``vprsnn-export`` command's entry point (also ``python -m vprsnn_export``).
 
 A Ctrl-C while torch, numba and the rest load (a few seconds on a busy machine) exits with
-code 130 and one line, like one during the command itself: the guard below stands until
-the command line is imported, then Python's own handler is back and
-:func:`vprsnn_export.cli.main` turns the interrupt into the same line after cleaning up.
+code 130 and one line, like one during the command itself: the guard of
+:mod:`vprsnn_export.startup` (installed by the package's ``__init__``, and here for any other
+way in) stands until the command line and the command's module are imported, then Python's own
+handler is back and :func:`vprsnn_export.cli.main` turns the interrupt into the same line.
 """
 
 import errno
@@ -11,19 +12,15 @@ import os
 import signal
 import sys
 
+from .startup import EXIT_INTERRUPTED, end_guard, install_guard
 
-def _interrupted_while_loading(signum: int, frame: object) -> None:
-    print("error: interrupted", file=sys.stderr)
-    raise SystemExit(130)
-
-
-signal.signal(signal.SIGINT, _interrupted_while_loading)
+install_guard()
 
 from .cli import import_command, main  # noqa: E402  (imported under the guard above)
 
 import_command(sys.argv[1:])  # the command's module, torch and numba load under the guard too
 
-signal.signal(signal.SIGINT, signal.default_int_handler)
+end_guard()
 
 
 EXIT_BROKEN_PIPE = 128 + signal.SIGPIPE  # what a shell reports for a writer killed by SIGPIPE (`| head`)
@@ -35,6 +32,9 @@ def run() -> None:
     try:
         code = main()
         sys.stdout.flush()
+    except KeyboardInterrupt:  # between the guard's end and main's own handler
+        print("error: interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
     except BrokenPipeError:
         _silence_stdout()
         code = EXIT_BROKEN_PIPE

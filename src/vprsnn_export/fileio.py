@@ -14,6 +14,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import shutil
 import stat
 import tempfile
@@ -152,7 +153,9 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     process dies, so a killed run never blocks the next one. A second writer to the same output
     gets one OutputError instead of both runs finishing and the last one winning. While the lock
     is held, temp files and staging folders that a killed run left beside the output
-    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``) are removed: no live writer owns them.
+    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``) are removed: no live writer owns them;
+    so are those inside an output folder (``quantize --out DIR``, ``verify --report DIR``), down to
+    :data:`LEFTOVER_DEPTH` sub-folders, unless another run holds their own output's lock.
     ``None`` or an empty path: no lock.
     """
     if path is None or str(path).strip() == "":
@@ -165,6 +168,8 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     try:
         if target.parent.is_dir():
             _remove_leftovers(target)
+        if target.is_dir() and not target.is_symlink():
+            _remove_leftovers_inside(target, LEFTOVER_DEPTH)
         try:
             yield
         finally:
@@ -206,6 +211,47 @@ def _remove_leftovers(target: Path) -> None:
             else:
                 with contextlib.suppress(OSError):
                     leftover.unlink()
+
+
+# what atomic_write, staging_folder and publish_folder name their temporaries (mkstemp's 8 random characters)
+LEFTOVER_FILE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.tmp$")
+LEFTOVER_FOLDER = re.compile(r"^\.(?P<name>.+)\.(?:staging|old)-[a-z0-9_]{8}$")
+LEFTOVER_DEPTH = 2  # the deepest a command writes inside its output folder (verify: exports/<network>/)
+
+
+def _remove_leftovers_inside(folder: Path, depth: int) -> None:
+    """Temp files and staging folders a killed run left inside the output ``folder`` (lock held), down to
+    ``depth`` sub-folders (links not followed); one whose own output is locked now by another run stays."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        is_dir = entry.is_dir(follow_symlinks=False)
+        match = (LEFTOVER_FOLDER if is_dir else LEFTOVER_FILE).match(entry.name)
+        if match and not _locked_by_another_run(folder / f".{match['name']}.lock"):
+            if is_dir:
+                shutil.rmtree(entry.path, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    os.unlink(entry.path)
+        elif is_dir and depth > 0:
+            _remove_leftovers_inside(Path(entry.path), depth - 1)
+
+
+def _locked_by_another_run(lock_path: Path) -> bool:
+    """Whether the output lock ``lock_path`` exists and another run holds it (e.g. ``train --out DIR/net.npz``)."""
+    try:
+        fd = os.open(lock_path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
 
 
 def staging_folder(out: Path) -> Path:

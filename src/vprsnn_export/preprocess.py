@@ -28,10 +28,16 @@ The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import os
+import re
+import sys
+import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -43,27 +49,86 @@ if TYPE_CHECKING:
     from .config import PreprocessConfig
 
 
+DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time
+DATA_LOSS = "premature end"  # libjpeg: "Premature end of JPEG file", "... premature end of data segment"
+OPENCV_LOG = re.compile(r"^\[[^\]]*\]\s*(?:global\s+)?\S+:\d+\s+\S+\s+")  # "[ WARN:0@0.1] global f.cpp:9 func "
+SINK: list[IO[bytes]] = []  # one temporary file, reused: a new one per image costs more than the decode
+
+
+@contextmanager
+def captured_stderr() -> Iterator[list[str]]:
+    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines.
+
+    The lines are filled in when the block ends, so an error raised after it can quote the decoder
+    instead of the decoder printing above the error. Without a usable descriptor 2 nothing is captured.
+    """
+    lines: list[str] = []
+    with DECODE_LOCK:
+        sys.stderr.flush()
+        try:
+            saved = os.dup(2)
+        except OSError:
+            yield lines
+            return
+        if not SINK:
+            SINK.append(tempfile.TemporaryFile())
+        sink = SINK[0]
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if sink.seek(0, os.SEEK_END):
+                sink.seek(0)
+                text = sink.read().decode(errors="replace")
+                sink.seek(0)
+                sink.truncate()
+                lines.extend(OPENCV_LOG.sub("", line.strip()) for line in text.splitlines() if line.strip())
+
+
+def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
+    """``cv2.imdecode(data, IMREAD_GRAYSCALE)`` with the decoder's stderr lines captured; None if undecodable."""
+    with captured_stderr() as noise:
+        try:
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        except cv2.error:
+            image = None
+    return image, noise
+
+
+def decoder_said(noise: list[str]) -> str:
+    """The decoder's first line for a message (``": libpng error: ..."``), or '' when it said nothing."""
+    return f": {noise[0]}" if noise else ""
+
+
 def read_grey_image(path: Path, context: str = "") -> np.ndarray:
     """Decode one image file as 2-D uint8 greyscale (``cv2.IMREAD_GRAYSCALE``).
 
-    A missing file, or one OpenCV cannot decode (``cv2.imread`` returns None), raises
-    a :class:`DataError` naming ``path``; ``context`` (e.g. which manifest row asked
-    for it) is appended to the message.
+    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path
+    Python can open works (a folder name that is not UTF-8 included) and none reaches OpenCV's
+    own path handling. A missing or unreadable file, one OpenCV cannot decode, or one the decoder
+    reports as cut short (libjpeg's "premature end") raises a :class:`DataError` naming ``path``,
+    with the decoder's message; the decoder's stderr lines never reach the terminal.
+    ``context`` (e.g. which manifest row asked for it) is appended to the message.
     """
     path = Path(path)
     suffix = f" ({context})" if context else ""
     try:
         found = path.is_file()
-    except OSError as exc:  # a name too long for the file system, a path through a file
+        data = path.read_bytes() if found else b""
+    except OSError as exc:  # a name too long for the file system, a path through a file, no permission
         raise DataError(f"cannot read image ({exc.strerror or exc}){suffix}", path) from None
     if not found:
         raise DataError(f"image file not found{suffix}", path)
-    try:
-        image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    except cv2.error as exc:
-        raise DataError(f"cannot decode image: {exc}{suffix}", path) from None
+    if not data:
+        raise DataError(f"empty image file{suffix}", path)
+    image, noise = decode_grey(data)
     if image is None or image.size == 0:
-        raise DataError(f"unreadable or corrupt image (OpenCV could not decode it){suffix}", path)
+        raise DataError(f"unreadable or corrupt image (OpenCV could not decode it{decoder_said(noise)}){suffix}", path)
+    lost = [line for line in noise if DATA_LOSS in line.lower()]
+    if lost:
+        raise DataError(f"truncated or corrupt image (the decoder said: {lost[0]}){suffix}", path)
     return image
 
 

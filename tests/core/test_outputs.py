@@ -6,7 +6,9 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import pytest
 
@@ -147,3 +149,49 @@ def test_train_never_overwrites_its_own_input(tmp_path, capsys):
     argv = [*TRAIN, "--subset", str(manifest), "--out", str(manifest), "--force"]
     assert main(argv) == 2
     assert "input files" in capsys.readouterr().err and manifest.read_text().startswith("place_id")
+
+
+def plant_leftovers(folder):
+    """What a run killed while writing inside ``folder`` leaves, named as the writers name it."""
+    (folder / "plots").mkdir(parents=True, exist_ok=True)
+    (folder / "exports").mkdir(exist_ok=True)
+    planted = [
+        tempfile.mkstemp(prefix=".model_8b.npz.", suffix=".tmp", dir=folder),
+        tempfile.mkstemp(prefix=".report.json.", suffix=".tmp", dir=folder),
+        tempfile.mkstemp(prefix=".accuracy.png.", suffix=".tmp", dir=folder / "plots"),
+    ]
+    for fd, _ in planted:
+        os.close(fd)
+    staging = staging_folder(folder / "exports" / "net")
+    (staging / "half.onnx").write_bytes(b"half")
+    return [Path(name) for _, name in planted] + [staging]
+
+
+def test_leftovers_inside_an_output_folder_go_and_the_rest_stays(tmp_path):
+    out = tmp_path / "out"
+    leftovers = plant_leftovers(out)
+    kept = [out / "notes.tmp", out / ".hidden.tmp", out / "plots" / "a.png", out / "model_8b.npz"]
+    for path in kept:
+        path.write_bytes(b"mine")
+    with output_lock(out / "trained.npz"):  # another run (train --out DIR/trained.npz) writing inside the folder now
+        fd, live = tempfile.mkstemp(prefix=".trained.npz.", suffix=".tmp", dir=out)
+        os.close(fd)
+        with output_lock(out):
+            assert Path(live).exists()  # its writer holds its lock: not a leftover
+            assert not any(path.exists() for path in leftovers)
+            assert all(path.read_bytes() == b"mine" for path in kept)
+
+
+@pytest.mark.parametrize("command", ["quantize", "verify"])
+def test_the_next_run_removes_what_a_killed_run_left_in_its_output_folder(tmp_path, capsys, command):
+    ckpt = tmp_path / "net.npz"
+    assert main([*TRAIN, "--out", str(ckpt), "--threads", "1"]) == 0
+    out = tmp_path / "out"
+    leftovers = plant_leftovers(out)
+    if command == "quantize":
+        argv = ["quantize", str(ckpt), "--bits", "8", "--out", str(out), "--quiet"]
+    else:
+        argv = ["verify", str(ckpt), "--query", "winter", "--bits", "8", "--report", str(out), "--quiet"]
+    assert main([*argv, "--threads", "1"]) in (0, 1), capsys.readouterr().err  # verify: 1 when a check fails
+    assert not any(path.exists() for path in leftovers)
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or ".staging-" in p.name]
