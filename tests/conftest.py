@@ -77,6 +77,29 @@ def _make_model(
 
 
 @pytest.fixture
+def tiny_model() -> FixedPointModel:
+    """A 4-input, 3-neuron 4-bit fixed-point model with hand-set integers (thresholds 4, mantissas 3)."""
+    cfg = preset("paper").replace(
+        **{"preprocess.image_size": 2, "preprocess.patch_size": 1, "network.n_inputs": 4, "network.n_neurons": 3}
+    )
+    return FixedPointModel(
+        bits=4,
+        weight_mantissa=np.full((4, 3), 3, dtype=np.int32),
+        scale_multiplier=np.ones(3, dtype=np.int32),
+        scale_exponent=-8,
+        threshold=np.full(3, 4, dtype=np.int32),
+        decay_dv=400,
+        config=cfg,
+        calibration=np.zeros((3, 1), dtype=np.int64),
+        float_calibration=np.zeros((3, 1), dtype=np.int64),
+        reference_place_ids=np.zeros(1, dtype=np.int64),
+        reference_traversals=["summer"],
+        quantisation={"per_neuron": True},
+        source_sha256="0" * 64,
+    )
+
+
+@pytest.fixture
 def small_config():
     """The factory ``small_config(n_inputs=16, n_neurons=6, **overrides) -> Config``."""
     return _small_config

@@ -21,7 +21,6 @@ from vprsnn_export import kernels
 from vprsnn_export.config import preset
 from vprsnn_export.dynamics import FloatNetwork, run_network
 from vprsnn_export.errors import InvalidValueError, VprError
-from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import IntegerNetwork
 
 N, T, D, NEURONS, GROUP = 2, 5, 6, 4, 2
@@ -268,34 +267,15 @@ def test_float_network_with_too_few_thresholds_is_refused(n_thresholds):
         kernels.float_run(spikes, torch.rand(4, 3), torch.ones(n_thresholds), beta=0.9)
 
 
-def fixed_point_model() -> FixedPointModel:
-    cfg = small_config()
-    return FixedPointModel(
-        bits=4,
-        weight_mantissa=np.full((4, 3), 3, dtype=np.int32),
-        scale_multiplier=np.ones(3, dtype=np.int32),
-        scale_exponent=-8,
-        threshold=np.full(3, 4, dtype=np.int32),
-        decay_dv=400,
-        config=cfg,
-        calibration=np.zeros((3, 1), dtype=np.int64),
-        float_calibration=np.zeros((3, 1), dtype=np.int64),
-        reference_place_ids=np.zeros(1, dtype=np.int64),
-        reference_traversals=["summer"],
-        quantisation={"per_neuron": True},
-        source_sha256="0" * 64,
-    )
-
-
-def test_valid_fixed_point_model_runs():
-    run = IntegerNetwork(fixed_point_model()).run(torch.ones((2, 5, 4), dtype=torch.uint8))
+def test_valid_fixed_point_model_runs(tiny_model):
+    run = IntegerNetwork(tiny_model).run(torch.ones((2, 5, 4), dtype=torch.uint8))
     assert run.counts.shape == (2, 3) and int(run.counts.sum()) > 0
 
 
 @pytest.mark.parametrize("name", ["threshold", "scale_multiplier"])
 @pytest.mark.parametrize("length", [0, 1, 2, 4])
-def test_fixed_point_model_with_short_arrays_is_refused(name, length):
-    model = fixed_point_model()
+def test_fixed_point_model_with_short_arrays_is_refused(name, length, tiny_model):
+    model = tiny_model
     setattr(model, name, np.ones(length, dtype=np.int32))
     with pytest.raises(InvalidValueError, match=name):
         IntegerNetwork(model)

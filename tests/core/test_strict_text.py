@@ -11,10 +11,8 @@ import pytest
 from vprsnn_export import threads
 from vprsnn_export.commands._common import integer, parse_int_list, parse_value
 from vprsnn_export.commands.export import parse_shape
-from vprsnn_export.config import preset
 from vprsnn_export.dataset import parse_places, parse_synthetic
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.modules import MAX_MODULES, module_regions
 from vprsnn_export.targets import onnx_target
 
@@ -58,29 +56,8 @@ def test_too_many_modules_is_a_stated_limit():
     assert np.array_equal(module_regions(5, 2), [[0, 2], [2, 4], [4, 5]])
 
 
-def fixed_point_model() -> FixedPointModel:
-    cfg = preset("paper").replace(
-        **{"preprocess.image_size": 2, "preprocess.patch_size": 1, "network.n_inputs": 4, "network.n_neurons": 3}
-    )
-    return FixedPointModel(
-        bits=4,
-        weight_mantissa=np.full((4, 3), 3, dtype=np.int32),
-        scale_multiplier=np.ones(3, dtype=np.int32),
-        scale_exponent=-8,
-        threshold=np.full(3, 4, dtype=np.int32),
-        decay_dv=400,
-        config=cfg,
-        calibration=np.zeros((3, 1), dtype=np.int64),
-        float_calibration=np.zeros((3, 1), dtype=np.int64),
-        reference_place_ids=np.zeros(1, dtype=np.int64),
-        reference_traversals=["summer"],
-        quantisation={"per_neuron": True},
-        source_sha256="0" * 64,
-    )
-
-
-def test_onnx_refuses_an_accumulator_that_would_wrap(monkeypatch):
-    model = fixed_point_model()  # current sums of 4 inputs x 3
+def test_onnx_refuses_an_accumulator_that_would_wrap(monkeypatch, tiny_model):
+    model = tiny_model  # current sums of 4 inputs x 3
     onnx_target.check_exportable(model)
     monkeypatch.setattr(onnx_target, "INT32_MAX", 11)
     with pytest.raises(InvalidValueError, match="int32 accumulator"):

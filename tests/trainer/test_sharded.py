@@ -25,12 +25,7 @@ SMALL = {"network.n_neurons": 12, "encoder.timesteps": 20, "train.epochs": 2, "t
 CPU = torch.device("cpu")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
 
 def route(n_places: int, traversals: tuple[str, ...]) -> tuple[np.ndarray, list[Presentation]]:

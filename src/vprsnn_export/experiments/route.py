@@ -107,19 +107,6 @@ def route_network(settings: Settings, seed: int, module_size: int) -> tuple[Conf
     return cfg, data, timed_checkpoint(settings, data, cfg, f"route{module_size}")
 
 
-def template_baselines(settings: Settings) -> dict[str, list[dict]]:
-    """Cosine and SAD nearest neighbour on the DoG images the network sees, at every k (velocity given)."""
-    cfg = preset(ROUTE_PRESET).replace(**settings.overrides)
-    data = route_data(settings, cfg)
-    reference, query = data.traversal(settings.reference), data.traversal(settings.query)
-    opts = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options())
-    ids = data.place_ids
-    return {
-        "cosine": nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS),
-        "sad_nn": nearest_neighbour_rows(sad_similarities(sad_distances(reference, query)), "sad", ids, ids, opts, KS),
-    }
-
-
 def options(estimate: bool = False) -> dict[str, Any]:
     """ReadoutOptions keywords: the given velocity, or the smoothed estimate over :data:`VELOCITY_GRID`."""
     if estimate:
@@ -127,22 +114,31 @@ def options(estimate: bool = False) -> dict[str, Any]:
     return {"velocity": VELOCITY}
 
 
-def baseline(settings: Settings, channels: str) -> list[dict]:
-    """SAD rows at every k (given velocity) on the route's images pre-processed with ``channels``."""
-    cfg = preset("paper" if channels == "intensity" else ROUTE_PRESET).replace(**settings.overrides)
-    data = route_data(settings, cfg)
-    distribution = sad_distribution(sad_distances(data.traversal(settings.reference), data.traversal(settings.query)))
-    opts = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options())
-    return [
-        {
-            "strategy": "sad",
-            "k": k,
-            **decision_metrics(
-                aggregated(distribution, k, opts, None), "wprob", data.place_ids, data.place_ids, opts.tolerance
-            ),
-        }
-        for k in KS
-    ]
+def baselines(settings: Settings) -> dict[str, list[dict]]:
+    """The no-learning rows at every k (given velocity): SAD read out like W+Prob on the patch-normalised
+    ("intensity") and DoG ("dog_on_off") images, and cosine and SAD nearest neighbour on the DoG images
+    ("cosine", "sad_nn"). Each traversal is loaded and each distance matrix computed once."""
+    out: dict[str, list[dict]] = {}
+    for channels in ("intensity", "dog_on_off"):
+        cfg = preset("paper" if channels == "intensity" else ROUTE_PRESET).replace(**settings.overrides)
+        data = route_data(settings, cfg)
+        reference, query = data.traversal(settings.reference), data.traversal(settings.query)
+        ids = data.place_ids
+        opts = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options())
+        distances = sad_distances(reference, query)
+        distribution = sad_distribution(distances)
+        out[channels] = [
+            {
+                "strategy": "sad",
+                "k": k,
+                **decision_metrics(aggregated(distribution, k, opts, None), "wprob", ids, ids, opts.tolerance),
+            }
+            for k in KS
+        ]
+        if channels == "dog_on_off":
+            out["cosine"] = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS)
+            out["sad_nn"] = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts, KS)
+    return out
 
 
 def readout(
@@ -236,8 +232,7 @@ def run(settings: Settings) -> dict:
         mine = [n for n in networks if n["module_size"] == size]
         for row in summarise_rows([n["rows"] for n in mine], keys=("readout", "strategy", "k")):
             summary.append({"module_size": size, **row})
-    baselines = {channels: baseline(settings, channels) for channels in ("intensity", "dog_on_off")}
-    baselines.update(template_baselines(settings))
+    no_learning = baselines(settings)
     return {
         "experiment": NAME,
         "places": settings.consecutive,
@@ -255,7 +250,7 @@ def run(settings: Settings) -> dict:
         "goals": {str(k): {"accuracy": a, "r_at_100p": r} for k, (a, r) in GOALS.items()},
         "networks": networks,
         "summary": summary,
-        "baselines": baselines,
+        "baselines": no_learning,
         "cost": cost_summary(networks, sizes),
         "provenance": provenance(settings, started),
     }
