@@ -10,6 +10,7 @@ import pkgutil
 import re
 import signal
 import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -35,6 +36,10 @@ class DefaultsFormatter(argparse.HelpFormatter):
         if "%(default)" in text or "default" in text.lower():
             return text
         return f"{text} (default: %(default)s)" if text else "default: %(default)s"
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        """Wrapped at spaces only: a path or name with hyphens (vprsnn-export) stays whole."""
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False) or [""]
 
 
 class Parser(argparse.ArgumentParser):

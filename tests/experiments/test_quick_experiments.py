@@ -2,11 +2,13 @@
 
 import json
 import re
+from pathlib import Path
 
 import pytest
 
-from vprsnn_export.cli import main
+from vprsnn_export.cli import build_parser, main
 from vprsnn_export.commands.experiment import experiment_modules
+from vprsnn_export.experiments.common import DOCS_RESULTS, regenerating_command
 
 NAMES = sorted(experiment_modules())
 
@@ -53,3 +55,54 @@ def test_quick_experiment_writes_json_markdown_and_plots(name, out_dir):
 def test_unknown_experiment_is_a_clear_error(capsys):
     assert main(["experiment", "nope", "--quick"]) == 2
     assert "unknown experiment 'nope'" in capsys.readouterr().err
+
+
+def test_default_output_is_outside_the_repository(monkeypatch, tmp_path):
+    monkeypatch.delenv("VPRSNN_RESULTS", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    args = build_parser(["experiment", "assignment"]).parse_args(["experiment", "assignment"])
+    assert Path(args.out) == tmp_path / ".cache" / "vprsnn-export" / "results"
+    assert not args.update_docs
+    monkeypatch.setenv("VPRSNN_RESULTS", str(tmp_path / "mine"))
+    assert build_parser(["experiment"]).parse_args(["experiment", "sweep"]).out == str(tmp_path / "mine")
+
+
+def test_update_docs_writes_the_repositorys_docs_results(monkeypatch, tmp_path):
+    (tmp_path / "docs" / "results").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    args = build_parser(["experiment"]).parse_args(["experiment", "assignment", "--update-docs"])
+    assert args.update_docs and args.out == DOCS_RESULTS
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--update-docs"], "run it from the repository root"),
+        (["--out", "x", "--update-docs"], "not allowed with argument"),
+        (["--quick", "--update-docs"], "not with --quick"),
+    ],
+)
+def test_update_docs_misuse_is_one_line(monkeypatch, tmp_path, capsys, argv, message):
+    if "--quick" in argv:
+        (tmp_path / "docs" / "results").mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    assert main(["experiment", "assignment", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "docs" / "results" / "assignment.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("results", "command"),
+    [
+        (
+            {"command": "vprsnn-export experiment sweep --seeds 5"},
+            "vprsnn-export experiment sweep --seeds 5 --update-docs",
+        ),
+        ({"command": "vprsnn-export experiment sweep --update-docs", "output": "docs/results"}, None),
+        ({"command": "vprsnn-export experiment sweep", "output": "/home/u/.cache/vprsnn-export/results"}, None),
+        ({"command": "vprsnn-export experiment sweep --out=/tmp/r"}, None),
+    ],
+)
+def test_the_page_names_the_command_that_regenerates_it(results, command):
+    assert regenerating_command(results) == (command or results["command"])

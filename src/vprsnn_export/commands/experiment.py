@@ -15,7 +15,7 @@ from typing import Any
 from .. import experiments
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..errors import InvalidValueError
-from ..experiments.common import Settings, Variant, document
+from ..experiments.common import DOCS_RESULTS, Settings, Variant, document, results_dir
 from ..fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
@@ -31,7 +31,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("experiment", help="run one of the paper's experiments (JSON, Markdown, plots)")
     parser.add_argument("name", help="experiment name, or 'list'")
     parser.add_argument("--quick", action="store_true", help="tiny synthetic size (CI); otherwise the real data")
-    parser.add_argument("--out", default="docs/results", help="output folder (default docs/results)")
+    output = parser.add_mutually_exclusive_group()
+    output.add_argument(
+        "--out",
+        default=str(results_dir()),
+        help="output folder (default: %(default)s, that is $VPRSNN_RESULTS, else ~/.cache/vprsnn-export/results: "
+        "outside the repository)",
+    )
+    output.add_argument(
+        "--update-docs",
+        action=UpdateDocs,
+        nargs=0,
+        default=False,
+        help=f"write the committed pages instead: {DOCS_RESULTS}/NAME.{{json,md,png}} of the repository "
+        "this runs in (run it from the repository root; not with --quick)",
+    )
     parser.add_argument("--data", help="place manifest (default ../shared/data/nordland_64x32_summer_winter)")
     parser.add_argument(
         "--seeds",
@@ -63,6 +77,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quiet", action="store_true")
     parser.set_defaults(handler=run)
+
+
+class UpdateDocs(argparse.Action):
+    """``--update-docs``: the output is the repository's docs/results (it must exist under the working folder)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        if not Path(DOCS_RESULTS).is_dir():
+            parser.error(
+                f"--update-docs writes {DOCS_RESULTS}/ of the repository: run it from the repository root "
+                f"({Path(DOCS_RESULTS).absolute()} is not a folder)"
+            )
+        namespace.update_docs = True
+        namespace.out = DOCS_RESULTS
 
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
@@ -114,12 +147,15 @@ def run(args: argparse.Namespace) -> int:
     if args.name not in modules:
         raise InvalidValueError(f"unknown experiment {args.name!r}; choose from {', '.join(modules)}")
     module = modules[args.name]
+    if getattr(args, "update_docs", False) and args.quick:
+        raise InvalidValueError(f"--update-docs writes the committed pages of {DOCS_RESULTS}: not with --quick")
     if args.grid and args.name != "sweep":
         raise InvalidValueError(f"--grid applies only to experiment sweep, not {args.name!r}")
     settings = settings_from_args(args)
     results = module.run(settings)
     command = "vprsnn-export " + " ".join(shlex.quote(a) for a in args.argv)
     results["command"] = command
+    results["output"] = args.out
     out = Path(args.out)
     stem = f"{args.name}_quick" if args.quick else args.name
     out.mkdir(parents=True, exist_ok=True)

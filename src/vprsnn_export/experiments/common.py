@@ -29,6 +29,7 @@ from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to the repository root, where experiments run
+DOCS_RESULTS = "docs/results"  # the committed pages, written only by ``experiment NAME --update-docs``
 
 
 @dataclass(frozen=True)
@@ -96,12 +97,24 @@ def provenance(settings: Settings, started: float) -> dict:
     }
 
 
+def regenerating_command(results: dict) -> str:
+    """The command that regenerates a page: the one its run recorded. Runs from before ``--out`` and
+    ``--update-docs`` were recorded (no "output" key) wrote docs/results by default, which is
+    ``--update-docs`` now."""
+    command = str(results["command"])
+    words = command.split()
+    if "output" in results or "--update-docs" in words or any(w.split("=")[0] == "--out" for w in words):
+        return command
+    return f"{command} --update-docs"
+
+
 def document(name: str, description: str, stem: str, results: dict, body: str) -> str:
-    """The Markdown page of an experiment: title, description, the command and provenance, then ``body``."""
+    """The Markdown page of an experiment: title, description, the command that regenerates it
+    (:func:`regenerating_command`) and provenance, then ``body``."""
     prov = results["provenance"]
     return (
         f"# Experiment: {name}\n\n{description}.\n\n"
-        f"Generated from `{stem}.json` by `{results['command']}` "
+        f"Generated from `{stem}.json` by `{regenerating_command(results)}` "
         f"({prov['seconds']} s on {prov['machine']}, torch {prov['torch']}, vprsnn-export {prov['package_version']}).\n\n"
         + body
     )
@@ -109,6 +122,12 @@ def document(name: str, description: str, stem: str, results: dict, body: str) -
 
 def pct(summary: dict) -> str:
     return f"{100 * summary['mean']:.1f} ± {100 * summary['std']:.1f}"
+
+
+def results_dir() -> Path:
+    """Where ``experiment NAME`` writes by default: $VPRSNN_RESULTS, else ~/.cache/vprsnn-export/results
+    (outside the repository: only ``--update-docs`` writes the committed docs/results)."""
+    return Path(os.environ.get("VPRSNN_RESULTS", Path.home() / ".cache" / "vprsnn-export" / "results"))
 
 
 def cache_dir() -> Path:
