@@ -23,12 +23,16 @@ from vprsnn_export.device import resolve_device
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.sourcehash import source_fingerprint
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to the repository root, where experiments run
+#: The module whose functions compute what is cached (training, calibration, query spike counts): the
+#: source it imports, transitively, is hashed into every cache key (:func:`code_version`).
+CACHED_BY = ("vprsnn_export.experiments.common",)
 DOCS_RESULTS = "docs/results"  # the committed pages, written only by ``experiment NAME --update-docs``
 
 
@@ -136,9 +140,16 @@ def cache_dir() -> Path:
     return Path(os.environ.get("VPRSNN_CACHE", Path.home() / ".cache" / "vprsnn-export" / "checkpoints"))
 
 
+def code_version() -> str:
+    """The package version and a sha256 of the source that computes cached results
+    (:func:`vprsnn_export.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
+    calibration, the network or the data loading gives new cache keys, so a stale cache is never reused."""
+    return f"{__version__}+{source_fingerprint(CACHED_BY)}"
+
+
 def checkpoint_path(settings: Settings, data: Dataset, cfg: Config, selection_key: str) -> Path:
     """Where the checkpoint of ``cfg`` trained on ``data`` is cached: a hash of everything that determines it
-    (config, data manifest hash, selected places, reference, version)."""
+    (config, data manifest hash, selected places, reference, package version and source: :func:`code_version`)."""
     config = cfg.to_dict()
     # readout-only keys added after networks were cached: left out, so those networks keep their keys
     for key in ("hyperactive_share", "outside_weight"):
@@ -149,7 +160,7 @@ def checkpoint_path(settings: Settings, data: Dataset, cfg: Config, selection_ke
             "manifest": data.manifest_sha256,
             "places": data.place_ids.tolist(),
             "reference": settings.reference,
-            "version": __version__,
+            "version": code_version(),
         },
         sort_keys=True,
     )
