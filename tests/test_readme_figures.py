@@ -1,0 +1,135 @@
+"""Every figure the README quotes from docs/results equals the JSON its page is rendered from.
+
+Each case formats the figures from the committed JSON the way the README writes them (percent
+with one decimal, mean ± std over seeds, as the pages do) into the README's own words, and asserts
+that sentence is in the README: a regenerated JSON whose numbers moved fails here until the README
+is updated with it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from vprsnn_export.experiments.common import pct
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "docs" / "results"
+
+
+def readme() -> str:
+    return " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+
+
+def results(stem: str) -> dict:
+    return json.loads((RESULTS / f"{stem}.json").read_text(encoding="utf-8"))
+
+
+def row(summary: list[dict], strategy: str, k: int, **where: object) -> dict:
+    """The one summary row of ``strategy`` at ``k`` (and ``where``'s other keys)."""
+    (found,) = [
+        r for r in summary if r["strategy"] == strategy and r["k"] == k and all(r[f] == v for f, v in where.items())
+    ]
+    return found
+
+
+def mean(value: dict | float, digits: int = 1) -> str:
+    """A percentage as the README writes a single figure: 100 x mean (or the value), ``digits`` decimals."""
+    number = value["mean"] if isinstance(value, dict) else value
+    return f"{100 * number:.{digits}f}"
+
+
+def assignment() -> str:
+    data = results("assignment")
+    subset, consecutive = data["subset"]["summary"], data["consecutive"]["summary"]
+    wprob, standard = row(subset, "wprob", 1), row(subset, "standard", 1)
+    k5 = row(consecutive, "wprob", 5)
+    return (
+        f"subset W+Prob reaches {pct(wprob['accuracy'])} % accuracy, R@100P {pct(wprob['r_at_100p'])} % "
+        f"(Standard {pct(standard['accuracy'])} %); on 100 consecutive places W+Prob k=5 reaches "
+        f"{pct(k5['accuracy'])} %, R@100P {pct(k5['r_at_100p'])} %. The no-learning SAD baseline on the same "
+        f"images gets {mean(row(subset, 'sad', 1)['accuracy'], 0)} % (subset) and "
+        f"{mean(row(consecutive, 'sad', 5)['accuracy'], 0)} % at k=5"
+    )
+
+
+def route() -> str:
+    data = results("route")
+    size = data["main_module_size"]
+    ks = data["ks"]
+
+    def snn(readout: str, metric: str, with_std: bool) -> str:
+        cells = [row(data["summary"], "wprob", k, readout=readout, module_size=size)[metric] for k in ks]
+        return " / ".join(pct(c) if with_std else mean(c) for c in cells)
+
+    def baseline(name: str, metric: str) -> str:
+        return " / ".join(
+            mean(row(data["baselines"][name], r["strategy"], r["k"])[metric]) for r in data["baselines"][name]
+        )
+
+    default, previous = data["default_readout"], data["previous_readout"]
+    seconds = sorted(n["train_seconds"] for n in data["networks"] if n["module_size"] == size)
+    return (
+        f"W+Prob {snn(default, 'accuracy', True)} % at k = {' / '.join(map(str, ks))} "
+        f"(R@100P {snn(default, 'r_at_100p', False)} %); one WTA per module (the earlier default) gave "
+        f"{snn(previous, 'accuracy', False)} %. **The strongest no-learning baseline on the same images is still "
+        f"better: cosine nearest neighbour on the DoG input gets {baseline('cosine', 'accuracy')} % "
+        f"(R@100P {baseline('cosine', 'r_at_100p')} %)**; SAD on the DoG input {baseline('sad_nn', 'accuracy')} %."
+        f" | Training the 24 modules took {seconds[0]:.0f}-{seconds[-1]:.0f} s"
+    )
+
+
+def timing() -> str:
+    data = results("timing")
+
+    def path(name: str, batch: int) -> dict:
+        (found,) = [r for r in data["throughput"] if r["T"] == 300 and r["batch"] == batch and r["path"] == name]
+        return found
+
+    return (
+        f"At T = 300, 100 queries batched: integer {path('integer', 100)['queries_per_s']:.0f} queries/s, float "
+        f"{path('float', 100)['queries_per_s']:.0f}, dense-BLAS bound {path('dense_bound', 100)['queries_per_s']:.0f}, "
+        f"torch loop {path('float_torch_loop', 100)['queries_per_s']:.0f}; one query alone: "
+        f"{path('integer', 1)['ms_per_query']:.2f} ms integer, {path('float', 1)['ms_per_query']:.2f} ms float. "
+        f"Training the default configuration on {data['training_images']} places ({data['training_epochs']} epochs): "
+        f"{data['training_seconds']:.1f} s."
+    )
+
+
+def sweep() -> str:
+    data = results("sweep")
+
+    def summary(selection: str, variant: str) -> list[dict]:
+        (found,) = [v for v in data[selection]["variants"] if v["variant"] == variant]
+        return found["summary"]
+
+    paper_subset, paper_run = summary("subset", "paper"), summary("consecutive", "paper")
+    dog_subset, dog_run = summary("subset", "dog"), summary("consecutive", "dog")
+    return (
+        f"(W+Prob k=1: {pct(row(paper_subset, 'wprob', 1)['accuracy'])} % on the subset, SAD "
+        f"{mean(row(paper_subset, 'sad', 1)['accuracy'], 0)} %; {pct(row(paper_run, 'wprob', 1)['accuracy'])} % on "
+        f"places 1000-1099, SAD {mean(row(paper_run, 'sad', 1)['accuracy'], 0)} %). The default centre-surround "
+        f"ON/OFF input channels lift W+Prob k=1 to {pct(row(dog_subset, 'wprob', 1)['accuracy'])} % on the subset "
+        f"and {pct(row(dog_run, 'wprob', 1)['accuracy'])} % on places 1000-1099 (k=5: "
+        f"{mean(row(dog_subset, 'wprob', 5)['accuracy'])} % and {mean(row(dog_run, 'wprob', 5)['accuracy'])} %, "
+        f"R@100P {mean(row(dog_subset, 'wprob', 5)['r_at_100p'])} % and "
+        f"{mean(row(dog_run, 'wprob', 5)['r_at_100p'])} %)"
+    )
+
+
+CASES: dict[str, Callable[[], str]] = {"assignment": assignment, "route": route, "timing": timing, "sweep": sweep}
+
+
+@pytest.mark.parametrize("stem", sorted(CASES))
+def test_readme_quotes_its_json(stem):
+    text = readme()
+    for sentence in CASES[stem]().split(" | "):
+        assert sentence in text, f"README.md does not quote docs/results/{stem}.json as: {sentence!r}"
+
+
+def test_readme_cites_the_pages_it_quotes():
+    text = readme()
+    assert all(f"experiment {stem}" in text for stem in CASES)
