@@ -84,7 +84,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         series,
         xlabel="weight bits",
         ylabel="% (W+Prob)",
-        title="Quantisation: W+Prob vs weight bits (dashed: float)",
+        title="Quantisation: W+Prob vs weight bits (grey lines: float)",
         baselines=baselines,
     )
     table = rows_table([r for r in summary if r["strategy"] == "wprob"], ("scaling", "bits", "strategy", "k"))

@@ -277,8 +277,8 @@ def blocks_of(report: VerifyReport) -> list[Block]:
             image=plot_weights(first),
             name="weight_histograms.png",
             text="Float weights divided by their scale range "
-            f"({first.float.weights.normalised_by}), and the share of weights on each "
-            "quantised level q / (2^b - 1).",
+            f"({first.float.weights.normalised_by}): the share of weights on each quantised level "
+            "q / L, L = 2^b - 1 (bars), and the share of float weights within 1 / L around each point (line).",
         )
     )
     blocks += tolerance_blocks(report)
@@ -711,32 +711,42 @@ def plot_modules(run: VerifiedRun) -> bytes:
     fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 0.35 * len(modules) + 2), 5.2), sharex=True)
     cmap = plt.get_cmap("viridis")
     n = max(len(results) - 1, 1)
-    axes[0].plot(x, [100 * m.float_accuracy_k for m in modules], "o-", color="black", label="float")
     for index, result in enumerate(results):
         color = cmap(index / n)
         axes[0].plot(x, [100 * m.accuracy_k for m in result.modules], ".-", color=color, label=f"{result.bits}-bit")
         axes[1].plot(x, [100 * m.winner_agreement for m in result.modules], ".-", color=color)
+    # float last, open circles and dashed: a bit width equal to it stays visible inside them
+    float_accuracy = [100 * m.float_accuracy_k for m in modules]
+    axes[0].plot(x, float_accuracy, "o--", color="black", markerfacecolor="none", markersize=8, label="float")
     axes[0].set_ylabel(f"accuracy k={modules[0].k} %")
     axes[1].set_ylabel("same winner %")
     axes[1].set_xlabel("module (region of consecutive places)")
+    axes[1].xaxis.set_major_locator(plt.MaxNLocator(integer=True))  # module numbers, never 0.5
     for ax in axes:
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=len(results) + 1)
+    axes[0].legend(fontsize=8, ncol=len(results) + 1, loc="lower center", bbox_to_anchor=(0.5, 1.02))
     fig.tight_layout()
     return png(fig)
 
 
+def window_share(edges: np.ndarray, counts: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
+    """The share of a histogram's values within ``width`` around each ``x`` (uniform within a bin):
+    ``share(x) = F(x + width/2) - F(x - width/2)``, F the cumulative share at the edges, interpolated.
+    At x = q / L with width 1 / L it is the share of float weights that round to level q: a share, <= 1."""
+    cdf = np.concatenate([[0.0], np.cumsum(counts)]) / max(float(np.sum(counts)), 1.0)
+    return np.interp(x + width / 2, edges, cdf) - np.interp(x - width / 2, edges, cdf)
+
+
 def plot_weights(run: VerifiedRun) -> bytes:
-    """Per bit width: the share of weights on each level q / L (bars) over the float weights' histogram
-    rescaled to the same units (share per interval of width 1 / L, line)."""
+    """Per bit width: the share of weights on each level q / L (bars) over the float weights' share within
+    a level's width 1 / L around each point (line, :func:`window_share`): the same units, both <= 1."""
     plt = pyplot()
     results = run.bits
     fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
     hist = run.float.weights
-    edges = np.asarray(hist.edges)
+    edges = np.asarray(hist.edges, dtype=np.float64)
     counts = np.asarray(hist.counts, dtype=np.float64)
-    density = counts / max(counts.sum(), 1) / np.diff(edges)
-    centres = (edges[:-1] + edges[1:]) / 2
+    x = np.linspace(edges[0], edges[-1], 401)
     for ax, result in zip(axes[0], results, strict=True):
         levels = result.weight_levels
         top = levels.levels
@@ -749,7 +759,7 @@ def plot_weights(run: VerifiedRun) -> bytes:
             alpha=0.85,
             label=f"{result.bits}-bit levels",
         )
-        ax.plot(centres, density / top, color="tab:blue", linewidth=1.2, label="float")
+        ax.plot(x, window_share(edges, counts, x, 1 / top), color="tab:blue", linewidth=1.2, label="float")
         ax.set_title(f"{result.bits}-bit: {100 * levels.zero_fraction:.1f} % of weights at 0", fontsize=9)
         ax.set_xlabel("weight / scale range")
         ax.set_xlim(-0.08, 1.08)
