@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+from tqdm import tqdm
 
 from .errors import InvalidValueError
 
@@ -91,20 +94,35 @@ def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any,
     return result, time.perf_counter() - started
 
 
+def task_bar(total: int, desc: str | None) -> tqdm:
+    """A bar on stderr over finished tasks (none when ``desc`` is None); closed on any exception (``leave=False``)."""
+    return tqdm(total=total, desc=desc, unit="task", file=sys.stderr, leave=False, disable=desc is None)
+
+
 def map_tasks(
-    cluster: Cluster | None, function: Callable[..., Any], tasks: Sequence[tuple], *, timing: list | None = None
+    cluster: Cluster | None,
+    function: Callable[..., Any],
+    tasks: Sequence[tuple],
+    *,
+    timing: list | None = None,
+    progress: str | None = None,
 ) -> list[Any]:
     """[function(*task) for task in tasks], on the cluster's workers (in parallel) or here when ``cluster`` is None.
 
     Arguments shared by several tasks should be the same object: Ray stores each once. A Ray
     runtime this call starts is shut down before it returns; one already running (``ray.init``
-    by the caller) is used and left running. ``timing``: a TaskTiming is appended.
+    by the caller) is used and left running. ``timing``: a TaskTiming is appended. ``progress``:
+    the description of a bar on stderr that counts finished tasks (None: no bar).
     """
     started = time.perf_counter()
     if cluster is None:
-        pairs = [_timed(torch_threads(), function, *task) for task in tasks]
+        pairs = []
+        with task_bar(len(tasks), progress) as bar:
+            for task in tasks:
+                pairs.append(_timed(torch_threads(), function, *task))
+                bar.update(1)
     else:
-        pairs = _ray_map(cluster, function, tasks)
+        pairs = _ray_map(cluster, function, tasks, progress)
     if timing is not None:
         timing.append(TaskTiming(time.perf_counter() - started, tuple(seconds for _, seconds in pairs)))
     return [result for result, _ in pairs]
@@ -116,7 +134,9 @@ def torch_threads() -> int:
     return torch.get_num_threads()
 
 
-def _ray_map(cluster: Cluster, function: Callable[..., Any], tasks: Sequence[tuple]) -> list[tuple[Any, float]]:
+def _ray_map(
+    cluster: Cluster, function: Callable[..., Any], tasks: Sequence[tuple], progress: str | None
+) -> list[tuple[Any, float]]:
     ray = _ray()
     started_here = not ray.is_initialized()
     if started_here:
@@ -134,6 +154,11 @@ def _ray_map(cluster: Cluster, function: Callable[..., Any], tasks: Sequence[tup
             return shared[id(value)]
 
         refs = [remote.remote(cluster.threads, function, *(stored(a) for a in task)) for task in tasks]
+        with task_bar(len(refs), progress) as bar:
+            pending = list(refs)
+            while pending:  # as tasks finish, in any order; the results below keep the tasks' order
+                ready, pending = ray.wait(pending, num_returns=1)
+                bar.update(len(ready))
         return list(ray.get(refs))
     finally:
         if started_here:

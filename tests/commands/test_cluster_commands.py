@@ -8,6 +8,7 @@ import pytest
 import ray
 
 from vprsnn_export.cli import main
+from vprsnn_export.cluster import Cluster, map_tasks
 
 TINY = ["--timesteps", "20", "--epochs", "2", "--neurons", "16", "--module-size", "10", "--seed", "4", "--quiet"]
 
@@ -77,3 +78,9 @@ def test_experiment_route_on_ray_trains_the_same_networks(two_workers, tmp_path,
 def test_experiment_cluster_option_is_parsed_and_checked(capsys):
     assert main(["experiment", "route", "--quick", "--cluster", "nowhere"]) == 2
     assert "--cluster" in capsys.readouterr().err
+
+
+def test_ray_tasks_show_a_bar_and_keep_their_order(two_workers, capsys):
+    tasks = [(base, 2) for base in range(6)]
+    assert map_tasks(Cluster("local", 2), pow, tasks, progress="modules on ray") == [b * b for b in range(6)]
+    assert "modules on ray" in capsys.readouterr().err

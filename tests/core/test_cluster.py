@@ -36,3 +36,10 @@ def test_more_threads_per_task_than_local_worker_slots_is_refused():
     assert parse_cluster("local:2", threads=2) == Cluster("local", 2, 2)
     with pytest.raises(InvalidValueError, match="--threads 3"):
         parse_cluster("local:2", threads=3)
+
+
+def test_a_bar_counts_the_finished_tasks(capsys):
+    assert map_tasks(None, pow, [(2, 3), (3, 2)], progress="modules") == [8, 9]
+    assert "modules" in capsys.readouterr().err
+    assert map_tasks(None, pow, [(2, 3)]) == [8]
+    assert capsys.readouterr().err == ""  # no description: no bar

@@ -233,6 +233,7 @@ def rescoped_checkpoint(
     if path.exists():
         return cfg, load_checkpoint(path)
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, resolve_device(settings.device))
+    network.progress = settings.progress
     references = {name: data.traversal(name) for name in ckpt.reference_traversals}
     rescoped = replace(ckpt, config=cfg, calibration=calibrate(network.counts, references, data.place_ids, cfg))
     save_checkpoint(path, rescoped)
@@ -261,6 +262,7 @@ def timed_query_counts(
     if counts_path.exists() and timing.exists():
         return TimedCounts(np.load(counts_path), float(json.loads(timing.read_text())["seconds"]), True)
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, resolve_device(settings.device))
+    network.progress = settings.progress
     started = time.perf_counter()
     run = network.run(query_spikes(data.traversal(settings.query), data.place_ids, settings.query, ckpt.config))
     seconds = time.perf_counter() - started

@@ -374,6 +374,7 @@ def evaluate_float(
             "query",
             cluster,
             state_isolation=state_isolation,
+            progress=progress,
         )[traversal]
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids

@@ -494,6 +494,7 @@ def verify_checkpoint(
     spikes = query_spikes(query_images, query_place_ids, query_traversal, ckpt.config)
     recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
     float_network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
+    float_network.progress = progress  # a bar over the query chunks of each network run below
     float_run = float_network.run(spikes[:recorded], record=True)
     float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
     ref_ids = ckpt.reference_place_ids
@@ -528,13 +529,14 @@ def verify_checkpoint(
                 calibration=options.calibration,
                 reference_images=reference_images,
                 device=device,
+                progress=progress,
             )
             folder = root / f"{bits}bit"
             model_path = save_fixed_point(folder / "model.npz", model)
             seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="simulate")
-            int_network = IntegerNetwork(model, device)
+            int_network = IntegerNetwork(model, device, progress=progress)
             int_run = int_network.run(spikes[:recorded], record=True)
             int_all = int_run if recorded == spikes.shape[0] else int_network.run(spikes)
             int_counts = int_all.counts.numpy()

@@ -52,16 +52,23 @@ def train_and_calibrate(
     rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
-        trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster)
+        trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
         network = FloatNetwork.from_arrays(
             trained.weights.numpy(), trained.thresholds.numpy(), cfg, torch.device("cpu")
         )
         calibration = calibrate_on_cluster(
-            trained.weights.numpy(), trained.thresholds.numpy(), cfg, reference_images, dataset.place_ids, cluster
+            trained.weights.numpy(),
+            trained.thresholds.numpy(),
+            cfg,
+            reference_images,
+            dataset.place_ids,
+            cluster,
+            progress=progress,
         )
     else:
         trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
         network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
+        network.progress = progress  # calibration presents every reference place to the whole ensemble
         calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg)
     return Checkpoint(
         config=cfg,

@@ -91,6 +91,7 @@ def train_modules_on_cluster(
     *,
     modules_per_task: int = 1,
     timing: list | None = None,
+    progress: bool = False,
 ) -> TrainedNetwork:
     """:func:`.batched.train_modules` with its modules split into tasks on ``cluster`` (None: here, one by one).
 
@@ -101,7 +102,8 @@ def train_modules_on_cluster(
         raise ValueError("no training images for a module")
     groups = module_groups(len(rows), modules_per_task)
     tasks = [(*group_inputs(images, presentations, [rows[m] for m in group]), cfg) for group in groups]
-    done: list[GroupTraining] = map_tasks(cluster, train_group, tasks, timing=timing)
+    bar = "training modules" if progress else None
+    done: list[GroupTraining] = map_tasks(cluster, train_group, tasks, timing=timing, progress=bar)
     weights = torch.from_numpy(np.concatenate([g.weights for g in done]))
     fired = np.concatenate([g.fired for g in done], axis=1)
     theta = np.concatenate([g.theta for g in done], axis=1)
@@ -144,6 +146,7 @@ def float_runs_on_cluster(
     state_isolation: bool | None = None,
     modules_per_task: int = 1,
     timing: list | None = None,
+    progress: bool = False,
 ) -> dict[str, SpikeRun]:
     """The float ensemble on each traversal's images, split into tasks: one SpikeRun per traversal.
 
@@ -183,7 +186,7 @@ def float_runs_on_cluster(
             for piece in slices
         ]
         axis, parts_per_traversal = 0, len(slices)
-    done = map_tasks(cluster, run_group, tasks, timing=timing)
+    done = map_tasks(cluster, run_group, tasks, timing=timing, progress=f"{stream} runs" if progress else None)
     runs: dict[str, SpikeRun] = {}
     for k, traversal in enumerate(presentations):
         parts = done[k * parts_per_traversal : (k + 1) * parts_per_traversal]
@@ -205,10 +208,19 @@ def calibrate_on_cluster(
     cluster: Cluster | None,
     *,
     modules_per_task: int = 1,
+    progress: bool = False,
 ) -> np.ndarray:
     """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network."""
     runs = float_runs_on_cluster(
-        weights, thresholds, cfg, reference_images, place_ids, "calibrate", cluster, modules_per_task=modules_per_task
+        weights,
+        thresholds,
+        cfg,
+        reference_images,
+        place_ids,
+        "calibrate",
+        cluster,
+        modules_per_task=modules_per_task,
+        progress=progress,
     )
     total = np.zeros((0, 0), dtype=np.int64)
     for traversal in reference_images:
