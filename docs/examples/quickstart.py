@@ -20,7 +20,7 @@ backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend
 counts = {backend.name: backend.run(spikes[:3]).counts for backend in backends}
 print({name: int(c.sum()) for name, c in counts.items()})
 
-options = vx.VerifyOptions(readout, bits=(8, 4))
+options = vx.VerifyOptions(readout, bits=(8,))
 run = vx.verify_checkpoint(ckpt, "quickstart", winter, places, "winter", options, reference_images=reference)
 vx.write_report(vx.build_report([run], {"example": "quickstart"}), "report")
 print("verdict:", "PASS" if run.passed else "FAIL")

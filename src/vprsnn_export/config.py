@@ -41,8 +41,10 @@ class PreprocessConfig:
     patch_size: int = 7
     patch_norm: bool = True  # ablation switch: False scales the whole image to [0, 1] instead
     channels: str = "dog_on_off"  # the default since the sweep (docs/model.md); "intensity" is the paper's
-    dog_sigma_centre: float = 1.0  # DoG centre Gaussian, in pixels of the resized image
-    dog_sigma_surround: float = 2.0  # DoG surround Gaussian
+    #: DoG centre and surround Gaussians, in pixels of the resized image. 0.7 / 1.4 since issue 20 (was 1 / 2): finer
+    #: edges lift the whole route and the subset at k=1 (docs/research/route-recognition.md section 6).
+    dog_sigma_centre: float = 0.7
+    dog_sigma_surround: float = 1.4
 
     @property
     def n_channels(self) -> int:

@@ -60,11 +60,17 @@ def test_every_variant_selection_and_k_is_measured(default_sweep):
 
 def test_readout_only_variants_reuse_the_trained_network(default_sweep, cache, tmp_path):
     _, results, trainings = default_sweep
-    # 2 training configs (paper, dog) x 1 seed x 2 selections; the gamma variants train nothing
-    assert trainings == 4
+    # 3 training configs (paper, dog, dog-sigma1-2) x 1 seed x 2 selections; the gamma variants train nothing
+    assert trainings == 6
     for selection in sweep.SELECTIONS:
         networks = {v["variant"]: v["network"] for v in results[selection]["variants"]}
-        assert networks == {"paper": "paper", "paper+gamma0.1": "paper", "dog": "dog", "dog+gamma0.1": "dog"}
+        assert networks == {
+            "paper": "paper",
+            "paper+gamma0.1": "paper",
+            "dog": "dog",
+            "dog+gamma0.1": "dog",
+            "dog-sigma1-2": "dog-sigma1-2",
+        }
     # a second sweep over the same networks with another readout trains nothing: the cache serves them
     again, trainings = run_sweep(tmp_path, "--grid", "a=paper,assignment.gamma=0.3", "--grid", "b=dog")
     assert trainings == 0

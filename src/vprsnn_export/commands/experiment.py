@@ -60,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=[],
         metavar="NAME=PRESET[,KEY=VALUE...]",
-        help="experiment sweep: one variant of the grid (repeatable; default paper, paper+gamma=0.1, dog, dog+gamma=0.1)",
+        help="experiment sweep: one variant of the grid (repeatable; default: the grid the sweep page lists)",
     )
     parser.add_argument(
         "--module-sizes",

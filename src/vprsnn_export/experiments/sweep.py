@@ -39,6 +39,7 @@ DEFAULT_GRID = (
     Variant("paper+gamma0.1", "paper", {"assignment.gamma": 0.1}),
     Variant("dog", "dog"),
     Variant("dog+gamma0.1", "dog", {"assignment.gamma": 0.1}),
+    Variant("dog-sigma1-2", "dog", {"preprocess.dog_sigma_centre": 1.0, "preprocess.dog_sigma_surround": 2.0}),
 )
 
 
