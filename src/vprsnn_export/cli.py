@@ -17,6 +17,7 @@ from typing import Any, NoReturn
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
 from .fileio import check_output_folder, output_lock
+from .resources import set_memory_limit
 from .threads import set_threads
 from .version import __version__
 
@@ -137,6 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
+        set_memory_limit(getattr(args, "memory_limit", None))
         output = getattr(args, "report", None)
         output = getattr(args, "out", None) if output is None else output
         if output is not None and getattr(args, "output_kind", "folder") == "folder":
