@@ -12,7 +12,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import IO, Any, NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
@@ -49,6 +49,12 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         print(f"error: {self.prog}: {message}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+        """argparse's, without its ``except OSError: pass``: help or a version that cannot be written (a full
+        device, a closed pipe) reaches ``__main__.run``, which exits 1 with one line or 141, not 0."""
+        if message:
+            (file or sys.stderr).write(message)
 
 
 def join_negative_values(argv: Sequence[str]) -> list[str]:
