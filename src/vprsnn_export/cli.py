@@ -12,7 +12,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO, Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
@@ -20,6 +20,9 @@ from .fileio import check_output_folder, output_lock
 from .resources import set_memory_limit
 from .threads import set_threads
 from .version import __version__
+
+if TYPE_CHECKING:
+    from _typeshed import SupportsWrite
 
 NEGATIVE_VALUE = re.compile(r"^-\.?\d")  # "-2:2:0.1", "-0.5": a value, not an option
 
@@ -50,7 +53,7 @@ class Parser(argparse.ArgumentParser):
         print(f"error: {self.prog}: {message}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
 
-    def _print_message(self, message: str, file: IO[str] | None = None) -> None:
+    def _print_message(self, message: str, file: SupportsWrite[str] | None = None) -> None:
         """argparse's, without its ``except OSError: pass``: help or a version that cannot be written (a full
         device, a closed pipe) reaches ``__main__.run``, which exits 1 with one line or 141, not 0."""
         if message:
