@@ -104,6 +104,8 @@ def calls(f: Fixtures) -> dict[str, tuple[Any, dict[str, Any]]]:
         ),
         "deploy": (vx.deploy, dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, calibration="float")),
         "decide": (vx.decide, dict(scores=scores, strategy="wprob")),
+        "strategy_scores": (vx.strategy_scores, dict(sr=sr, sq=counts, strategy="weighted", gamma=0.5)),
+        "aggregate": (vx.aggregate, dict(prob=scores / scores.sum(1, keepdims=True), k=2, velocity=1.0)),
         "sad_distances": (vx.sad_distances, dict(reference=f.winter, queries=f.winter)),
         "sad_distribution": (vx.sad_distribution, dict(distances=scores)),
         "pr_metrics": (vx.pr_metrics, dict(correct=np.array([True, False]), confidence=np.array([0.5, 0.2]))),
@@ -132,7 +134,9 @@ def arguments() -> list[tuple[str, str]]:
         "select_places": ("dataset", "place_ids"),
         "quantize_checkpoint": ("ckpt", "ckpt_sha256", "bits", "per_neuron", "scale_method"),
         "deploy": ("ckpt", "ckpt_sha256", "bits"),
-        "decide": ("scores",),
+        "decide": ("scores", "strategy"),
+        "strategy_scores": ("sr", "sq", "strategy"),
+        "aggregate": ("prob", "k", "velocity"),
         "sad_distances": ("reference", "queries"),
         "sad_distribution": ("distances",),
         "pr_metrics": ("correct", "confidence"),
@@ -141,7 +145,7 @@ def arguments() -> list[tuple[str, str]]:
         "save_checkpoint": ("path", "ckpt"),
         "save_fixed_point": ("path", "model"),
         "IntegerNetwork": ("model",),
-        "FloatNetwork": ("weights", "thresholds", "cfg"),
+        "FloatNetwork": ("weights", "thresholds", "cfg", "device"),
     }
     return [(function, arg) for function, args in names.items() for arg in args]
 
@@ -306,3 +310,26 @@ def test_numbers_in_text_are_ascii_decimal_only(text):
     for exotic in ("²", "٣", "３", "1_000", " 7", "7 ", "+7", ""):
         assert ascii_uint(exotic) is None and ascii_int(exotic) is None
     assert ascii_int("-12") == -12
+
+
+def test_the_leftovers_of_the_api_campaign_are_refused_or_exact(fx):
+    """tools/bad_input_api.py's last foreign and accepted cases: each argument named, or the exact result."""
+    prob = np.random.default_rng(1).random((4, 5))
+    prob /= prob.sum(1, keepdims=True)
+    for strategy in (np.zeros(3), ["wprob"], None):
+        with pytest.raises(vx.InvalidValueError, match="strategy"):
+            vx.decide(prob, strategy)
+        with pytest.raises(vx.InvalidValueError, match="strategy"):
+            vx.strategy_scores(fx.ckpt.calibration, np.ones((2, fx.ckpt.calibration.shape[0])), strategy, 0.5)
+    for velocity in (True, np.array([True, False, True, True])):
+        with pytest.raises(vx.InvalidValueError, match="velocity"):
+            vx.aggregate(prob, 2, velocity)
+    np.testing.assert_array_equal(vx.aggregate(prob, 10**30, 1.5), vx.aggregate(prob, 4, 1.5))  # W_j stops at 0
+    with pytest.raises(vx.InvalidValueError, match="place_ids"):
+        vx.select_places(fx.data, [])
+    with pytest.raises(vx.InvalidValueError, match="progress"):
+        vx.train_and_calibrate(fx.data, ["summer"], fx.cfg, progress=np.ones(3))
+    for device in (object(), "no-such-device", 3):
+        with pytest.raises(vx.InvalidValueError, match="device"):
+            vx.FloatNetwork.from_arrays(fx.ckpt.weights, fx.ckpt.thresholds, fx.cfg, device)
+    assert vx.FloatNetwork.from_arrays(fx.ckpt.weights, fx.ckpt.thresholds, fx.cfg, "cpu").weights.device.type == "cpu"

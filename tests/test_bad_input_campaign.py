@@ -1,7 +1,9 @@
-"""The bad-input campaign of issue 12 (tools/bad_input_campaign.py), run whole: about 15 minutes on one core.
+"""The bad-input campaign of issues 12 and 24 (tools/bad_input_campaign.py), run whole: CLI, API and faults.
 
 Every bad input must stop with one line ``error: ...`` and exit 2 (no traceback, no usage block or
-warning, no silent acceptance, no hang), and every legal extreme must run.
+warning, no silent acceptance, no hang), every legal extreme must run; every public function with a
+bad argument raises the project's error (or accepts a legal value), nothing it writes fails to load;
+a kill while writing, a full or closed standard output and a Ctrl-C at start-up are handled.
 """
 
 from __future__ import annotations
@@ -30,6 +32,9 @@ def test_bad_input_campaign(tmp_path):
     bad = [c for c in cases if not c["legal"]]
     legal = [c for c in cases if c["legal"]]
     assert len(bad) >= 300 and len(legal) >= 80
+    sections = {c["command"] for c in cases}
+    assert {"(api)", "(faults)", "train"} <= sections
+    assert sum(c["command"] == "(api)" for c in cases) >= 1000
 
     def ids(group: list[dict], klass: str) -> list[str]:
         return [f"{c['id']}: {c['last_line']}" for c in group if c["class"] == klass]
@@ -37,6 +42,9 @@ def test_bad_input_campaign(tmp_path):
     assert ids(bad, "traceback") == []
     assert ids(bad, "multi-line") == []
     assert ids(bad, "accepted") == []
+    assert ids(bad, "write-then-refuse") == []
+    assert ids(bad, "crash") == []
     assert ids(bad, "timeout") == []
+    assert [f"{c['id']}: {c['note']}" for c in bad if c["class"] == "other"] == []
     assert [f"{c['id']} ({c['class']}): {c['last_line']}" for c in legal if c["class"] != "ran"] == []
     assert done.returncode == (0 if all(c["class"] in ("clean", "ran") for c in cases) else 1)

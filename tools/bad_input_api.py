@@ -4,16 +4,22 @@ Builds a tiny network (synthetic:6, T = 8, 8 neurons, one epoch) and its 4-bit m
 each public function with one argument replaced by each of 14 bad values (None, a string, NaN,
 inf, -1, 10**30, empty arrays, an all-NaN array, a 3-D array, an object, a list, True, 1.5).
 Classes: ``project`` (a VprError), ``foreign`` (any other exception: numpy, torch, AttributeError,
-a bare ValueError), ``accepted`` (returned; legitimate for some values, e.g. the string as a label).
-Run from the repository root with the project's environment active (writes into a temp folder):
+a bare ValueError), ``accepted`` (returned; legitimate for the values :data:`LEGAL` lists with the
+reason, e.g. the string as a label), ``write-then-refuse`` (a save_* call that returned, but its
+file does not load back). Run from the repository root with the project's environment active
+(writes into a temp folder):
 
-    OMP_NUM_THREADS=1 nice -n 15 python tools/bad_input_api.py
+    OMP_NUM_THREADS=1 nice -n 15 python tools/bad_input_api.py [--json cases.json]
 
-Prints one line per foreign or accepted case and the counts; exit status 1 when any case is foreign.
+Prints one line per foreign or accepted case and the counts; ``--json``: every case with its class
+and whether its acceptance is legal (tools/bad_input_campaign.py's API section reads it). Exit
+status 1 when any case is foreign, write-then-refuse, or accepted without being legal.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import sys
 import tempfile
@@ -98,30 +104,75 @@ def calls(folder: Path) -> dict:
     }  # fmt: skip
 
 
-def main() -> int:
+#: Bad values a function may accept, with the reason: (function, argument, value label) -> why it is right.
+LEGAL = {
+    **{(name, "traversal", "str"): "any text names a traversal" for name in
+       ("evaluate_float", "evaluate_fixed_point", "query_spikes", "calibration_spikes")},
+    ("pr_metrics", "confidence", "list"): "[1, 2] are two confidences for the two decisions",
+    ("aggregate", "k", "huge"): "a window longer than the stream is the whole stream (equal to k = N)",
+    ("aggregate", "velocity", "neg"): "a negative velocity is a route run backwards",
+    ("aggregate", "velocity", "float"): "1.5 places per frame",
+    ("regularise", "layout", "none"): "None: a single network, nothing to regularise",
+    ("select_places", "place_ids", "list"): "places 1 and 2 are in the data set",
+    ("set_threads", "threads", "none"): "None: the default thread count",
+    ("quantize_checkpoint", "ckpt_sha256", "str"): "any text labels the source",
+    ("deploy", "ckpt_sha256", "str"): "any text labels the source",
+    ("quantize_checkpoint", "per_neuron", "bool"): "True is a valid choice",
+    ("train_and_calibrate", "progress", "bool"): "True is a valid choice",
+    ("FloatNetwork.from_arrays", "device", "none"): "None: the tensors stay where they are",
+    ("save_fixed_point", "path", "str"): "'x' is a file name (written and read back)",
+    ("save_checkpoint", "path", "str"): "'x' is a file name (written and read back)",
+    ("load_checkpoint", "path", "str"): "reads the 'x' that save_checkpoint wrote",
+}  # fmt: skip
+READERS = {"save_fixed_point": vx.load_fixed_point, "save_checkpoint": vx.load_checkpoint}
+
+
+def call_case(name: str, function, kwargs: dict, arg: str, label: str, value: object) -> dict:
+    """One call with ``arg`` replaced by ``value``: its class, and the exception or the legal reason."""
+    record = {"case": f"{name}({arg}={label})", "function": name, "argument": arg, "value": label}
+    try:
+        function(**{**kwargs, arg: value})
+    except VprError as exc:
+        return {**record, "class": "project", "detail": str(exc).splitlines()[0][:200] if str(exc) else ""}
+    except Exception as exc:  # noqa: BLE001  (the point: any other exception is a defect)
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        detail = f"{type(exc).__name__}: {str(exc)[:90]} @ {Path(where.filename).name}:{where.lineno}"
+        return {**record, "class": "foreign", "detail": detail}
+    if name in READERS:
+        path = kwargs["path"] if arg != "path" else value
+        try:
+            READERS[name](path)
+        except Exception as exc:  # noqa: BLE001
+            return {**record, "class": "write-then-refuse", "detail": f"{type(exc).__name__}: {str(exc)[:120]}"}
+    reason = LEGAL.get((name, arg, label))
+    return {**record, "class": "accepted", "legal": reason is not None, "detail": reason or ""}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", type=Path, help="write every case here")
+    args = parser.parse_args(argv)
+    out = None if args.json is None else args.json.resolve()
     warnings.simplefilter("ignore")
     vx.set_threads(1)
-    tally: Counter[str] = Counter()
+    records = []
     with tempfile.TemporaryDirectory() as tmp:
         os.chdir(tmp)  # a drawn string is a path for save_* and load_*: written here
         for name, (function, kwargs) in calls(Path(tmp)).items():
             for arg in kwargs:
                 for label, value in BAD.items():
-                    case = f"{name}({arg}={label})"
-                    try:
-                        function(**{**kwargs, arg: value})
-                        tally["accepted"] += 1
-                        print(f"accepted {case}")
-                    except VprError:
-                        tally["project"] += 1
-                    except Exception as exc:  # noqa: BLE001  (the point: any other exception is a defect)
-                        tally["foreign"] += 1
-                        where = traceback.extract_tb(exc.__traceback__)[-1]
-                        print(f"foreign  {case}: {type(exc).__name__}: {str(exc)[:90]} "
-                              f"@ {Path(where.filename).name}:{where.lineno}")  # fmt: skip
-    total = sum(tally.values())
-    print(f"{total} calls: {tally['project']} project error, {tally['foreign']} foreign, {tally['accepted']} accepted")
-    return 1 if tally["foreign"] else 0
+                    record = call_case(name, function, kwargs, arg, label, value)
+                    records.append(record)
+                    if record["class"] != "project":
+                        legal = " (legal)" if record.get("legal") else ""
+                        print(f"{record['class']}{legal} {record['case']}: {record['detail']}")
+    tally = Counter(r["class"] for r in records)
+    illegal = sum(1 for r in records if r["class"] == "accepted" and not r["legal"])
+    print(f"{len(records)} calls: {tally['project']} project error, {tally['foreign']} foreign, "
+          f"{tally['accepted']} accepted ({illegal} not legal), {tally['write-then-refuse']} write-then-refuse")  # fmt: skip
+    if out is not None:
+        out.write_text(json.dumps({"cases": records}, indent=1) + "\n", encoding="utf-8")
+    return 1 if tally["foreign"] or tally["write-then-refuse"] or illegal else 0
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Bad-input campaign over all nine `vprsnn-export` commands (issue 12), reproducible.
+"""Bad-input campaign over all nine `vprsnn-export` commands (issue 12), the library and faults (issue 24), reproducible.
 
 Builds tiny fixtures once in a temp folder (a checkpoint trained for one epoch on
 ``synthetic:10``, 8- and 2-bit models, an export, a verify report, tampered copies of each,
@@ -10,6 +10,17 @@ root, with the project's virtual environment active:
     OMP_NUM_THREADS=1 python tools/bad_input_campaign.py --out build/campaign
     python tools/bad_input_campaign.py --out build/campaign --only velocity   # a subset
     python tools/bad_input_campaign.py --out build/campaign --exec            # every case a fresh process
+
+Three sections (``--sections``, all by default): ``cli`` (the command lines above), ``api`` (the
+public functions with bad arguments: tools/bad_input_api.py's cases, run in a child process so that
+a crash is seen; a project error is ``clean``, any other exception ``traceback``, a file a save_*
+function wrote that does not load ``write-then-refuse``, a bad value returned from ``accepted``
+unless tools/bad_input_api.py lists it as legal, then ``ran``) and ``faults`` (SIGKILL while an
+output is written: every file left visible loads, and the next run removes the temp; standard output
+on /dev/full or a closed pipe: the conventional exit code and at most one line; Ctrl-C while the
+command starts (once torch begins to load: before that, a SIGINT lands in CPython's own start-up or
+pip's script wrapper, before any code of the project runs): exit 130 with one line; a broken check
+is ``other``).
 
 Each case runs in its own empty folder, with stdin from /dev/null, OMP_NUM_THREADS=1, a private
 VPRSNN_CACHE and a timeout. By default a case is a child forked from this interpreter once it has
@@ -58,7 +69,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 NORDLAND = ROOT.parent / "shared" / "data" / "nordland_64x32_summer_winter"
 COMMANDS = ("train", "evaluate", "quantize", "simulate", "export", "verify", "report", "experiment", "demo")
-BAD_CLASSES = ("clean", "traceback", "multi-line", "accepted", "timeout", "other")
+SECTIONS = ("cli", "api", "faults")
+API_TOOL = Path(__file__).resolve().with_name("bad_input_api.py")
+BAD_CLASSES = ("clean", "traceback", "multi-line", "accepted", "write-then-refuse", "crash", "timeout", "other")
 LEGAL_CLASSES = ("ran", "refused", "traceback", "multi-line", "timeout", "other")
 TIMEOUT_S = 60.0  # the slowest legal extreme takes about 10 s
 
@@ -293,6 +306,8 @@ def classify(case: Case, raw: Raw) -> str:
     """The class of one outcome (see the module docstring)."""
     if raw.timed_out:
         return "timeout"
+    if raw.rc < 0:  # killed by a signal: a segfault, an abort, the kernel's OOM killer
+        return "crash"
     if "Traceback" in raw.stderr:
         return "traceback"
     if case.legal and raw.rc in case.ok_rc:
@@ -1039,6 +1054,24 @@ def train_cases() -> list[Case]:
     return cases
 
 
+def memory_cases() -> list[Case]:
+    """Runs whose predicted memory exceeds the limit (src/vprsnn_export/resources.py) and the limit's option."""
+    limit = ("--memory-limit", "8G")
+    big = ("train", "--data", "synthetic:300", "--reference", "summer", "--epochs", "1", "--neurons", "16")
+    cases = [
+        bad("memory-train-million-neurons", *TRAIN, "--neurons", "1000000", *limit),
+        bad("memory-train-T100000", *big, "--timesteps", "100000", "--out", "t.npz", *limit),
+        bad("memory-train-modules", *TRAIN, "--neurons", "100000", "--module-size", "1", *limit),
+        bad("memory-evaluate-1K", *EVAL, "--memory-limit", "1K"),
+        bad("memory-simulate-1K", *SIM, "--memory-limit", "1K"),
+        bad("memory-verify-1K", *VERIFY, "--memory-limit", "1K"),
+        legal("memory-train-64G", *TRAIN, "--memory-limit", "64G"),
+        legal("memory-train-fraction", *TRAIN, "--memory-limit", "1.5G"),
+    ]
+    cases += numeric("train", TRAIN, "--memory-limit", values={**VALUES, "superscript": "²G", "unit-only": "G"})
+    return cases
+
+
 def evaluate_cases() -> list[Case]:
     cases = readout_cases("evaluate", EVAL)
     cases += common_runtime_cases("evaluate", EVAL)
@@ -1133,7 +1166,15 @@ def export_cases() -> list[Case]:
         ),  # fmt: skip
     ]
     if importlib.util.find_spec("norse") is None:
-        cases.append(bad("export-nir-consumer-norse-missing", *check, "--nir-consumer", "norse", note="norse absent"))
+        cases.append(
+            legal(
+                "export-nir-consumer-norse-missing",
+                *check,
+                "--nir-consumer",
+                "norse",
+                note="norse absent: since the consumer gate (issue 23) its row says the package is missing, not gated",
+            )
+        )
     return cases
 
 
@@ -1525,6 +1566,7 @@ def all_cases() -> list[Case]:
         cli_cases,
         config_cases,
         train_cases,
+        memory_cases,
         evaluate_cases,
         simulate_cases,
         quantize_cases,
@@ -1621,6 +1663,273 @@ def run_campaign(
     return outcomes
 
 
+# ---------------------------------------------------------------------------------------------- api section
+
+
+def api_outcome(record: Mapping[str, Any]) -> Outcome:
+    """One call of tools/bad_input_api.py as a campaign outcome (classes: see the module docstring)."""
+    klass = {"project": "clean", "foreign": "traceback", "write-then-refuse": "write-then-refuse"}.get(
+        record["class"], "accepted"
+    )
+    is_legal = record["class"] == "accepted" and bool(record.get("legal"))
+    detail = str(record.get("detail", ""))
+    return Outcome(
+        id=f"api-{record['case']}",
+        command="(api)",
+        line=f"vx.{record['case']}",
+        legal=is_legal,
+        klass="ran" if is_legal else klass,
+        rc=0,
+        first_line=detail,
+        last_line=detail,
+        seconds=0.0,
+        runner="api",
+        fork_class=None,
+        note="",
+        stderr="" if klass == "clean" else detail,
+    )
+
+
+def api_section(work: Path, timeout: float) -> list[Outcome]:
+    """tools/bad_input_api.py in a child process; its cases as outcomes, or one ``crash``/``timeout`` outcome."""
+    work.mkdir(parents=True, exist_ok=True)
+    cases = work / "api_cases.json"
+    started = time.perf_counter()
+    try:
+        done = subprocess.run(
+            [sys.executable, str(API_TOOL), "--json", str(cases)],
+            cwd=work,
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            timeout=timeout,
+        )
+        raw = Raw(done.returncode, decode(done.stdout), decode(done.stderr), time.perf_counter() - started, False)
+    except subprocess.TimeoutExpired as exc:
+        raw = Raw(-9, decode(exc.stdout or b""), decode(exc.stderr or b""), time.perf_counter() - started, True)
+    if raw.rc >= 0 and not raw.timed_out and cases.is_file():
+        return [api_outcome(record) for record in json.loads(cases.read_text(encoding="utf-8"))["cases"]]
+    klass = "timeout" if raw.timed_out else "crash" if raw.rc < 0 else "other"
+    lines = stderr_lines(raw.stderr) or [f"rc {raw.rc}"]
+    return [Outcome("api-run", "(api)", f"python {API_TOOL.name}", False, klass, raw.rc, lines[0], lines[-1],
+                    round(raw.seconds, 2), "api", None, "", raw.stderr[-3000:])]  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------- fault section
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault case's result: the process's raw result and the checks that failed (empty: handled)."""
+
+    id: str
+    line: str
+    raw: Raw
+    failed: tuple[str, ...]
+
+
+def fault_outcome(fault: Fault) -> Outcome:
+    lines = stderr_lines(fault.raw.stderr)
+    if fault.raw.timed_out:
+        klass = "timeout"
+    elif "Traceback" in fault.raw.stderr:
+        klass = "traceback"
+    elif fault.failed:
+        klass = "other"
+    else:
+        klass = "clean"
+    return Outcome(
+        id=fault.id,
+        command="(faults)",
+        line=fault.line,
+        legal=False,
+        klass=klass,
+        rc=fault.raw.rc,
+        first_line=lines[0] if lines else "",
+        last_line=lines[-1] if lines else "",
+        seconds=round(fault.raw.seconds, 2),
+        runner="exec",
+        fork_class=None,
+        note="; ".join(fault.failed),
+        stderr=fault.raw.stderr[-3000:],
+    )
+
+
+def start(program: str, argv: Sequence[str], cwd: Path, stdout: Any = subprocess.DEVNULL) -> subprocess.Popen:
+    return subprocess.Popen(
+        [program, *argv], cwd=cwd, stdin=subprocess.DEVNULL, stdout=stdout, stderr=subprocess.PIPE,
+        start_new_session=True,
+    )  # fmt: skip
+
+
+def finish(process: subprocess.Popen, started: float, timeout: float) -> Raw:
+    """Wait for ``process``; its stderr, exit code (-signal when killed) and wall time."""
+    timed_out = False
+    try:
+        _, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        timed_out = True
+        os.killpg(process.pid, signal.SIGKILL)
+        _, err = process.communicate()
+    return Raw(process.returncode, "", decode(err or b""), time.perf_counter() - started, timed_out)
+
+
+def kill_while_writing(program: str, argv: Sequence[str], cwd: Path, watch: Path, timeout: float) -> tuple[Raw, bool]:
+    """Run ``argv`` and SIGKILL it as soon as a temp file (``.NAME.*.tmp``) appears in ``watch``.
+
+    Returns the killed (or finished) run and whether the kill came while a temp file was there.
+    """
+    started = time.perf_counter()
+    process = start(program, argv, cwd)
+    caught = False
+    while process.poll() is None and time.perf_counter() - started < timeout:
+        if watch.is_dir() and any(watch.glob(".*.tmp")):
+            os.killpg(process.pid, signal.SIGKILL)
+            caught = True
+            break
+        time.sleep(0.0005)
+    return finish(process, started, timeout), caught
+
+
+def loads(path: Path) -> str | None:
+    """None when the project's reader for ``path`` loads it whole; else the reader's error."""
+    vx = importlib.import_module("vprsnn_export")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            kind = json.loads(npz["__meta__"].tobytes().decode("utf-8")).get("kind", "")
+        reader = vx.load_fixed_point if "fixed" in str(kind) else vx.load_checkpoint
+        reader(path)
+    except Exception as exc:  # noqa: BLE001  (any failure to read is the finding)
+        return f"{path.name} does not load: {type(exc).__name__}: {str(exc)[:120]}"
+    return None
+
+
+def leftovers(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.glob(".*") if p.name.endswith(".tmp") or ".staging-" in p.name)
+
+
+def sigkill_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path, out: Path, timeout: float) -> Fault:
+    """SIGKILL while ``argv`` writes into ``out`` (a folder or the folder of an output file), then the next run.
+
+    Checks: the kill came during a write (up to 5 tries); every visible .npz left loads; the next run
+    (``--force``) succeeds and leaves no temp file behind.
+    """
+    folder = out if out.suffix != ".npz" else out.parent
+    failed: list[str] = []
+    caught = False
+    raw = Raw(0, "", "", 0.0, False)
+    for _ in range(5):
+        if folder == cwd:
+            out.unlink(missing_ok=True)
+        else:
+            shutil.rmtree(folder, ignore_errors=True)
+        raw, caught = kill_while_writing(program, argv, cwd, folder, timeout)
+        if caught or raw.timed_out:
+            break
+    if not caught:
+        failed.append("no kill landed while a temp file was being written (5 tries)")
+    visible = [out] if out.suffix == ".npz" else sorted(folder.rglob("*.npz")) if folder.is_dir() else []
+    failed += [problem for path in visible if path.is_file() and (problem := loads(path))]
+    left_before = leftovers(folder) if folder.is_dir() else []
+    again = finish(start(program, [*argv, "--force"], cwd), time.perf_counter(), timeout)
+    if again.rc != 0:
+        failed.append(f"the next run failed (rc {again.rc}): {(stderr_lines(again.stderr) or [''])[-1]}")
+    left_after = leftovers(folder) if folder.is_dir() else []
+    if left_after:
+        failed.append(f"the next run left {left_after} (before it: {left_before})")
+    line = shlex.join(["vprsnn-export", *argv]) + "  # SIGKILL while writing, then again with --force"
+    stderr = raw.stderr if "Traceback" in raw.stderr else again.stderr
+    return Fault(fault_id, line, Raw(again.rc, "", stderr, raw.seconds + again.seconds, again.timed_out), tuple(failed))
+
+
+def stdout_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path, timeout: float, full: bool) -> Fault:
+    """Standard output on /dev/full (exit 1, one line ``error: cannot write the standard output``) or on a
+    pipe whose reader has gone (exit 141 as for SIGPIPE, nothing on stderr)."""
+    started = time.perf_counter()
+    if full:
+        with open("/dev/full", "wb") as sink:
+            raw = finish(start(program, argv, cwd, stdout=sink), started, timeout)
+        expected_rc, expected = 1, "error: cannot write the standard output"
+    else:
+        process = start(program, argv, cwd, stdout=subprocess.PIPE)
+        assert process.stdout is not None
+        process.stdout.close()  # the reader is gone before the first write
+        raw = finish(process, started, timeout)
+        expected_rc, expected = 128 + signal.SIGPIPE, ""
+    lines = stderr_lines(raw.stderr)
+    failed = []
+    if raw.rc != expected_rc:
+        failed.append(f"exit {raw.rc}, expected {expected_rc}")
+    if (lines[-1:] if lines else [""])[0][: len(expected)] != expected or len(lines) > (1 if expected else 0):
+        failed.append(f"stderr {lines[:3]!r}, expected {'one line ' + repr(expected) if expected else 'nothing'}")
+    where = "> /dev/full" if full else "| (closed pipe)"
+    return Fault(fault_id, shlex.join(["vprsnn-export", *argv]) + f" {where}", raw, tuple(failed))
+
+
+def mapped(pid: int, needle: str) -> bool:
+    """Whether process ``pid`` has a file whose path contains ``needle`` mapped (Linux /proc)."""
+    try:
+        return needle in Path(f"/proc/{pid}/maps").read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return False
+
+
+def interrupt_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path, after: float, timeout: float) -> Fault:
+    """Ctrl-C (SIGINT) while the command starts: ``after`` seconds once torch's libraries are being mapped
+    (the command's own start-up: package, command module, torch, numba), the guard of startup.py
+    standing; expected: exit 130 with the one line ``error: interrupted``."""
+    started = time.perf_counter()
+    process = start(program, argv, cwd)
+    failed = []
+    while process.poll() is None and not mapped(process.pid, "/torch/") and time.perf_counter() - started < timeout:
+        time.sleep(0.001)
+    time.sleep(after)
+    if process.poll() is not None:
+        failed.append(f"the command ended before the interrupt ({after} s after torch began to load)")
+    else:
+        process.send_signal(signal.SIGINT)
+    raw = finish(process, started, timeout)
+    lines = stderr_lines(raw.stderr)
+    if raw.rc != 130 or lines != ["error: interrupted"]:
+        failed.append(f"exit {raw.rc} with stderr {lines[:3]!r}, expected 130 and 'error: interrupted'")
+    line = shlex.join(["vprsnn-export", *argv]) + f"  # SIGINT {after} s after torch began to load"
+    return Fault(fault_id, line, raw, tuple(failed))
+
+
+def fault_section(work: Path, fx: Path, timeout: float, only: str | None) -> list[Outcome]:
+    """The fault cases (see the module docstring), each in its own folder under ``work``."""
+    program = ExecRunner(timeout).program
+    ck = str(fx / "net.npz")
+    train = [*sh(T_TINY), "--quiet"]
+    cases: dict[str, Callable[[Path], Fault]] = {
+        "fault-sigkill-quantize": lambda cwd: sigkill_fault(
+            program, "fault-sigkill-quantize", ["quantize", ck, "--bits", "2,3,4,5,6,7,8", "--out", "q", "--quiet"],
+            cwd, cwd / "q", timeout),
+        "fault-sigkill-train": lambda cwd: sigkill_fault(
+            program, "fault-sigkill-train", [*train, "--out", "t.npz"], cwd, cwd / "t.npz", timeout),
+        "fault-dev-full-help": lambda cwd: stdout_fault(program, "fault-dev-full-help", ["--help"], cwd, timeout, True),
+        "fault-dev-full-evaluate": lambda cwd: stdout_fault(
+            program, "fault-dev-full-evaluate", ["evaluate", ck, "--query", "winter"], cwd, timeout, True),
+        "fault-closed-pipe-help": lambda cwd: stdout_fault(
+            program, "fault-closed-pipe-help", ["--help"], cwd, timeout, False),
+        "fault-closed-pipe-evaluate": lambda cwd: stdout_fault(
+            program, "fault-closed-pipe-evaluate", ["evaluate", ck, "--query", "winter"], cwd, timeout, False),
+        **{f"fault-ctrl-c-startup-{delay}s": (lambda cwd, delay=delay: interrupt_fault(
+            program, f"fault-ctrl-c-startup-{delay}s", [*train, "--out", "i.npz"], cwd, delay, timeout))
+           for delay in (0.0, 0.1, 0.3, 1.0)},
+    }  # fmt: skip
+    outcomes = []
+    chosen = [name for name in cases if not only or only in name]
+    for index, name in enumerate(chosen, 1):
+        cwd = work / name
+        shutil.rmtree(cwd, ignore_errors=True)
+        cwd.mkdir(parents=True)
+        outcome = fault_outcome(cases[name](cwd))
+        progress(index, len(chosen), outcome)
+        outcomes.append(outcome)
+        shutil.rmtree(cwd, ignore_errors=True)
+    return outcomes
+
+
 # ---------------------------------------------------------------------------------------------- writing
 
 
@@ -1643,7 +1952,7 @@ def counts_table(outcomes: Sequence[Outcome]) -> str:
         "| command | bad | " + " | ".join(BAD_CLASSES) + " | legal | ran | not ran |",
         "|---|" + "---:|" * (len(BAD_CLASSES) + 4),
     ]
-    for command in (*COMMANDS, "(none)"):
+    for command in (*COMMANDS, "(none)", "(api)", "(faults)"):
         mine = [o for o in outcomes if o.command == command]
         if not mine:
             continue
@@ -1673,7 +1982,7 @@ def finding_text(outcome: Outcome) -> str:
 def markdown(outcomes: Sequence[Outcome], command: str, seconds: float) -> str:
     findings = [o for o in outcomes if is_finding(o)]
     parts = [
-        "# Bad-input campaign (issue 12)\n",
+        "# Bad-input campaign (issues 12 and 24): command line, library, faults\n",
         f"`{command}`: {len(outcomes)} cases in {seconds:.0f} s, {time.strftime('%Y-%m-%d %H:%M')}.\n",
         "Classes: see the docstring of tools/bad_input_campaign.py.\n",
         "## Counts\n",
@@ -1721,6 +2030,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--nordland", type=Path, default=NORDLAND, help="the shared Nordland data, for manifests")
     parser.add_argument("--keep", action="store_true", help="keep the temp folder (fixtures, logs)")
     parser.add_argument("--list", action="store_true", help="print the case ids and command lines, run nothing")
+    parser.add_argument(
+        "--sections", default=",".join(SECTIONS), help=f"comma-separated sections to run (default {','.join(SECTIONS)})"
+    )
     return parser.parse_args(argv)
 
 
@@ -1732,7 +2044,10 @@ def selected(cases: Sequence[Case], only: str | None) -> list[Case]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    cases = selected(all_cases(), args.only)
+    sections = [name for name in args.sections.split(",") if name]
+    if not sections or any(name not in SECTIONS for name in sections):
+        raise SystemExit(f"--sections: choose from {', '.join(SECTIONS)}")
+    cases = selected(all_cases(), args.only) if "cli" in sections else []
     if args.list:
         for case in cases:
             print(f"{'legal' if case.legal else 'bad  '} {case.id}: {shlex.join(case.argv)}")
@@ -1751,6 +2066,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fixtures ready in {time.perf_counter() - started:.0f} s; {len(cases)} cases", file=sys.stderr)
         confirm_run = None if args.exec or args.no_confirm else exec_run
         outcomes = run_campaign(cases, run, confirm_run, work, fx, ro)
+        if "api" in sections and (not args.only or args.only in "api"):
+            outcomes += api_section(work / "api", timeout=20 * 60)
+        if "faults" in sections:
+            outcomes += fault_section(work / "faults", fx, args.timeout, args.only)
     finally:
         release_readonly(temp / "readonly")
         if not args.keep:

@@ -37,6 +37,7 @@ from .readout.metrics import pr_metrics
 from .readout.regions import ModuleLayout, module_layout, regularise
 from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
+from .resources import memory_limit, set_memory_limit
 from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
@@ -118,6 +119,7 @@ __all__ = [
     "module_count",
     "module_layout",
     "module_regions",
+    "memory_limit",
     "load_dataset",
     "load_fixed_point",
     "load_source",
@@ -138,6 +140,7 @@ __all__ = [
     "save_checkpoint",
     "save_fixed_point",
     "select_places",
+    "set_memory_limit",
     "set_threads",
     "smooth_velocity",
     "strategy_scores",

@@ -13,13 +13,17 @@ import sys
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
 from .fileio import check_output_folder, output_lock
+from .resources import set_memory_limit
 from .threads import set_threads
 from .version import __version__
+
+if TYPE_CHECKING:
+    from _typeshed import SupportsWrite
 
 NEGATIVE_VALUE = re.compile(r"^-\.?\d")  # "-2:2:0.1", "-0.5": a value, not an option
 
@@ -53,6 +57,12 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         print(f"error: {self.prog}: {message}", file=sys.stderr)
         raise SystemExit(EXIT_BAD_INPUT)
+
+    def _print_message(self, message: str, file: SupportsWrite[str] | None = None) -> None:
+        """argparse's, without its ``except OSError: pass``: help or a version that cannot be written (a full
+        device, a closed pipe) reaches ``__main__.run``, which exits 1 with one line or 141, not 0."""
+        if message:
+            (file or sys.stderr).write(message)
 
 
 def join_negative_values(argv: Sequence[str]) -> list[str]:
@@ -142,6 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         args.argv = argv
         args.threads = set_threads(getattr(args, "threads", None))
+        set_memory_limit(getattr(args, "memory_limit", None))
         output = getattr(args, "report", None)
         output = getattr(args, "out", None) if output is None else output
         if output is not None and getattr(args, "output_kind", "folder") == "folder":

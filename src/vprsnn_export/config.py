@@ -272,6 +272,10 @@ def _build(cls: type, data: dict[str, Any], where: str) -> Any:
 
 
 def _coerce(value: Any, kind: type, where: str) -> Any:
+    if kind is str:
+        if not isinstance(value, str):
+            raise InvalidValueError(f"{where}: expected a name (text), got {value!r}")
+        return value
     if kind is bool:
         if isinstance(value, bool):
             return value

@@ -191,6 +191,8 @@ def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Da
     if not isinstance(dataset, Dataset):
         raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
     wanted = check_place_ids(place_ids)
+    if wanted.size == 0:
+        raise InvalidValueError("place_ids must name at least one place")
     position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
     missing = [int(pid) for pid in wanted if int(pid) not in position]
     if missing:

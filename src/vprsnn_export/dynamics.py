@@ -28,9 +28,33 @@ import torch
 
 from .arguments import real_array, require_type
 from .config import Config, wta_group
+from .device import check_device
 from .errors import InvalidValueError
 from .kernels import QUERY_CHUNK, blas_block, float_run
+from .resources import LOWER_RUN, MemoryNeed, check_memory, run_need
 from .runs import SpikeRun, run_in_chunks
+
+
+def config_run_need(cfg: Config, *, presentations: int, n_neurons: int, places: int, rasters: int = 0) -> MemoryNeed:
+    """:func:`~vprsnn_export.resources.run_need` with the sizes of ``cfg`` (T, D, rate scale) and the chunk of runs."""
+    return run_need(
+        presentations=presentations,
+        timesteps=cfg.encoder.timesteps,
+        n_inputs=cfg.network.n_inputs,
+        n_neurons=n_neurons,
+        places=places,
+        chunk=QUERY_CHUNK,
+        rate_scale=cfg.encoder.rate_scale,
+        rasters=rasters,
+    )
+
+
+def check_run_memory(
+    cfg: Config, what: str, *, presentations: int, n_neurons: int, places: int, rasters: int = 0
+) -> None:
+    """InvalidValueError (one line) when such a run would not fit in the memory limit (:mod:`~vprsnn_export.resources`)."""
+    need = config_run_need(cfg, presentations=presentations, n_neurons=n_neurons, places=places, rasters=rasters)
+    check_memory(need, what, LOWER_RUN)
 
 
 def wta_step(
@@ -201,9 +225,10 @@ class FloatNetwork:
     def from_arrays(
         cls, weights: np.ndarray, thresholds: np.ndarray, cfg: Config, device: torch.device
     ) -> FloatNetwork:
+        where = check_device("device", device)
         return cls(
-            torch.as_tensor(real_array("weights", weights), dtype=torch.float32).to(device),
-            torch.as_tensor(real_array("thresholds", thresholds), dtype=torch.float32).to(device),
+            torch.as_tensor(real_array("weights", weights), dtype=torch.float32).to(where),
+            torch.as_tensor(real_array("thresholds", thresholds), dtype=torch.float32).to(where),
             cfg,
         )
 

@@ -22,6 +22,7 @@ from .arguments import check_place_ids, require_type
 from .config import Config, EncoderConfig
 from .errors import InvalidValueError
 from .kernels import bernoulli_spikes
+from .resources import LOWER_RUN, check_memory, spikes_need
 
 STREAM_QUERY = "query"
 STREAM_CALIBRATE = "calibrate"
@@ -71,6 +72,7 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:
         raise InvalidValueError(f"images: expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
+    check_memory(spikes_need(images.shape[0], cfg.timesteps, images.shape[1]), "encoding the spikes", LOWER_RUN)
     prob = firing_probabilities(images, cfg).numpy()
     return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps))
 

@@ -70,3 +70,10 @@ def test_the_command_line_reports_one_line_and_exit_2(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and err.startswith("error: config.encoder.timesteps")
     assert not (tmp_path / "t.npz").exists()
+
+
+@pytest.mark.parametrize("key", ["preprocess.channels", "network.wta_scope"])
+@pytest.mark.parametrize("value", [[1], {"a": 1}, 3, None])
+def test_a_name_setting_that_is_not_text_is_refused(key, value):
+    with pytest.raises(InvalidValueError, match=key.split(".")[1]):
+        Config().replace(**{key: value})

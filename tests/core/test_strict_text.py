@@ -85,3 +85,12 @@ def test_a_full_stdout_is_one_line_and_a_closed_pipe_is_quiet():
     assert read_end.stdin is not None
     done = run_cli("experiment", "list", stdout=read_end.stdin.fileno())
     assert done.returncode == 141 and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("option", ["--help", "--version"])
+def test_help_that_cannot_be_written_is_not_a_success(option):
+    """argparse swallows OSError while printing help; the parser does not, so the text is not lost with exit 0."""
+    with open("/dev/full", "w") as full:
+        done = run_cli(option, stdout=full.fileno())
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == ["error: cannot write the standard output (No space left on device)"]

@@ -69,6 +69,12 @@ def add_threads_option(parser: argparse.ArgumentParser) -> None:
         help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
         "slow a shared machine down 10-20x)",
     )
+    parser.add_argument(
+        "--memory-limit",
+        metavar="SIZE",
+        help="memory a run may need, e.g. 512M or 8G: a run predicted to need more stops before it starts "
+        "(default: VPRSNN_MEMORY_LIMIT, else 90%% of the available memory; docs/scale.md)",
+    )
 
 
 def add_runtime_options(parser: argparse.ArgumentParser) -> None:

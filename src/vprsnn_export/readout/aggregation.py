@@ -59,6 +59,8 @@ def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
 
 
 def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
+    if isinstance(velocity, bool | np.bool_) or np.asarray(velocity).dtype.kind == "b":
+        raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
     v = real_array("velocity", velocity)
     if v.ndim == 0:
         v = np.full(n, float(v))
@@ -76,6 +78,12 @@ def _check_args(k: int, rule: str, eps: float) -> int:
     if not (np.isfinite(eps) and eps > 0):
         raise InvalidValueError(f"eps must be a finite value > 0, got {eps}")
     return int(k)
+
+
+def _window(k: int, n_queries: int) -> int:
+    """The window length that matters: W_j never reaches before frame 0, so any k > max(N, 2) acts as max(N, 2)
+    (a huge k would otherwise size the (queries, k, places) window arrays)."""
+    return k if k == 1 else min(k, max(n_queries, 2))
 
 
 def shift_window(
@@ -197,6 +205,7 @@ def _aggregate_scored(
     p = _prob2d(prob)
     k = _check_args(k, rule, eps)
     n_queries, n_places = p.shape
+    k = _window(k, n_queries)
     t = _positions(frame_positions, n_queries)
     v = _velocities(velocity, n_queries)
     if k == 1:
@@ -240,6 +249,7 @@ def window_scores(
     p = _prob2d(prob)
     k = _check_args(k, rule, eps)
     n_queries, n_places = p.shape
+    k = _window(k, n_queries)
     t = _positions(frame_positions, n_queries)
     if k == 1:
         return np.repeat(p.max(axis=1)[:, None], cands.size, axis=1)

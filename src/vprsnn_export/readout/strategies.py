@@ -16,6 +16,7 @@ from typing import Final
 
 import numpy as np
 
+from vprsnn_export.arguments import real_number
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.registry import Registry
 
@@ -73,6 +74,15 @@ STRATEGIES.register(
 )
 
 
+def require_strategy(strategy: object) -> str:
+    """``strategy`` when it is a name (str); InvalidValueError naming the argument otherwise (an array is unhashable)."""
+    if not isinstance(strategy, str):
+        raise InvalidValueError(
+            f"strategy must be one of {', '.join(STRATEGIES.names())}, got {type(strategy).__name__}"
+        )
+    return strategy
+
+
 def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     """Predicted place index and confidence per query.
 
@@ -91,7 +101,7 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     aggregated distribution or ``baseline.sad_distribution``) as ``scores``.
     InvalidValueError for a strategy that is not registered.
     """
-    entry = STRATEGIES.get(strategy)
+    entry = STRATEGIES.get(require_strategy(strategy))
     s = _scores2d(scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     no_match, conf = entry.decision(s)
@@ -110,10 +120,10 @@ def strategy_scores(sr: np.ndarray, sq: np.ndarray, strategy: str, gamma: float 
     ``gamma`` (eq. 9) is required for a strategy that ``needs_gamma`` (weighted, wprob)
     and ignored otherwise. Feed the result to :func:`decide` with the same ``strategy``.
     """
-    entry = STRATEGIES.get(strategy)
+    entry = STRATEGIES.get(require_strategy(strategy))
     if gamma is None and entry.needs_gamma:
         raise InvalidValueError(f"strategy {strategy!r} needs the involvement threshold gamma")
-    return entry.scores(sr, sq, 0.0 if gamma is None else float(gamma))
+    return entry.scores(sr, sq, 0.0 if gamma is None else real_number("gamma", gamma))
 
 
 def all_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> dict[str, np.ndarray]:

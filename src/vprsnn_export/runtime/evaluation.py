@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import require_type
+from vprsnn_export.arguments import check_place_ids, require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
@@ -357,6 +357,14 @@ def evaluate_float(
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, ReadoutOptions)
+    check_run_memory(
+        ckpt.config,
+        "evaluation",
+        presentations=len(check_place_ids(query_place_ids, "query_place_ids")),
+        n_neurons=ckpt.weights.shape[1],
+        places=len(ckpt.reference_place_ids),
+        rasters=0 if _isolated(ckpt.config, state_isolation) else 1,
+    )
     device = torch.device("cpu") if device is None else device
     if cluster is None:
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
@@ -406,6 +414,11 @@ def evaluate_float(
 CALIBRATIONS = ("deployed", "float")
 
 
+def _isolated(cfg: Config, state_isolation: bool | None) -> bool:
+    """Whether a run keeps state isolation (the config's setting unless ``state_isolation`` overrides it)."""
+    return cfg.network.state_isolation if state_isolation is None else bool(state_isolation)
+
+
 def evaluate_fixed_point(
     model: FixedPointModel,
     query_images: np.ndarray,
@@ -425,6 +438,14 @@ def evaluate_fixed_point(
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, ReadoutOptions)
+    check_run_memory(
+        model.config,
+        "evaluation",
+        presentations=len(check_place_ids(query_place_ids, "query_place_ids")),
+        n_neurons=model.weight_mantissa.shape[1],
+        places=len(model.reference_place_ids),
+        rasters=(2 if float_checkpoint is not None else 0) + (0 if _isolated(model.config, state_isolation) else 1),
+    )
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None

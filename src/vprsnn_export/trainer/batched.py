@@ -35,6 +35,7 @@ from vprsnn_export.encoding import encode, firing_probabilities, presentation_se
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.kernels import bernoulli_limits, generator_seeds, stdp_windows
 from vprsnn_export.modules import module_regions
+from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update
 from .stdp import initial_weights
@@ -180,6 +181,20 @@ def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[to
     return weights, theta
 
 
+def check_training_memory(cfg: Config, n_modules: int, most_rows: int, threads: int | None) -> None:
+    """InvalidValueError (one line) when training ``n_modules`` modules would not fit in the memory limit."""
+    workers = max(1, min(n_modules, torch.get_num_threads() if threads is None else threads))
+    need = training_need(
+        n_modules=n_modules,
+        n_inputs=cfg.network.n_inputs,
+        n_neurons=cfg.network.n_neurons,
+        timesteps=cfg.encoder.timesteps,
+        batch=max(1, min(cfg.train.batch_size, most_rows)),
+        threads=workers,
+    )
+    check_memory(need, "training", LOWER_TRAINING)
+
+
 def train_modules(
     images: np.ndarray,
     presentations: Sequence[Presentation],
@@ -202,6 +217,7 @@ def train_modules(
     ``on_epoch(epoch, weights (inputs, M n), theta (M n,))`` may add numbers to the entry.
     """
     n_rows = np.array([len(r) for r in rows])
+    check_training_memory(cfg, len(rows), int(n_rows.max(initial=0)), threads)
     states = module_epochs(images, presentations, rows, cfg, device=device, threads=threads, compiled=compiled)
     epochs = tqdm(states, total=cfg.train.epochs, desc="train", unit="epoch", disable=not progress, leave=False)
     history: list[dict] = []

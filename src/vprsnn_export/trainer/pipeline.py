@@ -7,15 +7,15 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import require_names, require_type
+from vprsnn_export.arguments import require_bool, require_names, require_type
 from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.errors import InvalidValueError
 
-from .batched import module_training_rows, train_modules
+from .batched import check_training_memory, module_training_rows, train_modules
 from .calibrate import calibrate
 from .sharded import calibrate_on_cluster, train_modules_on_cluster
 from .train import Presentation
@@ -42,6 +42,7 @@ def train_and_calibrate(
     """
     require_type("dataset", dataset, Dataset)
     require_type("cfg", cfg, Config)
+    progress = require_bool("progress", progress)
     if any(name not in dataset.images for name in require_names("references", references)):
         raise InvalidValueError(
             f"references must name traversals of the data set ({', '.join(dataset.images)}), got {references!r}"
@@ -50,6 +51,11 @@ def train_and_calibrate(
     images = np.concatenate([dataset.traversal(name) for name in references])
     presentations = [Presentation(name, int(pid)) for name in references for pid in dataset.place_ids]
     rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
+    check_training_memory(cfg, len(rows), max(len(r) for r in rows), threads)
+    n_places = len(dataset.place_ids)
+    check_run_memory(
+        cfg, "calibration", presentations=n_places, n_neurons=len(rows) * cfg.network.n_neurons, places=n_places
+    )
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
         trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
