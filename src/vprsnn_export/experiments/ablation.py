@@ -35,7 +35,7 @@ def run(settings: Settings) -> dict:
                 data.traversal(settings.query),
                 data.place_ids,
                 settings.query,
-                ReadoutOptions(gamma=cfg.assignment.gamma),
+                ReadoutOptions.from_config(cfg),
                 device=resolve_device(settings.device),
             )
             rows += [

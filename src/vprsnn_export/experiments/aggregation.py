@@ -40,18 +40,18 @@ def run(settings: Settings) -> dict:
             data.traversal(settings.query),
             data.place_ids,
             settings.query,
-            ReadoutOptions(gamma=cfg.assignment.gamma),
+            ReadoutOptions.from_config(cfg),
             device=resolve_device(settings.device),
         )
         rows = []
         for rule in RULES:
-            options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, rule=rule)
+            options = ReadoutOptions.from_config(cfg, ks=KS, rule=rule)
             rows += [
-                dict(r, rule=rule, seed=seed)
+                dict(r.to_dict(), rule=rule, seed=seed)
                 for r in readout_rows(
                     ckpt.calibration, counts.query_counts, ckpt.reference_place_ids, data.place_ids, options
                 )
-                if r["strategy"] == "wprob"
+                if r.strategy == "wprob"
             ]
         per_seed.append(rows)
         distributions = envelope.network_distributions(settings, cfg, data, ckpt)

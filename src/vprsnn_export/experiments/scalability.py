@@ -39,7 +39,7 @@ def run(settings: Settings) -> dict:
                 data.traversal(settings.query),
                 data.place_ids,
                 settings.query,
-                ReadoutOptions(gamma=cfg.assignment.gamma),
+                ReadoutOptions.from_config(cfg),
                 device=resolve_device(settings.device),
             )
             row = next(r for r in result.rows if r["strategy"] == "wprob")
