@@ -261,40 +261,46 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
 def load_fixed_point(path: str | Path) -> FixedPointModel:
     """Read and validate a fixed-point model; ModelFileError names the file and the problem."""
     meta, arrays = read_container(path, "fixed-point model")  # the path as given: '' is named as empty, not '.'
-    path = Path(path)
-    traversals, data = check_header(meta, path)
-    needed = {
-        "weight_mantissa",
-        "scale_multiplier",
-        "threshold",
-        "calibration",
-        "float_calibration",
-        "reference_place_ids",
-    }
-    if needed - set(arrays):
-        raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
+    return model_from_header(meta, arrays, Path(path))
+
+
+MODEL_ARRAYS: tuple[str, ...] = ("weight_mantissa", "scale_multiplier", "threshold", "calibration")
+MODEL_ARRAYS += ("float_calibration", "reference_place_ids")
+
+
+def model_from_header(
+    meta: Mapping[str, Any],
+    arrays: Mapping[str, np.ndarray],
+    path: Path,
+    what: str = "fixed-point header",
+    **fields: Any,
+) -> FixedPointModel:
+    """The model of a fixed-point header (:meth:`FixedPointModel.header`) and its arrays (:data:`MODEL_ARRAYS`),
+    the one way every reader (.npz, NIR, Loihi-style) rebuilds a model: the header's checks
+    (:func:`check_header`), then the model, then :func:`validate`. ``fields`` replace header values that a
+    file states in its own terms (the Loihi description's bits, decay and voltage widths); ModelFileError
+    naming ``path`` (``what``: the part of the file that is invalid)."""
+    traversals, data = check_header(dict(meta), path)
+    if set(MODEL_ARRAYS) - set(arrays):
+        raise ModelFileError(f"fixed-point model lacks arrays {sorted(set(MODEL_ARRAYS) - set(arrays))}", path)
     try:
-        model = FixedPointModel(
-            bits=int(meta["bits"]),
-            weight_mantissa=arrays["weight_mantissa"],
-            scale_multiplier=arrays["scale_multiplier"],
-            scale_exponent=int(meta["scale_exponent"]),
-            threshold=arrays["threshold"],
-            decay_dv=int(meta["decay_dv"]),
-            config=Config.from_dict(meta["config"]),
-            calibration=arrays["calibration"],
-            float_calibration=arrays["float_calibration"],
-            reference_place_ids=arrays["reference_place_ids"],
-            reference_traversals=traversals,
-            quantisation=QuantisationReport.from_dict(meta["quantisation"]),
-            source_sha256=str(meta["source_sha256"]),
-            data=data,
-            voltage_shift=int(meta["voltage_shift"]),
-            voltage_bits=int(meta["voltage_bits"]),
-            version=str(meta.get("package_version", "unknown")),
-        )
+        values: dict[str, Any] = {
+            "bits": int(meta["bits"]),
+            "scale_exponent": int(meta["scale_exponent"]),
+            "decay_dv": int(meta["decay_dv"]),
+            "config": Config.from_dict(meta["config"]),
+            "reference_traversals": traversals,
+            "quantisation": QuantisationReport.from_dict(meta["quantisation"]),
+            "source_sha256": str(meta["source_sha256"]),
+            "data": data,
+            "voltage_shift": int(meta["voltage_shift"]),
+            "voltage_bits": int(meta["voltage_bits"]),
+            "version": str(meta.get("package_version", "unknown")),
+        }
+        values |= {name: arrays[name] for name in MODEL_ARRAYS} | fields
+        model = FixedPointModel(**values)
     except (KeyError, TypeError, ValueError, VprError) as exc:
-        raise ModelFileError(f"invalid fixed-point header ({exc})", path) from None
+        raise ModelFileError(f"invalid {what} ({exc})", path) from None
     validate(model, path)
     return model
 
