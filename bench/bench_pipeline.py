@@ -94,7 +94,7 @@ def main() -> None:
         network.run(spikes[:1])  # compile or load
         network_s, run = best_of(lambda: network.run(spikes), args.repeats)
         del spikes
-        options = ReadoutOptions(gamma=ckpt.config.assignment.gamma)
+        options = ReadoutOptions.from_config(ckpt.config)
         counts = run.counts.numpy()
         readout_s, _ = best_of(
             lambda: readout_rows(ckpt.calibration, counts, ckpt.reference_place_ids, dataset.place_ids, options),

@@ -284,8 +284,8 @@ def test_tiny_weights_are_refused_at_quantisation_not_at_reading(fx):
 @settings(max_examples=30, deadline=None)
 @given(depth=st.integers(1, 3 * JSON_MAX_DEPTH), digits=st.integers(1, 3 * JSON_MAX_DIGITS))
 def test_json_within_limits_parses_and_beyond_them_is_refused(depth, digits):
-    text = "[" * (depth - 1) + "9" * digits + "]" * (depth - 1)
-    if depth <= JSON_MAX_DEPTH and digits <= JSON_MAX_DIGITS:
+    text = "[" * (depth - 1) + "9" * digits + "]" * (depth - 1)  # depth - 1 nested lists (the limit counts lists)
+    if depth - 1 <= JSON_MAX_DEPTH and digits <= JSON_MAX_DIGITS:
         value = parse_json(text, "x")
         for _ in range(depth - 1):
             value = value[0]

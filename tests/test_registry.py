@@ -199,8 +199,8 @@ def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_t
     sr = np.array([[3, 0], [0, 2], [1, 1]])
     sq = np.array([[2, 0, 0], [0, 0, 1]])
     rows = readout_rows(sr, sq, np.array([0, 1]), np.array([0, 1]), ReadoutOptions(gamma=0.5))
-    assert [r["strategy"] for r in rows] == ["standard", "weighted", "wprob", "anyplace"]
-    assert rows[-1]["accuracy"] == 0.5  # query 1's one spike votes for both places: a tie to place 0
+    assert [r.strategy for r in rows] == ["standard", "weighted", "wprob", "anyplace"]
+    assert rows[-1].accuracy == 0.5  # query 1's one spike votes for both places: a tie to place 0
     assert row_label("anyplace", 1) == "Any place k=1"
 
     path = tmp_path / "net.npz"

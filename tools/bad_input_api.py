@@ -58,7 +58,7 @@ def calls(folder: Path) -> dict:
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg, progress=False)
     winter, places = data.traversal("winter"), data.place_ids
     ref = {"summer": data.traversal("summer")}
-    readout = vx.ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1,))
+    readout = vx.ReadoutOptions.from_config(cfg, ks=(1,))
     model = vx.deploy(ckpt, "probe", 4, reference_images=ref)
     vx.save_checkpoint(folder / "ckpt.npz", ckpt)
     vx.save_fixed_point(folder / "model.npz", model)

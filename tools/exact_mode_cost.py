@@ -39,9 +39,9 @@ def wprob_row(ckpt: Checkpoint, beta: float, data: str) -> dict:
         dataset.traversal("winter"),
         dataset.place_ids,
         "winter",
-        ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1,)),
+        ReadoutOptions.from_config(cfg, ks=(1,)),
     )
-    return next(r for r in rows if r["strategy"] == "wprob" and r["k"] == 1)
+    return next(r for r in rows if r.strategy == "wprob" and r.k == 1).to_dict()
 
 
 def main() -> None:

@@ -52,8 +52,8 @@ from .config import Config
 from .errors import InvalidValueError
 from .kernel_checks import require_array, require_groups, require_int
 from .runs import SpikeRun
+from .widths import DECAY_BITS
 
-DECAY_BITS = 12  # V <- (V keep) >> 12: the integer decay's 12-bit fraction (export/model.py DECAY_BITS)
 INT32_SAFE = (1 << 31) - 1
 QUERY_CHUNK = 128  # presentations run_network multiplies at once: bounds its (chunk, T, neurons) currents
 

@@ -3,25 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from vprsnn_export.serial import JsonDataclass, json_options
+
 
 @dataclass(frozen=True)
-class MeanStd:
+class MeanStd(JsonDataclass):
     """Mean and sample standard deviation (ddof=1; 0 for one value) of n values; None when n = 0."""
 
-    mean: float | None
-    std: float | None
-    n: int
-
-    def to_dict(self) -> dict[str, float | int | None]:
-        return {"mean": self.mean, "std": self.std, "n": self.n}
-
-    @classmethod
-    def from_dict(cls, data: dict) -> MeanStd:
-        return cls(data.get("mean"), data.get("std"), int(data.get("n", 0)))
+    mean: float | None = field(metadata=json_options(missing=None))
+    std: float | None = field(metadata=json_options(missing=None))
+    n: int = field(metadata=json_options(missing=0))
 
 
 def mean_std(values: Iterable[float | None]) -> MeanStd:

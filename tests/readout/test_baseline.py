@@ -107,5 +107,5 @@ def test_cosine_baseline_rows_in_an_evaluation_equal_the_direct_computation() ->
     rows = nearest_neighbour_rows(cosine_similarities(ref, qry), "cosine", ids, ids, ReadoutOptions(gamma=0.02), [1])
     pred, conf = nearest_neighbour(cosine_similarities(ref, qry))
     direct = pr_metrics(is_correct(predicted_place_ids(pred, ids), ids, 0), conf)
-    assert rows == [{"strategy": "cosine", "k": 1, **direct}]
-    assert 0.0 < rows[0]["accuracy"] < 1.0
+    assert [r.to_dict() for r in rows] == [{"strategy": "cosine", "k": 1, **direct}]
+    assert 0.0 < rows[0].accuracy < 1.0

@@ -39,7 +39,9 @@ def test_whole_route_rows_and_per_module_accuracy(ensemble):
     assert np.mean([m.accuracy for m in result.modules]) == pytest.approx(wprob["accuracy"])
     options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
     plain = readout_rows(ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options)
-    assert result.rows == plain  # lambda = rho = 1: exactly the unregularised whole-route readout
+    assert result.rows == [
+        r.to_dict() for r in plain
+    ]  # lambda = rho = 1: exactly the unregularised whole-route readout
     payload = result.to_dict()
     assert len(payload["modules"]) == 3 and payload["silenced_neurons"] == 0
 
@@ -54,7 +56,7 @@ def test_the_default_readout_is_regularised(ensemble):
     rows = readout_rows(
         ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options, modules=layout
     )
-    assert result.rows == rows
+    assert result.rows == [r.to_dict() for r in rows]
 
 
 def test_the_config_limit_silences_neurons(ensemble):

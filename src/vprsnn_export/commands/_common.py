@@ -301,8 +301,8 @@ RESULT_COLUMNS = (
 )
 
 
-def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
-    """The readout options of evaluate/simulate/export --check from their arguments."""
+def readout_options(args: argparse.Namespace, config: Config) -> ReadoutOptions:
+    """The readout options of evaluate/simulate/verify from their arguments, for a network with ``config``."""
     if args.renamed_window is not None:
         raise InvalidValueError(
             f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
@@ -319,8 +319,8 @@ def readout_options(args: argparse.Namespace, gamma: float) -> ReadoutOptions:
             f"--velocity expects a non-zero number of places per frame from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, "
             f"got {args.velocity}"
         )
-    return ReadoutOptions(
-        gamma=gamma,
+    return ReadoutOptions.from_config(
+        config,
         ks=parse_int_list(args.k, "--k"),
         rule=args.rule,
         velocity=args.velocity,

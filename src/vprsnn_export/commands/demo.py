@@ -112,7 +112,7 @@ def failed_checks(result: BitsResult) -> str:
     return "; ".join(failed) or "-"
 
 
-def summary_rows(run_result: VerifiedRun) -> list[dict]:
+def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
     top = max(DEMO_KS)
     rows = []
     for result in run_result.bits:
@@ -163,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     )
     ckpt_path = save_checkpoint(out / "float.npz", ckpt)
     say(f"1/4 trained {cfg.train.epochs} epochs -> {ckpt_path}")
-    options = VerifyOptions(readout=ReadoutOptions(gamma=cfg.assignment.gamma, ks=DEMO_KS), bits=DEMO_BITS)
+    options = VerifyOptions(readout=ReadoutOptions.from_config(cfg, ks=DEMO_KS), bits=DEMO_BITS)
     say(
         "the verdict is PASS when every bit width passes every check (tolerances: docs/verify.md); a bit width "
         "that misses one makes it FAIL and the exit code 1"
@@ -213,14 +213,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"float network ({profile_text(cfg, dataset.n_places, profile)}):")
     print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
     print("\nquantised and deployed vs float (tolerances: docs/verify.md):")
-    print(format_table(summary_rows(result), SUMMARY_COLUMNS))
+    print(format_table(demo_table_rows(result), SUMMARY_COLUMNS))
     exact = all(r.cross_implementation.passed for r in result.bits)
     print(
         f"\nexports: {out / 'deploy'}   cross-implementation: {'all exact' if exact else 'DIFFERENCES FOUND'}   "
         f"time: {time.perf_counter() - started:.0f} s"
     )
     print(f"report: {written['html'].resolve()}")
-    failed = [f"{row['bits']} bits" for row in summary_rows(result) if row["verdict"] == "FAIL"]
+    failed = [f"{row['bits']} bits" for row in demo_table_rows(result) if row["verdict"] == "FAIL"]
     print(
         f"Verdict: {'PASS' if report.passed else 'FAIL'} (as in the report; exit code "
         f"{0 if report.passed else EXIT_CHECK_FAILED})"

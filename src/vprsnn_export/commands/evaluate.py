@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
-    options = readout_options(args, ckpt.config.assignment.gamma)
+    options = readout_options(args, ckpt.config)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
     if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):

@@ -19,7 +19,7 @@ from ..experiments.common import DOCS_RESULTS, Settings, Variant, document, resu
 from ..fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
-HELPER_MODULES = {"common", "plots"}
+HELPER_MODULES = {"common", "plots", "query"}  # modules of experiments/ that are not experiments
 
 
 def experiment_modules() -> dict:

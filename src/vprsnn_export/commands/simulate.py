@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError(
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
-    options = readout_options(args, model.config.assignment.gamma)
+    options = readout_options(args, model.config)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
     warning = sequence_warning(dataset.place_ids, options)
     if warning:

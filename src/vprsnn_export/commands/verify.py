@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..config import Config
 from ..dataset import MAX_PLACES, Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
@@ -116,14 +117,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def verify_options(args: argparse.Namespace, gamma: float) -> VerifyOptions:
+def verify_options(args: argparse.Namespace, config: Config) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
     if args.match_window < 0:
         raise InvalidValueError(f"--match-window must be >= 0, got {args.match_window}")
-    readout = readout_options(args, gamma)
+    readout = readout_options(args, config)
     return VerifyOptions(
         readout=readout,
         bits=bits,
@@ -298,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
-    options = verify_options(args, templates[0][1].config.assignment.gamma)
+    options = verify_options(args, templates[0][1].config)
     source, subset, places = selection(args, templates[0][1])
     cache: dict = {}
     networks: Iterable[tuple[str, Checkpoint, Path]]
@@ -323,9 +324,7 @@ def run(args: argparse.Namespace) -> int:
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
-        gamma_options = dataclasses.replace(
-            options, readout=dataclasses.replace(options.readout, gamma=ckpt.config.assignment.gamma)
-        )
+        gamma_options = dataclasses.replace(options, readout=options.readout.with_config(ckpt.config))
         runs.append(
             verify_checkpoint(
                 ckpt,

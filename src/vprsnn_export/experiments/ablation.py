@@ -5,10 +5,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from vprsnn_export.device import resolve_device
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
-
 from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
+from .query import evaluate_query
 
 NAME = "ablation"
 DESCRIPTION = "full model vs WTA off, homeostasis off, patch normalisation off, weight normalisation off"
@@ -30,14 +28,7 @@ def run(settings: Settings) -> dict:
             cfg = settings.config(seed, **change)
             data = load(settings, "subset", cfg)
             ckpt = trained_checkpoint(settings, data, cfg, "subset")
-            result = evaluate_float(
-                ckpt,
-                data.traversal(settings.query),
-                data.place_ids,
-                settings.query,
-                ReadoutOptions(gamma=cfg.assignment.gamma),
-                device=resolve_device(settings.device),
-            )
+            result = evaluate_query(settings, ckpt, data, cfg)
             rows += [
                 dict(r, variant=variant, seed=seed, **result.spike_stats.to_dict())
                 for r in result.rows

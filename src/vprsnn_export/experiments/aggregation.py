@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.device import resolve_device
 from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
+from vprsnn_export.runtime.evaluation import ReadoutOptions, readout_rows
 
 from . import envelope
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
+from .query import evaluate_query
 
 NAME = "aggregation"
 DESCRIPTION = (
@@ -35,23 +35,16 @@ def run(settings: Settings) -> dict:
     per_seed = []
     velocity_per_seed = []
     for seed, cfg, data, ckpt in consecutive_networks(settings):
-        counts = evaluate_float(
-            ckpt,
-            data.traversal(settings.query),
-            data.place_ids,
-            settings.query,
-            ReadoutOptions(gamma=cfg.assignment.gamma),
-            device=resolve_device(settings.device),
-        )
+        counts = evaluate_query(settings, ckpt, data, cfg)
         rows = []
         for rule in RULES:
-            options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, rule=rule)
+            options = ReadoutOptions.from_config(cfg, ks=KS, rule=rule)
             rows += [
-                dict(r, rule=rule, seed=seed)
+                dict(r.to_dict(), rule=rule, seed=seed)
                 for r in readout_rows(
                     ckpt.calibration, counts.query_counts, ckpt.reference_place_ids, data.place_ids, options
                 )
-                if r["strategy"] == "wprob"
+                if r.strategy == "wprob"
             ]
         per_seed.append(rows)
         distributions = envelope.network_distributions(settings, cfg, data, ckpt)

@@ -30,7 +30,7 @@ def evaluate_selection(settings: Settings, selection: str, ks: tuple[int, ...]) 
             data.traversal(settings.query),
             data.place_ids,
             settings.query,
-            ReadoutOptions(gamma=cfg.assignment.gamma, ks=ks),
+            ReadoutOptions.from_config(cfg, ks=ks),
             device=resolve_device(settings.device),
             reference_images={settings.reference: data.traversal(settings.reference)},
         )

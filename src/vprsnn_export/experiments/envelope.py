@@ -125,7 +125,7 @@ def network_distributions(settings: Settings, cfg, data, ckpt) -> dict[str, np.n
         query,
         data.place_ids,
         settings.query,
-        ReadoutOptions(gamma=cfg.assignment.gamma),
+        ReadoutOptions.from_config(cfg),
         device=resolve_device(settings.device),
     )
     wprob = strategy_scores(

@@ -29,7 +29,7 @@ def run(settings: Settings) -> dict:
     for seed in settings.seeds:
         cfg = settings.config(seed, **{"train.epochs": max(marks)})
         data = load(settings, "subset", cfg)
-        options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 5))
+        options = ReadoutOptions.from_config(cfg, ks=(1, 5))
         reference = {settings.reference: data.traversal(settings.reference)}
 
         def on_epoch(epoch, weights, theta, cfg=cfg, data=data, options=options, reference=reference):
@@ -45,7 +45,7 @@ def run(settings: Settings) -> dict:
                 settings.query,
                 options,
             )
-            return {"rows": rows}
+            return {"rows": [row.to_dict() for row in rows]}
 
         images = data.traversal(settings.reference)
         presentations = [Presentation(settings.reference, int(p)) for p in data.place_ids]

@@ -26,7 +26,7 @@ def run(settings: Settings) -> dict:
     device = resolve_device(settings.device)
     per_seed = []
     for seed, cfg, data, ckpt in consecutive_networks(settings):
-        options = ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 5))
+        options = ReadoutOptions.from_config(cfg, ks=(1, 5))
         query = data.traversal(settings.query)
         float_rows = evaluate_float(ckpt, query, data.place_ids, settings.query, options, device=device).rows
         rows = [dict(r, bits="float", scaling="float", seed=seed, saturations=0) for r in float_rows]

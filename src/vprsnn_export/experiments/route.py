@@ -35,6 +35,7 @@ from vprsnn_export.runtime.evaluation import (
     ReadoutOptions,
     aggregated,
     decision_metrics,
+    metric_row,
     module_accuracies,
     nearest_neighbour_rows,
     readout_scores,
@@ -124,7 +125,7 @@ def baselines(settings: Settings) -> dict[str, list[dict]]:
         data = route_data(settings, cfg)
         reference, query = data.traversal(settings.reference), data.traversal(settings.query)
         ids = data.place_ids
-        opts = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options())
+        opts = ReadoutOptions.from_config(cfg, ks=KS, **options())
         distances = sad_distances(reference, query)
         distribution = sad_distribution(distances)
         out[channels] = [
@@ -136,8 +137,10 @@ def baselines(settings: Settings) -> dict[str, list[dict]]:
             for k in KS
         ]
         if channels == "dog_on_off":
-            out["cosine"] = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS)
-            out["sad_nn"] = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts, KS)
+            cosine = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS)
+            out["cosine"] = [r.to_dict() for r in cosine]
+            sad = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts, KS)
+            out["sad_nn"] = [r.to_dict() for r in sad]
     return out
 
 
@@ -152,17 +155,16 @@ def readout(
     tracemalloc.start()
     started = time.perf_counter()
     scores = readout_scores(ckpt.calibration, counts, cfg.assignment.gamma, layout)
-    rows = score_rows(scores, ids, ids, ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options()))
+    rows = score_rows(scores, ids, ids, ReadoutOptions.from_config(cfg, ks=KS, **options()))
     seconds = time.perf_counter() - started
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     if estimate:
-        searched = ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS, **options(True))
+        searched = ReadoutOptions.from_config(cfg, ks=KS, **options(True))
         for k in KS[1:]:
             dist = aggregated(scores["wprob"], k, searched, None)
-            rows.append({"strategy": "wprob-est", "k": k, **decision_metrics(dist, "wprob", ids, ids, 0)})
-    rows = [dict(r, readout=name) for r in rows]
-    return rows, (layout, scores["wprob"]), seconds, peak
+            rows.append(metric_row("wprob-est", k, decision_metrics(dist, "wprob", ids, ids, 0)))
+    return [dict(r.to_dict(), readout=name) for r in rows], (layout, scores["wprob"]), seconds, peak
 
 
 def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[str, Any]:

@@ -6,12 +6,11 @@ import time
 from pathlib import Path
 
 from vprsnn_export.dataset import load_dataset
-from vprsnn_export.device import resolve_device
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
 from vprsnn_export.stats import mean_std
 
 from .common import Settings, provenance, trained_checkpoint
 from .plots import line_plot
+from .query import evaluate_query
 
 NAME = "scalability"
 DESCRIPTION = "AUC-PR and accuracy (W+Prob, k=1) vs N in {25, 50, 100, 200, 400}, windows of consecutive places"
@@ -34,14 +33,7 @@ def run(settings: Settings) -> dict:
                 settings.data, [settings.reference, settings.query], cfg.preprocess, places=f"{start}:{n}"
             )
             ckpt = trained_checkpoint(settings, data, cfg, f"window{start}-{n}")
-            result = evaluate_float(
-                ckpt,
-                data.traversal(settings.query),
-                data.place_ids,
-                settings.query,
-                ReadoutOptions(gamma=cfg.assignment.gamma),
-                device=resolve_device(settings.device),
-            )
+            result = evaluate_query(settings, ckpt, data, cfg)
             row = next(r for r in result.rows if r["strategy"] == "wprob")
             windows.append({"start": start, **row})
         points.append(

@@ -28,7 +28,7 @@ def run(settings: Settings) -> dict:
                 data.traversal(settings.query),
                 data.place_ids,
                 settings.query,
-                ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 5)),
+                ReadoutOptions.from_config(cfg, ks=(1, 5)),
                 device=resolve_device(settings.device),
                 state_isolation=isolation,
             )

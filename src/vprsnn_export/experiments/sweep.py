@@ -104,7 +104,7 @@ def evaluate_selection(settings: Settings, selection: str, grid: tuple[Variant, 
                     data.traversal(settings.query),
                     data.place_ids,
                     settings.query,
-                    ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS),
+                    ReadoutOptions.from_config(cfg, ks=KS),
                     device=device,
                     reference_images={settings.reference: data.traversal(settings.reference)},
                 )
@@ -117,10 +117,10 @@ def evaluate_selection(settings: Settings, selection: str, grid: tuple[Variant, 
                 evaluation.query_counts,
                 ckpt.reference_place_ids,
                 place_ids,
-                ReadoutOptions(gamma=cfg.assignment.gamma, ks=KS),
+                ReadoutOptions.from_config(cfg, ks=KS),
             )
-            rows += [r for r in evaluation.rows if r["strategy"] == "sad"]
-            per_variant[variant.name].append([dict(r, seed=seed) for r in rows])
+            sad = [r for r in evaluation.rows if r["strategy"] == "sad"]
+            per_variant[variant.name].append([dict(r, seed=seed) for r in [*(row.to_dict() for row in rows), *sad]])
             candidates[variant.name].append(evaluation.spike_stats.mean_candidates_per_step)
     return {
         "n_places": n_places,

@@ -15,6 +15,25 @@ every clip is counted as a saturation event. The float weight the mantissa stand
 is w_ij ~= q_ij * m_j * 2**scale_exponent, and the float threshold theta_j ~=
 theta_int_j * m_j * 2**scale_exponent, so each neuron's voltage lives in its own
 scale and comparing currents across neurons (the WTA) uses a_j m_j.
+
+Every implementation of the LIF + WTA step, and the test that proves it equal to the one it
+is checked against (docs/fixed-point.md §5.1 has the same table):
+
+    implementation                          where                                 proved equal by
+    float step (torch; the reference)       dynamics.wta_step / run_network       tests/core/test_dynamics.py (by hand)
+    float kernel loop (numba)               kernels.float_run                     tests/core/test_kernels.py::test_float_kernel_matches_run_network
+    training window (numba, WTA + STDP)     kernels.stdp_window / stdp_windows    tests/core/test_kernels.py::test_stdp_window_gives_train_batch_weights_bit_for_bit
+    integer kernel loop (numba)             kernels.integer_run                   tests/core/test_kernels.py::test_integer_kernel_is_bit_identical_to_the_simulator_and_the_reference
+    integer simulator (torch path)          targets/intsim.run_prepared           tests/targets/test_intsim.py::test_fast_simulator_equals_reference_on_random_models,
+                                                                                  tests/targets/test_device_paths.py::test_torch_integer_path_equals_the_cpu_kernel
+    reference stepper (Python ints)         targets/reference_stepper.reference_run  this docstring executed literally (the oracle of the two above)
+    ONNX graph (onnxruntime)                targets/onnx_target.step_body         tests/targets/test_onnx_target.py::test_property_onnx_equals_simulator
+    NIR file read back + readout rule       targets/nir_target, nir_semantics     tests/targets/test_nir_target.py::test_fixed_point_round_trip_is_exact,
+                                                                                  ::test_readout_rule_on_the_wta_off_raster_gives_the_integer_network
+    NIR consumer runners                    targets/nir_consumers.run_consumer    tests/targets/test_consumers.py::test_each_consumer_runs_a_single_threshold_fixed_point_file_exactly
+    Loihi-style description (Lava, netx)    targets/loihi_target                  tests/targets/test_loihi_target.py::test_round_trip_rebuilds_the_model_exactly,
+                                                                                  ::test_lava_runs_the_description_spike_for_spike, tests/targets/test_netx.py
+                                                                                  (Lava and netx: run where a Python 3.10 Lava venv can be built, skipped otherwise)
 """
 
 from __future__ import annotations
@@ -34,11 +53,11 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.fileio import read_container, write_container
 from vprsnn_export.modules import ensemble_neurons
 from vprsnn_export.version import __version__
+from vprsnn_export.widths import DECAY_BITS
 
 FORMAT = "vprsnn-fixed-point"
 FORMAT_VERSION = 1
 SUPPORTED_BITS = (2, 3, 4, 5, 6, 7, 8)
-DECAY_BITS = 12  # Loihi: decays are 12-bit, 4096 = no decay
 VOLTAGE_BITS = 24  # Loihi: 24-bit signed membrane voltage
 VOLTAGE_SHIFT = 6  # Loihi: the synaptic input and vth mantissa are shifted left by 6
 MULTIPLIER_BITS = 16  # per-neuron scale multipliers m_j are unsigned 16-bit
@@ -242,40 +261,46 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
 def load_fixed_point(path: str | Path) -> FixedPointModel:
     """Read and validate a fixed-point model; ModelFileError names the file and the problem."""
     meta, arrays = read_container(path, "fixed-point model")  # the path as given: '' is named as empty, not '.'
-    path = Path(path)
-    traversals, data = check_header(meta, path)
-    needed = {
-        "weight_mantissa",
-        "scale_multiplier",
-        "threshold",
-        "calibration",
-        "float_calibration",
-        "reference_place_ids",
-    }
-    if needed - set(arrays):
-        raise ModelFileError(f"fixed-point model lacks arrays {sorted(needed - set(arrays))}", path)
+    return model_from_header(meta, arrays, Path(path))
+
+
+MODEL_ARRAYS: tuple[str, ...] = ("weight_mantissa", "scale_multiplier", "threshold", "calibration")
+MODEL_ARRAYS += ("float_calibration", "reference_place_ids")
+
+
+def model_from_header(
+    meta: Mapping[str, Any],
+    arrays: Mapping[str, np.ndarray],
+    path: Path,
+    what: str = "fixed-point header",
+    **fields: Any,
+) -> FixedPointModel:
+    """The model of a fixed-point header (:meth:`FixedPointModel.header`) and its arrays (:data:`MODEL_ARRAYS`),
+    the one way every reader (.npz, NIR, Loihi-style) rebuilds a model: the header's checks
+    (:func:`check_header`), then the model, then :func:`validate`. ``fields`` replace header values that a
+    file states in its own terms (the Loihi description's bits, decay and voltage widths); ModelFileError
+    naming ``path`` (``what``: the part of the file that is invalid)."""
+    traversals, data = check_header(dict(meta), path)
+    if set(MODEL_ARRAYS) - set(arrays):
+        raise ModelFileError(f"fixed-point model lacks arrays {sorted(set(MODEL_ARRAYS) - set(arrays))}", path)
     try:
-        model = FixedPointModel(
-            bits=int(meta["bits"]),
-            weight_mantissa=arrays["weight_mantissa"],
-            scale_multiplier=arrays["scale_multiplier"],
-            scale_exponent=int(meta["scale_exponent"]),
-            threshold=arrays["threshold"],
-            decay_dv=int(meta["decay_dv"]),
-            config=Config.from_dict(meta["config"]),
-            calibration=arrays["calibration"],
-            float_calibration=arrays["float_calibration"],
-            reference_place_ids=arrays["reference_place_ids"],
-            reference_traversals=traversals,
-            quantisation=QuantisationReport.from_dict(meta["quantisation"]),
-            source_sha256=str(meta["source_sha256"]),
-            data=data,
-            voltage_shift=int(meta["voltage_shift"]),
-            voltage_bits=int(meta["voltage_bits"]),
-            version=str(meta.get("package_version", "unknown")),
-        )
+        values: dict[str, Any] = {
+            "bits": int(meta["bits"]),
+            "scale_exponent": int(meta["scale_exponent"]),
+            "decay_dv": int(meta["decay_dv"]),
+            "config": Config.from_dict(meta["config"]),
+            "reference_traversals": traversals,
+            "quantisation": QuantisationReport.from_dict(meta["quantisation"]),
+            "source_sha256": str(meta["source_sha256"]),
+            "data": data,
+            "voltage_shift": int(meta["voltage_shift"]),
+            "voltage_bits": int(meta["voltage_bits"]),
+            "version": str(meta.get("package_version", "unknown")),
+        }
+        values |= {name: arrays[name] for name in MODEL_ARRAYS} | fields
+        model = FixedPointModel(**values)
     except (KeyError, TypeError, ValueError, VprError) as exc:
-        raise ModelFileError(f"invalid fixed-point header ({exc})", path) from None
+        raise ModelFileError(f"invalid {what} ({exc})", path) from None
     validate(model, path)
     return model
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,8 @@ from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
+from .results import MetricRow
+
 
 @dataclass(frozen=True)
 class ReadoutOptions:
@@ -62,6 +64,18 @@ class ReadoutOptions:
     velocity_memory: int = 50  # "track", "smooth": recent frames whose mean is divided out (0: none)
     velocity_lag: int | None = None  # "smooth": frames each decision waits for (None: 2k - 1)
     tolerance: int = 0
+
+    @classmethod
+    def from_config(cls, config: Config, **settings: Any) -> ReadoutOptions:
+        """The options of a network trained with ``config``: gamma is the config's ``assignment.gamma`` (its one
+        source; every caller that reads out a checkpoint or model takes it from here), the rest as given."""
+        require_type("config", config, Config)
+        return cls(gamma=config.assignment.gamma, **settings)
+
+    def with_config(self, config: Config) -> ReadoutOptions:
+        """These options for a network trained with ``config`` (its ``assignment.gamma``)."""
+        require_type("config", config, Config)
+        return replace(self, gamma=config.assignment.gamma)
 
 
 def decision_metrics(
@@ -189,8 +203,8 @@ def readout_rows(
     frame_positions: np.ndarray | None = None,
     *,
     modules: ModuleLayout | None = None,
-) -> list[dict]:
-    """Rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries} for one network.
+) -> list[MetricRow]:
+    """The typed rows (strategy, k, accuracy, P@100R, R@100P, AUC-PR, number of queries) of one network.
 
     ``modules``: the layout of an ensemble, whose hyperactive neurons are silenced (None: no regularisation).
     """
@@ -208,17 +222,22 @@ def score_rows(
     query_place_ids: np.ndarray,
     options: ReadoutOptions,
     frame_positions: np.ndarray | None = None,
-) -> list[dict]:
+) -> list[MetricRow]:
     """The rows of :func:`readout_rows` from the scores of :func:`readout_scores`."""
     rows = []
     for strategy in STRATEGIES:
         metrics = decision_metrics(scores[strategy], strategy, reference_place_ids, query_place_ids, options.tolerance)
-        rows.append({"strategy": strategy, "k": 1, **metrics})
+        rows.append(metric_row(strategy, 1, metrics))
     for k in sorted(set(options.ks) - {1}):
         dist = aggregated(scores[SEQUENCE_STRATEGY], k, options, frame_positions)
         metrics = decision_metrics(dist, SEQUENCE_STRATEGY, reference_place_ids, query_place_ids, options.tolerance)
-        rows.append({"strategy": SEQUENCE_STRATEGY, "k": k, **metrics})
+        rows.append(metric_row(SEQUENCE_STRATEGY, k, metrics))
     return rows
+
+
+def metric_row(strategy: str, k: int, metrics: Mapping[str, Any]) -> MetricRow:
+    """The typed row of one readout from :func:`~vprsnn_export.readout.metrics.pr_metrics`' values."""
+    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
 
 
 def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
@@ -246,13 +265,13 @@ def baseline_rows(
     options: ReadoutOptions,
     ks: Sequence[int],
     frame_positions: np.ndarray | None = None,
-) -> list[dict]:
+) -> list[MetricRow]:
     """The SAD baseline read out like W+Prob, at every k."""
     rows = []
     for k in sorted(set(ks)):
         dist = aggregated(distribution, k, options, frame_positions)
         metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
-        rows.append({"strategy": "sad", "k": k, **metrics})
+        rows.append(metric_row("sad", k, metrics))
     return rows
 
 
@@ -264,7 +283,7 @@ def nearest_neighbour_rows(
     options: ReadoutOptions,
     ks: Sequence[int],
     frame_positions: np.ndarray | None = None,
-) -> list[dict]:
+) -> list[MetricRow]:
     """A no-learning baseline read out as nearest neighbour at every k: the best place, the margin between
     the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
@@ -273,7 +292,7 @@ def nearest_neighbour_rows(
         summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
         predicted, confidence = nearest_neighbour(summed)
         correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
-        rows.append({"strategy": name, "k": k, **pr_metrics(correct, confidence)})
+        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
     return rows
 
 
@@ -391,17 +410,17 @@ def evaluate_float(
     check_sequence_length(options, len(query_place_ids))
     check_places_overlap(reference_ids, query_place_ids, options.tolerance)
     scores = readout_scores(ckpt.calibration, counts, options.gamma, layout)
-    rows = score_rows(scores, reference_ids, query_place_ids, options)
+    typed = score_rows(scores, reference_ids, query_place_ids, options)
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
-        rows += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
+        typed += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
         similarities = cosine_similarities(reference, query_images)
-        rows += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, options.ks)
+        typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, options.ks)
     candidates = run.candidates_per_step
     assert candidates is not None  # the float network always reports them
     return Evaluation(
-        rows=rows,
+        rows=[row.to_dict() for row in typed],
         spike_stats=spike_statistics(candidates.numpy(), counts),
         query_counts=counts,
         modules=None
@@ -457,7 +476,7 @@ def evaluate_fixed_point(
         for row in readout_rows(
             calibration, counts, model.reference_place_ids, query_place_ids, options, modules=layout
         ):
-            rows.append({"calibration": name, **row})
+            rows.append({"calibration": name, **row.to_dict()})
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
         network = FloatNetwork.from_arrays(float_checkpoint.weights, float_checkpoint.thresholds, model.config, device)
@@ -484,7 +503,7 @@ def calibrate_and_evaluate(
     query_place_ids: np.ndarray,
     query_traversal: str,
     options: ReadoutOptions,
-) -> list[dict]:
+) -> list[MetricRow]:
     """Calibrate any network (``network.counts(spikes)``, ``network.cfg``) and read out the queries."""
 
     calibration = calibrate(network.counts, reference_images, reference_place_ids, network.cfg)

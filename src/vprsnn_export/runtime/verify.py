@@ -329,11 +329,6 @@ def decision_scores(
     return scores, agg
 
 
-def metric_rows(rows: Sequence[Mapping[str, Any]]) -> tuple[MetricRow, ...]:
-    """The typed rows of :func:`runtime.evaluation.readout_rows`."""
-    return tuple(MetricRow.from_dict(row) for row in rows)
-
-
 def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
     """Each quantised row with its float value and the difference (quantised - float) of every metric."""
     reference = {(r.strategy, r.k): r for r in float_rows}
@@ -500,9 +495,7 @@ def verify_checkpoint(
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
     layout = ensemble_layout(ckpt.config, len(ref_ids))
-    float_rows = metric_rows(
-        readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, modules=layout)
-    )
+    float_rows = tuple(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, modules=layout))
     float_scores, float_agg = decision_scores(ckpt.calibration, float_counts, readout, layout)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
@@ -556,7 +549,7 @@ def verify_checkpoint(
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            int_rows = metric_rows(
+            int_rows = tuple(
                 readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout, modules=layout)
             )
             rows = metric_deltas(float_rows, int_rows)
@@ -740,7 +733,6 @@ __all__ = [
     "decision_level",
     "level_histogram",
     "metric_deltas",
-    "metric_rows",
     "parse_tolerances",
     "pr_points",
     "spike_level",

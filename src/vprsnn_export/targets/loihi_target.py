@@ -46,9 +46,15 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export.config import Config, wta_group
+from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
+from vprsnn_export.export.model import (
+    DECAY_BITS,
+    MODEL_ARRAYS,
+    FixedPointModel,
+    model_from_header,
+    validate,
+)
 from vprsnn_export.fileio import atomic_write, atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.targets.packing import PACKING, describe_packing, pack_bits, unpack_bits
@@ -526,25 +532,15 @@ def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi desc
         fixed = desc.header["fixed_point_model"]
         conn = desc.header["connections"][0]
         exc = desc.header["populations"][1]
-        model = FixedPointModel(
-            bits=int(conn["num_weight_bits"]),
-            weight_mantissa=mantissas_from_lava(lava_weight_matrix(desc), int(conn["weight_exp"])),
-            scale_multiplier=desc.arrays["wta_score_multiplier"].astype(np.int32),
-            scale_exponent=int(fixed["scale_exponent"]),
-            threshold=desc.arrays["exc_vth"].astype(np.int32),
-            decay_dv=int(exc["dv"]),
-            config=Config.from_dict(fixed["config"]),
-            calibration=desc.arrays["calibration"].astype(np.int64),
-            float_calibration=desc.arrays["float_calibration"].astype(np.int64),
-            reference_place_ids=desc.arrays["reference_place_ids"].astype(np.int64),
-            reference_traversals=list(fixed["reference_traversals"]),
-            quantisation=QuantisationReport.from_dict(fixed["quantisation"]),
-            source_sha256=str(fixed["source_sha256"]),
-            data=dict(fixed.get("data", {})),
-            voltage_shift=int(exc["vth_shift"]),
-            voltage_bits=int(exc["u_v_bits"]),
-            version=str(fixed.get("package_version", "unknown")),
-        )
+        arrays = {
+            "weight_mantissa": mantissas_from_lava(lava_weight_matrix(desc), int(conn["weight_exp"])),
+            "scale_multiplier": desc.arrays["wta_score_multiplier"].astype(np.int32),
+            "threshold": desc.arrays["exc_vth"].astype(np.int32),
+            **{name: desc.arrays[name].astype(np.int64) for name in MODEL_ARRAYS[3:]},
+        }
+        lava = {"bits": int(conn["num_weight_bits"]), "decay_dv": int(exc["dv"])}  # in the Lava parameters' terms
+        lava |= {"voltage_shift": int(exc["vth_shift"]), "voltage_bits": int(exc["u_v_bits"])}
+        model = model_from_header(fixed, arrays, path, "Loihi description's fixed-point header", **lava)
     except (KeyError, IndexError, TypeError, ValueError, VprError) as exc_:
         raise ModelFileError(f"incomplete Loihi description ({type(exc_).__name__}: {exc_})", path) from None
     if int(exc["du"]) != DU_NO_CURRENT_MEMORY or (1 << DECAY_BITS) <= model.decay_dv:

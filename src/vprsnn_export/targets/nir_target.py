@@ -47,7 +47,7 @@ from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, QuantisationReport, validate
+from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
 from vprsnn_export.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.targets.nir_semantics import float_consumers, integer_semantics
@@ -396,27 +396,14 @@ def integral(array: np.ndarray, name: str, path: Path) -> np.ndarray:
 def fixed_point_from_graph(
     header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path
 ) -> FixedPointModel:
-    model = FixedPointModel(
-        bits=int(header["bits"]),
-        weight_mantissa=integral(weight, "linear.weight", path),
-        scale_multiplier=np.asarray(meta["wta_score_multiplier"]).astype(np.int32),
-        scale_exponent=int(header["scale_exponent"]),
-        threshold=integral(thresholds, "lif.v_threshold", path),
-        decay_dv=int(header["decay_dv"]),
-        config=Config.from_dict(header["config"]),
-        calibration=np.asarray(meta["calibration"]).astype(np.int64),
-        float_calibration=np.asarray(meta["float_calibration"]).astype(np.int64),
-        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
-        reference_traversals=list(header["reference_traversals"]),
-        quantisation=QuantisationReport.from_dict(header["quantisation"]),
-        source_sha256=str(header["source_sha256"]),
-        data=dict(header.get("data", {})),
-        voltage_shift=int(header["voltage_shift"]),
-        voltage_bits=int(header["voltage_bits"]),
-        version=str(header.get("package_version", "unknown")),
-    )
-    validate(model, path)
-    return model
+    """The fixed-point model of a NIR file: its embedded header and the graph's integer weights and thresholds."""
+    arrays = {
+        "weight_mantissa": integral(weight, "linear.weight", path),
+        "scale_multiplier": np.asarray(meta["wta_score_multiplier"]).astype(np.int32),
+        "threshold": integral(thresholds, "lif.v_threshold", path),
+        **{name: np.asarray(meta[name]).astype(np.int64) for name in MODEL_ARRAYS[3:]},
+    }
+    return model_from_header(header, arrays, path, "NIR fixed-point header")
 
 
 def checkpoint_from_graph(

@@ -1,0 +1,29 @@
+"""The float network of an experiment on its query traversal, read out with its config's options."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.config import Config
+from vprsnn_export.dataset import Dataset
+from vprsnn_export.device import resolve_device
+from vprsnn_export.runtime.evaluation import Evaluation, ReadoutOptions, evaluate_float
+
+from .common import Settings
+
+
+def evaluate_query(settings: Settings, ckpt: Checkpoint, data: Dataset, cfg: Config, **readout: Any) -> Evaluation:
+    """``evaluate_float`` of ``ckpt`` on ``settings.query`` over ``data``'s places, on the settings' device, with
+    :meth:`ReadoutOptions.from_config` of ``cfg`` (``readout``: the other readout options)."""
+    return evaluate_float(
+        ckpt,
+        data.traversal(settings.query),
+        data.place_ids,
+        settings.query,
+        ReadoutOptions.from_config(cfg, **readout),
+        device=resolve_device(settings.device),
+    )
+
+
+__all__ = ["evaluate_query"]
