@@ -52,6 +52,14 @@ def test_quick_experiment_writes_json_markdown_and_plots(name, out_dir):
     assert "nan" not in markdown.lower()
 
 
+@pytest.mark.parametrize("name", ["aggregation", "assignment", "route", "scalability", "sweep"])
+def test_experiments_that_show_a_baseline_show_cosine(name, tmp_path):
+    """Issue 20: every experiment that prints SAD (or a learned result) prints cosine nearest neighbour too."""
+    assert main(["experiment", name, "--quick", "--out", str(tmp_path), "--quiet"]) == 0
+    assert "cosine" in (tmp_path / f"{name}_quick.md").read_text()
+    assert '"cosine"' in (tmp_path / f"{name}_quick.json").read_text()
+
+
 def test_unknown_experiment_is_a_clear_error(capsys):
     assert main(["experiment", "nope", "--quick"]) == 2
     assert "unknown experiment 'nope'" in capsys.readouterr().err

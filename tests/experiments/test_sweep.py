@@ -54,7 +54,7 @@ def test_every_variant_selection_and_k_is_measured(default_sweep):
         assert [v["variant"] for v in block["variants"]] == names
         for entry in block["variants"]:
             measured = {(r["strategy"], r["k"]) for r in entry["summary"]}
-            assert {("wprob", 1), ("wprob", 5), ("standard", 1), ("sad", 1), ("sad", 5)} <= measured
+            assert {("wprob", 1), ("wprob", 5), ("standard", 1), ("sad", 1), ("sad", 5), ("cosine", 1), ("cosine", 5)} <= measured
             assert all(r["accuracy"]["n"] == 1 for r in entry["summary"])
 
 
@@ -91,6 +91,7 @@ def test_render_survives_a_json_round_trip(default_sweep, tmp_path):
     assert page == (out / "sweep_quick.md").read_text()
     assert (tmp_path / "sweep_quick.png").stat().st_size > 1000
     assert "| paper+gamma0.1 | paper |" in page
+    assert "| SAD k=1 acc / R@100P % | SAD k=5 acc / R@100P % | cosine k=1 acc / R@100P % | cosine k=5" in page
 
 
 @pytest.mark.parametrize(

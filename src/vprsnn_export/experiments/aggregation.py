@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from vprsnn_export.readout.baseline import cosine_similarities
 from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
-from vprsnn_export.runtime.evaluation import ReadoutOptions, readout_rows
+from vprsnn_export.runtime.evaluation import ReadoutOptions, nearest_neighbour_rows, readout_rows
 
 from . import envelope
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
@@ -24,8 +25,11 @@ NAME = "aggregation"
 DESCRIPTION = (
     "W+Prob with k in {1, 3, 5, 7, 10, 15}, product vs sum rule, on 100 consecutive places; "
     "at k=5 every operational-envelope condition with the given, per-window searched, tracked and smoothed velocity, "
-    "beside SAD on the same windows"
+    "beside SAD on the same windows; cosine nearest neighbour on the network's own input (summed along the diagonal) "
+    "at every k as the no-learning template ceiling"
 )
+#: The ``rule`` column of the cosine baseline's rows: k frames' similarities summed along the diagonal.
+COSINE_RULE = "cosine diagonal sum"
 KS = (1, 3, 5, 7, 10, 15)
 RULES = AGGREGATION_RULES.names()
 
@@ -46,6 +50,14 @@ def run(settings: Settings) -> dict:
                 )
                 if r.strategy == "wprob"
             ]
+        similarities = cosine_similarities(data.traversal(settings.reference), data.traversal(settings.query))
+        options = ReadoutOptions.from_config(cfg, ks=KS)
+        rows += [
+            dict(r.to_dict(), rule=COSINE_RULE, seed=seed)
+            for r in nearest_neighbour_rows(
+                similarities, "cosine", ckpt.reference_place_ids, data.place_ids, options, KS
+            )
+        ]
         per_seed.append(rows)
         distributions = envelope.network_distributions(settings, cfg, data, ckpt)
         velocity_rows = envelope.envelope_rows(
@@ -68,10 +80,13 @@ def run(settings: Settings) -> dict:
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     summary = results["summary"]
     series = {}
-    for rule in RULES:
+    for rule in (*RULES, COSINE_RULE):
         rows = [r for r in summary if r["rule"] == rule]
+        if not rows:  # a page written before the cosine rows were measured
+            continue
         for metric, label in (("r_at_100p", "R@100P"), ("accuracy", "accuracy")):
-            series[f"{rule} rule {label}"] = (
+            name = "cosine NN (no learning)" if rule == COSINE_RULE else f"{rule} rule"
+            series[f"{name} {label}"] = (
                 [100 * r[metric]["mean"] for r in rows],
                 [100 * r[metric]["std"] for r in rows],
             )

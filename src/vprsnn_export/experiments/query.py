@@ -13,9 +13,12 @@ from vprsnn_export.runtime.evaluation import Evaluation, ReadoutOptions, evaluat
 from .common import Settings
 
 
-def evaluate_query(settings: Settings, ckpt: Checkpoint, data: Dataset, cfg: Config, **readout: Any) -> Evaluation:
+def evaluate_query(
+    settings: Settings, ckpt: Checkpoint, data: Dataset, cfg: Config, baselines: bool = False, **readout: Any
+) -> Evaluation:
     """``evaluate_float`` of ``ckpt`` on ``settings.query`` over ``data``'s places, on the settings' device, with
-    :meth:`ReadoutOptions.from_config` of ``cfg`` (``readout``: the other readout options)."""
+    :meth:`ReadoutOptions.from_config` of ``cfg`` (``readout``: the other readout options); ``baselines``: with
+    the rows of SAD and cosine nearest neighbour on the same images (strategies "sad", "cosine")."""
     return evaluate_float(
         ckpt,
         data.traversal(settings.query),
@@ -23,6 +26,7 @@ def evaluate_query(settings: Settings, ckpt: Checkpoint, data: Dataset, cfg: Con
         settings.query,
         ReadoutOptions.from_config(cfg, **readout),
         device=resolve_device(settings.device),
+        reference_images={settings.reference: data.traversal(settings.reference)} if baselines else None,
     )
 
 

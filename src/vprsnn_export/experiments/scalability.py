@@ -13,7 +13,11 @@ from .plots import line_plot
 from .query import evaluate_query
 
 NAME = "scalability"
-DESCRIPTION = "AUC-PR and accuracy (W+Prob, k=1) vs N in {25, 50, 100, 200, 400}, windows of consecutive places"
+DESCRIPTION = (
+    "AUC-PR and accuracy (W+Prob, k=1) vs N in {25, 50, 100, 200, 400}, windows of consecutive places, beside "
+    "cosine nearest neighbour on the network's own input (no learning)"
+)
+METRICS = (("AUC-PR", "auc_pr"), ("accuracy", "accuracy"), ("R@100P", "r_at_100p"))
 FULL_SIZES = (25, 50, 100, 200, 400)
 FULL_STARTS = (500, 1500)
 QUICK_SIZES = (10, 20)
@@ -33,16 +37,16 @@ def run(settings: Settings) -> dict:
                 settings.data, [settings.reference, settings.query], cfg.preprocess, places=f"{start}:{n}"
             )
             ckpt = trained_checkpoint(settings, data, cfg, f"window{start}-{n}")
-            result = evaluate_query(settings, ckpt, data, cfg)
+            result = evaluate_query(settings, ckpt, data, cfg, baselines=True)
             row = next(r for r in result.rows if r["strategy"] == "wprob")
-            windows.append({"start": start, **row})
+            cosine = next(r for r in result.rows if r["strategy"] == "cosine" and r["k"] == 1)
+            windows.append({"start": start, **row, "cosine": cosine})
         points.append(
             {
                 "n_places": n,
                 "windows": windows,
-                "auc_pr": mean_std(w["auc_pr"] for w in windows).to_dict(),
-                "accuracy": mean_std(w["accuracy"] for w in windows).to_dict(),
-                "r_at_100p": mean_std(w["r_at_100p"] for w in windows).to_dict(),
+                **{key: mean_std(w[key] for w in windows).to_dict() for _, key in METRICS},
+                "cosine": {key: mean_std(w["cosine"][key] for w in windows).to_dict() for _, key in METRICS},
             }
         )
     return {"experiment": NAME, "seed": seed, "points": points, "provenance": provenance(settings, started)}
@@ -52,9 +56,14 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     points = results["points"]
     x = [p["n_places"] for p in points]
     series = {
-        label: ([100 * p[key]["mean"] for p in points], [100 * p[key]["std"] for p in points])
-        for label, key in (("AUC-PR", "auc_pr"), ("accuracy", "accuracy"), ("R@100P", "r_at_100p"))
+        label: ([100 * p[key]["mean"] for p in points], [100 * p[key]["std"] for p in points]) for label, key in METRICS
     }
+    with_cosine = all("cosine" in p for p in points)  # pages written before the baseline was measured lack it
+    if with_cosine:
+        series["cosine NN accuracy"] = (
+            [100 * p["cosine"]["accuracy"]["mean"] for p in points],
+            [100 * p["cosine"]["accuracy"]["std"] for p in points],
+        )
     line_plot(
         out_dir / f"{stem}.png",
         x,
@@ -64,13 +73,15 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         title="Scalability: sliding windows of consecutive places",
         log_x=True,
     )
-    lines = ["| N | windows | AUC-PR % | accuracy % | R@100P % |", "|---:|---:|---:|---:|---:|"]
+    header = "| N | windows | AUC-PR % | accuracy % | R@100P % |"
+    if with_cosine:
+        header += " cosine NN AUC-PR % | cosine NN accuracy % | cosine NN R@100P % |"
+    lines = [header, "|" + "---:|" * (header.count("|") - 1)]
     for p in points:
+        blocks = [p, p["cosine"]] if with_cosine else [p]
         lines.append(
             f"| {p['n_places']} | {len(p['windows'])} | "
-            + " | ".join(
-                f"{100 * p[k]['mean']:.1f} ± {100 * p[k]['std']:.1f}" for k in ("auc_pr", "accuracy", "r_at_100p")
-            )
+            + " | ".join(f"{100 * b[k]['mean']:.1f} ± {100 * b[k]['std']:.1f}" for b in blocks for _, k in METRICS)
             + " |"
         )
     return (

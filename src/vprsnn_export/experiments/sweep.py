@@ -1,4 +1,4 @@
-"""A declared grid of config variants over seeds, on the subset and on consecutive places, beside SAD.
+"""A declared grid of config variants over seeds, on the subset and on consecutive places, beside SAD and cosine.
 
 Each variant is a preset plus dotted config overrides (``--grid NAME=PRESET[,KEY=VALUE...]``).
 Keys under ``assignment.`` only change the readout: variants that differ only there share one
@@ -29,10 +29,13 @@ from .plots import save_figure
 NAME = "sweep"
 DESCRIPTION = (
     "a grid of config variants (preset + overrides) over seeds: W+Prob k=1 and 5 and Standard k=1 on the "
-    "100-place subset and on consecutive places, beside SAD on the same pre-processed images, mean ± std over seeds"
+    "100-place subset and on consecutive places, beside SAD and cosine nearest neighbour on the same pre-processed images, mean ± std over seeds"
 )
 KS = (1, 5)
 SELECTIONS = ("subset", "consecutive")
+#: The no-learning baselines on the images each variant's network sees (runtime.evaluation.evaluate_float).
+BASELINE_TITLES = {"sad": "SAD", "cosine": "cosine"}
+BASELINES = tuple(BASELINE_TITLES)
 READOUT_SECTION = "assignment"  # config keys that change only the readout, never the trained network
 DEFAULT_GRID = (
     Variant("paper", "paper"),
@@ -119,8 +122,10 @@ def evaluate_selection(settings: Settings, selection: str, grid: tuple[Variant, 
                 place_ids,
                 ReadoutOptions.from_config(cfg, ks=KS),
             )
-            sad = [r for r in evaluation.rows if r["strategy"] == "sad"]
-            per_variant[variant.name].append([dict(r, seed=seed) for r in [*(row.to_dict() for row in rows), *sad]])
+            baselines = [r for r in evaluation.rows if r["strategy"] in BASELINES]
+            per_variant[variant.name].append(
+                [dict(r, seed=seed) for r in [*(row.to_dict() for row in rows), *baselines]]
+            )
             candidates[variant.name].append(evaluation.spike_stats.mean_candidates_per_step)
     return {
         "n_places": n_places,
@@ -162,15 +167,18 @@ def selection_titles(results: dict) -> dict[str, str]:
 
 
 def selection_table(block: dict) -> str:
-    """One row per variant: W+Prob k=1 and 5 (accuracy, R@100P), Standard k=1, SAD k=1 and 5, in percent."""
+    """One row per variant: W+Prob k=1 and 5 (accuracy, R@100P), Standard k=1, SAD and cosine k=1 and 5, in
+    percent (a baseline column is left out of a block written before it was measured)."""
+    baselines = [b for b in BASELINES if any(r["strategy"] == b for r in block["variants"][0]["summary"])]
     lines = [
         "| variant | network | W+Prob k=1 acc % | W+Prob k=1 R@100P % | W+Prob k=5 acc % | W+Prob k=5 R@100P % "
-        "| Standard k=1 acc % | SAD k=1 acc / R@100P % | SAD k=5 acc / R@100P % | candidates / step | seeds |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| Standard k=1 acc % | "
+        + "".join(f"{BASELINE_TITLES[b]} k={k} acc / R@100P % | " for b in baselines for k in (1, 5))
+        + "candidates / step | seeds |",
+        "|---|---|" + "---:|" * (7 + 2 * len(baselines)),
     ]
     for entry in block["variants"]:
         wprob1, wprob5 = summary_row(entry, "wprob", 1), summary_row(entry, "wprob", 5)
-        sad1, sad5 = summary_row(entry, "sad", 1), summary_row(entry, "sad", 5)
         cells = [
             entry["variant"],
             entry["network"],
@@ -179,8 +187,7 @@ def selection_table(block: dict) -> str:
             pct(wprob5["accuracy"]),
             pct(wprob5["r_at_100p"]),
             pct(summary_row(entry, "standard", 1)["accuracy"]),
-            f"{100 * sad1['accuracy']['mean']:.1f} / {100 * sad1['r_at_100p']['mean']:.1f}",
-            f"{100 * sad5['accuracy']['mean']:.1f} / {100 * sad5['r_at_100p']['mean']:.1f}",
+            *(baseline_cell(summary_row(entry, b, k)) for b in baselines for k in (1, 5)),
             f"{entry['candidates_per_step']['mean']:.1f}",
             str(wprob1["accuracy"]["n"]),
         ]
@@ -188,8 +195,14 @@ def selection_table(block: dict) -> str:
     return "\n".join(lines)
 
 
+def baseline_cell(row: dict) -> str:
+    """A seedless baseline's accuracy / R@100P in percent."""
+    return f"{100 * row['accuracy']['mean']:.1f} / {100 * row['r_at_100p']['mean']:.1f}"
+
+
 def plot(results: dict, path: Path) -> Path:
-    """Per selection: W+Prob accuracy (k=1, k=5) per variant with error bars, SAD on the same images as ticks."""
+    """Per selection: W+Prob accuracy (k=1, k=5) per variant with error bars, SAD (dashed) and cosine (dotted)
+    on the same images as ticks."""
     titles = selection_titles(results)
     fig = Figure(figsize=(4.2 * len(SELECTIONS), 4.2))
     axes = fig.subplots(1, len(SELECTIONS), sharey=True)
@@ -201,8 +214,11 @@ def plot(results: dict, path: Path) -> Path:
             means = [100 * r["mean"] for r in rows]
             stds = [100 * r["std"] for r in rows]
             ax.errorbar(x + offset, means, yerr=stds, fmt="o", capsize=3, color=colour, label=f"W+Prob k={k}")
-            sad = [100 * summary_row(v, "sad", k)["accuracy"]["mean"] for v in variants]
-            ax.hlines(sad, x - 0.35, x + 0.35, colors=colour, linestyles="--", linewidth=1, label=f"SAD k={k}")
+            for baseline, style in (("sad", "--"), ("cosine", ":")):
+                if all(any(r["strategy"] == baseline for r in v["summary"]) for v in variants):
+                    levels = [100 * summary_row(v, baseline, k)["accuracy"]["mean"] for v in variants]
+                    label = f"{BASELINE_TITLES[baseline]} k={k}"
+                    ax.hlines(levels, x - 0.35, x + 0.35, colors=colour, linestyles=style, linewidth=1, label=label)
         ax.set_xticks(x, [v["variant"] for v in variants], rotation=20, ha="right", fontsize=8)
         ax.set_title(titles[selection], fontsize=9)
         ax.set_ylim(0, 102)
@@ -227,7 +243,9 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         "`network` names the variant whose trained networks a row reads out: variants that differ only in "
         f"`{READOUT_SECTION}.*` keys share them (one training per seed). SAD is the no-learning baseline on "
         "the same pre-processed images the variant's network sees, read out through the W+Prob "
-        "transformation; it has no seed, so it is shown as accuracy / R@100P.\n",
+        "transformation; cosine is nearest neighbour by cosine similarity on the same images (the template "
+        "ceiling: margin between best and second-best as confidence, k frames summed along the diagonal). "
+        "Neither has a seed, so each is shown as accuracy / R@100P.\n",
     ]
     for selection in SELECTIONS:
         block = results[selection]
