@@ -52,7 +52,8 @@ def assignment() -> str:
         f"(Standard {pct(standard['accuracy'])} %); on 100 consecutive places W+Prob k=5 reaches "
         f"{pct(k5['accuracy'])} %, R@100P {pct(k5['r_at_100p'])} %. The no-learning SAD baseline on the same "
         f"images gets {mean(row(subset, 'sad', 1)['accuracy'], 0)} % (subset) and "
-        f"{mean(row(consecutive, 'sad', 5)['accuracy'], 0)} % at k=5"
+        f"{mean(row(consecutive, 'sad', 5)['accuracy'], 0)} % at k=5, cosine nearest neighbour "
+        f"{mean(row(subset, 'cosine', 1)['accuracy'], 0)} % and {mean(row(consecutive, 'cosine', 5)['accuracy'], 0)} %"
     )
 
 
@@ -116,7 +117,9 @@ def sweep() -> str:
         f"and {pct(row(dog_run, 'wprob', 1)['accuracy'])} % on places 1000-1099 (k=5: "
         f"{mean(row(dog_subset, 'wprob', 5)['accuracy'])} % and {mean(row(dog_run, 'wprob', 5)['accuracy'])} %, "
         f"R@100P {mean(row(dog_subset, 'wprob', 5)['r_at_100p'])} % and "
-        f"{mean(row(dog_run, 'wprob', 5)['r_at_100p'])} %)"
+        f"{mean(row(dog_run, 'wprob', 5)['r_at_100p'])} %), above SAD on the same images but below cosine nearest "
+        f"neighbour on them ({mean(row(dog_subset, 'cosine', 1)['accuracy'], 0)} % on the subset and "
+        f"{mean(row(dog_run, 'cosine', 1)['accuracy'], 0)} % on places 1000-1099 at k=1"
     )
 
 
