@@ -30,12 +30,15 @@ from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.config import Config, PreprocessConfig
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
+from vprsnn_export.dynamics_kernel import float_run
 from vprsnn_export.encoding import encode, presentation_seed, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.kernels import blas_block, float_run, integer_run, stdp_window
+from vprsnn_export.kernel_sums import blas_block
 from vprsnn_export.runs import SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork, run_prepared
+from vprsnn_export.targets.intsim_kernel import integer_run
 from vprsnn_export.trainer.stdp import initial_weights
+from vprsnn_export.trainer.stdp_kernel import stdp_window
 from vprsnn_export.trainer.train import train_batch
 
 NORDLAND = Path(__file__).resolve().parents[1].parent / "shared/data/nordland_64x32_summer_winter"

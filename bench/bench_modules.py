@@ -26,8 +26,8 @@ import torch
 
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import load_dataset
+from vprsnn_export.dynamics_kernel import float_run
 from vprsnn_export.encoding import query_spikes
-from vprsnn_export.kernels import float_run
 from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.train import Presentation, train_network
 

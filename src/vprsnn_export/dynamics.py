@@ -29,8 +29,9 @@ import torch
 from .arguments import real_array, require_type
 from .config import Config, wta_group
 from .device import check_device
+from .dynamics_kernel import QUERY_CHUNK, float_run
 from .errors import InvalidValueError
-from .kernels import QUERY_CHUNK, blas_block, float_run
+from .kernel_sums import blas_block
 from .resources import LOWER_RUN, MemoryNeed, check_memory, run_need
 from .runs import SpikeRun, run_in_chunks
 
@@ -114,7 +115,7 @@ def run_network(
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
     On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.kernels.float_run`: the same counts bit for bit, the currents summed
+    (:func:`vprsnn_export.dynamics_kernel.float_run`: the same counts bit for bit, the currents summed
     in this machine's BLAS order); ``compiled=False`` (and any GPU) runs the torch loop below,
     one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
     moved to ``weights.device`` chunk by chunk.

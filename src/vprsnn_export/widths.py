@@ -2,8 +2,8 @@
 
 The fixed-point contract (:mod:`vprsnn_export.export.model`) states the decay as
 ``V <- trunc0(V (4096 - dv) / 4096)``: a 12-bit fraction, Loihi's. The compiled integer kernel
-(:mod:`vprsnn_export.kernels`, core) computes the same shift and cannot import the export layer,
-so the constant lives here, below both.
+(:mod:`vprsnn_export.targets.intsim_kernel`) computes the same shift; the constant lives here, in
+the core, below both.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Every compiled kernel refuses, through its checked entry point, any array it would index out of bounds.
 
 numba checks no bounds, so a short array would be read (or written) past its end. Each checked
-entry point of :mod:`vprsnn_export.kernels` is called with valid arrays (it runs) and then with
+entry point (beside each kernel: ``KERNEL_MODULES``) is called with valid arrays (it runs) and then with
 each array in turn made short, empty, of the wrong dtype, non-contiguous, not an array or
 read-only (when written): every variant raises InvalidValueError naming the argument.
 """
@@ -17,11 +17,13 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export import kernels
+from vprsnn_export import dynamics_kernel, encoding_kernel, kernel_sums
 from vprsnn_export.config import preset
 from vprsnn_export.dynamics import FloatNetwork, run_network
 from vprsnn_export.errors import InvalidValueError, VprError
+from vprsnn_export.targets import intsim_kernel
 from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.trainer import stdp_kernel
 
 N, T, D, NEURONS, GROUP = 2, 5, 6, 4, 2
 F32 = np.float32
@@ -122,23 +124,28 @@ def stdp_windows_args() -> dict[str, Any]:
 
 
 def call_stdp_windows(scalars: tuple, **arrays: Any) -> Any:
-    """:func:`kernels.stdp_windows_kernel` with its arrays by name (its scalars are positional)."""
+    """:func:`stdp_kernel.stdp_windows_kernel` with its arrays by name (its scalars are positional)."""
     order = ("limits", "seeds", "sizes", "blocks", "timesteps", "weights", "theta")
-    return kernels.stdp_windows_kernel(*(arrays[name] for name in order), *scalars)
+    return stdp_kernel.stdp_windows_kernel(*(arrays[name] for name in order), *scalars)
 
 
 #: kernel -> (checked entry point, valid arguments, arguments written, arguments that set the sizes)
 CASES: dict[str, tuple[Callable[..., Any], Callable[[], dict[str, Any]], set[str], set[str]]] = {
     "integer": (
-        kernels.integer_kernel,
+        intsim_kernel.integer_kernel,
         integer_args,
         {"current_store", "counts", "n_candidates", "raster", "final"},
         {"spikes", "mantissas"},
     ),
-    "float": (kernels.float_kernel, float_args, {"counts", "n_candidates", "raster", "final"}, {"spikes", "weights"}),
-    "blocked": (kernels.blocked_currents, blocked_args, set(), {"spikes", "weights"}),
-    "stdp": (kernels.stdp_window_kernel, stdp_args, {"weights"}, {"spikes", "weights"}),
-    "bernoulli": (kernels.bernoulli_kernel, bernoulli_args, {"out"}, {"thresholds"}),
+    "float": (
+        dynamics_kernel.float_kernel,
+        float_args,
+        {"counts", "n_candidates", "raster", "final"},
+        {"spikes", "weights"},
+    ),
+    "blocked": (kernel_sums.blocked_currents, blocked_args, set(), {"spikes", "weights"}),
+    "stdp": (stdp_kernel.stdp_window_kernel, stdp_args, {"weights"}, {"spikes", "weights"}),
+    "bernoulli": (encoding_kernel.bernoulli_kernel, bernoulli_args, {"out"}, {"thresholds"}),
     "stdp_windows": (call_stdp_windows, stdp_windows_args, {"weights"}, {"limits", "weights"}),
 }
 
@@ -226,11 +233,15 @@ def test_bad_sizes_are_refused(kernel, name, value):
         entry(**args)
 
 
+#: every module that holds compiled kernels: the shared sums and each kernel beside its caller
+KERNEL_MODULES = (kernel_sums, encoding_kernel, dynamics_kernel, intsim_kernel, stdp_kernel)
+
+
 def compiled_kernels() -> set[str]:
-    tree = ast.parse(inspect.getsource(kernels))
     return {
         node.name
-        for node in tree.body
+        for module in KERNEL_MODULES
+        for node in ast.parse(inspect.getsource(module)).body
         if isinstance(node, ast.FunctionDef) and any(getattr(d, "id", None) == "compiled" for d in node.decorator_list)
     }
 
@@ -240,12 +251,12 @@ def test_compiled_kernels_are_called_from_python_only_through_checked_entry_poin
     compiled = compiled_kernels()
     checked = {"integer_kernel", "float_kernel", "blocked_currents", "stdp_window_kernel", "bernoulli_kernel"}
     checked.add("stdp_windows_kernel")
-    tree = ast.parse(inspect.getsource(kernels))
-    for node in tree.body:
-        if not isinstance(node, ast.FunctionDef) or node.name in compiled | checked:
-            continue
-        called = {n.func.id for n in ast.walk(node) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
-        assert not called & compiled, f"{node.name} calls {called & compiled} unchecked"
+    for module in KERNEL_MODULES:
+        for node in ast.parse(inspect.getsource(module)).body:
+            if not isinstance(node, ast.FunctionDef) or node.name in compiled | checked:
+                continue
+            called = {n.func.id for n in ast.walk(node) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+            assert not called & compiled, f"{module.__name__}.{node.name} calls {called & compiled} unchecked"
 
 
 def small_config():
@@ -264,7 +275,7 @@ def test_float_network_with_too_few_thresholds_is_refused(n_thresholds):
         with pytest.raises(InvalidValueError, match="thresholds"):
             run_network(spikes, torch.rand(4, 3), torch.ones(n_thresholds), beta=0.9, compiled=compiled)
     with pytest.raises(InvalidValueError, match="theta"):
-        kernels.float_run(spikes, torch.rand(4, 3), torch.ones(n_thresholds), beta=0.9)
+        dynamics_kernel.float_run(spikes, torch.rand(4, 3), torch.ones(n_thresholds), beta=0.9)
 
 
 def test_valid_fixed_point_model_runs(tiny_model):
@@ -286,11 +297,11 @@ def test_integer_run_with_short_thresholds_or_multipliers_is_refused():
     q = np.ones((4, 3), dtype=np.int64)
     common: dict[str, Any] = dict(shift=6, keep=4000, limit=(1 << 23) - 1, wta=True)
     with pytest.raises(InvalidValueError, match="threshold"):
-        kernels.integer_run(spikes, q, np.ones(2), None, **common)
+        intsim_kernel.integer_run(spikes, q, np.ones(2), None, **common)
     with pytest.raises(InvalidValueError, match="multipliers"):
-        kernels.integer_run(spikes, q, np.ones(3), np.ones(1), **common)
+        intsim_kernel.integer_run(spikes, q, np.ones(3), np.ones(1), **common)
     with pytest.raises(InvalidValueError, match="mantissas"):
-        kernels.integer_run(spikes, np.ones((3, 3)), np.ones(3), None, **common)
+        intsim_kernel.integer_run(spikes, np.ones((3, 3)), np.ones(3), None, **common)
 
 
 def test_training_kernels_refuse_mismatched_thresholds():
@@ -298,10 +309,10 @@ def test_training_kernels_refuse_mismatched_thresholds():
     weights = torch.rand(4, 3)
     spikes = torch.ones((2, 5, 4), dtype=torch.uint8)
     with pytest.raises(VprError, match="theta"):
-        kernels.stdp_window(weights, torch.ones(2), spikes, cfg)
+        stdp_kernel.stdp_window(weights, torch.ones(2), spikes, cfg)
     limits = np.zeros((1, 2, 4), dtype=np.int32)
     seeds = np.zeros((1, 2), dtype=np.int64)
     with pytest.raises(VprError, match="theta"):
-        kernels.stdp_windows(
+        stdp_kernel.stdp_windows(
             np.ones((1, 4, 3), dtype=F32), np.ones((1, 2), dtype=F32), limits, seeds, np.array([2]), cfg
         )

@@ -22,7 +22,7 @@ def test_closure_is_what_importing_the_module_loads():
     loaded = {name for name in sys.modules if name.split(".")[0] == "vprsnn_export"}
     closure = set(import_closure(ROOTS))
     assert closure <= loaded
-    assert "vprsnn_export.trainer.stdp" in closure and "vprsnn_export.kernels" in closure
+    assert "vprsnn_export.trainer.stdp" in closure and "vprsnn_export.trainer.stdp_kernel" in closure
     assert not any(name.startswith(("vprsnn_export.commands", "vprsnn_export.runtime")) for name in closure)
     assert "vprsnn_export.experiments.plots" not in closure
 

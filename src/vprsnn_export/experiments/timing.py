@@ -12,9 +12,9 @@ import torch
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
+from vprsnn_export.dynamics_kernel import QUERY_CHUNK
 from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.kernels import QUERY_CHUNK
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork
@@ -117,7 +117,7 @@ def run(settings: Settings) -> dict:
         "experiment": NAME,
         "version": VERSION,
         "threads": torch.get_num_threads(),
-        "training_path": "compiled kernel (vprsnn_export.kernels.stdp_window)",
+        "training_path": "compiled kernel (vprsnn_export.trainer.stdp_kernel.stdp_window)",
         "device": str(device),
         "throughput": rows,
         "training_seconds_per_epoch": train_s,

@@ -40,8 +40,9 @@ from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
-from vprsnn_export.kernels import integer_run
 from vprsnn_export.runs import SpikeRun, run_in_chunks
+
+from .intsim_kernel import integer_run
 
 QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
 FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
@@ -211,7 +212,7 @@ class ChunkRun:
 def run_prepared(
     prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool, compiled: bool = True
 ) -> SpikeRun:
-    """The whole run: on the CPU the compiled event-driven kernel (:func:`vprsnn_export.kernels.integer_run`,
+    """The whole run: on the CPU the compiled event-driven kernel (:func:`vprsnn_export.targets.intsim_kernel.integer_run`,
     bit-identical); otherwise (or ``compiled=False``) chunks of QUERY_CHUNK presentations in parallel
     (isolation), or one presentation at a time carrying V, through :func:`recur`."""
     if compiled and prep.threshold.device.type == "cpu":

@@ -14,7 +14,7 @@ so module m's weights and thresholds are bit for bit those of ``train_network`` 
 with the same seed. A module without a batch k sits it out (no update, no homeostasis).
 
 The weights are held as (M, inputs, n). On the CPU the compiled kernel
-(:func:`vprsnn_export.kernels.stdp_windows`) runs every module's batch in one call, in
+(:func:`vprsnn_export.trainer.stdp_kernel.stdp_windows`) runs every module's batch in one call, in
 contiguous slices of modules on ``threads`` Python threads; elsewhere (a GPU, ``compiled=False``
 or a BLAS whose order the kernel cannot reproduce) the torch loop of :func:`.train.train_batch`
 runs all modules with the same batch size at once, one batched matmul per step.
@@ -32,13 +32,14 @@ from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
 from vprsnn_export.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.encoding_kernel import bernoulli_limits, generator_seeds
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.kernels import bernoulli_limits, generator_seeds, stdp_windows
 from vprsnn_export.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update
 from .stdp import initial_weights
+from .stdp_kernel import stdp_windows
 from .train import Presentation, TrainedNetwork, epoch_order, train_batch, training_seeds
 
 

@@ -14,10 +14,10 @@ from vprsnn_export.config import Config
 from vprsnn_export.dynamics import wta_step
 from vprsnn_export.encoding import encode, presentation_seed
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.kernels import stdp_window
 
 from .homeostasis import homeostasis_update
 from .stdp import apply_update, decay_trace, initial_weights, stdp_delta
+from .stdp_kernel import stdp_window
 
 
 @dataclass(frozen=True)
@@ -49,7 +49,7 @@ def train_batch(
     theta (M, neurons)) the torch loop trains M independent networks side by side, one
     batched matmul per step for all of them (:mod:`vprsnn_export.trainer.batched`).
 
-    On the CPU the compiled kernel (:func:`vprsnn_export.kernels.stdp_window`) runs a single
+    On the CPU the compiled kernel (:func:`vprsnn_export.trainer.stdp_kernel.stdp_window`) runs a single
     network's window when it can reproduce torch's summation order here (identical weights);
     otherwise, or with ``compiled=False``, the torch loop below.
     """

@@ -1,0 +1,478 @@
+"""The compiled STDP training window: the step loop of ``train.train_batch`` in one call.
+
+:func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column normalisation)
+with every float32 operation in the torch loop's order, so the weights are bit for bit those of
+the torch loop where this machine's BLAS orders its sums as probed
+(:func:`vprsnn_export.kernel_sums.blas_block`, :func:`vprsnn_export.kernel_sums.batch_sums_in_order`).
+:func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
+encoding each module's batch inside it (:mod:`vprsnn_export.encoding_kernel`), on threads over
+contiguous slices of modules (:func:`vprsnn_export.parallel.module_slices`).
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+import torch
+
+from vprsnn_export.config import Config
+from vprsnn_export.encoding_kernel import _bernoulli_kernel
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.kernel_checks import require_array, require_int
+from vprsnn_export.kernel_sums import (
+    ANY3,
+    SPIKES,
+    _active_inputs,
+    _blocked_sum,
+    as_spike_array,
+    batch_sums_in_order,
+    blas_block,
+    compiled,
+)
+from vprsnn_export.parallel import module_slices
+
+
+@compiled
+def _stdp_window(
+    spikes: np.ndarray,  # (B, T, inputs) uint8
+    weights: np.ndarray,  # (inputs, neurons) float32, updated in place
+    theta: np.ndarray,  # (neurons,) float32
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+    block: int,
+) -> np.ndarray:
+    """The training window, each float32 operation in the torch loop's order, in one pass over W per step.
+
+    dW_ij = A+ (w_max - w_ij) P_ij - A- w_ij D_ij with P_ij = sum_b x_bi S_bj and
+    D_ij = sum_b s_bi y_bj (b in order). S_bj is 0 unless j fires now, so P is built only for this
+    step's winners (their rows of pre traces summed in row order); s_bi is 0 unless input i is active
+    in row b, so D is built only for the active inputs (their rows' post traces summed in row order;
+    y_bj is exactly 0 until j has fired in row b, and adding an exact 0 changes no float). W is then
+    updated row by row over all neurons (vectorised), with dW_ij = +0 (W unchanged) wherever P and D
+    are 0. Column normalisation divides column j by its norm n_j; a column no row has fired into
+    ("untraced") whose norm was exactly 1.0f ("settled") keeps its weights (the division is the
+    identity) and is divided by 1.
+    """
+    batch, timesteps, n_inputs = spikes.shape
+    n_neurons = weights.shape[1]
+    zero = np.float32(0)
+    one = np.float32(1)
+    tiny = np.float32(np.finfo(np.float32).tiny)
+    voltage = np.zeros((batch, n_neurons), dtype=np.float32)
+    post_trace = np.zeros((batch, n_neurons), dtype=np.float32)
+    pre_trace = np.zeros((batch, n_inputs), dtype=np.float32)
+    current = np.empty((batch, n_neurons), dtype=np.float32)
+    fired = np.zeros((batch, n_neurons), dtype=np.bool_)
+    partial = np.empty(n_neurons, dtype=np.float32)
+    index = np.empty((batch, n_inputs), dtype=np.int64)
+    n_active = np.empty(batch, dtype=np.int64)
+    row_traced = np.zeros(batch, dtype=np.bool_)  # some neuron has fired in row b (y_b != 0)
+    traced = np.zeros(n_neurons, dtype=np.bool_)  # neuron j has fired in some row
+    winners = np.empty((batch, n_neurons), dtype=np.int64)  # per row: the neurons firing this step
+    n_winners = np.zeros(batch, dtype=np.int64)
+    settled = np.zeros(n_neurons, dtype=np.bool_)  # column norm exactly 1.0f and column unchanged since
+    win_slot = np.full(n_neurons, -1, dtype=np.int64)  # neuron -> its row of P^T this step
+    win_cols = np.empty(n_neurons, dtype=np.int64)
+    potentiation = np.empty((n_neurons, n_inputs), dtype=np.float32)  # P^T, one row per winning column
+    input_slot = np.full(n_inputs, -1, dtype=np.int64)  # input -> its row of D this step
+    inputs_used = np.empty(n_inputs, dtype=np.int64)
+    depression = np.empty((n_inputs, n_neurons), dtype=np.float32)  # one row per active input
+    p_row = np.zeros(n_neurons, dtype=np.float32)
+    zero_row = np.zeros(n_neurons, dtype=np.float32)
+    squares = np.empty(n_neurons, dtype=np.float32)
+    scale = np.empty(n_neurons, dtype=np.float32)
+    fired_total = np.zeros(n_neurons, dtype=np.float32)
+    partials = np.empty((batch, n_neurons), dtype=np.float32)
+    starts = np.empty(n_inputs + 1, dtype=np.int64)
+    members = np.empty(batch * n_inputs, dtype=np.int64)
+    ready = False  # this step's lists and currents were made while normalising the last step's weights
+    for t in range(timesteps):
+        if not ready:
+            for b in range(batch):
+                n_active[b] = _active_inputs(spikes[b, t], index[b])
+                _blocked_sum(weights, index[b], n_active[b], block, current[b], partial)
+        ready = False
+        for b in range(batch):
+            row_voltage, row_current, row_fired = voltage[b], current[b], fired[b]
+            n_cand = 0
+            for j in range(n_neurons):  # branch-free: vectorised
+                v = beta * row_voltage[j] + row_current[j]
+                candidate = v > theta[j]
+                row_fired[j] = candidate
+                row_voltage[j] = zero if candidate else v
+                n_cand += candidate
+            n_winners[b] = 0
+            if n_cand > 0 and wta:  # the first candidate with the largest current fires
+                best = -1
+                best_current = np.float32(-np.inf)
+                for j in range(n_neurons):
+                    if row_fired[j]:
+                        row_fired[j] = False
+                        if best < 0 or row_current[j] > best_current:
+                            best_current = row_current[j]
+                            best = j
+                row_fired[best] = True
+                winners[b, 0] = best
+                n_winners[b] = 1
+            elif n_cand > 0:
+                for j in range(n_neurons):
+                    if row_fired[j]:
+                        winners[b, n_winners[b]] = j
+                        n_winners[b] += 1
+        for b in range(batch):
+            for i in range(n_inputs):
+                pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
+            if n_winners[b] > 0 or row_traced[b]:  # y_bj = 0 keep + 0 = 0 in a row that has never fired
+                for j in range(n_neurons):
+                    post_trace[b, j] = post_trace[b, j] * post_keep + (one if fired[b, j] else zero)
+            for w in range(n_winners[b]):
+                j = winners[b, w]
+                fired_total[j] += one
+                traced[j] = True
+                row_traced[b] = True
+        n_win = 0
+        for b in range(batch):
+            for w in range(n_winners[b]):
+                j = winners[b, w]
+                if win_slot[j] < 0:
+                    win_slot[j] = n_win
+                    win_cols[n_win] = j
+                    potentiation[n_win] = zero
+                    n_win += 1
+                sums = potentiation[win_slot[j]]
+                trace = pre_trace[b]
+                for i in range(n_inputs):
+                    sums[i] += trace[i]
+        n_used = 0
+        for b in range(batch):
+            if row_traced[b]:
+                for a in range(n_active[b]):
+                    i = index[b, a]
+                    if input_slot[i] < 0:
+                        input_slot[i] = n_used
+                        inputs_used[n_used] = i
+                        depression[n_used] = zero
+                        n_used += 1
+                    sums = depression[input_slot[i]]
+                    trace = post_trace[b]
+                    for j in range(n_neurons):
+                        sums[j] += trace[j]
+        n_columns = 0
+        for j in range(n_neurons):
+            if traced[j] or (weight_norm and not settled[j]):
+                n_columns += 1
+        if n_columns > 0:
+            squares[:] = zero
+            for i in range(n_inputs):
+                for q in range(n_win):
+                    p_row[win_cols[q]] = potentiation[q, i]
+                d_row = depression[input_slot[i]] if input_slot[i] >= 0 else zero_row
+                row = weights[i]
+                for j in range(n_neurons):
+                    w = row[j]
+                    delta = a_plus * (w_max - w) * p_row[j] - a_minus * w * d_row[j]
+                    w = min(max(w + delta, zero), w_max)
+                    row[j] = w
+                    squares[j] += w * w
+                for q in range(n_win):
+                    p_row[win_cols[q]] = zero
+            if weight_norm:
+                dividing = False
+                for j in range(n_neurons):
+                    scale[j] = one
+                    if traced[j] or not settled[j]:
+                        scale[j] = max(np.sqrt(squares[j]), tiny)
+                        settled[j] = scale[j] == one
+                        dividing = dividing or not settled[j]
+                if dividing and t + 1 < timesteps:
+                    _divide_and_sum(
+                        weights, scale, spikes[:, t + 1], index, n_active, block, current, partials, starts, members
+                    )
+                    ready = True
+                elif dividing:
+                    for i in range(n_inputs):
+                        row = weights[i]
+                        for j in range(n_neurons):
+                            row[j] = row[j] / scale[j]
+        for q in range(n_win):
+            win_slot[win_cols[q]] = -1
+        for u in range(n_used):
+            input_slot[inputs_used[u]] = -1
+    return fired_total
+
+
+@compiled
+def _divide_and_sum(
+    weights: np.ndarray,  # (inputs, neurons) float32: divided by scale in place
+    scale: np.ndarray,  # (neurons,) float32
+    spikes: np.ndarray,  # (B, inputs) the next step's input spikes
+    index: np.ndarray,  # (B, inputs) out: the next step's active inputs per row
+    n_active: np.ndarray,  # (B,) out
+    block: int,
+    current: np.ndarray,  # (B, neurons) out: the next step's currents, as _blocked_sum sums them
+    partials: np.ndarray,  # (B, neurons) scratch
+    starts: np.ndarray,  # (inputs + 1,) scratch
+    members: np.ndarray,  # (B inputs,) scratch
+) -> None:
+    """Column normalisation w_ij <- w_ij / n_j fused with the next step's currents, in one pass over W.
+
+    Each row of W, once divided, is added (still in L1) to the currents of the rows b whose input
+    is active next: row b's inputs arrive in increasing order, its first block summed into the
+    total from zero and every later block from zero into a partial added to the total when the
+    block ends, exactly the additions of :func:`_blocked_sum`.
+    """
+    batch, n_inputs = spikes.shape
+    n = weights.shape[1]
+    starts[:] = 0
+    for b in range(batch):
+        n_active[b] = _active_inputs(spikes[b], index[b])
+        for a in range(n_active[b]):
+            starts[index[b, a] + 1] += 1
+    for i in range(n_inputs):
+        starts[i + 1] += starts[i]
+    for b in range(batch):  # rows of each input, increasing (starts[i] is the cursor, restored below)
+        for a in range(n_active[b]):
+            i = index[b, a]
+            members[starts[i]] = b
+            starts[i] += 1
+    for i in range(n_inputs - 1, 0, -1):
+        starts[i] = starts[i - 1]
+    starts[0] = 0
+    open_block = np.full(batch, -1, dtype=np.int64)  # per row: the block being summed (-1: none yet)
+    into_total = np.ones(batch, dtype=np.bool_)  # the open block is the row's first: summed into the total
+    for i in range(n_inputs):
+        row = weights[i]
+        for j in range(n):
+            row[j] = row[j] / scale[j]
+        here = i // block
+        for m in range(starts[i], starts[i + 1]):
+            b = members[m]
+            if open_block[b] == here:
+                sums = current[b] if into_total[b] else partials[b]
+                for j in range(n):
+                    sums[j] += row[j]
+                continue
+            if open_block[b] >= 0:  # a later block starts: the last one ends
+                if not into_total[b]:
+                    total = current[b]
+                    part = partials[b]
+                    for j in range(n):
+                        total[j] += part[j]
+                into_total[b] = False
+            open_block[b] = here
+            sums = current[b] if into_total[b] else partials[b]
+            for j in range(n):
+                sums[j] = 0 + row[j]
+    for b in range(batch):
+        total = current[b]
+        if open_block[b] < 0:
+            for j in range(n):
+                total[j] = 0
+        elif not into_total[b]:
+            part = partials[b]
+            for j in range(n):
+                total[j] += part[j]
+
+
+@compiled
+def _stdp_windows(
+    limits: np.ndarray,  # (M, B, inputs) int32: bernoulli_limits of each row's firing probabilities
+    seeds: np.ndarray,  # (M, B) int64: generator_seeds of each row's presentation seed
+    sizes: np.ndarray,  # (M,) int64: rows of module m in this batch (0: it sits the batch out)
+    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (blas_block of its rows)
+    timesteps: int,
+    weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
+    theta: np.ndarray,  # (M, neurons) float32
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+) -> np.ndarray:
+    """One training batch of every module: encode module m's rows, then its :func:`_stdp_window`.
+
+    The modules are independent networks, so each one's window is exactly the single network's;
+    returns the spikes per neuron of every module in this batch (M, neurons) float32.
+    """
+    n_modules, batch, n_inputs = limits.shape
+    fired = np.zeros((n_modules, weights.shape[2]), dtype=np.float32)
+    spikes = np.empty((batch, timesteps, n_inputs), dtype=np.uint8)
+    for m in range(n_modules):
+        rows = sizes[m]
+        if rows > 0:
+            _bernoulli_kernel(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows])
+            fired[m] = _stdp_window(
+                spikes[:rows],
+                weights[m],
+                theta[m],
+                beta,
+                wta,
+                pre_keep,
+                post_keep,
+                a_plus,
+                a_minus,
+                w_max,
+                weight_norm,
+                blocks[m],
+            )
+    return fired
+
+
+def stdp_window_kernel(
+    spikes: np.ndarray,
+    weights: np.ndarray,
+    theta: np.ndarray,
+    beta: np.float32,
+    wta: bool,
+    pre_keep: np.float32,
+    post_keep: np.float32,
+    a_plus: np.float32,
+    a_minus: np.float32,
+    w_max: np.float32,
+    weight_norm: bool,
+    block: int,
+) -> np.ndarray:
+    """:func:`_stdp_window` once every array it indexes is checked (InvalidValueError naming it)."""
+    k = "STDP window kernel"
+    require_array(k, "spikes", spikes, SPIKES, ANY3)
+    require_array(k, "weights", weights, (np.float32,), (spikes.shape[2], None), writable=True)
+    require_array(k, "theta", theta, (np.float32,), (weights.shape[1],))
+    require_int(k, "block", block, 1)
+    return _stdp_window(
+        spikes, weights, theta, beta, bool(wta), pre_keep, post_keep, a_plus, a_minus, w_max, bool(weight_norm),
+        int(block),
+    )  # fmt: skip
+
+
+def stdp_windows_kernel(
+    limits: np.ndarray,
+    seeds: np.ndarray,
+    sizes: np.ndarray,
+    blocks: np.ndarray,
+    timesteps: int,
+    weights: np.ndarray,
+    theta: np.ndarray,
+    *args: Any,
+) -> np.ndarray:
+    """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it).
+
+    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm.
+    """
+    k = "STDP windows kernel"
+    require_array(k, "limits", limits, (np.int32,), ANY3)
+    n_modules, batch, n_inputs = limits.shape
+    require_array(k, "seeds", seeds, (np.int64,), (n_modules, batch))
+    require_array(k, "sizes", sizes, (np.int64,), (n_modules,))
+    require_array(k, "blocks", blocks, (np.int64,), (n_modules,))
+    if sizes.size and (sizes.min() < 0 or sizes.max() > batch):
+        raise InvalidValueError(f"{k}: sizes must lie in [0, {batch}], got [{sizes.min()}, {sizes.max()}]")
+    if (blocks[sizes > 0] < 1).any():
+        raise InvalidValueError(f"{k}: blocks must be >= 1 for every module with a batch")
+    steps = require_int(k, "timesteps", timesteps, 0)
+    require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
+    require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
+    if len(args) != 8:
+        raise InvalidValueError(f"{k}: expected 8 scalar parameters, got {len(args)}")
+    return _stdp_windows(limits, seeds, sizes, blocks, steps, weights, theta, *args)
+
+
+def stdp_window(
+    weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``.
+
+    Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
+    and column normalisation, each float32 operation in torch's order, so the weights are bit
+    for bit those of the torch loop when this machine's BLAS orders its sums as probed
+    (:func:`blas_block`, :func:`batch_sums_in_order`). Returns (new weights, spikes per neuron
+    in the batch as float32), or ``None`` when the tensors are not float32 on the CPU or the
+    BLAS order is not reproducible: the caller then runs the torch loop. Homeostasis is the caller's.
+    """
+    batch, _, n_inputs = spikes.shape
+    n_neurons = weights.shape[1]
+    if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
+        return None
+    block = blas_block(batch, n_inputs, n_neurons)
+    if block is None or not batch_sums_in_order(batch, n_inputs, n_neurons):
+        return None
+    updated = weights.detach().clone().contiguous()
+    fired = stdp_window_kernel(
+        as_spike_array(spikes),
+        updated.numpy(),
+        np.ascontiguousarray(theta.detach().numpy()),
+        np.float32(cfg.network.beta),
+        bool(cfg.network.wta),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
+        np.float32(cfg.stdp.a_plus),
+        np.float32(cfg.stdp.a_minus),
+        np.float32(cfg.stdp.w_max),
+        bool(cfg.stdp.weight_norm),
+        block,
+    )
+    return updated, torch.from_numpy(fired)
+
+
+def stdp_windows(
+    weights: np.ndarray,
+    theta: np.ndarray,
+    limits: np.ndarray,
+    seeds: np.ndarray,
+    sizes: np.ndarray,
+    cfg: Config,
+    *,
+    threads: int = 1,
+) -> np.ndarray | None:
+    """One training batch of M independent modules, compiled: :func:`stdp_window` for each, side by side.
+
+    ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
+    module m's batch is its first ``sizes[m]`` rows of ``limits`` (M, B, inputs) int32
+    (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
+    kernel exactly as :func:`bernoulli_spikes` encodes them, so module m's weights are those of
+    ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
+    modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
+    not used). Returns the spikes per neuron (M, n) float32, or ``None`` when this machine's BLAS
+    order is not reproducible for some batch size (the caller then runs the torch loop).
+    """
+    n_modules, _, n_inputs = limits.shape
+    n_neurons = weights.shape[2]
+    blocks = np.zeros(n_modules, dtype=np.int64)
+    for size in sorted({int(s) for s in sizes if s > 0}):
+        block = blas_block(size, n_inputs, n_neurons)
+        if block is None or not batch_sums_in_order(size, n_inputs, n_neurons):
+            return None
+        blocks[np.asarray(sizes) == size] = block
+    args = (
+        np.float32(cfg.network.beta),
+        bool(cfg.network.wta),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
+        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
+        np.float32(cfg.stdp.a_plus),
+        np.float32(cfg.stdp.a_minus),
+        np.float32(cfg.stdp.w_max),
+        bool(cfg.stdp.weight_norm),
+    )
+    timesteps = int(cfg.encoder.timesteps)
+    sizes = np.ascontiguousarray(sizes, dtype=np.int64)
+
+    def run(part: slice) -> np.ndarray:
+        return stdp_windows_kernel(
+            limits[part], seeds[part], sizes[part], blocks[part], timesteps, weights[part], theta[part], *args
+        )
+
+    parts = module_slices(n_modules, threads)
+    if len(parts) == 1:
+        return run(parts[0])
+    with ThreadPoolExecutor(max_workers=len(parts)) as pool:
+        return np.concatenate(list(pool.map(run, parts)))
