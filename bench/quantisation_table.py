@@ -7,11 +7,11 @@ For every seed it runs exactly these commands (and reuses any file already writt
     vprsnn-export train --data DATA/places.csv --subset DATA/subset_100_places.csv \\
         --reference summer --seed S --out OUT/seedS.npz --quiet
     vprsnn-export evaluate OUT/seedS.npz --query winter --k 1,5 --json --quiet
-    vprsnn-export quantize OUT/seedS.npz --bits 8,6,4,3,2 SCHEME_FLAGS --out OUT/seedS_models --json --quiet
+    vprsnn-export quantize OUT/seedS.npz --bits 8,6,4,3,2 SCHEME_FLAGS --out OUT/seedS_models --force --json --quiet
     vprsnn-export simulate OUT/seedS_models/model_<b>bit_<scheme>.npz --query winter --k 1,5 \\
         --json --quiet --compare OUT/seedS.npz
 
-with SCHEME_FLAGS "" (per-tensor, max) and "--per-neuron" (per-neuron, max) by default;
+with SCHEME_FLAGS "--per-tensor" (per-tensor, max) and "--per-neuron" (per-neuron, max) by default;
 --schemes also offers per-tensor-mse, per-neuron-mse ("--per-neuron --scale mse") and the
 threshold-folded per-neuron-max-folded / per-neuron-mse-folded ("... --fold-thresholds").
 It prints W+Prob accuracy and R@100P at k=1 and k=5 as mean +- std over the seeds
@@ -32,9 +32,9 @@ import numpy as np
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/nordland_64x32_summer_winter"
 SCHEMES = {
-    "per-tensor": [],
+    "per-tensor": ["--per-tensor"],
     "per-neuron": ["--per-neuron"],
-    "per-tensor-mse": ["--scale", "mse"],
+    "per-tensor-mse": ["--per-tensor", "--scale", "mse"],
     "per-neuron-mse": ["--per-neuron", "--scale", "mse"],
     "per-neuron-max-folded": ["--per-neuron", "--fold-thresholds"],
     "per-neuron-mse-folded": ["--per-neuron", "--scale", "mse", "--fold-thresholds"],
@@ -80,7 +80,18 @@ def seed_results(seed: int, out: Path, bits: str, schemes: list[str]) -> dict:
     models = out / f"seed{seed}_models"
     for scheme in schemes:
         quantised = json.loads(
-            cli("quantize", str(ckpt), "--bits", bits, *SCHEMES[scheme], "--out", str(models), "--json", "--quiet")
+            cli(
+                "quantize",
+                str(ckpt),
+                "--bits",
+                bits,
+                *SCHEMES[scheme],
+                "--out",
+                str(models),
+                "--force",
+                "--json",
+                "--quiet",
+            )
         )
         for entry in quantised["models"]:
             result[f"{entry['bits']}bit {scheme}"] = json.loads(
