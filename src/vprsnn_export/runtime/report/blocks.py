@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from vprsnn_export.readout.strategies import STRATEGIES
 
 from ..results import METRICS, RunSummary, VerifiedRun, VerifyReport
-from ..verify import TOLERANCE_MEANING
+from ..verify.checks import TOLERANCE_MEANING
 from .labels import METRIC_TITLES, data_note, ms, network_label, points, row_label, signed_pct, strategy_title, verdict
 from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weights
 

@@ -12,7 +12,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.fileio import parse_json
 
 from ..results import ReportError, VerifyReport
-from ..verify import build_report, summarise_runs
+from ..verify.summary import build_report, summarise_runs
 
 REPORT_JSON = "report.json"
 
