@@ -42,13 +42,9 @@ from vprsnn_export.fileio import (
     sha256_file,
     staging_folder,
 )
-from vprsnn_export.targets.nir_target import (
-    CONSUMERS,
-    WTA_INHIBITION,
-    apply_readout_rule,
-    load_graph,
-    spike_agreement,
-)
+from vprsnn_export.targets.nir_read import load_graph
+from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
+from vprsnn_export.targets.nir_target import WTA_INHIBITION, apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
 from .conformance import (
