@@ -41,7 +41,8 @@ from vprsnn_export.targets.loihi_target import (
 from vprsnn_export.targets.nir_read import read_nir
 from vprsnn_export.targets.nir_runners import generic_consumer_raster, snntorch_consumer_raster
 from vprsnn_export.targets.nir_target import apply_readout_rule, build_graph, write_nir
-from vprsnn_export.targets.onnx_target import run_onnx_outputs, write_onnx
+from vprsnn_export.targets.onnx_session import run_onnx_outputs
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.targets.reference_stepper import reference_run
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
