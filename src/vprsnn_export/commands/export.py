@@ -36,7 +36,7 @@ from ..runtime.exporting import (
     load_source,
     parse_export_targets,
 )
-from ..targets.loihi_target import budget_table
+from ..targets.loihi_budget import budget_table
 from ..targets.nir_target import WTA_INHIBITION
 from ..targets.registry import TARGETS
 from ._common import add_data_options, add_runtime_options, format_table, integer, print_json
