@@ -25,7 +25,8 @@ from vprsnn_export.encoding import encode, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runtime.exporting import load_source
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
+from vprsnn_export.targets.onnx_session import run_session, session
+from vprsnn_export.targets.onnx_target import write_onnx
 
 COLUMNS = (
     ("backend", "backend"),

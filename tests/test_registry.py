@@ -28,8 +28,10 @@ from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strat
 from vprsnn_export.registry import Registry
 from vprsnn_export.runtime.conformance import cross_implementation, parse_targets, read_back, target_path, write_targets
 from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, readout_rows
-from vprsnn_export.runtime.exporting import ExportSource, export_all, export_and_check, parse_export_targets
-from vprsnn_export.runtime.report import row_label, write_report
+from vprsnn_export.runtime.exporting import ExportSource, export_and_check
+from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
+from vprsnn_export.runtime.report import write_report
+from vprsnn_export.runtime.report.labels import row_label
 from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from vprsnn_export.targets.registry import TARGETS, Network, Target, WriteOptions, integer
 

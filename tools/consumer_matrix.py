@@ -36,7 +36,8 @@ from vprsnn_export.runtime.consumer_gate import decided_places
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_consumers import MATRIX_CONSUMERS, ConsumerUnavailable, run_consumer
 from vprsnn_export.targets.nir_target import apply_readout_rule, write_nir
-from vprsnn_export.targets.onnx_target import run_onnx_outputs, write_onnx
+from vprsnn_export.targets.onnx_session import run_onnx_outputs
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.threads import set_threads
 
 FILES = ("float", "8bit", "4bit", "2bit", "8bit-folded", "4bit-folded", "2bit-folded")

@@ -50,8 +50,10 @@ from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
 from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from .targets.intsim import IntegerNetwork
 from .targets.loihi_target import read_loihi_model, write_loihi
-from .targets.nir_target import apply_readout_rule, read_nir, write_nir
-from .targets.onnx_target import OnnxBackend, write_onnx
+from .targets.nir_read import read_nir
+from .targets.nir_target import apply_readout_rule, write_nir
+from .targets.onnx_session import OnnxBackend
+from .targets.onnx_target import write_onnx
 from .targets.reference_stepper import ReferenceStepper
 from .targets.registry import TARGETS, Target
 from .threads import set_threads

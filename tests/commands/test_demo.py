@@ -6,8 +6,8 @@ from vprsnn_export.cli import main
 from vprsnn_export.commands.demo import DEMO_BITS
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.targets.loihi_target import read_loihi_model
-from vprsnn_export.targets.nir_target import read_nir
-from vprsnn_export.targets.onnx_target import read_onnx
+from vprsnn_export.targets.nir_read import read_nir
+from vprsnn_export.targets.onnx_session import read_onnx
 
 
 def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):

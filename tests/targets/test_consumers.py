@@ -31,7 +31,8 @@ from vprsnn_export.config import Config, preset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.nir_target import CONSUMERS, apply_readout_rule, write_nir
+from vprsnn_export.targets.nir_runners import CONSUMERS
+from vprsnn_export.targets.nir_target import apply_readout_rule, write_nir
 
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 PACKAGE = {

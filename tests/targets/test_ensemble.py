@@ -29,24 +29,13 @@ from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.evaluation import ensemble_layout, readout_scores
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.loihi_target import (
-    LOIHI1,
-    LOIHI2,
-    budget_table,
-    core_budget,
-    read_loihi,
-    read_loihi_model,
-    write_loihi,
-)
-from vprsnn_export.targets.nir_target import (
-    apply_readout_rule,
-    build_graph,
-    generic_consumer_raster,
-    read_nir,
-    snntorch_consumer_raster,
-    write_nir,
-)
-from vprsnn_export.targets.onnx_target import run_onnx_outputs, write_onnx
+from vprsnn_export.targets.loihi_budget import LOIHI1, LOIHI2, budget_table, core_budget
+from vprsnn_export.targets.loihi_target import read_loihi, read_loihi_model, write_loihi
+from vprsnn_export.targets.nir_read import read_nir
+from vprsnn_export.targets.nir_runners import generic_consumer_raster, snntorch_consumer_raster
+from vprsnn_export.targets.nir_target import apply_readout_rule, build_graph, write_nir
+from vprsnn_export.targets.onnx_session import run_onnx_outputs
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.targets.reference_stepper import reference_run
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 

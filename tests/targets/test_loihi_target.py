@@ -18,19 +18,15 @@ from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.fileio import sha256_bytes
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.loihi_target import (
+from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
     HEADER_NAME,
     NETX_NAME,
     WEIGHTS_NAME,
     describe,
-    lava_weight_matrix,
     lava_weights,
-    npz_bytes,
-    read_loihi,
-    read_loihi_model,
-    write_loihi,
 )
+from vprsnn_export.targets.loihi_target import lava_weight_matrix, npz_bytes, read_loihi, read_loihi_model, write_loihi
 
 HERE = Path(__file__).resolve().parent
 RUN_LAVA = HERE / "lava_conformance" / "run_lava.py"

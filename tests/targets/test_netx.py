@@ -20,7 +20,8 @@ import torch
 from vprsnn_export.config import preset
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.loihi_target import NETX_NAME, write_loihi
+from vprsnn_export.targets.loihi_description import NETX_NAME
+from vprsnn_export.targets.loihi_target import write_loihi
 
 RUN_LAVA = Path(__file__).resolve().parent / "lava_conformance" / "run_lava.py"
 

@@ -17,16 +17,9 @@ from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.nir_target import (
-    DT_SECONDS,
-    apply_readout_rule,
-    build_graph,
-    generic_consumer_raster,
-    read_nir,
-    snntorch_consumer_raster,
-    spike_agreement,
-    write_nir,
-)
+from vprsnn_export.targets.nir_read import read_nir
+from vprsnn_export.targets.nir_runners import generic_consumer_raster, snntorch_consumer_raster, spike_agreement
+from vprsnn_export.targets.nir_target import DT_SECONDS, apply_readout_rule, build_graph, write_nir
 
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 

@@ -22,17 +22,8 @@ from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
-from vprsnn_export.targets.onnx_target import (
-    IR_VERSION,
-    OPSET,
-    OnnxBackend,
-    build_onnx,
-    read_onnx,
-    readout_matrix_nodes,
-    run_onnx,
-    run_onnx_outputs,
-    write_onnx,
-)
+from vprsnn_export.targets.onnx_session import OnnxBackend, read_onnx, run_onnx, run_onnx_outputs
+from vprsnn_export.targets.onnx_target import IR_VERSION, OPSET, build_onnx, readout_matrix_nodes, write_onnx
 
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 

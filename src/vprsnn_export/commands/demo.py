@@ -29,7 +29,8 @@ from ..export.model import DEFAULT_BITS
 from ..modules import module_count
 from ..preprocess import CHANNELS
 from ..runtime.evaluation import ReadoutOptions
-from ..runtime.report import points, write_report
+from ..runtime.report import write_report
+from ..runtime.report.labels import points
 from ..runtime.results import BitsResult, VerifiedRun
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..targets.registry import TARGETS

@@ -27,16 +27,11 @@ from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS
 from ..runtime.consumer_gate import check_tolerance
-from ..runtime.exporting import (
-    MANIFEST_NAME,
-    check_deploy_folder,
-    check_presentations,
-    export_and_check,
-    integer_model,
-    load_source,
-    parse_export_targets,
-)
-from ..targets.loihi_target import budget_table
+from ..runtime.exporting import export_and_check, load_source
+from ..runtime.exporting.checks import check_presentations
+from ..runtime.exporting.folder import MANIFEST_NAME, check_deploy_folder
+from ..runtime.exporting.source import integer_model, parse_export_targets
+from ..targets.loihi_budget import budget_table
 from ..targets.nir_target import WTA_INHIBITION
 from ..targets.registry import TARGETS
 from ._common import add_data_options, add_runtime_options, format_table, integer, print_json

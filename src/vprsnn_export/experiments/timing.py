@@ -18,7 +18,8 @@ from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.onnx_target import run_session, session, write_onnx
+from vprsnn_export.targets.onnx_session import run_session, session
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.train import Presentation, train_network
 
 from .common import Settings, load, provenance, trained_checkpoint

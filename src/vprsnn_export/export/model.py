@@ -28,8 +28,8 @@ is checked against (docs/fixed-point.md §5.1 has the same table):
                                                                                   tests/targets/test_device_paths.py::test_torch_integer_path_equals_the_cpu_kernel
     reference stepper (Python ints)         targets/reference_stepper.reference_run  this docstring executed literally (the oracle of the two above)
     ONNX graph (onnxruntime)                targets/onnx_target.step_body         tests/targets/test_onnx_target.py::test_property_onnx_equals_simulator
-    NIR file read back + readout rule       targets/nir_target, nir_semantics     tests/targets/test_nir_target.py::test_fixed_point_round_trip_is_exact,
-                                                                                  ::test_readout_rule_on_the_wta_off_raster_gives_the_integer_network
+    NIR file read back + readout rule       targets/nir_target, nir_read          tests/targets/test_nir_target.py::test_fixed_point_round_trip_is_exact,
+                                            (nir_semantics)                       ::test_readout_rule_on_the_wta_off_raster_gives_the_integer_network
     NIR consumer runners                    targets/nir_consumers.run_consumer    tests/targets/test_consumers.py::test_each_consumer_runs_a_single_threshold_fixed_point_file_exactly
     Loihi-style description (Lava, netx)    targets/loihi_target                  tests/targets/test_loihi_target.py::test_round_trip_rebuilds_the_model_exactly,
                                                                                   ::test_lava_runs_the_description_spike_for_spike, tests/targets/test_netx.py

@@ -29,8 +29,9 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavailable, available, run_consumer
+from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_semantics import float_consumers
-from vprsnn_export.targets.nir_target import apply_readout_rule, load_graph
+from vprsnn_export.targets.nir_target import apply_readout_rule
 
 from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult

@@ -60,7 +60,7 @@ from vprsnn_export.readout.regions import ModuleLayout, regularised_calibration
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runtime.evaluation import ensemble_layout
 from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.onnx_target import read_onnx, run_session, session
+from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
 
 BACKENDS = ("auto", "float", "integer", "onnx")
 STREAM = "localize"

@@ -327,7 +327,7 @@ class VerifiedRun(JsonDataclass):
     checkpoint: str | None = field(
         default=None, metadata=json_options(omit="none")
     )  # the checkpoint file, when the caller names it
-    # queries of the step-level checks (None: all; runtime.verify.RASTER_BUDGET)
+    # queries of the step-level checks (None: all; runtime.verify.run.RASTER_BUDGET)
     recorded_queries: int | None = field(default=None, metadata=json_options(omit="none"))
 
     __json_extra__ = ("passed",)

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.errors import VprError
-from vprsnn_export.targets.nir_target import CONSUMERS, norse_consumer_raster
+from vprsnn_export.targets.nir_runners import CONSUMERS, norse_consumer_raster
 
 NORSE_DEFAULT_DT = 1e-3  # norse.torch.from_nir's default dt
 

@@ -1,4 +1,4 @@
-"""NIR export and import of the network, built as a ``nir.NIRGraph`` directly.
+"""NIR export of the network, built as a ``nir.NIRGraph`` directly (read back: :mod:`.nir_read`).
 
 Graph (node names are fixed; edges (src, dst)):
 
@@ -28,9 +28,9 @@ With k = 0 such a consumer computes the WTA-off network (every candidate spikes,
 superset of the network's spikes). ``wta_node=False`` leaves the node out for importers
 that mishandle recurrent graphs (snnTorch 1.0, Norse 1.1).
 
-Alongside: :func:`generic_consumer_raster` runs a file through nirtorch with NIR's own
-LIF equations and :func:`snntorch_consumer_raster` through snnTorch's importer, so the
-agreement of a metadata-blind consumer can be measured (:func:`spike_agreement`).
+Alongside, in :mod:`.nir_runners`: :func:`generic_consumer_raster` runs a file through nirtorch
+with NIR's own LIF equations and :func:`snntorch_consumer_raster` through snnTorch's importer, so
+the agreement of a metadata-blind consumer can be measured (:func:`spike_agreement`).
 """
 
 from __future__ import annotations
@@ -43,11 +43,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
-from vprsnn_export.config import Config, wta_group
-from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
+from vprsnn_export.config import wta_group
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.modules import module_count, module_regions
 from vprsnn_export.targets.nir_semantics import float_consumers, integer_semantics
@@ -311,202 +310,6 @@ def write_nir(
     return atomic_write_bytes(path, buffer.getvalue())
 
 
-def load_graph(path: str | Path):
-    """``nir.read`` with every failure turned into a ModelFileError naming the file."""
-    import nir
-
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError("no such NIR file", path)
-    try:
-        return nir.read(path)
-    except Exception as exc:  # h5py raises OSError, nir KeyError/ValueError/AssertionError on damage
-        raise ModelFileError(
-            f"not a readable NIR file (truncated or corrupt: {type(exc).__name__}: {exc})", path
-        ) from None
-
-
-def read_nir(path: str | Path) -> Source:
-    """Rebuild the exported network: a Checkpoint (float) or a FixedPointModel (fixed point).
-
-    Weights and thresholds come from the graph's nodes; the rest (config, decay, scales,
-    calibration) from its metadata. Any missing or inconsistent piece is a ModelFileError.
-    """
-    path = Path(path)
-    graph = load_graph(path)
-    try:
-        return graph_to_source(graph, path)
-    except ModelFileError:
-        raise
-    except (KeyError, TypeError, ValueError, AttributeError, VprError) as exc:
-        raise ModelFileError(f"not a vprsnn NIR export ({type(exc).__name__}: {exc})", path) from None
-
-
-def graph_to_source(graph, path: Path) -> Source:
-    import nir
-
-    meta = graph.metadata
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
-    if int(meta.get("format_version", -1)) != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
-    edges = sorted(map(tuple, graph.edges))
-    expected = EDGES if "wta" in graph.nodes else PLAIN_EDGES
-    missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
-    if missing or edges != sorted(expected):
-        raise ModelFileError(
-            f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
-        )
-    linear, lif = graph.nodes["linear"], graph.nodes["lif"]
-    if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
-        raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
-    header = parse_json(str(meta["header_json"]), "header_json")
-    weight = np.asarray(linear.weight).T
-    thresholds = np.asarray(lif.v_threshold)
-    if str(meta["kind"]) == "fixed-point":
-        model = fixed_point_from_graph(header, meta, weight, thresholds, path)
-        check_dynamics(lif, effective_beta(model), float(meta["dt"]), path)
-        return model
-    ckpt = checkpoint_from_graph(header, meta, weight, thresholds, path)
-    check_dynamics(lif, effective_beta(ckpt), float(meta["dt"]), path)
-    return ckpt
-
-
-def check_dynamics(lif, beta: float, dt: float, path: Path) -> None:
-    """The node's tau and r must be the ones this beta and dt give (so node and metadata agree)."""
-    import nir
-
-    if isinstance(lif, nir.IF):
-        if beta < 1.0:
-            raise ModelFileError(f"an IF node but beta = {beta} < 1 in the metadata", path)
-        return
-    expect_tau, expect_r = dt / (1.0 - beta), 1.0 / (1.0 - beta)
-    if not (np.allclose(lif.tau, expect_tau, rtol=1e-9) and np.allclose(lif.r, expect_r, rtol=1e-9)):
-        raise ModelFileError(f"the LIF node's tau/r disagree with beta = {beta} and dt = {dt} in the metadata", path)
-    if np.any(np.asarray(lif.v_reset) != 0) or np.any(np.asarray(lif.v_leak) != 0):
-        raise ModelFileError("the LIF node must have v_reset = 0 and v_leak = 0", path)
-
-
-def integral(array: np.ndarray, name: str, path: Path) -> np.ndarray:
-    if not np.all(np.isfinite(array)) or np.any(array != np.round(array)):
-        raise ModelFileError(f"{name} must hold integers in a fixed-point export", path)
-    return np.round(array).astype(np.int32)
-
-
-def fixed_point_from_graph(
-    header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path
-) -> FixedPointModel:
-    """The fixed-point model of a NIR file: its embedded header and the graph's integer weights and thresholds."""
-    arrays = {
-        "weight_mantissa": integral(weight, "linear.weight", path),
-        "scale_multiplier": np.asarray(meta["wta_score_multiplier"]).astype(np.int32),
-        "threshold": integral(thresholds, "lif.v_threshold", path),
-        **{name: np.asarray(meta[name]).astype(np.int64) for name in MODEL_ARRAYS[3:]},
-    }
-    return model_from_header(header, arrays, path, "NIR fixed-point header")
-
-
-def checkpoint_from_graph(
-    header: dict, meta: dict, weight: np.ndarray, thresholds: np.ndarray, path: Path
-) -> Checkpoint:
-    if header.get("format") != CHECKPOINT_FORMAT:
-        raise ModelFileError(f"the embedded header is not a checkpoint header ({header.get('format')!r})", path)
-    ckpt = Checkpoint(
-        config=Config.from_dict(header["config"]),
-        weights=np.ascontiguousarray(weight.astype(np.float32)),
-        thresholds=thresholds.astype(np.float32),
-        calibration=np.asarray(meta["calibration"]).astype(np.int64),
-        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
-        reference_traversals=list(header["reference_traversals"]),
-        data=dict(header.get("data", {})),
-        history=list(header.get("history", [])),
-        version=str(header.get("package_version", "unknown")),
-    )
-    validate_checkpoint(ckpt, path)
-    return ckpt
-
-
-class EulerLIF(torch.nn.Module):
-    """NIR's LIF (or IF) as written in the file, stepped by forward Euler at ``dt``: no metadata used.
-
-    v <- v + dt/tau ((v_leak - v) + r I)      (IF, dv/dt = r I: v <- v + (dt r) I)
-    z = v > v_threshold;  v <- v_reset where z
-    """
-
-    def __init__(self, node, dt: float) -> None:
-        import nir
-
-        super().__init__()
-        n = np.asarray(node.v_threshold).shape
-        leaky = isinstance(node, nir.LIF)
-        gain = dt / np.asarray(node.tau, dtype=np.float64) if leaky else np.zeros(n)
-        drive = (gain if leaky else dt) * np.asarray(node.r, dtype=np.float64)
-        self.register_buffer("gain", torch.as_tensor(gain))
-        self.register_buffer("drive", torch.as_tensor(drive))
-        self.register_buffer(
-            "v_leak", torch.as_tensor(np.asarray(getattr(node, "v_leak", np.zeros(n)), dtype=np.float64))
-        )
-        self.register_buffer("v_threshold", torch.as_tensor(np.asarray(node.v_threshold, dtype=np.float64)))
-        self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
-
-    gain: torch.Tensor
-    drive: torch.Tensor
-    v_leak: torch.Tensor
-    v_threshold: torch.Tensor
-    v_reset: torch.Tensor
-
-    def forward(self, x: torch.Tensor, state: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        v = torch.zeros_like(x) if state is None else state
-        v = v + self.gain * (self.v_leak - v) + self.drive * x
-        z = v > self.v_threshold
-        return z.to(x.dtype), torch.where(z, self.v_reset, v)
-
-
-def generic_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS) -> torch.Tensor:
-    """Run a NIR graph through nirtorch's generic interpreter with NIR's own LIF equations.
-
-    This is what a consumer that reads only the nodes (no metadata) computes: float32,
-    forward Euler at ``dt``, every neuron over threshold spikes. Returns (N, T, neurons) bool.
-    """
-    import nir
-    import nirtorch
-
-    node_map = {nir.LIF: lambda node: EulerLIF(node, dt), nir.IF: lambda node: EulerLIF(node, dt)}
-    module = nirtorch.nir_to_torch(graph, node_map)
-    return step_module(module, spikes)
-
-
-def step_module(module, spikes: torch.Tensor) -> torch.Tensor:
-    """Feed (N, T, inputs) one step at a time to a stateful torch module returning (z, state)."""
-    n, timesteps, _ = spikes.shape
-    state = None
-    outputs = []
-    with torch.no_grad():
-        for t in range(timesteps):
-            z, state = module(spikes[:, t].to(torch.float32), state)
-            outputs.append(z.detach().to(torch.bool))
-    return torch.stack(outputs, dim=1)
-
-
-def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
-    """Run a NIR graph through snnTorch's importer (``snntorch.import_from_nir``), stepped per t.
-
-    snnTorch's importer asserts one threshold for all neurons; it raises for files with
-    per-neuron thresholds (quantise with threshold folding to get a single threshold).
-    """
-    import contextlib
-    import copy
-
-    from snntorch.import_nir import import_from_nir
-
-    with contextlib.redirect_stdout(io.StringIO()):
-        module = import_from_nir(copy.deepcopy(graph))
-    return step_module(module, spikes)
-
-
-CONSUMERS_INSTALL = 'pip install -c constraints.txt ".[consumers]"'
-
-
 def consumer_settings(dt: float) -> dict[str, Any]:
     """How to load the file in each NIR consumer so that it computes the WTA-off network (stored as JSON).
 
@@ -540,90 +343,6 @@ def consumer_settings(dt: float) -> dict[str, Any]:
         },
         "then": "apply_readout_rule(graph, input spikes, the consumer's spikes) for the network's raster",
     }
-
-
-def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
-    """A copy of ``graph`` with :func:`consumer_settings` applied for ``consumer`` (norse, spikingjelly).
-
-    norse (LIF):   v_threshold'_j = g_j v_threshold_j,  g_j = dt * (1 / tau_j)   (all float32, Norse's order)
-    spikingjelly:  v_threshold'_j = nextafter(float32(v_threshold_j), +inf)
-    """
-    import copy
-
-    import nir
-
-    adjusted = copy.deepcopy(graph)
-    lif = adjusted.nodes["lif"]
-    threshold32 = torch.as_tensor(np.asarray(lif.v_threshold), dtype=torch.float32)
-    if consumer == "norse":
-        if isinstance(lif, nir.LIF):
-            gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
-            lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
-    elif consumer == "spikingjelly":
-        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
-    else:
-        raise InvalidValueError(f"no load settings for consumer {consumer!r} (norse, spikingjelly)")
-    return adjusted
-
-
-def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS, plain: bool = False) -> torch.Tensor:
-    """Run a NIR graph through Norse's importer (``norse.torch.from_nir``, an optional package) at ``dt``.
-
-    Norse 1.1 ignores the LIF's r (it integrates v <- v + dt/tau (v_leak - v + I)); unless
-    ``plain``, the thresholds are scaled by dt/tau first as :func:`consumer_settings` says. Its graph
-    executor returns the output of the last node it runs, which is ``wta`` when that node is
-    present, so the spikes are read from the executor's cache of the ``lif`` node instead.
-    """
-    import logging
-
-    try:
-        import norse.torch as norse_torch
-    except ImportError:
-        raise InvalidValueError(f"the Norse consumer needs the norse package ({CONSUMERS_INSTALL})") from None
-    logging.getLogger().disabled = True
-    try:
-        module = norse_torch.from_nir(graph if plain else consumer_graph(graph, "norse", dt), dt=dt)
-    finally:
-        logging.getLogger().disabled = False
-    state = None
-    outputs = []
-    with torch.no_grad():
-        for t in range(spikes.shape[1]):
-            _, state = module(spikes[:, t].to(torch.float32), state)
-            outputs.append(state.cache["lif"].detach().to(torch.bool))
-    return torch.stack(outputs, dim=1)
-
-
-def spikingjelly_consumer_raster(
-    graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS, plain: bool = False
-) -> torch.Tensor:
-    """Run a NIR graph through SpikingJelly's importer (``nir_exchange.import_from_nir``, optional) at ``dt``.
-
-    SpikingJelly 2.0 maps the LIF (r = tau/dt) to ``LIFNode(tau/dt, decay_input=False)``:
-    v <- v - v dt/tau + I = beta v + I, and fires at v >= v_threshold; unless ``plain``, the
-    threshold is moved to the next float32 above it as :func:`consumer_settings` says. It
-    refuses (ValueError) per-neuron thresholds.
-    """
-    try:
-        from spikingjelly.activation_based.nir_exchange import import_from_nir
-        from spikingjelly.logger import logger
-    except ImportError:
-        raise InvalidValueError(
-            f"the SpikingJelly consumer needs the spikingjelly package ({CONSUMERS_INSTALL})"
-        ) from None
-    logger.disable("spikingjelly")
-    module = import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly", dt), dt=dt)
-    return step_module(module, spikes)
-
-
-CONSUMERS = {
-    "nirtorch": generic_consumer_raster,
-    "snntorch": lambda graph, spikes: snntorch_consumer_raster(graph, spikes),
-    "norse": norse_consumer_raster,
-    "norse-plain": lambda graph, spikes: norse_consumer_raster(graph, spikes, plain=True),
-    "spikingjelly": spikingjelly_consumer_raster,
-    "spikingjelly-plain": lambda graph, spikes: spikingjelly_consumer_raster(graph, spikes, plain=True),
-}
 
 
 def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
@@ -664,26 +383,3 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
     raster = torch.zeros(grouped.shape, dtype=torch.bool).scatter_(2, winner, True)
     raster &= candidates.reshape(grouped.shape).to(torch.bool).any(dim=2, keepdim=True)
     return raster.reshape(candidates.shape)
-
-
-def spike_agreement(reference: torch.Tensor, consumer: torch.Tensor) -> dict[str, float]:
-    """How a consumer's raster (N, T, neurons) relates to the network's.
-
-    recall: share of the network's spikes the consumer also emits; precision: share of the
-    consumer's spikes that are the network's; exact_steps: share of (presentation, step)
-    with identical spike vectors; top1: share of presentations whose most-spiking neuron
-    (argmax of counts, lowest index on ties) is the same.
-    """
-    ref, out = reference.to(torch.bool), consumer.to(torch.bool)
-    both = int((ref & out).sum())
-    n_ref, n_out = int(ref.sum()), int(out.sum())
-    top_ref = ref.sum(dim=1).argmax(dim=1)
-    top_out = out.sum(dim=1).argmax(dim=1)
-    return {
-        "recall": both / n_ref if n_ref else 1.0,
-        "precision": both / n_out if n_out else 1.0,
-        "exact_steps": float((ref == out).all(dim=2).float().mean()),
-        "top1_neuron": float((top_ref == top_out).float().mean()),
-        "network_spikes": n_ref,
-        "consumer_spikes": n_out,
-    }

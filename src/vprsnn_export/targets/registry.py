@@ -20,8 +20,10 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.registry import Registry
 from vprsnn_export.runs import Backend
 from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
-from vprsnn_export.targets.nir_target import WTA_INHIBITION, read_nir, write_nir
-from vprsnn_export.targets.onnx_target import OnnxBackend, write_onnx
+from vprsnn_export.targets.nir_read import read_nir
+from vprsnn_export.targets.nir_target import WTA_INHIBITION, write_nir
+from vprsnn_export.targets.onnx_session import OnnxBackend
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.targets.statements import loihi_statement, nir_statement, onnx_statement
 
 Network = Checkpoint | FixedPointModel

@@ -11,16 +11,10 @@ from vprsnn_export.cli import main
 from vprsnn_export.dataset import load_dataset
 from vprsnn_export.errors import EXIT_BAD_INPUT
 from vprsnn_export.runtime.evaluation import ReadoutOptions
-from vprsnn_export.runtime.report import (
-    REPORT_HTML,
-    REPORT_JSON,
-    REPORT_MD,
-    ReportError,
-    combine_reports,
-    load_report,
-    write_report,
-)
-from vprsnn_export.runtime.results import VerifyReport
+from vprsnn_export.runtime.report import combine_reports, load_report, write_report
+from vprsnn_export.runtime.report.load import REPORT_JSON
+from vprsnn_export.runtime.report.render import REPORT_HTML, REPORT_MD
+from vprsnn_export.runtime.results import ReportError, VerifyReport
 from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
 
 

@@ -8,7 +8,8 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
-from vprsnn_export.runtime.exporting import MANIFEST_NAME, read_export
+from vprsnn_export.runtime.exporting import read_export
+from vprsnn_export.runtime.exporting.folder import MANIFEST_NAME
 from vprsnn_export.targets import registry as target_registry
 
 TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]

@@ -15,7 +15,6 @@ from vprsnn_export.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runs import SpikeRun
-from vprsnn_export.runtime import verify as verify_module
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,
@@ -34,19 +33,17 @@ from vprsnn_export.runtime.results import (
     VerifiedRun,
     VerifyReport,
 )
-from vprsnn_export.runtime.verify import (
+from vprsnn_export.runtime.verify import VerifyOptions, build_report, summarise_runs, verify_checkpoint
+from vprsnn_export.runtime.verify import run as verify_module
+from vprsnn_export.runtime.verify.checks import (
     DEFAULT_TOLERANCES,
-    VerifyOptions,
-    build_report,
     count_correlations,
     metric_deltas,
     module_rows,
     parse_tolerances,
-    summarise_runs,
     tolerance_checks,
     top1_agreement,
     tv_distance,
-    verify_checkpoint,
 )
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from vprsnn_export.runtime.report import window_share
+from vprsnn_export.runtime.report.plots import window_share
 
 
 def test_a_peaked_histogram_gives_shares_not_densities():

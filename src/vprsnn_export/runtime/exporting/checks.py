@@ -1,0 +1,187 @@
+"""Every written file read back and run beside the project's simulators (:func:`check_exports`): exact checks and measurements."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from vprsnn_export.checkpoint import Checkpoint
+from vprsnn_export.dataset import load_dataset
+from vprsnn_export.encoding import encode, query_spikes
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.targets.nir_read import load_graph
+from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
+from vprsnn_export.targets.nir_target import apply_readout_rule
+from vprsnn_export.targets.registry import TARGETS
+
+from ..conformance import (
+    Contender,
+    backend_of,
+    compare_backends,
+    conformance_rows,
+    read_back,
+    target_path,
+    wprob_readout,
+)
+from ..consumer_gate import consumer_gate, decided_places
+from ..results import Comparison
+from .source import ExportSource
+
+
+@dataclass(frozen=True)
+class CheckRow:
+    """One line of the check table: an exact check (``ok`` True/False) or a measurement (``ok`` None)."""
+
+    target: str
+    check: str
+    ok: bool | None
+    detail: str
+
+    @property
+    def result(self) -> str:
+        return "-" if self.ok is None else ("ok" if self.ok else "FAILED")
+
+    def to_dict(self) -> dict[str, str]:
+        return {"target": self.target, "check": self.check, "result": self.result, "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class ExportChecks:
+    """Every written file read back and run: the exact comparisons and the measurements."""
+
+    spikes: str  # what was presented
+    comparisons: tuple[Comparison, ...]
+    measurements: tuple[CheckRow, ...] = ()
+
+    @property
+    def passed(self) -> bool:
+        return all(c.equal for c in self.comparisons)
+
+    @property
+    def rows(self) -> list[CheckRow]:
+        exact = [
+            CheckRow(r["target"], r["check"], r["result"] == "ok", r["detail"])
+            for r in conformance_rows(self.comparisons)
+        ]
+        return exact + list(self.measurements)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
+
+
+def check_presentations(
+    source: ExportSource,
+    query: str | None,
+    *,
+    data: str | None = None,
+    subset: str | None = None,
+    places: str | None = None,
+    samples: int = 16,
+    progress: bool = False,
+) -> tuple[torch.Tensor, str]:
+    """Query presentations of ``query`` (real data; the model's own data selection unless given),
+    else ``samples`` synthetic Bernoulli trains of random images."""
+    network = source.network
+    cfg = network.config
+    if query:
+        if subset is None and places is None:
+            subset, places = network.data.get("subset"), network.data.get("places")
+        origin = data or network.data.get("source")
+        if not origin:
+            raise InvalidValueError("the model names no data source: give --data")
+        dataset = load_dataset(origin, [query], cfg.preprocess, subset=subset, places=places, progress=progress)
+        images, ids = dataset.traversal(query), dataset.place_ids
+        if samples > 0:
+            images, ids = images[:samples], ids[:samples]
+        return query_spikes(images, ids, query, cfg), f"{len(ids)} '{query}' queries from {dataset.source}"
+    n = samples if samples > 0 else 16
+    rng = np.random.default_rng(cfg.seed)
+    spikes = encode(rng.random((n, cfg.network.n_inputs)).astype(np.float32), list(range(n)), cfg.encoder)
+    return spikes, f"{n} synthetic presentations (uniform random pixels)"
+
+
+def nir_consumer_rows(
+    path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
+) -> list[CheckRow]:
+    """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
+    graph = load_graph(path)
+    try:
+        consumer = CONSUMERS[consumer_name](graph, spikes)
+    except (
+        AssertionError,
+        ValueError,
+    ) as exc:  # snnTorch asserts, SpikingJelly raises ValueError on what they cannot express
+        return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
+    agreement = spike_agreement(raster, consumer)
+    rows: list[CheckRow] = []
+    if "wta" not in graph.nodes:
+        ruled = apply_readout_rule(graph, spikes, consumer)
+        differing = int((ruled != raster.to(torch.bool)).sum())
+        rows.append(
+            CheckRow(
+                "nir",
+                f"{consumer_name} + readout rule (metadata) vs network",
+                None,
+                f"{differing} differing raster entries of {raster.numel()}",
+            )
+        )
+    places = decided_places(network, raster.sum(dim=1).numpy())
+    consumer_places = decided_places(network, consumer.sum(dim=1).numpy())
+    rate = consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1])
+    return [
+        *rows,
+        CheckRow(
+            "nir",
+            f"{consumer_name} (no metadata) vs network",
+            None,
+            f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {rate:.1f} spikes/step",
+        ),
+        CheckRow(
+            "nir",
+            f"{consumer_name} top-1 place (W+Prob) == network's",
+            None,
+            f"{float(np.mean(places == consumer_places)):.3f}",
+        ),
+    ]
+
+
+def check_exports(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    written: Mapping[str, Sequence[Path]],
+    spikes: torch.Tensor,
+    *,
+    spikes_label: str = "",
+    nir_consumer: str = "nirtorch",
+    nir_tolerance: float | None = None,
+    device: torch.device | None = None,
+    progress: bool = False,
+) -> ExportChecks:
+    """Read every written file back and run it against the project's simulator of what it was written from."""
+    comparisons: list[Comparison] = []
+    measurements: list[CheckRow] = []
+    integer = [t for t in TARGETS if t in written and TARGETS.get(t).integer_only]
+    stages = ["nir"] * ("nir" in written) + ["integer"] * bool(integer and model is not None)
+    for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
+        if stage == "nir":
+            network = source.network
+            baseline = backend_of(network, device)
+            base_run = baseline.run(spikes, record=True)
+            path = target_path("nir", written["nir"])
+            contender = read_back("nir", path, network, device)
+            comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
+            if base_run.raster is not None:
+                measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
+                comparisons += consumer_gate(path, network, base_run.raster, spikes, tolerance=nir_tolerance)
+        elif model is not None:
+            contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
+            comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+    return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))

@@ -1,0 +1,198 @@
+"""The deploy folder: written as a whole with its export.json (:func:`export_and_check`), read back (:func:`read_export`)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.fileio import (
+    OutputError,
+    atomic_write_text,
+    check_output_folder,
+    parse_json,
+    publish_folder,
+    sha256_file,
+    staging_folder,
+)
+from vprsnn_export.targets.nir_target import WTA_INHIBITION
+
+from .checks import ExportChecks, check_exports
+from .source import ExportSource, consumer_statements, export_all
+
+MANIFEST_NAME = "export.json"
+
+
+@dataclass(frozen=True)
+class WrittenFile:
+    path: Path
+    sha256: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"path": str(self.path), "sha256": self.sha256}
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What `export` wrote (export.json): the folder, the model, every file with its hash, the consumers, the checks."""
+
+    folder: Path
+    model: str
+    model_sha256: str
+    kind: str
+    files: Mapping[str, tuple[WrittenFile, ...]]
+    consumers: Mapping[str, str]
+    checks: ExportChecks | None = None
+
+    @property
+    def passed(self) -> bool:
+        return self.checks is None or self.checks.passed
+
+    def written(self, target: str) -> Path:
+        """The (first) file written for ``target``: ``result.written("onnx")``."""
+        if target not in self.files:
+            raise InvalidValueError(f"no {target} file was written (targets: {', '.join(self.files) or 'none'})")
+        return self.files[target][0].path
+
+    def to_dict(self) -> dict[str, Any]:
+        data: dict[str, Any] = {
+            "folder": str(self.folder),
+            "model": self.model,
+            "model_sha256": self.model_sha256,
+            "kind": self.kind,
+            "files": {t: [f.to_dict() for f in files] for t, files in self.files.items()},
+            "consumers": dict(self.consumers),
+        }
+        if self.checks is not None:
+            data["checks"] = self.checks.to_dict()
+        return data
+
+
+def export_and_check(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    targets: Sequence[str],
+    out: str | Path,
+    *,
+    inhibition: float = WTA_INHIBITION,
+    wta_node: bool = False,
+    spikes: torch.Tensor | None = None,
+    spikes_label: str = "",
+    nir_consumer: str = "nirtorch",
+    nir_tolerance: float | None = None,
+    device: torch.device | None = None,
+    overwrite: bool = True,
+    progress: bool = False,
+) -> ExportResult:
+    """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
+
+    The folder is built as a whole beside ``out`` and then put in its place
+    (:func:`vprsnn_export.fileio.publish_folder`), export.json last: a reader never sees new
+    files beside old ones, and an interrupted export leaves the previous folder as it was.
+    An existing ``out`` must be empty or an earlier export (it holds export.json); that one is
+    replaced only with ``overwrite=True``.
+    """
+    out = Path(out)
+    check_deploy_folder(out, overwrite=overwrite)
+    staging = staging_folder(out)
+    try:
+        written = export_all(source, model, targets, staging, inhibition=inhibition, wta_node=wta_node)
+        checks = None
+        if spikes is not None:
+            checks = check_exports(
+                source,
+                model,
+                written,
+                spikes,
+                spikes_label=spikes_label,
+                nir_consumer=nir_consumer,
+                nir_tolerance=nir_tolerance,
+                device=device,
+                progress=progress,
+            )
+        result = ExportResult(
+            folder=out,
+            model=str(source.path),
+            model_sha256=source.sha256,
+            kind=source.kind,
+            files={
+                t: tuple(WrittenFile(out / p.relative_to(staging), sha256_file(p)) for p in paths)
+                for t, paths in written.items()
+            },
+            consumers=consumer_statements(source, model, targets, wta_node, inhibition),
+            checks=checks,
+        )
+        atomic_write_text(staging / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+        publish_folder(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return result
+
+
+def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
+    """OutputError unless ``out`` is new, an empty folder, or (``overwrite``) an earlier export's folder."""
+    check_output_folder(out)
+    if not out.exists():
+        return
+    if (out / MANIFEST_NAME).is_file():
+        if not overwrite:
+            raise OutputError(f"holds an earlier export ({MANIFEST_NAME}): --force to replace it", out)
+        return
+    if any(out.iterdir()):
+        raise OutputError(f"is a folder with other files and no {MANIFEST_NAME}: give a new or empty folder", out)
+
+
+def read_export(folder: str | Path) -> ExportResult:
+    """Read a deploy folder's export.json and check every file it lists against its sha256.
+
+    ModelFileError when the manifest is missing or corrupt, or a file is missing or differs
+    from what export wrote (an interrupted or mixed folder); the checks are not re-run.
+    """
+    folder = Path(folder)
+    manifest = folder / MANIFEST_NAME
+    if not manifest.is_file():
+        raise ModelFileError(f"not a deploy folder: no {MANIFEST_NAME}", folder)
+    try:
+        data = parse_json(manifest.read_bytes(), MANIFEST_NAME)
+        files = {
+            target: tuple(WrittenFile(Path(f["path"]), str(f["sha256"])) for f in entries)
+            for target, entries in data["files"].items()
+        }
+        result = ExportResult(
+            folder=Path(str(data["folder"])),
+            model=str(data["model"]),
+            model_sha256=str(data["model_sha256"]),
+            kind=str(data["kind"]),
+            files=files,
+            consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
+        )
+    except (
+        OSError,
+        UnicodeDecodeError,
+        json.JSONDecodeError,
+        InvalidValueError,
+        KeyError,
+        TypeError,
+        AttributeError,
+    ) as exc:
+        raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
+    base = Path(str(data.get("folder", "")))
+    for entries in files.values():
+        for entry in entries:
+            try:
+                path = folder / entry.path.relative_to(base)
+            except ValueError:
+                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, outside its folder {base}", folder) from None
+            if not path.is_file():
+                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, which is missing", folder)
+            if sha256_file(path) != entry.sha256:
+                raise ModelFileError(f"{entry.path} differs from what export wrote (sha256 mismatch)", folder)
+    return result

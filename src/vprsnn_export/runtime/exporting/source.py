@@ -1,0 +1,143 @@
+"""The model file read for export (:func:`load_source`), the integer model the integer targets get, every target written."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
+from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
+from vprsnn_export.fileio import read_container, sha256_file
+from vprsnn_export.targets.nir_target import WTA_INHIBITION
+from vprsnn_export.targets.registry import TARGETS, WriteOptions
+
+from ..deployment import deploy
+
+
+@dataclass(frozen=True)
+class ExportSource:
+    """A model file read for export: exactly one of a float checkpoint and a fixed-point model."""
+
+    path: Path
+    sha256: str
+    checkpoint: Checkpoint | None = None
+    fixed_point: FixedPointModel | None = None
+
+    def __post_init__(self) -> None:
+        if (self.checkpoint is None) == (self.fixed_point is None):
+            raise InvalidValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
+
+    @classmethod
+    def of(cls, network: Checkpoint | FixedPointModel, sha256: str, path: str | Path = "<in memory>") -> ExportSource:
+        """A network held in memory (``sha256`` names it in the exported files' provenance)."""
+        if isinstance(network, FixedPointModel):
+            return cls(Path(path), sha256, fixed_point=network)
+        return cls(Path(path), sha256, checkpoint=network)
+
+    @property
+    def network(self) -> Checkpoint | FixedPointModel:
+        """What NIR exports and what the project's own simulator runs."""
+        return self.checkpoint if self.checkpoint is not None else self._fixed()
+
+    @property
+    def is_float(self) -> bool:
+        return self.checkpoint is not None
+
+    @property
+    def kind(self) -> str:
+        return "float checkpoint" if self.is_float else "fixed-point model"
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        """The thresholds as stored (float for a checkpoint, integer mantissas for a fixed-point model)."""
+        return self.checkpoint.thresholds if self.checkpoint is not None else self._fixed().threshold
+
+    def _fixed(self) -> FixedPointModel:
+        if self.fixed_point is None:
+            raise InvalidValueError("not a fixed-point model")
+        return self.fixed_point
+
+
+def load_source(path: str | Path) -> ExportSource:
+    """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
+    path = Path(path)
+    meta, _ = read_container(path, "model")
+    kind = meta.get("format")
+    if kind == CHECKPOINT_FORMAT:
+        return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))
+    if kind == FIXED_FORMAT:
+        return ExportSource(path, sha256_file(path), fixed_point=load_fixed_point(path))
+    raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
+
+
+def parse_export_targets(raw: str) -> tuple[str, ...]:
+    """``--to``: some of the registered targets (at least one); InvalidValueError otherwise."""
+    return TARGETS.parse_list(raw, "--to")
+
+
+def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
+    """The fixed-point model the integer targets get, or None when none is asked for.
+
+    A float checkpoint is quantised only when ``bits`` is given (per-neuron max-abs
+    scales, the float calibration kept): :func:`runtime.deployment.deploy`.
+    """
+    if source.fixed_point is not None:
+        if bits is not None:
+            raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")
+        return source.fixed_point
+    wanted = [t for t in targets if TARGETS.get(t).integer_only]
+    if not wanted or source.checkpoint is None:
+        return None
+    if bits is None:
+        raise InvalidValueError(
+            f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
+            "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
+        )
+    return deploy(source.checkpoint, source.sha256, check_bits(bits), calibration="float")
+
+
+def consumer_statements(
+    source: ExportSource, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
+) -> dict[str, str]:
+    """What each consumer of each written file computes, in one sentence or three (each target's ``statement``)."""
+    options = WriteOptions(source.sha256, inhibition, wta_node)
+    notes: dict[str, str] = {}
+    for entry in TARGETS.values():
+        if entry.name in targets and (model is not None or not entry.integer_only):
+            note = entry.statement(source.network, model, options)
+            if note is not None:
+                notes[entry.name] = note
+    return notes
+
+
+def export_all(
+    source: ExportSource,
+    model: FixedPointModel | None,
+    targets: Sequence[str],
+    out: Path,
+    *,
+    inhibition: float = WTA_INHIBITION,
+    wta_node: bool = False,
+) -> dict[str, list[Path]]:
+    """Write each target into ``out`` in the registry's order: the source itself to a target that takes
+    either (NIR), the fixed-point model to an integer-only one (ONNX, Loihi-style files).
+
+    InvalidValueError for a target that is not registered, or an integer-only one without ``model``.
+    """
+    wanted = {TARGETS.get(name).name for name in targets}
+    integer = [name for name in TARGETS if name in wanted and TARGETS.get(name).integer_only]
+    if integer and model is None:
+        raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
+    options = WriteOptions(source.sha256, inhibition, wta_node)
+    written: dict[str, list[Path]] = {}
+    for entry in TARGETS.values():
+        if entry.name in wanted:
+            network = model if entry.integer_only and model is not None else source.network
+            written[entry.name] = entry.write(network, out / entry.filename, options)
+    return written

@@ -1,0 +1,57 @@
+"""The report's cells: metric and readout titles, mean ± std and signed percentages, verdicts."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from vprsnn_export.readout.strategies import STRATEGIES
+from vprsnn_export.stats import MeanStd
+
+from ..results import VerifiedRun
+
+METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
+
+
+def signed_pct(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{round(100 * value, digits) + 0.0:+.{digits}f}"
+
+
+def ms(summary: MeanStd | None, *, percent: bool = True, signed: bool = False, digits: int = 1) -> str:
+    """A mean ± std cell (just the mean for a single run)."""
+    if summary is None or summary.mean is None:
+        return "-"
+    scale = 100.0 if percent else 1.0
+    value = round(scale * summary.mean, digits) + 0.0  # no "-0.0"
+    mean = f"{value:{'+' if signed else ''}.{digits}f}"
+    return mean if summary.n <= 1 else f"{mean} ± {scale * (summary.std or 0.0):.{digits}f}"
+
+
+def data_note(settings: Mapping[str, Any]) -> str:
+    """ " from DATA (selection)" when the settings name the data."""
+    if not settings.get("data"):
+        return ""
+    selection = settings.get("subset") or (f"places {settings['places']}" if settings.get("places") else "all places")
+    return f" from {settings['data']} ({selection})"
+
+
+def strategy_title(strategy: str) -> str:
+    """A strategy's title in the report (its registry entry's; a name not registered stays as it is)."""
+    return STRATEGIES.get(strategy).title if strategy in STRATEGIES else strategy
+
+
+def row_label(strategy: str, k: int) -> str:
+    return f"{strategy_title(strategy)} k={k}"
+
+
+def verdict(passed: bool) -> str:
+    return "PASS" if passed else "FAIL"
+
+
+def network_label(run: VerifiedRun, index: int) -> str:
+    return run.label or str(index + 1)
+
+
+def points(check: str, value: float) -> str:
+    """A tolerance value in the unit the terminal also uses: percentage points, or a count (saturations)."""
+    return str(int(value)) if check == "saturations" else f"{100 * value:.1f} pts"

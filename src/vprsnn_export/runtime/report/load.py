@@ -1,0 +1,83 @@
+"""Reading a report.json, and several reports pooled into one (mean ± std)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.fileio import parse_json
+
+from ..results import ReportError, VerifyReport
+from ..verify.summary import build_report, summarise_runs
+
+REPORT_JSON = "report.json"
+
+
+def report_path(path: str | Path) -> Path:
+    """A run folder (holding report.json) or the report.json itself."""
+    path = Path(path)
+    return path / REPORT_JSON if path.is_dir() else path
+
+
+def load_report(path: str | Path) -> VerifyReport:
+    """The report of a report.json (or of the folder holding one); ReportError when it is not one."""
+    file = report_path(path)
+    if not file.is_file():
+        raise ReportError(f"no {REPORT_JSON} here (give a folder written by verify, or its {REPORT_JSON})", file)
+    try:
+        data = parse_json(file.read_bytes(), REPORT_JSON)
+    except (UnicodeDecodeError, json.JSONDecodeError, InvalidValueError) as exc:
+        raise ReportError(f"not valid JSON ({exc})", file) from None
+    return VerifyReport.from_dict(data, str(file))
+
+
+#: Settings that make two verification runs measure different things: pooling them into one
+#: mean ± std needs the user's explicit consent (``allow_mixed``).
+POOLING_KEYS = ("query", "data", "subset", "places", "bits", "readout", "per_neuron", "scale_method", "calibration")
+
+
+def _as_json(value: Any) -> str:
+    """A setting as JSON text, so a tuple and the list a JSON file gives back compare equal."""
+    return json.dumps(value, sort_keys=True, default=str)
+
+
+def combine_reports(
+    reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
+) -> VerifyReport:
+    """One report holding every run of ``reports``; the summary becomes mean ± std over all of them.
+
+    Settings come from the first report; keys on which the others differ are listed under
+    ``settings_differ`` (and shown in the report). Reports that differ in a :data:`POOLING_KEYS`
+    setting (other data, bit widths, readout) are refused unless ``allow_mixed``.
+    """
+    if not reports:
+        raise ReportError("no reports to combine")
+    if len(reports) == 1:
+        return dataclasses.replace(reports[0], summary=summarise_runs(reports[0].runs))
+    runs = [run for report in reports for run in report.runs]
+    settings = dict(reports[0].settings)
+    differ = sorted(
+        {
+            key
+            for report in reports[1:]
+            for key in set(settings) | set(report.settings)
+            if _as_json(report.settings.get(key)) != _as_json(settings.get(key))
+        }
+    )
+    incompatible = [key for key in differ if key in POOLING_KEYS]
+    if incompatible and not allow_mixed:
+        raise ReportError(
+            f"the reports differ in {', '.join(incompatible)}: pooling them into one mean ± std would mix different "
+            "measurements (--allow-mixed to pool them anyway)"
+        )
+    return dataclasses.replace(
+        build_report(runs, settings, command=None),
+        seconds=sum(float(report.seconds or 0) for report in reports),
+        combined_from=tuple(sources or ()),
+        commands=tuple(report.command for report in reports),
+        settings_differ=tuple(differ),
+    )

@@ -1,0 +1,145 @@
+"""The blocks rendered as Markdown (figures in plots/) and as one self-contained HTML file; write_report."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+
+from ..results import VerifyReport
+from .blocks import Block, blocks_of
+from .load import REPORT_JSON
+
+REPORT_MD = "report.md"
+REPORT_HTML = "report.html"
+PLOTS_DIR = "plots"
+
+
+def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
+    lines: list[str] = []
+    for block in blocks:
+        if block.kind == "h1":
+            lines += [f"# {block.text}", ""]
+        elif block.kind == "h2":
+            lines += [f"## {block.text}", ""]
+        elif block.kind == "h3":
+            lines += [f"### {block.text}", ""]
+        elif block.kind == "p":
+            lines += [block.text, ""]
+        elif block.kind == "pre":
+            lines += ([f"{block.title}:", ""] if block.title else []) + ["```", block.text, "```", ""]
+        elif block.kind == "table":
+            lines.append("| " + " | ".join(block.headers) + " |")
+            lines.append("|" + "---|" * len(block.headers))
+            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in block.rows]
+            lines.append("")
+        elif block.kind == "figure":
+            lines += [
+                f"### {block.title}",
+                "",
+                f"![{block.title}]({plots_dir}/{block.name})",
+                "",
+                f"*{block.text}*",
+                "",
+            ]
+    return "\n".join(lines)
+
+
+CSS = """
+body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; margin: 2em auto; max-width: 1150px;
+       color: #1d1d1f; line-height: 1.45; padding: 0 1em; }
+h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { margin-top: 1.8em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; }
+th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
+th { background: #f0f0f3; }
+td:first-child, th:first-child, td.t { text-align: left; }
+details { margin: .4em 0; } summary { cursor: pointer; color: #333; }
+tr.pass td { background: #eaf7ea; }
+tr.fail td { background: #fbe3e3; }
+figure { margin: 1em 0; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 13px; color: #555; }
+pre { background: #f6f6f8; padding: .6em; overflow-x: auto; font-size: 12px; }
+.verdict-pass { color: #17701f; } .verdict-fail { color: #b00020; }
+"""
+
+
+def _html_inline(text: str) -> str:
+    escaped = html.escape(text)
+    parts = escaped.split("**")
+    out = []
+    for index, part in enumerate(parts):
+        out.append(f"<strong>{part}</strong>" if index % 2 else part)
+    return (
+        "".join(out)
+        .replace("<strong>Verdict: PASS</strong>", '<strong class="verdict-pass">Verdict: PASS</strong>')
+        .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
+    )
+
+
+NUMERIC = re.compile(r"^[-+]?[\d./]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?( exact)?$")
+
+
+def _cell(value: object) -> str:
+    """A table cell: numbers right-aligned, text left-aligned."""
+    text = str(value)
+    cls = "" if NUMERIC.match(text) or text in ("-", "PASS", "FAIL") else ' class="t"'
+    return f"<td{cls}>{html.escape(text)}</td>"
+
+
+def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verification report") -> str:
+    body: list[str] = []
+    for block in blocks:
+        if block.kind in ("h1", "h2", "h3"):
+            body.append(f"<{block.kind}>{html.escape(block.text)}</{block.kind}>")
+        elif block.kind == "p":
+            body.append(f"<p>{_html_inline(block.text)}</p>")
+        elif block.kind == "pre" and block.title:
+            body.append(
+                f"<details><summary>{html.escape(block.title)}</summary><pre>{html.escape(block.text)}</pre></details>"
+            )
+        elif block.kind == "pre":
+            body.append(f"<pre>{html.escape(block.text)}</pre>")
+        elif block.kind == "table":
+            head = "".join(f"<th>{html.escape(str(h))}</th>" for h in block.headers)
+            rows = []
+            for index, row in enumerate(block.rows):
+                status = block.status[index] if index < len(block.status) else None
+                cls = f' class="{status}"' if status else ""
+                rows.append(f"<tr{cls}>" + "".join(_cell(c) for c in row) + "</tr>")
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
+        elif block.kind == "figure":
+            data = base64.b64encode(block.image).decode("ascii")
+            body.append(
+                f"<h3>{html.escape(block.title)}</h3>"
+                f'<figure><img alt="{html.escape(block.title)}" src="data:image/png;base64,{data}">'
+                f"<figcaption>{html.escape(block.text)}</figcaption></figure>"
+            )
+    return (
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>'
+        f"<style>{CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
+
+
+def write_report(report: VerifyReport, out_dir: str | Path, *, write_json: bool = True) -> dict[str, Path]:
+    """Write report.json (optionally), report.md with plots/*.png, and the self-contained report.html."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    if write_json:
+        written["json"] = atomic_write_text(
+            out / REPORT_JSON, json.dumps(report.to_dict(), indent=1, sort_keys=False) + "\n"
+        )
+    blocks = blocks_of(report)
+    for block in blocks:
+        if block.kind == "figure":
+            atomic_write_bytes(out / PLOTS_DIR / block.name, block.image)
+    written["md"] = atomic_write_text(out / REPORT_MD, render_markdown(blocks))
+    written["html"] = atomic_write_text(out / REPORT_HTML, render_html(blocks))
+    return written

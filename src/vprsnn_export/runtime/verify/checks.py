@@ -1,0 +1,364 @@
+"""The checks of `verify`, each a small pure function: tolerances, spike, decision, module and metric level, weights."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import torch
+
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.readout.regions import ModuleAccuracy, ModuleLayout, module_accuracy
+from vprsnn_export.readout.strategies import STRATEGIES, decide
+from vprsnn_export.targets.intsim import step_agreement
+
+from ..evaluation import ReadoutOptions, aggregated, readout_scores
+from ..results import (
+    DecisionLevel,
+    LevelHistogram,
+    MetricRow,
+    ModuleRow,
+    PrCurve,
+    SpikeLevel,
+    ToleranceCheck,
+    WeightHistogram,
+    find_row,
+)
+
+#: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).
+DEFAULT_TOLERANCES: dict[str, float | None] = {
+    "accuracy": 0.02,  # accuracy of Standard, Weighted and W+Prob at k=1
+    "r_at_100p": 0.01,  # R@100P of W+Prob at every k (k > 1 only on consecutive queries)
+    "auc_pr": None,  # AUC-PR of W+Prob at the largest k (off by default)
+    "p_at_100r": None,  # P@100R of every strategy at k=1 (equals accuracy; off by default)
+    "winner_agreement": None,  # minimum fraction of steps with the float winner (off by default)
+    "top1_agreement": None,  # minimum W+Prob k=1 top-1 agreement with float (off by default)
+    "saturations": None,  # maximum saturation events on the queries (off by default)
+    "query_slack": 1,  # a metric drop worth at most this many queries (n / Q) always passes
+}
+TOLERANCE_MEANING = {
+    "accuracy": "accuracy drop of every strategy at k=1",
+    "r_at_100p": "R@100P drop of W+Prob at every k (k > 1 only on consecutive queries)",
+    "auc_pr": "AUC-PR drop of W+Prob at the largest k (k = 1 on non-consecutive queries)",
+    "p_at_100r": "P@100R drop of every strategy at k=1",
+    "winner_agreement": "fraction of time steps with the float winner, at least",
+    "top1_agreement": "W+Prob k=1 top-1 agreement with float, at least",
+    "saturations": "voltage saturation events on the queries, at most",
+    "query_slack": "metric drops of at most this many queries' worth (n / Q) pass whatever the limit",
+}
+MINIMUM_KEYS = ("winner_agreement", "top1_agreement")
+OFF = ("off", "none", "")
+
+
+# ---------------------------------------------------------------------------- the tolerance settings
+
+
+def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
+    """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else."""
+    tolerances = dict(DEFAULT_TOLERANCES if base is None else base)
+    for item in (text or "").split(","):
+        if not item.strip():
+            continue
+        key, sep, raw = item.partition("=")
+        key, raw = key.strip(), raw.strip().lower()
+        if not sep or key not in DEFAULT_TOLERANCES:
+            raise InvalidValueError(
+                f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
+                f"(VALUE a number or off), got {item!r}"
+            )
+        if raw in OFF:
+            tolerances[key] = None
+            continue
+        try:
+            value = float(raw)
+        except ValueError:
+            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw!r}") from None
+        if not np.isfinite(value) or value < 0:
+            raise InvalidValueError(f"--tolerance {key}: expected a finite number >= 0, got {raw!r}")
+        tolerances[key] = value
+    return tolerances
+
+
+# ---------------------------------------------------------------------------- spike level
+
+
+def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.ndarray:
+    """Pearson correlation of the float and integer spike-count vectors (over neurons), one per query.
+
+    Where a vector is constant the correlation is undefined: two identical vectors (e.g. both
+    silent) count as 1, otherwise 0.
+    """
+    a = np.asarray(float_counts, dtype=np.float64)
+    b = np.asarray(int_counts, dtype=np.float64)
+    da, db = a - a.mean(axis=1, keepdims=True), b - b.mean(axis=1, keepdims=True)
+    na, nb = np.sqrt((da * da).sum(axis=1)), np.sqrt((db * db).sum(axis=1))
+    defined = (na > 0) & (nb > 0)
+    corr = np.where(defined, (da * db).sum(axis=1) / np.where(defined, na * nb, 1.0), 0.0)
+    identical = np.all(a == b, axis=1)
+    return np.where(~defined & identical, 1.0, corr)
+
+
+def spike_level(
+    float_raster: torch.Tensor,
+    int_raster: torch.Tensor,
+    float_counts: np.ndarray,
+    int_counts: np.ndarray,
+    saturations: int,
+    calibration_saturations: int | None = None,
+) -> SpikeLevel:
+    """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
+    agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
+    corr = count_correlations(float_counts, int_counts)
+    float_total = np.asarray(float_counts).sum(axis=1)
+    int_total = np.asarray(int_counts).sum(axis=1)
+    return SpikeLevel(
+        winner_agreement=agreement["all_steps"],
+        winner_agreement_active=agreement["active_steps"],
+        n_steps=int(agreement["n_steps"]),
+        n_active_steps=int(agreement["n_active_steps"]),
+        count_correlation_mean=float(corr.mean()),
+        count_correlation_min=float(corr.min()),
+        count_correlation=tuple(round(float(c), 6) for c in corr),
+        total_spikes_float=int(float_total.sum()),
+        total_spikes=int(int_total.sum()),
+        spike_ratio=float(int_total.sum() / float_total.sum()) if float_total.sum() else None,
+        spikes_per_query_float=tuple(int(v) for v in float_total),
+        spikes_per_query=tuple(int(v) for v in int_total),
+        saturations=int(saturations),
+        calibration_saturations=calibration_saturations,
+    )
+
+
+# ---------------------------------------------------------------------------- decision level
+
+
+def tv_distance(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Total variation distance 1/2 sum_l |p(l) - q(l)| per row, in [0, 1]."""
+    return 0.5 * np.abs(np.asarray(p, dtype=np.float64) - np.asarray(q, dtype=np.float64)).sum(axis=1)
+
+
+def top1_agreement(scores_a: np.ndarray, scores_b: np.ndarray, strategy: str) -> float:
+    """Fraction of queries with the same decision (the same place, or both no-match)."""
+    return float(np.mean(decide(scores_a, strategy)[0] == decide(scores_b, strategy)[0]))
+
+
+def decision_level(
+    float_scores: Mapping[str, np.ndarray],
+    int_scores: Mapping[str, np.ndarray],
+    float_aggregated: Mapping[int, np.ndarray],
+    int_aggregated: Mapping[int, np.ndarray],
+) -> DecisionLevel:
+    """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
+    tv = tv_distance(float_scores["wprob"], int_scores["wprob"])
+    return DecisionLevel(
+        top1_agreement={s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
+        wprob_tv_mean=float(tv.mean()),
+        wprob_tv_max=float(tv.max()),
+        wprob_tv=tuple(round(float(v), 6) for v in tv),
+        aggregated_agreement={
+            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
+        },
+    )
+
+
+# ---------------------------------------------------------------------------- modules of an ensemble
+
+
+def region_accuracies(
+    distribution: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    regions: np.ndarray,
+    tolerance: int,
+) -> list[ModuleAccuracy]:
+    """Per module: the W+Prob decisions of ``distribution`` (Q, places) scored on its region's queries
+    (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
+    predicted, _ = decide(distribution, "wprob")
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
+    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
+
+
+def module_rows(
+    regions: np.ndarray,
+    group: int,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    float_aggregated: Mapping[int, np.ndarray],
+    int_aggregated: Mapping[int, np.ndarray],
+    float_raster: torch.Tensor,
+    int_raster: torch.Tensor,
+    tolerance: int,
+) -> tuple[ModuleRow, ...]:
+    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
+    and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
+
+    Vectorised over modules (one bincount per quantity in ``module_accuracy``, one raster reshape).
+    """
+    n_modules = len(regions)
+    top = max(float_aggregated)
+    accuracy = {
+        name: [region_accuracies(agg[k], reference_place_ids, query_place_ids, regions, tolerance) for k in (1, top)]
+        for name, agg in (("float", float_aggregated), ("int", int_aggregated))
+    }
+    by_region = accuracy["float"][0]
+    a = torch.as_tensor(float_raster)
+    b = torch.as_tensor(int_raster)
+    n, timesteps, _ = a.shape
+    a, b = a.reshape(n, timesteps, n_modules, group), b.reshape(n, timesteps, n_modules, group)
+    agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
+    spikes_float = a.sum(dim=(0, 1, 3)).numpy()
+    spikes = b.sum(dim=(0, 1, 3)).numpy()
+    return tuple(
+        ModuleRow(
+            module=region.module,
+            first_place=region.first_place,
+            last_place=region.last_place,
+            n_queries=region.n_queries,
+            k=int(top),
+            float_accuracy=accuracy["float"][0][m].accuracy,
+            accuracy=accuracy["int"][0][m].accuracy,
+            float_accuracy_k=accuracy["float"][1][m].accuracy,
+            accuracy_k=accuracy["int"][1][m].accuracy,
+            winner_agreement=float(agreement[m]),
+            spikes_float=int(spikes_float[m]),
+            spikes=int(spikes[m]),
+        )
+        for m, region in enumerate(by_region)
+    )
+
+
+# ---------------------------------------------------------------------------- metric level
+
+
+def decision_scores(
+    calibration: np.ndarray, counts: np.ndarray, options: ReadoutOptions, modules: ModuleLayout | None = None
+) -> tuple[dict, dict]:
+    """Scores of every strategy at k=1 and the W+Prob aggregate at every k (k=1 included); an ensemble's
+    (``modules``) with its region regularisation, as :func:`runtime.evaluation.readout_rows` scores it."""
+    scores = readout_scores(calibration, counts, options.gamma, modules)
+    agg = {k: aggregated(scores["wprob"], k, options, None) for k in sorted(set(options.ks) | {1})}
+    return scores, agg
+
+
+def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
+    """Each quantised row with its float value and the difference (quantised - float) of every metric."""
+    reference = {(r.strategy, r.k): r for r in float_rows}
+    return tuple(row.with_float(reference[(row.strategy, row.k)]) for row in rows)
+
+
+def pr_points(
+    distribution: np.ndarray,
+    strategy: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    tolerance: int,
+) -> PrCurve:
+    """The exact PR operating points of one score matrix, for the report's plots."""
+    predicted, confidence = decide(distribution, strategy)
+    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
+    correct = is_correct(ids, query_place_ids, tolerance)
+    precision, recall, _ = pr_curve(correct, confidence)
+    return PrCurve(tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall))
+
+
+def curves(
+    scores: Mapping[str, np.ndarray],
+    agg: Mapping[int, np.ndarray],
+    reference_ids: np.ndarray,
+    query_ids: np.ndarray,
+    options: ReadoutOptions,
+) -> dict[str, PrCurve]:
+    """PR curves of W+Prob at k=1 and at the largest k."""
+    out = {"wprob k=1": pr_points(scores["wprob"], "wprob", reference_ids, query_ids, options.tolerance)}
+    top = max(options.ks)
+    if top > 1:
+        out[f"wprob k={top}"] = pr_points(agg[top], "wprob", reference_ids, query_ids, options.tolerance)
+    return out
+
+
+# ---------------------------------------------------------------------------- tolerances
+
+
+def tolerance_checks(
+    rows: Sequence[MetricRow],
+    spike: SpikeLevel,
+    decision: DecisionLevel,
+    tolerances: Mapping[str, float | None],
+    ks: Sequence[int],
+    *,
+    sequences: bool = True,
+) -> list[ToleranceCheck]:
+    """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
+
+    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that
+    are not consecutive places, whose k-frame windows mix unrelated places:
+    :func:`~vprsnn_export.runtime.evaluation.sequence_warning`) no k > 1 metric is judged.
+
+    Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
+    network that does better than float never fails. A metric moves in steps of 1/Q (one
+    query of Q), so the limit applied is max(limit, query_slack / Q): with 30 queries a
+    "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
+    """
+    judged = sorted(k for k in set(ks) if k == 1 or sequences)
+    top = max(judged)
+    checks: list[ToleranceCheck] = []
+    n_queries = rows[0].n_queries if rows else 1
+    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
+
+    def drop(name: str, strategy: str, k: int, metric: str) -> None:
+        row = find_row(rows, strategy, k)
+        limit = tolerances[name]
+        if row is None or row.delta is None or limit is None:
+            raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {name} tolerance")
+        value = 0.0 - row.delta.get(metric)
+        applied = max(limit, slack)
+        what = f"{metric} drop, {strategy} k={k}"
+        checks.append(ToleranceCheck(name, what, value, limit, applied, bool(value <= applied + 1e-12)))
+
+    def bound(name: str, what: str, value: float, at_least: bool) -> None:
+        limit = tolerances[name]
+        if limit is None:
+            return
+        passed = value >= limit if at_least else value <= limit
+        checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
+
+    if tolerances.get("accuracy") is not None:
+        for strategy in STRATEGIES:
+            drop("accuracy", strategy, 1, "accuracy")
+    if tolerances.get("p_at_100r") is not None:
+        for strategy in STRATEGIES:
+            drop("p_at_100r", strategy, 1, "p_at_100r")
+    if tolerances.get("r_at_100p") is not None:
+        for k in judged:
+            drop("r_at_100p", "wprob", k, "r_at_100p")
+    if tolerances.get("auc_pr") is not None:
+        drop("auc_pr", "wprob", top, "auc_pr")
+    bound("winner_agreement", "steps with the float winner", spike.winner_agreement, True)
+    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement["wprob"], True)
+    bound("saturations", "saturation events on the queries", spike.saturations, False)
+    return checks
+
+
+# ---------------------------------------------------------------------------- weights
+
+
+def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> WeightHistogram:
+    """Histogram of the float weights divided by their scale range (per-neuron or global maximum)."""
+    w = np.asarray(float_weights, dtype=np.float64)
+    top = w.max(axis=0, keepdims=True) if per_neuron else np.array([[w.max()]])
+    ratio = w / np.where(top > 0, top, 1.0)
+    counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
+    return WeightHistogram(
+        "per-neuron maximum" if per_neuron else "global maximum",
+        tuple(int(c) for c in counts),
+        tuple(round(float(e), 6) for e in edges),
+    )
+
+
+def level_histogram(model: FixedPointModel) -> LevelHistogram:
+    """How many weights sit on each mantissa level 0 .. 2**bits - 1."""
+    levels = (1 << model.bits) - 1
+    counts = np.bincount(np.asarray(model.weight_mantissa).ravel().astype(np.int64), minlength=levels + 1)
+    return LevelHistogram(levels, tuple(int(c) for c in counts[: levels + 1]), float(counts[0] / max(counts.sum(), 1)))

@@ -1,0 +1,120 @@
+"""An exported ONNX graph read back, checked and run on onnxruntime (CPU): :class:`OnnxBackend`."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.runs import SpikeRun
+from vprsnn_export.targets.onnx_target import INPUT
+
+
+@dataclass
+class OnnxRun:
+    """What one onnxruntime call returned, in the project's layout (presentations first)."""
+
+    counts: np.ndarray  # (N, neurons) int64
+    saturations: np.ndarray  # (N,) int64
+    wprob: np.ndarray | None  # (N, places) float64
+    raster: np.ndarray | None  # (N, T, neurons) bool
+    seconds: float  # wall time of the session.run calls
+
+
+def read_onnx(path: str | Path) -> onnx.ModelProto:
+    """Load and check an exported graph; a missing, truncated or foreign file is a ModelFileError."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError("no such ONNX file", path)
+    try:
+        loaded = onnx.load(str(path))
+        onnx.checker.check_model(loaded)
+    except Exception as exc:  # onnx raises DecodeError, ValidationError, ... on a damaged file
+        raise ModelFileError(
+            f"not a readable ONNX model (truncated or corrupt: {type(exc).__name__}: {exc})", path
+        ) from None
+    props = {p.key: p.value for p in loaded.metadata_props}
+    if props.get("vprsnn.format") != "vprsnn-onnx/1":
+        raise ModelFileError("not an ONNX graph written by vprsnn-export (metadata vprsnn.format missing)", path)
+    return loaded
+
+
+def session(path: str | Path, threads: int | None = None):
+    """An onnxruntime CPU session on a checked file."""
+    import onnxruntime as ort
+
+    loaded = read_onnx(path)
+    options = ort.SessionOptions()
+    if threads is not None:
+        options.intra_op_num_threads = threads
+    try:
+        return ort.InferenceSession(loaded.SerializeToString(), options, providers=["CPUExecutionProvider"])
+    except Exception as exc:  # onnxruntime's own Fail / InvalidGraph
+        raise ModelFileError(f"onnxruntime cannot load this graph ({exc})", path) from None
+
+
+def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> OnnxRun:
+    """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs]."""
+    array = np.asarray(spikes.numpy() if isinstance(spikes, torch.Tensor) else spikes)
+    if array.ndim != 3 or array.dtype not in (np.uint8, np.bool_):
+        raise InvalidValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
+    names = [o.name for o in sess.get_outputs()]
+    pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
+    seconds = 0.0
+    for start in range(0, array.shape[0], batch):
+        chunk = np.ascontiguousarray(array[start : start + batch].astype(np.uint8).transpose(1, 0, 2))
+        began = time.perf_counter()
+        values = sess.run(None, {INPUT: chunk})
+        seconds += time.perf_counter() - began
+        for name, value in zip(names, values, strict=True):
+            pieces[name].append(value)
+    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
+    raster = joined.get("raster")
+    return OnnxRun(
+        counts=joined["counts"],
+        saturations=joined["saturations"],
+        wprob=joined.get("wprob"),
+        raster=None if raster is None else raster.transpose(1, 0, 2),
+        seconds=seconds,
+    )
+
+
+def run_onnx_outputs(
+    path: str | Path, spikes: torch.Tensor | np.ndarray, *, batch: int = 128, threads: int | None = None
+) -> OnnxRun:
+    """Every output of an exported graph for spikes (N, T, inputs)."""
+    return run_session(session(path, threads), spikes, batch)
+
+
+def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
+    """Output spike counts (N, neurons) int64 of an exported graph on onnxruntime (CPU)."""
+    return run_onnx_outputs(path, spikes).counts
+
+
+@dataclass
+class OnnxBackend:
+    """An exported graph on onnxruntime as a :class:`~vprsnn_export.runs.Backend`.
+
+    The run carries the counts, the total saturations, the W+Prob distribution when the
+    graph has that head, and the raster when it has that output (``record`` cannot add
+    an output the graph lacks).
+    """
+
+    path: Path
+    threads: int | None = None
+    batch: int = 128
+    name: str = "onnxruntime"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        out = run_onnx_outputs(self.path, spikes, batch=self.batch, threads=self.threads)
+        return SpikeRun(
+            counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
+            raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),
+            saturations=int(out.saturations.sum()),
+            wprob=out.wprob,
+        )
