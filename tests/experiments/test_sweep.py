@@ -54,7 +54,15 @@ def test_every_variant_selection_and_k_is_measured(default_sweep):
         assert [v["variant"] for v in block["variants"]] == names
         for entry in block["variants"]:
             measured = {(r["strategy"], r["k"]) for r in entry["summary"]}
-            assert {("wprob", 1), ("wprob", 5), ("standard", 1), ("sad", 1), ("sad", 5), ("cosine", 1), ("cosine", 5)} <= measured
+            assert {
+                ("wprob", 1),
+                ("wprob", 5),
+                ("standard", 1),
+                ("sad", 1),
+                ("sad", 5),
+                ("cosine", 1),
+                ("cosine", 5),
+            } <= measured
             assert all(r["accuracy"]["n"] == 1 for r in entry["summary"])
 
 
