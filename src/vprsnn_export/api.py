@@ -19,7 +19,6 @@ The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx
 
 from __future__ import annotations
 
-from .checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from .cluster import Cluster, parse_cluster
 from .config import Config
 from .dataset import Dataset, load_dataset, select_places
@@ -29,6 +28,7 @@ from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
 from .frames import iter_frames
+from .io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from .modules import module_count, module_regions
 from .preprocess import CHANNELS, Channel
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity

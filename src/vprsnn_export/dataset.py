@@ -27,7 +27,6 @@ from tqdm import tqdm
 from .arguments import ascii_uint, check_place_ids
 from .config import PreprocessConfig
 from .errors import DataError, InvalidValueError
-from .fileio import is_readable_file, sha256_bytes
 from .folders import (
     FolderGroundTruth,
     decode_frames,
@@ -36,6 +35,7 @@ from .folders import (
     ground_truths,
     is_folder_dataset,
 )
+from .io.fileio import is_readable_file, sha256_bytes
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 

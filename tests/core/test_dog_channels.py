@@ -6,10 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config, preset
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.preprocess import dog_on_off, normalise_resized
 
 

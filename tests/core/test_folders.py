@@ -9,11 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
 from vprsnn_export.dataset import Dataset, load_dataset
 from vprsnn_export.errors import DataError, InvalidValueError
+from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.synthetic import synthetic_route
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 

@@ -287,7 +287,7 @@ def test_netx_runs_the_ensemble(route, queries, tmp_path, netx_python):
 
 
 def test_quantize_command_prints_the_modules(route, tmp_path, capsys):
-    from vprsnn_export.checkpoint import save_checkpoint
+    from vprsnn_export.io.checkpoint import save_checkpoint
 
     path = save_checkpoint(tmp_path / "ens.npz", route[0])
     args = ["quantize", str(path), "--bits", "4", "--per-tensor", "--reuse-float-calibration", "--quiet"]

@@ -16,7 +16,7 @@ import torch
 from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import sha256_bytes
+from vprsnn_export.io.fileio import sha256_bytes
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,

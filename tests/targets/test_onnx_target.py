@@ -13,11 +13,11 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
+from vprsnn_export.io.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runs import Backend

@@ -20,12 +20,12 @@ import sys
 import time
 from pathlib import Path
 
-from ..checkpoint import checkpoint_sha256, save_checkpoint
 from ..config import Config
 from ..dataset import load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
+from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..modules import module_count
 from ..preprocess import CHANNELS
 from ..runtime.evaluation import ReadoutOptions

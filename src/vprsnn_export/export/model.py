@@ -47,10 +47,10 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.arguments import require_path
-from vprsnn_export.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.fileio import read_container, write_container
+from vprsnn_export.io.checkpoint import reference_header, validate_reference_ids
+from vprsnn_export.io.fileio import read_container, write_container
 from vprsnn_export.modules import ensemble_neurons
 from vprsnn_export.version import __version__
 from vprsnn_export.widths import DECAY_BITS

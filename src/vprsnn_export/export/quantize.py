@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.arguments import require_bool, require_choice, require_type
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.io.checkpoint import Checkpoint
 
 from .model import (
     MULTIPLIER_BITS,

@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork

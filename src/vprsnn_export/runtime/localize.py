@@ -45,13 +45,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.encoding import encode, presentation_seed
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import atomic_write_text, is_readable_file
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
 from vprsnn_export.preprocess import normalise_resized, resize_image
 from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
 from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution

@@ -50,7 +50,7 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
+from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
     DU_NO_CURRENT_MEMORY,

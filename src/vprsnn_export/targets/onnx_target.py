@@ -52,7 +52,7 @@ from onnx import TensorProto, helper, numpy_helper
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
-from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.io.fileio import atomic_write_bytes
 from vprsnn_export.readout.regions import module_layout, regularised_calibration
 from vprsnn_export.targets.packing import PACKING, pack_bits
 

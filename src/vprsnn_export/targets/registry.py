@@ -15,8 +15,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.registry import Registry
 from vprsnn_export.runs import Backend
 from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi

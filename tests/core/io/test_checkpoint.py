@@ -3,10 +3,10 @@ import json
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
-from vprsnn_export.fileio import write_container
+from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from vprsnn_export.io.fileio import write_container
 
 
 def _ckpt(cfg=None):
@@ -92,8 +92,8 @@ def test_not_a_checkpoint(tmp_path):
 
 
 def test_identical_runs_write_byte_identical_checkpoints(tmp_path):
-    from vprsnn_export.checkpoint import checkpoint_sha256
     from vprsnn_export.cli import main
+    from vprsnn_export.io.checkpoint import checkpoint_sha256
 
     paths = [tmp_path / "a.npz", tmp_path / "b.npz"]
     for path in paths:

@@ -1,4 +1,4 @@
-"""vprsnn_export.serial: the generic dataclass <-> JSON mapping, by field options and type hints."""
+"""vprsnn_export.io.serial: the generic dataclass <-> JSON mapping, by field options and type hints."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from typing import Any, Literal
 import numpy as np
 import pytest
 
-from vprsnn_export.serial import JsonDataclass, from_json, json_options, to_json
+from vprsnn_export.io.serial import JsonDataclass, from_json, json_options, to_json
 
 
 class Colour(enum.Enum):

@@ -1,6 +1,6 @@
 """The float checkpoint: weights, thresholds, calibration, full config and provenance in one file.
 
-Format: an npz container (no pickle) from :mod:`vprsnn_export.fileio` with arrays
+Format: an npz container (no pickle) from :mod:`vprsnn_export.io.fileio` with arrays
 ``weights`` (inputs, neurons) float32, ``thresholds`` (neurons,) float32,
 ``calibration`` (neurons, places) int64 = S^R and ``reference_place_ids``
 (places,) int64, and a JSON header holding the config, the seed, the data
@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from .arguments import require_path
-from .config import Config
-from .dataset import MAX_PLACE_ID, parse_places, parse_synthetic
-from .errors import InvalidValueError, ModelFileError, VprError
+from ..arguments import require_path
+from ..config import Config
+from ..dataset import MAX_PLACE_ID, parse_places, parse_synthetic
+from ..errors import InvalidValueError, ModelFileError, VprError
+from ..modules import ensemble_neurons
+from ..version import __version__
 from .fileio import read_container, sha256_file, write_container
-from .modules import ensemble_neurons
-from .version import __version__
 
 FORMAT = "vprsnn-checkpoint"
 FORMAT_VERSION = 1

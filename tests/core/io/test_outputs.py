@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from vprsnn_export.cli import main
-from vprsnn_export.fileio import (
+from vprsnn_export.io.fileio import (
     OutputError,
     atomic_write_text,
     check_output,

@@ -10,11 +10,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.checkpoint import load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import load_fixed_point
-from vprsnn_export.fileio import read_container, write_container
+from vprsnn_export.io.checkpoint import load_checkpoint
+from vprsnn_export.io.fileio import read_container, write_container
 
 TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
 

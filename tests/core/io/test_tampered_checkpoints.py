@@ -8,10 +8,10 @@ import zipfile
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
-from vprsnn_export.fileio import META_KEY
+from vprsnn_export.io.checkpoint import load_checkpoint
+from vprsnn_export.io.fileio import META_KEY
 
 TRAIN = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
 

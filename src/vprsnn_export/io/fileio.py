@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .arguments import require_path
-from .errors import InvalidValueError, ModelFileError, VprError
+from ..arguments import require_path
+from ..errors import InvalidValueError, ModelFileError, VprError
 
 
 class OutputError(VprError):
