@@ -36,9 +36,9 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.dynamics import input_currents, run_network
 from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.intsim import prepare, run_prepared

@@ -18,9 +18,9 @@ from pathlib import Path
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.dynamics import run_network, wta_step
-from vprsnn_export.encoding import query_spikes
 from vprsnn_export.trainer.train import Presentation, train_network
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")

@@ -21,16 +21,16 @@ from __future__ import annotations
 
 from .cluster import Cluster, parse_cluster
 from .config import Config
-from .dataset import Dataset, load_dataset, select_places
+from .data.dataset import Dataset, load_dataset, select_places
+from .data.encoding import calibration_spikes, query_spikes
+from .data.frames import iter_frames
+from .data.preprocess import CHANNELS, Channel
 from .dynamics import FloatNetwork
-from .encoding import calibration_spikes, query_spikes
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
-from .frames import iter_frames
 from .io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from .modules import module_count, module_regions
-from .preprocess import CHANNELS, Channel
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
+from .data.preprocess import CHANNELS
 from .errors import InvalidValueError
-from .preprocess import CHANNELS
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ per step). Float sums follow the order this machine's BLAS uses for the dense ma
 bit for bit where the probe succeeds.
 
 The kernels, each beside its caller with its checked entry point: the Bernoulli encoder
-(:mod:`vprsnn_export.encoding_kernel`), the float network (:mod:`vprsnn_export.dynamics_kernel`),
+(:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.dynamics_kernel`),
 the integer simulator (:mod:`vprsnn_export.targets.intsim_kernel`) and the STDP training window
 (:mod:`vprsnn_export.trainer.stdp_kernel`); threads and tiles: :mod:`vprsnn_export.parallel`.
 

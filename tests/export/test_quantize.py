@@ -10,7 +10,7 @@ import torch
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import preset
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import load_fixed_point

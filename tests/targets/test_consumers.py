@@ -250,8 +250,8 @@ class RealFiles:
 
 def real_files(folder: Path) -> RealFiles:
     """Train once (seed 1, default config), quantise, export, run the network on the 100 winter queries."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
@@ -347,8 +347,8 @@ def test_print_matrix(real):
 @pytest.fixture(scope="module")
 def default_network():
     """The default (DoG) config, seed 7, places 1000-1099 (never used elsewhere), 40 epochs; 100 winter queries."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     folder = Path(os.environ.get("VPRSNN_NORDLAND", NORDLAND))  # a worktree elsewhere names the data folder

@@ -333,8 +333,8 @@ def test_export_command_float_checkpoint_needs_quantisation_for_integer_targets(
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
 def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     """A short training on the real subset, quantised at 8, 4 and 2 bits: ONNX == integer simulator on every query."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 

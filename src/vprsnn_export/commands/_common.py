@@ -11,7 +11,7 @@ from typing import Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
-from ..dataset import Dataset, load_selection
+from ..data.dataset import Dataset, load_selection
 from ..errors import InvalidValueError
 from ..io.fileio import parse_json
 from ..readout.rules import RULES

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from ..cluster import CLUSTER_HELP, parse_cluster
-from ..dataset import load_dataset, selection_record
+from ..data.dataset import load_dataset, selection_record
 from ..device import resolve_device
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Config
-from ..dataset import MAX_PLACES, Dataset, load_dataset
+from ..data.dataset import MAX_PLACES, Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..arguments import require_path
 from ..config import Config
-from ..dataset import MAX_PLACE_ID, parse_places, parse_synthetic
+from ..data.dataset import MAX_PLACE_ID, parse_places, parse_synthetic
 from ..errors import InvalidValueError, ModelFileError, VprError
 from ..modules import ensemble_neurons
 from ..version import __version__

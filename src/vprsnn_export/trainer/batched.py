@@ -31,8 +31,8 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding import encode, firing_probabilities, presentation_seed
-from vprsnn_export.encoding_kernel import bernoulli_limits, generator_seeds
+from vprsnn_export.data.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.data.encoding_kernel import bernoulli_limits, generator_seeds
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need

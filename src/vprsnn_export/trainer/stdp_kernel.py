@@ -5,7 +5,7 @@ with every float32 operation in the torch loop's order, so the weights are bit f
 the torch loop where this machine's BLAS orders its sums as probed
 (:func:`vprsnn_export.kernel_sums.blas_block`, :func:`vprsnn_export.kernel_sums.batch_sums_in_order`).
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
-encoding each module's batch inside it (:mod:`vprsnn_export.encoding_kernel`), on threads over
+encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.parallel.module_slices`).
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding_kernel import _bernoulli_kernel
+from vprsnn_export.data.encoding_kernel import _bernoulli_kernel
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.kernel_checks import require_array, require_int
 from vprsnn_export.kernel_sums import (

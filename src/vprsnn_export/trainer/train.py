@@ -11,8 +11,8 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
+from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.dynamics import wta_step
-from vprsnn_export.encoding import encode, presentation_seed
 from vprsnn_export.errors import InvalidValueError
 
 from .homeostasis import homeostasis_update

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 
 SYNTHETIC_VERSION = 1
 IMAGE_HEIGHT = 32

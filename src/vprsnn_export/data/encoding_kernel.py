@@ -3,7 +3,7 @@
 torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is
 u = m / 2^24 with m the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the
 kernel (:func:`_bernoulli_kernel`, checked entry point :func:`bernoulli_kernel`) runs the twister
-and compares integers. Its caller is :mod:`vprsnn_export.encoding`; the training kernel
+and compares integers. Its caller is :mod:`vprsnn_export.data.encoding`; the training kernel
 (:mod:`vprsnn_export.trainer.stdp_kernel`) encodes each module's batch with it inside one call.
 """
 
@@ -13,9 +13,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .errors import InvalidValueError
-from .kernel_checks import require_array, require_int
-from .kernel_sums import SPIKES, compiled
+from ..errors import InvalidValueError
+from ..kernel_checks import require_array, require_int
+from ..kernel_sums import SPIKES, compiled
 
 MT_N = 624  # words of the Mersenne Twister state (torch's CPU generator is MT19937)
 MT_M = 397

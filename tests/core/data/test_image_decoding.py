@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from vprsnn_export.cli import main
+from vprsnn_export.data.preprocess import read_grey_image
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import DataError
-from vprsnn_export.preprocess import read_grey_image
-from vprsnn_export.synthetic import synthetic_route
 
 IMAGE = cv2.GaussianBlur(np.random.default_rng(0).integers(0, 256, (120, 160), dtype=np.uint8), (0, 0), 3)
 PNG = cv2.imencode(".png", IMAGE)[1].tobytes()

@@ -42,11 +42,11 @@ from typing import IO, TYPE_CHECKING
 import cv2
 import numpy as np
 
-from .errors import DataError, InvalidValueError
-from .registry import Registry
+from ..errors import DataError, InvalidValueError
+from ..registry import Registry
 
 if TYPE_CHECKING:
-    from .config import PreprocessConfig
+    from ..config import PreprocessConfig
 
 
 DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time

@@ -1,6 +1,6 @@
 """Place manifests, place selection and the preprocessed image set.
 
-A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.folders`: frames in
+A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.data.folders`: frames in
 time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`).
 
 A place manifest is a CSV with one row per place: an integer ``place_id`` column and
@@ -24,9 +24,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .arguments import ascii_uint, check_place_ids
-from .config import PreprocessConfig
-from .errors import DataError, InvalidValueError
+from ..arguments import ascii_uint, check_place_ids
+from ..config import PreprocessConfig
+from ..errors import DataError, InvalidValueError
+from ..io.fileio import is_readable_file, sha256_bytes
 from .folders import (
     FolderGroundTruth,
     decode_frames,
@@ -35,7 +36,6 @@ from .folders import (
     ground_truths,
     is_folder_dataset,
 )
-from .io.fileio import is_readable_file, sha256_bytes
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
@@ -249,7 +249,7 @@ def load_dataset(
 def _load_folder(
     folder: Path, names: tuple[str, ...], cfg: PreprocessConfig, subset: Selection, places: str | None, progress: bool
 ) -> Dataset:
-    """A folder of traversal folders (:mod:`vprsnn_export.folders`): place j is frame j of each traversal."""
+    """A folder of traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each traversal."""
     files = folder_files(folder, names)
     n_frames = len(next(iter(files.values())))
     truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})

@@ -8,9 +8,9 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config, preset
+from vprsnn_export.data.preprocess import dog_on_off, normalise_resized
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import load_checkpoint
-from vprsnn_export.preprocess import dog_on_off, normalise_resized
 
 
 def test_on_and_off_follow_the_equation_and_never_overlap():

@@ -18,11 +18,11 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .arguments import check_place_ids, require_type
-from .config import Config, EncoderConfig
+from ..arguments import check_place_ids, require_type
+from ..config import Config, EncoderConfig
+from ..errors import InvalidValueError
+from ..resources import LOWER_RUN, check_memory, spikes_need
 from .encoding_kernel import bernoulli_spikes
-from .errors import InvalidValueError
-from .resources import LOWER_RUN, check_memory, spikes_need
 
 STREAM_QUERY = "query"
 STREAM_CALIBRATE = "calibrate"
@@ -67,7 +67,7 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
 
     Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i]
     with u drawn from ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced by
-    the compiled :func:`vprsnn_export.encoding_kernel.bernoulli_spikes` without building u.
+    the compiled :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes` without building u.
     """
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:

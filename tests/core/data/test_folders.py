@@ -11,19 +11,19 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import DataError, InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
-from vprsnn_export.synthetic import synthetic_route
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 
 def shared_data(name: str) -> Path:
     """``shared/data/<name>`` beside the repository or beside one of its parents (a worktree sits deeper)."""
-    for folder in Path(__file__).resolve().parents[2].parents:
+    for folder in Path(__file__).resolve().parents[3].parents:
         if (folder / "shared/data" / name).is_dir():
             return folder / "shared/data" / name
-    return Path(__file__).resolve().parents[3] / "shared/data" / name
+    return Path(__file__).resolve().parents[4] / "shared/data" / name
 
 
 LENS = shared_data("lens_example_davis128")

@@ -9,11 +9,11 @@ import sys
 import numpy as np
 import pytest
 
-from vprsnn_export import synthetic
 from vprsnn_export.config import PreprocessConfig
+from vprsnn_export.data import synthetic
+from vprsnn_export.data.preprocess import preprocess_images
+from vprsnn_export.data.synthetic import SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.preprocess import preprocess_images
-from vprsnn_export.synthetic import SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
 
 def test_shapes_and_dtype() -> None:
@@ -57,7 +57,7 @@ def test_neighbouring_places_look_alike() -> None:
 def test_the_same_route_in_a_fresh_interpreter() -> None:
     """No dependence on hash randomisation, import order or global RNG state: another process, same bytes."""
     code = (
-        "import hashlib; from vprsnn_export.synthetic import synthetic_route; r = synthetic_route(30); "
+        "import hashlib; from vprsnn_export.data.synthetic import synthetic_route; r = synthetic_route(30); "
         "print(hashlib.sha256(b''.join(r[t].tobytes() for t in sorted(r))).hexdigest())"
     )
     other = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()

@@ -2,7 +2,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import EncoderConfig
-from vprsnn_export.encoding import encode, encode_presentations, presentation_seed
+from vprsnn_export.data.encoding import encode, encode_presentations, presentation_seed
 
 
 def test_spikes_are_a_pure_function_of_seed_image_and_presentation():

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from vprsnn_export.config import preset
-from vprsnn_export.dataset import Dataset, load_dataset, parse_places
+from vprsnn_export.data.dataset import Dataset, load_dataset, parse_places
+from vprsnn_export.data.preprocess import preprocess_images
+from vprsnn_export.data.synthetic import synthetic_fingerprint, synthetic_route
 from vprsnn_export.errors import DataError, InvalidValueError
-from vprsnn_export.preprocess import preprocess_images
-from vprsnn_export.synthetic import synthetic_fingerprint, synthetic_route
 
 CFG = preset("paper").preprocess  # the patch-normalised intensity channel these tests pin
-NORDLAND = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "nordland_64x32_summer_winter"
+NORDLAND = Path(__file__).resolve().parents[3].parent / "shared" / "data" / "nordland_64x32_summer_winter"
 TRAVERSALS = ("summer", "winter")
 N_PLACES = 8
 

@@ -24,7 +24,7 @@ from typing import TextIO
 import cv2
 import numpy as np
 
-from .errors import DataError
+from ..errors import DataError
 from .preprocess import read_grey_image
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"})

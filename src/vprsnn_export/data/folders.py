@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from .config import PreprocessConfig
-from .errors import DataError
+from ..config import PreprocessConfig
+from ..errors import DataError
+from ..io.fileio import sha256_bytes
 from .frames import image_files
-from .io.fileio import sha256_bytes
 from .preprocess import normalise_resized, read_grey_image, resize_image
 
 GT_SUFFIXES = ("_GT.npy", "_GT.csv")

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from vprsnn_export.config import PreprocessConfig, preset
+from vprsnn_export.data.preprocess import patch_normalise, preprocess_images, read_grey_image, resize_image
 from vprsnn_export.errors import DataError
-from vprsnn_export.preprocess import patch_normalise, preprocess_images, read_grey_image, resize_image
 
 CFG = preset("paper").preprocess  # the patch-normalised intensity channel these tests pin
 
