@@ -27,9 +27,9 @@ import pytest
 import torch
 
 from vprsnn_export.config import Config, preset
-from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_runners import CONSUMERS
 from vprsnn_export.targets.nir_target import apply_readout_rule, write_nir

@@ -18,9 +18,9 @@ from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
 from vprsnn_export.io.checkpoint import Checkpoint, save_checkpoint
+from vprsnn_export.network.runs import Backend
 from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.readout.strategies import strategy_scores
-from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_session import OnnxBackend, read_onnx, run_onnx, run_onnx_outputs
 from vprsnn_export.targets.onnx_target import IR_VERSION, OPSET, build_onnx, readout_matrix_nodes, write_onnx

@@ -27,7 +27,7 @@ from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
-from ..modules import module_count
+from ..network.modules import module_count
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.report.labels import points

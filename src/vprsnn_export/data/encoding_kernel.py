@@ -14,8 +14,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import InvalidValueError
-from ..kernel_checks import require_array, require_int
-from ..kernel_sums import SPIKES, compiled
+from ..network.kernel_checks import require_array, require_int
+from ..network.kernel_sums import SPIKES, compiled
 
 MT_N = 624  # words of the Mersenne Twister state (torch's CPU generator is MT19937)
 MT_M = 397

@@ -20,7 +20,7 @@ from ..arguments import require_path
 from ..config import Config
 from ..data.dataset import MAX_PLACE_ID, parse_places, parse_synthetic
 from ..errors import InvalidValueError, ModelFileError, VprError
-from ..modules import ensemble_neurons
+from ..network.modules import ensemble_neurons
 from ..version import __version__
 from .fileio import read_container, sha256_file, write_container
 

@@ -24,7 +24,7 @@ The operating point ``theta`` comes from a labelled calibration run (:func:`oper
 with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
 decision was right. It is stored beside the model (:func:`save_operating_point`).
 
-Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.dynamics.FloatNetwork`), ``integer``
+Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.network.dynamics.FloatNetwork`), ``integer``
 (a fixed-point model, :class:`~vprsnn_export.targets.intsim.IntegerNetwork`) and ``onnx`` (the
 graph exported from that fixed-point model, one onnxruntime session). Every backend returns the
 spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
@@ -48,11 +48,11 @@ import torch
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.data.preprocess import normalise_resized, resize_image
-from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
 from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
 from vprsnn_export.readout.metrics import is_correct

@@ -26,7 +26,7 @@ emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones)
 ``tests/targets/lava_conformance/run_lava.py --wta`` implements it as a Lava process
 (``WtaReadout``) fed by the LIF spikes and the Dense current.
 
-Ensembles (src/vprsnn_export/modules.py): the M modules are M populations ``exc_m`` (the
+Ensembles (src/vprsnn_export/network/modules.py): the M modules are M populations ``exc_m`` (the
 header's ``modules``: neurons [m n, (m + 1) n), their region of places, their threshold
 and current bounds), each with its own parameters and its own WTA (``wta.group_size`` = n).
 Lava's Dense + LIF of the whole ensemble computes every module's WTA-off network at once

@@ -16,7 +16,7 @@ Computation (every operation integer; the contract of :mod:`export.model`):
         Vn  = V + A[t] * 2**voltage_shift
         V   = Clip(Vn, -(2**23 - 1), 2**23 - 1);  saturations += #(Vn != V)
         C   = V > theta << voltage_shift
-        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/modules.py):
+        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/network/modules.py):
                  w = ArgMax(Reshape(Where(C, A[t] m, -1), [batch, M, n]), axis 2) (first index on ties);
                  S = (j mod n == w of j's module) and C
         WTA off: S = C

@@ -14,7 +14,7 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export import parallel
-from vprsnn_export.dynamics import run_network
-from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.kernel_sums import _blocked_currents, blas_block
+from vprsnn_export.network import parallel
+from vprsnn_export.network.dynamics import run_network
+from vprsnn_export.network.dynamics_kernel import float_run
+from vprsnn_export.network.kernel_sums import _blocked_currents, blas_block
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 

@@ -1,6 +1,6 @@
 """The float network's compiled, event-driven step loop (plasticity off): :func:`float_run`.
 
-The step equations are those of :mod:`vprsnn_export.dynamics`:
+The step equations are those of :mod:`vprsnn_export.network.dynamics`:
 
     I_j = sum_{i active} w_ij                     (rows summed in increasing i)
     V_j = beta V_j + I_j;  C = {j : V_j > theta_j}
@@ -10,10 +10,10 @@ The step equations are those of :mod:`vprsnn_export.dynamics`:
 
 State is zeroed at the start of every presentation (isolation) or carried over in order. The
 kernel sums each step's active rows in float32 in the order this machine's BLAS uses for the
-dense matmul (probed: :func:`vprsnn_export.kernel_sums.blas_block`), so it reproduces
-:func:`vprsnn_export.dynamics.run_network` bit for bit where the probe succeeds; elsewhere a
+dense matmul (probed: :func:`vprsnn_export.network.kernel_sums.blas_block`), so it reproduces
+:func:`vprsnn_export.network.dynamics.run_network` bit for bit where the probe succeeds; elsewhere a
 current may differ in its last bit and, rarely, a threshold decision with it. The neurons run in
-tiles of whole WTA groups, on threads (:mod:`vprsnn_export.parallel`).
+tiles of whole WTA groups, on threads (:mod:`vprsnn_export.network.parallel`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 from .kernel_checks import require_array, require_groups, require_int
 from .kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, _numpy, as_spike_array, blas_block, compiled
 from .parallel import check_group, neuron_tile, run_parts, run_threads
@@ -209,13 +209,13 @@ def float_run(
 ) -> SpikeRun:
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
 
-    ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
+    ``group``: neurons per WTA group (:mod:`vprsnn_export.network.modules`); ``None``: one group.
     ``threads`` (default: torch's thread count): Python threads sharing the run, by whole WTA
     groups of neurons (an ensemble) or by presentations (:func:`run_parts`); the kernel runs
     the neurons in tiles of whole groups (:func:`neuron_tile`) so that a tile's weights stay
     in cache across the presentations.
 
-    Same dynamics as :func:`vprsnn_export.dynamics.run_network`. Each step's currents are the
+    Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`. Each step's currents are the
     active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
     :func:`_blocked_sum`); by default the block that reproduces this machine's BLAS on the
     shape ``run_network`` multiplies (:func:`blas_block`), so the counts are those of

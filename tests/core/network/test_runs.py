@@ -7,8 +7,8 @@ import pytest
 import torch
 from tqdm import tqdm
 
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.runs import SpikeRun, run_in_chunks
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 from vprsnn_export.targets.intsim import IntegerNetwork
 
 pytestmark = pytest.mark.usefixtures("one_thread")

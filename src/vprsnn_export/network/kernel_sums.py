@@ -9,9 +9,9 @@ per step). Float sums follow the order this machine's BLAS uses for the dense ma
 bit for bit where the probe succeeds.
 
 The kernels, each beside its caller with its checked entry point: the Bernoulli encoder
-(:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.dynamics_kernel`),
+(:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.network.dynamics_kernel`),
 the integer simulator (:mod:`vprsnn_export.targets.intsim_kernel`) and the STDP training window
-(:mod:`vprsnn_export.trainer.stdp_kernel`); threads and tiles: :mod:`vprsnn_export.parallel`.
+(:mod:`vprsnn_export.trainer.stdp_kernel`); threads and tiles: :mod:`vprsnn_export.network.parallel`.
 
 Compilation is lazy (first call, about a second per signature) and cached next to the kernel's
 file (numba ``cache=True``); on a read-only install without a writable cache directory the
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 from .kernel_checks import require_array, require_int
 
 F = TypeVar("F", bound=Callable[..., object])

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .arguments import require_integer
-from .config import Config
-from .errors import InvalidValueError
+from ..arguments import require_integer
+from ..config import Config
+from ..errors import InvalidValueError
 
 MAX_COUNT = 1 << 53  # places and module sizes: exact in float64, far beyond any route
 MAX_MODULES = 1 << 20  # modules of one ensemble: beyond any route, before the (M, 2) regions exhaust memory

@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 
 TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default size
 

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export import dynamics_kernel, kernel_sums
 from vprsnn_export.config import preset
 from vprsnn_export.data import encoding_kernel
-from vprsnn_export.dynamics import FloatNetwork, run_network
 from vprsnn_export.errors import InvalidValueError, VprError
+from vprsnn_export.network import dynamics_kernel, kernel_sums
+from vprsnn_export.network.dynamics import FloatNetwork, run_network
 from vprsnn_export.targets import intsim_kernel
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.trainer import stdp_kernel

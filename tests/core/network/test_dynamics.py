@@ -1,6 +1,6 @@
 import torch
 
-from vprsnn_export.dynamics import run_network, wta_step
+from vprsnn_export.network.dynamics import run_network, wta_step
 
 
 def test_wta_step_picks_largest_current_among_candidates_and_resets_all_candidates():

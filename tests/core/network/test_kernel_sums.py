@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export import kernel_sums
-from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.kernel_sums import as_spike_array
+from vprsnn_export.network import kernel_sums
+from vprsnn_export.network.dynamics_kernel import float_run
+from vprsnn_export.network.kernel_sums import as_spike_array
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 

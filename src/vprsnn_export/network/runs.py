@@ -1,7 +1,7 @@
 """One result type for every implementation of the network, and the interface they share.
 
 A *backend* is anything that presents spike trains (N, T, inputs) of 0/1 uint8 to the
-network and reports what it did: the float reference (:class:`vprsnn_export.dynamics.FloatNetwork`),
+network and reports what it did: the float reference (:class:`vprsnn_export.network.dynamics.FloatNetwork`),
 the integer simulator and its reference stepper, onnxruntime on the exported graph, and the
 exported files read back. They all return a :class:`SpikeRun`, so verification iterates over
 backends instead of special-casing each one.

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 
 Shape = Sequence[int | None]  # None: any length along that axis
 

@@ -1,7 +1,7 @@
 import numpy as np
 
 from vprsnn_export.config import Config
-from vprsnn_export.modules import ensemble_neurons, module_count, module_regions, neuron_modules, region_mask
+from vprsnn_export.network.modules import ensemble_neurons, module_count, module_regions, neuron_modules, region_mask
 
 
 def test_regions_cut_the_places_into_consecutive_runs_the_last_one_shorter():

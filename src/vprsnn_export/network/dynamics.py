@@ -7,7 +7,7 @@ Per time step t, for a batch of presentations (rows) and neurons j:
     C[t]   = {j : V_j[t] > theta_j}                       (candidates)
     WTA on:  S_j[t] = 1 for the one j in C[t] with the largest I_j[t]
              (ties: lowest index); nothing fires if C[t] is empty.
-             In an ensemble of modules (:mod:`vprsnn_export.modules`) this holds
+             In an ensemble of modules (:mod:`vprsnn_export.network.modules`) this holds
              within each WTA group (:func:`vprsnn_export.config.wta_group`): all
              neurons (network.wta_scope = ensemble) or each module's n neurons
     WTA off: S_j[t] = 1 for every j in C[t]
@@ -26,13 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .arguments import real_array, require_type
-from .config import Config, wta_group
-from .device import check_device
+from ..arguments import real_array, require_type
+from ..config import Config, wta_group
+from ..device import check_device
+from ..errors import InvalidValueError
+from ..resources import LOWER_RUN, MemoryNeed, check_memory, run_need
 from .dynamics_kernel import QUERY_CHUNK, float_run
-from .errors import InvalidValueError
 from .kernel_sums import blas_block
-from .resources import LOWER_RUN, MemoryNeed, check_memory, run_need
 from .runs import SpikeRun, run_in_chunks
 
 
@@ -115,7 +115,7 @@ def run_network(
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
     On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.dynamics_kernel.float_run`: the same counts bit for bit, the currents summed
+    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the same counts bit for bit, the currents summed
     in this machine's BLAS order); ``compiled=False`` (and any GPU) runs the torch loop below,
     one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
     moved to ``weights.device`` chunk by chunk.
@@ -205,7 +205,7 @@ def check_network(spikes: torch.Tensor | None, weights: torch.Tensor, theta: tor
 
 @dataclass
 class FloatNetwork:
-    """The float reference network: float32 weights and thresholds on a device (a :class:`~vprsnn_export.runs.Backend`)."""
+    """The float reference network: float32 weights and thresholds on a device (a :class:`~vprsnn_export.network.runs.Backend`)."""
 
     weights: torch.Tensor
     thresholds: torch.Tensor
