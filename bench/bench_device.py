@@ -6,7 +6,7 @@
 
 For each ensemble size M in --modules (M modules of network.n_neurons neurons on network.n_inputs inputs, the default config):
 
-* CPU float kernel / CPU integer kernel: the compiled event-driven kernels (vprsnn_export.dynamics_kernel, vprsnn_export.targets.intsim_kernel);
+* CPU float kernel / CPU integer kernel: the compiled event-driven kernels (vprsnn_export.network.dynamics_kernel, vprsnn_export.targets.intsim_kernel);
 * torch float / torch integer on --device: ``run_network(compiled=False)`` and
   ``run_prepared(compiled=False)``, every query of a chunk and every module at once, t sequential;
 * dense bound on --device: the input-current matmul alone (spikes @ W, float32), the work a
@@ -35,12 +35,12 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.dynamics import input_currents, run_network
-from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import input_currents, run_network
+from vprsnn_export.network.dynamics_kernel import float_run
 from vprsnn_export.targets.intsim import prepare, run_prepared
 from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.stdp import initial_weights

@@ -4,7 +4,7 @@
 
 Prints one table. The reference loop presents one query at a time and computes
 each step's current as its own vector-matrix product (the textbook loop); the
-batched path is `vprsnn_export.dynamics.run_network` (one current matmul for all
+batched path is `vprsnn_export.network.dynamics.run_network` (one current matmul for all
 queries and steps, then a recurrence over t vectorised over queries and neurons).
 Both run here, side by side, on the same spikes, and must give the same counts.
 """
@@ -18,9 +18,9 @@ from pathlib import Path
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import run_network, wta_step
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.network.dynamics import run_network, wta_step
 from vprsnn_export.trainer.train import Presentation, train_network
 
 NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")

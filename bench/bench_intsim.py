@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.trainer.stdp import initial_weights
 

@@ -26,15 +26,15 @@ import numpy as np
 import torch
 from bench_intsim import untrained_checkpoint  # the sibling script (bench/ is on sys.path when run)
 
-from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.config import Config, PreprocessConfig
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
-from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.encoding import encode, presentation_seed, query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import encode, presentation_seed, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.kernel_sums import blas_block
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork, input_currents, run_network
+from vprsnn_export.network.dynamics_kernel import float_run
+from vprsnn_export.network.kernel_sums import blas_block
+from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork, run_prepared
 from vprsnn_export.targets.intsim_kernel import integer_run
 from vprsnn_export.trainer.stdp import initial_weights

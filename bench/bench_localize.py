@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.runtime.localize import LocalizeOptions, Localizer
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.threads import set_threads

@@ -25,9 +25,9 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics_kernel import float_run
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.network.dynamics_kernel import float_run
 from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.train import Presentation, train_network
 

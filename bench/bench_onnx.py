@@ -20,8 +20,8 @@ import numpy as np
 import torch
 
 from vprsnn_export.commands._common import format_table
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import encode, query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import encode, query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.runtime.exporting import load_source
 from vprsnn_export.targets.intsim import simulate

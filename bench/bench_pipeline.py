@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import load_checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.io.checkpoint import load_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.evaluation import ReadoutOptions, readout_rows
 from vprsnn_export.trainer import train as train_module
 from vprsnn_export.trainer.train import Presentation, train_batch, train_network

@@ -23,7 +23,7 @@ from hypothesis.extra.numpy import array_shapes, arrays
 import vprsnn_export as vx
 from vprsnn_export.arguments import ascii_int, ascii_uint
 from vprsnn_export.errors import VprError
-from vprsnn_export.fileio import JSON_MAX_DEPTH, JSON_MAX_DIGITS, parse_json
+from vprsnn_export.io.fileio import JSON_MAX_DEPTH, JSON_MAX_DIGITS, parse_json
 
 FAST = settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck), database=None)
 

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config, PreprocessConfig
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import encode
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import encode
+from vprsnn_export.data.preprocess import CHANNELS, Channel, normalise_resized
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point, save_fixed_point
-from vprsnn_export.preprocess import CHANNELS, Channel, normalise_resized
+from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.assignment import share_decision
 from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strategy_scores

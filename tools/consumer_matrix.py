@@ -26,12 +26,12 @@ import nir
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.consumer_gate import decided_places
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_consumers import MATRIX_CONSUMERS, ConsumerUnavailable, run_consumer

@@ -15,9 +15,9 @@ import argparse
 
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
 from vprsnn_export.threads import set_threads
 

@@ -19,18 +19,19 @@ The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx
 
 from __future__ import annotations
 
-from .checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from .cluster import Cluster, parse_cluster
 from .config import Config
-from .dataset import Dataset, load_dataset, select_places
-from .dynamics import FloatNetwork
-from .encoding import calibration_spikes, query_spikes
+from .data.dataset import Dataset, load_dataset, select_places
+from .data.encoding import calibration_spikes, query_spikes
+from .data.frames import iter_frames
+from .data.preprocess import CHANNELS, Channel
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import quantize_checkpoint
-from .frames import iter_frames
-from .modules import module_count, module_regions
-from .preprocess import CHANNELS, Channel
+from .io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from .network.dynamics import FloatNetwork
+from .network.modules import module_count, module_regions
+from .network.runs import Backend, SpikeRun
 from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
@@ -38,7 +39,6 @@ from .readout.regions import ModuleLayout, module_layout, regularise
 from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
 from .resources import memory_limit, set_memory_limit
-from .runs import Backend, SpikeRun
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, NoReturn
 
 from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
-from .fileio import check_output_folder, output_lock
+from .io.fileio import check_output_folder, output_lock
 from .resources import set_memory_limit
 from .threads import set_threads
 from .version import __version__
@@ -139,7 +139,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Parse, run one command; expected errors are one line and exit 2, an interrupt exits 130, SIGTERM 143.
 
     The command's output (``--out``, or ``--report`` for verify) is locked for the whole run
-    (:func:`vprsnn_export.fileio.output_lock`): a second run writing the same output stops at once.
+    (:func:`vprsnn_export.io.fileio.output_lock`): a second run writing the same output stops at once.
     """
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminate)

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
+from .data.preprocess import CHANNELS
 from .errors import InvalidValueError
-from .preprocess import CHANNELS
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ class HomeostasisConfig:
 class TrainConfig:
     epochs: int = 60  # chosen from the measured curve in docs/results/epochs.md
     batch_size: int = 64
-    module_size: int = 0  # places per module (src/vprsnn_export/modules.py); 0: one network for all places
+    module_size: int = 0  # places per module (src/vprsnn_export/network/modules.py); 0: one network for all places
 
 
 @dataclass(frozen=True)

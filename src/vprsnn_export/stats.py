@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vprsnn_export.serial import JsonDataclass, json_options
+from vprsnn_export.io.serial import JsonDataclass, json_options
 
 
 @dataclass(frozen=True)

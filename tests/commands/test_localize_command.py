@@ -11,13 +11,13 @@ import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import checkpoint_sha256, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset, read_manifest
+from vprsnn_export.data.dataset import load_dataset, read_manifest
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.export.model import save_fixed_point
+from vprsnn_export.io.checkpoint import checkpoint_sha256, save_checkpoint
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.synthetic import synthetic_route
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import load_checkpoint
 from vprsnn_export.cli import main
+from vprsnn_export.io.checkpoint import load_checkpoint
 
 SMALL = ["--timesteps", "100", "--epochs", "8", "--neurons", "100"]
 

@@ -7,7 +7,7 @@ import pytest
 
 import vprsnn_export as vx
 from vprsnn_export import cli, resources
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.resources import (
     ENV_LIMIT,

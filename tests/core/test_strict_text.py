@@ -11,9 +11,9 @@ import pytest
 from vprsnn_export import threads
 from vprsnn_export.commands._common import integer, parse_int_list, parse_value
 from vprsnn_export.commands.export import parse_shape
-from vprsnn_export.dataset import parse_places, parse_synthetic
+from vprsnn_export.data.dataset import parse_places, parse_synthetic
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.modules import MAX_MODULES, module_regions
+from vprsnn_export.network.modules import MAX_MODULES, module_regions
 from vprsnn_export.targets import onnx_target
 
 EXOTIC = ["²", "٣", "３", "1_0", "⁵"]

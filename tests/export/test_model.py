@@ -7,7 +7,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config, preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import (
@@ -19,7 +18,8 @@ from vprsnn_export.export.model import (
     save_fixed_point,
 )
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.fileio import read_container, write_container
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.fileio import read_container, write_container
 
 SMALL = {"preprocess.image_size": 4, "preprocess.patch_size": 2, "network.n_inputs": 16, "network.n_neurons": 5}
 

@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import preset
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.export.quantize import (
@@ -22,6 +20,8 @@ from vprsnn_export.export.quantize import (
     quantize_checkpoint,
     split_scales,
 )
+from vprsnn_export.io.checkpoint import Checkpoint, save_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.deployment import recalibrate
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.stdp import initial_weights

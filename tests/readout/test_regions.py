@@ -5,7 +5,7 @@ import pytest
 
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.modules import module_regions
+from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.assignment import standard_scores
 from vprsnn_export.readout.regions import (
     ModuleLayout,

@@ -8,9 +8,9 @@ import nir
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.targets.nir_target import write_nir
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
 from vprsnn_export.trainer.pipeline import train_and_calibrate

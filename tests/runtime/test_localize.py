@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.readout.aggregation import aggregate, track_velocity
 from vprsnn_export.readout.strategies import decide
@@ -21,7 +22,6 @@ from vprsnn_export.runtime.localize import (
     precision_threshold,
     save_operating_point,
 )
-from vprsnn_export.synthetic import synthetic_route
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 

@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from vprsnn_export.checkpoint import save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
 from vprsnn_export.runtime.predictions import network_predictions
 from vprsnn_export.trainer.pipeline import train_and_calibrate

@@ -26,10 +26,10 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config, preset
-from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_runners import CONSUMERS
 from vprsnn_export.targets.nir_target import apply_readout_rule, write_nir
@@ -250,8 +250,8 @@ class RealFiles:
 
 def real_files(folder: Path) -> RealFiles:
     """Train once (seed 1, default config), quantise, export, run the network on the 100 winter queries."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
@@ -347,8 +347,8 @@ def test_print_matrix(real):
 @pytest.fixture(scope="module")
 def default_network():
     """The default (DoG) config, seed 7, places 1000-1099 (never used elsewhere), 40 epochs; 100 winter queries."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
     folder = Path(os.environ.get("VPRSNN_NORDLAND", NORDLAND))  # a worktree elsewhere names the data folder

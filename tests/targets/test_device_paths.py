@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from vprsnn_export.config import preset
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.targets.intsim import prepare, run_prepared
 

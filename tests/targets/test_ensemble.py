@@ -19,8 +19,8 @@ import torch
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.readout.regions import hyperactive_neurons
@@ -287,7 +287,7 @@ def test_netx_runs_the_ensemble(route, queries, tmp_path, netx_python):
 
 
 def test_quantize_command_prints_the_modules(route, tmp_path, capsys):
-    from vprsnn_export.checkpoint import save_checkpoint
+    from vprsnn_export.io.checkpoint import save_checkpoint
 
     path = save_checkpoint(tmp_path / "ens.npz", route[0])
     args = ["quantize", str(path), "--bits", "4", "--per-tensor", "--reuse-float-calibration", "--quiet"]

@@ -11,11 +11,11 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from vprsnn_export.config import preset
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import IntegerNetwork, matmul_dtype, prepare, run_prepared, simulate, step_agreement
 from vprsnn_export.targets.reference_stepper import reference_run, trunc_div
 from vprsnn_export.trainer.calibrate import calibrate

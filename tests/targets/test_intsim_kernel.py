@@ -8,10 +8,10 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export import parallel
 from vprsnn_export.config import preset
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.network import parallel
+from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.targets.intsim import prepare, run_prepared
 from vprsnn_export.targets.intsim_kernel import integer_run
 from vprsnn_export.targets.reference_stepper import reference_run

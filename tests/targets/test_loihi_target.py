@@ -16,7 +16,7 @@ import torch
 from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import sha256_bytes
+from vprsnn_export.io.fileio import sha256_bytes
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
@@ -316,8 +316,8 @@ def real_case() -> tuple[FixedPointModel, torch.Tensor]:
 def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
     """VPRSNN_LAVA_MODEL (a fixed-point model file) when set, else a 3-epoch network quantised at 8 bits per neuron;
     with the spike trains of its first ``n`` winter queries."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.model import load_fixed_point
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate

@@ -84,8 +84,8 @@ NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
 def test_netx_on_real_nordland_queries(tmp_path, netx_python):
     """VPRSNN_LAVA_MODEL's network.net on its first VPRSNN_LAVA_QUERIES (4) winter queries, at the model's T."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.model import load_fixed_point
 
     model = load_fixed_point(os.environ["VPRSNN_LAVA_MODEL"])

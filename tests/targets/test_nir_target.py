@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.nir_read import read_nir
 from vprsnn_export.targets.nir_runners import generic_consumer_raster, snntorch_consumer_raster, spike_agreement

@@ -13,14 +13,14 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
+from vprsnn_export.io.checkpoint import Checkpoint, save_checkpoint
+from vprsnn_export.network.runs import Backend
 from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.readout.strategies import strategy_scores
-from vprsnn_export.runs import Backend
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_session import OnnxBackend, read_onnx, run_onnx, run_onnx_outputs
 from vprsnn_export.targets.onnx_target import IR_VERSION, OPSET, build_onnx, readout_matrix_nodes, write_onnx
@@ -333,8 +333,8 @@ def test_export_command_float_checkpoint_needs_quantisation_for_integer_targets(
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
 def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     """A short training on the real subset, quantised at 8, 4 and 2 bits: ONNX == integer simulator on every query."""
-    from vprsnn_export.dataset import load_dataset
-    from vprsnn_export.encoding import query_spikes
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.data.encoding import query_spikes
     from vprsnn_export.export.quantize import quantize_checkpoint
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from vprsnn_export.config import preset
-from vprsnn_export.modules import module_regions
+from vprsnn_export.network.modules import module_regions
 from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.train import Presentation, train_network
 

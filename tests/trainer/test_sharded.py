@@ -8,8 +8,8 @@ import torch
 
 from vprsnn_export.cluster import TaskTiming
 from vprsnn_export.config import preset
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.trainer.batched import module_training_rows, train_modules
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import (

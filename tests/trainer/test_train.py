@@ -2,7 +2,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import preset
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.train import Presentation, train_network
 

@@ -11,9 +11,9 @@ from typing import Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
-from ..dataset import Dataset, load_selection
+from ..data.dataset import Dataset, load_selection
 from ..errors import InvalidValueError
-from ..fileio import parse_json
+from ..io.fileio import parse_json
 from ..readout.rules import RULES
 from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 from ..runtime.evaluation import ReadoutOptions
@@ -215,7 +215,7 @@ def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Co
 
 def parse_value(raw: str) -> Any:
     """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string
-    (:func:`~vprsnn_export.fileio.parse_json`: a value beyond its limits is an InvalidValueError)."""
+    (:func:`~vprsnn_export.io.fileio.parse_json`: a value beyond its limits is an InvalidValueError)."""
     try:
         return parse_json(raw, f"--set/--grid value {raw[:40]!r}")
     except json.JSONDecodeError:

@@ -20,14 +20,14 @@ import sys
 import time
 from pathlib import Path
 
-from ..checkpoint import checkpoint_sha256, save_checkpoint
 from ..config import Config
-from ..dataset import load_dataset
+from ..data.dataset import load_dataset
+from ..data.preprocess import CHANNELS
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
-from ..modules import module_count
-from ..preprocess import CHANNELS
+from ..io.checkpoint import checkpoint_sha256, save_checkpoint
+from ..network.modules import module_count
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.report.labels import points

@@ -7,11 +7,11 @@ import sys
 
 import numpy as np
 
-from ..checkpoint import load_checkpoint
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..fileio import check_output
+from ..io.checkpoint import load_checkpoint
+from ..io.fileio import check_output
 from ..runtime.evaluation import evaluate_float, sequence_warning
 from ..runtime.predictions import network_predictions
 from ._common import (

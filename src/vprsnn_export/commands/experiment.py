@@ -16,7 +16,7 @@ from .. import experiments
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..errors import InvalidValueError
 from ..experiments.common import DOCS_RESULTS, Settings, Variant, document, results_dir
-from ..fileio import atomic_write_text
+from ..io.fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
 HELPER_MODULES = {"common", "plots", "query"}  # modules of experiments/ that are not experiments

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from ..arguments import ascii_uint
-from ..dataset import MAX_PLACES
+from ..data.dataset import MAX_PLACES
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS

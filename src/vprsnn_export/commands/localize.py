@@ -18,9 +18,9 @@ import math
 import sys
 from pathlib import Path
 
+from ..data.frames import iter_frames
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..frames import iter_frames
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
     BACKENDS,

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
-from ..fileio import check_output
+from ..io.checkpoint import checkpoint_sha256, load_checkpoint
+from ..io.fileio import check_output
 from ..runtime.deployment import deploy
 from ._common import (
     PER_TENSOR_HELP,

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..checkpoint import checkpoint_sha256, load_checkpoint
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
+from ..io.checkpoint import checkpoint_sha256, load_checkpoint
 from ..runtime.evaluation import evaluate_fixed_point, sequence_warning
 from ._common import (
     RESULT_COLUMNS,

@@ -6,11 +6,11 @@ import argparse
 import time
 from pathlib import Path
 
-from ..checkpoint import save_checkpoint
 from ..cluster import CLUSTER_HELP, parse_cluster
-from ..dataset import load_dataset, selection_record
+from ..data.dataset import load_dataset, selection_record
 from ..device import resolve_device
-from ..fileio import check_output
+from ..io.checkpoint import save_checkpoint
+from ..io.fileio import check_output
 from ..trainer.pipeline import train_and_calibrate
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
 

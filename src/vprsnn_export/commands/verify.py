@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..config import Config
-from ..dataset import MAX_PLACES, Dataset, load_dataset
+from ..data.dataset import MAX_PLACES, Dataset, load_dataset
 from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
+from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
 from ..runtime.evaluation import sequence_warning

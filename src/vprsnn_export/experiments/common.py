@@ -15,14 +15,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config, preset
-from vprsnn_export.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.sourcehash import source_fingerprint
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.calibrate import calibrate

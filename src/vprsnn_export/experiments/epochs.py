@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.dynamics import FloatNetwork
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.train import Presentation, train_network

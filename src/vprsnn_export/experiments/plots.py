@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib import ticker  # noqa: E402
 
-from vprsnn_export.fileio import atomic_write_bytes  # noqa: E402
+from vprsnn_export.io.fileio import atomic_write_bytes  # noqa: E402
 
 
 def save_figure(fig, path: Path) -> Path:

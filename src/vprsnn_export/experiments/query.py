@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import Dataset
+from vprsnn_export.data.dataset import Dataset
 from vprsnn_export.device import resolve_device
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.runtime.evaluation import Evaluation, ReadoutOptions, evaluate_float
 
 from .common import Settings

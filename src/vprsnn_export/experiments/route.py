@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.config import Config, preset
-from vprsnn_export.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.readout.strategies import STRATEGIES

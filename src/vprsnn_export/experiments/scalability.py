@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.stats import mean_std
 
 from .common import Settings, provenance, trained_checkpoint

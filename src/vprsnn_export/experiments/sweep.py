@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import PRESETS, AssignmentConfig, Config, preset
 from vprsnn_export.device import resolve_device
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.runtime.evaluation import Evaluation, ReadoutOptions, evaluate_float, readout_rows
 from vprsnn_export.stats import mean_std
 

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
-from vprsnn_export.dynamics import FloatNetwork, input_currents, run_network
-from vprsnn_export.dynamics_kernel import QUERY_CHUNK
-from vprsnn_export.encoding import query_spikes
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork, input_currents, run_network
+from vprsnn_export.network.dynamics_kernel import QUERY_CHUNK
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.targets.intsim import IntegerNetwork

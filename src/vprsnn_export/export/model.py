@@ -20,8 +20,8 @@ Every implementation of the LIF + WTA step, and the test that proves it equal to
 is checked against (docs/fixed-point.md §5.1 has the same table):
 
     implementation                          where                                 proved equal by
-    float step (torch; the reference)       dynamics.wta_step / run_network       tests/core/test_dynamics.py (by hand)
-    float kernel loop (numba)               dynamics_kernel.float_run             tests/core/test_dynamics_kernel.py::test_float_kernel_matches_run_network
+    float step (torch; the reference)       dynamics.wta_step / run_network       tests/core/network/test_dynamics.py (by hand)
+    float kernel loop (numba)               dynamics_kernel.float_run             tests/core/network/test_dynamics_kernel.py::test_float_kernel_matches_run_network
     training window (numba, WTA + STDP)     trainer/stdp_kernel.stdp_window / stdp_windows  tests/trainer/test_stdp_kernel.py::test_stdp_window_gives_train_batch_weights_bit_for_bit
     integer kernel loop (numba)             targets/intsim_kernel.integer_run     tests/targets/test_intsim_kernel.py::test_integer_kernel_is_bit_identical_to_the_simulator_and_the_reference
     integer simulator (torch path)          targets/intsim.run_prepared           tests/targets/test_intsim.py::test_fast_simulator_equals_reference_on_random_models,
@@ -47,13 +47,13 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.arguments import require_path
-from vprsnn_export.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.fileio import read_container, write_container
-from vprsnn_export.modules import ensemble_neurons
+from vprsnn_export.io.checkpoint import reference_header, validate_reference_ids
+from vprsnn_export.io.fileio import read_container, write_container
+from vprsnn_export.network.modules import ensemble_neurons
+from vprsnn_export.network.widths import DECAY_BITS
 from vprsnn_export.version import __version__
-from vprsnn_export.widths import DECAY_BITS
 
 FORMAT = "vprsnn-fixed-point"
 FORMAT_VERSION = 1

@@ -7,7 +7,7 @@ one exponent for the network); the float weight w_ij becomes the unsigned mantis
 
 and the float threshold becomes theta_int_j = clip(floor(theta_j / s_j + 1/2), 1, 2**17 - 1).
 Per-tensor quantisation uses one scale per module (per weight tensor: an ensemble of M
-modules, src/vprsnn_export/modules.py, stores M tensors side by side, module m owning the
+modules, src/vprsnn_export/network/modules.py, stores M tensors side by side, module m owning the
 columns [m n, (m + 1) n)); per-neuron one per column.
 The scale method picks the desired s_j from the float weights:
 
@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.arguments import require_bool, require_choice, require_type
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.io.checkpoint import Checkpoint
 
 from .model import (
     MULTIPLIER_BITS,

@@ -1,6 +1,6 @@
 """Region regularisation of an ensemble: region-specific assignment and silencing of hyperactive neurons.
 
-An ensemble of modules (``src/vprsnn_export/modules.py``) applies the hard WTA within each module, so
+An ensemble of modules (``src/vprsnn_export/network/modules.py``) applies the hard WTA within each module, so
 every module has a winner for every image, including the images of the other modules' regions. The
 calibration S^R spans every module's neurons over every reference place, so it shows which neurons
 also respond outside their own module's region. Hussaini et al. (RA-L 2022, "Ensembles of compact,
@@ -33,7 +33,7 @@ import numpy as np
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.modules import module_regions, region_mask
+from vprsnn_export.network.modules import module_regions, region_mask
 
 from .assignment import _counts
 

@@ -4,7 +4,7 @@ The baseline is the integer simulator (a fixed-point model) or the float network
 float checkpoint exported to NIR). Each *contender* is another backend on the same
 spike tensor: the slow reference stepper (first few presentations), the ONNX graph on
 onnxruntime, the NIR file read back and the Loihi-style files read back, each run on
-the simulator. Every :class:`~vprsnn_export.runs.SpikeRun` field both sides report is
+the simulator. Every :class:`~vprsnn_export.network.runs.SpikeRun` field both sides report is
 compared exactly (raster, counts, candidates per step, final voltages, saturations);
 a W+Prob head (float64 arithmetic in another summation order) must give identical
 decisions and differ from the readout by at most ``WPROB_ROUNDING``. A model read back
@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.dynamics import FloatNetwork
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.runs import Backend, SpikeRun
 from vprsnn_export.readout.strategies import decide
-from vprsnn_export.runs import Backend, SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper

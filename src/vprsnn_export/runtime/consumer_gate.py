@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavailable, available, run_consumer
 from vprsnn_export.targets.nir_read import load_graph

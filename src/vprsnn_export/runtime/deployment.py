@@ -15,10 +15,10 @@ import numpy as np
 import torch
 
 from vprsnn_export.arguments import require_type
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.trainer.calibrate import calibrate
 

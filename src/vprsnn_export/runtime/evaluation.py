@@ -10,13 +10,13 @@ import numpy as np
 import torch
 
 from vprsnn_export.arguments import check_place_ids, require_type
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
-from vprsnn_export.dynamics import FloatNetwork, check_run_memory
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.baseline import (
     cosine_similarities,

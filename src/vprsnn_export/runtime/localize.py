@@ -24,7 +24,7 @@ The operating point ``theta`` comes from a labelled calibration run (:func:`oper
 with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
 decision was right. It is stored beside the model (:func:`save_operating_point`).
 
-Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.dynamics.FloatNetwork`), ``integer``
+Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.network.dynamics.FloatNetwork`), ``integer``
 (a fixed-point model, :class:`~vprsnn_export.targets.intsim.IntegerNetwork`) and ``onnx`` (the
 graph exported from that fixed-point model, one onnxruntime session). Every backend returns the
 spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
@@ -45,14 +45,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.config import Config
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import encode, presentation_seed
+from vprsnn_export.data.encoding import encode, presentation_seed
+from vprsnn_export.data.preprocess import normalise_resized, resize_image
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import atomic_write_text, is_readable_file
-from vprsnn_export.preprocess import normalise_resized, resize_image
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
+from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
 from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
 from vprsnn_export.readout.metrics import is_correct
@@ -292,7 +292,7 @@ class Localizer:
         return self.run_inputs(normalise_resized(resized, self.config.preprocess), names)
 
     def run_inputs(self, inputs: np.ndarray, names: list[str] | None = None) -> list[Decision]:
-        """:meth:`run_batch` on preprocessed frames (N, inputs), e.g. a :class:`~vprsnn_export.dataset.Dataset`'s.
+        """:meth:`run_batch` on preprocessed frames (N, inputs), e.g. a :class:`~vprsnn_export.data.dataset.Dataset`'s.
 
         The integer simulator and the ONNX graph give exactly ``push``'s decisions. The float network
         sums its input currents in this machine's BLAS order, which depends on the batch size, so a

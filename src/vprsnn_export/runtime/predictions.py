@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import atomic_write_text
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.fileio import atomic_write_text
 from vprsnn_export.readout.metrics import is_correct, predicted_place_ids
 from vprsnn_export.readout.strategies import STRATEGIES, decide
 from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_scores

@@ -2,7 +2,7 @@
 
 Every result is a frozen dataclass with ``to_dict()`` (the JSON value report.json holds)
 and ``from_dict()`` (its inverse: ``Type.from_dict(x.to_dict()) == x``), both by the one
-generic mapping of :mod:`vprsnn_export.serial` from the fields and their type hints; a
+generic mapping of :mod:`vprsnn_export.io.serial` from the fields and their type hints; a
 field's options (``json_options``) keep the schema's keys and load older files. The report
 renderer and the commands read attributes, never nested string keys.
 """
@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 
 from vprsnn_export.errors import VprError
 from vprsnn_export.export.model import QuantisationReport
-from vprsnn_export.serial import JsonDataclass, from_json_dict, json_options
+from vprsnn_export.io.serial import JsonDataclass, from_json_dict, json_options
 from vprsnn_export.stats import MeanStd
 
 SCHEMA = "vprsnn-verify-report/1"

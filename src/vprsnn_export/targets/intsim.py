@@ -40,7 +40,7 @@ from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
-from vprsnn_export.runs import SpikeRun, run_in_chunks
+from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
 from .intsim_kernel import integer_run
 

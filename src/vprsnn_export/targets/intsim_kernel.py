@@ -12,7 +12,7 @@ The step equations are those of ``targets/intsim.py`` and ``export/model.py``:
 State is zeroed at the start of every presentation (isolation) or carried over in order. The
 kernel is bit-identical to the integer simulator (:func:`vprsnn_export.targets.intsim.run_prepared`)
 and its reference stepper. The neurons run in tiles of whole WTA groups, on threads
-(:mod:`vprsnn_export.parallel`).
+(:mod:`vprsnn_export.network.parallel`).
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ import numpy as np
 import torch
 
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.kernel_checks import require_array, require_groups, require_int
-from vprsnn_export.kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, as_spike_array, compiled
-from vprsnn_export.parallel import check_group, neuron_tile, run_parts, run_threads
-from vprsnn_export.runs import SpikeRun
-from vprsnn_export.widths import DECAY_BITS
+from vprsnn_export.network.kernel_checks import require_array, require_groups, require_int
+from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, as_spike_array, compiled
+from vprsnn_export.network.parallel import check_group, neuron_tile, run_parts, run_threads
+from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.network.widths import DECAY_BITS
 
 INT32_SAFE = (1 << 31) - 1
 
@@ -185,7 +185,7 @@ def integer_run(
 ) -> SpikeRun:
     """The integer simulator's run, event-driven and compiled; bit-identical to ``targets.intsim.run_prepared``.
 
-    ``group``: neurons per WTA group (:mod:`vprsnn_export.modules`); ``None``: one group.
+    ``group``: neurons per WTA group (:mod:`vprsnn_export.network.modules`); ``None``: one group.
     ``threads`` and the tiles of neurons as in :func:`float_run`.
 
     ``mantissas`` are the unshifted weights q_ij (inputs, neurons), non-negative; the kernel sums

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.modules import module_count
+from vprsnn_export.network.modules import module_count
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ import numpy as np
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, validate
-from vprsnn_export.modules import module_regions
+from vprsnn_export.network.modules import module_regions
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.packing import describe_packing, pack_bits
 from vprsnn_export.version import __version__

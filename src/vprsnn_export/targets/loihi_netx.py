@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import atomic_write
+from vprsnn_export.io.fileio import atomic_write
 from vprsnn_export.targets.loihi_description import DU_NO_CURRENT_MEMORY
 
 

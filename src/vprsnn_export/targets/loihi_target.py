@@ -26,7 +26,7 @@ emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones)
 ``tests/targets/lava_conformance/run_lava.py --wta`` implements it as a Lava process
 (``WtaReadout``) fed by the LIF spikes and the Dense current.
 
-Ensembles (src/vprsnn_export/modules.py): the M modules are M populations ``exc_m`` (the
+Ensembles (src/vprsnn_export/network/modules.py): the M modules are M populations ``exc_m`` (the
 header's ``modules``: neurons [m n, (m + 1) n), their region of places, their threshold
 and current bounds), each with its own parameters and its own WTA (``wta.group_size`` = n).
 Lava's Dense + LIF of the whole ensemble computes every module's WTA-off network at once
@@ -50,7 +50,7 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
+from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
     DU_NO_CURRENT_MEMORY,

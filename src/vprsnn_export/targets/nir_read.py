@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.checkpoint import Checkpoint, validate_checkpoint
 from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError, VprError
 from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
-from vprsnn_export.fileio import parse_json
+from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from vprsnn_export.io.checkpoint import Checkpoint, validate_checkpoint
+from vprsnn_export.io.fileio import parse_json
 from vprsnn_export.targets.nir_target import EDGES, FORMAT, FORMAT_VERSION, NODES, PLAIN_EDGES, Source, effective_beta
 
 

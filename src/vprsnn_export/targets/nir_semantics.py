@@ -33,8 +33,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
 
 #: Decision agreement the gates require of a file whose consumers are stated exact.
 EXACT_DECISION_TOLERANCE = 1.0

@@ -43,12 +43,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
-from vprsnn_export.fileio import atomic_write_bytes, parse_json
-from vprsnn_export.modules import module_count, module_regions
+from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
+from vprsnn_export.io.fileio import atomic_write_bytes, parse_json
+from vprsnn_export.network.modules import module_count, module_regions
 from vprsnn_export.targets.nir_semantics import float_consumers, integer_semantics
 from vprsnn_export.version import __version__
 

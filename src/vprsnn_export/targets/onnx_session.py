@@ -11,7 +11,7 @@ import onnx
 import torch
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.targets.onnx_target import INPUT
 
 
@@ -98,7 +98,7 @@ def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
 
 @dataclass
 class OnnxBackend:
-    """An exported graph on onnxruntime as a :class:`~vprsnn_export.runs.Backend`.
+    """An exported graph on onnxruntime as a :class:`~vprsnn_export.network.runs.Backend`.
 
     The run carries the counts, the total saturations, the W+Prob distribution when the
     graph has that head, and the raster when it has that output (``record`` cannot add

@@ -16,7 +16,7 @@ Computation (every operation integer; the contract of :mod:`export.model`):
         Vn  = V + A[t] * 2**voltage_shift
         V   = Clip(Vn, -(2**23 - 1), 2**23 - 1);  saturations += #(Vn != V)
         C   = V > theta << voltage_shift
-        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/modules.py):
+        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/network/modules.py):
                  w = ArgMax(Reshape(Where(C, A[t] m, -1), [batch, M, n]), axis 2) (first index on ties);
                  S = (j mod n == w of j's module) and C
         WTA off: S = C
@@ -52,7 +52,7 @@ from onnx import TensorProto, helper, numpy_helper
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
-from vprsnn_export.fileio import atomic_write_bytes
+from vprsnn_export.io.fileio import atomic_write_bytes
 from vprsnn_export.readout.regions import module_layout, regularised_calibration
 from vprsnn_export.targets.packing import PACKING, pack_bits
 

@@ -15,7 +15,7 @@ import torch
 
 from vprsnn_export.config import wta_group
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.network.runs import SpikeRun
 
 
 def trunc_div(x: int, d: int) -> int:
@@ -78,7 +78,7 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
 
 @dataclass
 class ReferenceStepper:
-    """The slow oracle as a :class:`~vprsnn_export.runs.Backend` (always records: it is one loop either way)."""
+    """The slow oracle as a :class:`~vprsnn_export.network.runs.Backend` (always records: it is one loop either way)."""
 
     model: FixedPointModel
     name: str = "reference stepper"

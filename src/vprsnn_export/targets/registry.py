@@ -15,10 +15,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.runs import Backend
 from vprsnn_export.registry import Registry
-from vprsnn_export.runs import Backend
 from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
 from vprsnn_export.targets.nir_read import read_nir
 from vprsnn_export.targets.nir_target import WTA_INHIBITION, write_nir

@@ -11,9 +11,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.modules import module_count
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.modules import module_count
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING

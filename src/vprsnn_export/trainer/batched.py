@@ -1,6 +1,6 @@
 """Modules trained side by side: M independent networks as one batched computation.
 
-An ensemble (:mod:`vprsnn_export.modules`) has one network per region of consecutive places.
+An ensemble (:mod:`vprsnn_export.network.modules`) has one network per region of consecutive places.
 Module m trains on its own rows only (its region's places in every reference traversal), with
 everything random derived from the run's one seed exactly as :func:`.train.train_network` derives
 it for that region alone:
@@ -31,10 +31,10 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding import encode, firing_probabilities, presentation_seed
-from vprsnn_export.encoding_kernel import bernoulli_limits, generator_seeds
+from vprsnn_export.data.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.data.encoding_kernel import bernoulli_limits, generator_seeds
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.modules import module_regions
+from vprsnn_export.network.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding import calibration_spikes
+from vprsnn_export.data.encoding import calibration_spikes
 
 CountRunner = Callable[[torch.Tensor], torch.Tensor]
 """Any network implementation: spikes (N, T, inputs) uint8 -> output spike counts (N, neurons)."""

@@ -8,12 +8,12 @@ import numpy as np
 import torch
 
 from vprsnn_export.arguments import require_bool, require_names, require_type
-from vprsnn_export.checkpoint import Checkpoint
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import Dataset
-from vprsnn_export.dynamics import FloatNetwork, check_run_memory
+from vprsnn_export.data.dataset import Dataset
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
 
 from .batched import check_training_memory, module_training_rows, train_modules
 from .calibrate import calibrate

@@ -25,9 +25,9 @@ import torch
 
 from vprsnn_export.cluster import Cluster, map_tasks
 from vprsnn_export.config import Config, wta_group
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import calibration_spikes, query_spikes
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.data.encoding import calibration_spikes, query_spikes
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.runs import SpikeRun
 
 from .batched import history_entry, initial_state, module_epochs, side_by_side
 from .train import Presentation, TrainedNetwork

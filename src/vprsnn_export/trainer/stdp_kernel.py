@@ -3,10 +3,10 @@
 :func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column normalisation)
 with every float32 operation in the torch loop's order, so the weights are bit for bit those of
 the torch loop where this machine's BLAS orders its sums as probed
-(:func:`vprsnn_export.kernel_sums.blas_block`, :func:`vprsnn_export.kernel_sums.batch_sums_in_order`).
+(:func:`vprsnn_export.network.kernel_sums.blas_block`, :func:`vprsnn_export.network.kernel_sums.batch_sums_in_order`).
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
-encoding each module's batch inside it (:mod:`vprsnn_export.encoding_kernel`), on threads over
-contiguous slices of modules (:func:`vprsnn_export.parallel.module_slices`).
+encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
+contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.encoding_kernel import _bernoulli_kernel
+from vprsnn_export.data.encoding_kernel import _bernoulli_kernel
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.kernel_checks import require_array, require_int
-from vprsnn_export.kernel_sums import (
+from vprsnn_export.network.kernel_checks import require_array, require_int
+from vprsnn_export.network.kernel_sums import (
     ANY3,
     SPIKES,
     _active_inputs,
@@ -31,7 +31,7 @@ from vprsnn_export.kernel_sums import (
     blas_block,
     compiled,
 )
-from vprsnn_export.parallel import module_slices
+from vprsnn_export.network.parallel import module_slices
 
 
 @compiled

@@ -11,9 +11,9 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
-from vprsnn_export.dynamics import wta_step
-from vprsnn_export.encoding import encode, presentation_seed
+from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.network.dynamics import wta_step
 
 from .homeostasis import homeostasis_update
 from .stdp import apply_update, decay_trace, initial_weights, stdp_delta
@@ -40,7 +40,7 @@ def train_batch(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Present one batch (B, T, inputs) with plasticity on; state starts at zero for every row.
 
-    Per step: the WTA step of :mod:`vprsnn_export.dynamics`, trace decay, STDP
+    Per step: the WTA step of :mod:`vprsnn_export.network.dynamics`, trace decay, STDP
     (summed over the batch), clip and column normalisation. After the window:
     homeostasis with rbar_j = (spikes of j in the batch) / (B T).
     Returns (weights, thresholds, per-neuron spike counts of the batch).

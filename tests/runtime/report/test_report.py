@@ -6,10 +6,10 @@ import re
 
 import pytest
 
-from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.cli import main
-from vprsnn_export.dataset import load_dataset
+from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import EXIT_BAD_INPUT
+from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.runtime.evaluation import ReadoutOptions
 from vprsnn_export.runtime.report import combine_reports, load_report, write_report
 from vprsnn_export.runtime.report.load import REPORT_JSON

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 import torch
 
-from vprsnn_export.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
-from vprsnn_export.runs import SpikeRun
+from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
+from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,

@@ -12,11 +12,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.dataset import load_dataset
-from vprsnn_export.encoding import encode, query_spikes
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.encoding import encode, query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule

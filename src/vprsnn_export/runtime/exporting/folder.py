@@ -13,7 +13,7 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.fileio import (
+from vprsnn_export.io.fileio import (
     OutputError,
     atomic_write_text,
     check_output_folder,
@@ -94,7 +94,7 @@ def export_and_check(
     """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
 
     The folder is built as a whole beside ``out`` and then put in its place
-    (:func:`vprsnn_export.fileio.publish_folder`), export.json last: a reader never sees new
+    (:func:`vprsnn_export.io.fileio.publish_folder`), export.json last: a reader never sees new
     files beside old ones, and an interrupted export leaves the previous folder as it was.
     An existing ``out`` must be empty or an earlier export (it holds export.json); that one is
     replaced only with ``overwrite=True``.

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
-from vprsnn_export.fileio import read_container, sha256_file
+from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
+from vprsnn_export.io.fileio import read_container, sha256_file
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 

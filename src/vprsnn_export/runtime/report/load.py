@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.fileio import parse_json
+from vprsnn_export.io.fileio import parse_json
 
 from ..results import ReportError, VerifyReport
 from ..verify.summary import build_report, summarise_runs

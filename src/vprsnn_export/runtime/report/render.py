@@ -9,7 +9,7 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from vprsnn_export.fileio import atomic_write_bytes, atomic_write_text
+from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 
 from ..results import VerifyReport
 from .blocks import Block, blocks_of

@@ -16,12 +16,12 @@ import torch
 from tqdm import tqdm
 
 from vprsnn_export.arguments import require_type
-from vprsnn_export.checkpoint import Checkpoint
-from vprsnn_export.dynamics import FloatNetwork
-from vprsnn_export.encoding import query_spikes
+from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
-from vprsnn_export.modules import module_regions
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.modules import module_regions
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
 

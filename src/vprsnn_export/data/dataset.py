@@ -1,0 +1,435 @@
+"""Place manifests, place selection and the preprocessed image set.
+
+A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.data.folders`: frames in
+time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`).
+
+A place manifest is a CSV with one row per place: an integer ``place_id`` column and
+one column per traversal holding an image path relative to the CSV's folder. The
+same place id in two traversals is the same place (the ground truth).
+
+``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of
+traversal folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
+START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..arguments import ascii_uint, check_place_ids
+from ..config import PreprocessConfig
+from ..errors import DataError, InvalidValueError
+from ..io.fileio import is_readable_file, sha256_bytes
+from .folders import (
+    FolderGroundTruth,
+    decode_frames,
+    folder_files,
+    folder_fingerprint,
+    ground_truths,
+    is_folder_dataset,
+)
+from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
+from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
+
+PLACE_ID = "place_id"
+MANIFEST_NAME = "places.csv"
+SYNTHETIC = "synthetic"
+Selection = str | Path | Sequence[int] | np.ndarray | None
+"""A subset CSV (a ``place_id`` column, in order), the place ids themselves, or None for every place."""
+NORDLAND_HINT = "the Nordland data lives under ../shared/data/nordland_64x32_summer_winter (relative to the repository)"
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """Preprocessed images of the selected places, one aligned array per traversal."""
+
+    source: str  # manifest path as given, or "synthetic[:N]"
+    manifest_sha256: str  # sha256 of the manifest file bytes, or the synthetic fingerprint
+    place_ids: np.ndarray  # (N,) int64, in selection order
+    images: dict[str, np.ndarray]  # traversal -> (N, image_size**2) float32, row k is place_ids[k]
+    ground_truth: tuple[FolderGroundTruth, ...] = ()  # a folder data set's checked ground-truth files
+
+    @classmethod
+    def from_arrays(
+        cls,
+        images: Mapping[str, np.ndarray],
+        cfg: PreprocessConfig,
+        place_ids: Sequence[int] | np.ndarray | None = None,
+        *,
+        source: str = "arrays",
+    ) -> Dataset:
+        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)``
+        uint8 frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1); they are
+        preprocessed with ``cfg`` like loaded images. ``manifest_sha256`` hashes the pixels and ids.
+
+        ``vx.Dataset.from_arrays({"day": day, "night": night}, vx.Config().preprocess)``
+        """
+        names = _check_traversals(list(images))
+        arrays = {name: np.asarray(images[name]) for name in names}
+        counts = {name: len(array) for name, array in arrays.items()}
+        if len(set(counts.values())) != 1 or 0 in counts.values():
+            raise DataError(f"every traversal needs the same, non-zero number of frames; got {counts}", source)
+        n = next(iter(counts.values()))
+        ids = np.arange(n, dtype=np.int64) if place_ids is None else np.asarray(place_ids, dtype=np.int64).reshape(-1)
+        if ids.shape != (n,) or len(np.unique(ids)) != n or (ids.size and ids.min() < 0):
+            raise InvalidValueError(f"place_ids must be {n} distinct non-negative integers, got shape {ids.shape}")
+        digest = sha256_bytes(b"".join(arrays[name].tobytes() for name in names) + ids.tobytes())
+        processed = {name: preprocess_images(array, cfg) for name, array in arrays.items()}
+        return cls(source=source, manifest_sha256=digest, place_ids=ids, images=processed)
+
+    def match_window(self, query: str) -> int | None:
+        """The ground-truth files' window for ``query`` (the largest over its files), None without one."""
+        windows = [truth.window for truth in self.ground_truth if truth.query == query]
+        return max(windows) if windows else None
+
+    @property
+    def n_places(self) -> int:
+        return len(self.place_ids)
+
+    @property
+    def traversals(self) -> tuple[str, ...]:
+        return tuple(self.images)
+
+    def traversal(self, name: str) -> np.ndarray:
+        """The ``(N, image_size**2)`` images of traversal ``name``; DataError listing the loaded ones if absent."""
+        if name not in self.images:
+            raise DataError(
+                f"traversal {name!r} is not loaded from {self.source}; available: {', '.join(self.images) or 'none'}"
+            )
+        return self.images[name]
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A parsed place manifest: its resolved path, content hash, header and rows by place id."""
+
+    path: Path
+    sha256: str
+    columns: tuple[str, ...]
+    rows: dict[int, tuple[int, dict[str, str]]]  # place_id -> (CSV line number, row)
+
+
+MAX_PLACE_ID = 2**53  # ids beyond this cannot be told apart once they pass through float64
+MAX_PLACES = 10_000_000  # a selection larger than this is a typing error, not a route
+MAX_SYNTHETIC_PLACES = 100_000
+
+
+def parse_places(spec: str) -> tuple[int, int, int]:
+    """``"START:COUNT[:STRIDE]"`` -> ``(start, count, stride)``: place ids ``start + k * stride``, k = 0..count-1.
+
+    START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an InvalidValueError.
+    """
+    parts = str(spec).strip().split(":")
+    usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
+    if len(parts) not in (2, 3):
+        raise InvalidValueError(usage)
+    numbers = [ascii_uint(part.strip()) for part in parts]
+    if None in numbers:
+        raise InvalidValueError(usage)
+    values = [int(number or 0) for number in numbers]
+    start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
+    if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
+        raise InvalidValueError(usage)
+    return start, count, stride
+
+
+def parse_synthetic(data: str) -> int | None:
+    """``"synthetic"`` -> 60 places, ``"synthetic:N"`` -> N, anything else -> None (a path)."""
+    if data == SYNTHETIC:
+        return DEFAULT_PLACES
+    if not data.startswith(SYNTHETIC + ":"):
+        return None
+    text = data[len(SYNTHETIC) + 1 :]
+    count = ascii_uint(text)
+    if count is None or not 1 <= count <= MAX_SYNTHETIC_PLACES:
+        raise InvalidValueError(
+            f"--data {data!r}: expected synthetic or synthetic:N with N from 1 to {MAX_SYNTHETIC_PLACES}"
+        )
+    return count
+
+
+def selection_record(subset: str | Path | None, places: str | None) -> dict[str, str | None]:
+    """The place selection as a checkpoint stores it: an absolute subset path (so the checkpoint can be
+    used from another directory) or a START:COUNT[:STRIDE] spec."""
+    return {"subset": str(Path(subset).resolve()) if subset else None, "places": places}
+
+
+def load_selection(
+    data: Mapping[str, object],
+    traversals: Sequence[str],
+    cfg: PreprocessConfig,
+    *,
+    source: str | Path | None = None,
+    subset: str | Path | None = None,
+    places: str | None = None,
+    progress: bool = False,
+) -> Dataset:
+    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here.
+
+    ``source``/``subset``/``places`` override the record; without a subset or places, the
+    record's own selection is used.
+    """
+    if subset is None and places is None:
+        subset = _optional_str(data.get("subset"))
+        places = _optional_str(data.get("places"))
+    chosen = source if source is not None else _optional_str(data.get("source"))
+    if chosen is None:
+        raise DataError("no data source: give --data (the checkpoint records none)")
+    return load_dataset(chosen, traversals, cfg, subset=subset, places=places, progress=progress)
+
+
+def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
+    """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
+    if not isinstance(dataset, Dataset):
+        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    wanted = check_place_ids(place_ids)
+    if wanted.size == 0:
+        raise InvalidValueError("place_ids must name at least one place")
+    position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
+    missing = [int(pid) for pid in wanted if int(pid) not in position]
+    if missing:
+        raise DataError(f"place id(s) {missing[:5]} are not in {dataset.source}")
+    rows = np.asarray([position[int(pid)] for pid in wanted], dtype=np.int64)
+    return replace(dataset, place_ids=wanted, images={name: array[rows] for name, array in dataset.images.items()})
+
+
+def _optional_str(value: object) -> str | None:
+    return None if value is None else str(value)
+
+
+def load_dataset(
+    data: str | Path,
+    traversals: Sequence[str],
+    cfg: PreprocessConfig,
+    *,
+    subset: Selection = None,
+    places: str | None = None,
+    progress: bool = False,
+) -> Dataset:
+    """Load, select, decode and preprocess; every expected problem is a DataError/InvalidValueError naming the file."""
+    names = _check_traversals(traversals)
+    if subset is not None and places is not None:
+        raise InvalidValueError("give either --subset or --places, not both")
+    n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
+    if n_synthetic is not None:
+        return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
+    if is_folder_dataset(Path(data)) and not (Path(data) / MANIFEST_NAME).is_file():
+        return _load_folder(Path(data), names, cfg, subset, places, progress)
+    manifest = read_manifest(data)
+    missing = [name for name in names if name not in manifest.columns]
+    if missing:
+        raise DataError(
+            f"traversal column(s) {', '.join(repr(m) for m in missing)} not in the manifest; its columns are: {', '.join(manifest.columns)}",
+            manifest.path,
+        )
+    selected = _select(
+        np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
+    )
+    cells = {name: _image_paths(manifest, name, selected) for name in names}
+    images: dict[str, np.ndarray] = {}
+    with tqdm(
+        total=len(selected) * len(names), desc="decoding images", unit="img", file=sys.stderr, disable=not progress
+    ) as bar:
+        for name in names:
+            images[name] = _decode(cells[name], cfg, bar)
+    # stored resolved, so a checkpoint made here still finds its data when used from another directory
+    return Dataset(
+        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
+    )
+
+
+def _load_folder(
+    folder: Path, names: tuple[str, ...], cfg: PreprocessConfig, subset: Selection, places: str | None, progress: bool
+) -> Dataset:
+    """A folder of traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each traversal."""
+    files = folder_files(folder, names)
+    n_frames = len(next(iter(files.values())))
+    truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
+    selected = _select(np.arange(n_frames, dtype=np.int64), subset, places, str(folder))
+    return Dataset(
+        source=str(folder.resolve()),
+        manifest_sha256=folder_fingerprint(files, truths),
+        place_ids=selected,
+        images=decode_frames(files, selected, cfg, progress),
+        ground_truth=tuple(truths),
+    )
+
+
+def read_manifest(data: str | Path) -> Manifest:
+    """Resolve ``data`` (a CSV, or a folder holding ``places.csv``) and parse it; DataError on any defect."""
+    path = Path(data)
+    if path.is_dir():
+        if not (path / MANIFEST_NAME).is_file():
+            raise DataError(
+                f"this folder has no {MANIFEST_NAME} place manifest and no traversal folders of images", path
+            )
+        path = path / MANIFEST_NAME
+    elif not is_readable_file(path):
+        hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
+        raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
+    raw = path.read_bytes()
+    columns, records = _read_csv(raw, path, "place manifest")
+    if PLACE_ID not in columns:
+        raise DataError(
+            f"the place manifest has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
+        )
+    rows: dict[int, tuple[int, dict[str, str]]] = {}
+    for line, record in records:
+        place = _place_id(record.get(PLACE_ID), line, path)
+        if place in rows:
+            raise DataError(f"duplicate place_id {place} on lines {rows[place][0]} and {line}", path)
+        rows[place] = (line, record)
+    if not rows:
+        raise DataError("the place manifest lists no places", path)
+    return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
+
+
+def read_subset(path: str | Path) -> np.ndarray:
+    """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
+    path = Path(path)
+    if not is_readable_file(path):
+        raise DataError("no such subset file (a CSV with a place_id column)", path)
+    columns, records = _read_csv(path.read_bytes(), path, "subset file")
+    if PLACE_ID not in columns:
+        raise DataError(
+            f"the subset file has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
+        )
+    ids: list[int] = []
+    lines: dict[int, int] = {}
+    for line, record in records:
+        place = _place_id(record.get(PLACE_ID), line, path)
+        if place in lines:
+            raise DataError(f"duplicate place_id {place} on lines {lines[place]} and {line}", path)
+        lines[place] = line
+        ids.append(place)
+    if not ids:
+        raise DataError("empty selection: the subset file lists no places", path)
+    return np.asarray(ids, dtype=np.int64)
+
+
+def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
+    if isinstance(traversals, str):
+        traversals = (traversals,)
+    names = tuple(dict.fromkeys(str(name).strip() for name in traversals))
+    if not names or "" in names:
+        raise InvalidValueError(f"expected one or more traversal names, got {list(traversals)!r}")
+    if PLACE_ID in names:
+        raise InvalidValueError(f"{PLACE_ID!r} is the place id column, not a traversal")
+    return names
+
+
+def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[tuple[int, dict[str, str]]]]:
+    """Header and ``(line number, row)`` pairs of a UTF-8 CSV, names and cells stripped of spaces."""
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"the {kind} is not UTF-8 CSV text ({exc})", path) from None
+    try:
+        reader = csv.reader(io.StringIO(text, newline=""))
+        header = next(reader, None)
+        if header is None:
+            raise DataError(f"the {kind} is empty (no header row)", path)
+        columns = tuple(name.strip() for name in header)
+        duplicated = sorted({name for name in columns if columns.count(name) > 1})
+        if duplicated:
+            raise DataError(f"the {kind} repeats column(s) {', '.join(duplicated)}", path)
+        records = []
+        for cells in reader:
+            if not any(cell.strip() for cell in cells):
+                continue
+            records.append((reader.line_num, {name: cell.strip() for name, cell in zip(columns, cells, strict=False)}))
+    except csv.Error as exc:
+        raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
+    return columns, records
+
+
+def _place_id(value: str | None, line: int, path: Path) -> int:
+    place = ascii_uint((value or "").strip(" \t"))
+    if place is None:
+        raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
+    if not 0 <= place <= MAX_PLACE_ID:
+        raise DataError(f"line {line}: place_id {place} is outside 0..2**53", path)
+    return place
+
+
+def _select(available: np.ndarray, subset: Selection, places: str | None, source: str) -> np.ndarray:
+    """Selected place ids in selection order; every one must be in ``available``."""
+    if isinstance(subset, str | Path):
+        selected = read_subset(subset)
+        where = f"subset file {subset}"
+    elif subset is not None:
+        selected = np.asarray(subset, dtype=np.int64).reshape(-1)
+        where = "the given place ids"
+    elif places is not None:
+        start, count, stride = parse_places(places)
+        selected = start + stride * np.arange(count, dtype=np.int64)
+        where = f"--places {places}"
+    else:
+        selected = available.copy()
+        where = source
+    if not len(selected):
+        raise DataError(f"empty selection ({where})", source)
+    absent = selected[~np.isin(selected, available)]
+    if len(absent):
+        shown = ", ".join(str(int(place)) for place in absent[:5]) + (", ..." if len(absent) > 5 else "")
+        raise DataError(
+            f"{len(absent)} selected place id(s) from {where} are not in the data ({shown}); "
+            f"it holds {len(available)} places, ids {int(available.min())}..{int(available.max())}",
+            source,
+        )
+    return selected
+
+
+def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tuple[Path, str]]:
+    """Image path and a context string for every selected place of one traversal; DataError on an empty cell."""
+    folder = manifest.path.parent
+    paths = []
+    for place in selected.tolist():
+        line, record = manifest.rows[place]
+        cell = record.get(name, "")
+        if not cell:
+            raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
+        paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
+    return paths
+
+
+def _decode(paths: list[tuple[Path, str]], cfg: PreprocessConfig, bar: tqdm) -> np.ndarray:
+    size = cfg.image_size
+    resized = np.empty((len(paths), size, size), dtype=np.uint8)
+    for index, (path, context) in enumerate(paths):
+        resized[index] = resize_image(read_grey_image(path, context), size)
+        bar.update(1)
+    return normalise_resized(resized, cfg)
+
+
+def _load_synthetic(
+    source: str,
+    n_places: int,
+    names: tuple[str, ...],
+    cfg: PreprocessConfig,
+    subset: Selection,
+    places: str | None,
+) -> Dataset:
+    missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]
+    if missing:
+        raise DataError(
+            f"the synthetic route has no traversal(s) {', '.join(repr(m) for m in missing)}; available: {', '.join(SYNTHETIC_TRAVERSALS)}",
+            source,
+        )
+    selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
+    route = synthetic_route(n_places, names)
+    images = {name: preprocess_images(route[name][selected], cfg) for name in names}
+    return Dataset(
+        source=source,
+        manifest_sha256=synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS),
+        place_ids=selected,
+        images=images,
+    )

@@ -1,0 +1,227 @@
+"""Image preprocessing: greyscale decode, INTER_AREA resize, patch min-max normalisation.
+
+For an input image ``I`` (uint8, any H x W) and ``S = image_size``, ``p = patch_size``:
+
+1. ``R = resize(I, S x S)`` with OpenCV's area interpolation (``cv2.INTER_AREA``), still uint8.
+2. With ``patch_norm`` (the method): split ``R`` into the ``(S/p)**2`` non-overlapping
+   ``p x p`` patches ``P`` and normalise each one independently,
+   ``P_hat = (P - min P) / (max P - min P)``; a flat patch (``max P == min P``) becomes 0.
+   Without it (an ablation): ``R_hat = R / 255``.
+3. Flatten row-major: the value of pixel ``(row, col)`` sits at index ``row * S + col``.
+
+The result lies in [0, 1] as float32, shape ``(N, S * S)``.
+
+With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF
+channels (the retina's, and an event camera's, split of a signed response):
+
+    D = G_{sigma_c} * R - G_{sigma_s} * R          (Gaussian blurs of R as float, reflected borders)
+    ON = max(D, 0),  OFF = max(-D, 0),  both divided by max(ON, OFF) over the image (0 if flat)
+
+and the image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input
+``r * 2S + c`` (ON) and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
+
+The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function
+(step 2) and its number of channels, from which ``network.n_inputs`` follows
+(``n_channels * S * S``, checked by the config). Adding one is a function and one
+``CHANNELS.register`` line (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from ..errors import DataError, InvalidValueError
+from ..registry import Registry
+
+if TYPE_CHECKING:
+    from ..config import PreprocessConfig
+
+
+DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time
+DATA_LOSS = "premature end"  # libjpeg: "Premature end of JPEG file", "... premature end of data segment"
+OPENCV_LOG = re.compile(r"^\[[^\]]*\]\s*(?:global\s+)?\S+:\d+\s+\S+\s+")  # "[ WARN:0@0.1] global f.cpp:9 func "
+SINK: list[IO[bytes]] = []  # one temporary file, reused: a new one per image costs more than the decode
+
+
+@contextmanager
+def captured_stderr() -> Iterator[list[str]]:
+    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines.
+
+    The lines are filled in when the block ends, so an error raised after it can quote the decoder
+    instead of the decoder printing above the error. Without a usable descriptor 2 nothing is captured.
+    """
+    lines: list[str] = []
+    with DECODE_LOCK:
+        sys.stderr.flush()
+        try:
+            saved = os.dup(2)
+        except OSError:
+            yield lines
+            return
+        if not SINK:
+            SINK.append(tempfile.TemporaryFile())
+        sink = SINK[0]
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if sink.seek(0, os.SEEK_END):
+                sink.seek(0)
+                text = sink.read().decode(errors="replace")
+                sink.seek(0)
+                sink.truncate()
+                lines.extend(OPENCV_LOG.sub("", line.strip()) for line in text.splitlines() if line.strip())
+
+
+def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
+    """``cv2.imdecode(data, IMREAD_GRAYSCALE)`` with the decoder's stderr lines captured; None if undecodable."""
+    with captured_stderr() as noise:
+        try:
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        except cv2.error:
+            image = None
+    return image, noise
+
+
+def decoder_said(noise: list[str]) -> str:
+    """The decoder's first line for a message (``": libpng error: ..."``), or '' when it said nothing."""
+    return f": {noise[0]}" if noise else ""
+
+
+def read_grey_image(path: Path, context: str = "") -> np.ndarray:
+    """Decode one image file as 2-D uint8 greyscale (``cv2.IMREAD_GRAYSCALE``).
+
+    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path
+    Python can open works (a folder name that is not UTF-8 included) and none reaches OpenCV's
+    own path handling. A missing or unreadable file, one OpenCV cannot decode, or one the decoder
+    reports as cut short (libjpeg's "premature end") raises a :class:`DataError` naming ``path``,
+    with the decoder's message; the decoder's stderr lines never reach the terminal.
+    ``context`` (e.g. which manifest row asked for it) is appended to the message.
+    """
+    path = Path(path)
+    suffix = f" ({context})" if context else ""
+    try:
+        found = path.is_file()
+        data = path.read_bytes() if found else b""
+    except OSError as exc:  # a name too long for the file system, a path through a file, no permission
+        raise DataError(f"cannot read image ({exc.strerror or exc}){suffix}", path) from None
+    if not found:
+        raise DataError(f"image file not found{suffix}", path)
+    if not data:
+        raise DataError(f"empty image file{suffix}", path)
+    image, noise = decode_grey(data)
+    if image is None or image.size == 0:
+        raise DataError(f"unreadable or corrupt image (OpenCV could not decode it{decoder_said(noise)}){suffix}", path)
+    lost = [line for line in noise if DATA_LOSS in line.lower()]
+    if lost:
+        raise DataError(f"truncated or corrupt image (the decoder said: {lost[0]}){suffix}", path)
+    return image
+
+
+def resize_image(grey: np.ndarray, size: int) -> np.ndarray:
+    """``R = resize(I, size x size)`` with ``cv2.INTER_AREA``; uint8 in, uint8 out."""
+    if grey.ndim != 2 or grey.dtype != np.uint8:
+        raise DataError(f"expected a 2-D uint8 greyscale image, got shape {grey.shape} dtype {grey.dtype}")
+    return cv2.resize(grey, (size, size), interpolation=cv2.INTER_AREA)
+
+
+def patch_normalise(resized: np.ndarray, patch_size: int) -> np.ndarray:
+    """Min-max normalise every ``p x p`` patch of every image independently.
+
+    ``resized`` is ``(N, S, S)``; returns float32 ``(N, S, S)`` with
+    ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``.
+    """
+    n, height, width = resized.shape
+    if height % patch_size or width % patch_size:
+        raise InvalidValueError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")
+    rows, cols = height // patch_size, width // patch_size
+    patches = resized.astype(np.float32).reshape(n, rows, patch_size, cols, patch_size)
+    low = patches.min(axis=(2, 4), keepdims=True)
+    span = patches.max(axis=(2, 4), keepdims=True) - low
+    out = np.zeros_like(patches)
+    np.divide(patches - low, span, out=out, where=np.broadcast_to(span > 0, patches.shape))
+    return out.reshape(n, height, width)
+
+
+def scale_unit(resized: np.ndarray) -> np.ndarray:
+    """Whole-image scaling ``R_hat = R / 255`` (the ``patch_norm = False`` ablation), float32."""
+    return resized.astype(np.float32) / np.float32(255.0)
+
+
+def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) -> np.ndarray:
+    """Difference-of-Gaussians ON/OFF channels of ``(N, S, S)`` uint8 images -> ``(N, S, 2S)`` float32 in [0, 1].
+
+    ``D = G_c * R - G_s * R``; ``ON = max(D, 0)``, ``OFF = max(-D, 0)``, side by side in each row,
+    scaled by the image's largest ON or OFF value (a flat image gives zeros).
+    """
+    images = resized.astype(np.float32)
+    centre = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_centre, borderType=cv2.BORDER_REFLECT) for i in images])
+    surround = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_surround, borderType=cv2.BORDER_REFLECT) for i in images])
+    response = centre - surround
+    both = np.concatenate([np.maximum(response, 0), np.maximum(-response, 0)], axis=2)
+    top = both.reshape(len(both), -1).max(axis=1)
+    return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
+
+
+def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """The paper's one channel: patch min-max normalisation (``R / 255`` without ``patch_norm``), (N, S, S)."""
+    return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else scale_unit(resized)
+
+
+def dog_channels(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """DoG ON and OFF channels with the config's sigmas, (N, S, 2S) (:func:`dog_on_off`)."""
+    return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One choice of input channels (``preprocess.channels``).
+
+    ``normalise(resized, cfg)``: ``(N, S, S)`` uint8 -> ``(N, S, n_channels * S)`` float32 in [0, 1]
+    (each image row holds the channels side by side); ``label`` names the inputs in summaries.
+    """
+
+    name: str
+    n_channels: int
+    normalise: Callable[[np.ndarray, PreprocessConfig], np.ndarray]
+    label: str
+
+
+CHANNELS: Registry[Channel] = Registry("config.preprocess.channels")
+CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised"))
+CHANNELS.register(Channel("dog_on_off", 2, dog_channels, "DoG ON/OFF"))
+
+
+def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
+    if resized.ndim != 3 or resized.dtype != np.uint8:
+        raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
+    if len(resized) == 0:
+        raise DataError("no images to preprocess")
+    scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
+    return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
+
+
+def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
+    if grey.ndim != 3 or grey.dtype != np.uint8:
+        raise DataError(f"expected (N, H, W) uint8 images, got shape {grey.shape} dtype {grey.dtype}")
+    size = cfg.image_size
+    resized = np.empty((len(grey), size, size), dtype=np.uint8)
+    for index, image in enumerate(grey):
+        resized[index] = resize_image(image, size)
+    return normalise_resized(resized, cfg)

@@ -1,0 +1,210 @@
+"""The float checkpoint: weights, thresholds, calibration, full config and provenance in one file.
+
+Format: an npz container (no pickle) from :mod:`vprsnn_export.io.fileio` with arrays
+``weights`` (inputs, neurons) float32, ``thresholds`` (neurons,) float32,
+``calibration`` (neurons, places) int64 = S^R and ``reference_place_ids``
+(places,) int64, and a JSON header holding the config, the seed, the data
+provenance (source, manifest sha256, reference traversals, place selection),
+the training history and the package version.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..arguments import require_path
+from ..config import Config
+from ..data.dataset import MAX_PLACE_ID, parse_places, parse_synthetic
+from ..errors import InvalidValueError, ModelFileError, VprError
+from ..network.modules import ensemble_neurons
+from ..version import __version__
+from .fileio import read_container, sha256_file, write_container
+
+FORMAT = "vprsnn-checkpoint"
+FORMAT_VERSION = 1
+
+
+@dataclass
+class Checkpoint:
+    config: Config
+    weights: np.ndarray
+    thresholds: np.ndarray
+    calibration: np.ndarray
+    reference_place_ids: np.ndarray
+    reference_traversals: list[str]
+    data: dict[str, Any]  # source, manifest_sha256, subset, places
+    history: list[dict] = field(default_factory=list)
+    version: str = __version__
+
+
+def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
+    """The JSON header of a checkpoint file (also embedded in exported NIR graphs)."""
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "package_version": ckpt.version,
+        "config": ckpt.config.to_dict(),
+        "seed": ckpt.config.seed,
+        "reference_traversals": list(ckpt.reference_traversals),
+        "data": ckpt.data,
+        "history": [reproducible(entry) for entry in ckpt.history],
+    }
+
+
+#: History fields that measure the machine, not the network: left out of files so that two
+#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
+TIMING_FIELDS = ("seconds",)
+
+
+def reproducible(entry: dict[str, Any]) -> dict[str, Any]:
+    """One epoch's history entry without its wall-clock timings."""
+    return {key: value for key, value in entry.items() if key not in TIMING_FIELDS}
+
+
+def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
+    """Validate and write a checkpoint atomically (npz arrays + JSON header with the whole config); returns the path."""
+    path = require_path("path", path)
+    validate_checkpoint(ckpt, path)
+    meta = checkpoint_header(ckpt)
+    check_header(meta, path)  # the reader's own checks: nothing is written that load_checkpoint refuses
+    arrays: dict[str, np.ndarray] = {
+        "weights": ckpt.weights.astype(np.float32),
+        "thresholds": ckpt.thresholds.astype(np.float32),
+        "calibration": ckpt.calibration.astype(np.int64),
+        "reference_place_ids": ckpt.reference_place_ids.astype(np.int64),
+    }
+    return write_container(path, meta, arrays)
+
+
+def load_checkpoint(path: str | Path) -> Checkpoint:
+    """Read and validate a checkpoint (shapes, dtypes, finiteness, config); ModelFileError names the file and the problem."""
+    meta, arrays = read_container(path, "checkpoint")  # the path as given: '' is named as empty, not '.'
+    path = Path(path)
+    config, traversals, data, history = check_header(meta, path)
+    missing = {"weights", "thresholds", "calibration", "reference_place_ids"} - set(arrays)
+    if missing:
+        raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
+    ckpt = Checkpoint(
+        config=config,
+        weights=arrays["weights"],
+        thresholds=arrays["thresholds"],
+        calibration=arrays["calibration"],
+        reference_place_ids=arrays["reference_place_ids"],
+        reference_traversals=list(traversals),
+        data=dict(data),
+        history=list(history),
+        version=str(meta.get("package_version", "unknown")),
+    )
+    validate_checkpoint(ckpt, path)
+    return ckpt
+
+
+def check_header(
+    meta: dict[str, Any], path: str | Path
+) -> tuple[Config, list[str], dict[str, str | None], list[dict[str, Any]]]:
+    """A checkpoint header's config, reference traversals, data record and history; ModelFileError naming ``path``.
+
+    Run by the reader on what it reads and by the writer on what it is about to write.
+    """
+    if meta.get("format") != FORMAT:
+        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    try:
+        config = Config.from_dict(meta["config"])
+    except (KeyError, VprError) as exc:
+        raise ModelFileError(f"invalid config in checkpoint ({exc})", path) from None
+    traversals, data = reference_header(meta, path)
+    history = meta.get("history", [])
+    if not isinstance(history, list) or not all(isinstance(entry, dict) for entry in history):
+        raise ModelFileError("history must be a list of per-epoch mappings", path)
+    return config, traversals, data, history
+
+
+def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
+    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
+
+    Shared by checkpoints and fixed-point models (which also need a string ``package_version``);
+    ModelFileError naming ``path`` otherwise.
+    """
+    if not isinstance(meta.get("package_version", "unknown"), str):
+        raise ModelFileError(f"package_version must be a version string, got {meta['package_version']!r}", path)
+    traversals = meta.get("reference_traversals", [])
+    if (
+        not isinstance(traversals, list)
+        or not traversals
+        or not all(isinstance(t, str) and t for t in traversals)
+        or len(set(traversals)) != len(traversals)
+    ):
+        raise ModelFileError("reference_traversals must be a non-empty list of distinct traversal names", path)
+    data = meta.get("data", {})
+    if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
+        raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+    try:
+        if data.get("places"):
+            parse_places(data["places"])
+        if str(data.get("source", "")).startswith("synthetic"):
+            parse_synthetic(data["source"])
+    except InvalidValueError as exc:
+        raise ModelFileError(f"the data record is invalid ({exc})", path) from None
+    return list(traversals), dict(data)
+
+
+def validate_reference_ids(ids: np.ndarray, path: str | Path) -> int:
+    """The number of reference places: ``ids`` must be a non-empty 1-D array of distinct non-negative integers."""
+    ids = np.asarray(ids)
+    if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer):
+        raise ModelFileError("reference_place_ids must be a non-empty 1-D integer array", path)
+    if np.unique(ids).size != ids.size or np.any(ids < 0) or np.any(ids > MAX_PLACE_ID):
+        raise ModelFileError(f"reference_place_ids must be distinct place ids from 0 to {MAX_PLACE_ID}", path)
+    return int(ids.size)
+
+
+def checkpoint_sha256(path: str | Path) -> str:
+    """sha256 of the checkpoint file's bytes: the identity every model, export and report derived from it records."""
+    return sha256_file(path)
+
+
+def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> None:
+    """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
+    path = Path(path)
+    if not isinstance(ckpt, Checkpoint):
+        raise ModelFileError(f"not a Checkpoint: a {type(ckpt).__name__}", path)
+    if isinstance(ckpt.reference_traversals, str) or not isinstance(ckpt.reference_traversals, list | tuple):
+        raise ModelFileError(
+            f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}", path
+        )
+    net = ckpt.config.network
+    n_places = validate_reference_ids(ckpt.reference_place_ids, path)
+    n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side
+    expect = {
+        "weights": (net.n_inputs, n_neurons),
+        "thresholds": (n_neurons,),
+    }
+    for name, shape in expect.items():
+        array = getattr(ckpt, name)
+        if array.shape != shape:
+            raise ModelFileError(f"{name} has shape {array.shape}, expected {shape} from its config", path)
+        if not np.issubdtype(array.dtype, np.floating):
+            raise ModelFileError(f"{name} has dtype {array.dtype}, expected float32", path)
+        if not np.all(np.isfinite(array)):
+            raise ModelFileError(f"{name} contains NaN or infinite values", path)
+    if np.any(ckpt.weights < 0):
+        raise ModelFileError("weights contain negative values (STDP weights are non-negative)", path)
+    if np.any(ckpt.weights > ckpt.config.stdp.w_max * (1 + 1e-6)):
+        raise ModelFileError(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}", path)
+    if np.any(ckpt.thresholds <= 0):
+        raise ModelFileError("thresholds must be positive", path)
+    ceiling = max(ckpt.config.homeostasis.theta_max, ckpt.config.network.theta_init)
+    if np.any(ckpt.thresholds > ceiling * (1 + 1e-6)):
+        raise ModelFileError(f"thresholds exceed the config's theta_max / theta_init ({ceiling})", path)
+    if ckpt.calibration.shape != (n_neurons, n_places):
+        raise ModelFileError(f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}", path)
+    if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(ckpt.calibration < 0):
+        raise ModelFileError("calibration must hold non-negative integer spike counts", path)
+    if not ckpt.reference_traversals:
+        raise ModelFileError("checkpoint names no reference traversal", path)

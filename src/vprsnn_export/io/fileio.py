@@ -1,0 +1,397 @@
+"""Atomic writes and the npz+JSON container used by checkpoints and fixed-point models.
+
+A container is an ``.npz`` (never pickled) holding named numeric arrays plus one
+``__meta__`` entry: the UTF-8 bytes of a JSON header. Files are written to a
+temporary name in the destination folder, flushed to disk, then renamed, so an
+interrupted run never leaves a half-written file under the final name.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import io
+import json
+import os
+import re
+import shutil
+import stat
+import tempfile
+import tokenize
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..arguments import require_path
+from ..errors import InvalidValueError, ModelFileError, VprError
+
+
+class OutputError(VprError):
+    """An output path that cannot or must not be written (a folder, a device, a link, no permission)."""
+
+
+META_KEY = "__meta__"
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temp file in the same folder, fsync, rename)."""
+    return atomic_write(path, lambda handle: handle.write(data))
+
+
+def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str | Path | None, ...] = ()) -> Path:
+    """The output file ``path`` if it may be written: OutputError when it is empty, a folder, a device or
+    other special file, a symbolic link, one of the command's ``inputs``, a name too long for the file
+    system, under a file, or (``overwrite=False``) an existing file."""
+    if str(path).strip() == "":
+        raise OutputError("empty output path")
+    path = Path(path)
+    try:
+        if path.is_symlink():
+            raise OutputError("is a symbolic link: give the path of the file itself", path)
+        if path.exists():
+            mode = path.stat().st_mode
+            if stat.S_ISDIR(mode):
+                raise OutputError("is a folder: give a file name", path)
+            if not stat.S_ISREG(mode):
+                raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
+            if any(source and Path(source).exists() and path.samefile(source) for source in inputs):
+                raise OutputError("is one of this command's input files: give another output name", path)
+            if not overwrite:
+                raise OutputError("exists already: give another name, or --force to replace it", path)
+        _check_ancestors(path)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+    return path
+
+
+def check_output_folder(path: str | Path) -> Path:
+    """The output folder ``path`` if it may be created or written into: OutputError when it is empty, a
+    symbolic link, an existing file or special file, under a file, or a name too long for the file system."""
+    if str(path).strip() == "":
+        raise OutputError("empty output path")
+    path = Path(path)
+    try:
+        if path.is_symlink():
+            raise OutputError("is a symbolic link: give the path of the folder itself", path)
+        if path.exists() and not path.is_dir():
+            raise OutputError("is not a folder: give a new or existing folder", path)
+        _check_ancestors(path)
+        if path.is_dir():
+            tempfile.TemporaryFile(dir=path).close()  # writable, whatever os.access says for root
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+    return path
+
+
+def _check_ancestors(path: Path) -> None:
+    """OutputError when an existing ancestor of ``path`` is not a folder; OSError for a name too long."""
+    for parent in path.absolute().parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise OutputError(f"{parent} is not a folder", path)
+            break
+    if len(os.fsencode(path.name)) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
+        raise OutputError("the file name is too long for this file system", path)
+
+
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
+
+
+def atomic_write(path: str | Path, write: Callable[[Any], Any]) -> Path:
+    """Call ``write(binary_handle)`` on a temp file next to ``path``, then rename it into place.
+
+    The file gets the permissions a plain ``open`` would give (0666 less the umask); the temp
+    file is removed on any failure or interrupt; an unwritable place is one OutputError.
+    """
+    path = check_output(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.chmod(tmp_name, 0o666 & ~_umask())
+        os.replace(tmp_name, path)
+    except BaseException as exc:
+        if os.path.exists(tmp_name):
+            os.unlink(tmp_name)
+        if isinstance(exc, OSError):
+            raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+        raise
+    return path
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _existing_ancestor(path: Path) -> Path:
+    for candidate in path.absolute().parents:
+        if candidate.is_dir():
+            return candidate
+    return Path("/")
+
+
+@contextlib.contextmanager
+def output_lock(path: str | Path | None) -> Iterator[None]:
+    """Hold an exclusive lock on the output ``path`` (a file or a folder) for the whole ``with`` block.
+
+    The lock is an ``flock`` on a hidden file beside the output, ``.NAME.lock`` (in the nearest
+    existing folder above it when its folder does not exist yet); the kernel releases it when the
+    process dies, so a killed run never blocks the next one. A second writer to the same output
+    gets one OutputError instead of both runs finishing and the last one winning. While the lock
+    is held, temp files and staging folders that a killed run left beside the output
+    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``) are removed: no live writer owns them;
+    so are those inside an output folder (``quantize --out DIR``, ``verify --report DIR``), down to
+    :data:`LEFTOVER_DEPTH` sub-folders, unless another run holds their own output's lock.
+    ``None`` or an empty path: no lock.
+    """
+    if path is None or str(path).strip() == "":
+        yield
+        return
+    target = Path(path)
+    home = target.absolute().parent if target.absolute().parent.is_dir() else _existing_ancestor(target)
+    lock_path = home / f".{target.name or 'output'}.lock"
+    fd = _acquire(lock_path, target)
+    try:
+        if target.parent.is_dir():
+            _remove_leftovers(target)
+        if target.is_dir() and not target.is_symlink():
+            _remove_leftovers_inside(target, LEFTOVER_DEPTH)
+        try:
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(lock_path)
+    finally:
+        os.close(fd)
+
+
+def _acquire(lock_path: Path, target: Path) -> int:
+    """An fd holding the flock of ``lock_path``; retried when the file was unlinked by a finishing holder."""
+    for _ in range(3):
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+        except OSError as exc:
+            raise OutputError(f"cannot write here ({exc.strerror or exc})", target) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputError(
+                "another vprsnn-export run is writing it now: wait for it or give another output", target
+            ) from None
+        try:
+            if os.stat(lock_path).st_ino == os.fstat(fd).st_ino:
+                return fd
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # the holder unlinked this file as we took it: take the new one
+    raise OutputError("could not take the output lock (a run keeps replacing it)", target)
+
+
+def _remove_leftovers(target: Path) -> None:
+    """Temp files and staging folders of ``target`` left by a killed run (call with the lock held)."""
+    for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
+        for leftover in target.parent.glob(pattern):
+            if leftover.is_dir() and not leftover.is_symlink():
+                shutil.rmtree(leftover, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    leftover.unlink()
+
+
+# what atomic_write, staging_folder and publish_folder name their temporaries (mkstemp's 8 random characters)
+LEFTOVER_FILE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.tmp$")
+LEFTOVER_FOLDER = re.compile(r"^\.(?P<name>.+)\.(?:staging|old)-[a-z0-9_]{8}$")
+LEFTOVER_DEPTH = 2  # the deepest a command writes inside its output folder (verify: exports/<network>/)
+
+
+def _remove_leftovers_inside(folder: Path, depth: int) -> None:
+    """Temp files and staging folders a killed run left inside the output ``folder`` (lock held), down to
+    ``depth`` sub-folders (links not followed); one whose own output is locked now by another run stays."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        is_dir = entry.is_dir(follow_symlinks=False)
+        match = (LEFTOVER_FOLDER if is_dir else LEFTOVER_FILE).match(entry.name)
+        if match and not _locked_by_another_run(folder / f".{match['name']}.lock"):
+            if is_dir:
+                shutil.rmtree(entry.path, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    os.unlink(entry.path)
+        elif is_dir and depth > 0:
+            _remove_leftovers_inside(Path(entry.path), depth - 1)
+
+
+def _locked_by_another_run(lock_path: Path) -> bool:
+    """Whether the output lock ``lock_path`` exists and another run holds it (e.g. ``train --out DIR/net.npz``)."""
+    try:
+        fd = os.open(lock_path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def staging_folder(out: Path) -> Path:
+    """A new hidden folder beside ``out`` (same file system) to build its content in before :func:`publish_folder`."""
+    try:
+        out.absolute().parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=out.absolute().parent))
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
+
+
+def publish_folder(staging: Path, out: Path) -> Path:
+    """Put the finished folder ``staging`` in place of ``out`` as a whole.
+
+    With no ``out`` yet this is one atomic rename. An existing ``out`` is first renamed aside
+    (``.NAME.old-*``), the new folder renamed into place, the old one removed: a reader sees the
+    old folder, then briefly none, then the new one, never a mix of the two.
+    """
+    out = Path(out)
+    os.chmod(staging, 0o777 & ~_umask())
+    try:
+        if out.exists():
+            aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.absolute().parent))
+            os.replace(out, aside / out.name)
+            os.replace(staging, out)
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            os.replace(staging, out)
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
+    return out
+
+
+JSON_MAX_BYTES = 256 << 20  # a header, option or report.json larger than this is refused before parsing
+JSON_MAX_DEPTH = 64  # nesting of objects and lists (the files written here nest at most 6 deep)
+JSON_MAX_DIGITS = 40  # digits of an integer literal (the counts written here have at most 20)
+
+
+def parse_json(text: str | bytes, what: str) -> Any:
+    """JSON parsed within limits: size (:data:`JSON_MAX_BYTES`), nesting (:data:`JSON_MAX_DEPTH`) and integer
+    length (:data:`JSON_MAX_DIGITS`); InvalidValueError naming ``what`` beyond them.
+
+    The one JSON reader for every header, option and report. Malformed JSON raises ``json.JSONDecodeError``
+    (bytes that are not UTF-8: ``UnicodeDecodeError``), which callers turn into their own error.
+    """
+    if len(text) > JSON_MAX_BYTES:
+        raise InvalidValueError(f"{what}: {len(text)} bytes of JSON exceed the limit of {JSON_MAX_BYTES}")
+    if isinstance(text, bytes):
+        text = text.decode("utf-8")
+    try:
+        value = json.loads(text, parse_int=_json_int)
+    except RecursionError:
+        raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels") from None
+    except InvalidValueError as exc:  # an integer literal beyond the limit
+        raise InvalidValueError(f"{what}: {exc}") from None
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        if isinstance(item, dict | list):
+            if depth > JSON_MAX_DEPTH:
+                raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
+            stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
+    return value
+
+
+def _json_int(literal: str) -> int:
+    if len(literal.lstrip("-")) > JSON_MAX_DIGITS:
+        raise InvalidValueError(f"JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
+    return int(literal)
+
+
+def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
+    """Write arrays plus a JSON header into one ``.npz`` atomically."""
+    require_path("path", path)
+    if META_KEY in arrays:
+        raise InvalidValueError(f"array name {META_KEY!r} is reserved")
+    header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
+    buffer = io.BytesIO()
+    members: dict[str, Any] = {META_KEY: header, **arrays}
+    np.savez_compressed(buffer, **members)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def is_readable_file(path: str | Path) -> bool:
+    """``Path.is_file`` that answers False instead of raising for a name too long or a path through a file."""
+    try:
+        return Path(path).is_file()
+    except OSError:
+        return False
+
+
+def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Read a container written by :func:`write_container`; any defect is a ModelFileError naming the file."""
+    require_path("path", path)
+    if not str(path).strip():
+        raise ModelFileError(f"empty {kind} path")
+    path = Path(path)
+    if not is_readable_file(path):
+        raise ModelFileError(f"no such {kind} file" + (" (a folder)" if path.is_dir() else ""), path)
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ModelFileError(f"not a {kind}: a single .npy array, not an .npz container", path)
+        with loaded as npz:
+            arrays = {name: npz[name] for name in npz.files}
+        foreign = sorted(name for name, value in arrays.items() if not isinstance(value, np.ndarray))
+        if foreign:
+            raise ModelFileError(f"not a {kind}: members {foreign} are not .npy arrays", path)
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        EOFError,
+        OSError,
+        ValueError,
+        KeyError,
+        TypeError,
+        NotImplementedError,
+        RuntimeError,
+        SyntaxError,
+        tokenize.TokenError,
+    ) as exc:  # zipfile: corrupt flags read as "encrypted"/"patched data"; numpy: a corrupt .npy header
+        raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
+    if META_KEY not in arrays:
+        raise ModelFileError(f"not a {kind}: the JSON header is missing", path)
+    try:
+        meta = parse_json(arrays.pop(META_KEY).tobytes(), "header")
+    except (UnicodeDecodeError, json.JSONDecodeError, InvalidValueError) as exc:
+        raise ModelFileError(f"the JSON header of this {kind} is corrupt ({exc})", path) from None
+    if not isinstance(meta, dict):
+        raise ModelFileError(f"the JSON header of this {kind} is a {type(meta).__name__}, not a mapping", path)
+    return meta, arrays
+
+
+def sha256_file(path: str | Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()

@@ -1,0 +1,1 @@
+"""The network: float LIF + hard WTA (FloatNetwork) and its compiled step loop, ensembles of modules, SpikeRun and the Backend interface, and what every compiled kernel shares (sums, checks, threads, widths)."""

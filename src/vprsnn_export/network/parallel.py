@@ -1,0 +1,67 @@
+"""How the compiled kernels share a call among Python threads, and the tiles of neurons they run.
+
+Each kernel call is serial and releases the GIL: ``threads`` > 1 runs parts of a call (contiguous
+slices of modules, :func:`module_slices`; whole WTA groups of neurons or presentations,
+:func:`run_parts`) on a pool of Python threads (:func:`run_threads`). numba's threading layer is
+never launched (once launched, its OpenMP workers slowed torch's training loop sevenfold here).
+Inference runs the neurons in tiles of whole WTA groups (:func:`neuron_tile`): a tile's weights,
+copied contiguous, stay in cache across presentations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ..errors import InvalidValueError
+
+TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default size
+
+
+def neuron_tile(n_neurons: int, group: int) -> int:
+    """Whole WTA groups, about :data:`TILE_NEURONS` neurons (at least one group, at most all)."""
+    return min(n_neurons, group * max(1, TILE_NEURONS // group))
+
+
+def run_parts(
+    n_presentations: int, n_neurons: int, group: int, threads: int, isolation: bool
+) -> list[tuple[slice, int, int]]:
+    """How ``threads`` threads share a run: (presentations, start, stop) per thread.
+
+    Neurons in whole WTA groups when there are enough groups (any isolation), else presentations
+    (state isolation only: otherwise presentations are one stream and run in order).
+    """
+    groups = n_neurons // group
+    if threads > 1 and groups >= threads:
+        cuts = np.linspace(0, groups, threads + 1).round().astype(np.int64) * group
+        return [(slice(0, n_presentations), int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    if threads > 1 and isolation and n_presentations > 1:
+        cuts = np.linspace(0, n_presentations, min(threads, n_presentations) + 1).round().astype(np.int64)
+        return [(slice(int(a), int(b)), 0, n_neurons) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+    return [(slice(0, n_presentations), 0, n_neurons)]
+
+
+def run_threads(tasks: Sequence[Callable[[], object]]) -> None:
+    """Run the (GIL-releasing) tasks, on a pool of Python threads when there are several."""
+    if len(tasks) == 1:
+        tasks[0]()
+        return
+    with ThreadPoolExecutor(max_workers=len(tasks)) as pool:
+        for future in [pool.submit(task) for task in tasks]:
+            future.result()
+
+
+def check_group(n_neurons: int, group: int | None) -> int:
+    """The WTA group size: ``n_neurons`` for ``None``; ValueError unless it divides ``n_neurons``."""
+    size = n_neurons if group is None else int(group)
+    if size < 1 or n_neurons % size:
+        raise InvalidValueError(f"group: WTA groups of {size} neurons do not divide {n_neurons} neurons")
+    return size
+
+
+def module_slices(n_modules: int, parts: int) -> list[slice]:
+    """At most ``parts`` contiguous, non-empty, nearly equal slices of range(n_modules)."""
+    bounds = np.linspace(0, n_modules, max(1, min(parts, n_modules)) + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
