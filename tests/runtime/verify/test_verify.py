@@ -356,6 +356,35 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
     assert [r.to_dict() for r in again.float.metrics] == evaluated.rows
 
 
+def test_verify_scores_each_network_once(tiny, monkeypatch):
+    """Issue 25: the float network and each deployed width are read out by one readout_scores call each."""
+    from vprsnn_export.runtime import evaluation
+    from vprsnn_export.runtime.verify import checks
+
+    path, ckpt, data = tiny
+    calls = []
+    real = evaluation.readout_scores
+    counted = lambda *args, **kwargs: calls.append(1) or real(*args, **kwargs)  # noqa: E731
+    for module in (evaluation, checks):  # every name verify could score through
+        monkeypatch.setattr(module, "readout_scores", counted)
+    options = VerifyOptions(
+        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        bits=(8, 4),
+        targets=(),
+        reference_queries=0,
+    )
+    verify_checkpoint(
+        ckpt,
+        checkpoint_sha256(path),
+        data.traversal("winter"),
+        data.place_ids,
+        "winter",
+        options,
+        reference_images={"summer": data.traversal("summer")},
+    )
+    assert len(calls) == 3
+
+
 def test_build_report_and_summary(verified):
     report = build_report([verified, verified], {"bits": [8, 2]}, command=["vprsnn-export", "verify"], seconds=1.0)
     data = report.to_dict()

@@ -22,14 +22,23 @@ from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_poin
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
+from vprsnn_export.readout.regions import ModuleLayout
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
 
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import CALIBRATIONS, deploy
-from ..evaluation import ReadoutOptions, ensemble_layout, readout_rows, sequence_warning
-from ..results import BitsResult, FloatResult, VerifiedRun
+from ..evaluation import (
+    ReadoutOptions,
+    check_places_overlap,
+    check_readout_arrays,
+    check_sequence_length,
+    ensemble_layout,
+    score_rows,
+    sequence_warning,
+)
+from ..results import BitsResult, FloatResult, MetricRow, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
     curves,
@@ -68,6 +77,24 @@ class VerifyOptions:
 #: fit, the metrics on all of them (a whole route: 2400 queries x 300 steps x 9600 neurons would be
 #: 6.9 GB per raster).
 RASTER_BUDGET = 1 << 29
+
+
+def scored_once(
+    calibration: np.ndarray,
+    counts: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    readout: ReadoutOptions,
+    layout: ModuleLayout | None,
+) -> tuple[tuple[MetricRow, ...], dict, dict]:
+    """One network's readout, scored once: the rows :func:`runtime.evaluation.readout_rows` gives (after
+    its checks), the scores of every strategy at k=1 and the W+Prob aggregate at every k, all from one
+    :func:`~vprsnn_export.runtime.evaluation.readout_scores` call."""
+    check_readout_arrays(calibration, counts, reference_place_ids, query_place_ids)
+    check_sequence_length(readout, len(query_place_ids))
+    check_places_overlap(reference_place_ids, query_place_ids, readout.tolerance)
+    scores, aggregates = decision_scores(calibration, counts, readout, layout)
+    return tuple(score_rows(scores, reference_place_ids, query_place_ids, readout)), scores, aggregates
 
 
 def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int = RASTER_BUDGET) -> int:
@@ -119,8 +146,9 @@ def verify_checkpoint(
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
     layout = ensemble_layout(ckpt.config, len(ref_ids))
-    float_rows = tuple(readout_rows(ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, modules=layout))
-    float_scores, float_agg = decision_scores(ckpt.calibration, float_counts, readout, layout)
+    float_rows, float_scores, float_agg = scored_once(
+        ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, layout
+    )
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
     results: list[BitsResult] = []
@@ -173,11 +201,10 @@ def verify_checkpoint(
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            int_rows = tuple(
-                readout_rows(model.calibration, int_counts, ref_ids, query_place_ids, readout, modules=layout)
+            int_rows, scores, agg = scored_once(
+                model.calibration, int_counts, ref_ids, query_place_ids, readout, layout
             )
             rows = metric_deltas(float_rows, int_rows)
-            scores, agg = decision_scores(model.calibration, int_counts, readout, layout)
             if float_run.raster is None or int_run.raster is None:
                 raise InvalidValueError("verify needs the recorded rasters of both networks")
             spike = spike_level(
