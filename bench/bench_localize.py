@@ -29,7 +29,8 @@ import numpy as np
 from vprsnn_export.config import Config
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.runtime.localize import LocalizeOptions, Localizer
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.localize import Localizer
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.threads import set_threads
 
@@ -100,9 +101,8 @@ def main() -> None:
             label = f"{modules} x {ckpt.config.network.n_neurons} n, {modules * args.module_size} places"
             for backend in backends:
                 for k in ks:
-                    options = LocalizeOptions(
-                        k=k, velocity_candidates=None if k == 1 else tuple(np.round(np.arange(0.5, 1.51, 0.1), 2))
-                    )
+                    grid = None if k == 1 else tuple(np.round(np.arange(0.5, 1.51, 0.1), 2))
+                    options = SequenceOptions(ks=(k,), velocity_candidates=grid, velocity_estimate="track")
                     network = ckpt if backend == "float" else model
                     onnx = graph if backend == "onnx" else None
                     localizer = Localizer(network, backend=backend, options=options, onnx_path=onnx, threads=1)

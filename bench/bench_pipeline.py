@@ -28,7 +28,8 @@ from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.runtime.evaluation import ReadoutOptions, readout_rows
+from vprsnn_export.readout.scoring import readout_rows
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.trainer import train as train_module
 from vprsnn_export.trainer.train import Presentation, train_batch, train_network
 
@@ -94,10 +95,12 @@ def main() -> None:
         network.run(spikes[:1])  # compile or load
         network_s, run = best_of(lambda: network.run(spikes), args.repeats)
         del spikes
-        options = ReadoutOptions.from_config(ckpt.config)
+        options = SequenceOptions()
         counts = run.counts.numpy()
         readout_s, _ = best_of(
-            lambda: readout_rows(ckpt.calibration, counts, ckpt.reference_place_ids, dataset.place_ids, options),
+            lambda: readout_rows(
+                ckpt.calibration, counts, ckpt.reference_place_ids, dataset.place_ids, options, ckpt.config
+            ),
             args.repeats,
         )
         n = len(dataset.place_ids)

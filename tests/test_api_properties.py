@@ -54,7 +54,7 @@ class Fixtures:
         self.winter = self.data.traversal("winter")
         self.places = self.data.place_ids
         self.reference = {"summer": self.data.traversal("summer")}
-        self.options = vx.ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1,))
+        self.options = vx.SequenceOptions(ks=(1,))
         self.model = vx.deploy(self.ckpt, "props", 4, reference_images=self.reference)
         self.folder = folder
         vx.save_checkpoint(folder / "net.npz", self.ckpt)
@@ -91,6 +91,7 @@ def calls(f: Fixtures) -> dict[str, tuple[Any, dict[str, Any]]]:
                 reference_place_ids=f.places,
                 query_place_ids=f.places,
                 options=f.options,
+                config=f.cfg,
             ),
         ),
         "regularise": (vx.regularise, dict(sr=sr, sq=counts, layout=layout)),
@@ -126,7 +127,7 @@ def arguments() -> list[tuple[str, str]]:
         "evaluate_float": ("ckpt", "query_images", "query_place_ids", "traversal", "options"),
         "evaluate_fixed_point": ("model", "query_images", "query_place_ids", "options"),
         "query_spikes": ("images", "place_ids", "traversal", "cfg"),
-        "readout_rows": ("calibration", "query_counts", "reference_place_ids", "query_place_ids", "options"),
+        "readout_rows": ("calibration", "query_counts", "reference_place_ids", "query_place_ids", "options", "config"),
         "regularise": ("sr", "sq", "layout"),
         "module_count": ("n_places", "module_size"),
         "module_regions": ("n_places", "module_size"),
@@ -188,7 +189,7 @@ def test_readout_rows_needs_a_calibration_of_the_reference_places(fx, n_places):
     neurons = 4
     ids = np.arange(12)
     calibration = np.ones((neurons, n_places), dtype=np.int64)
-    call = lambda: vx.readout_rows(calibration, np.ones((12, neurons)), ids, ids, fx.options)  # noqa: E731
+    call = lambda: vx.readout_rows(calibration, np.ones((12, neurons)), ids, ids, fx.options, fx.cfg)  # noqa: E731
     if n_places == 12:
         assert len(call()) == 3
     else:

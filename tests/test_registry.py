@@ -24,10 +24,11 @@ from vprsnn_export.export.model import FixedPointModel, load_fixed_point, save_f
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.assignment import share_decision
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from vprsnn_export.registry import Registry
 from vprsnn_export.runtime.conformance import cross_implementation, parse_targets, read_back, target_path, write_targets
-from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, readout_rows
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
 from vprsnn_export.runtime.report import write_report
@@ -140,12 +141,10 @@ def test_an_unknown_strategy_rule_estimate_or_channel_is_an_error_everywhere():
         "strategy": [lambda: decide(prob, "argmax"), lambda: strategy_scores(sr, sq, "argmax", 0.5)],
         "aggregation rule": [
             lambda: aggregate(prob, 2, 1.0, rule="argmax"),
-            lambda: aggregated(prob, 2, ReadoutOptions(gamma=0.5, rule="argmax"), None),
+            lambda: SequenceOptions(rule="argmax").aggregate(prob, 2),
         ],
         "velocity estimate": [
-            lambda: aggregated(
-                prob, 2, ReadoutOptions(0.5, velocity_candidates=(1.0,), velocity_estimate="argmax"), None
-            )
+            lambda: SequenceOptions(velocity_candidates=(1.0,), velocity_estimate="argmax").aggregate(prob, 2)
         ],
         "config.preprocess.channels": [
             lambda: Config().replace(**{"preprocess.channels": "argmax"}),
@@ -174,7 +173,7 @@ def test_an_unknown_name_on_the_command_line_exits_2(argv, capsys):
 
 def test_the_cli_and_the_library_share_the_velocity_estimate_default(capsys):
     assert main(["evaluate", "--help"]) == 0
-    assert f"(default {ReadoutOptions(gamma=0.5).velocity_estimate})" in " ".join(capsys.readouterr().out.split())
+    assert f"(default {SequenceOptions().velocity_estimate})" in " ".join(capsys.readouterr().out.split())
 
 
 # ---------------------------------------------------------------------------- toy entries flow through
@@ -200,7 +199,7 @@ def test_a_toy_target_is_exported_read_back_and_checked(toy_target, make_model, 
 def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_target, tmp_path):
     sr = np.array([[3, 0], [0, 2], [1, 1]])
     sq = np.array([[2, 0, 0], [0, 0, 1]])
-    rows = readout_rows(sr, sq, np.array([0, 1]), np.array([0, 1]), ReadoutOptions(gamma=0.5))
+    rows = Readout(sr, 0.5).rows(sq, np.array([0, 1]), np.array([0, 1]))
     assert [r.strategy for r in rows] == ["standard", "weighted", "wprob", "anyplace"]
     assert rows[-1].accuracy == 0.5  # query 1's one spike votes for both places: a tie to place 0
     assert row_label("anyplace", 1) == "Any place k=1"
@@ -210,13 +209,13 @@ def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_t
     assert main([*train, "--timesteps", "20", "--epochs", "1", "--neurons", "16"]) == 0
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:8", ["summer", "winter"], ckpt.config.preprocess)
-    options = VerifyOptions(readout=ReadoutOptions(gamma=0.5), bits=(4,), targets=("npz",), reference_queries=0)
+    options = VerifyOptions(readout=SequenceOptions(), bits=(4,), targets=("npz",), reference_queries=0)
     query = (data.traversal("winter"), data.place_ids, "winter")
     references = {"summer": data.traversal("summer")}
     run = verify_checkpoint(ckpt, checkpoint_sha256(path), *query, options, reference_images=references)
     assert "anyplace" in run.bits[0].decision_level.top1_agreement
     assert {c.check.split(":")[0] for c in run.bits[0].cross_implementation.comparisons} == {"npz read back"}
-    write_report(build_report([run], {**options.to_dict(), "query": "winter"}), tmp_path / "report")
+    write_report(build_report([run], {**options.to_dict(ckpt.config), "query": "winter"}), tmp_path / "report")
     markdown = (tmp_path / "report" / "report.md").read_text()
     assert "Any place k=1" in markdown and "top-1 Any place %" in markdown
 

@@ -58,7 +58,7 @@ def calls(folder: Path) -> dict:
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg, progress=False)
     winter, places = data.traversal("winter"), data.place_ids
     ref = {"summer": data.traversal("summer")}
-    readout = vx.ReadoutOptions.from_config(cfg, ks=(1,))
+    readout = vx.SequenceOptions(ks=(1,))
     model = vx.deploy(ckpt, "probe", 4, reference_images=ref)
     vx.save_checkpoint(folder / "ckpt.npz", ckpt)
     vx.save_fixed_point(folder / "model.npz", model)
@@ -74,7 +74,8 @@ def calls(folder: Path) -> dict:
         "calibration_spikes": (vx.calibration_spikes, dict(images=winter, place_ids=places, traversal="winter",
                                                            cfg=cfg)),
         "readout_rows": (vx.readout_rows, dict(calibration=sr, query_counts=np.ones((6, sr.shape[0])),
-                                               reference_place_ids=places, query_place_ids=places, options=readout)),
+                                               reference_place_ids=places, query_place_ids=places, options=readout,
+                                               config=cfg)),
         "decide": (vx.decide, dict(scores=scores, strategy="wprob")),
         "strategy_scores": (vx.strategy_scores, dict(sr=sr, sq=np.ones((3, sr.shape[0])), strategy="weighted",
                                                      gamma=0.5)),

@@ -18,7 +18,8 @@ import torch
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import calibrate_and_evaluate
 from vprsnn_export.threads import set_threads
 
 
@@ -39,7 +40,7 @@ def wprob_row(ckpt: Checkpoint, beta: float, data: str) -> dict:
         dataset.traversal("winter"),
         dataset.place_ids,
         "winter",
-        ReadoutOptions.from_config(cfg, ks=(1,)),
+        SequenceOptions(ks=(1,)),
     )
     return next(r for r in rows if r.strategy == "wprob" and r.k == 1).to_dict()
 

@@ -9,7 +9,7 @@ vx.set_threads(1)
 cfg = vx.Config().replace(**{"encoder.timesteps": 60, "train.epochs": 4, "network.n_neurons": 64})
 data = vx.load_dataset("synthetic:24", ["summer", "winter"], cfg.preprocess)
 ckpt = vx.train_and_calibrate(data, ["summer"], cfg, progress=False)
-readout = vx.ReadoutOptions.from_config(cfg, ks=(1, 3))
+readout = vx.SequenceOptions(ks=(1, 3))  # gamma is the config's (cfg.assignment.gamma)
 winter, places, reference = data.traversal("winter"), data.place_ids, {"summer": data.traversal("summer")}
 print(vx.evaluate_float(ckpt, winter, places, "winter", readout).rows)
 

@@ -5,12 +5,13 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     data = vx.load_dataset("synthetic:24", ["summer", "winter"], vx.Config().preprocess)
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
     cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
+    readout = vx.SequenceOptions(ks=(1, 3))                                 # k, rule, velocity (gamma: the config's)
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
     model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
     vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
     run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
-    robot = vx.Localizer(model, options=vx.LocalizeOptions(k=5), threshold=theta)  # one frame at a time
+    robot = vx.Localizer(model, options=vx.SequenceOptions(ks=(5,)), threshold=theta)  # one frame at a time
     decision = robot.push(grey_frame)                                         # place, confidence, accepted
 
 The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx.STRATEGIES``,
@@ -36,14 +37,16 @@ from .readout.aggregation import aggregate, estimate_velocity, smooth_velocity
 from .readout.baseline import sad_distances, sad_distribution
 from .readout.metrics import pr_metrics
 from .readout.regions import ModuleLayout, module_layout, regularise
+from .readout.scoring import Readout, readout_rows
+from .readout.sequence import SequenceOptions
 from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
 from .resources import memory_limit, set_memory_limit
 from .runtime.conformance import compare_backends, cross_implementation
 from .runtime.deployment import deploy, recalibrate
-from .runtime.evaluation import Evaluation, ReadoutOptions, evaluate_fixed_point, evaluate_float, readout_rows
+from .runtime.evaluation import Evaluation, evaluate_fixed_point, evaluate_float
 from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
-from .runtime.localize import LocalizeOptions, Localizer, OperatingPoint, operating_point
+from .runtime.localize import Localizer, OperatingPoint, operating_point
 from .runtime.predictions import Predictions, network_predictions
 from .runtime.report import write_report
 from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
@@ -84,15 +87,15 @@ __all__ = [
     "FloatNetwork",
     "IntegerNetwork",
     "InvalidValueError",
-    "LocalizeOptions",
     "Localizer",
     "ModelFileError",
     "ModuleLayout",
     "OnnxBackend",
     "OperatingPoint",
     "Predictions",
-    "ReadoutOptions",
+    "Readout",
     "ReferenceStepper",
+    "SequenceOptions",
     "SpikeRun",
     "Strategy",
     "Target",

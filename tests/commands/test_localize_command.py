@@ -97,7 +97,7 @@ def test_calibrate_stores_the_operating_point_beside_the_model(synthetic, capsys
     assert main(["localize", str(fixed), "--calibrate", "winter", "--k", "3", "--precision", "1.0"]) == 0
     assert "precision 100.0 %" in capsys.readouterr().out
     stored = json.loads(fixed.with_name("q4.operating-point.json").read_text())
-    assert stored["options"]["k"] == 3 and stored["precision"] == 1.0
+    assert stored["options"]["ks"] == [3] and stored["precision"] == 1.0
     lines = localize(capsys, fixed, "--frames", frames, "--precision", "1.0", "--onnx", graph)
     assert all(d["accepted"] == (d["place_id"] is not None and d["confidence"] >= stored["threshold"]) for d in lines)
     accepted = [d for d in lines if d["accepted"]]

@@ -132,7 +132,7 @@ def test_evaluate_refuses_a_run_over_the_limit(tiny_model):
     images = np.zeros((4, tiny_model.config.network.n_inputs), dtype=np.float32)
     set_memory_limit(1024)
     with pytest.raises(InvalidValueError, match="evaluation needs about"):
-        vx.evaluate_fixed_point(tiny_model, images, np.arange(4), "winter", vx.ReadoutOptions(gamma=0.02))
+        vx.evaluate_fixed_point(tiny_model, images, np.arange(4), "winter", vx.SequenceOptions())
 
 
 def test_cli_states_the_limit(tmp_path, capsys, monkeypatch):

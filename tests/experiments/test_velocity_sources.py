@@ -1,4 +1,4 @@
-"""Velocity sources: ReadoutOptions routing in aggregated() and the envelope rows of every Table IV condition."""
+"""Velocity sources: SequenceOptions.aggregate routing and the envelope rows of every Table IV condition."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.experiments import envelope
 from vprsnn_export.experiments.common import summarise_rows
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
-from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated
+from vprsnn_export.readout.sequence import SequenceOptions
 
 GRID = (-1.0, -0.5, 0.5, 1.0, 1.5)
 
@@ -24,33 +24,31 @@ def _route(n: int, seed: int) -> np.ndarray:
 
 def test_aggregated_routes_each_velocity_source() -> None:
     prob = _route(30, seed=1)
-    given = aggregated(prob, 5, ReadoutOptions(gamma=0.5, velocity=1.0), None)
+    given = SequenceOptions(velocity=1.0).aggregate(prob, 5)
     np.testing.assert_array_equal(given, aggregate(prob, 5, 1.0))
-    window = aggregated(prob, 5, ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="window"), None)
+    window = SequenceOptions(velocity_candidates=GRID, velocity_estimate="window").aggregate(prob, 5)
     np.testing.assert_array_equal(window, estimate_velocity(prob, 5, np.asarray(GRID))[1])
-    options = ReadoutOptions(
-        gamma=0.5,
+    options = SequenceOptions(
         velocity_candidates=GRID,
         velocity_estimate="track",
         velocity_span=4,
         velocity_length=6,
         velocity_memory=8,
     )
-    tracked = aggregated(prob, 5, options, None)
+    tracked = options.aggregate(prob, 5)
     expected = track_velocity(prob, 5, np.asarray(GRID), 4, length=6, memory=8)[1]
     np.testing.assert_array_equal(tracked, expected)
-    assert aggregated(prob, 1, options, None) is prob
-    options = ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="smooth", velocity_lag=3)
-    smoothed = aggregated(prob, 5, options, None)
+    assert options.aggregate(prob, 1) is prob
+    options = SequenceOptions(velocity_candidates=GRID, velocity_estimate="smooth", velocity_lag=3)
+    smoothed = options.aggregate(prob, 5)
     np.testing.assert_array_equal(smoothed, smooth_velocity(prob, 5, np.asarray(GRID), 10, lag=3)[1])
 
 
 def test_unknown_velocity_estimate_is_a_clear_error() -> None:
-    options = ReadoutOptions(gamma=0.5, velocity_candidates=GRID, velocity_estimate="oracle")
     with pytest.raises(
         InvalidValueError, match="velocity estimate: unknown 'oracle'; choose from smooth, track, window"
     ):
-        aggregated(_route(10, seed=2), 5, options, None)
+        SequenceOptions(velocity_candidates=GRID, velocity_estimate="oracle")  # refused when the options are built
 
 
 def test_envelope_rows_cover_every_condition_method_and_source() -> None:

@@ -17,7 +17,8 @@ from vprsnn_export.readout.regions import (
     regularise,
     silence,
 )
-from vprsnn_export.runtime.evaluation import ReadoutOptions, readout_rows
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
 
 # 2 modules x 2 neurons, 6 places: module 0 owns places 0-2, module 1 places 3-5.
 SR = np.array(
@@ -108,10 +109,10 @@ def test_rho_one_gives_exactly_the_unregularised_rows():
     sr = rng.integers(0, 4, size=(8, 12)) * (rng.random((8, 12)) < 0.4)
     sq = rng.integers(0, 6, size=(12, 8)) * (rng.random((12, 8)) < 0.5)
     ids = np.arange(12)
-    options = ReadoutOptions(gamma=0.1, ks=(1, 3))
-    plain = readout_rows(sr, sq, ids, ids, options)
-    assert readout_rows(sr, sq, ids, ids, options, modules=ModuleLayout(module_regions(12, 3), 2, 1.0)) == plain
-    silenced = readout_rows(sr, sq, ids, ids, options, modules=ModuleLayout(module_regions(12, 3), 2, 0.0))
+    options = SequenceOptions(ks=(1, 3))
+    plain = Readout(sr, 0.1, options).rows(sq, ids, ids)
+    assert Readout(sr, 0.1, options, ModuleLayout(module_regions(12, 3), 2, 1.0)).rows(sq, ids, ids) == plain
+    silenced = Readout(sr, 0.1, options, ModuleLayout(module_regions(12, 3), 2, 0.0)).rows(sq, ids, ids)
     assert len(silenced) == len(plain)
 
 

@@ -8,7 +8,9 @@ import pytest
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16, "train.module_size": 8}
@@ -23,7 +25,7 @@ def ensemble():
 
 def evaluate(ckpt, data, **changes):
     ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**changes)) if changes else ckpt
-    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
+    options = SequenceOptions(ks=(1, 3))
     return evaluate_float(ckpt, data.traversal("winter"), data.place_ids, "winter", options)
 
 
@@ -37,8 +39,10 @@ def test_whole_route_rows_and_per_module_accuracy(ensemble):
     assert result.modules is not None and [m.n_queries for m in result.modules] == [8, 8, 8]
     wprob = next(r for r in result.rows if r["strategy"] == "wprob" and r["k"] == 1)
     assert np.mean([m.accuracy for m in result.modules]) == pytest.approx(wprob["accuracy"])
-    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
-    plain = readout_rows(ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options)
+    options = SequenceOptions(ks=(1, 3))
+    plain = Readout(ckpt.calibration, ckpt.config.assignment.gamma, options).rows(
+        result.query_counts, ckpt.reference_place_ids, data.place_ids
+    )
     assert result.rows == [
         r.to_dict() for r in plain
     ]  # lambda = rho = 1: exactly the unregularised whole-route readout
@@ -52,9 +56,9 @@ def test_the_default_readout_is_regularised(ensemble):
     layout = module_layout(ckpt.config, 24)
     assert (layout.outside_weight, layout.hyperactive_share) == (0.0, 0.5)
     assert result.silenced == int(hyperactive_neurons(ckpt.calibration, layout).sum())
-    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3))
-    rows = readout_rows(
-        ckpt.calibration, result.query_counts, ckpt.reference_place_ids, data.place_ids, options, modules=layout
+    options = SequenceOptions(ks=(1, 3))
+    rows = Readout(ckpt.calibration, ckpt.config.assignment.gamma, options, layout).rows(
+        result.query_counts, ckpt.reference_place_ids, data.place_ids
     )
     assert result.rows == [r.to_dict() for r in rows]
 

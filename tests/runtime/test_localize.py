@@ -10,13 +10,12 @@ from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.readout.aggregation import aggregate, track_velocity
+from vprsnn_export.readout.scoring import Readout, ensemble_layout
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.runtime.evaluation import ensemble_layout, readout_scores
 from vprsnn_export.runtime.localize import (
-    LocalizeOptions,
     Localizer,
-    Readout,
     load_operating_point,
     operating_point,
     precision_threshold,
@@ -26,7 +25,9 @@ from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
-TRACK = LocalizeOptions(k=3, velocity_candidates=(0.5, 1.0, 1.5), velocity_span=4, velocity_memory=5)
+TRACK = SequenceOptions(
+    ks=(3,), velocity_candidates=(0.5, 1.0, 1.5), velocity_estimate="track", velocity_span=4, velocity_memory=5
+)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +44,7 @@ def answers(decisions):
     return [(d.frame, d.place_id, d.confidence, d.velocity, d.accepted) for d in decisions]
 
 
-@pytest.mark.parametrize("options", [LocalizeOptions(), LocalizeOptions(k=3), TRACK], ids=["k1", "k3", "track"])
+@pytest.mark.parametrize("options", [SequenceOptions(), SequenceOptions(ks=(3,)), TRACK], ids=["k1", "k3", "track"])
 def test_integer_and_onnx_decide_identically_frame_by_frame(networks, options):
     _, model, graph, _, grey = networks
     integer = Localizer(model, options=options, threshold=0.5)
@@ -82,7 +83,7 @@ def test_precision_threshold_is_the_lowest_that_keeps_precision():
 
 def test_operating_point_reaches_its_precision_and_round_trips(networks, tmp_path):
     ckpt, _, _, data, _ = networks
-    localizer = Localizer(ckpt, options=LocalizeOptions(k=3))
+    localizer = Localizer(ckpt, options=SequenceOptions(ks=(3,)))
     point, decisions = operating_point(
         localizer, data.traversal("winter"), data.place_ids, precision=1.0, model_sha256="ab" * 32, query="winter"
     )
@@ -106,8 +107,12 @@ def test_backend_mismatches_are_one_clear_error(networks, tmp_path):
     graph = write_onnx(other, tmp_path / "other.onnx")
     with pytest.raises(ModelFileError, match="not exported from the given model"):
         Localizer(model, backend="onnx", onnx_path=graph)
-    with pytest.raises(InvalidValueError, match="k must be"):
-        LocalizeOptions(k=0)
+    with pytest.raises(InvalidValueError, match="--k"):
+        SequenceOptions(ks=(0,))
+    with pytest.raises(InvalidValueError, match="one k"):
+        Localizer(ckpt, options=SequenceOptions(ks=(1, 3)))
+    with pytest.raises(InvalidValueError, match="causally: choose track or window"):  # smooth waits for frames
+        Localizer(ckpt, options=SequenceOptions(ks=(3,), velocity_candidates=(1.0,)))
 
 
 @pytest.mark.parametrize("module_size", [0, 8])
@@ -119,8 +124,8 @@ def test_the_prepared_readout_is_the_evaluation_readout(module_size):
     counts = rng.poisson(0.4, (10, neurons)).astype(np.int64)
     counts[0] = 0  # a silent frame: the uniform distribution, a no-match
     layout = ensemble_layout(cfg, 24)
-    expected = readout_scores(calibration, counts, cfg.assignment.gamma, layout)["wprob"]
-    readout = Readout.of(calibration, cfg.assignment.gamma, layout)
+    readout = Readout(calibration, cfg.assignment.gamma, modules=layout)
+    expected = readout.scores(counts)["wprob"]
     got = np.stack([readout.wprob(row) for row in counts])
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
     assert decide(got[:1], "wprob")[0][0] == -1

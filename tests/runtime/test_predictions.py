@@ -13,7 +13,8 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
 from vprsnn_export.runtime.predictions import network_predictions
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
@@ -29,7 +30,7 @@ def trained():
 
 def test_each_column_reproduces_its_metric_row(trained, tmp_path):
     ckpt, data = trained
-    options = ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3), tolerance=1)
+    options = SequenceOptions(ks=(1, 3), tolerance=1)
     result = evaluate_float(ckpt, data.traversal("winter"), data.place_ids, "winter", options)
     found = network_predictions(ckpt, result.query_counts, data.place_ids, options)
     assert found.n_queries == 24 and [(d.strategy, d.k) for d in found.decided] == [

@@ -24,9 +24,9 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.readout.regions import hyperactive_neurons
+from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.runtime.evaluation import ensemble_layout, readout_scores
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_budget import LOIHI1, LOIHI2, budget_table, core_budget
@@ -308,9 +308,9 @@ def test_the_onnx_wprob_head_reads_out_with_the_region_regularisation(route, que
         ),
     )
     onnx_run = run_onnx_outputs(write_onnx(model, tmp_path / "m.onnx"), queries)
-    layout = ensemble_layout(model.config, model.calibration.shape[1])
-    assert hyperactive_neurons(model.calibration, layout).any()  # the rule silences someone here
-    expected = readout_scores(model.calibration, onnx_run.counts, model.config.assignment.gamma, layout)["wprob"]
+    readout = Readout.of(model.calibration, model.config)
+    assert readout.modules is not None and hyperactive_neurons(model.calibration, readout.modules).any()
+    expected = readout.scores(onnx_run.counts)["wprob"]  # the rule silences someone here
     assert np.abs(onnx_run.wprob - expected).max() <= 1e-12
     plain = strategy_scores(model.calibration, onnx_run.counts, "wprob", model.config.assignment.gamma)
     assert np.abs(onnx_run.wprob - plain).max() > 1e-6  # and the rule changes the distribution

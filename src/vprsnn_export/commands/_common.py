@@ -7,6 +7,7 @@ import json
 import math
 import sys
 from collections.abc import Sequence
+from dataclasses import fields
 from typing import Any
 
 from ..arguments import ascii_int
@@ -15,8 +16,8 @@ from ..data.dataset import Dataset, load_selection
 from ..errors import InvalidValueError
 from ..io.fileio import parse_json
 from ..readout.rules import RULES
-from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
-from ..runtime.evaluation import ReadoutOptions
+from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions
+from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
 
 
 def integer(text: str) -> int:
@@ -48,10 +49,10 @@ def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) ->
 
 
 def add_query_options(parser: argparse.ArgumentParser) -> None:
-    """Data, --query, readout and the spillover switch: what evaluate and simulate share."""
+    """Data, --query, the sequence options and the spillover switch: what evaluate and simulate share."""
     add_data_options(parser, data_required=False)
     parser.add_argument("--query", required=True, help="query traversal name")
-    add_readout_options(parser)
+    add_sequence_options(parser)
     parser.add_argument(
         "--no-state-isolation", action="store_true", help="carry neuron state across queries (spillover ablation)"
     )
@@ -83,61 +84,91 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def add_readout_options(
-    parser: argparse.ArgumentParser, *, default_k: str = "1", old_window_option: str = "--tolerance", json: bool = True
+#: The command-line flag of each SequenceOptions field (the rest: its name with dashes) and its help.
+SEQUENCE_FLAGS = {"ks": "--k", "velocity_candidates": "--velocity-search", "tolerance": "--match-window"}
+SEQUENCE_HELP = {
+    "ks": "sequence lengths, e.g. 1,3,5 (the sequence strategy aggregated for k > 1)",
+    "rule": "aggregation rule: " + "; ".join(f"{r.name}: {r.description}" for r in RULES.values()),
+    "velocity": "places per query frame (negative: reversed)",
+    "velocity_candidates": "estimate the velocity from the query stream over this grid LO:HI:STEP instead of using "
+    "--velocity (negative values allowed: -2:2:0.1)",
+    "velocity_estimate": "with --velocity-search: "
+    + "; ".join(f"{e.name}: {e.description}" for e in VELOCITY_ESTIMATES.values()),
+    "velocity_span": "smooth, track: recent windows whose scores are summed",
+    "velocity_length": "smooth, track: frames per scored trajectory (default 3k, 2k)",
+    "velocity_memory": "smooth, track: recent frames whose mean is divided out (0: none)",
+    "velocity_lag": "smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
+    "tolerance": "a prediction within +-N places of the truth is correct",
+}
+
+
+def sequence_flag(name: str) -> str:
+    """The command-line flag of a SequenceOptions field (its attribute on the parsed arguments: without the dashes)."""
+    return SEQUENCE_FLAGS.get(name, "--" + name.replace("_", "-"))
+
+
+def sequence_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The sequence options given on the command line, unparsed, by field name (None: not given)."""
+    return {f.name: getattr(args, sequence_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
+
+
+def add_sequence_options(
+    parser: argparse.ArgumentParser,
+    *,
+    default_k: str | None = None,
+    stream: bool = False,
+    old_window_option: str | None = "--tolerance",
+    json: bool = True,
 ) -> None:
-    """--k, --rule, the velocity options and --match-window (``old_window_option`` stops with a hint)."""
-    group = parser.add_argument_group("readout")
-    group.add_argument(
-        "--k",
-        default=default_k,
-        help=f"sequence lengths, e.g. 1,3,5 (W+Prob aggregated for k > 1; default {default_k})",
-    )
-    group.add_argument(
-        "--rule",
-        choices=RULES.names(),
-        default=RULES.names()[0],
-        help="aggregation rule: " + "; ".join(f"{r.name}: {r.description}" for r in RULES.values()),
-    )
-    group.add_argument("--velocity", type=float, default=1.0, help="places per query frame (negative: reversed)")
-    group.add_argument(
-        "--velocity-search",
-        metavar="LO:HI:STEP",
-        help="estimate the velocity from the query stream over this grid instead of using --velocity "
-        "(negative values allowed: -2:2:0.1)",
-    )
-    group.add_argument(
-        "--velocity-estimate",
-        choices=VELOCITY_ESTIMATES.names(),
-        default=DEFAULT_VELOCITY_ESTIMATE,
-        help="with --velocity-search: "
-        + "; ".join(f"{e.name}: {e.description}" for e in VELOCITY_ESTIMATES.values())
-        + f" (default {DEFAULT_VELOCITY_ESTIMATE})",
-    )
-    group.add_argument(
-        "--velocity-span",
-        type=integer,
-        default=10,
-        metavar="N",
-        help="smooth, track: recent windows whose scores are summed (10)",
-    )
-    group.add_argument(
-        "--velocity-lag",
-        type=integer,
-        metavar="N",
-        help="smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
-    )
-    group.add_argument(
-        "--match-window",
-        type=integer,
-        default=0,
-        metavar="N",
-        help="a prediction within +-N places of the truth is correct",
-    )
-    group.add_argument(old_window_option, dest="renamed_window", help=argparse.SUPPRESS)
-    parser.set_defaults(old_window_option=old_window_option)
+    """One option per :class:`SequenceOptions` field, its default the field's (``default_k``: a command's own
+    --k); ``stream``: a causal stream (localize), whose --velocity-estimate offers the causal estimates only.
+    Every option is None unless given: :func:`sequence_options` builds and validates them."""
+    group = parser.add_argument_group("sequence")
+    estimates = causal_estimates() if stream else VELOCITY_ESTIMATES.names()
+    for item in fields(SequenceOptions):
+        flag = sequence_flag(item.name)
+        default = default_k if item.name == "ks" and default_k else item.default
+        if item.name == "velocity_estimate" and stream:
+            default = estimates[0]
+        shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
+        kind: dict[str, Any] = {"type": integer, "metavar": "N"}
+        if item.name in ("ks", "velocity_candidates"):
+            kind = {"metavar": "LIST" if item.name == "ks" else "LO:HI:STEP"}
+        elif item.name == "velocity":
+            kind = {"type": float}
+        elif item.name in ("rule", "velocity_estimate"):
+            kind = {"choices": RULES.names() if item.name == "rule" else estimates}
+        note = "" if shown is None else f" (default {shown})"
+        group.add_argument(flag, help=SEQUENCE_HELP[item.name] + note, **kind)
+    if old_window_option:
+        group.add_argument(old_window_option, dest="renamed_window", help=argparse.SUPPRESS)
+    parser.set_defaults(old_window_option=old_window_option, default_k=default_k, stream=stream)
     if json:
         group.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+
+
+def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The sequence options given on the command line, parsed (``--k``, ``--velocity-search``), by field name."""
+    if getattr(args, "renamed_window", None) is not None:
+        raise InvalidValueError(
+            f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
+            "verify's --tolerance sets pass/fail limits"
+        )
+    given = {name: value for name, value in sequence_arguments(args).items() if value is not None}
+    if args.default_k and "ks" not in given:
+        given["ks"] = args.default_k
+    if "ks" in given:
+        given["ks"] = parse_int_list(given["ks"], "--k", MAX_K)
+    if "velocity_candidates" in given:
+        given["velocity_candidates"] = parse_velocity_grid(given["velocity_candidates"])
+    if args.stream and "velocity_candidates" in given and "velocity_estimate" not in given:
+        given["velocity_estimate"] = causal_estimates()[0]
+    return given
+
+
+def sequence_options(args: argparse.Namespace) -> SequenceOptions:
+    """The SequenceOptions of evaluate, simulate, verify and localize from their arguments (validated once, there)."""
+    return SequenceOptions(**given_sequence_options(args))
 
 
 def add_config_options(parser: argparse.ArgumentParser) -> None:
@@ -222,9 +253,8 @@ def parse_value(raw: str) -> Any:
         return raw
 
 
-MAX_LIST_VALUE = 10_000  # --k, --bits: far above any meaningful value, low enough to fail before memory does
+MAX_LIST_VALUE = MAX_K  # --bits and other lists: far above any meaningful value, low enough to fail before memory does
 MAX_VELOCITY_CANDIDATES = 10_000
-MAX_VELOCITY = 1000.0  # places per frame: beyond any camera rate along a route
 
 
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
@@ -299,37 +329,6 @@ RESULT_COLUMNS = (
     ("auc_pr", "AUC-PR %"),
     ("n_queries", "queries"),
 )
-
-
-def readout_options(args: argparse.Namespace, config: Config) -> ReadoutOptions:
-    """The readout options of evaluate/simulate/verify from their arguments, for a network with ``config``."""
-    if args.renamed_window is not None:
-        raise InvalidValueError(
-            f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
-            "verify's --tolerance sets pass/fail limits"
-        )
-    if not 1 <= args.velocity_span <= 100_000:
-        raise InvalidValueError(f"--velocity-span expects an integer from 1 to 100000, got {args.velocity_span}")
-    if args.velocity_lag is not None and not 0 <= args.velocity_lag <= 100_000:
-        raise InvalidValueError(f"--velocity-lag expects an integer from 0 to 100000, got {args.velocity_lag}")
-    if not 0 <= args.match_window <= 1_000_000:
-        raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
-    if not math.isfinite(args.velocity) or args.velocity == 0 or abs(args.velocity) > MAX_VELOCITY:
-        raise InvalidValueError(
-            f"--velocity expects a non-zero number of places per frame from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, "
-            f"got {args.velocity}"
-        )
-    return ReadoutOptions.from_config(
-        config,
-        ks=parse_int_list(args.k, "--k"),
-        rule=args.rule,
-        velocity=args.velocity,
-        velocity_candidates=parse_velocity_grid(args.velocity_search),
-        velocity_estimate=args.velocity_estimate,
-        velocity_span=args.velocity_span,
-        velocity_lag=args.velocity_lag,
-        tolerance=args.match_window,
-    )
 
 
 def query_data(

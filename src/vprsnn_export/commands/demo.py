@@ -28,7 +28,8 @@ from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..network.modules import module_count
-from ..runtime.evaluation import ReadoutOptions
+from ..readout.sequence import SequenceOptions
+from ..readout.strategies import SEQUENCE_STRATEGY
 from ..runtime.report import write_report
 from ..runtime.report.labels import points
 from ..runtime.results import BitsResult, VerifiedRun
@@ -119,7 +120,7 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
     for result in run_result.bits:
         cross = result.cross_implementation
         targets = [t for t in TARGETS if t in cross.files]
-        wprob, aggregated = result.row("wprob", 1), result.row("wprob", top)
+        wprob, aggregated = result.row(SEQUENCE_STRATEGY, 1), result.row(SEQUENCE_STRATEGY, top)
         delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
         weakest = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement), default=None)
         rows.append(
@@ -164,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
     )
     ckpt_path = save_checkpoint(out / "float.npz", ckpt)
     say(f"1/4 trained {cfg.train.epochs} epochs -> {ckpt_path}")
-    options = VerifyOptions(readout=ReadoutOptions.from_config(cfg, ks=DEMO_KS), bits=DEMO_BITS)
+    options = VerifyOptions(readout=SequenceOptions(ks=DEMO_KS), bits=DEMO_BITS)
     say(
         "the verdict is PASS when every bit width passes every check (tolerances: docs/verify.md); a bit width "
         "that misses one makes it FAIL and the exit code 1"
@@ -195,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     )
     say(f"3/4 verified against float on the same {result.n_queries} query presentations")
     settings = {
-        **options.to_dict(),
+        **options.to_dict(cfg),
         "query": DEMO_QUERY,
         "data": data,
         "subset": None,

@@ -12,7 +12,7 @@ from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
-from ..runtime.evaluation import evaluate_float, sequence_warning
+from ..runtime.evaluation import evaluate_float
 from ..runtime.predictions import network_predictions
 from ._common import (
     RESULT_COLUMNS,
@@ -21,7 +21,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    readout_options,
+    sequence_options,
 )
 
 MODULE_COLUMNS = (
@@ -73,12 +73,12 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
-    options = readout_options(args, ckpt.config)
+    options = sequence_options(args)
     traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
     if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         raise InvalidValueError("--baseline needs the query places to be the checkpoint's reference places")
-    warning = sequence_warning(dataset.place_ids, options)
+    warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
     window = dataset.match_window(args.query)

@@ -21,10 +21,10 @@ from pathlib import Path
 from ..data.frames import iter_frames
 from ..device import resolve_device
 from ..errors import InvalidValueError
+from ..readout.sequence import SequenceOptions
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
     BACKENDS,
-    LocalizeOptions,
     Localizer,
     OperatingPoint,
     load_operating_point,
@@ -32,9 +32,14 @@ from ..runtime.localize import (
     operating_point_path,
     save_operating_point,
 )
-from ._common import add_data_options, add_runtime_options, parse_velocity_grid, query_data
-
-DEFAULTS = {"k": 1, "rule": "product", "velocity": 1.0, "velocity_span": 10, "velocity_memory": 50}
+from ._common import (
+    add_data_options,
+    add_runtime_options,
+    add_sequence_options,
+    given_sequence_options,
+    query_data,
+    sequence_flag,
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -62,19 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--onnx", metavar="FILE|DEPLOY", help="the ONNX graph exported from MODEL (or its deploy folder)"
     )
-    group = parser.add_argument_group("sequence")
-    group.add_argument("--k", type=int, help=f"frames aggregated per decision (default {DEFAULTS['k']})")
-    group.add_argument("--rule", choices=("product", "sum"), help="aggregation rule (default product)")
-    group.add_argument("--velocity", type=float, help="places per frame (default 1.0)")
-    group.add_argument(
-        "--velocity-search",
-        metavar="LO:HI:STEP",
-        help="track the velocity causally over this grid instead of using --velocity",
-    )
-    group.add_argument("--velocity-span", type=int, metavar="N", help="windows summed by the tracker (default 10)")
-    group.add_argument(
-        "--velocity-memory", type=int, metavar="N", help="frames of stream contrast for the tracker (default 50)"
-    )
+    add_sequence_options(parser, stream=True, old_window_option=None, json=False)
     point = parser.add_argument_group("operating point")
     accept = point.add_mutually_exclusive_group()
     accept.add_argument(
@@ -90,43 +83,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="where the operating point is stored (default: MODEL's name + .operating-point.json)",
     )
-    point.add_argument(
-        "--match-window",
-        type=int,
-        default=0,
-        metavar="N",
-        help="--calibrate: a place within +-N of the truth is right (default 0)",
-    )
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
-def given_options(args: argparse.Namespace) -> dict:
-    """The sequence options given on the command line (None: not given)."""
-    return {
-        "k": args.k,
-        "rule": args.rule,
-        "velocity": args.velocity,
-        "velocity_candidates": parse_velocity_grid(args.velocity_search),
-        "velocity_span": args.velocity_span,
-        "velocity_memory": args.velocity_memory,
-    }
-
-
-def options_from(given: dict, stored: LocalizeOptions | None, where: Path | None) -> LocalizeOptions:
+def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
     """The given options over the stored (or default) ones; a stored point's options cannot be changed."""
-    base = stored.to_dict() if stored is not None else {**DEFAULTS, "velocity_candidates": None}
+    base = (SequenceOptions() if stored is None else stored).to_dict()
     for name, value in given.items():
-        if value is None:
-            continue
         if stored is not None and (list(value) if isinstance(value, tuple) else value) != base[name]:
             raise InvalidValueError(
-                f"--{name.replace('_', '-').replace('candidates', 'search')} differs from the operating point's "
-                f"{base[name]!r} ({where}): its threshold holds for its own options; recalibrate or give --threshold"
+                f"{sequence_flag(name)} differs from the operating point's {base[name]!r} ({where}): its threshold "
+                "holds for its own options; recalibrate or give --threshold"
             )
         base[name] = value
-    return LocalizeOptions.from_dict(base)
+    return SequenceOptions.from_dict(base)
 
 
 def onnx_file(raw: str | None) -> Path | None:
@@ -154,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
                 f"--precision {args.precision}: the operating point {point_path} was calibrated for "
                 f"{stored.precision_target}; run --calibrate with --precision {args.precision}"
             )
-    options = options_from(given_options(args), None if stored is None else stored.options, point_path)
+    options = options_from(given_sequence_options(args), None if stored is None else stored.options, point_path)
     threshold = args.threshold if stored is None else stored.threshold
     if args.threshold is None and stored is None:
         print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
@@ -179,10 +151,8 @@ def run(args: argparse.Namespace) -> int:
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
     if args.threshold is not None:
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
-    if not 0 <= args.match_window <= 1_000_000:
-        raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
     network = source.network
-    options = options_from(given_options(args), None, None)
+    options = options_from(given_sequence_options(args), None, None)
     dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
@@ -192,7 +162,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         dataset.traversal(args.calibrate),
         dataset.place_ids,
         precision=1.0 if args.precision is None else args.precision,
-        match_window=args.match_window,
+        match_window=options.tolerance,
         model_sha256=source.sha256,
         query=args.calibrate,
     )
@@ -200,7 +170,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     threshold = "none qualified: nothing will be accepted" if point.threshold is None else f"{point.threshold:.6f}"
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
-        f"({localizer.backend}, k={options.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
+        f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
         f"recall {100 * point.recall:.1f} %"
     )
     print(f"wrote {point_path}")

@@ -9,7 +9,7 @@ from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
-from ..runtime.evaluation import evaluate_fixed_point, sequence_warning
+from ..runtime.evaluation import evaluate_fixed_point
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -17,7 +17,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    readout_options,
+    sequence_options,
 )
 
 
@@ -43,9 +43,9 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError(
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
-    options = readout_options(args, model.config)
+    options = sequence_options(args)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
-    warning = sequence_warning(dataset.place_ids, options)
+    warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
     result = evaluate_fixed_point(

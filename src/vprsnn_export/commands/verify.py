@@ -24,7 +24,6 @@ from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
-from ..runtime.evaluation import sequence_warning
 from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
@@ -33,13 +32,15 @@ from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     PER_TENSOR_HELP,
     add_data_options,
-    add_readout_options,
     add_runtime_options,
+    add_sequence_options,
     format_table,
     integer,
     parse_int_list,
     print_json,
-    readout_options,
+    sequence_arguments,
+    sequence_flag,
+    sequence_options,
 )
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
@@ -71,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--query", required=True, help="query traversal name")
     add_data_options(parser, data_required=False)
-    add_readout_options(parser, default_k="1,3,5", old_window_option="--gt-tolerance", json=False)
+    add_sequence_options(parser, default_k="1,3,5", old_window_option="--gt-tolerance", json=False)
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
@@ -117,16 +118,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def verify_options(args: argparse.Namespace, config: Config) -> VerifyOptions:
+def verify_options(args: argparse.Namespace) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
-    if args.match_window < 0:
-        raise InvalidValueError(f"--match-window must be >= 0, got {args.match_window}")
-    readout = readout_options(args, config)
     return VerifyOptions(
-        readout=readout,
+        readout=sequence_options(args),
         bits=bits,
         per_neuron=not args.per_tensor,
         scale_method=args.scale,
@@ -200,10 +198,15 @@ def seed_networks(
 
 
 def settings_of(
-    args: argparse.Namespace, options: VerifyOptions, source: str, subset: str | None, places: str | None
+    args: argparse.Namespace,
+    options: VerifyOptions,
+    config: Config,
+    source: str,
+    subset: str | None,
+    places: str | None,
 ) -> dict:
     return {
-        **options.to_dict(),
+        **options.to_dict(config),
         "query": args.query,
         "data": source,
         "subset": subset,
@@ -218,23 +221,20 @@ def command_line(args: argparse.Namespace) -> list[str]:
     """The command as given (the CLI's argv; rebuilt from the parsed options when absent)."""
     if getattr(args, "argv", None):
         return ["vprsnn-export", *args.argv]
-    line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", args.k]
+    k = args.k or args.default_k
+    line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", k]
     for flag, value in (
         ("--data", args.data),
         ("--subset", args.subset),
         ("--places", args.places),
         ("--tolerance", args.tolerance),
         ("--seeds", args.seeds),
-        ("--velocity-search", args.velocity_search),
     ):
         if value is not None:
             line += [flag, str(value)]
-    if args.rule != "product":
-        line += ["--rule", args.rule]
-    if args.velocity != 1.0:
-        line += ["--velocity", str(args.velocity)]
-    if args.match_window:
-        line += ["--match-window", str(args.match_window)]
+    for name, value in sequence_arguments(args).items():
+        if name != "ks" and value is not None:
+            line += [sequence_flag(name), str(value)]
     if args.per_tensor:
         line.append("--per-tensor")
     if args.scale != "max":
@@ -299,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
-    options = verify_options(args, templates[0][1].config)
+    options = verify_options(args)
     source, subset, places = selection(args, templates[0][1])
     cache: dict = {}
     networks: Iterable[tuple[str, Checkpoint, Path]]
@@ -313,18 +313,17 @@ def run(args: argparse.Namespace) -> int:
             (stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
             for i, (stem, ckpt, path) in enumerate(templates)
         ]
-    settings = settings_of(args, options, source, subset, places)
+    settings = settings_of(args, options, templates[0][1].config, source, subset, places)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = selection(args, ckpt)
         dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
-        if index == 0 and sequence_warning(dataset.place_ids, options.readout):
+        if index == 0 and options.readout.warning(dataset.place_ids):
             print(
                 "note: the queries are not consecutive places: k > 1 metrics are reported but not judged "
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
-        gamma_options = dataclasses.replace(options, readout=options.readout.with_config(ckpt.config))
         runs.append(
             verify_checkpoint(
                 ckpt,
@@ -332,7 +331,7 @@ def run(args: argparse.Namespace) -> int:
                 dataset.traversal(args.query),
                 dataset.place_ids,
                 args.query,
-                gamma_options,
+                options,
                 reference_images=None if options.calibration == "float" else reference_images,
                 export_dir=out / "exports" / folder_name(label, index),
                 device=device,

@@ -14,7 +14,9 @@ import numpy as np
 
 from vprsnn_export.readout.baseline import cosine_similarities
 from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
-from vprsnn_export.runtime.evaluation import ReadoutOptions, nearest_neighbour_rows, readout_rows
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import nearest_neighbour_rows
 
 from . import envelope
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
@@ -42,16 +44,16 @@ def run(settings: Settings) -> dict:
         counts = evaluate_query(settings, ckpt, data, cfg)
         rows = []
         for rule in RULES:
-            options = ReadoutOptions.from_config(cfg, ks=KS, rule=rule)
+            options = SequenceOptions(ks=KS, rule=rule)
             rows += [
                 dict(r.to_dict(), rule=rule, seed=seed)
-                for r in readout_rows(
-                    ckpt.calibration, counts.query_counts, ckpt.reference_place_ids, data.place_ids, options
+                for r in Readout(ckpt.calibration, cfg.assignment.gamma, options).rows(
+                    counts.query_counts, ckpt.reference_place_ids, data.place_ids
                 )
                 if r.strategy == "wprob"
             ]
         similarities = cosine_similarities(data.traversal(settings.reference), data.traversal(settings.query))
-        options = ReadoutOptions.from_config(cfg, ks=KS)
+        options = SequenceOptions(ks=KS)
         rows += [
             dict(r.to_dict(), rule=COSINE_RULE, seed=seed)
             for r in nearest_neighbour_rows(

@@ -6,7 +6,8 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
 from vprsnn_export.stats import mean_std
 
 from .common import Settings, load, provenance, rows_table, summarise_rows, trained_checkpoint
@@ -30,7 +31,7 @@ def evaluate_selection(settings: Settings, selection: str, ks: tuple[int, ...]) 
             data.traversal(settings.query),
             data.place_ids,
             settings.query,
-            ReadoutOptions.from_config(cfg, ks=ks),
+            SequenceOptions(ks=ks),
             device=resolve_device(settings.device),
             reference_images={settings.reference: data.traversal(settings.reference)},
         )

@@ -16,8 +16,10 @@ import numpy as np
 from vprsnn_export.device import resolve_device
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
+from vprsnn_export.readout.scoring import decision_metrics
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import strategy_scores
-from vprsnn_export.runtime.evaluation import ReadoutOptions, decision_metrics, evaluate_float
+from vprsnn_export.runtime.evaluation import evaluate_float
 
 from .common import Settings, consecutive_networks, mean_std, pct, provenance, rows_table, summarise_rows
 
@@ -125,7 +127,7 @@ def network_distributions(settings: Settings, cfg, data, ckpt) -> dict[str, np.n
         query,
         data.place_ids,
         settings.query,
-        ReadoutOptions.from_config(cfg),
+        SequenceOptions(),
         device=resolve_device(settings.device),
     )
     wprob = strategy_scores(

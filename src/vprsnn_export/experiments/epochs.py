@@ -8,7 +8,8 @@ from typing import Any
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.runtime.evaluation import ReadoutOptions, calibrate_and_evaluate
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import calibrate_and_evaluate
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.train import Presentation, train_network
 
@@ -29,7 +30,7 @@ def run(settings: Settings) -> dict:
     for seed in settings.seeds:
         cfg = settings.config(seed, **{"train.epochs": max(marks)})
         data = load(settings, "subset", cfg)
-        options = ReadoutOptions.from_config(cfg, ks=(1, 5))
+        options = SequenceOptions(ks=(1, 5))
         reference = {settings.reference: data.traversal(settings.reference)}
 
         def on_epoch(epoch, weights, theta, cfg=cfg, data=data, options=options, reference=reference):

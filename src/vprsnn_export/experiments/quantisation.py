@@ -6,8 +6,9 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_fixed_point, evaluate_float
+from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 from .plots import line_plot
@@ -25,8 +26,8 @@ def run(settings: Settings) -> dict:
     started = time.perf_counter()
     device = resolve_device(settings.device)
     per_seed = []
-    for seed, cfg, data, ckpt in consecutive_networks(settings):
-        options = ReadoutOptions.from_config(cfg, ks=(1, 5))
+    for seed, _cfg, data, ckpt in consecutive_networks(settings):
+        options = SequenceOptions(ks=(1, 5))
         query = data.traversal(settings.query)
         float_rows = evaluate_float(ckpt, query, data.place_ids, settings.query, options, device=device).rows
         rows = [dict(r, bits="float", scaling="float", seed=seed, saturations=0) for r in float_rows]

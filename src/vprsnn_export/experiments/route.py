@@ -30,17 +30,10 @@ from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
+from vprsnn_export.readout.scoring import Readout, decision_metrics, metric_row, region_accuracies
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES
-from vprsnn_export.runtime.evaluation import (
-    ReadoutOptions,
-    aggregated,
-    decision_metrics,
-    metric_row,
-    module_accuracies,
-    nearest_neighbour_rows,
-    readout_scores,
-    score_rows,
-)
+from vprsnn_export.runtime.evaluation import nearest_neighbour_rows
 from vprsnn_export.stats import mean_std
 
 from .common import (
@@ -109,7 +102,7 @@ def route_network(settings: Settings, seed: int, module_size: int) -> tuple[Conf
 
 
 def options(estimate: bool = False) -> dict[str, Any]:
-    """ReadoutOptions keywords: the given velocity, or the smoothed estimate over :data:`VELOCITY_GRID`."""
+    """SequenceOptions keywords: the given velocity, or the smoothed estimate over :data:`VELOCITY_GRID`."""
     if estimate:
         return {"velocity_candidates": VELOCITY_GRID, "velocity_estimate": "smooth"}
     return {"velocity": VELOCITY}
@@ -125,14 +118,14 @@ def baselines(settings: Settings) -> dict[str, list[dict]]:
         data = route_data(settings, cfg)
         reference, query = data.traversal(settings.reference), data.traversal(settings.query)
         ids = data.place_ids
-        opts = ReadoutOptions.from_config(cfg, ks=KS, **options())
+        opts = SequenceOptions(ks=KS, **options())
         distances = sad_distances(reference, query)
         distribution = sad_distribution(distances)
         out[channels] = [
             {
                 "strategy": "sad",
                 "k": k,
-                **decision_metrics(aggregated(distribution, k, opts, None), "wprob", ids, ids, opts.tolerance),
+                **decision_metrics(opts.aggregate(distribution, k), "wprob", ids, ids, opts.tolerance),
             }
             for k in KS
         ]
@@ -154,15 +147,16 @@ def readout(
     ids = data.place_ids
     tracemalloc.start()
     started = time.perf_counter()
-    scores = readout_scores(ckpt.calibration, counts, cfg.assignment.gamma, layout)
-    rows = score_rows(scores, ids, ids, ReadoutOptions.from_config(cfg, ks=KS, **options()))
+    rows, scores, _ = Readout(
+        ckpt.calibration, cfg.assignment.gamma, SequenceOptions(ks=KS, **options()), layout
+    ).scored(counts, ids, ids)
     seconds = time.perf_counter() - started
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     if estimate:
-        searched = ReadoutOptions.from_config(cfg, ks=KS, **options(True))
+        searched = SequenceOptions(ks=KS, **options(True))
         for k in KS[1:]:
-            dist = aggregated(scores["wprob"], k, searched, None)
+            dist = searched.aggregate(scores["wprob"], k)
             rows.append(metric_row("wprob-est", k, decision_metrics(dist, "wprob", ids, ids, 0)))
     return [dict(r.to_dict(), readout=name) for r in rows], (layout, scores["wprob"]), seconds, peak
 
@@ -194,7 +188,9 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
                 "silenced": int(hyperactive_neurons(ckpt.calibration, layout).sum()),
                 "readout_seconds": round(seconds, 2),
                 "readout_peak_mib": round(peak, 1),
-                "modules": [m.to_dict() for m in module_accuracies(wprob, data.place_ids, data.place_ids, layout)],
+                "modules": [
+                    m.to_dict() for m in region_accuracies(wprob, data.place_ids, data.place_ids, layout.regions)
+                ],
             }
         )
     ckpt = timed.checkpoint

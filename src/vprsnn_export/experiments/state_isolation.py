@@ -6,7 +6,8 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
 
@@ -20,7 +21,7 @@ DESCRIPTION = (
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     per_seed = []
-    for seed, cfg, data, ckpt in consecutive_networks(settings):
+    for seed, _cfg, data, ckpt in consecutive_networks(settings):
         rows = []
         for state, isolation in (("isolated", True), ("spillover", False)):
             result = evaluate_float(
@@ -28,7 +29,7 @@ def run(settings: Settings) -> dict:
                 data.traversal(settings.query),
                 data.place_ids,
                 settings.query,
-                ReadoutOptions.from_config(cfg, ks=(1, 5)),
+                SequenceOptions(ks=(1, 5)),
                 device=resolve_device(settings.device),
                 state_isolation=isolation,
             )

@@ -20,7 +20,9 @@ from vprsnn_export.config import PRESETS, AssignmentConfig, Config, preset
 from vprsnn_export.device import resolve_device
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.runtime.evaluation import Evaluation, ReadoutOptions, evaluate_float, readout_rows
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import Evaluation, evaluate_float
 from vprsnn_export.stats import mean_std
 
 from .common import Settings, Variant, load, pct, provenance, summarise_rows, trained_checkpoint
@@ -107,7 +109,7 @@ def evaluate_selection(settings: Settings, selection: str, grid: tuple[Variant, 
                     data.traversal(settings.query),
                     data.place_ids,
                     settings.query,
-                    ReadoutOptions.from_config(cfg, ks=KS),
+                    SequenceOptions(ks=KS),
                     device=device,
                     reference_images={settings.reference: data.traversal(settings.reference)},
                 )
@@ -115,13 +117,8 @@ def evaluate_selection(settings: Settings, selection: str, grid: tuple[Variant, 
             ckpt, place_ids, evaluation, first = evaluated[key]
             network_of[variant.name] = first
             n_places = len(place_ids)
-            rows = readout_rows(
-                ckpt.calibration,
-                evaluation.query_counts,
-                ckpt.reference_place_ids,
-                place_ids,
-                ReadoutOptions.from_config(cfg, ks=KS),
-            )
+            readout = Readout(ckpt.calibration, cfg.assignment.gamma, SequenceOptions(ks=KS))  # the variant's gamma
+            rows = readout.rows(evaluation.query_counts, ckpt.reference_place_ids, place_ids)
             baselines = [r for r in evaluation.rows if r["strategy"] in BASELINES]
             per_variant[variant.name].append(
                 [dict(r, seed=seed) for r in [*(row.to_dict() for row in rows), *baselines]]

@@ -27,11 +27,15 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .rules import RULES
+from .rules import DEFAULT_RULE, RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
 #: ten such float64/intp arrays are alive at once, so the peak is ~320 MB.
 _MAX_ELEMENTS: Final[int] = 4_000_000
+#: The velocity searches' defaults (:class:`~vprsnn_export.readout.sequence.SequenceOptions` takes them from here):
+#: windows whose scores are summed, and recent frames whose mean is divided out.
+DEFAULT_SPAN: Final[int] = 10
+DEFAULT_MEMORY: Final[int] = 50
 
 
 def _prob2d(prob: np.ndarray) -> np.ndarray:
@@ -160,7 +164,7 @@ def aggregate(
     prob: np.ndarray,
     k: int,
     velocity: float | np.ndarray,
-    rule: str = "product",
+    rule: str = DEFAULT_RULE,
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
 ) -> np.ndarray:
@@ -224,7 +228,7 @@ def window_scores(
     prob: np.ndarray,
     k: int,
     candidates: np.ndarray,
-    rule: str = "product",
+    rule: str = DEFAULT_RULE,
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
     *,
@@ -277,7 +281,7 @@ def estimate_velocity(
     prob: np.ndarray,
     k: int,
     candidates: np.ndarray,
-    rule: str = "product",
+    rule: str = DEFAULT_RULE,
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -377,13 +381,13 @@ def track_velocity(
     prob: np.ndarray,
     k: int,
     candidates: np.ndarray,
-    span: int = 10,
-    rule: str = "product",
+    span: int = DEFAULT_SPAN,
+    rule: str = DEFAULT_RULE,
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
     *,
     length: int | None = None,
-    memory: int = 50,
+    memory: int = DEFAULT_MEMORY,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocity tracked over the query stream; returns ``(velocity, aggregated)``.
 
@@ -428,14 +432,14 @@ def smooth_velocity(
     prob: np.ndarray,
     k: int,
     candidates: np.ndarray,
-    span: int = 10,
-    rule: str = "product",
+    span: int = DEFAULT_SPAN,
+    rule: str = DEFAULT_RULE,
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
     *,
     lag: int | None = None,
     length: int | None = None,
-    memory: int = 50,
+    memory: int = DEFAULT_MEMORY,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocity smoothed over the recent and the next ``lag`` windows (fixed lag); returns ``(velocity, aggregated)``.
 

@@ -11,10 +11,16 @@ confidences are never split: they are accepted or rejected together.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.serial import JsonDataclass, json_options
+
+METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 
 
 def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.MaskedArray:
@@ -161,3 +167,62 @@ def pr_metrics(correct: np.ndarray, confidence: np.ndarray) -> dict[str, float |
         "auc_pr": auc,
         "n_queries": n,
     }
+
+
+@dataclass(frozen=True)
+class MetricValues(JsonDataclass):
+    """Accuracy, P@100R, R@100P and AUC-PR of one readout (fractions in [0, 1], or their differences)."""
+
+    accuracy: float
+    p_at_100r: float
+    r_at_100p: float
+    auc_pr: float
+
+    def get(self, metric: str) -> float:
+        """The value of one metric by name (one of ``METRICS``)."""
+        if metric not in METRICS:
+            raise KeyError(metric)
+        return float(getattr(self, metric))
+
+    def minus(self, other: MetricValues) -> MetricValues:
+        """self - other, metric by metric."""
+        return MetricValues(*(self.get(m) - other.get(m) for m in METRICS))
+
+
+@dataclass(frozen=True)
+class MetricRow(JsonDataclass):
+    """One readout (strategy at k) of one network; quantised rows carry the float values and the deltas."""
+
+    strategy: str
+    k: int
+    values: MetricValues = field(metadata=json_options(flatten=True))
+    n_queries: int
+    float_values: MetricValues | None = field(default=None, metadata=json_options(key="float", omit="none"))
+    delta: MetricValues | None = field(default=None, metadata=json_options(omit="none"))  # quantised - float
+
+    @property
+    def accuracy(self) -> float:
+        return self.values.accuracy
+
+    @property
+    def p_at_100r(self) -> float:
+        return self.values.p_at_100r
+
+    @property
+    def r_at_100p(self) -> float:
+        return self.values.r_at_100p
+
+    @property
+    def auc_pr(self) -> float:
+        return self.values.auc_pr
+
+    def with_float(self, base: MetricRow) -> MetricRow:
+        """This row with the float row's values and the differences (this - float)."""
+        return MetricRow(
+            self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
+        )
+
+
+def find_row(rows: Sequence[MetricRow], strategy: str, k: int) -> MetricRow | None:
+    """The row of ``strategy`` at ``k``, or None."""
+    return next((r for r in rows if r.strategy == strategy and r.k == k), None)

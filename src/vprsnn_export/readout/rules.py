@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
@@ -59,6 +60,8 @@ class AggregationRule:
 RULES: Registry[AggregationRule] = Registry("aggregation rule")
 RULES.register(AggregationRule("product", product_rule, "product of the frames' probabilities (softmax of log sums)"))
 RULES.register(AggregationRule("sum", sum_rule, "sum of the frames' probabilities"))
+#: The default rule of the library and the CLI: the first registered.
+DEFAULT_RULE: Final[str] = RULES.names()[0]
 
 
-__all__ = ["RULES", "AggregationRule", "product_rule", "sum_rule"]
+__all__ = ["DEFAULT_RULE", "RULES", "AggregationRule", "product_rule", "sum_rule"]

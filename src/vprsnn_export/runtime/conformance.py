@@ -29,13 +29,13 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import Backend, SpikeRun
-from vprsnn_export.readout.strategies import decide
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 from vprsnn_export.targets.registry import TARGETS, WriteOptions, target_labels
 
-from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult
 
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
@@ -89,7 +89,7 @@ def distribution_comparison(
     if a_arr.shape != b_arr.shape:
         detail = f"shapes differ: {a_arr.shape} vs {b_arr.shape}"
         return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
-    n_decisions = int(np.count_nonzero(decide(a_arr, "wprob")[0] != decide(b_arr, "wprob")[0]))
+    n_decisions = int(np.count_nonzero(decide(a_arr, SEQUENCE_STRATEGY)[0] != decide(b_arr, SEQUENCE_STRATEGY)[0]))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
     return Comparison(
         check,
@@ -152,12 +152,8 @@ def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
     """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration
     (an ensemble's with its region regularisation, as every evaluation reads it out)."""
 
-    layout = ensemble_layout(source.config, source.calibration.shape[1])
-
-    def readout(counts: np.ndarray) -> np.ndarray:
-        return readout_scores(source.calibration, counts, source.config.assignment.gamma, layout)["wprob"]
-
-    return readout
+    readout = Readout.of(source.calibration, source.config)
+    return lambda counts: readout.scores(counts)[SEQUENCE_STRATEGY]
 
 
 @dataclass(frozen=True)

@@ -27,24 +27,23 @@ import torch
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.readout.strategies import decide
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavailable, available, run_consumer
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.nir_target import apply_readout_rule
 
-from .evaluation import ensemble_layout, readout_scores
 from .results import Comparison, ConformanceResult
 
 GATE_LABEL = "NIR read back"  # the conformance label of the nir target: the rows land under "nir"
 
 
 def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
-    """W+Prob decision (k = 1) of each presentation with the network's own calibration (an ensemble's
-    with its region regularisation)."""
-    layout = ensemble_layout(network.config, network.calibration.shape[1])
-    wprob = readout_scores(network.calibration, counts, network.config.assignment.gamma, layout)["wprob"]
-    return decide(wprob, "wprob")[0]
+    """The sequence strategy's (W+Prob) decision (k = 1) of each presentation with the network's own
+    calibration (an ensemble's with its region regularisation)."""
+    scores = Readout.of(network.calibration, network.config).scores(counts)
+    return decide(scores[SEQUENCE_STRATEGY], SEQUENCE_STRATEGY)[0]
 
 
 def check_tolerance(tolerance: float | None) -> float | None:

@@ -3,16 +3,16 @@
 Each frame ``j`` (a greyscale image of any size) is resized and preprocessed like the training
 data, encoded under the presentation key ``(seed, "localize", stream, j)`` and presented to the
 network alone (state isolation, as in evaluation). Its spike counts give the W+Prob distribution
-``P_j`` over the reference places (an ensemble's with its region regularisation,
-:class:`Readout`, the readout of :func:`vprsnn_export.runtime.evaluation.readout_scores` with its
-query-independent half computed once). The decision aggregates the ``k`` most
+``P_j`` over the reference places (an ensemble's with its region regularisation), and
+:meth:`vprsnn_export.readout.scoring.Readout.push` decides: the same readout as a batch's, with its
+query-independent half computed once. The decision aggregates the ``k`` most
 recent frames only (:func:`vprsnn_export.readout.aggregation.aggregate`):
 
 .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
           \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l),
           \\quad \\text{accepted}_j = c_j \\ge \\theta
 
-at a given velocity ``v``, or with ``velocity_candidates`` the causal tracker of
+at a given velocity ``v``, or with ``velocity_candidates`` (and a causal ``velocity_estimate``) the tracker of
 :func:`vprsnn_export.readout.aggregation.track_velocity`: ``v_j`` maximises the window scores of
 the ``span`` most recent windows of ``2k`` frames on the stream contrast of the ``memory`` most
 recent frames. **Lag**: the decision for frame ``j`` is given as soon as frame ``j`` arrives
@@ -34,9 +34,7 @@ which agree count for count, give the same decisions.
 from __future__ import annotations
 
 import json
-import math
 import time
-from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -53,12 +51,9 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
-from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
 from vprsnn_export.readout.metrics import is_correct
-from vprsnn_export.readout.regions import ModuleLayout, regularised_calibration
-from vprsnn_export.readout.strategies import decide
-from vprsnn_export.runtime.evaluation import ensemble_layout
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
 
@@ -66,51 +61,6 @@ BACKENDS = ("auto", "float", "integer", "onnx")
 STREAM = "localize"
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
-
-
-@dataclass(frozen=True)
-class LocalizeOptions:
-    """How the frames are aggregated: ``k`` frames at ``velocity`` places per frame, or the velocity
-    tracked over ``velocity_candidates`` (``velocity_span`` windows, ``velocity_memory`` frames of
-    stream contrast)."""
-
-    k: int = 1
-    rule: str = "product"
-    velocity: float = 1.0
-    velocity_candidates: tuple[float, ...] | None = None
-    velocity_span: int = 10
-    velocity_memory: int = 50
-
-    def __post_init__(self) -> None:
-        if isinstance(self.k, bool) or not isinstance(self.k, int) or not 1 <= self.k <= 10_000:
-            raise InvalidValueError(f"k must be an integer from 1 to 10000, got {self.k!r}")
-        if self.rule not in RULES:
-            raise InvalidValueError(f"rule must be one of {', '.join(RULES)}, got {self.rule!r}")
-        if not math.isfinite(self.velocity):
-            raise InvalidValueError(f"velocity must be finite, got {self.velocity!r}")
-        if not 1 <= self.velocity_span <= 100_000 or not 0 <= self.velocity_memory <= 100_000:
-            raise InvalidValueError("velocity_span must lie in 1..100000 and velocity_memory in 0..100000")
-        if self.velocity_candidates is not None and not self.velocity_candidates:
-            raise InvalidValueError("velocity_candidates must hold at least one velocity")
-
-    @property
-    def tracking(self) -> bool:
-        return self.velocity_candidates is not None and self.k > 1
-
-    @property
-    def history(self) -> int:
-        """Frames of W+Prob kept: the window, the tracker's trajectories (2k) and its contrast memory."""
-        return max(self.k, 2 * self.k, self.velocity_memory) if self.tracking else self.k
-
-    def to_dict(self) -> dict[str, Any]:
-        out = asdict(self)
-        out["velocity_candidates"] = None if self.velocity_candidates is None else list(self.velocity_candidates)
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> LocalizeOptions:
-        cands = data.get("velocity_candidates")
-        return cls(**{**data, "velocity_candidates": None if cands is None else tuple(float(v) for v in cands)})
 
 
 @dataclass(frozen=True)
@@ -140,7 +90,7 @@ class OperatingPoint:
     precision: float  # achieved on the calibration queries (1.0 when nothing is accepted)
     recall: float  # accepted and correct / all calibration queries
     n_queries: int
-    options: LocalizeOptions
+    options: SequenceOptions
     model_sha256: str
     backend: str
     query: str
@@ -155,66 +105,7 @@ class OperatingPoint:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> OperatingPoint:
         fields = {k: v for k, v in data.items() if k != "format"}
-        return cls(**{**fields, "options": LocalizeOptions.from_dict(fields["options"])})
-
-
-@dataclass(frozen=True)
-class Readout:
-    """The query-independent half of the W+Prob readout, computed once per network (eq. 9-11).
-
-    ``calibration``: S^R (an ensemble's region-weighted S~, hyperactive rows zeroed); ``weighting``:
-    S'' of :func:`~vprsnn_export.readout.assignment.weighted_matrix`; ``column_sum``: sum_m S^R_ml;
-    ``silent``: neurons whose query counts are ignored (None: none).
-    """
-
-    calibration: np.ndarray
-    weighting: np.ndarray
-    column_sum: np.ndarray
-    silent: np.ndarray | None
-
-    @classmethod
-    def of(cls, calibration: np.ndarray, gamma: float, layout: ModuleLayout | None) -> Readout:
-        silent = None
-        sr = np.asarray(calibration, dtype=np.float64)
-        if layout is not None:
-            sr, silent = regularised_calibration(calibration, layout)
-        return cls(sr, weighted_matrix(sr, gamma), sr.sum(axis=0), silent)
-
-    def wprob(self, counts: np.ndarray) -> np.ndarray:
-        """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.
-
-        .. math:: \\mathrm{Score}_l = \\Big(\\sum_{i \\in A} S^Q_i S''_{il}\\Big)
-                  \\frac{\\sum_{i \\in A} S^R_{il}}{\\sum_m S^R_{ml}}, \\quad
-                  A = \\{i : S^Q_i > 0, \\text{not silent}\\}, \\quad P = \\text{wprob\\_distribution}(\\mathrm{Score})
-
-        the readout of :func:`vprsnn_export.runtime.evaluation.readout_scores` (equal up to the order of
-        the float sums), at the cost of the few neurons that fired rather than all of them.
-        """
-        sq = np.asarray(counts, dtype=np.float64)
-        active = sq > 0
-        if self.silent is not None:
-            active &= ~self.silent
-        rows = np.flatnonzero(active)
-        safe = np.where(self.column_sum > 0, self.column_sum, 1.0)
-        penalty = np.where(self.column_sum > 0, self.calibration[rows].sum(axis=0) / safe, 0.0)
-        return wprob_distribution(((sq[rows] @ self.weighting[rows]) * penalty)[None])[0]
-
-
-def causal_velocity(
-    contrast: np.ndarray, scores: deque, options: LocalizeOptions, candidates: np.ndarray
-) -> tuple[np.ndarray, float]:
-    """The newest window's scores e_j(v) and the tracked velocity.
-
-    .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } 2k \\text{ frames of } Q, \\quad
-              v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
-
-    ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
-    previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
-    """
-    length = 2 * options.k
-    newest = window_scores(contrast[-length:], length, candidates, options.rule)[-1]
-    total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
-    return newest, float(candidates[int(np.argmax(total))])
+        return cls(**{**fields, "options": SequenceOptions.from_dict(fields["options"])})
 
 
 class Localizer:
@@ -230,30 +121,27 @@ class Localizer:
         network: Checkpoint | FixedPointModel,
         *,
         backend: str = "auto",
-        options: LocalizeOptions | None = None,
+        options: SequenceOptions | None = None,
         threshold: float | None = None,
         onnx_path: str | Path | None = None,
         device: torch.device | None = None,
         threads: int | None = None,
     ) -> None:
         self.network = network
-        self.options = LocalizeOptions() if options is None else options
+        self.readout = Readout.of(network.calibration, network.config, options)
+        self.options = self.readout.options
         self.threshold = threshold
         self.config: Config = network.config
         self.backend = resolve_backend(network, backend, onnx_path)
         self._counts = counts_runner(network, self.backend, onnx_path, device, threads)
-        layout = ensemble_layout(self.config, len(network.reference_place_ids))
-        self.readout = Readout.of(network.calibration, self.config.assignment.gamma, layout)
-        self._candidates = None if not self.options.tracking else np.asarray(self.options.velocity_candidates)
+        self.readout.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
 
     def reset(self) -> None:
         """Forget the stream: the next frame is frame 0."""
         self.frame = 0
-        self._wprob: deque[np.ndarray] = deque(maxlen=self.options.history)
-        self._contrast: deque[np.ndarray] = deque(maxlen=2 * self.options.k)
-        self._scores: deque[np.ndarray] = deque(maxlen=max(self.options.velocity_span - 1, 1))
+        self.readout.reset()
 
     def preprocess(self, grey: np.ndarray) -> np.ndarray:
         """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
@@ -306,22 +194,8 @@ class Localizer:
         return [self._decide(row, name, time.perf_counter() - share) for row, name in zip(counts, labels, strict=True)]
 
     def _decide(self, counts: np.ndarray, name: str, began: float) -> Decision:
-        options = self.options
-        row = self.wprob(counts)
-        self._wprob.append(row)
-        velocity = options.velocity
-        if self._candidates is not None:
-            recent = np.asarray(self._wprob)
-            memory = options.velocity_memory
-            self._contrast.append(stream_contrast(recent[-max(memory, 1) :], memory)[-1])
-            newest, velocity = causal_velocity(np.asarray(self._contrast), self._scores, options, self._candidates)
-            if options.velocity_span > 1:
-                self._scores.append(newest)
-        window = np.asarray(self._wprob)[-options.k :]
-        final = aggregate(window, options.k, velocity, options.rule)[-1:] if options.k > 1 else row[None]
-        index, confidence = decide(final, "wprob")
-        place = None if index[0] < 0 else int(self.network.reference_place_ids[index[0]])
-        conf = float(confidence[0])
+        index, conf, velocity = self.readout.push(counts)
+        place = None if index < 0 else int(self.network.reference_place_ids[index])
         decision = Decision(
             frame=self.frame,
             name=name,

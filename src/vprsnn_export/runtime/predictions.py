@@ -27,8 +27,9 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text
 from vprsnn_export.readout.metrics import is_correct, predicted_place_ids
-from vprsnn_export.readout.strategies import STRATEGIES, decide
-from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_scores
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 
 FORMATS = (".csv", ".jsonl")
 FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct")
@@ -104,11 +105,13 @@ def predictions(
     scores: Mapping[str, np.ndarray],
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray | None,
-    options: ReadoutOptions,
+    options: SequenceOptions,
 ) -> Predictions:
-    """The decisions behind :func:`vprsnn_export.runtime.evaluation.score_rows`, per query."""
+    """The decisions behind :meth:`vprsnn_export.readout.scoring.Readout.rows`, per query."""
     columns = [(strategy, 1, scores[strategy]) for strategy in STRATEGIES]
-    columns += [("wprob", k, aggregated(scores["wprob"], k, options, None)) for k in sorted(set(options.ks) - {1})]
+    columns += [
+        (SEQUENCE_STRATEGY, k, options.aggregate(scores[SEQUENCE_STRATEGY], k)) for k in sorted(set(options.ks) - {1})
+    ]
     decided = []
     for strategy, k, matrix in columns:
         index, confidence = decide(matrix, strategy)
@@ -123,10 +126,9 @@ def network_predictions(
     network: Checkpoint | FixedPointModel,
     query_counts: np.ndarray,
     query_place_ids: np.ndarray | None,
-    options: ReadoutOptions,
+    options: SequenceOptions,
 ) -> Predictions:
     """Per-query decisions from an evaluation's spike counts (``Evaluation.query_counts``), read out with
     the network's own calibration (an ensemble's with its region regularisation), like its metric rows."""
-    layout = ensemble_layout(network.config, len(network.reference_place_ids))
-    scores = readout_scores(network.calibration, query_counts, options.gamma, layout)
+    scores = Readout.of(network.calibration, network.config, options).scores(query_counts)
     return predictions(scores, network.reference_place_ids, query_place_ids, options)

@@ -10,7 +10,7 @@ from vprsnn_export.cli import main
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import EXIT_BAD_INPUT
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
-from vprsnn_export.runtime.evaluation import ReadoutOptions
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.report import combine_reports, load_report, write_report
 from vprsnn_export.runtime.report.load import REPORT_JSON
 from vprsnn_export.runtime.report.render import REPORT_HTML, REPORT_MD
@@ -46,7 +46,7 @@ def report(tmp_path_factory):
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:16", ["summer", "winter"], ckpt.config.preprocess)
     options = VerifyOptions(
-        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        readout=SequenceOptions(ks=(1, 3)),
         bits=(6, 3),
         targets=("onnx",),
         reference_queries=1,
@@ -61,7 +61,9 @@ def report(tmp_path_factory):
         reference_images={"summer": data.traversal("summer")},
         label="seed 42",
     )
-    return build_report([run], {**options.to_dict(), "query": "winter"}, command=["vprsnn-export", "verify", str(path)])
+    return build_report(
+        [run], {**options.to_dict(ckpt.config), "query": "winter"}, command=["vprsnn-export", "verify", str(path)]
+    )
 
 
 def test_writes_json_markdown_and_self_contained_html(report, tmp_path):

@@ -15,13 +15,13 @@ from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,
     distribution_comparison,
     exact_comparison,
 )
-from vprsnn_export.runtime.evaluation import ReadoutOptions
 from vprsnn_export.runtime.report import write_report
 from vprsnn_export.runtime.results import (
     SCHEMA,
@@ -64,9 +64,7 @@ def tiny(tmp_path_factory):
 @pytest.fixture(scope="module")
 def verified(tiny, tmp_path_factory):
     path, ckpt, data = tiny
-    options = VerifyOptions(
-        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)), bits=(8, 2), reference_queries=2
-    )
+    options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 2), reference_queries=2)
     run = verify_checkpoint(
         ckpt,
         checkpoint_sha256(path),
@@ -335,7 +333,7 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
 
     path, ckpt, data = tiny
     options = VerifyOptions(
-        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        readout=SequenceOptions(ks=(1, 3)),
         bits=(8,),
         targets=(),
         reference_queries=0,
@@ -356,19 +354,19 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
     assert [r.to_dict() for r in again.float.metrics] == evaluated.rows
 
 
-def test_verify_scores_each_network_once(tiny, monkeypatch):
-    """Issue 25: the float network and each deployed width are read out by one readout_scores call each."""
-    from vprsnn_export.runtime import evaluation
-    from vprsnn_export.runtime.verify import checks
+def test_verify_scores_and_aggregates_each_network_once(tiny, monkeypatch):
+    """Issues 25, 33: the float network and each deployed width are scored by one Readout.scores call and
+    aggregated once per k > 1 (the rows and the decision-level checks share the aggregates)."""
+    from vprsnn_export.readout import sequence
+    from vprsnn_export.readout.scoring import Readout
 
     path, ckpt, data = tiny
-    calls = []
-    real = evaluation.readout_scores
-    counted = lambda *args, **kwargs: calls.append(1) or real(*args, **kwargs)  # noqa: E731
-    for module in (evaluation, checks):  # every name verify could score through
-        monkeypatch.setattr(module, "readout_scores", counted)
+    scored, aggregated = [], []
+    real_scores, real_aggregate = Readout.scores, sequence.aggregate
+    monkeypatch.setattr(Readout, "scores", lambda *a, **kw: scored.append(1) or real_scores(*a, **kw))
+    monkeypatch.setattr(sequence, "aggregate", lambda *a, **kw: aggregated.append(a[1]) or real_aggregate(*a, **kw))
     options = VerifyOptions(
-        readout=ReadoutOptions(gamma=ckpt.config.assignment.gamma, ks=(1, 3)),
+        readout=SequenceOptions(ks=(1, 3)),
         bits=(8, 4),
         targets=(),
         reference_queries=0,
@@ -382,7 +380,8 @@ def test_verify_scores_each_network_once(tiny, monkeypatch):
         options,
         reference_images={"summer": data.traversal("summer")},
     )
-    assert len(calls) == 3
+    assert len(scored) == 3  # float, 8 and 4 bits
+    assert aggregated == [3, 3, 3]  # k = 3 once per network (twice before: in decision_scores and score_rows)
 
 
 def test_build_report_and_summary(verified):
@@ -433,7 +432,7 @@ def verify_ensemble(tmp_path, monkeypatch, budget):
     data = load_dataset("synthetic:30", ["summer", "winter"], cfg.preprocess)
     ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False)
     path = save_checkpoint(tmp_path / "ensemble.npz", ckpt)
-    options = VerifyOptions(readout=ReadoutOptions(gamma=cfg.assignment.gamma, ks=(1, 3)), bits=(8, 2), targets=())
+    options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 2), targets=())
     run = verify_checkpoint(
         ckpt,
         checkpoint_sha256(path),
@@ -453,7 +452,7 @@ def verify_ensemble(tmp_path, monkeypatch, budget):
         if budget is None:
             assert sum(m.spikes for m in result.modules) == result.spike_level.total_spikes
     assert VerifiedRun.from_dict(json.loads(json.dumps(run.to_dict()))).bits[1].modules == run.bits[1].modules
-    report = build_report([run], {**options.to_dict(), "query": "winter"}, command=["test"], seconds=1.0)
+    report = build_report([run], {**options.to_dict(cfg), "query": "winter"}, command=["test"], seconds=1.0)
     written = write_report(report, tmp_path / "report")
     text = written["md"].read_text()
     assert "## Modules of the ensemble" in text and "modules.png" in text

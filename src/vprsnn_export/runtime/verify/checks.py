@@ -10,11 +10,11 @@ import torch
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
-from vprsnn_export.readout.regions import ModuleAccuracy, ModuleLayout, module_accuracy
-from vprsnn_export.readout.strategies import STRATEGIES, decide
+from vprsnn_export.readout.scoring import region_accuracies
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 from vprsnn_export.targets.intsim import step_agreement
 
-from ..evaluation import ReadoutOptions, aggregated, readout_scores
 from ..results import (
     DecisionLevel,
     LevelHistogram,
@@ -151,33 +151,20 @@ def decision_level(
     int_aggregated: Mapping[int, np.ndarray],
 ) -> DecisionLevel:
     """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
-    tv = tv_distance(float_scores["wprob"], int_scores["wprob"])
+    tv = tv_distance(float_scores[SEQUENCE_STRATEGY], int_scores[SEQUENCE_STRATEGY])
     return DecisionLevel(
         top1_agreement={s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
         wprob_tv_mean=float(tv.mean()),
         wprob_tv_max=float(tv.max()),
         wprob_tv=tuple(round(float(v), 6) for v in tv),
         aggregated_agreement={
-            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], "wprob") for k in sorted(float_aggregated)
+            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], SEQUENCE_STRATEGY)
+            for k in sorted(float_aggregated)
         },
     )
 
 
 # ---------------------------------------------------------------------------- modules of an ensemble
-
-
-def region_accuracies(
-    distribution: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    regions: np.ndarray,
-    tolerance: int,
-) -> list[ModuleAccuracy]:
-    """Per module: the W+Prob decisions of ``distribution`` (Q, places) scored on its region's queries
-    (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
-    predicted, _ = decide(distribution, "wprob")
-    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
-    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
 
 
 def module_rows(
@@ -232,16 +219,6 @@ def module_rows(
 # ---------------------------------------------------------------------------- metric level
 
 
-def decision_scores(
-    calibration: np.ndarray, counts: np.ndarray, options: ReadoutOptions, modules: ModuleLayout | None = None
-) -> tuple[dict, dict]:
-    """Scores of every strategy at k=1 and the W+Prob aggregate at every k (k=1 included); an ensemble's
-    (``modules``) with its region regularisation, as :func:`runtime.evaluation.readout_rows` scores it."""
-    scores = readout_scores(calibration, counts, options.gamma, modules)
-    agg = {k: aggregated(scores["wprob"], k, options, None) for k in sorted(set(options.ks) | {1})}
-    return scores, agg
-
-
 def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
     """Each quantised row with its float value and the difference (quantised - float) of every metric."""
     reference = {(r.strategy, r.k): r for r in float_rows}
@@ -268,13 +245,14 @@ def curves(
     agg: Mapping[int, np.ndarray],
     reference_ids: np.ndarray,
     query_ids: np.ndarray,
-    options: ReadoutOptions,
+    options: SequenceOptions,
 ) -> dict[str, PrCurve]:
     """PR curves of W+Prob at k=1 and at the largest k."""
-    out = {"wprob k=1": pr_points(scores["wprob"], "wprob", reference_ids, query_ids, options.tolerance)}
+    name = SEQUENCE_STRATEGY
+    out = {f"{name} k=1": pr_points(scores[name], name, reference_ids, query_ids, options.tolerance)}
     top = max(options.ks)
     if top > 1:
-        out[f"wprob k={top}"] = pr_points(agg[top], "wprob", reference_ids, query_ids, options.tolerance)
+        out[f"{name} k={top}"] = pr_points(agg[top], name, reference_ids, query_ids, options.tolerance)
     return out
 
 
@@ -294,7 +272,7 @@ def tolerance_checks(
 
     R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that
     are not consecutive places, whose k-frame windows mix unrelated places:
-    :func:`~vprsnn_export.runtime.evaluation.sequence_warning`) no k > 1 metric is judged.
+    :meth:`~vprsnn_export.readout.sequence.SequenceOptions.warning`) no k > 1 metric is judged.
 
     Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
     network that does better than float never fails. A metric moves in steps of 1/Q (one
@@ -332,11 +310,11 @@ def tolerance_checks(
             drop("p_at_100r", strategy, 1, "p_at_100r")
     if tolerances.get("r_at_100p") is not None:
         for k in judged:
-            drop("r_at_100p", "wprob", k, "r_at_100p")
+            drop("r_at_100p", SEQUENCE_STRATEGY, k, "r_at_100p")
     if tolerances.get("auc_pr") is not None:
-        drop("auc_pr", "wprob", top, "auc_pr")
+        drop("auc_pr", SEQUENCE_STRATEGY, top, "auc_pr")
     bound("winner_agreement", "steps with the float winner", spike.winner_agreement, True)
-    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement["wprob"], True)
+    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True)
     bound("saturations", "saturation events on the queries", spike.saturations, False)
     return checks
 

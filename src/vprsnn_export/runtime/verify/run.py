@@ -16,34 +16,26 @@ import torch
 from tqdm import tqdm
 
 from vprsnn_export.arguments import require_type
+from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
-from vprsnn_export.readout.regions import ModuleLayout
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
 
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import CALIBRATIONS, deploy
-from ..evaluation import (
-    ReadoutOptions,
-    check_places_overlap,
-    check_readout_arrays,
-    check_sequence_length,
-    ensemble_layout,
-    score_rows,
-    sequence_warning,
-)
-from ..results import BitsResult, FloatResult, MetricRow, VerifiedRun
+from ..results import BitsResult, FloatResult, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
     curves,
     decision_level,
-    decision_scores,
     level_histogram,
     metric_deltas,
     module_rows,
@@ -57,7 +49,7 @@ from .checks import (
 class VerifyOptions:
     """What `verify` quantises and how it reads out and judges."""
 
-    readout: ReadoutOptions
+    readout: SequenceOptions
     bits: tuple[int, ...] = DEFAULT_BITS
     per_neuron: bool = True
     scale_method: str = "max"
@@ -66,9 +58,10 @@ class VerifyOptions:
     targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, config: Config) -> dict[str, Any]:
+        """The settings of a report; its readout with the gamma of ``config`` (the networks' config)."""
         data = dataclasses.asdict(self)
-        data["readout"] = dataclasses.asdict(self.readout)
+        data["readout"] = {"gamma": config.assignment.gamma, **dataclasses.asdict(self.readout)}
         return data
 
 
@@ -77,24 +70,6 @@ class VerifyOptions:
 #: fit, the metrics on all of them (a whole route: 2400 queries x 300 steps x 9600 neurons would be
 #: 6.9 GB per raster).
 RASTER_BUDGET = 1 << 29
-
-
-def scored_once(
-    calibration: np.ndarray,
-    counts: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    readout: ReadoutOptions,
-    layout: ModuleLayout | None,
-) -> tuple[tuple[MetricRow, ...], dict, dict]:
-    """One network's readout, scored once: the rows :func:`runtime.evaluation.readout_rows` gives (after
-    its checks), the scores of every strategy at k=1 and the W+Prob aggregate at every k, all from one
-    :func:`~vprsnn_export.runtime.evaluation.readout_scores` call."""
-    check_readout_arrays(calibration, counts, reference_place_ids, query_place_ids)
-    check_sequence_length(readout, len(query_place_ids))
-    check_places_overlap(reference_place_ids, query_place_ids, readout.tolerance)
-    scores, aggregates = decision_scores(calibration, counts, readout, layout)
-    return tuple(score_rows(scores, reference_place_ids, query_place_ids, readout)), scores, aggregates
 
 
 def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int = RASTER_BUDGET) -> int:
@@ -145,9 +120,8 @@ def verify_checkpoint(
     float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
-    layout = ensemble_layout(ckpt.config, len(ref_ids))
-    float_rows, float_scores, float_agg = scored_once(
-        ckpt.calibration, float_counts, ref_ids, query_place_ids, readout, layout
+    float_rows, float_scores, float_agg = Readout.of(ckpt.calibration, ckpt.config, readout).scored(
+        float_counts, ref_ids, query_place_ids
     )
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
@@ -201,8 +175,8 @@ def verify_checkpoint(
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            int_rows, scores, agg = scored_once(
-                model.calibration, int_counts, ref_ids, query_place_ids, readout, layout
+            int_rows, scores, agg = Readout.of(model.calibration, model.config, readout).scored(
+                int_counts, ref_ids, query_place_ids
             )
             rows = metric_deltas(float_rows, int_rows)
             if float_run.raster is None or int_run.raster is None:
@@ -224,7 +198,7 @@ def verify_checkpoint(
                 decision,
                 options.tolerances,
                 readout.ks,
-                sequences=sequence_warning(query_place_ids, readout) is None,
+                sequences=readout.warning(query_place_ids) is None,
             )
             modules = (
                 module_rows(
@@ -275,7 +249,7 @@ def verify_checkpoint(
         reference_place_ids=tuple(int(p) for p in ref_ids),
         export_dir=None if temporary is not None else str(root),
         float=FloatResult(
-            metrics=float_rows,
+            metrics=tuple(float_rows),
             total_spikes=int(float_counts.sum()),
             pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
             weights=weight_histograms(ckpt.weights, options.per_neuron),

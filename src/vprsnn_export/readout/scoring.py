@@ -1,0 +1,323 @@
+"""The readout of one network: spike counts -> place scores -> decisions -> metric rows, batch or stream.
+
+A :class:`Readout` is built once per network from its calibration S^R, the config's assignment
+settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.readout.sequence.SequenceOptions`.
+``scores(counts)`` gives every registered strategy's k=1 scores of a batch, ``sequences`` the
+:data:`~vprsnn_export.readout.strategies.SEQUENCE_STRATEGY` distribution aggregated at every k,
+``rows``/``scored`` the metric rows, and ``push(counts)`` one causal decision per frame of a stream.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+
+import numpy as np
+
+from vprsnn_export.arguments import real_number, require_type
+from vprsnn_export.config import Config
+from vprsnn_export.errors import InvalidValueError
+
+from .aggregation import aggregate, stream_contrast, window_scores
+from .assignment import weighted_matrix, wprob_distribution
+from .metrics import MetricRow, is_correct, pr_metrics, predicted_place_ids
+from .regions import (
+    ModuleAccuracy,
+    ModuleLayout,
+    module_accuracy,
+    module_layout,
+    regularise,
+    regularised_calibration,
+)
+from .sequence import SequenceOptions
+from .strategies import SEQUENCE_STRATEGY, STRATEGIES, all_scores, decide
+from .velocity import VELOCITY_ESTIMATES, causal_estimates
+
+
+def decision_metrics(
+    distribution: np.ndarray,
+    strategy: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    tolerance: int,
+) -> dict:
+    """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
+    predicted, confidence = decide(distribution, strategy)
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
+    return pr_metrics(correct, confidence)
+
+
+def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
+    """The typed row of one readout from :func:`~vprsnn_export.readout.metrics.pr_metrics`' values."""
+    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
+
+
+def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
+    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
+    return module_layout(config, n_places) if config.train.module_size > 0 else None
+
+
+def region_accuracies(
+    distribution: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    regions: np.ndarray,
+    tolerance: int = 0,
+) -> list[ModuleAccuracy]:
+    """Per module: accuracy and in-region share of the whole-route :data:`SEQUENCE_STRATEGY` decisions of
+    ``distribution`` (Q, places) on its region's queries (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
+    predicted, _ = decide(distribution, SEQUENCE_STRATEGY)
+    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
+    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
+
+
+def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int) -> None:
+    """InvalidValueError when no query place lies within ``tolerance`` of a reference place: every
+    decision would be wrong by construction (the model was trained on other places)."""
+    reference = np.sort(np.asarray(reference_place_ids, dtype=np.int64))
+    queries = np.asarray(query_place_ids, dtype=np.int64)
+    if reference.size == 0 or queries.size == 0:
+        return
+    nearest = np.clip(np.searchsorted(reference, queries), 0, reference.size - 1)
+    below = reference[np.clip(nearest - 1, 0, reference.size - 1)]
+    gap = np.minimum(np.abs(reference[nearest] - queries), np.abs(below - queries))
+    if np.all(gap > tolerance):
+        raise InvalidValueError(
+            f"none of the {queries.size} query places ({queries.min()}..{queries.max()}) is among the model's "
+            f"{reference.size} reference places ({reference[0]}..{reference[-1]}): select the places it was "
+            "trained on (--places / --subset)"
+        )
+
+
+def check_readout_arrays(
+    calibration: np.ndarray, query_counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
+) -> None:
+    """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
+    id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
+    shapes = {name: np.shape(value) for name, value in (("calibration", calibration), ("query_counts", query_counts))}
+    ids = {"reference_place_ids": np.shape(reference_place_ids), "query_place_ids": np.shape(query_place_ids)}
+    for name, shape in {**shapes, **ids}.items():
+        if len(shape) != (2 if name in shapes else 1):
+            raise InvalidValueError(f"{name} has shape {shape}, expected {2 if name in shapes else 1}-D")
+    if shapes["calibration"][1] != ids["reference_place_ids"][0]:
+        raise InvalidValueError(
+            f"calibration covers {shapes['calibration'][1]} places but reference_place_ids names "
+            f"{ids['reference_place_ids'][0]}"
+        )
+    if shapes["query_counts"] != (ids["query_place_ids"][0], shapes["calibration"][0]):
+        raise InvalidValueError(
+            f"query_counts has shape {shapes['query_counts']}, expected ({ids['query_place_ids'][0]}, "
+            f"{shapes['calibration'][0]}): one row per query id, one column per neuron of the calibration"
+        )
+
+
+class Readout:
+    """One network's readout: S^R, gamma, its module layout and the sequence options.
+
+    ``scores(counts)`` (a batch, Q x neurons) and ``push(counts)`` (one frame of a stream) give the same
+    W+Prob distributions up to the order of the float sums; ``push`` keeps the recent frames.
+    """
+
+    def __init__(
+        self,
+        calibration: np.ndarray,
+        gamma: float,
+        options: SequenceOptions | None = None,
+        modules: ModuleLayout | None = None,
+    ) -> None:
+        self.options = SequenceOptions() if options is None else options
+        require_type("options", self.options, SequenceOptions)
+        self.calibration = calibration
+        self.gamma = real_number("gamma", gamma)
+        self.modules = modules
+        self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None
+        self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
+
+    @classmethod
+    def of(cls, calibration: np.ndarray, config: Config, options: SequenceOptions | None = None) -> Readout:
+        """The readout of a network trained with ``config``: gamma is its ``assignment.gamma`` (the one source),
+        an ensemble's (``train.module_size`` > 0) module layout its regions and assignment settings."""
+        require_type("config", config, Config)
+        layout = ensemble_layout(config, np.shape(calibration)[1]) if np.ndim(calibration) == 2 else None
+        return cls(calibration, config.assignment.gamma, options, layout)
+
+    # ------------------------------------------------------------------------ batch
+
+    def scores(self, counts: np.ndarray) -> dict[str, np.ndarray]:
+        """The k=1 scores of every registered strategy (``readout.strategies.STRATEGIES``), (Q, places) each.
+
+        An ensemble's hyperactive neurons are silenced first (``readout.regions.regularise``: decided from S^R
+        alone); the weighted scores are computed once and W+Prob derived from them (``all_scores``).
+        """
+        sr, sq = regularise(self.calibration, counts, self.modules)
+        return all_scores(sr, sq, self.gamma)
+
+    def sequences(self, distribution: np.ndarray, frame_positions: np.ndarray | None = None) -> dict[int, np.ndarray]:
+        """A distribution aggregated at every k of the options, k = 1 (itself) included: {k: (Q, places)}."""
+        return {k: self.options.aggregate(distribution, k, frame_positions) for k in sorted(set(self.options.ks) | {1})}
+
+    def scored(
+        self,
+        counts: np.ndarray,
+        reference_place_ids: np.ndarray,
+        query_place_ids: np.ndarray,
+        frame_positions: np.ndarray | None = None,
+    ) -> tuple[list[MetricRow], dict[str, np.ndarray], dict[int, np.ndarray]]:
+        """The rows, the k=1 scores of every strategy and the sequence aggregates at every k, each computed once.
+
+        Rows: every strategy at k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1 (strategy, k, accuracy,
+        P@100R, R@100P, AUC-PR, number of queries). InvalidValueError when the arrays do not fit, a k exceeds the
+        queries or no query place is near a reference place.
+        """
+        check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
+        self.options.check_length(len(query_place_ids))
+        check_places_overlap(reference_place_ids, query_place_ids, self.options.tolerance)
+        scores = self.scores(counts)
+        aggregates = self.sequences(scores[SEQUENCE_STRATEGY], frame_positions)
+        tolerance = self.options.tolerance
+        rows = [
+            metric_row(s, 1, decision_metrics(scores[s], s, reference_place_ids, query_place_ids, tolerance))
+            for s in STRATEGIES
+        ]
+        for k in sorted(set(self.options.ks) - {1}):
+            metrics = decision_metrics(
+                aggregates[k], SEQUENCE_STRATEGY, reference_place_ids, query_place_ids, tolerance
+            )
+            rows.append(metric_row(SEQUENCE_STRATEGY, k, metrics))
+        return rows, scores, aggregates
+
+    def rows(
+        self,
+        counts: np.ndarray,
+        reference_place_ids: np.ndarray,
+        query_place_ids: np.ndarray,
+        frame_positions: np.ndarray | None = None,
+    ) -> list[MetricRow]:
+        """The metric rows of :meth:`scored`."""
+        return self.scored(counts, reference_place_ids, query_place_ids, frame_positions)[0]
+
+    # ------------------------------------------------------------------------ stream
+
+    def wprob(self, counts: np.ndarray) -> np.ndarray:
+        """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.
+
+        .. math:: \\mathrm{Score}_l = \\Big(\\sum_{i \\in A} S^Q_i S''_{il}\\Big)
+                  \\frac{\\sum_{i \\in A} S^R_{il}}{\\sum_m S^R_{ml}}, \\quad
+                  A = \\{i : S^Q_i > 0, \\text{not silent}\\}, \\quad P = \\text{wprob\\_distribution}(\\mathrm{Score})
+
+        :meth:`scores`' W+Prob (equal up to the order of the float sums), at the cost of the few neurons that
+        fired rather than all of them; the query-independent half (S'' of eq. 9-11) is computed once.
+        """
+        if self._prepared is None:
+            sr, silent = np.asarray(self.calibration, dtype=np.float64), None
+            if self.modules is not None:
+                sr, silent = regularised_calibration(self.calibration, self.modules)
+            self._prepared = (sr, weighted_matrix(sr, self.gamma), sr.sum(axis=0), silent)
+        sr, weighting, column_sum, silent = self._prepared
+        sq = np.asarray(counts, dtype=np.float64)
+        active = sq > 0
+        if silent is not None:
+            active &= ~silent
+        rows = np.flatnonzero(active)
+        safe = np.where(column_sum > 0, column_sum, 1.0)
+        penalty = np.where(column_sum > 0, sr[rows].sum(axis=0) / safe, 0.0)
+        return wprob_distribution(((sq[rows] @ weighting[rows]) * penalty)[None])[0]
+
+    @property
+    def k(self) -> int:
+        """The frames a stream aggregates per decision (the one k of the options)."""
+        if len(self.options.ks) != 1:
+            raise InvalidValueError(f"a stream decides at one k (--k), got {', '.join(map(str, self.options.ks))}")
+        return self.options.ks[0]
+
+    def _tracking(self) -> tuple[int, int, int] | None:
+        """(trajectory length, span, memory) of the causal velocity tracker, None at a given velocity."""
+        options, k = self.options, self.k
+        if options.velocity_candidates is None or k == 1:
+            return None
+        stream = VELOCITY_ESTIMATES.get(options.velocity_estimate).stream
+        if stream is None:
+            raise InvalidValueError(
+                f"--velocity-estimate {options.velocity_estimate} waits for later frames; a stream decides "
+                f"causally: choose {' or '.join(causal_estimates())}"
+            )
+        return stream(k, options)
+
+    def reset(self) -> None:
+        """Forget the stream: the next frame pushed is frame 0."""
+        self._stream = None
+
+    def push(self, counts: np.ndarray) -> tuple[int, float, float]:
+        """One frame's causal decision from its spike counts (neurons,): (place index or -1, confidence, velocity).
+
+        .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
+                  \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l)
+
+        at the given velocity, or ``v_j`` tracked causally: :func:`causal_velocity` over the stream contrast
+        of the ``memory`` recent frames, with the trajectory length, span and memory of the estimate's causal form
+        (``VelocityEstimator.stream``: "track" 2k, span, memory; "window" k, 1, 0).
+        """
+        options, k = self.options, self.k
+        tracking = self._tracking()
+        length, span, memory = tracking if tracking is not None else (1, 1, 0)
+        if self._stream is None:  # the recent W+Prob rows, stream-contrast rows and window scores
+            self._stream = (deque(maxlen=max(k, length, memory)), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
+        recent, contrast, scores = self._stream
+        row = self.wprob(counts)
+        recent.append(row)
+        velocity = options.velocity
+        if tracking is not None:
+            contrast.append(stream_contrast(np.asarray(recent)[-max(memory, 1) :], memory)[-1])
+            candidates = np.asarray(options.velocity_candidates)
+            newest, velocity = causal_velocity(np.asarray(contrast), scores, length, candidates, options.rule)
+            if span > 1:
+                scores.append(newest)
+        window = np.asarray(recent)[-k:]
+        final = aggregate(window, k, velocity, options.rule)[-1:] if k > 1 else row[None]
+        index, confidence = decide(final, SEQUENCE_STRATEGY)
+        return int(index[0]), float(confidence[0]), float(velocity)
+
+
+def readout_rows(
+    calibration: np.ndarray,
+    query_counts: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: SequenceOptions,
+    config: Config,
+    frame_positions: np.ndarray | None = None,
+) -> list[MetricRow]:
+    """The metric rows of one network trained with ``config`` (:meth:`Readout.of` ... :meth:`Readout.rows`)."""
+    require_type("options", options, SequenceOptions)
+    return Readout.of(calibration, config, options).rows(
+        query_counts, reference_place_ids, query_place_ids, frame_positions
+    )
+
+
+def causal_velocity(
+    contrast: np.ndarray, scores: deque, length: int, candidates: np.ndarray, rule: str
+) -> tuple[np.ndarray, float]:
+    """The newest window's scores e_j(v) and the tracked velocity.
+
+    .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } T \\text{ frames of } Q, \\quad
+              v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
+
+    ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
+    previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
+    """
+    newest = window_scores(contrast[-length:], length, candidates, rule)[-1]
+    total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
+    return newest, float(candidates[int(np.argmax(total))])
+
+
+__all__ = [
+    "Readout",
+    "causal_velocity",
+    "check_places_overlap",
+    "check_readout_arrays",
+    "decision_metrics",
+    "ensemble_layout",
+    "metric_row",
+    "readout_rows",
+    "region_accuracies",
+]
