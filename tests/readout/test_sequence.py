@@ -2,6 +2,7 @@
 
 import dataclasses
 import inspect
+import json
 
 import numpy as np
 import pytest
@@ -56,7 +57,7 @@ def test_bad_options_are_one_error_naming_the_option(changes, flag):
 
 def test_the_json_form_round_trips_and_reads_the_older_localize_form():
     options = SequenceOptions(ks=(3,), velocity_candidates=(0.5, 1.0), velocity_estimate="track", tolerance=2)
-    assert SequenceOptions.from_dict(options.to_dict()) == options
+    assert SequenceOptions.from_dict(json.loads(json.dumps(dataclasses.asdict(options)))) == options
     older = {"k": 3, "rule": "product", "velocity": 1.0, "velocity_candidates": [0.5, 1.0], "velocity_span": 10}
     assert SequenceOptions.from_dict({**older, "velocity_memory": 50, "tolerance": 2}) == options
     with pytest.raises(InvalidValueError, match="unknown sequence options gamma"):

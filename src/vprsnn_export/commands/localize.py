@@ -16,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 from ..data.frames import iter_frames
@@ -90,9 +91,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
     """The given options over the stored (or default) ones; a stored point's options cannot be changed."""
-    base = (SequenceOptions() if stored is None else stored).to_dict()
+    base = asdict(SequenceOptions() if stored is None else stored)
     for name, value in given.items():
-        if stored is not None and (list(value) if isinstance(value, tuple) else value) != base[name]:
+        if stored is not None and value != base[name]:
             raise InvalidValueError(
                 f"{sequence_flag(name)} differs from the operating point's {base[name]!r} ({where}): its threshold "
                 "holds for its own options; recalibrate or give --threshold"

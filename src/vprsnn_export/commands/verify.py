@@ -38,8 +38,6 @@ from ._common import (
     integer,
     parse_int_list,
     print_json,
-    sequence_arguments,
-    sequence_flag,
     sequence_options,
 )
 
@@ -218,34 +216,8 @@ def settings_of(
 
 
 def command_line(args: argparse.Namespace) -> list[str]:
-    """The command as given (the CLI's argv; rebuilt from the parsed options when absent)."""
-    if getattr(args, "argv", None):
-        return ["vprsnn-export", *args.argv]
-    k = args.k or args.default_k
-    line = ["vprsnn-export", "verify", *args.checkpoints, "--bits", args.bits, "--query", args.query, "--k", k]
-    for flag, value in (
-        ("--data", args.data),
-        ("--subset", args.subset),
-        ("--places", args.places),
-        ("--tolerance", args.tolerance),
-        ("--seeds", args.seeds),
-    ):
-        if value is not None:
-            line += [flag, str(value)]
-    for name, value in sequence_arguments(args).items():
-        if name != "ks" and value is not None:
-            line += [sequence_flag(name), str(value)]
-    if args.per_tensor:
-        line.append("--per-tensor")
-    if args.scale != "max":
-        line += ["--scale", args.scale]
-    if args.reuse_float_calibration:
-        line.append("--reuse-float-calibration")
-    if args.reference_queries != 3:
-        line += ["--reference-queries", str(args.reference_queries)]
-    if args.targets != ALL_TARGETS:
-        line += ["--targets", args.targets]
-    return line + ["--report", args.report]
+    """The command as given (the CLI's argv, which ``cli.main`` records)."""
+    return ["vprsnn-export", *getattr(args, "argv", ["verify", *args.checkpoints])]
 
 
 def folder_name(label: str, index: int) -> str:

@@ -14,9 +14,8 @@ import numpy as np
 
 from vprsnn_export.readout.baseline import cosine_similarities
 from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
-from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.scoring import Readout, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.runtime.evaluation import nearest_neighbour_rows
 
 from . import envelope
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
@@ -56,9 +55,7 @@ def run(settings: Settings) -> dict:
         options = SequenceOptions(ks=KS)
         rows += [
             dict(r.to_dict(), rule=COSINE_RULE, seed=seed)
-            for r in nearest_neighbour_rows(
-                similarities, "cosine", ckpt.reference_place_ids, data.place_ids, options, KS
-            )
+            for r in nearest_neighbour_rows(similarities, "cosine", ckpt.reference_place_ids, data.place_ids, options)
         ]
         per_seed.append(rows)
         distributions = envelope.network_distributions(settings, cfg, data, ckpt)

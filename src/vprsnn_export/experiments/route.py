@@ -30,10 +30,16 @@ from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
-from vprsnn_export.readout.scoring import Readout, decision_metrics, metric_row, region_accuracies
+from vprsnn_export.readout.scoring import (
+    Readout,
+    baseline_rows,
+    decision_metrics,
+    metric_row,
+    nearest_neighbour_rows,
+    region_accuracies,
+)
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES
-from vprsnn_export.runtime.evaluation import nearest_neighbour_rows
 from vprsnn_export.stats import mean_std
 
 from .common import (
@@ -121,18 +127,11 @@ def baselines(settings: Settings) -> dict[str, list[dict]]:
         opts = SequenceOptions(ks=KS, **options())
         distances = sad_distances(reference, query)
         distribution = sad_distribution(distances)
-        out[channels] = [
-            {
-                "strategy": "sad",
-                "k": k,
-                **decision_metrics(opts.aggregate(distribution, k), "wprob", ids, ids, opts.tolerance),
-            }
-            for k in KS
-        ]
+        out[channels] = [r.to_dict() for r in baseline_rows(distribution, ids, ids, opts)]
         if channels == "dog_on_off":
-            cosine = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, KS)
+            cosine = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts)
             out["cosine"] = [r.to_dict() for r in cosine]
-            sad = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts, KS)
+            sad = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts)
             out["sad_nn"] = [r.to_dict() for r in sad]
     return out
 

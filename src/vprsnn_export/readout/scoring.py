@@ -20,6 +20,7 @@ from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import aggregate, stream_contrast, window_scores
 from .assignment import weighted_matrix, wprob_distribution
+from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, is_correct, pr_metrics, predicted_place_ids
 from .regions import (
     ModuleAccuracy,
@@ -47,6 +48,13 @@ def decision_metrics(
     return pr_metrics(correct, confidence)
 
 
+def columns(
+    scores: Mapping[str, np.ndarray], aggregates: Mapping[int, np.ndarray]
+) -> list[tuple[str, int, np.ndarray]]:
+    """(strategy, k, scores) of every readout row: each strategy at k=1, :data:`SEQUENCE_STRATEGY` at each k > 1."""
+    return [(s, 1, scores[s]) for s in STRATEGIES] + [(SEQUENCE_STRATEGY, k, a) for k, a in aggregates.items() if k > 1]
+
+
 def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
     """The typed row of one readout from :func:`~vprsnn_export.readout.metrics.pr_metrics`' values."""
     return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
@@ -55,6 +63,42 @@ def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
 def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
     """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
     return module_layout(config, n_places) if config.train.module_size > 0 else None
+
+
+def baseline_rows(
+    distribution: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: SequenceOptions,
+    frame_positions: np.ndarray | None = None,
+) -> list[MetricRow]:
+    """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
+    rows = []
+    for k in sorted(set(options.ks)):
+        dist = options.aggregate(distribution, k, frame_positions)
+        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
+        rows.append(metric_row("sad", k, metrics))
+    return rows
+
+
+def nearest_neighbour_rows(
+    similarities: np.ndarray,
+    name: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: SequenceOptions,
+    frame_positions: np.ndarray | None = None,
+) -> list[MetricRow]:
+    """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
+    between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
+    (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
+    rows = []
+    for k in sorted(set(options.ks)):
+        summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
+        predicted, confidence = nearest_neighbour(summed)
+        correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
+        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
+    return rows
 
 
 def region_accuracies(
@@ -176,14 +220,9 @@ class Readout:
         aggregates = self.sequences(scores[SEQUENCE_STRATEGY], frame_positions)
         tolerance = self.options.tolerance
         rows = [
-            metric_row(s, 1, decision_metrics(scores[s], s, reference_place_ids, query_place_ids, tolerance))
-            for s in STRATEGIES
+            metric_row(s, k, decision_metrics(m, s, reference_place_ids, query_place_ids, tolerance))
+            for s, k, m in columns(scores, aggregates)
         ]
-        for k in sorted(set(self.options.ks) - {1}):
-            metrics = decision_metrics(
-                aggregates[k], SEQUENCE_STRATEGY, reference_place_ids, query_place_ids, tolerance
-            )
-            rows.append(metric_row(SEQUENCE_STRATEGY, k, metrics))
         return rows, scores, aggregates
 
     def rows(
@@ -312,12 +351,15 @@ def causal_velocity(
 
 __all__ = [
     "Readout",
+    "baseline_rows",
     "causal_velocity",
     "check_places_overlap",
     "check_readout_arrays",
+    "columns",
     "decision_metrics",
     "ensemble_layout",
     "metric_row",
+    "nearest_neighbour_rows",
     "readout_rows",
     "region_accuracies",
 ]

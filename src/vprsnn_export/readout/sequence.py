@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Any, Final
 
 import numpy as np
@@ -38,11 +38,11 @@ def _count(name: str, value: object, low: int, high: int, optional: bool = False
 def _velocities(values: object) -> tuple[float, ...]:
     """``values`` as floats when each is a finite real number of at most MAX_VELOCITY places per frame, else ()."""
     if not isinstance(values, (tuple, list)) or not all(
-        isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and abs(v) <= MAX_VELOCITY
-        for v in values
+        isinstance(v, numbers.Real) and not isinstance(v, bool) for v in values
     ):
         return ()
-    return tuple(float(v) for v in values)
+    floats = tuple(float(v) for v in values)
+    return floats if all(math.isfinite(v) and abs(v) <= MAX_VELOCITY for v in floats) else ()
 
 
 @dataclass(frozen=True)
@@ -139,16 +139,9 @@ class SequenceOptions:
             "k-frame windows mix unrelated places"
         )
 
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON form (tuples as lists)."""
-        out = asdict(self)
-        out["ks"] = list(self.ks)
-        out["velocity_candidates"] = None if self.velocity_candidates is None else list(self.velocity_candidates)
-        return out
-
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SequenceOptions:
-        """The inverse of :meth:`to_dict`; an older localize form (one ``k``) is read as ``ks=(k,)``."""
+        """The options of their JSON form (``dataclasses.asdict``); an older localize form (one ``k``) reads as ks=(k,)."""
         data = dict(data)
         if "k" in data:  # localize's form before SequenceOptions: one k, the velocity always tracked
             data["ks"] = (data.pop("k"),)

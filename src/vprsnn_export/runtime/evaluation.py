@@ -4,7 +4,7 @@ and add the no-learning baselines and spike statistics."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -20,57 +20,24 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.readout.baseline import (
     cosine_similarities,
-    diagonal_sums,
-    nearest_neighbour,
     sad_distances,
     sad_distribution,
 )
-from vprsnn_export.readout.metrics import MetricRow, is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
-from vprsnn_export.readout.scoring import Readout, decision_metrics, metric_row, region_accuracies
+from vprsnn_export.readout.scoring import (
+    Readout,
+    baseline_rows,
+    nearest_neighbour_rows,
+    region_accuracies,
+)
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY
 from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
-
-def baseline_rows(
-    distribution: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    options: SequenceOptions,
-    ks: Sequence[int],
-    frame_positions: np.ndarray | None = None,
-) -> list[MetricRow]:
-    """The SAD baseline read out like W+Prob, at every k."""
-    rows = []
-    for k in sorted(set(ks)):
-        dist = options.aggregate(distribution, k, frame_positions)
-        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
-        rows.append(metric_row("sad", k, metrics))
-    return rows
-
-
-def nearest_neighbour_rows(
-    similarities: np.ndarray,
-    name: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    options: SequenceOptions,
-    ks: Sequence[int],
-    frame_positions: np.ndarray | None = None,
-) -> list[MetricRow]:
-    """A no-learning baseline read out as nearest neighbour at every k: the best place, the margin between
-    the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
-    (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    rows = []
-    for k in sorted(set(ks)):
-        summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
-        predicted, confidence = nearest_neighbour(summed)
-        correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
-        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
-    return rows
+from .deployment import CALIBRATIONS
 
 
 @dataclass(frozen=True)
@@ -188,9 +155,9 @@ def evaluate_float(
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
-        typed += baseline_rows(distribution, reference_ids, query_place_ids, options, options.ks)
+        typed += baseline_rows(distribution, reference_ids, query_place_ids, options)
         similarities = cosine_similarities(reference, query_images)
-        typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, options.ks)
+        typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options)
     candidates = run.candidates_per_step
     assert candidates is not None  # the float network always reports them
     return Evaluation(
@@ -204,9 +171,6 @@ def evaluate_float(
         ),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
     )
-
-
-CALIBRATIONS = ("deployed", "float")
 
 
 def _isolated(cfg: Config, state_isolation: bool | None) -> bool:

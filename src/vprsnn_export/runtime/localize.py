@@ -100,7 +100,7 @@ class OperatingPoint:
         return self.threshold is not None and place_id is not None and confidence >= self.threshold
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": OPERATING_POINT_FORMAT, **asdict(self), "options": self.options.to_dict()}
+        return {"format": OPERATING_POINT_FORMAT, **asdict(self)}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> OperatingPoint:

@@ -27,9 +27,9 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text
 from vprsnn_export.readout.metrics import is_correct, predicted_place_ids
-from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.scoring import Readout, columns
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 
 FORMATS = (".csv", ".jsonl")
 FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct")
@@ -108,12 +108,9 @@ def predictions(
     options: SequenceOptions,
 ) -> Predictions:
     """The decisions behind :meth:`vprsnn_export.readout.scoring.Readout.rows`, per query."""
-    columns = [(strategy, 1, scores[strategy]) for strategy in STRATEGIES]
-    columns += [
-        (SEQUENCE_STRATEGY, k, options.aggregate(scores[SEQUENCE_STRATEGY], k)) for k in sorted(set(options.ks) - {1})
-    ]
+    aggregates = {k: options.aggregate(scores[SEQUENCE_STRATEGY], k) for k in sorted(set(options.ks))}
     decided = []
-    for strategy, k, matrix in columns:
+    for strategy, k, matrix in columns(scores, aggregates):
         index, confidence = decide(matrix, strategy)
         ids = predicted_place_ids(index, reference_place_ids)
         correct = None if query_place_ids is None else is_correct(ids, query_place_ids, options.tolerance)
