@@ -19,8 +19,10 @@ from vprsnn_export.config import Config, PreprocessConfig
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import encode
 from vprsnn_export.data.preprocess import CHANNELS, Channel, normalise_resized
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point, save_fixed_point
+from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.assignment import share_decision
@@ -28,12 +30,15 @@ from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from vprsnn_export.registry import Registry
+from vprsnn_export.runtime.backends import BACKENDS, BackendKind, choose_backend
 from vprsnn_export.runtime.conformance import cross_implementation, parse_targets, read_back, target_path, write_targets
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
+from vprsnn_export.runtime.localize import Localizer
 from vprsnn_export.runtime.report import write_report
 from vprsnn_export.runtime.report.labels import row_label
 from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS, Network, Target, WriteOptions, integer
 
 # ---------------------------------------------------------------------------- the toy entries
@@ -231,11 +236,40 @@ def test_a_toy_channel_sets_the_inputs(toy_channel_entry):
     np.testing.assert_allclose(out[:, :28] + out[:, 28:56], 1.0, atol=1e-6)  # row 0: the image, then its negative
 
 
+def open_toy(network, path, device, threads):
+    return IntegerNetwork(network, device)
+
+
+def test_a_toy_backend_is_one_registry_line_and_selectable(tmp_path, capsys):
+    """Issue 33: a new backend is one function and one BACKENDS.register line; localize (the library and
+    --backend) finds it through the registry and decides as the integer simulator it wraps."""
+    BACKENDS.register(BackendKind("toy", FixedPointModel, open_toy, "a toy", needs=None))
+    try:
+        path = tmp_path / "net.npz"
+        train = ["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(path), "--quiet"]
+        assert main([*train, "--timesteps", "20", "--epochs", "1", "--neurons", "16"]) == 0
+        model = quantize_checkpoint(
+            load_checkpoint(path), checkpoint_sha256(path), 4, per_neuron=True, scale_method="max"
+        )
+        assert choose_backend(model, "toy").name == "toy"
+        frames = synthetic_route(8, ("winter",))["winter"]
+        toy = Localizer(model, backend="toy", options=SequenceOptions(ks=(3,)))
+        plain = Localizer(model, options=SequenceOptions(ks=(3,)))
+        assert (toy.backend, plain.backend) == ("toy", "integer")
+        decided = [(d.place_id, d.confidence) for d in toy.run_batch(frames)]
+        assert decided == [(d.place_id, d.confidence) for d in plain.run_batch(frames)]
+        capsys.readouterr()
+        assert main(["localize", "--help"]) == 0
+        assert "toy: a toy" in " ".join(capsys.readouterr().out.split())  # --backend's choices and help
+    finally:
+        BACKENDS.unregister("toy")
+
+
 def test_the_walkthrough_registers_what_these_tests_register():
     """Every registry line of docs/architecture.md's walkthrough is one of this file's (but for line breaks)."""
     docs = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text(encoding="utf-8")
     lines = [line.strip() for line in docs.splitlines() if ".register(" in line and line.strip().endswith("))")]
-    assert len(lines) == 3  # a target, a strategy, a channel
+    assert len(lines) == 4  # a target, a strategy, a channel, a backend
     source = "".join(Path(__file__).read_text(encoding="utf-8").split())
     for line in lines:
         assert "".join(line.split()) in source, line

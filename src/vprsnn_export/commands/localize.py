@@ -23,9 +23,9 @@ from ..data.frames import iter_frames
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..readout.sequence import SequenceOptions
+from ..runtime.backends import BACKENDS
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
-    BACKENDS,
     Localizer,
     OperatingPoint,
     load_operating_point,
@@ -61,9 +61,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mode.add_argument("--calibrate", metavar="QUERY", help="labelled query traversal: store the operating point")
     parser.add_argument(
         "--backend",
-        choices=BACKENDS,
+        choices=("auto", *BACKENDS.names()),
         default="auto",
-        help="auto (default: float for a checkpoint, integer for a fixed-point model, onnx with --onnx)",
+        help="auto (default: float for a checkpoint, integer for a fixed-point model, onnx with --onnx); "
+        + "; ".join(f"{b.name}: {b.description}" for b in BACKENDS.values()),
     )
     parser.add_argument(
         "--onnx", metavar="FILE|DEPLOY", help="the ONNX graph exported from MODEL (or its deploy folder)"

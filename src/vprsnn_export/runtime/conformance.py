@@ -27,7 +27,6 @@ import torch
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import Backend, SpikeRun
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
@@ -36,6 +35,7 @@ from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 from vprsnn_export.targets.registry import TARGETS, WriteOptions, target_labels
 
+from .backends import open_backend
 from .results import Comparison, ConformanceResult
 
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
@@ -142,10 +142,9 @@ Source = Checkpoint | FixedPointModel
 
 
 def backend_of(source: Source, device: torch.device | None = None) -> Backend:
-    """The project's own simulator of a network: the float network or the integer simulator."""
-    if isinstance(source, FixedPointModel):
-        return IntegerNetwork(source, device)
-    return FloatNetwork.from_arrays(source.weights, source.thresholds, source.config, device or torch.device("cpu"))
+    """The project's own simulator of a network (the registered backend ``auto`` picks: the float network or
+    the integer simulator)."""
+    return open_backend(source, device=device)[1]
 
 
 def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:

@@ -24,15 +24,16 @@ The operating point ``theta`` comes from a labelled calibration run (:func:`oper
 with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
 decision was right. It is stored beside the model (:func:`save_operating_point`).
 
-Backends: ``float`` (a checkpoint, :class:`~vprsnn_export.network.dynamics.FloatNetwork`), ``integer``
-(a fixed-point model, :class:`~vprsnn_export.targets.intsim.IntegerNetwork`) and ``onnx`` (the
-graph exported from that fixed-point model, one onnxruntime session). Every backend returns the
+Backends: the registered ones (:data:`vprsnn_export.runtime.backends.BACKENDS`): ``float`` (a checkpoint),
+``integer`` (a fixed-point model, the integer simulator) and ``onnx`` (the graph exported from that
+fixed-point model, one onnxruntime session), each run with state isolation. Every backend returns the
 spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
 which agree count for count, give the same decisions.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Iterable, Iterator
@@ -50,14 +51,12 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
-from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.readout.metrics import is_correct
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
 
-BACKENDS = ("auto", "float", "integer", "onnx")
+from .backends import open_backend
+
 STREAM = "localize"
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
@@ -132,8 +131,9 @@ class Localizer:
         self.options = self.readout.options
         self.threshold = threshold
         self.config: Config = network.config
-        self.backend = resolve_backend(network, backend, onnx_path)
-        self._counts = counts_runner(network, self.backend, onnx_path, device, threads)
+        isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
+        self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
+        self._counts = lambda spikes: runner.run(spikes).counts.cpu().numpy()
         self.readout.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
@@ -207,54 +207,6 @@ class Localizer:
         )
         self.frame += 1
         return decision
-
-
-def resolve_backend(network: Checkpoint | FixedPointModel, backend: str, onnx_path: str | Path | None) -> str:
-    """``auto`` -> float for a checkpoint, integer for a fixed-point model; a mismatch is an InvalidValueError."""
-    if backend not in BACKENDS:
-        raise InvalidValueError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    fixed = isinstance(network, FixedPointModel)
-    if backend == "auto":
-        backend = "onnx" if onnx_path is not None else ("integer" if fixed else "float")
-    if backend == "float" and fixed:
-        raise InvalidValueError("--backend float needs a float checkpoint; this is a fixed-point model")
-    if backend in ("integer", "onnx") and not fixed:
-        raise InvalidValueError(f"--backend {backend} needs a fixed-point model (vprsnn-export quantize)")
-    if backend == "onnx" and onnx_path is None:
-        raise InvalidValueError("--backend onnx needs --onnx: the graph exported from this model")
-    return backend
-
-
-def counts_runner(
-    network: Checkpoint | FixedPointModel,
-    backend: str,
-    onnx_path: str | Path | None,
-    device: torch.device | None,
-    threads: int | None,
-):
-    """A function spikes (N, T, inputs) -> spike counts (N, neurons) int64 on the chosen backend."""
-    device = torch.device("cpu") if device is None else device
-    if isinstance(network, Checkpoint):
-        floating = FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
-        return lambda spikes: floating.run(spikes, state_isolation=True).counts.cpu().numpy()
-    if backend == "integer":
-        integer = IntegerNetwork(network, device)
-        return lambda spikes: integer.run(spikes, state_isolation=True).counts.cpu().numpy()
-    assert onnx_path is not None
-    check_graph(network, onnx_path)
-    sess = session(onnx_path, threads)
-    return lambda spikes: np.asarray(run_session(sess, spikes).counts, dtype=np.int64)
-
-
-def check_graph(model: FixedPointModel, path: str | Path) -> None:
-    """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
-    props = {p.key: p.value for p in read_onnx(path).metadata_props}
-    if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
-        raise ModelFileError(
-            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
-            f"{props.get('vprsnn.bits')} bits; model: source {model.source_sha256}, {model.bits} bits)",
-            path,
-        )
 
 
 def precision_threshold(confidence: np.ndarray, correct: np.ndarray, precision: float) -> float | None:

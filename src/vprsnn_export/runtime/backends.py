@@ -1,0 +1,121 @@
+"""The backends' registry: the implementations that run a network's spike trains.
+
+A :class:`BackendKind` says which network it runs (a float checkpoint or a fixed-point model), which
+exported file it needs, if any, and how it is opened: ``open(network, path, device, threads)`` gives a
+:class:`~vprsnn_export.network.runs.Backend` (``run(spikes) -> SpikeRun``). ``localize --backend`` lists
+:data:`BACKENDS`, :func:`choose_backend` resolves ``auto`` and refuses a mismatch, and the conformance
+checks run their baseline on the project's own simulator of a network through it. Adding one is a
+function and one ``BACKENDS.register`` line (docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.runs import Backend, SpikeRun
+from vprsnn_export.registry import Registry
+from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
+
+Network = Checkpoint | FixedPointModel
+#: open(network, exported file or None, device, threads) -> a backend running that network
+OpenFunction = Callable[[Network, "Path | None", torch.device, "int | None"], Backend]
+
+
+@dataclass(frozen=True)
+class BackendKind:
+    """One implementation: ``runs`` the network type it takes, ``needs`` the option naming the exported file it
+    runs (None: the network alone), ``open`` builds it, ``description`` its help text."""
+
+    name: str
+    runs: type
+    open: OpenFunction
+    description: str
+    needs: str | None = None
+
+
+@dataclass(frozen=True)
+class SessionBackend:
+    """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame)."""
+
+    session: object
+    name: str = "onnxruntime"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        out = run_session(self.session, spikes)
+        counts = torch.from_numpy(np.asarray(out.counts, dtype=np.int64))
+        return SpikeRun(counts=counts, saturations=int(out.saturations.sum()), wprob=out.wprob)
+
+
+def check_graph(model: FixedPointModel, path: str | Path) -> None:
+    """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
+    props = {p.key: p.value for p in read_onnx(path).metadata_props}
+    if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
+        raise ModelFileError(
+            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
+            f"{props.get('vprsnn.bits')} bits; model: source {model.source_sha256}, {model.bits} bits)",
+            path,
+        )
+
+
+def _float(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    assert isinstance(network, Checkpoint)
+    return FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
+
+
+def _integer(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    assert isinstance(network, FixedPointModel)
+    return IntegerNetwork(network, device)
+
+
+def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    assert isinstance(network, FixedPointModel) and path is not None
+    check_graph(network, path)
+    return SessionBackend(session(path, threads))
+
+
+BACKENDS: Registry[BackendKind] = Registry("--backend")
+BACKENDS.register(BackendKind("float", Checkpoint, _float, "the float network (a checkpoint)"))
+BACKENDS.register(BackendKind("integer", FixedPointModel, _integer, "the integer simulator (a fixed-point model)"))
+BACKENDS.register(BackendKind("onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx"))
+
+_NETWORKS = {Checkpoint: "a float checkpoint", FixedPointModel: "a fixed-point model (vprsnn-export quantize)"}
+
+
+def choose_backend(network: Network, name: str = "auto", path: str | Path | None = None) -> BackendKind:
+    """The kind named (``auto``: the first registered one that runs this network and needs a file exactly when
+    one is given); InvalidValueError when it does not run this network or lacks its file."""
+    if name == "auto":
+        fits = [kind for kind in BACKENDS.values() if (kind.needs is None) == (path is None)]
+        name = next((k for k in fits if isinstance(network, k.runs)), fits[0] if fits else BACKENDS.values()[0]).name
+    kind = BACKENDS.get(name)
+    if not isinstance(network, kind.runs):
+        raise InvalidValueError(f"--backend {name} needs {_NETWORKS.get(kind.runs, kind.runs.__name__)}")
+    if kind.needs is not None and path is None:
+        raise InvalidValueError(f"--backend {name} needs {kind.needs}: the file exported from this model")
+    return kind
+
+
+def open_backend(
+    network: Network,
+    name: str = "auto",
+    path: str | Path | None = None,
+    device: torch.device | None = None,
+    threads: int | None = None,
+) -> tuple[str, Backend]:
+    """(the kind's name, the backend) of :func:`choose_backend`, opened on ``device`` (default CPU)."""
+    kind = choose_backend(network, name, path)
+    opened = kind.open(network, None if path is None else Path(path), device or torch.device("cpu"), threads)
+    return kind.name, opened
+
+
+__all__ = ["BACKENDS", "BackendKind", "check_graph", "choose_backend", "open_backend"]
