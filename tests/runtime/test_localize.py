@@ -59,7 +59,7 @@ def test_the_decision_is_the_causal_aggregate_of_the_recent_frames(networks):
     ckpt, _, _, _, grey = networks
     localizer = Localizer(ckpt, options=TRACK)
     decisions = localizer.run_batch(grey)
-    wprob = np.stack([localizer.wprob(c) for c in localizer.counts(_inputs(localizer, grey), 0)])
+    wprob = np.stack([localizer.readout.wprob(c) for c in localizer.counts(_inputs(localizer, grey), 0)])
     velocity, _ = track_velocity(wprob, 3, np.asarray(TRACK.velocity_candidates), 4, memory=5)
     assert [d.velocity for d in decisions] == pytest.approx(velocity.tolist())
     for j in (0, 5, 23):  # frame j's decision uses frames j-2..j only, at its tracked velocity

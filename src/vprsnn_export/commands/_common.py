@@ -107,11 +107,6 @@ def sequence_flag(name: str) -> str:
     return SEQUENCE_FLAGS.get(name, "--" + name.replace("_", "-"))
 
 
-def sequence_arguments(args: argparse.Namespace) -> dict[str, Any]:
-    """The sequence options given on the command line, unparsed, by field name (None: not given)."""
-    return {f.name: getattr(args, sequence_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
-
-
 def add_sequence_options(
     parser: argparse.ArgumentParser,
     *,
@@ -154,7 +149,8 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
             f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
             "verify's --tolerance sets pass/fail limits"
         )
-    given = {name: value for name, value in sequence_arguments(args).items() if value is not None}
+    raw = {f.name: getattr(args, sequence_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
+    given = {name: value for name, value in raw.items() if value is not None}
     if args.default_k and "ks" not in given:
         given["ks"] = args.default_k
     if "ks" in given:

@@ -40,6 +40,7 @@ from ._common import (
     given_sequence_options,
     query_data,
     sequence_flag,
+    sequence_options,
 )
 
 
@@ -134,15 +135,8 @@ def run(args: argparse.Namespace) -> int:
         print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
     elif stored is not None and not args.quiet:
         print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
-    localizer = Localizer(
-        source.network,
-        backend=args.backend,
-        options=options,
-        threshold=threshold,
-        onnx_path=onnx,
-        device=device,
-        threads=args.threads,
-    )
+    backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
+    localizer = Localizer(source.network, options=options, threshold=threshold, **backend)
     assert frames is not None
     for decision in localizer.run(frames):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")
@@ -154,7 +148,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     if args.threshold is not None:
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network
-    options = options_from(given_sequence_options(args), None, None)
+    options = sequence_options(args)
     dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads

@@ -347,19 +347,3 @@ def causal_velocity(
     newest = window_scores(contrast[-length:], length, candidates, rule)[-1]
     total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
     return newest, float(candidates[int(np.argmax(total))])
-
-
-__all__ = [
-    "Readout",
-    "baseline_rows",
-    "causal_velocity",
-    "check_places_overlap",
-    "check_readout_arrays",
-    "columns",
-    "decision_metrics",
-    "ensemble_layout",
-    "metric_row",
-    "nearest_neighbour_rows",
-    "readout_rows",
-    "region_accuracies",
-]

@@ -154,6 +154,3 @@ class SequenceOptions:
             if data.get(name) is not None:
                 data[name] = tuple(data[name])
         return cls(**data)
-
-
-__all__ = ["SequenceOptions"]

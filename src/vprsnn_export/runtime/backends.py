@@ -116,6 +116,3 @@ def open_backend(
     kind = choose_backend(network, name, path)
     opened = kind.open(network, None if path is None else Path(path), device or torch.device("cpu"), threads)
     return kind.name, opened
-
-
-__all__ = ["BACKENDS", "BackendKind", "check_graph", "choose_backend", "open_backend"]

@@ -157,10 +157,6 @@ class Localizer:
         """Spike counts (N, neurons) of preprocessed frames numbered from ``first_frame`` (one network run)."""
         return self._counts(self.spikes(images, first_frame))
 
-    def wprob(self, counts: np.ndarray) -> np.ndarray:
-        """The k = 1 W+Prob distribution (places,) of one frame's spike counts (neurons,)."""
-        return self.readout.wprob(counts)
-
     def push(self, grey: np.ndarray, name: str = "") -> Decision:
         """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
         began = time.perf_counter()
