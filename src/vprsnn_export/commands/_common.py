@@ -16,7 +16,7 @@ from ..data.dataset import Dataset, load_selection
 from ..errors import InvalidValueError
 from ..io.fileio import parse_json
 from ..readout.rules import RULES
-from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions
+from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
 
 
@@ -84,8 +84,7 @@ def add_runtime_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-#: The command-line flag of each SequenceOptions field (the rest: its name with dashes) and its help.
-SEQUENCE_FLAGS = {"ks": "--k", "velocity_candidates": "--velocity-search", "tolerance": "--match-window"}
+#: The help of each SequenceOptions field's option.
 SEQUENCE_HELP = {
     "ks": "sequence lengths, e.g. 1,3,5 (the sequence strategy aggregated for k > 1)",
     "rule": "aggregation rule: " + "; ".join(f"{r.name}: {r.description}" for r in RULES.values()),
@@ -102,11 +101,6 @@ SEQUENCE_HELP = {
 }
 
 
-def sequence_flag(name: str) -> str:
-    """The command-line flag of a SequenceOptions field (its attribute on the parsed arguments: without the dashes)."""
-    return SEQUENCE_FLAGS.get(name, "--" + name.replace("_", "-"))
-
-
 def add_sequence_options(
     parser: argparse.ArgumentParser,
     *,
@@ -121,7 +115,7 @@ def add_sequence_options(
     group = parser.add_argument_group("sequence")
     estimates = causal_estimates() if stream else VELOCITY_ESTIMATES.names()
     for item in fields(SequenceOptions):
-        flag = sequence_flag(item.name)
+        flag = option_flag(item.name)
         default = default_k if item.name == "ks" and default_k else item.default
         if item.name == "velocity_estimate" and stream:
             default = estimates[0]
@@ -149,7 +143,7 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
             f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "
             "verify's --tolerance sets pass/fail limits"
         )
-    raw = {f.name: getattr(args, sequence_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
+    raw = {f.name: getattr(args, option_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
     given = {name: value for name, value in raw.items() if value is not None}
     if args.default_k and "ks" not in given:
         given["ks"] = args.default_k

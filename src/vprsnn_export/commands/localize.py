@@ -22,7 +22,7 @@ from pathlib import Path
 from ..data.frames import iter_frames
 from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..readout.sequence import SequenceOptions
+from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
@@ -39,7 +39,6 @@ from ._common import (
     add_sequence_options,
     given_sequence_options,
     query_data,
-    sequence_flag,
     sequence_options,
 )
 
@@ -97,7 +96,7 @@ def options_from(given: dict, stored: SequenceOptions | None, where: Path | None
     for name, value in given.items():
         if stored is not None and value != base[name]:
             raise InvalidValueError(
-                f"{sequence_flag(name)} differs from the operating point's {base[name]!r} ({where}): its threshold "
+                f"{option_flag(name)} differs from the operating point's {base[name]!r} ({where}): its threshold "
                 "holds for its own options; recalibrate or give --threshold"
             )
         base[name] = value

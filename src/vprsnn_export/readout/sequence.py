@@ -26,13 +26,21 @@ MAX_SETTING: Final[int] = 100_000  # span, length, memory, lag
 MAX_TOLERANCE: Final[int] = 1_000_000
 
 
+#: The command-line flag of a field whose flag is not its name with dashes.
+FLAGS: Final[dict[str, str]] = {"ks": "--k", "velocity_candidates": "--velocity-search", "tolerance": "--match-window"}
+
+
+def option_flag(name: str) -> str:
+    """The command-line flag of a SequenceOptions field (``commands._common.add_sequence_options``)."""
+    return FLAGS.get(name, "--" + name.replace("_", "-"))
+
+
 def _count(name: str, value: object, low: int, high: int, optional: bool = False) -> None:
     """InvalidValueError naming the field and its option unless ``value`` is an int in low..high (or None)."""
     if optional and value is None:
         return
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= value <= high:
-        flag = "--" + name.replace("_", "-").replace("tolerance", "match-window")
-        raise InvalidValueError(f"{name} ({flag}) expects an integer from {low} to {high}, got {value!r}")
+        raise InvalidValueError(f"{name} ({option_flag(name)}) expects an integer from {low} to {high}, got {value!r}")
 
 
 def _velocities(values: object) -> tuple[float, ...]:
@@ -76,7 +84,7 @@ class SequenceOptions:
         if not ks:
             raise InvalidValueError(f"ks (--k) expects integers from 1 to {MAX_K}, got {self.ks!r}")
         for k in ks:
-            _count("k", k, 1, MAX_K)
+            _count("ks", k, 1, MAX_K)
         object.__setattr__(self, "ks", tuple(int(k) for k in ks))
         RULES.get(self.rule)
         VELOCITY_ESTIMATES.get(self.velocity_estimate)
@@ -150,7 +158,4 @@ class SequenceOptions:
         unknown = sorted(set(data) - known)
         if unknown:
             raise InvalidValueError(f"unknown sequence options {', '.join(unknown)}")
-        for name in ("ks", "velocity_candidates"):
-            if data.get(name) is not None:
-                data[name] = tuple(data[name])
-        return cls(**data)
+        return cls(**data)  # lists become tuples when the options are built
