@@ -106,6 +106,21 @@ def test_calibrate_stores_the_operating_point_beside_the_model(synthetic, capsys
     assert "differs from the operating point" in capsys.readouterr().err
 
 
+def test_a_stream_tracks_the_velocity_causally_and_refuses_smooth(synthetic, capsys):
+    """localize's --velocity-search tracks (the first causal estimate); "smooth" waits for later frames."""
+    _, fixed, _, frames, _ = synthetic
+    search = ["--k", "3", "--velocity-search", "0.5:1.5:0.5", "--threshold", "0.5"]
+
+    def answers(lines: list[dict]) -> list[tuple]:
+        return [(d["frame"], d["place_id"], d["confidence"], d["accepted"], d["velocity"]) for d in lines]
+
+    tracked = answers(localize(capsys, fixed, "--frames", frames, *search))
+    assert tracked == answers(localize(capsys, fixed, "--frames", frames, *search, "--velocity-estimate", "track"))
+    assert len({v for *_, v in tracked}) > 1  # the velocity is tracked, not fixed
+    assert main(["localize", str(fixed), "--frames", str(frames), *search, "--velocity-estimate", "smooth"]) == 2
+    assert "invalid choice" in capsys.readouterr().err  # not offered: its choices are the causal estimates
+
+
 def test_bad_frames_are_one_line(synthetic, capsys, tmp_path):
     _, fixed, _, _, _ = synthetic
     (tmp_path / "notes.txt").write_text("x")

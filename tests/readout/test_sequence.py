@@ -62,3 +62,16 @@ def test_the_json_form_round_trips_and_reads_the_older_localize_form():
     assert SequenceOptions.from_dict({**older, "velocity_memory": 50, "tolerance": 2}) == options
     with pytest.raises(InvalidValueError, match="unknown sequence options gamma"):
         SequenceOptions.from_dict({"gamma": 0.1})
+
+
+def test_every_command_exposes_every_sequence_option():
+    """Issue 33: evaluate, simulate, verify and localize offer one flag per SequenceOptions field (generated)."""
+    from vprsnn_export.cli import build_parser
+    from vprsnn_export.readout.sequence import option_flag
+
+    parser = build_parser()
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    wanted = {option_flag(f.name) for f in dataclasses.fields(SequenceOptions)}
+    for name in ("evaluate", "simulate", "verify", "localize"):
+        flags = {flag for action in commands[name]._actions for flag in action.option_strings}
+        assert wanted <= flags, (name, wanted - flags)
