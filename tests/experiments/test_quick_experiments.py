@@ -8,7 +8,8 @@ import pytest
 
 from vprsnn_export.cli import build_parser, main
 from vprsnn_export.commands.experiment import experiment_modules
-from vprsnn_export.experiments.common import DOCS_RESULTS, regenerating_command
+from vprsnn_export.experiments.common import regenerating_command
+from vprsnn_export.experiments.settings import DOCS_RESULTS
 
 NAMES = sorted(experiment_modules())
 

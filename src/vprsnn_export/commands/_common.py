@@ -7,7 +7,7 @@ import json
 import math
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
@@ -16,7 +16,9 @@ from ..errors import InvalidValueError
 from ..io.fileio import parse_json
 from ..readout.rules import RULES
 from ..readout.velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
-from ..runtime.evaluation import ReadoutOptions
+
+if TYPE_CHECKING:
+    from ..runtime.evaluation import ReadoutOptions
 
 
 def integer(text: str) -> int:
@@ -303,6 +305,8 @@ RESULT_COLUMNS = (
 
 def readout_options(args: argparse.Namespace, config: Config) -> ReadoutOptions:
     """The readout options of evaluate/simulate/verify from their arguments, for a network with ``config``."""
+    from ..runtime.evaluation import ReadoutOptions
+
     if args.renamed_window is not None:
         raise InvalidValueError(
             f"{args.old_window_option}: renamed to --match-window (the ground-truth window in places); "

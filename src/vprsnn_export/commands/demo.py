@@ -22,19 +22,11 @@ from pathlib import Path
 
 from ..config import Config
 from ..data.dataset import load_dataset
-from ..data.preprocess import CHANNELS
-from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
-from ..network.modules import module_count
-from ..runtime.evaluation import ReadoutOptions
-from ..runtime.report import write_report
-from ..runtime.report.labels import points
 from ..runtime.results import BitsResult, VerifiedRun
-from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..targets.registry import TARGETS
-from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
 DEMO_DATA = "synthetic"
@@ -91,6 +83,9 @@ def demo_config(seed: int, quick: bool = False) -> Config:
 
 def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
     """What the demo trains: inputs, T, epochs and the ensemble's modules, and any profile changes."""
+    from ..data.preprocess import CHANNELS
+    from ..network.modules import module_count
+
     inputs = CHANNELS.get(cfg.preprocess.channels).label
     modules = module_count(n_places, cfg.train.module_size)
     size = cfg.train.module_size or n_places
@@ -106,6 +101,8 @@ def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
 
 def failed_checks(result: BitsResult) -> str:
     """The checks a bit width failed, named ("-" when none): the verdict's reason on the console."""
+    from ..runtime.report.labels import points
+
     failed = [f"{c.what}: {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
               for c in result.tolerance_checks if not c.passed]  # fmt: skip
     if not result.cross_implementation.passed:
@@ -139,6 +136,12 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.evaluation import ReadoutOptions
+    from ..runtime.report import write_report
+    from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
+    from ..trainer.pipeline import train_and_calibrate
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     threads = args.threads

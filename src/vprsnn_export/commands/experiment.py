@@ -15,11 +15,11 @@ from typing import Any
 from .. import experiments
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..errors import InvalidValueError
-from ..experiments.common import DOCS_RESULTS, Settings, Variant, document, results_dir
+from ..experiments.settings import DOCS_RESULTS, Settings, Variant, results_dir
 from ..io.fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
-HELPER_MODULES = {"common", "plots", "query"}  # modules of experiments/ that are not experiments
+HELPER_MODULES = {"common", "plots", "query", "settings"}  # modules of experiments/ that are not experiments
 
 
 def experiment_modules() -> dict:
@@ -139,6 +139,8 @@ def parse_grid_entry(item: str) -> Variant:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..experiments.common import document
+
     modules = experiment_modules()
     if args.name == "list":
         for name, module in modules.items():

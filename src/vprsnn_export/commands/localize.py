@@ -17,22 +17,14 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..data.frames import iter_frames
-from ..device import resolve_device
 from ..errors import InvalidValueError
-from ..runtime.exporting import load_source, read_export
-from ..runtime.localize import (
-    BACKENDS,
-    LocalizeOptions,
-    Localizer,
-    OperatingPoint,
-    load_operating_point,
-    operating_point,
-    operating_point_path,
-    save_operating_point,
-)
+from ..runtime.backends import BACKENDS
 from ._common import add_data_options, add_runtime_options, parse_velocity_grid, query_data
+
+if TYPE_CHECKING:
+    from ..runtime.localize import LocalizeOptions
 
 DEFAULTS = {"k": 1, "rule": "product", "velocity": 1.0, "velocity_span": 10, "velocity_memory": 50}
 
@@ -116,6 +108,8 @@ def given_options(args: argparse.Namespace) -> dict:
 
 def options_from(given: dict, stored: LocalizeOptions | None, where: Path | None) -> LocalizeOptions:
     """The given options over the stored (or default) ones; a stored point's options cannot be changed."""
+    from ..runtime.localize import LocalizeOptions
+
     base = stored.to_dict() if stored is not None else {**DEFAULTS, "velocity_candidates": None}
     for name, value in given.items():
         if value is None:
@@ -130,6 +124,8 @@ def options_from(given: dict, stored: LocalizeOptions | None, where: Path | None
 
 
 def onnx_file(raw: str | None) -> Path | None:
+    from ..runtime.exporting import read_export
+
     if raw is None:
         return None
     path = Path(raw)
@@ -137,6 +133,11 @@ def onnx_file(raw: str | None) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..data.frames import iter_frames
+    from ..device import resolve_device
+    from ..runtime.exporting import load_source
+    from ..runtime.localize import Localizer, OperatingPoint, load_operating_point, operating_point_path
+
     source = load_source(args.model)
     frames = None if args.frames is None else iter_frames(args.frames)  # a bad source fails before any output
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
@@ -177,6 +178,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
+    from ..runtime.localize import Localizer, operating_point, save_operating_point
+
     if args.threshold is not None:
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     if not 0 <= args.match_window <= 1_000_000:

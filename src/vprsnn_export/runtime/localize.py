@@ -58,11 +58,11 @@ from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
 from vprsnn_export.readout.metrics import is_correct
 from vprsnn_export.readout.regions import ModuleLayout, regularised_calibration
 from vprsnn_export.readout.strategies import decide
+from vprsnn_export.runtime.backends import BACKENDS
 from vprsnn_export.runtime.evaluation import ensemble_layout
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
 
-BACKENDS = ("auto", "float", "integer", "onnx")
 STREAM = "localize"
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"

@@ -10,7 +10,7 @@ from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.runtime.exporting import read_export
 from vprsnn_export.runtime.exporting.folder import MANIFEST_NAME
-from vprsnn_export.targets import registry as target_registry
+from vprsnn_export.targets import onnx_target
 
 TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
 
@@ -62,7 +62,7 @@ def test_an_interrupted_export_leaves_the_previous_folder_as_it_was(model, tmp_p
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(target_registry, "write_onnx", interrupted)
+    monkeypatch.setattr(onnx_target, "write_onnx", interrupted)  # the registry loads it per call
     assert export(model, out, "--force") == 130
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     assert [p.name for p in tmp_path.iterdir()] == ["deploy"]
