@@ -12,17 +12,11 @@ from vprsnn_export.runtime.exporting import read_export
 from vprsnn_export.runtime.exporting.folder import MANIFEST_NAME
 from vprsnn_export.targets import onnx_target
 
-TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
-
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("exporting")
-    assert (
-        main(["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(folder / "net.npz"), *TINY]) == 0
-    )
-    assert main(["quantize", str(folder / "net.npz"), "--bits", "4", "--out", str(folder / "q"), "--quiet"]) == 0
-    return str(next((folder / "q").glob("*.npz")))
+def model(quantised_model):
+    """The session's 4-bit model file (tests/conftest.py)."""
+    return str(quantised_model)
 
 
 def export(model, out, *extra):
