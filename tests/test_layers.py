@@ -123,3 +123,56 @@ def test_a_back_edge_is_detected(tmp_path):
         ("vprsnn_export.runtime.verify", True)
     ]
     assert LAYERS.index(layer_of("vprsnn_export.runtime.verify")) > LAYERS.index("trainer")
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the first-party modules it imports (at top, under TYPE_CHECKING or inside a function)."""
+    return {m: {t for t, _, _ in imports_of(m, path) if t in MODULES and t != m} for m, path in MODULES.items()}
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The groups of modules that import each other in a circle (strongly connected components of more than
+    one module, Tarjan's algorithm), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for target in sorted(graph.get(node, ())):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                member = stack.pop()
+                group.append(member)
+                if member == node:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(found)
+
+
+def test_no_modules_import_each_other_in_a_circle():
+    assert not circles(import_graph()), f"import circles among first-party modules: {circles(import_graph())}"
+
+
+def test_a_circle_is_detected(tmp_path):
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e"}}) == [["a", "b", "c"]]
+    hidden = tmp_path / "hidden.py"  # an import only type checkers follow still closes a circle
+    hidden.write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from vprsnn_export.config import Config\n"
+    )
+    graph = {**import_graph(), "vprsnn_export.data.preprocess": {"vprsnn_export.config"}}
+    assert ("vprsnn_export.config", 3, True) in imports_of("vprsnn_export.data.hidden", hidden)
+    assert ["vprsnn_export.config", "vprsnn_export.data.preprocess"] in circles(graph)
