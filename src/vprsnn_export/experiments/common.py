@@ -20,10 +20,10 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
 from vprsnn_export.experiments.settings import Settings as Settings  # the experiments import it from here
 from vprsnn_export.experiments.settings import Variant as Variant
+from vprsnn_export.experiments.sourcehash import source_fingerprint
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.sourcehash import source_fingerprint
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -89,7 +89,7 @@ def cache_dir() -> Path:
 
 def code_version() -> str:
     """The package version and a sha256 of the source that computes cached results
-    (:func:`vprsnn_export.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
+    (:func:`vprsnn_export.experiments.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
     calibration, the network or the data loading gives new cache keys, so a stale cache is never reused."""
     return f"{__version__}+{source_fingerprint(CACHED_BY)}"
 

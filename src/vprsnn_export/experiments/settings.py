@@ -10,8 +10,14 @@ from typing import Any
 
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config, preset
+from vprsnn_export.errors import DataError
 
-NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to the repository root, where experiments run
+#: The Nordland data folder as this repository's checkout keeps it, relative to the repository root: the
+#: default of ``experiment --data`` (after $VPRSNN_DATA), so only a run from the repository root finds it.
+NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")
+DATA_ENV = "VPRSNN_DATA"
+MANIFEST = "places.csv"  # a data folder's place manifest
+SUBSET = "subset_100_places.csv"  # and its 100-place subset (the paper's tables)
 DOCS_RESULTS = "docs/results"  # the committed pages, written only by ``experiment NAME --update-docs``
 
 
@@ -64,3 +70,27 @@ def results_dir() -> Path:
     """Where ``experiment NAME`` writes by default: $VPRSNN_RESULTS, else ~/.cache/vprsnn-export/results
     (outside the repository: only ``--update-docs`` writes the committed docs/results)."""
     return Path(os.environ.get("VPRSNN_RESULTS", Path.home() / ".cache" / "vprsnn-export" / "results"))
+
+
+def data_settings(given: str | None) -> dict[str, str | None]:
+    """The ``data`` and ``subset`` of :class:`Settings` for ``experiment --data``: a data folder gives its
+    :data:`MANIFEST` and its :data:`SUBSET` (when present); a place manifest (or ``synthetic:N``) gives itself
+    and no subset. None: $VPRSNN_DATA, else :data:`NORDLAND`. DataError (one line) when nothing is there."""
+    if given is not None and not given.strip():
+        raise DataError("--data: an empty path")
+    chosen = given if given is not None else os.environ.get(DATA_ENV) or None
+    if chosen is not None and chosen.startswith("synthetic:"):
+        return {"data": chosen, "subset": None}
+    path = Path(chosen) if chosen is not None else NORDLAND
+    if path.is_dir():
+        subset = path / SUBSET
+        return {"data": str(path / MANIFEST), "subset": str(subset) if subset.is_file() else None}
+    if path.is_file():
+        return {"data": str(path), "subset": None}
+    if given is not None:
+        where = "--data"
+    elif chosen is not None:
+        where = f"${DATA_ENV}"
+    else:
+        where = f"the default data folder (relative to the repository root: run there, or give --data DIR or set ${DATA_ENV})"
+    raise DataError(f"no data folder or place manifest at {path}: {where}")
