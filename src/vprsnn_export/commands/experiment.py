@@ -19,7 +19,8 @@ from ..experiments.settings import DATA_ENV, DOCS_RESULTS, NORDLAND, Settings, V
 from ..io.fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
-HELPER_MODULES = {"common", "plots", "query", "settings", "sourcehash"}  # modules of experiments/ that are not experiments
+#: The modules of experiments/ that are not experiments.
+HELPER_MODULES = {"common", "plots", "query", "settings", "sourcehash"}
 
 
 def experiment_modules() -> dict:
