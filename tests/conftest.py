@@ -1,19 +1,33 @@
-"""Shared test factories: a small config, a random fixed-point model, one torch thread.
+"""Shared test factories and trained networks: a small config, a random fixed-point model or float
+checkpoint, networks trained once per session, one torch thread.
 
 The tests import in importlib mode, so the factories are handed out as fixtures:
 ``def test_x(make_model): model = make_model(rng, bits=4)``. A module that wants one
 intra-op thread for its tiny tensors says ``pytestmark = pytest.mark.usefixtures("one_thread")``.
+
+Trained networks are session-scoped and built once per run (training is deterministic: a seed
+fixes it), so a test that does not test training itself asks for one instead of training its own:
+``trained`` (a float checkpoint and its synthetic data set), ``ensemble`` (one of modules),
+``tiny_checkpoint`` and ``quantised_model`` (files written by the command line), or the factories
+``train_network(data, **overrides)`` and ``cli_checkpoint(data, *options)`` for another size.
+They are shared: a test copies a file or ``dataclasses.replace``s a checkpoint before changing it.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from hypothesis import settings
 
+from vprsnn_export.cli import main
 from vprsnn_export.config import Config, preset
+from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 #: Property tests are judged on their examples, never on time: the 2-core machine is shared, and a
 #: per-example deadline fails a correct test under load. One profile for every test module.
@@ -74,6 +88,115 @@ def _make_model(
         source_sha256="ab" * 32,
         data={"source": "synthetic"},
     )
+
+
+def _make_checkpoint(
+    rng: np.random.Generator,
+    *,
+    beta: float = 0.95,
+    wta: bool = True,
+    dyadic: bool = False,
+    uniform: bool = False,
+    history: list | None = None,
+) -> Checkpoint:
+    """A random 16-input, 6-neuron float checkpoint of :func:`_small_config` with three reference places (1, 2, 3).
+
+    ``uniform``: one threshold (2.25) for all neurons, weights in [0, 0.5); else thresholds in [1, 2).
+    ``dyadic``: weights on a 1/16 grid, thresholds on a 1/4 grid, beta 0.5: every float32 sum is exact.
+    """
+    cfg = _small_config(**{"network.beta": 0.5 if dyadic else beta, "network.wta": wta})
+    weights = rng.integers(0, 16, (16, 6)) / 16.0 if dyadic else rng.random((16, 6)) * 0.5
+    thresholds = np.full(6, 2.25) if uniform else (rng.integers(4, 12, 6) / 4.0 if dyadic else rng.random(6) + 1.0)
+    return Checkpoint(
+        config=cfg,
+        weights=weights.astype(np.float32),
+        thresholds=thresholds.astype(np.float32),
+        calibration=rng.integers(0, 4, (6, 3)).astype(np.int64),
+        reference_place_ids=np.array([1, 2, 3], dtype=np.int64),
+        reference_traversals=["summer"],
+        data={"source": "synthetic", "subset": None},
+        history=[] if history is None else history,
+    )
+
+
+@pytest.fixture
+def make_checkpoint():
+    """The factory ``make_checkpoint(rng, *, beta, wta, dyadic, uniform, history) -> Checkpoint`` (hand-set, untrained)."""
+    return _make_checkpoint
+
+
+#: The small network the session trains by default: 40 time steps, 2 epochs, 16 neurons on 24 synthetic places.
+TRAINED = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
+#: `vprsnn-export train` options of the tiny network the command-line tests share (8 synthetic places).
+TINY_TRAIN = ("--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet")
+
+
+@pytest.fixture(scope="session")
+def train_network():
+    """The factory ``train_network(data="synthetic:24", **overrides) -> (Checkpoint, Dataset)``: the float network of
+    ``Config()`` with :data:`TRAINED` and ``overrides`` trained on the summer traversal of ``data`` (summer and
+    winter), once per session for each argument set."""
+    made: dict[str, tuple[Checkpoint, Dataset]] = {}
+
+    def train(data: str = "synthetic:24", **overrides) -> tuple[Checkpoint, Dataset]:
+        key = repr((data, sorted(overrides.items())))
+        if key not in made:
+            cfg = Config().replace(**{**TRAINED, **overrides})
+            dataset = load_dataset(data, ["summer", "winter"], cfg.preprocess)
+            selection = {"subset": None, "places": None}  # recorded as `train --data DATA` records it
+            made[key] = train_and_calibrate(dataset, ["summer"], cfg, progress=False, selection=selection), dataset
+        return made[key]
+
+    return train
+
+
+@pytest.fixture(scope="session")
+def trained(train_network) -> tuple[Checkpoint, Dataset]:
+    """A small trained float checkpoint (:data:`TRAINED`, 24 synthetic places) and its data set."""
+    return train_network()
+
+
+@pytest.fixture(scope="session")
+def ensemble(train_network) -> tuple[Checkpoint, Dataset]:
+    """The :func:`trained` network as an ensemble of three modules of 8 places, and its data set."""
+    return train_network(**{"train.module_size": 8})
+
+
+@pytest.fixture(scope="session")
+def synthetic_data(trained) -> Dataset:
+    """The synthetic data set (24 places, summer and winter) the :func:`trained` network was trained on."""
+    return trained[1]
+
+
+@pytest.fixture(scope="session")
+def cli_checkpoint(tmp_path_factory):
+    """The factory ``cli_checkpoint(data="synthetic:8", *options) -> Path``: the checkpoint that
+    ``vprsnn-export train --data DATA --reference summer OPTIONS`` writes, once per session for each argument set."""
+    made: dict[tuple[str, ...], Path] = {}
+
+    def train(data: str = "synthetic:8", *options: str) -> Path:
+        key = (data, *options)
+        if key not in made:
+            path = tmp_path_factory.mktemp("trained") / "net.npz"
+            assert main(["train", "--data", data, "--reference", "summer", "--out", str(path), *options]) == 0
+            made[key] = path
+        return made[key]
+
+    return train
+
+
+@pytest.fixture(scope="session")
+def tiny_checkpoint(cli_checkpoint) -> Path:
+    """The checkpoint file of ``train --data synthetic:8 --reference summer`` with :data:`TINY_TRAIN` (read-only)."""
+    return cli_checkpoint("synthetic:8", *TINY_TRAIN)
+
+
+@pytest.fixture(scope="session")
+def quantised_model(tiny_checkpoint, tmp_path_factory) -> Path:
+    """The 4-bit fixed-point model file ``quantize`` writes of :func:`tiny_checkpoint` (read-only)."""
+    folder = tmp_path_factory.mktemp("quantised") / "q"
+    assert main(["quantize", str(tiny_checkpoint), "--bits", "4", "--out", str(folder), "--quiet"]) == 0
+    return next(folder.glob("*.npz"))
 
 
 @pytest.fixture

@@ -1,7 +1,9 @@
 """The folders depend on each other in one direction only (docs/architecture.md).
 
 Every ``import`` of a ``vprsnn_export`` module, at module top or inside a function, must
-point to the same layer or an earlier one; and first-party imports sit at module top.
+point to the same layer or an earlier one; first-party imports sit at module top, except in
+the modules the command line's ``--help`` imports (:data:`LOADS_ON_USE`), which load the library
+when a command runs (tests/test_cli_startup.py); and no modules import each other in a circle.
 """
 
 from __future__ import annotations
@@ -23,6 +25,11 @@ def package_root() -> Path:
     with (ROOT / "pyproject.toml").open("rb") as handle:
         where = tomllib.load(handle)["tool"]["setuptools"]["packages"]["find"]["where"]
     return ROOT / where[0] / "vprsnn_export"
+
+
+#: Modules whose first-party imports may sit inside functions: the commands (their parsers are built
+#: without torch; the library loads in the handler) and the targets' registry (its writers and readers).
+LOADS_ON_USE = ("vprsnn_export.commands.", "vprsnn_export.targets.registry", "vprsnn_export.runtime.backends")
 
 
 def layer_of(module: str) -> str:
@@ -103,7 +110,7 @@ def test_no_import_points_to_a_later_layer(module: str):
     assert not back_edges, f"{module} ({layer_of(module)}) imports from a later layer: {back_edges}"
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if not m.startswith(LOADS_ON_USE)))
 def test_first_party_imports_are_at_module_top(module: str):
     inside = [f"line {line}: {target}" for target, line, top in imports_of(module, MODULES[module]) if not top]
     assert not inside, f"{module} imports inside functions: {inside}"
@@ -116,3 +123,56 @@ def test_a_back_edge_is_detected(tmp_path):
         ("vprsnn_export.runtime.verify", True)
     ]
     assert LAYERS.index(layer_of("vprsnn_export.runtime.verify")) > LAYERS.index("trainer")
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the first-party modules it imports (at top, under TYPE_CHECKING or inside a function)."""
+    return {m: {t for t, _, _ in imports_of(m, path) if t in MODULES and t != m} for m, path in MODULES.items()}
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The groups of modules that import each other in a circle (strongly connected components of more than
+    one module, Tarjan's algorithm), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for target in sorted(graph.get(node, ())):
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                member = stack.pop()
+                group.append(member)
+                if member == node:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(found)
+
+
+def test_no_modules_import_each_other_in_a_circle():
+    assert not circles(import_graph()), f"import circles among first-party modules: {circles(import_graph())}"
+
+
+def test_a_circle_is_detected(tmp_path):
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e"}}) == [["a", "b", "c"]]
+    hidden = tmp_path / "hidden.py"  # an import only type checkers follow still closes a circle
+    hidden.write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from vprsnn_export.config import Config\n"
+    )
+    graph = {**import_graph(), "vprsnn_export.data.preprocess": {"vprsnn_export.config"}}
+    assert ("vprsnn_export.config", 3, True) in imports_of("vprsnn_export.data.hidden", hidden)
+    assert ["vprsnn_export.config", "vprsnn_export.data.preprocess"] in circles(graph)

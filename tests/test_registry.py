@@ -201,7 +201,7 @@ def test_a_toy_target_is_exported_read_back_and_checked(toy_target, make_model, 
     assert any(c.b == "npz model on the simulator" for c in cross.comparisons)
 
 
-def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_target, tmp_path):
+def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_target, tmp_path, tiny_checkpoint):
     sr = np.array([[3, 0], [0, 2], [1, 1]])
     sq = np.array([[2, 0, 0], [0, 0, 1]])
     rows = Readout(sr, 0.5).rows(sq, np.array([0, 1]), np.array([0, 1]))
@@ -209,9 +209,7 @@ def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_t
     assert rows[-1].accuracy == 0.5  # query 1's one spike votes for both places: a tie to place 0
     assert row_label("anyplace", 1) == "Any place k=1"
 
-    path = tmp_path / "net.npz"
-    train = ["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(path), "--quiet"]
-    assert main([*train, "--timesteps", "20", "--epochs", "1", "--neurons", "16"]) == 0
+    path = tiny_checkpoint  # train --data synthetic:8 --timesteps 20 --epochs 1 --neurons 16 (tests/conftest.py)
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:8", ["summer", "winter"], ckpt.config.preprocess)
     options = VerifyOptions(readout=SequenceOptions(), bits=(4,), targets=("npz",), reference_queries=0)

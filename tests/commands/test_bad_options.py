@@ -8,14 +8,11 @@ from hypothesis import strategies as st
 
 from vprsnn_export.cli import main
 
-TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
-
 
 @pytest.fixture(scope="module")
-def checkpoint(tmp_path_factory):
-    path = tmp_path_factory.mktemp("options") / "net.npz"
-    assert main(["train", "--data", "synthetic:10", "--reference", "summer", "--out", str(path), *TINY]) == 0
-    return str(path)
+def checkpoint(tiny_checkpoint):
+    """The session's tiny checkpoint file (tests/conftest.py)."""
+    return str(tiny_checkpoint)
 
 
 EVALUATE_CASES = [

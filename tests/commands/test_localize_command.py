@@ -13,10 +13,10 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.data.dataset import load_dataset, read_manifest
+from vprsnn_export.data.dataset import Dataset, load_dataset, read_manifest
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.export.model import save_fixed_point
-from vprsnn_export.io.checkpoint import checkpoint_sha256, save_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_sha256, save_checkpoint
 from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -34,11 +34,8 @@ NORDLAND = shared_data("nordland_64x32_summer_winter")
 TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
 
 
-def write_models(folder: Path, data_source: str, places: str | None, n_places: int) -> tuple[Path, Path, Path]:
-    """A tiny checkpoint, its 4-bit model and that model's ONNX graph in ``folder``."""
-    cfg = Config().replace(**TINY)
-    data = load_dataset(data_source, ["summer", "winter"], cfg.preprocess, places=places)
-    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": places})
+def write_models(folder: Path, ckpt: Checkpoint, data: Dataset) -> tuple[Path, Path, Path]:
+    """A checkpoint, its 4-bit model and that model's ONNX graph in ``folder``."""
     net = save_checkpoint(folder / "net.npz", ckpt)
     model = deploy(ckpt, checkpoint_sha256(net), 4, reference_images={"summer": data.traversal("summer")})
     fixed = save_fixed_point(folder / "q4.npz", model)
@@ -65,9 +62,9 @@ def decisions(lines: list[dict]) -> list[tuple]:
 
 
 @pytest.fixture(scope="module")
-def synthetic(tmp_path_factory):
+def synthetic(tmp_path_factory, trained):
     folder = tmp_path_factory.mktemp("localize")
-    net, fixed, graph = write_models(folder, "synthetic:24", None, 24)
+    net, fixed, graph = write_models(folder, *trained)  # the session's network on 24 places (tests/conftest.py)
     frames = folder / "frames"
     frames.mkdir()
     grey = synthetic_route(24, ("winter",))["winter"]
@@ -136,7 +133,10 @@ def test_bad_frames_are_one_line(synthetic, capsys, tmp_path):
 
 @pytest.mark.skipif(not NORDLAND.is_dir(), reason=f"the shared Nordland data is absent ({NORDLAND})")
 def test_real_frames_from_a_folder_and_a_video(tmp_path, capsys):
-    net, fixed, graph = write_models(tmp_path, str(NORDLAND), "100:12", 12)
+    cfg = Config().replace(**TINY)
+    data = load_dataset(str(NORDLAND), ["summer", "winter"], cfg.preprocess, places="100:12")
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": "100:12"})
+    net, fixed, graph = write_models(tmp_path, ckpt, data)
     manifest = read_manifest(NORDLAND)
     frames = tmp_path / "winter"
     frames.mkdir()

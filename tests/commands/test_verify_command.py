@@ -12,10 +12,9 @@ LENIENT = "accuracy=1,r_at_100p=1"
 
 
 @pytest.fixture(scope="module")
-def checkpoint(tmp_path_factory):
-    path = tmp_path_factory.mktemp("verify-cli") / "net.npz"
-    assert main(["train", "--data", "synthetic:20", "--reference", "summer", "--out", str(path), "--quiet", *TINY]) == 0
-    return path
+def checkpoint(cli_checkpoint):
+    """A 48-neuron network on 20 synthetic places, trained once per session (tests/conftest.py)."""
+    return cli_checkpoint("synthetic:20", "--quiet", *TINY)
 
 
 def verify(checkpoint, report, *extra):

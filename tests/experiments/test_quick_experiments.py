@@ -8,7 +8,9 @@ import pytest
 
 from vprsnn_export.cli import build_parser, main
 from vprsnn_export.commands.experiment import experiment_modules
-from vprsnn_export.experiments.common import DOCS_RESULTS, regenerating_command
+from vprsnn_export.errors import DataError
+from vprsnn_export.experiments.common import regenerating_command
+from vprsnn_export.experiments.settings import DOCS_RESULTS, NORDLAND, SUBSET, data_settings
 
 NAMES = sorted(experiment_modules())
 
@@ -63,6 +65,48 @@ def test_experiments_that_show_a_baseline_show_cosine(name, tmp_path):
 def test_unknown_experiment_is_a_clear_error(capsys):
     assert main(["experiment", "nope", "--quick"]) == 2
     assert "unknown experiment 'nope'" in capsys.readouterr().err
+
+
+def test_the_data_path_comes_from_the_command_line_or_the_environment(monkeypatch, tmp_path):
+    """--data DIR: its manifest and its subset (when present); a manifest file: itself; else $VPRSNN_DATA,
+    else the repository's data folder relative to the working folder."""
+    folder = tmp_path / "nordland"
+    folder.mkdir()
+    (folder / "places.csv").write_text("place\n")
+    assert data_settings(str(folder)) == {"data": str(folder / "places.csv"), "subset": None}
+    (folder / SUBSET).write_text("place\n")
+    assert data_settings(str(folder)) == {"data": str(folder / "places.csv"), "subset": str(folder / SUBSET)}
+    assert data_settings(str(folder / "places.csv")) == {"data": str(folder / "places.csv"), "subset": None}
+    assert data_settings("synthetic:12") == {"data": "synthetic:12", "subset": None}
+    monkeypatch.setenv("VPRSNN_DATA", str(folder))
+    assert data_settings(None)["subset"] == str(folder / SUBSET)
+    monkeypatch.delenv("VPRSNN_DATA")
+    work = tmp_path / "repository"  # the default is ../shared/...: inside tmp_path from here
+    work.mkdir()
+    monkeypatch.chdir(work)  # not the repository root: the default folder is not there
+    with pytest.raises(DataError, match="relative to the repository root"):
+        data_settings(None)
+    (work / NORDLAND).mkdir(parents=True)
+    assert data_settings(None) == {"data": str(NORDLAND / "places.csv"), "subset": None}
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        ([], "no data folder or place manifest at ../shared/data/nordland_64x32_summer_winter: the default"),
+        (["--data", "nowhere"], "no data folder or place manifest at nowhere: --data"),
+        (["--data", " "], "--data: an empty path"),
+    ],
+)
+def test_missing_data_is_one_line_before_any_work(monkeypatch, tmp_path, capsys, argv, message):
+    monkeypatch.delenv("VPRSNN_DATA", raising=False)
+    work = tmp_path / "a" / "repository"  # ../shared/... is inside tmp_path from here, and absent
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    assert main(["experiment", "assignment", "--out", str(tmp_path / "out"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "out").exists()
 
 
 def test_default_output_is_outside_the_repository(monkeypatch, tmp_path):

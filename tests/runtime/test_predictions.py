@@ -9,23 +9,11 @@ import numpy as np
 import pytest
 
 from vprsnn_export.cli import main
-from vprsnn_export.config import Config
-from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.evaluation import evaluate_float
 from vprsnn_export.runtime.predictions import network_predictions
-from vprsnn_export.trainer.pipeline import train_and_calibrate
-
-TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
-
-
-@pytest.fixture(scope="module")
-def trained():
-    cfg = Config().replace(**TINY)
-    data = load_dataset("synthetic:24", ["summer", "winter"], cfg.preprocess)
-    return train_and_calibrate(data, ["summer"], cfg, progress=False), data
 
 
 def test_each_column_reproduces_its_metric_row(trained, tmp_path):

@@ -107,20 +107,6 @@ def make_model(rng, *, bits: int = 8, uniform: bool = True) -> FixedPointModel:
     )
 
 
-def make_checkpoint(rng) -> Checkpoint:
-    """A 16 x 6 float checkpoint (beta = 0.95) with one threshold for all neurons."""
-    return Checkpoint(
-        config=small_config(),
-        weights=(rng.random((16, 6)) * 0.5).astype(np.float32),
-        thresholds=np.full(6, 2.25, dtype=np.float32),
-        calibration=rng.integers(0, 4, (6, 3)).astype(np.int64),
-        reference_place_ids=np.array([1, 2, 3], dtype=np.int64),
-        reference_traversals=["summer"],
-        data={"source": "synthetic", "subset": None},
-        history=[],
-    )
-
-
 def random_spikes(seed: int, n: int = 5, timesteps: int = 25, p: float = 0.3) -> torch.Tensor:
     generator = torch.Generator().manual_seed(seed)
     return (torch.rand((n, timesteps, 16), generator=generator) < p).to(torch.uint8)
@@ -173,9 +159,9 @@ def test_each_consumer_runs_a_single_threshold_fixed_point_file_exactly(tmp_path
 
 
 @pytest.mark.parametrize("consumer", sorted(PACKAGE))
-def test_each_consumer_runs_a_single_threshold_float_file_exactly(tmp_path, consumer):
+def test_each_consumer_runs_a_single_threshold_float_file_exactly(tmp_path, consumer, make_checkpoint):
     require(consumer)
-    ckpt = make_checkpoint(np.random.default_rng(1))
+    ckpt = make_checkpoint(np.random.default_rng(1), uniform=True)
     graph = nir.read(write_nir(ckpt, tmp_path / "f.nir"))
     spikes = random_spikes(1, n=10, timesteps=40)
     off, ruled = counts(graph, ckpt, spikes, consumer)  # type: ignore[misc]

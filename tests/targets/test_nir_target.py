@@ -24,21 +24,7 @@ from vprsnn_export.targets.nir_target import DT_SECONDS, apply_readout_rule, bui
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 
 
-def make_checkpoint(rng, small_config, *, beta=0.95, wta=True, dyadic=False, uniform=False) -> Checkpoint:
-    """dyadic: weights on a 1/16 grid, thresholds on a 1/4 grid, beta 0.5: every float32 sum is exact."""
-    cfg = small_config(**{"network.beta": 0.5 if dyadic else beta, "network.wta": wta})
-    weights = rng.integers(0, 16, (16, 6)) / 16.0 if dyadic else rng.random((16, 6)) * 0.5
-    thresholds = np.full(6, 2.25) if uniform else (rng.integers(4, 12, 6) / 4.0 if dyadic else rng.random(6) + 1.0)
-    return Checkpoint(
-        config=cfg,
-        weights=weights.astype(np.float32),
-        thresholds=thresholds.astype(np.float32),
-        calibration=rng.integers(0, 4, (6, 3)).astype(np.int64),
-        reference_place_ids=np.array([1, 2, 3], dtype=np.int64),
-        reference_traversals=["summer"],
-        data={"source": "synthetic", "subset": None},
-        history=[{"epoch": 1, "mean_theta": 1.2}],
-    )
+HISTORY = [{"epoch": 1, "mean_theta": 1.2}]  # a checkpoint's training history, carried through the file
 
 
 def random_spikes(seed: int, n: int = 5, timesteps: int = 25, n_inputs: int = 16, p: float = 0.3) -> torch.Tensor:
@@ -74,8 +60,8 @@ def test_fixed_point_round_trip_is_exact(tmp_path, bits, wta, make_model):
 
 
 @pytest.mark.parametrize("wta", [True, False])
-def test_float_round_trip_is_exact(tmp_path, wta, small_config):
-    ckpt = make_checkpoint(np.random.default_rng(1), small_config, wta=wta)
+def test_float_round_trip_is_exact(tmp_path, wta, make_checkpoint):
+    ckpt = make_checkpoint(np.random.default_rng(1), wta=wta, history=HISTORY)
     rebuilt = read_nir(write_nir(ckpt, tmp_path / "f.nir", source_sha256="cd" * 32))
     assert isinstance(rebuilt, Checkpoint)
     assert np.array_equal(rebuilt.weights, ckpt.weights) and rebuilt.weights.dtype == np.float32
@@ -125,8 +111,8 @@ def test_readout_rule_on_the_wta_off_raster_gives_the_integer_network(tmp_path, 
     assert torch.equal(ruled, int_raster(model, spikes)) and int(ruled.sum()) > 0
 
 
-def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path, small_config):
-    ckpt = make_checkpoint(np.random.default_rng(9), small_config, dyadic=True)
+def test_readout_rule_turns_a_consumer_raster_into_the_float_network(tmp_path, make_checkpoint):
+    ckpt = make_checkpoint(np.random.default_rng(9), dyadic=True, history=HISTORY)
     graph = nir.read(write_nir(ckpt, tmp_path / "f.nir"))
     spikes = random_spikes(9)
     consumer = generic_consumer_raster(graph, spikes)
@@ -142,9 +128,9 @@ def test_no_leak_becomes_an_if_node(tmp_path, make_model):
     assert torch.equal(int_raster(model, spikes), int_raster(read_nir(path), spikes))
 
 
-def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path, small_config):
+def test_generic_nirtorch_consumer_computes_the_wta_off_network(tmp_path, make_checkpoint):
     """Inhibition 0 and exact float sums (dyadic values): nirtorch with NIR's LIF equals the WTA-off network."""
-    ckpt = make_checkpoint(np.random.default_rng(5), small_config, dyadic=True)
+    ckpt = make_checkpoint(np.random.default_rng(5), dyadic=True, history=HISTORY)
     graph = nir.read(write_nir(ckpt, tmp_path / "d.nir", wta_inhibition=0.0))
     spikes = random_spikes(5)
     consumer = generic_consumer_raster(graph, spikes)
@@ -161,19 +147,19 @@ def test_generic_consumer_on_a_fixed_point_file_is_close_to_the_integer_network(
     assert agreement["recall"] > 0.9 and agreement["precision"] > 0.9  # float vs round-toward-zero decay
 
 
-def test_snntorch_importer_runs_a_single_threshold_file_without_the_wta_node(tmp_path, small_config):
-    ckpt = make_checkpoint(np.random.default_rng(7), small_config, dyadic=True, uniform=True)
+def test_snntorch_importer_runs_a_single_threshold_file_without_the_wta_node(tmp_path, make_checkpoint):
+    ckpt = make_checkpoint(np.random.default_rng(7), dyadic=True, uniform=True, history=HISTORY)
     graph = nir.read(write_nir(ckpt, tmp_path / "s.nir", wta_node=False))
     spikes = random_spikes(7)
     assert torch.equal(snntorch_consumer_raster(graph, spikes), float_raster(ckpt, spikes, wta=False))
     assert isinstance(read_nir(tmp_path / "s.nir"), Checkpoint)
 
 
-def test_writer_validates_its_input(tmp_path, make_model, small_config):
+def test_writer_validates_its_input(tmp_path, make_model, make_checkpoint):
     model = make_model(np.random.default_rng(8))
     with pytest.raises(ModelFileError, match="weight_mantissa"):
         write_nir(dataclasses.replace(model, weight_mantissa=model.weight_mantissa + 300), tmp_path / "x.nir")
-    ckpt = make_checkpoint(np.random.default_rng(8), small_config)
+    ckpt = make_checkpoint(np.random.default_rng(8), history=HISTORY)
     with pytest.raises(ModelFileError, match="NaN"):
         write_nir(dataclasses.replace(ckpt, thresholds=np.full(6, np.nan, dtype=np.float32)), tmp_path / "x.nir")
     with pytest.raises(InvalidValueError, match="wta_inhibition"):

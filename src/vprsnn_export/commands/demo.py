@@ -23,19 +23,14 @@ from pathlib import Path
 from ..config import Config
 from ..data.dataset import load_dataset
 from ..data.preprocess import CHANNELS
-from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..network.modules import module_count
 from ..readout.sequence import SequenceOptions
 from ..readout.strategies import SEQUENCE_STRATEGY
-from ..runtime.report import write_report
-from ..runtime.report.labels import points
 from ..runtime.results import BitsResult, VerifiedRun
-from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
 from ..targets.registry import TARGETS
-from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
 DEMO_DATA = "synthetic"
@@ -107,6 +102,8 @@ def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
 
 def failed_checks(result: BitsResult) -> str:
     """The checks a bit width failed, named ("-" when none): the verdict's reason on the console."""
+    from ..runtime.report.labels import points
+
     failed = [f"{c.what}: {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
               for c in result.tolerance_checks if not c.passed]  # fmt: skip
     if not result.cross_implementation.passed:
@@ -140,6 +137,11 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.report import write_report
+    from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
+    from ..trainer.pipeline import train_and_calibrate
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     threads = args.threads

@@ -8,11 +8,9 @@ import sys
 import numpy as np
 
 from ..cluster import CLUSTER_HELP, parse_cluster
-from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
-from ..runtime.evaluation import evaluate_float
 from ..runtime.predictions import network_predictions
 from ._common import (
     RESULT_COLUMNS,
@@ -67,6 +65,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.evaluation import evaluate_float
+
     ckpt = load_checkpoint(args.checkpoint)
     if args.predictions is not None:
         if not args.predictions.lower().endswith((".csv", ".jsonl")):

@@ -15,11 +15,12 @@ from typing import Any
 from .. import experiments
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..errors import InvalidValueError
-from ..experiments.common import DOCS_RESULTS, Settings, Variant, document, results_dir
+from ..experiments.settings import DATA_ENV, DOCS_RESULTS, NORDLAND, Settings, Variant, data_settings, results_dir
 from ..io.fileio import atomic_write_text
 from ._common import integer, parse_int_list, parse_value
 
-HELPER_MODULES = {"common", "plots", "query"}  # modules of experiments/ that are not experiments
+#: The modules of experiments/ that are not experiments.
+HELPER_MODULES = {"common", "plots", "query", "settings", "sourcehash"}
 
 
 def experiment_modules() -> dict:
@@ -46,7 +47,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"write the committed pages instead: {DOCS_RESULTS}/NAME.{{json,md,png}} of the repository "
         "this runs in (run it from the repository root; not with --quick)",
     )
-    parser.add_argument("--data", help="place manifest (default ../shared/data/nordland_64x32_summer_winter)")
+    parser.add_argument(
+        "--data",
+        metavar="DIR",
+        help=f"the data folder (places.csv and, for the paper's tables, subset_100_places.csv) or a place manifest "
+        f"(default: ${DATA_ENV}, else {NORDLAND} relative to the working folder, i.e. run from the repository root; "
+        "with --quick the synthetic route)",
+    )
     parser.add_argument(
         "--seeds",
         type=integer,
@@ -114,8 +121,8 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = parse_value(raw.strip())
     extra: dict[str, Any] = {"overrides": overrides, "grid": tuple(parse_grid_entry(item) for item in args.grid)}
-    if args.data:
-        extra.update(data=args.data, subset=None)
+    if args.data is not None or not args.quick:
+        extra.update(data_settings(args.data))
     if args.module_sizes is not None:
         if args.name != "route":
             raise InvalidValueError(f"--module-sizes applies only to experiment route, not {args.name!r}")
@@ -139,6 +146,8 @@ def parse_grid_entry(item: str) -> Variant:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..experiments.common import document
+
     modules = experiment_modules()
     if args.name == "list":
         for name, module in modules.items():

@@ -23,16 +23,9 @@ from pathlib import Path
 
 from ..arguments import ascii_uint
 from ..data.dataset import MAX_PLACES
-from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS
-from ..runtime.consumer_gate import check_tolerance
-from ..runtime.exporting import export_and_check, load_source
-from ..runtime.exporting.checks import check_presentations
-from ..runtime.exporting.folder import MANIFEST_NAME, check_deploy_folder
-from ..runtime.exporting.source import integer_model, parse_export_targets
-from ..targets.loihi_budget import budget_table
-from ..targets.nir_target import WTA_INHIBITION
+from ..targets.nir_semantics import WTA_INHIBITION
 from ..targets.registry import TARGETS
 from ._common import add_data_options, add_runtime_options, format_table, integer, print_json
 
@@ -132,6 +125,8 @@ def parse_shape(raw: str) -> tuple[int, int, int]:
 
 
 def print_budget(raw: str, as_json: bool) -> int:
+    from ..targets.loihi_budget import budget_table
+
     budgets = budget_table(*parse_shape(raw), DEFAULT_BITS)
     rows = [dataclasses.asdict(budget) for budget in budgets]
     if as_json:
@@ -152,6 +147,13 @@ def print_budget(raw: str, as_json: bool) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.consumer_gate import check_tolerance
+    from ..runtime.exporting import export_and_check, load_source
+    from ..runtime.exporting.checks import check_presentations
+    from ..runtime.exporting.folder import MANIFEST_NAME, check_deploy_folder
+    from ..runtime.exporting.source import integer_model, parse_export_targets
+
     if args.loihi_cores:
         if args.model or args.out:
             raise InvalidValueError("--loihi-cores takes no MODEL and no --out (it only prints the core budget)")

@@ -18,21 +18,12 @@ import math
 import sys
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..data.frames import iter_frames
-from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
-from ..runtime.exporting import load_source, read_export
-from ..runtime.localize import (
-    Localizer,
-    OperatingPoint,
-    load_operating_point,
-    operating_point,
-    operating_point_path,
-    save_operating_point,
-)
 from ._common import (
     add_data_options,
     add_runtime_options,
@@ -41,6 +32,9 @@ from ._common import (
     query_data,
     sequence_options,
 )
+
+if TYPE_CHECKING:
+    from ..runtime.localize import OperatingPoint
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -104,6 +98,8 @@ def options_from(given: dict, stored: SequenceOptions | None, where: Path | None
 
 
 def onnx_file(raw: str | None) -> Path | None:
+    from ..runtime.exporting import read_export
+
     if raw is None:
         return None
     path = Path(raw)
@@ -111,6 +107,10 @@ def onnx_file(raw: str | None) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.exporting import load_source
+    from ..runtime.localize import Localizer, load_operating_point, operating_point_path
+
     source = load_source(args.model)
     frames = None if args.frames is None else iter_frames(args.frames)  # a bad source fails before any output
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
@@ -144,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
+    from ..runtime.localize import Localizer, operating_point, save_operating_point
+
     if args.threshold is not None:
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network

@@ -8,12 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
 from ..io.fileio import check_output
-from ..runtime.deployment import deploy
 from ._common import (
     PER_TENSOR_HELP,
     add_data_options,
@@ -82,6 +80,9 @@ def model_filename(
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.deployment import deploy
+
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
     per_neuron = not args.per_tensor
     if args.non_leaky and args.reuse_float_calibration:

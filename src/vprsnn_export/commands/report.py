@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from ..errors import InvalidValueError
-from ..runtime.report import combine_reports, load_report, report_path, write_report
 from ._common import add_threads_option
 
 
@@ -35,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..runtime.report import combine_reports, load_report, report_path, write_report
+
     sources = [str(report_path(p)) for p in args.runs]
     if len(set(sources)) != len(sources):
         raise InvalidValueError("the same report is named twice")

@@ -5,11 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
-from ..runtime.evaluation import evaluate_fixed_point
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -35,6 +33,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.evaluation import evaluate_fixed_point
+
     model = load_fixed_point(args.model)
     float_checkpoint = None
     if args.compare:

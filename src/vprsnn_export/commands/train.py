@@ -8,10 +8,8 @@ from pathlib import Path
 
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..data.dataset import load_dataset, selection_record
-from ..device import resolve_device
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output
-from ..trainer.pipeline import train_and_calibrate
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
 
 
@@ -32,6 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..trainer.pipeline import train_and_calibrate
+
     inputs = (args.data, args.subset, Path(args.data) / "places.csv")
     check_output(args.out, overwrite=args.force, inputs=inputs)  # before minutes of training, not after
     cfg = config_from_args(args)

@@ -12,23 +12,18 @@ import sys
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..config import Config
 from ..data.dataset import MAX_PLACES, Dataset, load_dataset
-from ..device import resolve_device
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
-from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..readout.strategies import STRATEGIES
-from ..runtime.conformance import parse_targets
-from ..runtime.report import write_report
 from ..runtime.results import MetricRow, VerifyReport
-from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
 from ..targets.registry import TARGETS
-from ..trainer.pipeline import train_and_calibrate
 from ._common import (
     PER_TENSOR_HELP,
     add_data_options,
@@ -40,6 +35,9 @@ from ._common import (
     print_json,
     sequence_options,
 )
+
+if TYPE_CHECKING:
+    from ..runtime.verify import VerifyOptions
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 ALL_TARGETS = ",".join(TARGETS)
@@ -118,6 +116,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def verify_options(args: argparse.Namespace) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
+    from ..runtime.conformance import parse_targets
+    from ..runtime.verify import VerifyOptions, parse_tolerances
+
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     if args.reference_queries < 0:
         raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
@@ -180,6 +181,10 @@ def seed_networks(
     Training goes through the experiments' checkpoint cache (same key), so a network the
     experiments already trained is reused; each is also written to DIR/checkpoints/seedN.npz.
     """
+    from ..device import resolve_device
+    from ..experiments.common import Settings, trained_checkpoint
+    from ..trainer.pipeline import train_and_calibrate
+
     key = "subset" if subset else ("consecutive" if places else "all")
     for seed in range(1, n_seeds + 1):
         cfg = template.config.replace(seed=seed)
@@ -257,6 +262,10 @@ MAX_SEEDS = 1000  # networks trained by one verify run
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..device import resolve_device
+    from ..runtime.report import write_report
+    from ..runtime.verify import build_report, verify_checkpoint
+
     started = time.perf_counter()
     progress = not args.quiet
     if args.seeds is not None and (not 1 <= args.seeds <= MAX_SEEDS or len(args.checkpoints) != 1):

@@ -8,77 +8,30 @@ import json
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 
-from vprsnn_export.cluster import Cluster
-from vprsnn_export.config import Config, preset
+from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
+from vprsnn_export.experiments.settings import Settings as Settings  # the experiments import it from here
+from vprsnn_export.experiments.settings import Variant as Variant
+from vprsnn_export.experiments.sourcehash import source_fingerprint
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.sourcehash import source_fingerprint
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 from vprsnn_export.version import __version__
 
-NORDLAND = Path("../shared/data/nordland_64x32_summer_winter")  # relative to the repository root, where experiments run
 #: The module whose functions compute what is cached (training, calibration, query spike counts): the
 #: source it imports, transitively, is hashed into every cache key (:func:`code_version`).
 CACHED_BY = ("vprsnn_export.experiments.common",)
-DOCS_RESULTS = "docs/results"  # the committed pages, written only by ``experiment NAME --update-docs``
-
-
-@dataclass(frozen=True)
-class Variant:
-    """One named point of a sweep grid (``--grid NAME=PRESET[,KEY=VALUE...]``): a preset plus config overrides."""
-
-    name: str
-    preset: str = "paper"
-    overrides: dict = field(default_factory=dict)  # dotted config overrides, applied after the settings' own
-
-
-@dataclass(frozen=True)
-class Settings:
-    """An experiment's size and data. ``quick`` runs on the synthetic route in CI."""
-
-    quick: bool = False
-    data: str = str(NORDLAND / "places.csv")
-    subset: str | None = str(NORDLAND / "subset_100_places.csv")
-    consecutive: str = "1000:100"
-    reference: str = "summer"
-    query: str = "winter"
-    seeds: tuple[int, ...] = (1, 2, 3, 4, 5)
-    device: str = "cpu"
-    progress: bool = True
-    overrides: dict = field(default_factory=dict)  # dotted config overrides
-    grid: tuple[Variant, ...] = ()  # experiment sweep's variants (empty: its default grid)
-    preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
-    module_sizes: tuple[int, ...] = ()  # experiment route's module sizes (empty: its default sizes)
-    cluster: Cluster | None = None  # train every network's modules on this Ray cluster (--cluster)
-
-    @classmethod
-    def quick_settings(cls, **changes: Any) -> Settings:
-        """The tiny synthetic size the test suite runs (``--quick``), with ``changes`` applied."""
-        quick = cls(
-            quick=True,
-            data="synthetic:24",
-            subset=None,
-            consecutive="0:24",
-            seeds=(1, 2),
-            overrides={"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 64},
-        )
-        return replace(quick, **changes)
-
-    def config(self, seed: int, **extra) -> Config:
-        return preset(self.preset).replace(**{**self.overrides, "seed": seed, **extra})
 
 
 def load(settings: Settings, selection: str, cfg: Config) -> Dataset:
@@ -128,12 +81,6 @@ def pct(summary: dict) -> str:
     return f"{100 * summary['mean']:.1f} ± {100 * summary['std']:.1f}"
 
 
-def results_dir() -> Path:
-    """Where ``experiment NAME`` writes by default: $VPRSNN_RESULTS, else ~/.cache/vprsnn-export/results
-    (outside the repository: only ``--update-docs`` writes the committed docs/results)."""
-    return Path(os.environ.get("VPRSNN_RESULTS", Path.home() / ".cache" / "vprsnn-export" / "results"))
-
-
 def cache_dir() -> Path:
     """Where experiments cache trained checkpoints: $VPRSNN_CACHE, else ~/.cache/vprsnn-export/checkpoints."""
 
@@ -142,7 +89,7 @@ def cache_dir() -> Path:
 
 def code_version() -> str:
     """The package version and a sha256 of the source that computes cached results
-    (:func:`vprsnn_export.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
+    (:func:`vprsnn_export.experiments.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
     calibration, the network or the data loading gives new cache keys, so a stale cache is never reused."""
     return f"{__version__}+{source_fingerprint(CACHED_BY)}"
 

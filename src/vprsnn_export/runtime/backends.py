@@ -13,22 +13,21 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
-import torch
+from typing import TYPE_CHECKING, Any
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.network.runs import Backend, SpikeRun
 from vprsnn_export.registry import Registry
-from vprsnn_export.targets.intsim import IntegerNetwork
-from vprsnn_export.targets.onnx_session import read_onnx, run_session, session
+
+if TYPE_CHECKING:  # the registry is read by --help, which imports no torch: the implementations load when opened
+    import torch
+
+    from vprsnn_export.network.runs import Backend, SpikeRun
 
 Network = Checkpoint | FixedPointModel
 #: open(network, exported file or None, device, threads) -> a backend running that network
-OpenFunction = Callable[[Network, "Path | None", torch.device, "int | None"], Backend]
+OpenFunction = Callable[[Network, "Path | None", Any, "int | None"], "Backend"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +50,12 @@ class SessionBackend:
     name: str = "onnxruntime"
 
     def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        import numpy as np
+        import torch
+
+        from vprsnn_export.network.runs import SpikeRun
+        from vprsnn_export.targets.onnx_session import run_session
+
         out = run_session(self.session, spikes)
         counts = torch.from_numpy(np.asarray(out.counts, dtype=np.int64))
         return SpikeRun(counts=counts, saturations=int(out.saturations.sum()), wprob=out.wprob)
@@ -58,6 +63,8 @@ class SessionBackend:
 
 def check_graph(model: FixedPointModel, path: str | Path) -> None:
     """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
+    from vprsnn_export.targets.onnx_session import read_onnx
+
     props = {p.key: p.value for p in read_onnx(path).metadata_props}
     if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
         raise ModelFileError(
@@ -68,16 +75,22 @@ def check_graph(model: FixedPointModel, path: str | Path) -> None:
 
 
 def _float(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    from vprsnn_export.network.dynamics import FloatNetwork
+
     assert isinstance(network, Checkpoint)
     return FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
 
 
 def _integer(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    from vprsnn_export.targets.intsim import IntegerNetwork
+
     assert isinstance(network, FixedPointModel)
     return IntegerNetwork(network, device)
 
 
 def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+    from vprsnn_export.targets.onnx_session import session
+
     assert isinstance(network, FixedPointModel) and path is not None
     check_graph(network, path)
     return SessionBackend(session(path, threads))
@@ -113,6 +126,8 @@ def open_backend(
     threads: int | None = None,
 ) -> tuple[str, Backend]:
     """(the kind's name, the backend) of :func:`choose_backend`, opened on ``device`` (default CPU)."""
+    import torch
+
     kind = choose_backend(network, name, path)
     opened = kind.open(network, None if path is None else Path(path), device or torch.device("cpu"), threads)
     return kind.name, opened

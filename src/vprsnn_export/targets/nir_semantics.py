@@ -36,6 +36,9 @@ from typing import Any
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 
+#: NIR lateral inhibition per other spike, in thresholds (the wta node): measured best for a metadata-blind consumer
+#: on the Nordland subset (docs/targets.md).
+WTA_INHIBITION = 1.0
 #: Decision agreement the gates require of a file whose consumers are stated exact.
 EXACT_DECISION_TOLERANCE = 1.0
 #: Decision agreement the gates require of the other files: the worst single-network cell of the
@@ -106,6 +109,7 @@ __all__ = [
     "EXACT_DECISION_TOLERANCE",
     "FLOAT32_EXACT_INTEGERS",
     "LEAKY_DECISION_TOLERANCE",
+    "WTA_INHIBITION",
     "float_consumers",
     "integer_semantics",
 ]

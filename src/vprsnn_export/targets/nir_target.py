@@ -49,13 +49,12 @@ from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.network.modules import module_count, module_regions
-from vprsnn_export.targets.nir_semantics import float_consumers, integer_semantics
+from vprsnn_export.targets.nir_semantics import WTA_INHIBITION, float_consumers, integer_semantics
 from vprsnn_export.version import __version__
 
 FORMAT = "vprsnn-nir"
 FORMAT_VERSION = 1
 DT_SECONDS = 1e-4
-WTA_INHIBITION = 1.0  # measured best for a metadata-blind consumer on the Nordland subset (docs/targets.md)
 NODES = ("input", "linear", "lif", "wta", "output")
 PLAIN_EDGES = [("input", "linear"), ("linear", "lif"), ("lif", "output")]
 EDGES = PLAIN_EDGES + [("lif", "wta"), ("wta", "lif")]

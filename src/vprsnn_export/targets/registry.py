@@ -14,17 +14,15 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.network.runs import Backend
 from vprsnn_export.registry import Registry
-from vprsnn_export.targets.loihi_target import read_loihi_model, write_loihi
-from vprsnn_export.targets.nir_read import read_nir
-from vprsnn_export.targets.nir_target import WTA_INHIBITION, write_nir
-from vprsnn_export.targets.onnx_session import OnnxBackend
-from vprsnn_export.targets.onnx_target import write_onnx
-from vprsnn_export.targets.statements import loihi_statement, nir_statement, onnx_statement
+from vprsnn_export.targets.nir_semantics import WTA_INHIBITION
+
+if TYPE_CHECKING:
+    from vprsnn_export.network.runs import Backend
 
 Network = Checkpoint | FixedPointModel
 
@@ -74,26 +72,72 @@ def integer(network: Network, target: str) -> FixedPointModel:
     return network
 
 
+# The writers, readers and statements load their modules when called: the registry (listed by every
+# command's --help) imports neither torch nor onnx.
+
+
 def _write_nir(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    from vprsnn_export.targets.nir_target import write_nir
+
     sha = options.source_sha256
     return [write_nir(network, path, source_sha256=sha, wta_inhibition=options.inhibition, wta_node=options.wta_node)]
 
 
 def _write_onnx(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    from vprsnn_export.targets.onnx_target import write_onnx
+
     return [write_onnx(integer(network, "onnx"), path, with_wprob=True, with_raster=options.conformance)]
 
 
 def _write_loihi(network: Network, path: Path, options: WriteOptions) -> list[Path]:
+    from vprsnn_export.targets.loihi_target import write_loihi
+
     return list(write_loihi(integer(network, "loihi"), path, source_sha256=options.source_sha256).values())
 
 
+def _read_nir(path: Path) -> Network:
+    from vprsnn_export.targets.nir_read import read_nir
+
+    return read_nir(path)
+
+
+def _read_onnx(path: Path) -> Backend:
+    from vprsnn_export.targets.onnx_session import OnnxBackend
+
+    return OnnxBackend(path)
+
+
+def _read_loihi(path: Path) -> Network:
+    from vprsnn_export.targets.loihi_target import read_loihi_model
+
+    return read_loihi_model(path)
+
+
+def _nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
+    from vprsnn_export.targets.statements import nir_statement
+
+    return nir_statement(network, wta_node=options.wta_node, inhibition=options.inhibition)
+
+
+def _onnx_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
+    from vprsnn_export.targets.statements import onnx_statement
+
+    return onnx_statement(network)
+
+
+def _loihi_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str | None:
+    from vprsnn_export.targets.statements import loihi_statement
+
+    return loihi_statement(network, model)
+
+
 TARGETS: Registry[Target] = Registry("target")
-TARGETS.register(Target("nir", "NIR", "NIR read back", False, "model.nir", _write_nir, read_nir, nir_statement))
+TARGETS.register(Target("nir", "NIR", "NIR read back", False, "model.nir", _write_nir, _read_nir, _nir_statement))
 TARGETS.register(
-    Target("onnx", "ONNX", "ONNX (onnxruntime)", True, "model.onnx", _write_onnx, OnnxBackend, onnx_statement)
+    Target("onnx", "ONNX", "ONNX (onnxruntime)", True, "model.onnx", _write_onnx, _read_onnx, _onnx_statement)
 )
 TARGETS.register(
-    Target("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, read_loihi_model, loihi_statement, True)
+    Target("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, _read_loihi, _loihi_statement, True)
 )
 
 

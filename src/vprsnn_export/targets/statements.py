@@ -1,13 +1,11 @@
 """What each consumer of a written file computes, in one sentence or three (export.json's ``consumers``).
 
-One function per deployment target, named by its registry entry (:mod:`targets.registry`):
-``statement(network, model, options)`` with ``network`` what was exported (a float
-checkpoint or a fixed-point model) and ``model`` the fixed-point model the integer targets got.
+One function per deployment target, named by its registry entry (:mod:`targets.registry`, which
+hands each the write options it reads): ``network`` is what was exported (a float checkpoint or
+a fixed-point model) and ``model`` the fixed-point model the integer targets got.
 """
 
 from __future__ import annotations
-
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,9 +15,6 @@ from vprsnn_export.network.modules import module_count
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
-
-if TYPE_CHECKING:
-    from vprsnn_export.targets.registry import WriteOptions
 
 
 def ensemble_sentence(network: Checkpoint | FixedPointModel) -> str:
@@ -55,13 +50,12 @@ def float_consumer_note(network: Checkpoint | FixedPointModel) -> str:
     )
 
 
-def nir_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions) -> str:
+def nir_statement(network: Checkpoint | FixedPointModel, *, wta_node: bool, inhibition: float) -> str:
     """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
     is_float = isinstance(network, Checkpoint)
     thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
     uniform = bool(np.all(thresholds == thresholds[0]))
     ensemble = ensemble_sentence(network)
-    wta_node, inhibition = options.wta_node, options.inhibition
     arithmetic = (
         "the float network's own arithmetic"
         if is_float
@@ -102,7 +96,7 @@ def nir_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel 
     )
 
 
-def onnx_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions) -> str:
+def onnx_statement(network: Checkpoint | FixedPointModel) -> str:
     """ONNX: onnxruntime computes the integer network exactly."""
     return (
         "onnxruntime computes the integer network exactly: spike counts, raster and saturations identical to the "
@@ -112,9 +106,7 @@ def onnx_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel
     )
 
 
-def loihi_statement(
-    network: Checkpoint | FixedPointModel, model: FixedPointModel | None, options: WriteOptions
-) -> str | None:
+def loihi_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None) -> str | None:
     """Loihi-style description: what Lava's Dense + LIF compute, and the cores the network needs."""
     if model is None:
         return None

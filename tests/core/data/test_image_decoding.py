@@ -11,7 +11,6 @@ import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.cli import main
 from vprsnn_export.data.preprocess import read_grey_image
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import DataError
@@ -69,10 +68,10 @@ def test_a_truncated_jpeg_is_not_accepted_partly_decoded(tmp_path) -> None:
         read_grey_image(tmp_path / "cut.jpg")
 
 
-def test_evaluate_on_a_non_utf8_folder_with_a_truncated_image_is_one_line_and_exit_2(tmp_path, capsys) -> None:
-    ckpt = tmp_path / "net.npz"
-    train = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
-    assert main([*train, "--out", str(ckpt), "--threads", "1"]) == 0
+def test_evaluate_on_a_non_utf8_folder_with_a_truncated_image_is_one_line_and_exit_2(
+    tmp_path, capsys, cli_checkpoint
+) -> None:
+    ckpt = cli_checkpoint("synthetic:8", "--quiet", "--timesteps", "20", "--epochs", "1", "--threads", "1")
     capsys.readouterr()
     folder = non_utf8_folder(tmp_path)
     for name, images in synthetic_route(8, ("summer", "winter")).items():

@@ -10,13 +10,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.io.fileio import read_container, write_container
-
-TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
 
 JSON_VALUES = st.recursive(
     st.none() | st.booleans() | st.integers(-(2**70), 2**70) | st.floats() | st.text(max_size=8),
@@ -30,16 +27,9 @@ PROPERTY = settings(max_examples=40, deadline=None, suppress_health_check=[Healt
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("corrupt")
-    assert (
-        main(["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(folder / "net.npz"), *TINY]) == 0
-    )
-    assert main(["quantize", str(folder / "net.npz"), "--bits", "4", "--out", str(folder / "q"), "--quiet"]) == 0
-    return {
-        "checkpoint": (folder / "net.npz", load_checkpoint),
-        "fixed-point model": (next((folder / "q").glob("*.npz")), load_fixed_point),
-    }
+def files(tiny_checkpoint, quantised_model):
+    """The session's checkpoint and 4-bit model files (tests/conftest.py), read only: edits go to copies."""
+    return {"checkpoint": (tiny_checkpoint, load_checkpoint), "fixed-point model": (quantised_model, load_fixed_point)}
 
 
 def loads_or_refuses(load, path) -> None:

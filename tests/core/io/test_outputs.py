@@ -183,9 +183,8 @@ def test_leftovers_inside_an_output_folder_go_and_the_rest_stays(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["quantize", "verify"])
-def test_the_next_run_removes_what_a_killed_run_left_in_its_output_folder(tmp_path, capsys, command):
-    ckpt = tmp_path / "net.npz"
-    assert main([*TRAIN, "--out", str(ckpt), "--threads", "1"]) == 0
+def test_the_next_run_removes_what_a_killed_run_left_in_its_output_folder(tmp_path, capsys, command, cli_checkpoint):
+    ckpt = cli_checkpoint("synthetic:8", "--quiet", "--timesteps", "20", "--epochs", "1", "--threads", "1")
     out = tmp_path / "out"
     leftovers = plant_leftovers(out)
     if command == "quantize":

@@ -13,14 +13,11 @@ from vprsnn_export.errors import ModelFileError
 from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.io.fileio import META_KEY
 
-TRAIN = ["train", "--data", "synthetic:8", "--reference", "summer", "--quiet", "--timesteps", "20", "--epochs", "1"]
-
 
 @pytest.fixture(scope="module")
-def good(tmp_path_factory):
-    path = tmp_path_factory.mktemp("tamper") / "net.npz"
-    assert main([*TRAIN, "--neurons", "16", "--out", str(path)]) == 0
-    with np.load(path) as npz:
+def good(tiny_checkpoint):
+    """The session's tiny checkpoint (tests/conftest.py) as its header and arrays."""
+    with np.load(tiny_checkpoint) as npz:
         arrays = {name: npz[name] for name in npz.files}
     meta = json.loads(arrays.pop(META_KEY).tobytes().decode())
     return meta, arrays

@@ -10,19 +10,13 @@ from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.runtime.exporting import read_export
 from vprsnn_export.runtime.exporting.folder import MANIFEST_NAME
-from vprsnn_export.targets import registry as target_registry
-
-TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "16", "--quiet"]
+from vprsnn_export.targets import onnx_target
 
 
 @pytest.fixture(scope="module")
-def model(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("exporting")
-    assert (
-        main(["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(folder / "net.npz"), *TINY]) == 0
-    )
-    assert main(["quantize", str(folder / "net.npz"), "--bits", "4", "--out", str(folder / "q"), "--quiet"]) == 0
-    return str(next((folder / "q").glob("*.npz")))
+def model(quantised_model):
+    """The session's 4-bit model file (tests/conftest.py)."""
+    return str(quantised_model)
 
 
 def export(model, out, *extra):
@@ -62,7 +56,7 @@ def test_an_interrupted_export_leaves_the_previous_folder_as_it_was(model, tmp_p
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(target_registry, "write_onnx", interrupted)
+    monkeypatch.setattr(onnx_target, "write_onnx", interrupted)  # the registry loads it per call
     assert export(model, out, "--force") == 130
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()} == before
     assert [p.name for p in tmp_path.iterdir()] == ["deploy"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 import sys
 
-from vprsnn_export.sourcehash import PACKAGE_ROOT, import_closure, source_fingerprint
+from vprsnn_export.experiments.sourcehash import PACKAGE_ROOT, import_closure, source_fingerprint
 
 ROOTS = ("vprsnn_export.experiments.common",)
 

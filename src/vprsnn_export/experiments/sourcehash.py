@@ -1,6 +1,7 @@
 """A fingerprint of the package source that computes a result: the files a module imports, transitively.
 
-A cache keyed by it (experiments' trained checkpoints) is never reused after that code changed.
+A cache keyed by it (experiments' trained checkpoints) is never reused after that code changed. It
+belongs to the experiments (their cache key), not to the library they run.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from functools import lru_cache
 from pathlib import Path
 
 PACKAGE = "vprsnn_export"
-PACKAGE_ROOT = Path(__file__).resolve().parent
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 
 
 def module_file(name: str, root: Path = PACKAGE_ROOT, package: str = PACKAGE) -> Path | None:
