@@ -55,6 +55,11 @@ def test_evaluate_json_beats_chance_by_a_wide_margin(trained, capsys):
     for row in payload["results"]:
         assert row["n_queries"] == 40
         assert 0 <= row["r_at_100p"] <= row["accuracy"] + 1e-12
+    cost = payload["cost"]  # events per query: every input spike reaches all 100 neurons for all 100 steps
+    assert cost["queries"] == 40 and cost["steps"] == 100 and cost["neuron_updates"] == 100 * 100
+    assert cost["input_spikes"] > 0 and cost["synaptic_events"] == pytest.approx(100 * cost["input_spikes"])
+    assert 0 < cost["template_macs"] <= 40 * cost["template_weights"] / 40
+    assert cost["snn_weights"] == 100 * cost["template_weights"] / 40
 
 
 def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
@@ -83,8 +88,9 @@ def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
 
 def test_evaluate_table_output(trained, capsys):
     assert main(["evaluate", str(trained), "--query", "winter", "--quiet", "--baseline"]) == 0
-    out = capsys.readouterr().out
-    assert "wprob" in out and "sad" in out and "R@100P" in out
+    captured = capsys.readouterr()
+    assert "wprob" in captured.out and "sad" in captured.out and "R@100P" in captured.out
+    assert "events per query: SNN" in captured.err and "vs template" in captured.err
 
 
 @pytest.mark.parametrize(

@@ -21,17 +21,18 @@ Pure numpy, vectorised over queries and steps.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.serial import JsonDataclass
 
 CHUNK = 64  # queries whose spikes are widened to int64 at once for a per-input fan-out
 
 
 @dataclass(frozen=True)
-class CostSummary:
+class CostSummary(JsonDataclass):
     """The means over queries of a :class:`QueryCost` (the JSON and the printed line)."""
 
     queries: int
@@ -47,9 +48,6 @@ class CostSummary:
     def event_ratio(self) -> float:
         """Synaptic events per template multiply-add, E / C (inf when the template does nothing)."""
         return self.synaptic_events / self.template_macs if self.template_macs > 0 else float("inf")
-
-    def to_dict(self) -> dict[str, float | int]:
-        return asdict(self)
 
     def line(self) -> str:
         """One printed line: ``events per query: SNN ... vs template ...``."""

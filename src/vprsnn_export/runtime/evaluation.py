@@ -16,6 +16,7 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.baseline import (
@@ -336,6 +337,7 @@ class Evaluation:
     winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
     modules: list[ModuleAccuracy] | None = field(default=None)  # an ensemble: per module, W+Prob k=1
     silenced: int | None = None  # an ensemble: neurons silenced by the region regularisation
+    cost: CostSummary | None = None  # events per query, SNN vs template (network.cost)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON of `evaluate --json` / `simulate --json` (without the spike counts).
@@ -347,6 +349,8 @@ class Evaluation:
         if self.modules is not None:
             out["modules"] = [m.to_dict() for m in self.modules]
             out["silenced_neurons"] = self.silenced
+        if self.cost is not None:
+            out["cost"] = self.cost.to_dict()
         return out
 
 
@@ -385,12 +389,13 @@ def evaluate_float(
         rasters=0 if _isolated(ckpt.config, state_isolation) else 1,
     )
     device = torch.device("cpu") if device is None else device
+    cost = None
     if cluster is None:
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
         network.progress = progress
-        run = network.run(
-            query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
-        )
+        spikes = query_spikes(query_images, query_place_ids, traversal, ckpt.config)
+        run = network.run(spikes, state_isolation=state_isolation)
+        cost = query_cost(spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query_images)
     else:
         run = float_runs_on_cluster(
             ckpt.weights,
@@ -427,6 +432,7 @@ def evaluate_float(
         if layout is None
         else module_accuracies(scores["wprob"], reference_ids, query_place_ids, layout, options.tolerance),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
+        cost=None if cost is None else cost.summary(),
     )
 
 
@@ -492,6 +498,9 @@ def evaluate_fixed_point(
         saturations=run.saturations,
         max_current=run.max_current,
         winner_agreement=agreement,
+        cost=query_cost(
+            spikes, model.weight_mantissa.shape[1], places=len(model.reference_place_ids), images=query_images
+        ).summary(),
     )
 
 
