@@ -135,3 +135,22 @@ def test_integer_simulator_reference_stepper_and_onnx_decide_alike(make_model, t
     for q, steps in enumerate(decisions[0].steps):
         truncated = integer.run(spikes[q : q + 1, :steps]).counts.numpy()
         assert np.array_equal(truncated[0], decisions[0].counts[q])
+
+
+@pytest.mark.usefixtures("one_thread")
+def test_the_float_network_stopped_at_t_counts_what_its_early_decision_counts(small_config):
+    """Float path: the decision from the recorded raster equals running only the first T_q steps."""
+    from vprsnn_export.network.dynamics import FloatNetwork
+
+    rng = np.random.default_rng(5)
+    cfg = small_config(16, 6)
+    network = FloatNetwork.from_arrays(
+        rng.random((16, 6)).astype(np.float32), np.full(6, 1.5, np.float32), cfg, torch.device("cpu")
+    )
+    spikes = torch.from_numpy((rng.random((5, 20, 16)) < 0.3).astype(np.uint8))
+    run = network.run(spikes, record=True)
+    assignment = standard_assignment(rng.integers(0, 4, (6, 3)))
+    decision = early_decision(run.raster.numpy(), assignment, 6, EarlyConfig(margin=True, spikes=4))
+    assert decision.steps.min() < 20
+    for q, steps in enumerate(decision.steps):
+        assert np.array_equal(network.run(spikes[q : q + 1, :steps]).counts.numpy()[0], decision.counts[q])

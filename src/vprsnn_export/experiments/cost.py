@@ -8,8 +8,9 @@ its query traversal, every point runs the float network and reads it out like ``
 * ``T=300`` (the network's own window): every query runs all T steps;
 * ``margin``, ``spikes K``, ``margin + spikes K``: the early decision (:mod:`vprsnn_export.readout.early`) on the
   same runs (the counts of the first T_q steps, from the recorded raster);
-* ``T=T'``: a shorter window, the rate scaled by T / T' to keep the expected input spikes (inference only:
-  the same weights and thresholds, calibrated again at T');
+* ``T=T'``: a shorter window, the rate scaled by T / T' to keep the expected input spikes, and ``T=T', rate r``
+  with the rate unchanged (input spikes and events cut by T' / T); inference only: the same weights and
+  thresholds, calibrated again at T';
 * ``cosine``: the template matcher on the same images (nnz(x_q) x places multiply-adds).
 """
 
@@ -36,7 +37,7 @@ from vprsnn_export.runtime.evaluation import ReadoutOptions, ensemble_layout, ne
 from vprsnn_export.trainer.calibrate import calibrate
 
 from .common import Settings, consecutive_networks, provenance, summarise_rows
-from .plots import save_figure
+from .plots import outside_legend, save_figure
 
 NAME = "cost"
 DESCRIPTION = (
@@ -112,21 +113,23 @@ def early_points(ckpt: Checkpoint, data: Dataset, query: str, network: FloatNetw
 
 
 def window_points(ckpt: Checkpoint, data: Dataset, query: str, device: torch.device) -> list[dict]:
-    """Shorter windows T' with the rate scaled by T / T': the same network calibrated and queried at T'."""
+    """Shorter windows T': the rate scaled by T / T' (the input spikes kept) and the rate unchanged (the input spikes
+    cut by T' / T); the same network, calibrated and queried at T'."""
     cfg = ckpt.config
     timesteps, rate = cfg.encoder.timesteps, cfg.encoder.rate_scale
     images = data.traversal(query)
     references = {name: data.traversal(name) for name in ckpt.reference_traversals}
     out = []
-    for window in sorted({max(1, round(timesteps * f)) for f in WINDOW_FRACTIONS}, reverse=True):
-        scaled = rate * timesteps / window
+    windows = sorted({max(1, round(timesteps * f)) for f in WINDOW_FRACTIONS}, reverse=True)
+    for window, scaled in [(w, rate * timesteps / w) for w in windows] + [(w, rate) for w in windows]:
+        name = f"T={window}" if scaled != rate else f"T={window}, rate {rate:g}"
         short: Config = cfg.replace(**{"encoder.timesteps": window, "encoder.rate_scale": scaled})
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, short, device)
         calibration = calibrate(network.counts, references, data.place_ids, short)
         spikes = query_spikes(images, data.place_ids, query, short)
         counts = network.counts(spikes).numpy()
         cost = query_cost(spikes, int(ckpt.weights.shape[1]), places=len(ckpt.reference_place_ids), images=images)
-        out.append(point(f"T={window}", window, scaled, cost.summary(), readout(ckpt, calibration, counts, data)))
+        out.append(point(name, window, scaled, cost.summary(), readout(ckpt, calibration, counts, data)))
     return out
 
 
@@ -225,6 +228,15 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     )
 
 
+def marker_of(name: str) -> str:
+    """The template a star, scaled windows circles, unscaled windows triangles, early rules squares."""
+    if name == "cosine":
+        return "*"
+    if name.startswith("T="):
+        return "^" if "rate" in name else "o"
+    return "s"
+
+
 def plot(points: list[dict], path: Path) -> Path:
     """W+Prob accuracy at k = 1 and 5 versus synaptic events per query (log x), the template as a star."""
     import matplotlib
@@ -239,17 +251,18 @@ def plot(points: list[dict], path: Path) -> Path:
             if value is None:
                 continue
             x, y = p["cost"]["synaptic_events"], 100 * value["mean"]
-            marker = "*" if p["point"] == "cosine" else ("o" if p["point"].startswith("T=") else "s")
+            marker = marker_of(p["point"])
             ax.scatter(x, y, color=colour, marker=marker, s=120 if marker == "*" else 40)
             ax.annotate(p["point"], (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
         ax.scatter([], [], color=colour, label=f"k={k}")
-    ax.scatter([], [], color="grey", marker="o", label="window T (rate scaled)")
+    ax.scatter([], [], color="grey", marker="o", label="window T (rate scaled: the input spikes kept)")
+    ax.scatter([], [], color="grey", marker="^", label="window T (rate unchanged)")
     ax.scatter([], [], color="grey", marker="s", label="early decision")
     ax.scatter([], [], color="grey", marker="*", s=120, label="template (cosine; x: multiply-adds)")
     ax.set_xscale("log")
     ax.set_xlabel("synaptic events per query (template: multiply-adds)")
     ax.set_ylabel("W+Prob accuracy %")
     ax.set_title("Accuracy versus events per query")
-    ax.legend(fontsize=8)
+    outside_legend(ax)
     ax.grid(True, alpha=0.3)
     return save_figure(fig, path)
