@@ -129,3 +129,21 @@ def test_module_size_trains_an_ensemble_whose_modules_are_the_regions_trained_al
     assert np.array_equal(whole.weights[:, 16:], last.weights)
     assert np.array_equal(whole.thresholds[16:], last.thresholds)
     assert len(whole.history[0]["module_active_neurons"]) == 3
+
+
+def test_a_checkpoint_with_the_early_decision_on_stops_its_queries_early(trained, tmp_path, capsys):
+    """config.early in the checkpoint: evaluate reads out the counts of the steps run and counts only those steps."""
+    from dataclasses import replace
+
+    from vprsnn_export.io.checkpoint import save_checkpoint
+
+    ckpt = load_checkpoint(trained)
+    early = tmp_path / "early.npz"
+    save_checkpoint(early, replace(ckpt, config=ckpt.config.replace(**{"early.spikes": 5})))
+    assert main(["evaluate", str(trained), "--query", "winter", "--json", "--quiet"]) == 0
+    full = json.loads(capsys.readouterr().out)
+    assert main(["evaluate", str(early), "--query", "winter", "--json", "--quiet"]) == 0
+    stopped = json.loads(capsys.readouterr().out)
+    assert stopped["config"]["early"] == {"margin": False, "spikes": 5} and "early" not in full["config"]
+    assert 5 <= stopped["cost"]["steps"] < full["cost"]["steps"] == 100
+    assert stopped["cost"]["synaptic_events"] < full["cost"]["synaptic_events"]

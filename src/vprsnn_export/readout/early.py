@@ -28,9 +28,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
-from vprsnn_export.config import EarlyConfig
+from vprsnn_export.config import Config, EarlyConfig, wta_group
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.network.runs import SpikeRun
+
+from .assignment import standard_assignment
+from .regions import module_layout, regularised_calibration
 
 #: Queries whose (steps, places) vote trajectories are held at once.
 CHUNK = 16
@@ -144,3 +149,30 @@ def early_in_chunks(
     if not parts:
         return EarlyDecision(np.zeros(0, np.int64), np.zeros((0, np.asarray(assignment).shape[0]), np.int64))
     return EarlyDecision(np.concatenate([p.steps for p in parts]), np.concatenate([p.counts for p in parts]))
+
+
+def vote_matrix(calibration: np.ndarray, cfg: Config) -> np.ndarray:
+    """A = Standard assignment of the readout's S~ (an ensemble's region regularisation applied, silenced rows 0)."""
+    sr = np.asarray(calibration)
+    if cfg.train.module_size > 0:
+        sr = regularised_calibration(sr, module_layout(cfg, sr.shape[1]))[0]
+    return standard_assignment(sr)
+
+
+def early_run(
+    run: Callable[..., SpikeRun], spikes: torch.Tensor, calibration: np.ndarray, cfg: Config, chunk: int = 64
+) -> EarlyDecision | None:
+    """``config.early``'s decision for the queries ``spikes`` on a backend (``run(part, record=True)``), chunk by
+    chunk (the rasters of a whole route need not fit in memory); None when the rule is off."""
+    if is_off(cfg.early):
+        return None
+    votes = vote_matrix(calibration, cfg)
+    group = wta_group(cfg, votes.shape[0])
+
+    def raster(start: int, stop: int) -> np.ndarray:
+        recorded = run(spikes[start:stop], record=True).raster
+        if recorded is None:
+            raise InvalidValueError("the early decision needs the backend's raster (record=True)")
+        return recorded.numpy()
+
+    return early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early, chunk)

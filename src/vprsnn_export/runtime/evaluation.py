@@ -26,6 +26,7 @@ from vprsnn_export.readout.baseline import (
     sad_distances,
     sad_distribution,
 )
+from vprsnn_export.readout.early import early_run
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
 from vprsnn_export.readout.regions import (
     ModuleAccuracy,
@@ -395,7 +396,13 @@ def evaluate_float(
         network.progress = progress
         spikes = query_spikes(query_images, query_place_ids, traversal, ckpt.config)
         run = network.run(spikes, state_isolation=state_isolation)
-        cost = query_cost(spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query_images)
+        early = early_run(network.run, spikes, ckpt.calibration, ckpt.config)  # None unless config.early is on
+        if early is not None:
+            run = replace(run, counts=torch.from_numpy(early.counts))
+        steps = None if early is None else early.steps
+        cost = query_cost(
+            spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query_images, steps=steps
+        )
     else:
         run = float_runs_on_cluster(
             ckpt.weights,
@@ -474,8 +481,10 @@ def evaluate_fixed_point(
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None
-    run = IntegerNetwork(model, device, progress=progress).run(spikes, record=compare, state_isolation=state_isolation)
-    counts = run.counts.numpy()
+    integer = IntegerNetwork(model, device, progress=progress)
+    run = integer.run(spikes, record=compare, state_isolation=state_isolation)
+    early = early_run(integer.run, spikes, model.calibration, model.config)  # None unless config.early is on
+    counts = run.counts.numpy() if early is None else early.counts
     rows = []
     layout = ensemble_layout(model.config, len(model.reference_place_ids))
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
@@ -499,7 +508,11 @@ def evaluate_fixed_point(
         max_current=run.max_current,
         winner_agreement=agreement,
         cost=query_cost(
-            spikes, model.weight_mantissa.shape[1], places=len(model.reference_place_ids), images=query_images
+            spikes,
+            model.weight_mantissa.shape[1],
+            places=len(model.reference_place_ids),
+            images=query_images,
+            steps=None if early is None else early.steps,
         ).summary(),
     )
 
