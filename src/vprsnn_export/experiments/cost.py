@@ -29,11 +29,13 @@ from vprsnn_export.device import resolve_device
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.network.modules import module_count
 from vprsnn_export.readout.assignment import standard_assignment
 from vprsnn_export.readout.baseline import cosine_similarities
 from vprsnn_export.readout.early import EarlyDecision, early_decision
 from vprsnn_export.readout.regions import regularised_calibration
 from vprsnn_export.runtime.evaluation import ReadoutOptions, ensemble_layout, nearest_neighbour_rows, readout_rows
+from vprsnn_export.targets.loihi_budget import core_budget, query_estimate
 from vprsnn_export.trainer.calibrate import calibrate
 
 from .common import Settings, consecutive_networks, provenance, summarise_rows
@@ -48,6 +50,8 @@ KS = (1, 5, 10)
 WINDOW_FRACTIONS = (2 / 3, 1 / 2, 1 / 3, 1 / 6)  # of the network's T: 200, 150, 100, 50 at T = 300
 SPIKE_FRACTIONS = (1 / 30, 1 / 12, 1 / 6)  # output spikes K as a share of T: 10, 25, 50 at T = 300
 CHUNK = 64  # queries whose rasters are recorded at once
+ESTIMATE_BITS = 8  # the weight width of the Loihi core budget behind the estimate (k neurons per core)
+ESTIMATES = ("energy_uj", "latency_ms")
 
 
 def networks(settings: Settings):
@@ -154,6 +158,15 @@ def run(settings: Settings) -> dict:
         network.progress = settings.progress
         points = early_points(ckpt, data, settings.query, network)
         points += window_points(ckpt, data, settings.query, device)
+        budget = core_budget(
+            module_count(len(ckpt.reference_place_ids), ckpt.config.train.module_size),
+            ckpt.config.network.n_neurons,
+            ckpt.config.network.n_inputs,
+            ESTIMATE_BITS,
+        )
+        for p in points:
+            estimate = query_estimate(CostSummary.from_dict(p["cost"]), budget)
+            p["loihi_estimate"] = {"energy_uj": estimate.energy_uj, "latency_ms": estimate.latency_ms}
         points.append(template_point(ckpt, data, settings.query, points[0]["cost"]["template_macs"]))
         per_network.append(
             {
@@ -184,6 +197,7 @@ def summary(per_network: list[dict]) -> list[dict]:
             cost = {"synaptic_events": float(np.mean([p["template_macs"] for p in points])), "steps": 1.0}
         else:
             cost = {key: float(np.mean([p["cost"][key] for p in points])) for key in points[0]["cost"]}
+            cost.update({key: float(np.mean([p["loihi_estimate"][key] for p in points])) for key in ESTIMATES})
         out.append({"point": name, "cost": cost, "rows": rows})
     return out
 
@@ -198,9 +212,9 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     head = (
         "| point | steps | input spikes | synaptic events (template: multiply-adds) | x template | "
         + " | ".join(f"acc k={k} %" for k in KS)
-        + " | R@100P k=5 % |"
+        + f" | R@100P k=5 % | Loihi 1 estimate ({ESTIMATE_BITS}-bit): uJ, ms |"
     )
-    lines = [head, "|" + "---|" * (5 + len(KS) + 1)]
+    lines = [head, "|" + "---|" * (5 + len(KS) + 2)]
     template = next(p["cost"]["synaptic_events"] for p in points if p["point"] == "cosine")
     for p in points:
         cost = p["cost"]
@@ -216,6 +230,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             cells.append("-" if value is None else f"{100 * value['mean']:.1f} ± {100 * value['std']:.1f}")
         r100 = _metric(p["rows"], 5, "r_at_100p")
         cells.append("-" if r100 is None else f"{100 * r100['mean']:.1f} ± {100 * r100['std']:.1f}")
+        cells.append(f"{cost['energy_uj']:,.0f}, {cost['latency_ms']:.2f}" if "energy_uj" in cost else "-")
         lines.append("| " + " | ".join(cells) + " |")
     nets = ", ".join(
         f"{n['network']} ({n['places']} places, {n['neurons']} neurons, WTA over the {n['wta_scope']})"
@@ -224,7 +239,10 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     return (
         f"Networks: {nets}. Mean over networks (± std where there are several); synaptic events = input spikes "
         "x every neuron (each input reaches all M n neurons); the template's cost is nnz(query) x places "
-        "multiply-adds.\n\n" + "\n".join(lines) + f"\n\n![accuracy versus events]({stem}.png)\n"
+        "multiply-adds. The Loihi 1 column is an **estimate** from published pre-silicon per-operation figures "
+        "(docs/targets.md section 2.6: 23.6 pJ per synaptic op, 81 pJ per neuron update; dynamic energy only).\n\n"
+        + "\n".join(lines)
+        + f"\n\n![accuracy versus events]({stem}.png)\n"
     )
 
 
