@@ -147,3 +147,15 @@ def test_a_checkpoint_with_the_early_decision_on_stops_its_queries_early(trained
     assert stopped["config"]["early"] == {"margin": False, "spikes": 5} and "early" not in full["config"]
     assert 5 <= stopped["cost"]["steps"] < full["cost"]["steps"] == 100
     assert stopped["cost"]["synaptic_events"] < full["cost"]["synaptic_events"]
+
+
+def test_the_early_decision_refuses_runs_without_state_isolation(trained, tmp_path, capsys):
+    from dataclasses import replace
+
+    from vprsnn_export.io.checkpoint import save_checkpoint
+
+    ckpt = load_checkpoint(trained)
+    early = tmp_path / "early.npz"
+    save_checkpoint(early, replace(ckpt, config=ckpt.config.replace(**{"early.margin": True})))
+    assert main(["evaluate", str(early), "--query", "winter", "--no-state-isolation", "--quiet"]) == 2
+    assert "state isolation" in capsys.readouterr().err

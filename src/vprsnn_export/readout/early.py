@@ -160,12 +160,21 @@ def vote_matrix(calibration: np.ndarray, cfg: Config) -> np.ndarray:
 
 
 def early_run(
-    run: Callable[..., SpikeRun], spikes: torch.Tensor, calibration: np.ndarray, cfg: Config, chunk: int = 64
+    run: Callable[..., SpikeRun],
+    spikes: torch.Tensor,
+    calibration: np.ndarray,
+    cfg: Config,
+    chunk: int = 64,
+    *,
+    isolated: bool | None = None,
 ) -> EarlyDecision | None:
     """``config.early``'s decision for the queries ``spikes`` on a backend (``run(part, record=True)``), chunk by
-    chunk (the rasters of a whole route need not fit in memory); None when the rule is off."""
+    chunk (the rasters of a whole route need not fit in memory); None when the rule is off. ``isolated``: whether
+    the run keeps state isolation (None: the config's); the rule needs it."""
     if is_off(cfg.early):
         return None
+    if not (cfg.network.state_isolation if isolated is None else isolated):
+        raise InvalidValueError("config.early needs state isolation (each query run on its own from V = 0)")
     votes = vote_matrix(calibration, cfg)
     group = wta_group(cfg, votes.shape[0])
 

@@ -26,7 +26,7 @@ from vprsnn_export.readout.baseline import (
     sad_distances,
     sad_distribution,
 )
-from vprsnn_export.readout.early import early_run
+from vprsnn_export.readout.early import early_run, is_off
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
 from vprsnn_export.readout.regions import (
     ModuleAccuracy,
@@ -391,12 +391,15 @@ def evaluate_float(
     )
     device = torch.device("cpu") if device is None else device
     cost = None
+    if cluster is not None and not is_off(ckpt.config.early):
+        raise InvalidValueError("config.early (the early decision) runs on this machine: not with --cluster")
     if cluster is None:
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
         network.progress = progress
         spikes = query_spikes(query_images, query_place_ids, traversal, ckpt.config)
         run = network.run(spikes, state_isolation=state_isolation)
-        early = early_run(network.run, spikes, ckpt.calibration, ckpt.config)  # None unless config.early is on
+        isolated = _isolated(ckpt.config, state_isolation)
+        early = early_run(network.run, spikes, ckpt.calibration, ckpt.config, isolated=isolated)  # None: rule off
         if early is not None:
             run = replace(run, counts=torch.from_numpy(early.counts))
         steps = None if early is None else early.steps
@@ -483,7 +486,8 @@ def evaluate_fixed_point(
     compare = float_checkpoint is not None
     integer = IntegerNetwork(model, device, progress=progress)
     run = integer.run(spikes, record=compare, state_isolation=state_isolation)
-    early = early_run(integer.run, spikes, model.calibration, model.config)  # None unless config.early is on
+    isolated = _isolated(model.config, state_isolation)
+    early = early_run(integer.run, spikes, model.calibration, model.config, isolated=isolated)  # None: rule off
     counts = run.counts.numpy() if early is None else early.counts
     rows = []
     layout = ensemble_layout(model.config, len(model.reference_place_ids))
