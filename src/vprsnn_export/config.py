@@ -122,6 +122,24 @@ class AssignmentConfig:
 
 
 @dataclass(frozen=True)
+class EarlyConfig:
+    """Early decision (readout/early.py, docs/results/cost.md): stop a query's simulation when its outcome is settled.
+
+    ``margin``: stop at the first step t where the leading place's votes exceed the second's by more than the
+    most the remaining T - t steps can add to any place. ``spikes`` > 0: stop once that many output spikes
+    have been emitted. Both off (the default): every query runs all T steps.
+    """
+
+    margin: bool = False
+    spikes: int = 0
+
+
+#: Sections that are written into a file only when they differ from their defaults, so that files written
+#: before they existed (and files that do not use them) stay byte-identical; a missing section reads as its defaults.
+OPTIONAL_SECTIONS = ("early",)
+
+
+@dataclass(frozen=True)
 class Config:
     seed: int = 42
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
@@ -131,6 +149,7 @@ class Config:
     homeostasis: HomeostasisConfig = field(default_factory=HomeostasisConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     assignment: AssignmentConfig = field(default_factory=AssignmentConfig)
+    early: EarlyConfig = field(default_factory=EarlyConfig)
 
     def __post_init__(self) -> None:
         for section in fields(self):
@@ -167,7 +186,12 @@ class Config:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        """Every section, except an :data:`OPTIONAL_SECTIONS` one at its defaults (left out, read back as them)."""
+        data = dataclasses.asdict(self)
+        for name in OPTIONAL_SECTIONS:
+            if getattr(self, name) == type(getattr(self, name))():
+                del data[name]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Config:
@@ -182,7 +206,7 @@ class Config:
 
     def replace(self, **dotted: Any) -> Config:
         """Copy with overrides given as dotted names: ``cfg.replace(**{"encoder.timesteps": 150})``."""
-        data = self.to_dict()
+        data = dataclasses.asdict(self)
         for name, value in dotted.items():
             section, _, key = name.rpartition(".")
             target = data
@@ -225,6 +249,7 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "assignment.gamma": (0.0, 1.0, True, True),
     "assignment.hyperactive_share": (0.0, 1.0, True, True),
     "assignment.outside_weight": (0.0, 1.0, True, True),
+    "early.spikes": (0, 100_000_000, True, True),
 }
 
 

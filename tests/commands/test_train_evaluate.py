@@ -55,6 +55,11 @@ def test_evaluate_json_beats_chance_by_a_wide_margin(trained, capsys):
     for row in payload["results"]:
         assert row["n_queries"] == 40
         assert 0 <= row["r_at_100p"] <= row["accuracy"] + 1e-12
+    cost = payload["cost"]  # events per query: every input spike reaches all 100 neurons for all 100 steps
+    assert cost["queries"] == 40 and cost["steps"] == 100 and cost["neuron_updates"] == 100 * 100
+    assert cost["input_spikes"] > 0 and cost["synaptic_events"] == pytest.approx(100 * cost["input_spikes"])
+    assert 0 < cost["template_macs"] <= 40 * cost["template_weights"] / 40
+    assert cost["snn_weights"] == 100 * cost["template_weights"] / 40
 
 
 def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
@@ -83,8 +88,9 @@ def test_same_seed_gives_identical_checkpoint_weights(trained, tmp_path):
 
 def test_evaluate_table_output(trained, capsys):
     assert main(["evaluate", str(trained), "--query", "winter", "--quiet", "--baseline"]) == 0
-    out = capsys.readouterr().out
-    assert "wprob" in out and "sad" in out and "R@100P" in out
+    captured = capsys.readouterr()
+    assert "wprob" in captured.out and "sad" in captured.out and "R@100P" in captured.out
+    assert "events per query: SNN" in captured.err and "vs template" in captured.err
 
 
 @pytest.mark.parametrize(
@@ -123,3 +129,33 @@ def test_module_size_trains_an_ensemble_whose_modules_are_the_regions_trained_al
     assert np.array_equal(whole.weights[:, 16:], last.weights)
     assert np.array_equal(whole.thresholds[16:], last.thresholds)
     assert len(whole.history[0]["module_active_neurons"]) == 3
+
+
+def test_a_checkpoint_with_the_early_decision_on_stops_its_queries_early(trained, tmp_path, capsys):
+    """config.early in the checkpoint: evaluate reads out the counts of the steps run and counts only those steps."""
+    from dataclasses import replace
+
+    from vprsnn_export.io.checkpoint import save_checkpoint
+
+    ckpt = load_checkpoint(trained)
+    early = tmp_path / "early.npz"
+    save_checkpoint(early, replace(ckpt, config=ckpt.config.replace(**{"early.spikes": 5})))
+    assert main(["evaluate", str(trained), "--query", "winter", "--json", "--quiet"]) == 0
+    full = json.loads(capsys.readouterr().out)
+    assert main(["evaluate", str(early), "--query", "winter", "--json", "--quiet"]) == 0
+    stopped = json.loads(capsys.readouterr().out)
+    assert stopped["config"]["early"] == {"margin": False, "spikes": 5} and "early" not in full["config"]
+    assert 5 <= stopped["cost"]["steps"] < full["cost"]["steps"] == 100
+    assert stopped["cost"]["synaptic_events"] < full["cost"]["synaptic_events"]
+
+
+def test_the_early_decision_refuses_runs_without_state_isolation(trained, tmp_path, capsys):
+    from dataclasses import replace
+
+    from vprsnn_export.io.checkpoint import save_checkpoint
+
+    ckpt = load_checkpoint(trained)
+    early = tmp_path / "early.npz"
+    save_checkpoint(early, replace(ckpt, config=ckpt.config.replace(**{"early.margin": True})))
+    assert main(["evaluate", str(early), "--query", "winter", "--no-state-isolation", "--quiet"]) == 2
+    assert "state isolation" in capsys.readouterr().err

@@ -62,6 +62,7 @@ def test_report_json_schema(passed, checkpoint):
     (run,) = data["runs"]
     assert run["config"]["encoder"]["timesteps"] == 40 and run["checkpoint"] == str(checkpoint)
     assert [r["bits"] for r in run["bits"]] == [8, 3]
+    assert run["float"]["cost"]["steps"] == 40 and run["float"]["cost"]["synaptic_events"] > 0
     for result in run["bits"]:
         cross = result["cross_implementation"]
         assert cross["passed"] and cross["reference_queries"] == 1

@@ -77,3 +77,14 @@ def test_the_command_line_reports_one_line_and_exit_2(capsys, tmp_path):
 def test_a_name_setting_that_is_not_text_is_refused(key, value):
     with pytest.raises(InvalidValueError, match=key.split(".")[1]):
         Config().replace(**{key: value})
+
+
+def test_the_early_section_is_written_only_when_it_is_used():
+    """Files that do not use the early decision stay byte-identical: the section at its defaults is left out."""
+    from vprsnn_export.config import Config
+
+    plain = Config()
+    assert "early" not in plain.to_dict() and Config.from_dict(plain.to_dict()) == plain
+    early = plain.replace(**{"early.margin": True, "early.spikes": 40})
+    assert early.to_dict()["early"] == {"margin": True, "spikes": 40}
+    assert Config.from_dict(early.to_dict()) == early

@@ -216,7 +216,9 @@ def test_quantize_and_simulate_commands(tmp_path, capsys):
     assert {"accuracy", "r_at_100p", "auc_pr", "n_queries"} <= set(result["results"][0])
     assert result["winner_agreement"]["all_steps"] > 0.9
     assert main(["evaluate", str(source), "--query", "winter", "--k", "1,3", "--json", "--quiet"]) == 0
-    float_rows = json.loads(capsys.readouterr().out)["results"]
+    evaluated = json.loads(capsys.readouterr().out)
+    float_rows = evaluated["results"]
+    assert result["cost"] == evaluated["cost"]  # the same spike trains: the same events per query
     assert [(r["strategy"], r["k"]) for r in float_rows] == [
         (r["strategy"], r["k"]) for r in result["results"] if r["calibration"] == "deployed"
     ]

@@ -125,4 +125,6 @@ def run(args: argparse.Namespace) -> int:
             f"{100 * stats.multi_candidate_step_fraction:.1f} % of steps have more than one",
             file=sys.stderr,
         )
+        if result.cost is not None:
+            print(result.cost.line(), file=sys.stderr)
     return 0

@@ -75,6 +75,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="experiment route: the module sizes to measure, the first one with every seed (default 100,50,200)",
     )
     parser.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="experiment cost: measure this trained checkpoint on its own places (repeatable) instead of training",
+    )
+    parser.add_argument(
         "--threads", type=integer, default=None, metavar="N", help="CPU threads (default: OMP_NUM_THREADS, else 1)"
     )
     parser.add_argument(
@@ -129,6 +136,10 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         extra["module_sizes"] = parse_int_list(args.module_sizes, "--module-sizes")
         if len(set(extra["module_sizes"])) != len(extra["module_sizes"]):
             raise InvalidValueError(f"--module-sizes names a size twice: {args.module_sizes!r}")
+    if args.checkpoint:
+        if args.name != "cost":
+            raise InvalidValueError(f"--checkpoint applies only to experiment cost, not {args.name!r}")
+        extra["checkpoints"] = tuple(args.checkpoint)
     return replace(settings, **extra)
 
 

@@ -205,6 +205,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"{target}: {', '.join(str(f.path) for f in files)}")
             if target in result.consumers:
                 print(f"  {result.consumers[target]}")
+        for estimate in (result.cost or {}).get("estimates", []):
+            print(
+                f"\nper query on {label}: {estimate['synaptic_events']:,.0f} synaptic events, {estimate['steps']:.0f} "
+                f"steps; {estimate['chip']} estimate {estimate['energy_uj']:.1f} uJ, {estimate['latency_ms']:.2f} ms"
+            )
         if result.checks is not None:
             print(f"\nchecks on {label}:")
             print(format_table([row.to_dict() for row in result.checks.rows], CHECK_COLUMNS))

@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
             "of steps have more than one",
             file=sys.stderr,
         )
+        if result.cost is not None:
+            print(result.cost.line(), file=sys.stderr)
         if result.winner_agreement is not None:
             agreement = result.winner_agreement
             print(

@@ -333,6 +333,9 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(format_table(verdict_rows(report), TABLE_COLUMNS))
+        for run in report.runs:
+            if run.float.cost is not None:
+                print(f"{run.label}: {run.float.cost.line()}", file=sys.stderr)
         print(
             f"\n{'PASS' if report.passed else 'FAIL'}: {report.n_passed} of {len(runs)} network(s) "
             f"pass every check; report: {written['html']}"

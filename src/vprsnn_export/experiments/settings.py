@@ -48,6 +48,7 @@ class Settings:
     preset: str = "paper"  # the paper's experiments reproduce the paper's configuration
     module_sizes: tuple[int, ...] = ()  # experiment route's module sizes (empty: its default sizes)
     cluster: Cluster | None = None  # train every network's modules on this Ray cluster (--cluster)
+    checkpoints: tuple[str, ...] = ()  # experiment cost: measure these trained checkpoints (--checkpoint)
 
     @classmethod
     def quick_settings(cls, **changes: Any) -> Settings:

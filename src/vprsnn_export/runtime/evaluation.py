@@ -5,7 +5,7 @@ and add the no-learning baselines and spike statistics."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -15,14 +15,17 @@ from vprsnn_export.arguments import check_place_ids, require_type
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
 from vprsnn_export.readout.baseline import (
     cosine_similarities,
     sad_distances,
     sad_distribution,
 )
+from vprsnn_export.readout.early import early_run, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
 from vprsnn_export.readout.scoring import (
@@ -80,6 +83,7 @@ class Evaluation:
     winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
     modules: list[ModuleAccuracy] | None = field(default=None)  # an ensemble: per module, W+Prob k=1
     silenced: int | None = None  # an ensemble: neurons silenced by the region regularisation
+    cost: CostSummary | None = None  # events per query, SNN vs template (network.cost)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON of `evaluate --json` / `simulate --json` (without the spike counts).
@@ -91,6 +95,8 @@ class Evaluation:
         if self.modules is not None:
             out["modules"] = [m.to_dict() for m in self.modules]
             out["silenced_neurons"] = self.silenced
+        if self.cost is not None:
+            out["cost"] = self.cost.to_dict()
         return out
 
 
@@ -129,11 +135,21 @@ def evaluate_float(
         rasters=0 if _isolated(ckpt.config, state_isolation) else 1,
     )
     device = torch.device("cpu") if device is None else device
+    cost = None
+    if cluster is not None and not is_off(ckpt.config.early):
+        raise InvalidValueError("config.early (the early decision) runs on this machine: not with --cluster")
     if cluster is None:
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
         network.progress = progress
-        run = network.run(
-            query_spikes(query_images, query_place_ids, traversal, ckpt.config), state_isolation=state_isolation
+        spikes = query_spikes(query_images, query_place_ids, traversal, ckpt.config)
+        run = network.run(spikes, state_isolation=state_isolation)
+        isolated = _isolated(ckpt.config, state_isolation)
+        early = early_run(network.run, spikes, ckpt.calibration, ckpt.config, isolated=isolated)  # None: rule off
+        if early is not None:
+            run = replace(run, counts=torch.from_numpy(early.counts))
+        steps = None if early is None else early.steps
+        cost = query_cost(
+            spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query_images, steps=steps
         )
     else:
         run = float_runs_on_cluster(
@@ -170,6 +186,7 @@ def evaluate_float(
             scores[SEQUENCE_STRATEGY], reference_ids, query_place_ids, layout.regions, options.tolerance
         ),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
+        cost=None if cost is None else cost.summary(),
     )
 
 
@@ -208,8 +225,11 @@ def evaluate_fixed_point(
     device = torch.device("cpu") if device is None else device
     spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
     compare = float_checkpoint is not None
-    run = IntegerNetwork(model, device, progress=progress).run(spikes, record=compare, state_isolation=state_isolation)
-    counts = run.counts.numpy()
+    integer = IntegerNetwork(model, device, progress=progress)
+    run = integer.run(spikes, record=compare, state_isolation=state_isolation)
+    isolated = _isolated(model.config, state_isolation)
+    early = early_run(integer.run, spikes, model.calibration, model.config, isolated=isolated)  # None: rule off
+    counts = run.counts.numpy() if early is None else early.counts
     rows = []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
         readout = Readout.of(calibration, model.config, options)
@@ -230,6 +250,13 @@ def evaluate_fixed_point(
         saturations=run.saturations,
         max_current=run.max_current,
         winner_agreement=agreement,
+        cost=query_cost(
+            spikes,
+            model.weight_mantissa.shape[1],
+            places=len(model.reference_place_ids),
+            images=query_images,
+            steps=None if early is None else early.steps,
+        ).summary(),
     )
 
 

@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 from vprsnn_export.errors import VprError
 from vprsnn_export.export.model import QuantisationReport
 from vprsnn_export.io.serial import JsonDataclass, from_json_dict, json_options
+from vprsnn_export.network.cost import CostSummary
 from vprsnn_export.readout.metrics import METRICS, MetricRow, MetricValues, find_row
 from vprsnn_export.stats import MeanStd
 
@@ -247,6 +248,7 @@ class FloatResult(JsonDataclass):
     total_spikes: int
     pr_curves: Mapping[str, PrCurve]
     weights: WeightHistogram
+    cost: CostSummary | None = field(default=None, metadata=json_options(omit="none"))  # events per query
 
 
 @dataclass(frozen=True)

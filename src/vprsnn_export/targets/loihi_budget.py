@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.io.serial import JsonDataclass
+from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.modules import module_count
 
 
@@ -148,3 +151,99 @@ def model_budgets(model: FixedPointModel) -> list[CoreBudget]:
     group = model.config.network.n_neurons
     modules = module_count(len(model.reference_place_ids), model.config.train.module_size)
     return budget_table(modules, group, model.n_inputs, (model.bits,))
+
+
+@dataclass(frozen=True)
+class OperationCosts:
+    """Published per-operation energy and time of a chip (docs/targets.md, "Cost per query")."""
+
+    chip: str
+    synaptic_op_pj: float  # one synaptic event (an input spike reaching one neuron)
+    neuron_update_pj: float  # one neuron's state update in one step
+    synaptic_op_ns: float
+    neuron_update_ns: float
+    barrier_ns: float  # the step's end: every core waits for the others
+    source: str
+
+
+#: Davies et al. 2018, Table 2: pre-silicon figures (SDF and SPICE simulation at 0.75 V), not silicon measurements.
+#: Every neuron here integrates input on every step, so the *active* neuron update is charged; the synaptic op is
+#: the table's minimum energy and maximum time; the barrier is its 32-tile (one chip) value.
+LOIHI1_OPERATIONS = OperationCosts(
+    chip="Loihi 1",
+    synaptic_op_pj=23.6,
+    neuron_update_pj=81.0,
+    synaptic_op_ns=3.5,
+    neuron_update_ns=8.4,
+    barrier_ns=465.0,
+    source="Davies et al., Loihi: A Neuromorphic Manycore Processor with On-Chip Learning, IEEE Micro 38(1) 2018, "
+    "Table 2 (pre-silicon): 23.6 pJ per synaptic spike op (min), 3.5 ns (max); 81 pJ and 8.4 ns per active neuron "
+    "update; 113-465 ns mesh-wide barrier sync (1-32 tiles)",
+)
+
+
+@dataclass(frozen=True)
+class QueryEstimate(JsonDataclass):
+    """An *estimate* of one query's energy and latency on a chip from its per-operation figures (:func:`query_estimate`)."""
+
+    chip: str
+    steps: float
+    synaptic_events: float
+    neuron_updates: float
+    energy_uj: float
+    latency_ms: float
+    source: str
+
+
+def query_estimate(
+    cost: CostSummary, budget: CoreBudget, operations: OperationCosts = LOIHI1_OPERATIONS
+) -> QueryEstimate:
+    """Energy and latency per query from the mean counts of ``cost`` and the cores of ``budget``:
+
+        energy  = E e_syn + U e_neuron                                 (E synaptic events, U neuron updates)
+        latency = S k t_syn + T (k t_neuron + t_barrier)               (S input spikes, T steps, k neurons per core)
+
+    The cores run in parallel and each holds k neurons that every input reaches, so a step takes the time
+    its busiest core needs for its input spikes' k synaptic ops and its k neuron updates, then the barrier.
+    Static (leakage) power, spike routing and the host's input and readout are left out: an estimate, not a
+    measurement.
+    """
+    k = budget.neurons_per_core
+    energy_pj = cost.synaptic_events * operations.synaptic_op_pj + cost.neuron_updates * operations.neuron_update_pj
+    latency_ns = cost.input_spikes * k * operations.synaptic_op_ns + cost.steps * (
+        k * operations.neuron_update_ns + operations.barrier_ns
+    )
+    return QueryEstimate(
+        chip=operations.chip,
+        steps=cost.steps,
+        synaptic_events=cost.synaptic_events,
+        neuron_updates=cost.neuron_updates,
+        energy_uj=energy_pj * 1e-6,
+        latency_ms=latency_ns * 1e-6,
+        source=operations.source,
+    )
+
+
+def deployment_cost(model: FixedPointModel, spikes: object | None = None, label: str = "") -> dict[str, Any]:
+    """export.json's ``cost``: the steps, neuron updates and synaptic events per input spike of one query, and with
+    ``spikes`` (N, T, I) the measured means and the :func:`query_estimate` on each chip with published figures.
+
+        steps = T,  neuron updates = T J,  synaptic events = J per input spike   (J = M n: every input reaches all)
+    """
+    neurons = int(model.weight_mantissa.shape[1])
+    steps = model.config.encoder.timesteps
+    out: dict[str, Any] = {
+        "steps": steps,
+        "neuron_updates": steps * neurons,
+        "synaptic_events_per_input_spike": neurons,
+    }
+    if spikes is None:
+        return out
+    cost = query_cost(spikes, neurons, places=len(model.reference_place_ids)).summary()
+    budget = next(b for b in model_budgets(model) if b.chip == LOIHI1_OPERATIONS.chip)
+    return {
+        **out,
+        "measured_on": label,
+        "per_query": cost.to_dict(),
+        "estimates": [query_estimate(cost, budget).to_dict()],
+    }

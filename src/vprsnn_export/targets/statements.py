@@ -121,6 +121,9 @@ def loihi_statement(network: Checkpoint | FixedPointModel, model: FixedPointMode
             for budget in model_budgets(model)
         )
         + " (network.json resources; docs/targets.md §2.5)."
+        + f" Per query: {model.config.encoder.timesteps} steps, {model.weight_mantissa.shape[1]:,} synaptic events per "
+        "input spike; export.json's cost gives the events and an energy and latency estimate from published "
+        "per-operation figures (docs/targets.md, Cost per query)."
     )
 
 

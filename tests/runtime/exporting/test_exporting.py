@@ -78,3 +78,16 @@ def test_read_export_detects_a_changed_or_missing_file(model, tmp_path):
     (moved / MANIFEST_NAME).write_text(json.dumps({"files": 3}))
     with pytest.raises(ModelFileError, match="corrupt"):
         read_export(moved)
+
+
+def test_export_json_states_the_cost_per_query(model, tmp_path, capsys):
+    out = tmp_path / "deploy"
+    assert export(model, out, "--check", "--check-samples", "4") == 0
+    assert "Loihi 1 estimate" in capsys.readouterr().out
+    cost = json.loads((out / MANIFEST_NAME).read_text())["cost"]
+    assert cost["steps"] == 20 and cost["synaptic_events_per_input_spike"] == 16
+    per_query = cost["per_query"]
+    assert per_query["queries"] == 4 and per_query["synaptic_events"] == pytest.approx(16 * per_query["input_spikes"])
+    (estimate,) = cost["estimates"]
+    assert estimate["chip"] == "Loihi 1" and estimate["energy_uj"] > 0 and estimate["latency_ms"] > 0
+    assert read_export(out).cost == cost

@@ -22,6 +22,7 @@ from vprsnn_export.io.fileio import (
     sha256_file,
     staging_folder,
 )
+from vprsnn_export.targets.loihi_budget import deployment_cost
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 
 from .checks import ExportChecks, check_exports
@@ -50,6 +51,7 @@ class ExportResult:
     files: Mapping[str, tuple[WrittenFile, ...]]
     consumers: Mapping[str, str]
     checks: ExportChecks | None = None
+    cost: Mapping[str, Any] | None = None  # per query: steps, events, the chip estimates (targets.loihi_budget)
 
     @property
     def passed(self) -> bool:
@@ -72,6 +74,8 @@ class ExportResult:
         }
         if self.checks is not None:
             data["checks"] = self.checks.to_dict()
+        if self.cost is not None:
+            data["cost"] = dict(self.cost)
         return data
 
 
@@ -128,6 +132,7 @@ def export_and_check(
             },
             consumers=consumer_statements(source, model, targets, wta_node, inhibition),
             checks=checks,
+            cost=None if model is None else deployment_cost(model, spikes, spikes_label),
         )
         atomic_write_text(staging / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
         publish_folder(staging, out)
@@ -173,6 +178,7 @@ def read_export(folder: str | Path) -> ExportResult:
             kind=str(data["kind"]),
             files=files,
             consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
+            cost=data.get("cost"),
         )
     except (
         OSError,

@@ -21,6 +21,7 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.network.cost import query_cost
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.scoring import Readout
@@ -253,6 +254,7 @@ def verify_checkpoint(
             total_spikes=int(float_counts.sum()),
             pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
             weights=weight_histograms(ckpt.weights, options.per_neuron),
+            cost=query_cost(spikes, ckpt.weights.shape[1], places=len(ref_ids), images=query_images).summary(),
         ),
         bits=tuple(results),
         checkpoint=checkpoint,
