@@ -666,6 +666,76 @@ def write_manifests(folder: Path, names: Sequence[str]) -> None:
     (folder / "binary.csv").write_bytes(np.random.default_rng(2).integers(0, 256, 512, dtype=np.uint8).tobytes())
 
 
+class _RunsCode:
+    """Pickles as a call that ends the process with status 0: a ground truth that runs code reads as ``accepted``."""
+
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        return (exec, ("__import__('os')._exit(0)",))
+
+
+def _objects(items: Sequence[Any]) -> np.ndarray:
+    array = np.empty(len(items), dtype=object)
+    array[:] = list(items)
+    return array
+
+
+def ground_truth_variants(n: int) -> dict[str, tuple[str, Any]]:
+    """Defective ground truths of an n-frame (summer, winter) pair: name -> (file name, array or CSV text)."""
+    eye = np.eye(n, dtype=np.int64)
+    lists = [[q] for q in range(n)]
+    rows = np.empty((n, 2), dtype=object)
+    rows[:, 0] = list(range(n))
+    rows[:, 1] = [[q] for q in range(n)]
+    pairs = "query,reference\n" + "".join(f"{q},{q}\n" for q in range(n))
+    npy = "summer_winter_GT.npy"
+    csv = "summer_winter_GT.csv"
+    return {
+        "runs-code": (npy, _objects([_RunsCode(), *lists[1:]])),
+        "nan": (npy, np.where(eye > 0, 1.0, np.nan)),
+        "minus-one": (npy, eye - 2 * (1 - eye)),
+        "soft": (npy, eye * 0.9 + 0.1),
+        "strings": (npy, eye.astype(str)),
+        "complex": (npy, eye.astype(complex)),
+        "datetime": (npy, np.zeros((n, n), dtype="datetime64[s]")),
+        "list-float": (npy, _objects([[0.9], *lists[1:]])),
+        "list-bool": (npy, _objects([[True], *lists[1:]])),
+        "list-outside": (npy, _objects([[n], *lists[1:]])),
+        "rows-bool-query": (npy, np.concatenate([np.array([[True, [0]]], dtype=object), rows[1:]])),
+        "rows-repeated-query": (npy, np.concatenate([rows[:1], rows[:-1]])),
+        "square-shifted": (npy, np.roll(eye, 1, axis=0)),
+        "wrong-shape": (npy, np.eye(n + 3)),
+        "no-match": (npy, np.zeros((n, n))),
+        "npz": (npy, {"gt": eye}),
+        "truncated": (npy, b"\x93NUMPY\x01\x00"),
+        "csv-underscore": (csv, pairs.replace("1,1\n", "1,1_0\n")),
+        "csv-arabic": (csv, pairs.replace("1,1\n", "1,\u0661\n")),
+        "csv-float": (csv, pairs.replace("1,1\n", "1,1.0\n")),
+        "csv-columns": (csv, pairs.replace("query,reference", "q,r")),
+        "disagree": ("both", (eye, pairs.replace("1,1\n", "1,2\n"))),
+    }
+
+
+def write_ground_truths(fx: Path, images: Path, n: int) -> None:
+    """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
+    for name, (file_name, content) in ground_truth_variants(n).items():
+        folder = fx / f"gt_{name}"
+        folder.mkdir()
+        for traversal in ("summer", "winter"):
+            (folder / traversal).symlink_to(images / traversal, target_is_directory=True)
+        if file_name == "both":
+            np.save(folder / "summer_winter_GT.npy", content[0])
+            (folder / "summer_winter_GT.csv").write_text(content[1], encoding="utf-8")
+        elif isinstance(content, str):
+            (folder / file_name).write_text(content, encoding="utf-8")
+        elif isinstance(content, bytes):
+            (folder / file_name).write_bytes(content)
+        elif isinstance(content, dict):
+            with open(folder / file_name, "wb") as handle:
+                np.savez(handle, **content)
+        else:
+            np.save(folder / file_name, content, allow_pickle=True)
+
+
 def write_subsets(fx: Path) -> None:
     subsets = {
         "ok": "place_id\n0\n1\n2\n3\n4\n",
@@ -771,6 +841,10 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     shutil.copytree(fx / "nord", fx / "nörd 路径")
     write_subsets(fx)
     write_plain_files(fx)
+    only_images = fx / "nord_frames"
+    for traversal in ("summer", "winter"):
+        shutil.copytree(fx / "nord" / traversal, only_images / traversal)
+    write_ground_truths(fx, only_images, len(names))
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1556,6 +1630,18 @@ LEGAL_SETUP: dict[str, dict[str, Any]] = {
 }
 
 
+def ground_truth_cases() -> list[Case]:
+    """Malformed, mismatched and code-running ground truth beside a folder data set (issue 31): every
+    command that reads the pair refuses it with one line, and no pickle inside it runs."""
+    cases = []
+    for name in ground_truth_variants(12):
+        data = f"{{fx}}/gt_{name}"
+        two = ("train", "--data", data, "--reference", "summer,winter", *TINY, "--out", "t.npz")
+        cases.append(bad(f"train-gt-{name}", *two))
+        cases.append(bad(f"evaluate-gt-{name}", *EVAL, "--data", data, "--baseline"))
+    return cases
+
+
 def legal_cases() -> list[Case]:
     return [legal(f"legal-{name}", *sh(text), **LEGAL_SETUP.get(name, {})) for name, text in LEGAL_LINES.items()]
 
@@ -1578,6 +1664,7 @@ def all_cases() -> list[Case]:
         tamper_cases,
         report_cases,
         manifest_cases,
+        ground_truth_cases,
         output_cases,
         legal_cases,
     )

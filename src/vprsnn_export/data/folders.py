@@ -23,8 +23,6 @@ file's matches. A query with no match, or ground truth that is not close to the 
 
 from __future__ import annotations
 
-import csv
-import io
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,9 +35,9 @@ from ..config import PreprocessConfig
 from ..errors import DataError
 from ..io.fileio import sha256_bytes
 from .frames import image_files
+from .groundtruth import pair_ground_truth
 from .preprocess import normalise_resized, read_grey_image, resize_image
 
-GT_SUFFIXES = ("_GT.npy", "_GT.csv")
 MAX_WINDOW = 50  # places: ground truth further from the index alignment than this is not supported
 
 
@@ -62,56 +60,6 @@ def traversal_names(folder: Path) -> list[str]:
     return sorted(child.name for child in folder.iterdir() if child.is_dir())
 
 
-def ground_truth_matrix(path: Path, n_reference: int, n_query: int) -> np.ndarray:
-    """The file as a boolean matrix (n_reference, n_query); DataError on any defect."""
-    if path.suffix == ".csv":
-        return _csv_matrix(path, n_reference, n_query)
-    try:
-        raw = np.load(path, allow_pickle=True)  # VPR-Bench stores lists of indices as an object array
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read this ground truth ({exc})", path) from None
-    if raw.ndim == 2 and raw.dtype != object:
-        if raw.shape != (n_reference, n_query):
-            raise DataError(
-                f"ground-truth matrix has shape {raw.shape}, expected (references, queries) = {(n_reference, n_query)}",
-                path,
-            )
-        return np.asarray(raw) != 0
-    if raw.ndim == 1 and len(raw) == n_query:
-        matrix = np.zeros((n_reference, n_query), dtype=bool)
-        for query, matches in enumerate(raw):
-            indices = np.atleast_1d(np.asarray(matches, dtype=np.int64))
-            if indices.size and (indices.min() < 0 or indices.max() >= n_reference):
-                raise DataError(f"query {query} lists reference indices outside 0..{n_reference - 1}", path)
-            matrix[indices, query] = True
-        return matrix
-    raise DataError(
-        f"expected a (references, queries) matrix or one list of reference indices per query ({n_query}), "
-        f"got shape {raw.shape} dtype {raw.dtype}",
-        path,
-    )
-
-
-def _csv_matrix(path: Path, n_reference: int, n_query: int) -> np.ndarray:
-    try:
-        rows = list(csv.DictReader(io.StringIO(path.read_text(encoding="utf-8-sig"))))
-        pairs = np.asarray([(int(row["query"]), int(row["reference"])) for row in rows], dtype=np.int64)
-    except (OSError, UnicodeDecodeError, csv.Error, KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"expected a CSV with integer columns query,reference ({exc})", path) from None
-    if pairs.size == 0:
-        raise DataError("the ground-truth CSV lists no pairs", path)
-    if (
-        pairs[:, 0].min() < 0
-        or pairs[:, 0].max() >= n_query
-        or pairs[:, 1].min() < 0
-        or pairs[:, 1].max() >= n_reference
-    ):
-        raise DataError(f"query or reference index outside 0..{n_query - 1} / 0..{n_reference - 1}", path)
-    matrix = np.zeros((n_reference, n_query), dtype=bool)
-    matrix[pairs[:, 1], pairs[:, 0]] = True
-    return matrix
-
-
 def alignment_window(matrix: np.ndarray, path: Path) -> int:
     """W = max_j min_{r : GT[r, j]} |r - j|; DataError for a query without a match or W > MAX_WINDOW."""
     n_reference, n_query = matrix.shape
@@ -132,15 +80,19 @@ def alignment_window(matrix: np.ndarray, path: Path) -> int:
 
 
 def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) -> list[FolderGroundTruth]:
-    """Every ``<a>_<b>_GT.npy|csv`` in ``folder`` whose two traversals are loaded, checked."""
+    """The ground truth of every ordered pair of loaded traversals that has a file
+    (:func:`~vprsnn_export.data.groundtruth.ground_truth_files`), read strictly and checked."""
     found = []
     for reference in names:
         for query in names:
-            for suffix in GT_SUFFIXES:
-                path = folder / f"{reference}_{query}{suffix}"
-                if reference != query and path.is_file():
-                    matrix = ground_truth_matrix(path, counts[reference], counts[query])
-                    found.append(FolderGroundTruth(path, reference, query, alignment_window(matrix, path)))
+            truth = (
+                None
+                if reference == query
+                else pair_ground_truth(folder, reference, query, counts[reference], counts[query])
+            )
+            if truth is not None:
+                matrix, path = truth
+                found.append(FolderGroundTruth(path, reference, query, alignment_window(matrix, path)))
     return found
 
 

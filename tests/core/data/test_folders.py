@@ -54,8 +54,8 @@ def test_a_folder_of_traversal_folders_loads_like_the_arrays(tmp_path):
 def test_ground_truth_files_give_the_match_window(tmp_path, form):
     write_route(tmp_path)
     truth = np.eye(12, dtype=np.int64)
-    truth[5, 4] = truth[4, 4] = 0
-    truth[6, 4] = 1  # query 4 matches reference 6 only: two places from its index
+    truth[4, 4] = 0
+    truth[6, 4] = truth[4, 6] = 1  # query 4 matches reference 6 only: two places from its index (symmetric)
     if form == "matrix":
         np.save(tmp_path / "summer_winter_GT.npy", truth)
     elif form == "lists":
@@ -66,7 +66,8 @@ def test_ground_truth_files_give_the_match_window(tmp_path, form):
         pairs = "\n".join(f"{q},{r}" for r, q in zip(*np.nonzero(truth), strict=True))
         (tmp_path / "summer_winter_GT.csv").write_text("query,reference\n" + pairs + "\n")
     data = load_dataset(tmp_path, ["summer", "winter"], CFG)
-    assert data.match_window("winter") == 2 and data.match_window("summer") is None
+    assert data.match_window("winter") == 2 and data.match_window("summer") == 2  # a pair reads both ways
+    assert load_dataset(tmp_path, ["winter"], CFG).match_window("winter") is None
 
 
 def test_folder_defects_are_one_clear_error(tmp_path):
