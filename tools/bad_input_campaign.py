@@ -715,6 +715,21 @@ def ground_truth_variants(n: int) -> dict[str, tuple[str, Any]]:
     }
 
 
+def write_offset_routes(fx: Path, images: Path, n: int) -> None:
+    """Traversals of different lengths: ``gt_offset`` (winter = summer's places 3..n-1, a LENS-style
+    ``winter_summer_GT.npy`` says so) and ``gt_unaligned`` (the same frames and no ground truth)."""
+    for name in ("gt_offset", "gt_unaligned"):
+        (fx / name).mkdir()
+        (fx / name / "summer").symlink_to(images / "summer", target_is_directory=True)
+        shutil.copytree(images / "winter", fx / name / "winter")
+        for index, path in enumerate(sorted((fx / name / "winter").iterdir())):
+            if index < 3:
+                path.unlink()
+    truth = np.zeros((n, n - 3), dtype=np.int64)
+    truth[np.arange(3, n), np.arange(n - 3)] = 1
+    np.save(fx / "gt_offset" / "winter_summer_GT.npy", truth)
+
+
 def write_ground_truths(fx: Path, images: Path, n: int) -> None:
     """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
     for name, (file_name, content) in ground_truth_variants(n).items():
@@ -845,6 +860,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     for traversal in ("summer", "winter"):
         shutil.copytree(fx / "nord" / traversal, only_images / traversal)
     write_ground_truths(fx, only_images, len(names))
+    write_offset_routes(fx, only_images, len(names))
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1542,6 +1558,8 @@ def output_cases() -> list[Case]:
 
 #: Legal extremes that must run (besides the legal values of the option lists above): id -> command line.
 LEGAL_LINES: dict[str, str] = {
+    "evaluate-gt-offset": "evaluate {fx}/net.npz --data {fx}/gt_offset --query winter --k 1,3",
+    "simulate-gt-offset": f"simulate {M8} --data {{fx}}/gt_offset --query winter",
     "train-T1-one-neuron-0-epochs": "train --data synthetic:10 --reference summer --timesteps 1 --neurons 1 --epochs 0 --out e.npz",
     "train-one-place": "train --data synthetic:1 --reference summer --timesteps 20 --epochs 1 --neurons 16 --out t.npz",
     "train-places-one": f"{T_TINY} --places 0:1 --out t.npz",
@@ -1639,6 +1657,14 @@ def ground_truth_cases() -> list[Case]:
         two = ("train", "--data", data, "--reference", "summer,winter", *TINY, "--out", "t.npz")
         cases.append(bad(f"train-gt-{name}", *two))
         cases.append(bad(f"evaluate-gt-{name}", *EVAL, "--data", data, "--baseline"))
+    unaligned = ("--data", "{fx}/gt_unaligned", "--query", "winter")  # 12 and 9 frames, no ground truth
+    cases += [
+        bad("evaluate-gt-unaligned", "evaluate", CK, *unaligned),
+        bad("simulate-gt-unaligned", "simulate", M8, *unaligned),
+        bad("localize-gt-unaligned", "localize", CK, "--calibrate", "winter", *unaligned[:2], "--quiet"),
+        bad("verify-gt-unaligned", "verify", CK, "--bits", "8", *unaligned, "--report", "v"),
+        bad("evaluate-gt-window-beside-file", *EVAL, "--data", "{fx}/gt_offset", "--match-window", "2"),
+    ]
     return cases
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from ._common import (
     print_json,
     query_data,
     readout_options,
+    scored_tolerance,
 )
 
 MODULE_COLUMNS = (
@@ -81,13 +83,9 @@ def run(args: argparse.Namespace) -> int:
     warning = sequence_warning(dataset.place_ids, options)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    window = dataset.match_window(args.query)
-    if window is not None and window > options.tolerance:
-        print(
-            f"warning: the ground truth of {args.query!r} matches some queries only {window} places from their "
-            f"own index: give --match-window {window} to score against it",
-            file=sys.stderr,
-        )
+    options = replace(
+        options, tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query)
+    )
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),

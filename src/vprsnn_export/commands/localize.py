@@ -32,7 +32,7 @@ from ..runtime.localize import (
     operating_point_path,
     save_operating_point,
 )
-from ._common import add_data_options, add_runtime_options, parse_velocity_grid, query_data
+from ._common import add_data_options, add_runtime_options, parse_velocity_grid, query_data, scored_tolerance
 
 DEFAULTS = {"k": 1, "rule": "product", "velocity": 1.0, "velocity_span": 10, "velocity_memory": 50}
 
@@ -192,7 +192,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         dataset.traversal(args.calibrate),
         dataset.place_ids,
         precision=1.0 if args.precision is None else args.precision,
-        match_window=args.match_window,
+        match_window=scored_tolerance(args.match_window, dataset, network.reference_traversals, args.calibrate),
         model_sha256=source.sha256,
         query=args.calibrate,
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from ..device import resolve_device
 from ..errors import InvalidValueError
@@ -18,6 +19,7 @@ from ._common import (
     print_json,
     query_data,
     readout_options,
+    scored_tolerance,
 )
 
 
@@ -45,6 +47,9 @@ def run(args: argparse.Namespace) -> int:
             )
     options = readout_options(args, model.config)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
+    options = replace(
+        options, tolerance=scored_tolerance(args.match_window, dataset, model.reference_traversals, args.query)
+    )
     warning = sequence_warning(dataset.place_ids, options)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)

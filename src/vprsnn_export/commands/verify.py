@@ -18,7 +18,7 @@ import numpy as np
 from ..config import Config
 from ..data.dataset import MAX_PLACES, Dataset, load_dataset
 from ..device import resolve_device
-from ..errors import EXIT_CHECK_FAILED, InvalidValueError
+from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
@@ -40,6 +40,7 @@ from ._common import (
     parse_int_list,
     print_json,
     readout_options,
+    scored_tolerance,
 )
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
@@ -155,9 +156,14 @@ def load_for(
     traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
     key = (source, subset, places, tuple(traversals))
     if key not in cache:
-        cache[key] = load_dataset(
-            source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
-        )
+        try:
+            cache[key] = load_dataset(
+                source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
+            )
+        except DataError:  # a folder whose query traversal has another length than the references': alone
+            cache[key] = load_dataset(
+                source, [query], ckpt.config.preprocess, subset=subset, places=places, progress=progress
+            )
     dataset = cache[key]
     if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
@@ -324,7 +330,11 @@ def run(args: argparse.Namespace) -> int:
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
-        gamma_options = dataclasses.replace(options, readout=options.readout.with_config(ckpt.config))
+        readout = dataclasses.replace(
+            options.readout.with_config(ckpt.config),
+            tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query),
+        )
+        gamma_options = dataclasses.replace(options, readout=readout)
         runs.append(
             verify_checkpoint(
                 ckpt,

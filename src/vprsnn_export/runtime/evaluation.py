@@ -25,7 +25,7 @@ from vprsnn_export.readout.baseline import (
     sad_distances,
     sad_distribution,
 )
-from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct, pr_metrics, predicted_place_ids
 from vprsnn_export.readout.regions import (
     ModuleAccuracy,
     ModuleLayout,
@@ -48,7 +48,7 @@ class ReadoutOptions:
     """How decisions are read out and scored (the CLI's --k, --rule, --velocity, --match-window).
 
     ``tolerance`` is the ground-truth window in places: a prediction within +-tolerance of the
-    true place counts as correct (0 = exact match).
+    true place counts as correct (0 = exact match); or the data set's ground truth (a MatchTruth).
     """
 
     gamma: float
@@ -63,7 +63,7 @@ class ReadoutOptions:
     velocity_length: int | None = None  # "track", "smooth": frames per scored trajectory (None: 2k, 3k)
     velocity_memory: int = 50  # "track", "smooth": recent frames whose mean is divided out (0: none)
     velocity_lag: int | None = None  # "smooth": frames each decision waits for (None: 2k - 1)
-    tolerance: int = 0
+    tolerance: Tolerance = 0
 
     @classmethod
     def from_config(cls, config: Config, **settings: Any) -> ReadoutOptions:
@@ -83,7 +83,7 @@ def decision_metrics(
     strategy: str,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
     predicted, confidence = decide(distribution, strategy)
@@ -141,12 +141,24 @@ def sequence_warning(query_place_ids: np.ndarray, options: ReadoutOptions) -> st
     )
 
 
-def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int) -> None:
-    """InvalidValueError when no query place lies within ``tolerance`` of a reference place: every
-    decision would be wrong by construction (the model was trained on other places)."""
+def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: Tolerance) -> None:
+    """InvalidValueError when no query place lies within ``tolerance`` of a reference place (or, with a
+    ground truth, no query matches a reference place): every decision would be wrong by construction
+    (the model was trained on other places)."""
     reference = np.sort(np.asarray(reference_place_ids, dtype=np.int64))
     queries = np.asarray(query_place_ids, dtype=np.int64)
     if reference.size == 0 or queries.size == 0:
+        return
+    if isinstance(tolerance, MatchTruth):
+        n_reference, n_query = tolerance.matrix.shape
+        if queries.min() < 0 or queries.max() >= n_query:
+            raise InvalidValueError(f"query place ids outside the ground truth's 0..{n_query - 1} ({tolerance.source})")
+        inside = reference[reference < n_reference]
+        if not tolerance.matrix[np.ix_(inside, queries)].any():
+            raise InvalidValueError(
+                f"none of the {queries.size} queries matches one of the model's {reference.size} reference places "
+                f"by the ground truth {tolerance.source}: select the places it was trained on (--places / --subset)"
+            )
         return
     nearest = np.clip(np.searchsorted(reference, queries), 0, reference.size - 1)
     below = reference[np.clip(nearest - 1, 0, reference.size - 1)]
@@ -250,7 +262,7 @@ def module_accuracies(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     modules: ModuleLayout,
-    tolerance: int = 0,
+    tolerance: Tolerance = 0,
 ) -> list[ModuleAccuracy]:
     """Per module: accuracy and in-region share of the whole-route W+Prob (k=1) decisions on its region's queries."""
     predicted, _ = decide(wprob, "wprob")

@@ -55,7 +55,7 @@ from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.readout.aggregation import RULES, aggregate, stream_contrast, window_scores
 from vprsnn_export.readout.assignment import weighted_matrix, wprob_distribution
-from vprsnn_export.readout.metrics import is_correct
+from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct
 from vprsnn_export.readout.regions import ModuleLayout, regularised_calibration
 from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runtime.evaluation import ensemble_layout
@@ -145,6 +145,7 @@ class OperatingPoint:
     backend: str
     query: str
     match_window: int
+    ground_truth: str = ""  # the ground-truth file the calibration queries were scored against ("" : by index)
 
     def accepts(self, confidence: float, place_id: int | None) -> bool:
         return self.threshold is not None and place_id is not None and confidence >= self.threshold
@@ -413,12 +414,13 @@ def operating_point(
     place_ids: np.ndarray,
     *,
     precision: float = 1.0,
-    match_window: int = 0,
+    match_window: Tolerance = 0,
     model_sha256: str = "",
     query: str = "",
 ) -> tuple[OperatingPoint, list[Decision]]:
     """Run the localiser over labelled preprocessed frames (N, inputs) in stream order (a query traversal)
-    and choose the threshold for ``precision``; a decision within ``match_window`` places is right."""
+    and choose the threshold for ``precision``; a decision within ``match_window`` places is right (or, with
+    the data set's ground truth as ``match_window``, a reference it names)."""
     if not 0 < precision <= 1:
         raise InvalidValueError(f"--precision must lie in (0, 1], got {precision}")
     decisions = localizer.run_inputs(inputs)
@@ -444,7 +446,8 @@ def operating_point(
         model_sha256=model_sha256,
         backend=localizer.backend,
         query=query,
-        match_window=int(match_window),
+        match_window=0 if isinstance(match_window, MatchTruth) else int(match_window),
+        ground_truth=match_window.source if isinstance(match_window, MatchTruth) else "",
     )
     return point, decisions
 

@@ -9,7 +9,7 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.readout.metrics import Tolerance, is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.readout.regions import ModuleAccuracy, ModuleLayout, module_accuracy
 from vprsnn_export.readout.strategies import STRATEGIES, decide
 from vprsnn_export.targets.intsim import step_agreement
@@ -171,7 +171,7 @@ def region_accuracies(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     regions: np.ndarray,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> list[ModuleAccuracy]:
     """Per module: the W+Prob decisions of ``distribution`` (Q, places) scored on its region's queries
     (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
@@ -189,7 +189,7 @@ def module_rows(
     int_aggregated: Mapping[int, np.ndarray],
     float_raster: torch.Tensor,
     int_raster: torch.Tensor,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> tuple[ModuleRow, ...]:
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
     and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
@@ -253,7 +253,7 @@ def pr_points(
     strategy: str,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> PrCurve:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)
