@@ -730,6 +730,29 @@ def write_offset_routes(fx: Path, images: Path, n: int) -> None:
     np.save(fx / "gt_offset" / "winter_summer_GT.npy", truth)
 
 
+def write_escaping_deploys(fx: Path) -> None:
+    """Copies of the deploy folder whose export.json (or Loihi network.json) names a file outside it (issue 31);
+    ``evil.onnx`` beside them holds the same bytes as the good graph, so only the path check can refuse it."""
+    if not (fx / "deploy" / "export.json").is_file():
+        return
+    shutil.copyfile(fx / "deploy" / "model.onnx", fx / "evil.onnx")
+    paths = {
+        "parent": "../evil.onnx",
+        "dotdot": "deploy/../evil.onnx",
+        "absolute": str(fx / "evil.onnx"),
+        "symlink": "model.onnx",
+    }
+    for name, path in paths.items():
+        folder = fx / f"deploy_{name}"
+        shutil.copytree(fx / "deploy", folder)
+        data = json.loads((folder / "export.json").read_text(encoding="utf-8"))
+        data["files"]["onnx"][0]["path"] = path
+        (folder / "export.json").write_text(json.dumps(data), encoding="utf-8")
+        if name == "symlink":
+            (folder / "model.onnx").unlink()
+            (folder / "model.onnx").symlink_to(fx / "evil.onnx")
+
+
 def write_ground_truths(fx: Path, images: Path, n: int) -> None:
     """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
     for name, (file_name, content) in ground_truth_variants(n).items():
@@ -849,6 +872,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
                 raise SystemExit(message)
             print(f"warning: {message}", file=sys.stderr)
     write_tampered(fx, fx / "net.npz", "ck", CHECKPOINT_EDITS)
+    write_escaping_deploys(fx)
     write_tampered(fx, fx / "models" / "model_8bit_per-neuron_max.npz", "fp", MODEL_EDITS)
     write_reports(fx)
     names = write_images(fx / "nord", nordland, 12)
@@ -1648,6 +1672,23 @@ LEGAL_SETUP: dict[str, dict[str, Any]] = {
 }
 
 
+def contained_file_cases() -> list[Case]:
+    """A deploy folder whose export.json names a file outside it (``..``, absolute, a symbolic link out):
+    ``localize --onnx DIR`` refuses it instead of running that file (issue 31)."""
+    return [
+        bad(
+            f"localize-onnx-deploy-{name}",
+            "localize",
+            M8,
+            "--onnx",
+            f"{{fx}}/deploy_{name}",
+            "--frames",
+            "{fx}/nord/summer",
+        )
+        for name in ("parent", "dotdot", "absolute", "symlink")
+    ]
+
+
 def ground_truth_cases() -> list[Case]:
     """Malformed, mismatched and code-running ground truth beside a folder data set (issue 31): every
     command that reads the pair refuses it with one line, and no pickle inside it runs."""
@@ -1691,6 +1732,7 @@ def all_cases() -> list[Case]:
         report_cases,
         manifest_cases,
         ground_truth_cases,
+        contained_file_cases,
         output_cases,
         legal_cases,
     )
