@@ -730,6 +730,25 @@ def write_offset_routes(fx: Path, images: Path, n: int) -> None:
     np.save(fx / "gt_offset" / "winter_summer_GT.npy", truth)
 
 
+#: Tampered copies of a calibrated operating point (point.json): name -> the JSON text's edit.
+POINT_EDITS: dict[str, Callable[[str], str]] = {
+    "threshold-neg": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": -1', text),
+    "threshold-zero": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": 0', text),
+    "threshold-nan": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": NaN', text),
+    "threshold-text": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": "0.5"', text),
+    "precision-five": lambda text: re.sub(r'"precision": [^,]+', '"precision": 5', text),
+    "deep": lambda text: "[" * 5000 + "]" * 5000,
+    "digits": lambda text: re.sub(r'"n_queries": [^,]+', '"n_queries": ' + "9" * 5001, text),
+}
+
+
+def write_tampered_points(fx: Path) -> None:
+    point = fx / "point.json"
+    if point.is_file():
+        for name, edit in POINT_EDITS.items():
+            (fx / f"point_{name}.json").write_text(edit(point.read_text(encoding="utf-8")), encoding="utf-8")
+
+
 def write_escaping_deploys(fx: Path) -> None:
     """Copies of the deploy folder whose export.json (or Loihi network.json) names a file outside it (issue 31);
     ``evil.onnx`` beside them holds the same bytes as the good graph, so only the path check can refuse it."""
@@ -842,6 +861,11 @@ CLI_FIXTURES: tuple[tuple[tuple[str, ...], bool], ...] = (
     (("export", "models/model_8bit_per-neuron_max.npz", "--to", "nir,loihi,onnx", "--out", "deploy/", "--quiet"), True),
     (("verify", "net.npz", "--bits", "8", "--query", "winter", "--report", "rep", "--quiet"), True),
     (
+        ("localize", "models/model_8bit_per-neuron_max.npz", "--calibrate", "winter", "--precision", "0.01")
+        + ("--operating-point", "point.json", "--quiet"),
+        False,
+    ),
+    (
         (
             "train",
             "--data",
@@ -873,6 +897,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
             print(f"warning: {message}", file=sys.stderr)
     write_tampered(fx, fx / "net.npz", "ck", CHECKPOINT_EDITS)
     write_escaping_deploys(fx)
+    write_tampered_points(fx)
     write_tampered(fx, fx / "models" / "model_8bit_per-neuron_max.npz", "fp", MODEL_EDITS)
     write_reports(fx)
     names = write_images(fx / "nord", nordland, 12)
@@ -1544,6 +1569,27 @@ INPUT_AS_OUTPUT: dict[str, tuple[str, tuple[str, ...]]] = {
     ),
     "verify-report-is-input": ("verify net.npz --bits 8 --query winter --report net.npz", ("net.npz",)),
     "report-out-is-input": ("report rep --out rep/report.json", ("rep",)),
+    "evaluate-predictions-is-manifest": (
+        f"evaluate {CK} --query winter --data nord/places.csv --predictions nord/places.csv",
+        ("nord",),
+    ),
+    "evaluate-predictions-is-subset": (
+        f"evaluate {CK} --query winter --subset subset_ok.csv --predictions subset_ok.csv",
+        ("subset_ok.csv",),
+    ),
+    "localize-calibration-is-model": ("localize net.npz --calibrate winter --operating-point net.npz", ("net.npz",)),
+    "localize-calibration-is-manifest": (
+        f"localize {CK} --calibrate winter --data nord/places.csv --operating-point nord/places.csv",
+        ("nord",),
+    ),
+    "localize-calibration-is-ground-truth": (
+        f"localize {CK} --calibrate winter --data gt_offset --operating-point gt_offset/winter_summer_GT.npy",
+        ("gt_offset",),
+    ),
+    "localize-calibration-accepts-nothing": (
+        f"localize {EDGE} --calibrate winter --precision 1 --operating-point p.json",
+        (),
+    ),
 }
 
 
@@ -1689,6 +1735,22 @@ def contained_file_cases() -> list[Case]:
     ]
 
 
+def operating_point_cases() -> list[Case]:
+    """A tampered operating point (threshold -1, 0, NaN, text; precision 5; 5000-deep; 5001 digits) is refused."""
+    return [
+        bad(
+            f"localize-point-{name}",
+            "localize",
+            M8,
+            "--frames",
+            "{fx}/nord/summer",
+            "--operating-point",
+            f"{{fx}}/point_{name}.json",
+        )
+        for name in POINT_EDITS
+    ]
+
+
 def ground_truth_cases() -> list[Case]:
     """Malformed, mismatched and code-running ground truth beside a folder data set (issue 31): every
     command that reads the pair refuses it with one line, and no pickle inside it runs."""
@@ -1733,6 +1795,7 @@ def all_cases() -> list[Case]:
         manifest_cases,
         ground_truth_cases,
         contained_file_cases,
+        operating_point_cases,
         output_cases,
         legal_cases,
     )

@@ -125,7 +125,8 @@ def test_simulate_verify_and_calibrate_score_against_the_file(tmp_path, capsys):
     by_key = {(r["strategy"], r["k"]): r for r in verified["runs"][0]["float"]["metrics"]}
     assert all(by_key[(r["strategy"], r["k"])] == r for r in float_rows)  # verify scored by the file too
     point = tmp_path / "point.json"
-    argv = ["localize", str(ckpt_path), "--calibrate", query, "--operating-point", str(point), "--quiet"]
+    argv = ["localize", str(ckpt_path), "--calibrate", query, "--precision", "0.01", "--operating-point", str(point)]
+    argv += ["--quiet"]
     capsys.readouterr()
     assert main(argv) == 0, capsys.readouterr().err
     stored = json.loads(point.read_text())
@@ -152,3 +153,21 @@ def test_a_query_may_match_several_references():
     truth = MatchTruth(np.array([[1, 0], [1, 1], [0, 1]], dtype=bool), "gt")
     predicted = np.ma.MaskedArray([1, 0, 2, 1], mask=[False, False, False, True])
     assert is_correct(predicted, np.array([0, 1, 1, 1]), truth).tolist() == [True, False, True, False]
+
+
+def test_no_output_replaces_the_ground_truth_it_was_scored_by(tmp_path, capsys):
+    data = tmp_path / "data"
+    truth = offset_route(data, "sunset1", "sunset2")
+    pairs = "".join(f"{q},{r}\n" for r, q in zip(*np.nonzero(truth), strict=True))
+    gt = data / "sunset1_sunset2_GT.csv"
+    gt.write_text("query,reference\n" + pairs, encoding="utf-8")
+    ckpt_path = tmp_path / "net.npz"
+    assert main(["train", "--data", str(data), "--reference", "sunset1", *TINY, "--out", str(ckpt_path)]) == 0
+    for argv in (
+        ["evaluate", str(ckpt_path), "--query", "sunset2", "--predictions", str(gt)],
+        ["localize", str(ckpt_path), "--calibrate", "sunset2", "--precision", "0.1", "--operating-point", str(gt)],
+    ):
+        capsys.readouterr()
+        assert main([*argv, "--quiet"]) == 2
+        assert "one of this command's input files" in capsys.readouterr().err
+    assert gt.read_text(encoding="utf-8") == "query,reference\n" + pairs

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..cluster import CLUSTER_HELP, parse_cluster
+from ..data.dataset import dataset_files
 from ..device import resolve_device
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
@@ -65,7 +66,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--cluster", help=f"run the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP})"
     )
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, file_output=lambda args: args.predictions)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -86,6 +87,10 @@ def run(args: argparse.Namespace) -> int:
     options = replace(
         options, tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query)
     )
+    if args.predictions is not None:  # nor over a file of the data set (manifest, subset, ground truth)
+        check_output(
+            args.predictions, inputs=(args.checkpoint, *dataset_files(dataset, args.subset, ckpt.data.get("subset")))
+        )
     result = evaluate_float(
         ckpt,
         dataset.traversal(args.query),

@@ -18,9 +18,11 @@ import math
 import sys
 from pathlib import Path
 
+from ..data.dataset import dataset_files
 from ..data.frames import iter_frames
 from ..device import resolve_device
 from ..errors import InvalidValueError
+from ..io.fileio import check_output
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
     BACKENDS,
@@ -99,7 +101,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, file_output=calibration_output)
+
+
+def calibration_output(args: argparse.Namespace) -> str | None:
+    """The file --calibrate writes (locked for the run like every command's output); None without --calibrate."""
+    if args.calibrate is None:
+        return None
+    return args.operating_point or str(operating_point_path(args.model))
 
 
 def given_options(args: argparse.Namespace) -> dict:
@@ -183,7 +192,11 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         raise InvalidValueError(f"--match-window expects an integer from 0 to 1000000, got {args.match_window}")
     network = source.network
     options = options_from(given_options(args), None, None)
+    check_output(point_path, inputs=(args.model, onnx))
     dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
+    check_output(
+        point_path, inputs=(args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
+    )
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
@@ -196,8 +209,14 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         model_sha256=source.sha256,
         query=args.calibrate,
     )
+    if point.threshold is None:
+        raise InvalidValueError(
+            f"no confidence threshold reaches precision {point.precision_target:g} on the {point.n_queries} "
+            f"'{args.calibrate}' queries: an operating point that accepts nothing is not written ({point_path}); "
+            "give a lower --precision or more calibration queries"
+        )
     save_operating_point(point, point_path)
-    threshold = "none qualified: nothing will be accepted" if point.threshold is None else f"{point.threshold:.6f}"
+    threshold = f"{point.threshold:.6f}"
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
         f"({localizer.backend}, k={options.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "

@@ -39,6 +39,7 @@ from .folders import (
     is_folder_dataset,
     query_truth,
 )
+from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
 from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
 
@@ -181,6 +182,20 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
     matrix, path = truth
     check_every_query_matched(matrix, dataset.place_ids, path)
     return MatchTruth(matrix, str(path))
+
+
+def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:
+    """The files a data set was read from that no output of the same run may replace: its manifest, every
+    ground-truth file of a folder data set (:data:`~vprsnn_export.data.groundtruth.GT_SUFFIXES`, VPR-Bench's
+    file) and the given subset files (None and place-id sequences are skipped)."""
+    source = Path(dataset.source)
+    files = [Path(s) for s in subsets if isinstance(s, str | Path) and str(s).strip()]
+    if source.is_file():
+        files.append(source)
+    elif source.is_dir():
+        files += [p for suffix in GT_SUFFIXES for p in source.glob(f"*{suffix}")]
+        files += [source / VPR_BENCH_GT, source / MANIFEST_NAME]
+    return tuple(files)
 
 
 def load_selection(
