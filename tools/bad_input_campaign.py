@@ -772,6 +772,18 @@ def write_escaping_deploys(fx: Path) -> None:
             (folder / "model.onnx").symlink_to(fx / "evil.onnx")
 
 
+def write_resized_streams(fx: Path, images: Path) -> None:
+    """``frames_cropped`` (a row and a column short) and ``frames_rescaled`` (twice the size) of the winter frames."""
+    cv2 = importlib.import_module("cv2")
+    for name, change in (
+        ("cropped", lambda im: im[:-1, :-1]),
+        ("rescaled", lambda im: cv2.resize(im, None, fx=2, fy=2)),
+    ):
+        (fx / f"frames_{name}").mkdir()
+        for path in sorted((images / "winter").iterdir())[:3]:
+            cv2.imwrite(str(fx / f"frames_{name}" / path.name), change(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)))
+
+
 def write_ground_truths(fx: Path, images: Path, n: int) -> None:
     """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
     for name, (file_name, content) in ground_truth_variants(n).items():
@@ -910,6 +922,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
         shutil.copytree(fx / "nord" / traversal, only_images / traversal)
     write_ground_truths(fx, only_images, len(names))
     write_offset_routes(fx, only_images, len(names))
+    write_resized_streams(fx, only_images)
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1628,6 +1641,7 @@ def output_cases() -> list[Case]:
 
 #: Legal extremes that must run (besides the legal values of the option lists above): id -> command line.
 LEGAL_LINES: dict[str, str] = {
+    "localize-frames-reference-size": f"localize {M8} --frames {{fx}}/nord/winter --threshold 0.5",
     "evaluate-gt-offset": "evaluate {fx}/net.npz --data {fx}/gt_offset --query winter --k 1,3",
     "simulate-gt-offset": f"simulate {M8} --data {{fx}}/gt_offset --query winter",
     "train-T1-one-neuron-0-epochs": "train --data synthetic:10 --reference summer --timesteps 1 --neurons 1 --epochs 0 --out e.npz",
@@ -1735,6 +1749,14 @@ def contained_file_cases() -> list[Case]:
     ]
 
 
+def stream_cases() -> list[Case]:
+    """A stream of frames cropped or rescaled from the reference images' size is refused before any decision."""
+    return [
+        bad(f"localize-frames-{name}", "localize", M8, "--frames", f"{{fx}}/frames_{name}", "--threshold", "0.5")
+        for name in ("cropped", "rescaled")
+    ]
+
+
 def operating_point_cases() -> list[Case]:
     """A tampered operating point (threshold -1, 0, NaN, text; precision 5; 5000-deep; 5001 digits) is refused."""
     return [
@@ -1796,6 +1818,7 @@ def all_cases() -> list[Case]:
         ground_truth_cases,
         contained_file_cases,
         operating_point_cases,
+        stream_cases,
         output_cases,
         legal_cases,
     )

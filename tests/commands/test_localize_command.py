@@ -237,3 +237,16 @@ def test_a_tampered_operating_point_is_refused_on_load(synthetic, tmp_path, caps
     point.write_text("[" * 5000 + "]" * 5000)
     assert main(["localize", str(fixed), "--frames", str(frames), "--operating-point", str(point), "--quiet"]) == 2
     assert "corrupt operating point" in capsys.readouterr().err
+
+
+def test_a_cropped_or_rescaled_stream_is_refused_before_any_decision(synthetic, tmp_path, capsys):
+    _, fixed, _, _, grey = synthetic
+    for label, frame in (("cropped", grey[0][:-1, :-1]), ("rescaled", cv2.resize(grey[0], (128, 64)))):
+        folder = tmp_path / label
+        folder.mkdir()
+        cv2.imwrite(str(folder / "f0.png"), frame)
+        capsys.readouterr()
+        assert main(["localize", str(fixed), "--frames", str(folder), "--threshold", "0.5", "--quiet"]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and len(err.strip().splitlines()) == 1
+        assert "the model's reference images are 64x32: a cropped or rescaled stream is refused" in err

@@ -16,12 +16,15 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
-from ..data.dataset import dataset_files
+import numpy as np
+
+from ..data.dataset import dataset_files, reference_frame_shape
 from ..data.frames import iter_frames
 from ..device import resolve_device
-from ..errors import InvalidValueError
+from ..errors import DataError, InvalidValueError
 from ..io.fileio import check_output
 from ..runtime.exporting import load_source, read_export
 from ..runtime.localize import (
@@ -179,10 +182,27 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
     )
     assert frames is not None
-    for decision in localizer.run(frames):
+    expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
+    for decision in localizer.run(sized_frames(frames, expected)):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")
         sys.stdout.flush()
     return 0
+
+
+def sized_frames(
+    frames: Iterator[tuple[str, np.ndarray]], expected: tuple[int, int] | None
+) -> Iterator[tuple[str, np.ndarray]]:
+    """The frames, each checked against the size of the model's reference images (None: not known here):
+    a cropped or rescaled stream (a video writer that drops a row, a camera at another resolution) would be
+    decided on other pixels than the model learnt, so a frame of another size stops the run with one line."""
+    for name, grey in frames:
+        if expected is not None and grey.shape != expected:
+            raise DataError(
+                f"frame {name!r} is {grey.shape[1]}x{grey.shape[0]} pixels but the model's reference images are "
+                f"{expected[1]}x{expected[0]}: a cropped or rescaled stream is refused; give frames of the "
+                "reference images' size"
+            )
+        yield name, grey
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:

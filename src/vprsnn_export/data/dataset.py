@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from ..arguments import ascii_uint, check_place_ids
 from ..config import PreprocessConfig
-from ..errors import DataError, InvalidValueError
+from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
 from ..readout.metrics import MatchTruth
 from .folders import (
@@ -39,9 +39,17 @@ from .folders import (
     is_folder_dataset,
     query_truth,
 )
+from .frames import image_files
 from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
-from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
+from .synthetic import (
+    DEFAULT_PLACES,
+    IMAGE_HEIGHT,
+    IMAGE_WIDTH,
+    SYNTHETIC_TRAVERSALS,
+    synthetic_fingerprint,
+    synthetic_route,
+)
 
 PLACE_ID = "place_id"
 MANIFEST_NAME = "places.csv"
@@ -196,6 +204,28 @@ def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:
         files += [p for suffix in GT_SUFFIXES for p in source.glob(f"*{suffix}")]
         files += [source / VPR_BENCH_GT, source / MANIFEST_NAME]
     return tuple(files)
+
+
+def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str]) -> tuple[int, int] | None:
+    """(height, width) of the first reference image a network was trained on (its data ``record``): the size a
+    stream of frames is expected to have. None when the data source is not readable here (nothing to compare)."""
+    source = _optional_str(record.get("source"))
+    names = list(traversals)
+    if source is None or not names:
+        return None
+    try:
+        if parse_synthetic(source) is not None:
+            return IMAGE_HEIGHT, IMAGE_WIDTH
+        folder = Path(source)
+        if is_folder_dataset(folder) and not (folder / MANIFEST_NAME).is_file():
+            first = image_files(folder / names[0])[0]
+        else:
+            manifest = read_manifest(source)
+            first = manifest.path.parent / next(iter(manifest.rows.values()))[1].get(names[0], "")
+        shape = read_grey_image(first).shape
+    except (VprError, OSError, StopIteration):
+        return None
+    return int(shape[0]), int(shape[1])
 
 
 def load_selection(
