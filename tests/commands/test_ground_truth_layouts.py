@@ -124,6 +124,8 @@ def test_simulate_verify_and_calibrate_score_against_the_file(tmp_path, capsys):
     verified = json.loads((report / "report.json").read_text())
     by_key = {(r["strategy"], r["k"]): r for r in verified["runs"][0]["float"]["metrics"]}
     assert all(by_key[(r["strategy"], r["k"])] == r for r in float_rows)  # verify scored by the file too
+    assert verified["settings"]["ground_truth"].endswith("sunset2_sunset1_GT.npy")
+    assert main(["report", str(report), "--out", str(tmp_path / "again")]) in (0, 1)  # the report reads back
     point = tmp_path / "point.json"
     argv = ["localize", str(ckpt_path), "--calibrate", query, "--precision", "0.01", "--operating-point", str(point)]
     argv += ["--quiet"]

@@ -22,6 +22,7 @@ from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..experiments.common import Settings, trained_checkpoint
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..readout.metrics import MatchTruth
 from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
 from ..runtime.evaluation import sequence_warning
@@ -335,6 +336,8 @@ def run(args: argparse.Namespace) -> int:
             tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query),
         )
         gamma_options = dataclasses.replace(options, readout=readout)
+        if isinstance(readout.tolerance, MatchTruth):  # the report says what the queries were scored against
+            settings["ground_truth"] = readout.tolerance.source
         runs.append(
             verify_checkpoint(
                 ckpt,
