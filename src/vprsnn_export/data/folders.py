@@ -71,6 +71,14 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
     others = [name for name in dict.fromkeys(references) if name != query]
     if not others:
         return None
+    absent = [name for name in others if not (folder / name).is_dir()]
+    if absent:
+        raise DataError(
+            f"the model's reference traversal {absent[0]!r} is not a folder here: nothing says how the frames of "
+            f"{query!r} align with its places; give the data set it was trained on (--data), with a ground-truth "
+            "file when the traversals differ in length",
+            folder,
+        )
     counts = {name: len(image_files(folder / name)) for name in [query, *others]}
     found = []
     for reference in others:

@@ -98,6 +98,8 @@ def test_without_a_file_traversals_of_different_lengths_are_not_scored_by_index(
     alone = load_dataset(tmp_path, ["winter"], CFG)
     with pytest.raises(DataError, match="not index-aligned and no ground-truth file"):
         scoring_truth(alone, ["summer"], "winter")
+    with pytest.raises(DataError, match="reference traversal 'autumn' is not a folder here"):
+        scoring_truth(alone, ["autumn"], "winter")
 
 
 @pytest.mark.skipif(not LENS.is_dir(), reason=f"the shared LENS example is absent ({LENS})")
