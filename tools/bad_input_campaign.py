@@ -2036,7 +2036,8 @@ def loads(path: Path) -> str | None:
     vx = importlib.import_module("vprsnn_export")
     try:
         with np.load(path, allow_pickle=False) as npz:
-            kind = json.loads(npz["__meta__"].tobytes().decode("utf-8")).get("kind", "")
+            meta = json.loads(npz["__meta__"].tobytes().decode("utf-8"))
+        kind = meta.get("format", meta.get("kind", ""))  # a fixed-point model's header names its "format"
         reader = vx.load_fixed_point if "fixed" in str(kind) else vx.load_checkpoint
         reader(path)
     except Exception as exc:  # noqa: BLE001  (any failure to read is the finding)
