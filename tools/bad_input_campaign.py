@@ -666,6 +666,145 @@ def write_manifests(folder: Path, names: Sequence[str]) -> None:
     (folder / "binary.csv").write_bytes(np.random.default_rng(2).integers(0, 256, 512, dtype=np.uint8).tobytes())
 
 
+class _RunsCode:
+    """Pickles as a call that ends the process with status 0: a ground truth that runs code reads as ``accepted``."""
+
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        return (exec, ("__import__('os')._exit(0)",))
+
+
+def _objects(items: Sequence[Any]) -> np.ndarray:
+    array = np.empty(len(items), dtype=object)
+    array[:] = list(items)
+    return array
+
+
+def ground_truth_variants(n: int) -> dict[str, tuple[str, Any]]:
+    """Defective ground truths of an n-frame (summer, winter) pair: name -> (file name, array or CSV text)."""
+    eye = np.eye(n, dtype=np.int64)
+    lists = [[q] for q in range(n)]
+    rows = np.empty((n, 2), dtype=object)
+    rows[:, 0] = list(range(n))
+    rows[:, 1] = [[q] for q in range(n)]
+    pairs = "query,reference\n" + "".join(f"{q},{q}\n" for q in range(n))
+    npy = "summer_winter_GT.npy"
+    csv = "summer_winter_GT.csv"
+    return {
+        "runs-code": (npy, _objects([_RunsCode(), *lists[1:]])),
+        "nan": (npy, np.where(eye > 0, 1.0, np.nan)),
+        "minus-one": (npy, eye - 2 * (1 - eye)),
+        "soft": (npy, eye * 0.9 + 0.1),
+        "strings": (npy, eye.astype(str)),
+        "complex": (npy, eye.astype(complex)),
+        "datetime": (npy, np.zeros((n, n), dtype="datetime64[s]")),
+        "list-float": (npy, _objects([[0.9], *lists[1:]])),
+        "list-bool": (npy, _objects([[True], *lists[1:]])),
+        "list-outside": (npy, _objects([[n], *lists[1:]])),
+        "rows-bool-query": (npy, np.concatenate([np.array([[True, [0]]], dtype=object), rows[1:]])),
+        "rows-repeated-query": (npy, np.concatenate([rows[:1], rows[:-1]])),
+        "square-shifted": (npy, np.roll(eye, 1, axis=0)),
+        "wrong-shape": (npy, np.eye(n + 3)),
+        "no-match": (npy, np.zeros((n, n))),
+        "npz": (npy, {"gt": eye}),
+        "truncated": (npy, b"\x93NUMPY\x01\x00"),
+        "csv-underscore": (csv, pairs.replace("1,1\n", "1,1_0\n")),
+        "csv-arabic": (csv, pairs.replace("1,1\n", "1,\u0661\n")),
+        "csv-float": (csv, pairs.replace("1,1\n", "1,1.0\n")),
+        "csv-columns": (csv, pairs.replace("query,reference", "q,r")),
+        "disagree": ("both", (eye, pairs.replace("1,1\n", "1,2\n"))),
+    }
+
+
+def write_offset_routes(fx: Path, images: Path, n: int) -> None:
+    """Traversals of different lengths: ``gt_offset`` (winter = summer's places 3..n-1, a LENS-style
+    ``winter_summer_GT.npy`` says so) and ``gt_unaligned`` (the same frames and no ground truth)."""
+    for name in ("gt_offset", "gt_unaligned"):
+        (fx / name).mkdir()
+        (fx / name / "summer").symlink_to(images / "summer", target_is_directory=True)
+        shutil.copytree(images / "winter", fx / name / "winter")
+        for index, path in enumerate(sorted((fx / name / "winter").iterdir())):
+            if index < 3:
+                path.unlink()
+    truth = np.zeros((n, n - 3), dtype=np.int64)
+    truth[np.arange(3, n), np.arange(n - 3)] = 1
+    np.save(fx / "gt_offset" / "winter_summer_GT.npy", truth)
+
+
+#: Tampered copies of a calibrated operating point (point.json): name -> the JSON text's edit.
+POINT_EDITS: dict[str, Callable[[str], str]] = {
+    "threshold-neg": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": -1', text),
+    "threshold-zero": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": 0', text),
+    "threshold-nan": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": NaN', text),
+    "threshold-text": lambda text: re.sub(r'"threshold": [^,]+', '"threshold": "0.5"', text),
+    "precision-five": lambda text: re.sub(r'"precision": [^,]+', '"precision": 5', text),
+    "deep": lambda text: "[" * 5000 + "]" * 5000,
+    "digits": lambda text: re.sub(r'"n_queries": [^,]+', '"n_queries": ' + "9" * 5001, text),
+}
+
+
+def write_tampered_points(fx: Path) -> None:
+    point = fx / "point.json"
+    if point.is_file():
+        for name, edit in POINT_EDITS.items():
+            (fx / f"point_{name}.json").write_text(edit(point.read_text(encoding="utf-8")), encoding="utf-8")
+
+
+def write_escaping_deploys(fx: Path) -> None:
+    """Copies of the deploy folder whose export.json (or Loihi network.json) names a file outside it (issue 31);
+    ``evil.onnx`` beside them holds the same bytes as the good graph, so only the path check can refuse it."""
+    if not (fx / "deploy" / "export.json").is_file():
+        return
+    shutil.copyfile(fx / "deploy" / "model.onnx", fx / "evil.onnx")
+    paths = {
+        "parent": "../evil.onnx",
+        "dotdot": "deploy/../evil.onnx",
+        "absolute": str(fx / "evil.onnx"),
+        "symlink": "model.onnx",
+    }
+    for name, path in paths.items():
+        folder = fx / f"deploy_{name}"
+        shutil.copytree(fx / "deploy", folder)
+        data = json.loads((folder / "export.json").read_text(encoding="utf-8"))
+        data["files"]["onnx"][0]["path"] = path
+        (folder / "export.json").write_text(json.dumps(data), encoding="utf-8")
+        if name == "symlink":
+            (folder / "model.onnx").unlink()
+            (folder / "model.onnx").symlink_to(fx / "evil.onnx")
+
+
+def write_resized_streams(fx: Path, images: Path) -> None:
+    """``frames_cropped`` (a row and a column short) and ``frames_rescaled`` (twice the size) of the winter frames."""
+    cv2 = importlib.import_module("cv2")
+    for name, change in (
+        ("cropped", lambda im: im[:-1, :-1]),
+        ("rescaled", lambda im: cv2.resize(im, None, fx=2, fy=2)),
+    ):
+        (fx / f"frames_{name}").mkdir()
+        for path in sorted((images / "winter").iterdir())[:3]:
+            cv2.imwrite(str(fx / f"frames_{name}" / path.name), change(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)))
+
+
+def write_ground_truths(fx: Path, images: Path, n: int) -> None:
+    """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
+    for name, (file_name, content) in ground_truth_variants(n).items():
+        folder = fx / f"gt_{name}"
+        folder.mkdir()
+        for traversal in ("summer", "winter"):
+            (folder / traversal).symlink_to(images / traversal, target_is_directory=True)
+        if file_name == "both":
+            np.save(folder / "summer_winter_GT.npy", content[0])
+            (folder / "summer_winter_GT.csv").write_text(content[1], encoding="utf-8")
+        elif isinstance(content, str):
+            (folder / file_name).write_text(content, encoding="utf-8")
+        elif isinstance(content, bytes):
+            (folder / file_name).write_bytes(content)
+        elif isinstance(content, dict):
+            with open(folder / file_name, "wb") as handle:
+                np.savez(handle, **content)
+        else:
+            np.save(folder / file_name, content, allow_pickle=True)
+
+
 def write_subsets(fx: Path) -> None:
     subsets = {
         "ok": "place_id\n0\n1\n2\n3\n4\n",
@@ -734,6 +873,11 @@ CLI_FIXTURES: tuple[tuple[tuple[str, ...], bool], ...] = (
     (("export", "models/model_8bit_per-neuron_max.npz", "--to", "nir,loihi,onnx", "--out", "deploy/", "--quiet"), True),
     (("verify", "net.npz", "--bits", "8", "--query", "winter", "--report", "rep", "--quiet"), True),
     (
+        ("localize", "models/model_8bit_per-neuron_max.npz", "--calibrate", "winter", "--precision", "0.01")
+        + ("--operating-point", "point.json", "--quiet"),
+        False,
+    ),
+    (
         (
             "train",
             "--data",
@@ -764,6 +908,8 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
                 raise SystemExit(message)
             print(f"warning: {message}", file=sys.stderr)
     write_tampered(fx, fx / "net.npz", "ck", CHECKPOINT_EDITS)
+    write_escaping_deploys(fx)
+    write_tampered_points(fx)
     write_tampered(fx, fx / "models" / "model_8bit_per-neuron_max.npz", "fp", MODEL_EDITS)
     write_reports(fx)
     names = write_images(fx / "nord", nordland, 12)
@@ -771,6 +917,12 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     shutil.copytree(fx / "nord", fx / "nörd 路径")
     write_subsets(fx)
     write_plain_files(fx)
+    only_images = fx / "nord_frames"
+    for traversal in ("summer", "winter"):
+        shutil.copytree(fx / "nord" / traversal, only_images / traversal)
+    write_ground_truths(fx, only_images, len(names))
+    write_offset_routes(fx, only_images, len(names))
+    write_resized_streams(fx, only_images)
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1430,6 +1582,27 @@ INPUT_AS_OUTPUT: dict[str, tuple[str, tuple[str, ...]]] = {
     ),
     "verify-report-is-input": ("verify net.npz --bits 8 --query winter --report net.npz", ("net.npz",)),
     "report-out-is-input": ("report rep --out rep/report.json", ("rep",)),
+    "evaluate-predictions-is-manifest": (
+        f"evaluate {CK} --query winter --data nord/places.csv --predictions nord/places.csv",
+        ("nord",),
+    ),
+    "evaluate-predictions-is-subset": (
+        f"evaluate {CK} --query winter --subset subset_ok.csv --predictions subset_ok.csv",
+        ("subset_ok.csv",),
+    ),
+    "localize-calibration-is-model": ("localize net.npz --calibrate winter --operating-point net.npz", ("net.npz",)),
+    "localize-calibration-is-manifest": (
+        f"localize {CK} --calibrate winter --data nord/places.csv --operating-point nord/places.csv",
+        ("nord",),
+    ),
+    "localize-calibration-is-ground-truth": (
+        f"localize {CK} --calibrate winter --data gt_offset --operating-point gt_offset/winter_summer_GT.npy",
+        ("gt_offset",),
+    ),
+    "localize-calibration-accepts-nothing": (
+        f"localize {EDGE} --calibrate winter --precision 1 --operating-point p.json",
+        (),
+    ),
 }
 
 
@@ -1468,6 +1641,9 @@ def output_cases() -> list[Case]:
 
 #: Legal extremes that must run (besides the legal values of the option lists above): id -> command line.
 LEGAL_LINES: dict[str, str] = {
+    "localize-frames-reference-size": f"localize {M8} --frames {{fx}}/nord/winter --threshold 0.5",
+    "evaluate-gt-offset": "evaluate {fx}/net.npz --data {fx}/gt_offset --query winter --k 1,3",
+    "simulate-gt-offset": f"simulate {M8} --data {{fx}}/gt_offset --query winter",
     "train-T1-one-neuron-0-epochs": "train --data synthetic:10 --reference summer --timesteps 1 --neurons 1 --epochs 0 --out e.npz",
     "train-one-place": "train --data synthetic:1 --reference summer --timesteps 20 --epochs 1 --neurons 16 --out t.npz",
     "train-places-one": f"{T_TINY} --places 0:1 --out t.npz",
@@ -1556,6 +1732,67 @@ LEGAL_SETUP: dict[str, dict[str, Any]] = {
 }
 
 
+def contained_file_cases() -> list[Case]:
+    """A deploy folder whose export.json names a file outside it (``..``, absolute, a symbolic link out):
+    ``localize --onnx DIR`` refuses it instead of running that file (issue 31)."""
+    return [
+        bad(
+            f"localize-onnx-deploy-{name}",
+            "localize",
+            M8,
+            "--onnx",
+            f"{{fx}}/deploy_{name}",
+            "--frames",
+            "{fx}/nord/summer",
+        )
+        for name in ("parent", "dotdot", "absolute", "symlink")
+    ]
+
+
+def stream_cases() -> list[Case]:
+    """A stream of frames cropped or rescaled from the reference images' size is refused before any decision."""
+    return [
+        bad(f"localize-frames-{name}", "localize", M8, "--frames", f"{{fx}}/frames_{name}", "--threshold", "0.5")
+        for name in ("cropped", "rescaled")
+    ]
+
+
+def operating_point_cases() -> list[Case]:
+    """A tampered operating point (threshold -1, 0, NaN, text; precision 5; 5000-deep; 5001 digits) is refused."""
+    return [
+        bad(
+            f"localize-point-{name}",
+            "localize",
+            M8,
+            "--frames",
+            "{fx}/nord/summer",
+            "--operating-point",
+            f"{{fx}}/point_{name}.json",
+        )
+        for name in POINT_EDITS
+    ]
+
+
+def ground_truth_cases() -> list[Case]:
+    """Malformed, mismatched and code-running ground truth beside a folder data set (issue 31): every
+    command that reads the pair refuses it with one line, and no pickle inside it runs."""
+    cases = []
+    for name in ground_truth_variants(12):
+        data = f"{{fx}}/gt_{name}"
+        two = ("train", "--data", data, "--reference", "summer,winter", *TINY, "--out", "t.npz")
+        cases.append(bad(f"train-gt-{name}", *two))
+        cases.append(bad(f"evaluate-gt-{name}", *EVAL, "--data", data, "--baseline"))
+    unaligned = ("--data", "{fx}/gt_unaligned", "--query", "winter")  # 12 and 9 frames, no ground truth
+    cases += [
+        bad("evaluate-gt-unaligned", "evaluate", CK, *unaligned),
+        bad("simulate-gt-unaligned", "simulate", M8, *unaligned),
+        bad("localize-gt-unaligned", "localize", CK, "--calibrate", "winter", *unaligned[:2], "--quiet"),
+        bad("verify-gt-unaligned", "verify", CK, "--bits", "8", *unaligned, "--report", "v"),
+        bad("evaluate-gt-window-beside-file", *EVAL, "--data", "{fx}/gt_offset", "--match-window", "2"),
+    ]
+    return cases
+
+
 def legal_cases() -> list[Case]:
     return [legal(f"legal-{name}", *sh(text), **LEGAL_SETUP.get(name, {})) for name, text in LEGAL_LINES.items()]
 
@@ -1578,6 +1815,10 @@ def all_cases() -> list[Case]:
         tamper_cases,
         report_cases,
         manifest_cases,
+        ground_truth_cases,
+        contained_file_cases,
+        operating_point_cases,
+        stream_cases,
         output_cases,
         legal_cases,
     )
@@ -1795,7 +2036,8 @@ def loads(path: Path) -> str | None:
     vx = importlib.import_module("vprsnn_export")
     try:
         with np.load(path, allow_pickle=False) as npz:
-            kind = json.loads(npz["__meta__"].tobytes().decode("utf-8")).get("kind", "")
+            meta = json.loads(npz["__meta__"].tobytes().decode("utf-8"))
+        kind = meta.get("format", meta.get("kind", ""))  # a fixed-point model's header names its "format"
         reader = vx.load_fixed_point if "fixed" in str(kind) else vx.load_checkpoint
         reader(path)
     except Exception as exc:  # noqa: BLE001  (any failure to read is the finding)

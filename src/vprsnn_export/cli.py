@@ -157,7 +157,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         output = getattr(args, "out", None) if output is None else output
         if output is not None and getattr(args, "output_kind", "folder") == "folder":
             check_output_folder(output)  # a file output (train) is checked by its command, against its inputs
-        with output_lock(output):
+        file_output = args.file_output(args) if hasattr(args, "file_output") else None  # evaluate --predictions, ...
+        with output_lock(output), output_lock(file_output):
             return int(args.handler(args) or 0)
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -155,3 +155,113 @@ def test_real_frames_from_a_folder_and_a_video(tmp_path, capsys):
         assert decisions(lines["integer"]) == decisions(lines["onnx"])
         assert all(d["place_id"] is None or 100 <= d["place_id"] < 112 for d in lines["float"])
     assert lines["integer"][0]["name"] == "winter.avi#0"
+
+
+# ------------------------------------------------------ outputs never overwrite inputs; tampered points (issue 31)
+
+
+def manifest_route(folder: Path, n: int = 12) -> Path:
+    """A place manifest of the synthetic route's summer and winter images, with a subset file."""
+    route = synthetic_route(n, ("summer", "winter"))
+    for name in ("summer", "winter"):
+        (folder / name).mkdir(parents=True)
+        for index, image in enumerate(route[name]):
+            cv2.imwrite(str(folder / name / f"{index}.png"), image)
+    rows = "".join(f"{i},summer/{i}.png,winter/{i}.png\n" for i in range(n))
+    (folder / "places.csv").write_text("place_id,summer,winter\n" + rows, encoding="utf-8")
+    (folder / "subset.csv").write_text("place_id\n" + "".join(f"{i}\n" for i in range(n)), encoding="utf-8")
+    return folder / "places.csv"
+
+
+def test_calibration_and_predictions_refuse_to_overwrite_an_input(tmp_path, capsys):
+    places = manifest_route(tmp_path / "data")
+    subset = places.with_name("subset.csv")
+    net, fixed, _ = write_models(tmp_path, str(places), None, 12)
+    before = {path: path.read_bytes() for path in (places, subset, net, fixed)}
+    data = ["--data", str(places), "--subset", str(subset)]
+    for model, output in ((fixed, fixed), (net, net), (fixed, places), (fixed, subset)):
+        argv = ["localize", str(model), "--calibrate", "winter", "--precision", "0.5", "--operating-point", str(output)]
+        assert main([*argv, *data, "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert "one of this command's input files" in err and len(err.strip().splitlines()) == 1
+    for output in (places, subset):
+        argv = ["evaluate", str(net), "--query", "winter", *data, "--predictions", str(output), "--quiet"]
+        assert main(argv) == 2
+        assert "one of this command's input files" in capsys.readouterr().err
+    assert {path: path.read_bytes() for path in before} == before
+
+
+def test_a_killed_runs_temp_file_is_removed_by_the_next_run_and_a_second_writer_is_refused(synthetic, tmp_path, capsys):
+    from vprsnn_export.io.fileio import output_lock
+
+    _, fixed, _, _, _ = synthetic
+    point = tmp_path / "point.json"
+    stale = tmp_path / ".point.json.abcd1234.tmp"  # what atomic_write leaves when killed mid-write
+    stale.write_text("{")
+    argv = ["localize", str(fixed), "--calibrate", "winter", "--precision", "0.5", "--operating-point", str(point)]
+    assert main([*argv, "--quiet"]) == 0
+    assert point.is_file() and not stale.exists()
+    with output_lock(point):  # another run is writing it now
+        assert main([*argv, "--quiet"]) == 2
+    assert "another vprsnn-export run is writing it" in capsys.readouterr().err
+    predictions = tmp_path / "p.csv"
+    with output_lock(predictions):
+        assert main(["evaluate", str(synthetic[0]), "--query", "winter", "--predictions", str(predictions)]) == 2
+    assert "another vprsnn-export run is writing it" in capsys.readouterr().err and not predictions.exists()
+
+
+def test_an_operating_point_that_accepts_nothing_is_not_written(tmp_path, capsys):
+    cfg = Config().replace(**{"encoder.timesteps": 8, "train.epochs": 0, "network.n_neurons": 2})
+    data = load_dataset("synthetic:12", ["summer", "winter"], cfg.preprocess)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": None})
+    net = save_checkpoint(tmp_path / "weak.npz", ckpt)
+    point = tmp_path / "weak.json"
+    argv = ["localize", str(net), "--calibrate", "winter", "--precision", "1.0", "--operating-point", str(point)]
+    assert main([*argv, "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "accepts nothing is not written" in err[0] and not point.exists()
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("threshold", -1),
+        ("threshold", 0),
+        ("threshold", "NaN"),
+        ("threshold", "0.5"),
+        ("threshold", True),
+        ("precision_target", 2),
+        ("recall", -0.1),
+        ("n_queries", -3),
+        ("match_window", 1.5),
+    ],
+)
+def test_a_tampered_operating_point_is_refused_on_load(synthetic, tmp_path, capsys, field, value):
+    _, fixed, _, frames, _ = synthetic
+    point = tmp_path / "point.json"
+    argv = ["localize", str(fixed), "--calibrate", "winter", "--precision", "0.5", "--operating-point", str(point)]
+    assert main([*argv, "--quiet"]) == 0
+    text = point.read_text()
+    data = json.loads(text)
+    data[field] = value
+    point.write_text(json.dumps(data).replace('"NaN"', "NaN"))
+    capsys.readouterr()
+    assert main(["localize", str(fixed), "--frames", str(frames), "--operating-point", str(point), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tampered or corrupt operating point" in err[0] and field in err[0]
+    point.write_text("[" * 5000 + "]" * 5000)
+    assert main(["localize", str(fixed), "--frames", str(frames), "--operating-point", str(point), "--quiet"]) == 2
+    assert "corrupt operating point" in capsys.readouterr().err
+
+
+def test_a_cropped_or_rescaled_stream_is_refused_before_any_decision(synthetic, tmp_path, capsys):
+    _, fixed, _, _, grey = synthetic
+    for label, frame in (("cropped", grey[0][:-1, :-1]), ("rescaled", cv2.resize(grey[0], (128, 64)))):
+        folder = tmp_path / label
+        folder.mkdir()
+        cv2.imwrite(str(folder / "f0.png"), frame)
+        capsys.readouterr()
+        assert main(["localize", str(fixed), "--frames", str(folder), "--threshold", "0.5", "--quiet"]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and len(err.strip().splitlines()) == 1
+        assert "the model's reference images are 64x32: a cropped or rescaled stream is refused" in err

@@ -159,3 +159,17 @@ def test_the_early_decision_refuses_runs_without_state_isolation(trained, tmp_pa
     save_checkpoint(early, replace(ckpt, config=ckpt.config.replace(**{"early.margin": True})))
     assert main(["evaluate", str(early), "--query", "winter", "--no-state-isolation", "--quiet"]) == 2
     assert "state isolation" in capsys.readouterr().err
+
+
+def test_train_warns_when_a_module_has_fewer_neurons_than_places(tmp_path, capsys):
+    """Issue 31: 724 places on one 400-neuron module trained without a word; now a warning with a --module-size."""
+    base = ["train", "--data", "synthetic:12", "--reference", "summer", "--timesteps", "8", "--epochs", "0", "--quiet"]
+    assert main([*base, "--neurons", "8", "--out", str(tmp_path / "a.npz")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "warning: 12 places per module but 8 neurons: the module cannot give every place a neuron of its own; "
+        "train an ensemble with --module-size 2 (or more --neurons)"
+    ]
+    assert main([*base, "--neurons", "8", "--module-size", "6", "--out", str(tmp_path / "b.npz")]) == 0
+    assert main([*base, "--neurons", "12", "--out", str(tmp_path / "c.npz")]) == 0
+    assert capsys.readouterr().err == ""

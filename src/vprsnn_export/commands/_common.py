@@ -12,9 +12,10 @@ from typing import Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
-from ..data.dataset import Dataset, load_selection
+from ..data.dataset import Dataset, load_selection, scoring_truth
 from ..errors import InvalidValueError
 from ..io.fileio import parse_json
+from ..readout.metrics import Tolerance
 from ..readout.rules import RULES
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
@@ -334,3 +335,17 @@ def query_data(
         places=args.places,
         progress=not args.quiet,
     )
+
+
+def scored_tolerance(match_window: int, dataset: Dataset, references: Sequence[str], query: str) -> Tolerance:
+    """How ``query``'s decisions are judged: the data set's ground truth when it has one (then --match-window,
+    which is for index-aligned data, is refused), else ``match_window`` places around the query's own id."""
+    truth = scoring_truth(dataset, references, query)
+    if truth is None:
+        return match_window
+    if match_window:
+        raise InvalidValueError(
+            f"--match-window {match_window}: {truth.source} says which reference frames match each query; "
+            "--match-window is for index-aligned data without a ground-truth file"
+        )
+    return truth

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 import numpy as np
 
 from ..cluster import CLUSTER_HELP, parse_cluster
+from ..data.dataset import dataset_files
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
@@ -19,6 +21,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
+    scored_tolerance,
     sequence_options,
 )
 
@@ -61,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--cluster", help=f"run the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP})"
     )
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, file_output=lambda args: args.predictions)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,12 +85,12 @@ def run(args: argparse.Namespace) -> int:
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    window = dataset.match_window(args.query)
-    if window is not None and window > options.tolerance:
-        print(
-            f"warning: the ground truth of {args.query!r} matches some queries only {window} places from their "
-            f"own index: give --match-window {window} to score against it",
-            file=sys.stderr,
+    options = replace(
+        options, tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query)
+    )
+    if args.predictions is not None:  # nor over a file of the data set (manifest, subset, ground truth)
+        check_output(
+            args.predictions, inputs=(args.checkpoint, *dataset_files(dataset, args.subset, ckpt.data.get("subset")))
         )
     result = evaluate_float(
         ckpt,

@@ -16,12 +16,17 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from ..data.dataset import dataset_files, reference_frame_shape
 from ..data.frames import iter_frames
-from ..errors import InvalidValueError
+from ..errors import DataError, InvalidValueError
+from ..io.fileio import check_output
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ._common import (
@@ -30,6 +35,7 @@ from ._common import (
     add_sequence_options,
     given_sequence_options,
     query_data,
+    scored_tolerance,
     sequence_options,
 )
 
@@ -81,7 +87,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
-    parser.set_defaults(handler=run)
+    parser.set_defaults(handler=run, file_output=calibration_output)
+
+
+def calibration_output(args: argparse.Namespace) -> str | None:
+    """The file --calibrate writes (locked for the run like every command's output); None without --calibrate."""
+    from ..runtime.localize import operating_point_path
+
+    if args.calibrate is None:
+        return None
+    return args.operating_point or str(operating_point_path(args.model))
 
 
 def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
@@ -137,10 +152,27 @@ def run(args: argparse.Namespace) -> int:
     backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     localizer = Localizer(source.network, options=options, threshold=threshold, **backend)
     assert frames is not None
-    for decision in localizer.run(frames):
+    expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
+    for decision in localizer.run(sized_frames(frames, expected)):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")
         sys.stdout.flush()
     return 0
+
+
+def sized_frames(
+    frames: Iterator[tuple[str, np.ndarray]], expected: tuple[int, int] | None
+) -> Iterator[tuple[str, np.ndarray]]:
+    """The frames, each checked against the size of the model's reference images (None: not known here):
+    a cropped or rescaled stream (a video writer that drops a row, a camera at another resolution) would be
+    decided on other pixels than the model learnt, so a frame of another size stops the run with one line."""
+    for name, grey in frames:
+        if expected is not None and grey.shape != expected:
+            raise DataError(
+                f"frame {name!r} is {grey.shape[1]}x{grey.shape[0]} pixels but the model's reference images are "
+                f"{expected[1]}x{expected[0]}: a cropped or rescaled stream is refused; give frames of the "
+                "reference images' size"
+            )
+        yield name, grey
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
@@ -150,7 +182,11 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network
     options = sequence_options(args)
+    check_output(point_path, inputs=(args.model, onnx))
     dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
+    check_output(
+        point_path, inputs=(args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
+    )
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
@@ -159,12 +195,18 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         dataset.traversal(args.calibrate),
         dataset.place_ids,
         precision=1.0 if args.precision is None else args.precision,
-        match_window=options.tolerance,
+        match_window=scored_tolerance(args.match_window, dataset, network.reference_traversals, args.calibrate),
         model_sha256=source.sha256,
         query=args.calibrate,
     )
+    if point.threshold is None:
+        raise InvalidValueError(
+            f"no confidence threshold reaches precision {point.precision_target:g} on the {point.n_queries} "
+            f"'{args.calibrate}' queries: an operating point that accepts nothing is not written ({point_path}); "
+            "give a lower --precision or more calibration queries"
+        )
     save_operating_point(point, point_path)
-    threshold = "none qualified: nothing will be accepted" if point.threshold is None else f"{point.threshold:.6f}"
+    threshold = f"{point.threshold:.6f}"
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
         f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "

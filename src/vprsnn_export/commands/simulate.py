@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
@@ -15,6 +16,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
+    scored_tolerance,
     sequence_options,
 )
 
@@ -46,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
             )
     options = sequence_options(args)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
+    options = replace(
+        options, tolerance=scored_tolerance(args.match_window, dataset, model.reference_traversals, args.query)
+    )
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)

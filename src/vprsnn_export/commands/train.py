@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 from ..cluster import CLUSTER_HELP, parse_cluster
+from ..config import Config
 from ..data.dataset import load_dataset, selection_record
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output
@@ -54,9 +56,27 @@ def run(args: argparse.Namespace) -> int:
         cluster=cluster,
     )
     path = save_checkpoint(args.out, ckpt)
+    warning = capacity_warning(len(dataset.place_ids), cfg)  # after the run: an error stays the only stderr line
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     where = device if cluster is None else f"cluster {cluster.address}"
     print(
         f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
         f"in {time.perf_counter() - started:.1f} s on {where} ({args.threads} thread(s)); wrote {path}"
     )
     return 0
+
+
+def capacity_warning(n_places: int, cfg: Config) -> str | None:
+    """A warning when one module must learn more places than it has neurons (places per module P, or every
+    place without modules, above ``network.n_neurons``): some places then have no neuron of their own. The
+    suggested module size is n / 4 places (docs/experiments.md: 100 places per module of 400 neurons)."""
+    per_module = min(cfg.train.module_size or n_places, n_places)
+    neurons = cfg.network.n_neurons
+    if per_module <= neurons:
+        return None
+    suggested = max(1, neurons // 4)
+    return (
+        f"{per_module} places per module but {neurons} neurons: the module cannot give every place a neuron of "
+        f"its own; train an ensemble with --module-size {suggested} (or more --neurons)"
+    )

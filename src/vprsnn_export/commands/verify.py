@@ -18,9 +18,10 @@ import numpy as np
 
 from ..config import Config
 from ..data.dataset import MAX_PLACES, Dataset, load_dataset
-from ..errors import EXIT_CHECK_FAILED, InvalidValueError
+from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..readout.metrics import MatchTruth
 from ..readout.strategies import STRATEGIES
 from ..runtime.results import MetricRow, VerifyReport
 from ..targets.registry import TARGETS
@@ -33,6 +34,7 @@ from ._common import (
     integer,
     parse_int_list,
     print_json,
+    scored_tolerance,
     sequence_options,
 )
 
@@ -152,9 +154,14 @@ def load_for(
     traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
     key = (source, subset, places, tuple(traversals))
     if key not in cache:
-        cache[key] = load_dataset(
-            source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
-        )
+        try:
+            cache[key] = load_dataset(
+                source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
+            )
+        except DataError:  # a folder whose query traversal has another length than the references': alone
+            cache[key] = load_dataset(
+                source, [query], ckpt.config.preprocess, subset=subset, places=places, progress=progress
+            )
     dataset = cache[key]
     if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
@@ -305,6 +312,13 @@ def run(args: argparse.Namespace) -> int:
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
+        readout = dataclasses.replace(
+            options.readout,
+            tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query),
+        )
+        network_options = dataclasses.replace(options, readout=readout)
+        if isinstance(readout.tolerance, MatchTruth):  # the report says what the queries were scored against
+            settings["ground_truth"] = readout.tolerance.source
         runs.append(
             verify_checkpoint(
                 ckpt,
@@ -312,7 +326,7 @@ def run(args: argparse.Namespace) -> int:
                 dataset.traversal(args.query),
                 dataset.place_ids,
                 args.query,
-                options,
+                network_options,
                 reference_images=None if options.calibration == "float" else reference_images,
                 export_dir=out / "exports" / folder_name(label, index),
                 device=device,

@@ -26,18 +26,30 @@ from tqdm import tqdm
 
 from ..arguments import ascii_uint, check_place_ids
 from ..config import PreprocessConfig
-from ..errors import DataError, InvalidValueError
+from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
+from ..readout.metrics import MatchTruth
 from .folders import (
     FolderGroundTruth,
+    check_every_query_matched,
     decode_frames,
     folder_files,
     folder_fingerprint,
     ground_truths,
     is_folder_dataset,
+    query_truth,
 )
+from .frames import image_files
+from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT
 from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
-from .synthetic import DEFAULT_PLACES, SYNTHETIC_TRAVERSALS, synthetic_fingerprint, synthetic_route
+from .synthetic import (
+    DEFAULT_PLACES,
+    IMAGE_HEIGHT,
+    IMAGE_WIDTH,
+    SYNTHETIC_TRAVERSALS,
+    synthetic_fingerprint,
+    synthetic_route,
+)
 
 PLACE_ID = "place_id"
 MANIFEST_NAME = "places.csv"
@@ -84,11 +96,6 @@ class Dataset:
         digest = sha256_bytes(b"".join(arrays[name].tobytes() for name in names) + ids.tobytes())
         processed = {name: preprocess_images(array, cfg) for name, array in arrays.items()}
         return cls(source=source, manifest_sha256=digest, place_ids=ids, images=processed)
-
-    def match_window(self, query: str) -> int | None:
-        """The ground-truth files' window for ``query`` (the largest over its files), None without one."""
-        windows = [truth.window for truth in self.ground_truth if truth.query == query]
-        return max(windows) if windows else None
 
     @property
     def n_places(self) -> int:
@@ -160,6 +167,65 @@ def selection_record(subset: str | Path | None, places: str | None) -> dict[str,
     """The place selection as a checkpoint stores it: an absolute subset path (so the checkpoint can be
     used from another directory) or a START:COUNT[:STRIDE] spec."""
     return {"subset": str(Path(subset).resolve()) if subset else None, "places": places}
+
+
+def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> MatchTruth | None:
+    """How the queries of traversal ``query`` are scored against a network trained on ``references``: the
+    data set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data
+    set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
+    a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
+    match, or the folder when its traversals are not index-aligned and no file says how they match."""
+    if not isinstance(dataset, Dataset):
+        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    folder = Path(dataset.source)
+    if (
+        parse_synthetic(dataset.source) is not None
+        or not is_folder_dataset(folder)
+        or (folder / MANIFEST_NAME).is_file()
+    ):
+        return None
+    truth = query_truth(folder, _check_traversals(references), query)
+    if truth is None:
+        return None
+    matrix, path = truth
+    check_every_query_matched(matrix, dataset.place_ids, path)
+    return MatchTruth(matrix, str(path))
+
+
+def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:
+    """The files a data set was read from that no output of the same run may replace: its manifest, every
+    ground-truth file of a folder data set (:data:`~vprsnn_export.data.groundtruth.GT_SUFFIXES`, VPR-Bench's
+    file) and the given subset files (None and place-id sequences are skipped)."""
+    source = Path(dataset.source)
+    files = [Path(s) for s in subsets if isinstance(s, str | Path) and str(s).strip()]
+    if source.is_file():
+        files.append(source)
+    elif source.is_dir():
+        files += [p for suffix in GT_SUFFIXES for p in source.glob(f"*{suffix}")]
+        files += [source / VPR_BENCH_GT, source / MANIFEST_NAME]
+    return tuple(files)
+
+
+def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str]) -> tuple[int, int] | None:
+    """(height, width) of the first reference image a network was trained on (its data ``record``): the size a
+    stream of frames is expected to have. None when the data source is not readable here (nothing to compare)."""
+    source = _optional_str(record.get("source"))
+    names = list(traversals)
+    if source is None or not names:
+        return None
+    try:
+        if parse_synthetic(source) is not None:
+            return IMAGE_HEIGHT, IMAGE_WIDTH
+        folder = Path(source)
+        if is_folder_dataset(folder) and not (folder / MANIFEST_NAME).is_file():
+            first = image_files(folder / names[0])[0]
+        else:
+            manifest = read_manifest(source)
+            first = manifest.path.parent / next(iter(manifest.rows.values()))[1].get(names[0], "")
+        shape = read_grey_image(first).shape
+    except (VprError, OSError, StopIteration):
+        return None
+    return int(shape[0]), int(shape[1])
 
 
 def load_selection(

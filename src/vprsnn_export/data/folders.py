@@ -6,25 +6,17 @@ Layout (no CSV manifest)::
     myimgs/winter/0001.png 0002.png ...
     myimgs/summer_winter_GT.npy             optional ground truth for a (reference, query) pair
 
-The place of a frame is its index in its traversal (0, 1, ...): frame ``j`` of every traversal is
-place ``j`` ("same index"), so every traversal holds the same number of frames. ``--places`` /
-``--subset`` select by that index. A ground-truth file is checked against that alignment:
-
-* ``<reference>_<query>_GT.npy``, a 2-D 0/1 matrix ``GT[reference, query]`` (the LENS layout), or a
-  1-D object array with, per query, the list of matching reference indices (VPR-Bench);
-* ``<reference>_<query>_GT.csv`` with columns ``query,reference`` (one row per matching pair).
-
-For every query ``j`` the distance to its nearest matching reference must be at most the largest
-such distance over the queries, ``W = max_j min_{r in GT(j)} |r - j|``; the loader reports ``W``
-(:attr:`FolderGroundTruth.window`) so that ``--match-window W`` scores every query against the
-file's matches. A query with no match, or ground truth that is not close to the index alignment
-(``W`` above :data:`MAX_WINDOW`), is a DataError: this version scores against index-aligned places.
+The place id of a frame is its index in its traversal (0, 1, ...). With a ground-truth file for a
+(reference, query) pair (:mod:`vprsnn_export.data.groundtruth`: LENS's ``<a>_<b>_GT.npy``, VPR-Bench's
+``ground_truth_new.npy`` beside ``ref/`` and ``query/``, or a CSV of pairs) every query is scored against
+the reference frames that file names, whatever the two traversals' lengths and offsets
+(:func:`query_truth`). Without one, frame ``j`` of every traversal is place ``j`` ("same index"): that
+needs equal frame counts, and a pair of different lengths is refused rather than scored by index.
+Traversals loaded together share their place ids, so they must hold the same number of frames.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,20 +29,17 @@ from ..config import PreprocessConfig
 from ..errors import DataError
 from ..io.fileio import sha256_bytes
 from .frames import image_files
+from .groundtruth import pair_ground_truth
 from .preprocess import normalise_resized, read_grey_image, resize_image
-
-GT_SUFFIXES = ("_GT.npy", "_GT.csv")
-MAX_WINDOW = 50  # places: ground truth further from the index alignment than this is not supported
 
 
 @dataclass(frozen=True)
 class FolderGroundTruth:
-    """A ground-truth file of a (reference, query) pair, checked against the index alignment."""
+    """A ground-truth file of a (reference, query) pair of loaded traversals, read and checked."""
 
     path: Path
     reference: str
     query: str
-    window: int  # W: every query has a matching reference within +-W of its own index
 
 
 def is_folder_dataset(path: Path) -> bool:
@@ -62,85 +51,72 @@ def traversal_names(folder: Path) -> list[str]:
     return sorted(child.name for child in folder.iterdir() if child.is_dir())
 
 
-def ground_truth_matrix(path: Path, n_reference: int, n_query: int) -> np.ndarray:
-    """The file as a boolean matrix (n_reference, n_query); DataError on any defect."""
-    if path.suffix == ".csv":
-        return _csv_matrix(path, n_reference, n_query)
-    try:
-        raw = np.load(path, allow_pickle=True)  # VPR-Bench stores lists of indices as an object array
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read this ground truth ({exc})", path) from None
-    if raw.ndim == 2 and raw.dtype != object:
-        if raw.shape != (n_reference, n_query):
-            raise DataError(
-                f"ground-truth matrix has shape {raw.shape}, expected (references, queries) = {(n_reference, n_query)}",
-                path,
-            )
-        return np.asarray(raw) != 0
-    if raw.ndim == 1 and len(raw) == n_query:
-        matrix = np.zeros((n_reference, n_query), dtype=bool)
-        for query, matches in enumerate(raw):
-            indices = np.atleast_1d(np.asarray(matches, dtype=np.int64))
-            if indices.size and (indices.min() < 0 or indices.max() >= n_reference):
-                raise DataError(f"query {query} lists reference indices outside 0..{n_reference - 1}", path)
-            matrix[indices, query] = True
-        return matrix
-    raise DataError(
-        f"expected a (references, queries) matrix or one list of reference indices per query ({n_query}), "
-        f"got shape {raw.shape} dtype {raw.dtype}",
-        path,
-    )
-
-
-def _csv_matrix(path: Path, n_reference: int, n_query: int) -> np.ndarray:
-    try:
-        rows = list(csv.DictReader(io.StringIO(path.read_text(encoding="utf-8-sig"))))
-        pairs = np.asarray([(int(row["query"]), int(row["reference"])) for row in rows], dtype=np.int64)
-    except (OSError, UnicodeDecodeError, csv.Error, KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"expected a CSV with integer columns query,reference ({exc})", path) from None
-    if pairs.size == 0:
-        raise DataError("the ground-truth CSV lists no pairs", path)
-    if (
-        pairs[:, 0].min() < 0
-        or pairs[:, 0].max() >= n_query
-        or pairs[:, 1].min() < 0
-        or pairs[:, 1].max() >= n_reference
-    ):
-        raise DataError(f"query or reference index outside 0..{n_query - 1} / 0..{n_reference - 1}", path)
-    matrix = np.zeros((n_reference, n_query), dtype=bool)
-    matrix[pairs[:, 1], pairs[:, 0]] = True
-    return matrix
-
-
-def alignment_window(matrix: np.ndarray, path: Path) -> int:
-    """W = max_j min_{r : GT[r, j]} |r - j|; DataError for a query without a match or W > MAX_WINDOW."""
-    n_reference, n_query = matrix.shape
-    unmatched = np.flatnonzero(~matrix.any(axis=0))
+def check_every_query_matched(matrix: np.ndarray, queries: np.ndarray, path: Path) -> None:
+    """DataError naming the first of ``queries`` (query frame indices) that matches no reference frame."""
+    unmatched = queries[~matrix[:, queries].any(axis=0)]
     if unmatched.size:
-        raise DataError(f"{unmatched.size} queries have no matching reference (first: query {unmatched[0]})", path)
-    distance = np.abs(np.arange(n_reference)[:, None] - np.arange(n_query)[None, :]).astype(np.float64)
-    nearest = np.where(matrix, distance, np.inf).min(axis=0)
-    window = int(nearest.max())
-    if window > MAX_WINDOW:
-        worst = int(np.argmax(nearest))
         raise DataError(
-            f"query {worst}'s nearest match is {window} frames from its own index: this version scores folder "
-            f"data sets whose frame j is place j (within +-{MAX_WINDOW})",
+            f"{unmatched.size} queries have no matching reference (first: query {int(unmatched[0])}): "
+            "they cannot be scored",
             path,
         )
-    return window
+
+
+def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np.ndarray, Path] | None:
+    """GT[reference frame, query frame] of traversal ``query`` against the reference traversal(s), from the
+    ground-truth files beside them (several references must agree); None when the pair has no file and the
+    traversals are index-aligned (equal frame counts) or ``query`` is a reference itself. DataError naming
+    the folder when the frame counts differ and no file says which frames match: never an index score on
+    data that is not index-aligned."""
+    others = [name for name in dict.fromkeys(references) if name != query]
+    if not others:
+        return None
+    absent = [name for name in others if not (folder / name).is_dir()]
+    if absent:
+        raise DataError(
+            f"the model's reference traversal {absent[0]!r} is not a folder here: nothing says how the frames of "
+            f"{query!r} align with its places; give the data set it was trained on (--data), with a ground-truth "
+            "file when the traversals differ in length",
+            folder,
+        )
+    counts = {name: len(image_files(folder / name)) for name in [query, *others]}
+    found = []
+    for reference in others:
+        truth = pair_ground_truth(folder, reference, query, counts[reference], counts[query])
+        if truth is not None:
+            found.append(truth)
+    if not found:
+        unequal = [name for name in others if counts[name] != counts[query]]
+        if unequal:
+            raise DataError(
+                f"traversal {query!r} holds {counts[query]} frames and reference {unequal[0]!r} "
+                f"{counts[unequal[0]]}: they are not index-aligned and no ground-truth file "
+                f"({unequal[0]}_{query}_GT.npy or .csv) says which frames match; refusing to score by index",
+                folder,
+            )
+        return None
+    matrix, path = found[0]
+    for other, other_path in found[1:]:
+        if not np.array_equal(other, matrix):
+            raise DataError(f"this ground truth disagrees with {other_path} (two reference traversals)", path)
+    return matrix, path
 
 
 def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) -> list[FolderGroundTruth]:
-    """Every ``<a>_<b>_GT.npy|csv`` in ``folder`` whose two traversals are loaded, checked."""
+    """The ground truth of every ordered pair of loaded traversals that has a file
+    (:func:`~vprsnn_export.data.groundtruth.ground_truth_files`), read strictly and checked."""
     found = []
     for reference in names:
         for query in names:
-            for suffix in GT_SUFFIXES:
-                path = folder / f"{reference}_{query}{suffix}"
-                if reference != query and path.is_file():
-                    matrix = ground_truth_matrix(path, counts[reference], counts[query])
-                    found.append(FolderGroundTruth(path, reference, query, alignment_window(matrix, path)))
+            truth = (
+                None
+                if reference == query
+                else pair_ground_truth(folder, reference, query, counts[reference], counts[query])
+            )
+            if truth is not None:
+                matrix, path = truth
+                check_every_query_matched(matrix, np.arange(counts[query]), path)
+                found.append(FolderGroundTruth(path, reference, query))
     return found
 
 
@@ -160,7 +136,8 @@ def folder_files(folder: Path, names: Sequence[str]) -> dict[str, list[Path]]:
         raise DataError(
             "the traversals hold different numbers of frames ("
             + ", ".join(f"{name} {count}" for name, count in counts.items())
-            + "): frame j of every traversal must be place j",
+            + "): traversals loaded together share their place ids; load them one at a time (a ground-truth "
+            "file scores a query traversal of another length)",
             folder,
         )
     return files

@@ -207,7 +207,9 @@ def timed_query_counts(
     counts_path = path.with_name(f"{stem}.{settings.query}.counts.npy")
     timing = path.with_name(f"{stem}.{settings.query}.counts.json")
     if counts_path.exists() and timing.exists():
-        return TimedCounts(np.load(counts_path), float(json.loads(timing.read_text())["seconds"]), True)
+        return TimedCounts(
+            np.load(counts_path, allow_pickle=False), float(json.loads(timing.read_text())["seconds"]), True
+        )
     network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, resolve_device(settings.device))
     network.progress = settings.progress
     started = time.perf_counter()

@@ -21,7 +21,7 @@ from vprsnn_export.errors import InvalidValueError
 from .aggregation import aggregate, stream_contrast, window_scores
 from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
-from .metrics import MetricRow, is_correct, pr_metrics, predicted_place_ids
+from .metrics import MatchTruth, MetricRow, Tolerance, is_correct, pr_metrics, predicted_place_ids
 from .regions import (
     ModuleAccuracy,
     ModuleLayout,
@@ -40,7 +40,7 @@ def decision_metrics(
     strategy: str,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
     predicted, confidence = decide(distribution, strategy)
@@ -106,7 +106,7 @@ def region_accuracies(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     regions: np.ndarray,
-    tolerance: int = 0,
+    tolerance: Tolerance = 0,
 ) -> list[ModuleAccuracy]:
     """Per module: accuracy and in-region share of the whole-route :data:`SEQUENCE_STRATEGY` decisions of
     ``distribution`` (Q, places) on its region's queries (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
@@ -115,12 +115,24 @@ def region_accuracies(
     return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
 
 
-def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: int) -> None:
-    """InvalidValueError when no query place lies within ``tolerance`` of a reference place: every
-    decision would be wrong by construction (the model was trained on other places)."""
+def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: Tolerance) -> None:
+    """InvalidValueError when no query place lies within ``tolerance`` of a reference place (or, with a
+    ground truth, no query matches a reference place): every decision would be wrong by construction
+    (the model was trained on other places)."""
     reference = np.sort(np.asarray(reference_place_ids, dtype=np.int64))
     queries = np.asarray(query_place_ids, dtype=np.int64)
     if reference.size == 0 or queries.size == 0:
+        return
+    if isinstance(tolerance, MatchTruth):
+        n_reference, n_query = tolerance.matrix.shape
+        if queries.min() < 0 or queries.max() >= n_query:
+            raise InvalidValueError(f"query place ids outside the ground truth's 0..{n_query - 1} ({tolerance.source})")
+        inside = reference[reference < n_reference]
+        if not tolerance.matrix[np.ix_(inside, queries)].any():
+            raise InvalidValueError(
+                f"none of the {queries.size} queries matches one of the model's {reference.size} reference places "
+                f"by the ground truth {tolerance.source}: select the places it was trained on (--places / --subset)"
+            )
         return
     nearest = np.clip(np.searchsorted(reference, queries), 0, reference.size - 1)
     below = reference[np.clip(nearest - 1, 0, reference.size - 1)]

@@ -17,6 +17,7 @@ import numpy as np
 from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import DEFAULT_MEMORY, DEFAULT_SPAN, aggregate
+from .metrics import MatchTruth, Tolerance
 from .rules import DEFAULT_RULE, RULES
 from .velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 
@@ -77,7 +78,7 @@ class SequenceOptions:
     velocity_length: int | None = None
     velocity_memory: int = DEFAULT_MEMORY
     velocity_lag: int | None = None
-    tolerance: int = 0
+    tolerance: Tolerance = 0  # or the data set's ground truth (a MatchTruth): the window is not used then
 
     def __post_init__(self) -> None:
         ks = tuple(self.ks) if isinstance(self.ks, (tuple, list)) else ()
@@ -107,7 +108,8 @@ class SequenceOptions:
         _count("velocity_length", self.velocity_length, 1, MAX_SETTING, optional=True)
         _count("velocity_memory", self.velocity_memory, 0, MAX_SETTING)
         _count("velocity_lag", self.velocity_lag, 0, MAX_SETTING, optional=True)
-        _count("tolerance", self.tolerance, 0, MAX_TOLERANCE)
+        if not isinstance(self.tolerance, MatchTruth):
+            _count("tolerance", self.tolerance, 0, MAX_TOLERANCE)
 
     def aggregate(self, distribution: np.ndarray, k: int, frame_positions: np.ndarray | None = None) -> np.ndarray:
         """A distribution (Q, places) aggregated over k frames at the given velocity or at one estimated from it.

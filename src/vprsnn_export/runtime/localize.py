@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass
@@ -50,8 +51,8 @@ from vprsnn_export.data.preprocess import normalise_resized, resize_image
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.io.fileio import atomic_write_text, is_readable_file
-from vprsnn_export.readout.metrics import is_correct
+from vprsnn_export.io.fileio import atomic_write_text, is_readable_file, parse_json
+from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 
@@ -94,6 +95,7 @@ class OperatingPoint:
     backend: str
     query: str
     match_window: int
+    ground_truth: str = ""  # the ground-truth file the calibration queries were scored against ("" : by index)
 
     def accepts(self, confidence: float, place_id: int | None) -> bool:
         return self.threshold is not None and place_id is not None and confidence >= self.threshold
@@ -235,12 +237,13 @@ def operating_point(
     place_ids: np.ndarray,
     *,
     precision: float = 1.0,
-    match_window: int = 0,
+    match_window: Tolerance = 0,
     model_sha256: str = "",
     query: str = "",
 ) -> tuple[OperatingPoint, list[Decision]]:
     """Run the localiser over labelled preprocessed frames (N, inputs) in stream order (a query traversal)
-    and choose the threshold for ``precision``; a decision within ``match_window`` places is right."""
+    and choose the threshold for ``precision``; a decision within ``match_window`` places is right (or, with
+    the data set's ground truth as ``match_window``, a reference it names)."""
     if not 0 < precision <= 1:
         raise InvalidValueError(f"--precision must lie in (0, 1], got {precision}")
     decisions = localizer.run_inputs(inputs)
@@ -266,9 +269,36 @@ def operating_point(
         model_sha256=model_sha256,
         backend=localizer.backend,
         query=query,
-        match_window=int(match_window),
+        match_window=0 if isinstance(match_window, MatchTruth) else int(match_window),
+        ground_truth=match_window.source if isinstance(match_window, MatchTruth) else "",
     )
     return point, decisions
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def operating_point_problem(point: OperatingPoint) -> str | None:
+    """What makes a stored operating point unusable (None: nothing): a threshold that is not a finite confidence
+    > 0 (-1 or 0 would accept every frame, NaN none), a precision target outside (0, 1], an achieved precision
+    or recall outside [0, 1], a query count or match window that is not a non-negative integer."""
+    if point.threshold is not None and not (_is_real(point.threshold) and point.threshold > 0):
+        return f"threshold {point.threshold!r} is not a confidence > 0"
+    if not (_is_real(point.precision_target) and 0 < point.precision_target <= 1):
+        return f"precision_target {point.precision_target!r} is not in (0, 1]"
+    for name in ("precision", "recall"):
+        value = getattr(point, name)
+        if not (_is_real(value) and 0 <= value <= 1):
+            return f"{name} {value!r} is not in [0, 1]"
+    for name in ("n_queries", "match_window"):
+        value = getattr(point, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            return f"{name} {value!r} is not a non-negative integer"
+    for name in ("model_sha256", "backend", "query", "ground_truth"):
+        if not isinstance(getattr(point, name), str):
+            return f"{name} is not a string"
+    return None
 
 
 def operating_point_path(model_path: str | Path) -> Path:
@@ -287,12 +317,23 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
     if not is_readable_file(path):
         raise ModelFileError("no operating point here: run `localize MODEL --calibrate QUERY` first", path)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = parse_json(path.read_bytes(), "operating point")
         if data.get("format") != OPERATING_POINT_FORMAT:
             raise ModelFileError(f"not an operating point (format {data.get('format')!r})", path)
         point = OperatingPoint.from_dict(data)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, KeyError, AttributeError) as exc:
+    except (
+        OSError,
+        UnicodeDecodeError,
+        json.JSONDecodeError,
+        TypeError,
+        KeyError,
+        AttributeError,
+        ValueError,
+    ) as exc:  # ValueError: InvalidValueError of a JSON beyond its limits or of malformed options
         raise ModelFileError(f"corrupt operating point ({exc})", path) from None
+    problem = operating_point_problem(point)
+    if problem:
+        raise ModelFileError(f"tampered or corrupt operating point: {problem}", path)
     if model_sha256 is not None and point.model_sha256 != model_sha256:
         raise ModelFileError("this operating point was calibrated on another model file (sha256 differs)", path)
     return point

@@ -5,7 +5,8 @@ For query ``q`` (in stream order), strategy ``s`` and sequence length ``k``:
 .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}^{(s, k)}_{ql}, \\quad c_q = \\text{confidence of } \\hat l_q,
           \\quad \\text{correct}_q = |\\mathrm{id}(\\hat l_q) - \\text{truth}_q| \\le \\text{match window}
 
-with the very scores the metric rows are computed from (``runtime.evaluation``: every strategy
+(with a data set's ground-truth file, ``correct_q = GT[id(l_q), truth_q]``, truth_q being the query's own
+frame index: ``readout.metrics.MatchTruth``), with the very scores the metric rows are computed from (``runtime.evaluation``: every strategy
 at k = 1, W+Prob aggregated at each k > 1), so the accuracy of a (strategy, k) column of
 :class:`Predictions` equals that row's accuracy.
 """

@@ -97,6 +97,23 @@ def header_path(path: str | Path) -> Path:
     return path / HEADER_NAME if path.is_dir() else path
 
 
+def arrays_file(head: Path, header: dict) -> Path:
+    """The arrays file the header names, in network.json's folder: a bare file name (no folder, no ``..``, not
+    absolute; a symbolic link that leads out of the folder is refused too); ModelFileError otherwise."""
+    arrays = header.get("arrays")
+    name = arrays.get("file", ARRAYS_NAME) if isinstance(arrays, dict) else None
+    if not isinstance(name, str) or not name or Path(name).name != name or name in (".", ".."):
+        raise ModelFileError(f"the header's arrays file must be a file name in its folder, got {name!r}", head)
+    path = head.parent / name
+    try:
+        inside = path.resolve().parent == head.parent.resolve()
+    except (OSError, RuntimeError):
+        inside = False
+    if not inside:
+        raise ModelFileError(f"the arrays file {name!r} resolves outside the description's folder", head)
+    return path
+
+
 def read_loihi(path: str | Path) -> LoihiDescription:
     """Read and check a description (its folder or its network.json); defects are ModelFileErrors."""
     head = header_path(path)
@@ -114,7 +131,7 @@ def read_loihi(path: str | Path) -> LoihiDescription:
         raise ModelFileError(
             f"unsupported Loihi description version {version!r} (this version reads {list(READABLE_VERSIONS)})", head
         )
-    arrays_path = head.parent / str(header.get("arrays", {}).get("file", ARRAYS_NAME))
+    arrays_path = arrays_file(head, header)
     if not arrays_path.is_file():
         raise ModelFileError("the arrays file named by the header is missing", arrays_path)
     blob = arrays_path.read_bytes()

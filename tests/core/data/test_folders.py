@@ -11,7 +11,7 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config
-from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset, load_dataset, scoring_truth
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import DataError, InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
@@ -51,11 +51,11 @@ def test_a_folder_of_traversal_folders_loads_like_the_arrays(tmp_path):
 
 
 @pytest.mark.parametrize("form", ["matrix", "lists", "csv"])
-def test_ground_truth_files_give_the_match_window(tmp_path, form):
+def test_ground_truth_files_become_the_scoring_truth(tmp_path, form):
     write_route(tmp_path)
     truth = np.eye(12, dtype=np.int64)
-    truth[5, 4] = truth[4, 4] = 0
-    truth[6, 4] = 1  # query 4 matches reference 6 only: two places from its index
+    truth[4, 4] = 0
+    truth[6, 4] = truth[4, 6] = 1  # query 4 matches reference 6 only (symmetric: a square matrix must be)
     if form == "matrix":
         np.save(tmp_path / "summer_winter_GT.npy", truth)
     elif form == "lists":
@@ -66,7 +66,12 @@ def test_ground_truth_files_give_the_match_window(tmp_path, form):
         pairs = "\n".join(f"{q},{r}" for r, q in zip(*np.nonzero(truth), strict=True))
         (tmp_path / "summer_winter_GT.csv").write_text("query,reference\n" + pairs + "\n")
     data = load_dataset(tmp_path, ["summer", "winter"], CFG)
-    assert data.match_window("winter") == 2 and data.match_window("summer") is None
+    assert [(t.reference, t.query) for t in data.ground_truth] == [("summer", "winter"), ("winter", "summer")]
+    alone = load_dataset(tmp_path, ["winter"], CFG, places="2:6")  # the query traversal alone, as evaluate loads it
+    scored = scoring_truth(alone, ["summer"], "winter")
+    np.testing.assert_array_equal(scored.matrix, truth > 0)
+    assert scored.source.endswith(f"summer_winter_GT.{'csv' if form == 'csv' else 'npy'}")
+    assert scoring_truth(alone, ["winter"], "winter") is None  # a reference traversal is its own truth
 
 
 def test_folder_defects_are_one_clear_error(tmp_path):
@@ -87,11 +92,14 @@ def test_folder_defects_are_one_clear_error(tmp_path):
         Dataset.from_arrays({"a": np.zeros((2, 8, 8), np.uint8)}, CFG, place_ids=[1, 1])
 
 
-def test_far_ground_truth_is_refused(tmp_path):
-    write_route(tmp_path, n=60)
-    np.save(tmp_path / "summer_winter_GT.npy", np.fliplr(np.eye(60, dtype=np.int64)))
-    with pytest.raises(DataError, match="59 frames from its own index"):
-        load_dataset(tmp_path, ["summer", "winter"], CFG)
+def test_without_a_file_traversals_of_different_lengths_are_not_scored_by_index(tmp_path):
+    write_route(tmp_path)
+    (tmp_path / "winter" / "img11.png").unlink()
+    alone = load_dataset(tmp_path, ["winter"], CFG)
+    with pytest.raises(DataError, match="not index-aligned and no ground-truth file"):
+        scoring_truth(alone, ["summer"], "winter")
+    with pytest.raises(DataError, match="reference traversal 'autumn' is not a folder here"):
+        scoring_truth(alone, ["autumn"], "winter")
 
 
 @pytest.mark.skipif(not LENS.is_dir(), reason=f"the shared LENS example is absent ({LENS})")
@@ -101,7 +109,9 @@ def test_the_lens_folder_evaluates_with_its_npy_ground_truth(tmp_path, capsys):
     trained = train_and_calibrate(data, ["example-reference"], cfg, progress=False, selection={"places": "0:30"})
     ckpt = save_checkpoint(tmp_path / "lens.npz", trained)
     argv = ["evaluate", str(ckpt), "--query", "example-query", "--k", "1,3", "--json", "--quiet"]
-    assert main([*argv, "--match-window", "1"]) == 0
+    assert main([*argv, "--match-window", "1"]) == 2  # the file decides: a window is for index-aligned data
+    assert "example-reference_example-query_GT.npy says which reference frames match" in capsys.readouterr().err
+    assert main(argv) == 0
     rows = json.loads(capsys.readouterr().out)["results"]
     assert [(r["strategy"], r["k"], r["n_queries"]) for r in rows][-1] == ("wprob", 3, 30)
     assert all(0 <= r["accuracy"] <= 1 for r in rows)

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import pytest
 
 from vprsnn_export.cli import main
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.runtime.exporting import read_export
 from vprsnn_export.runtime.exporting.folder import MANIFEST_NAME
@@ -91,3 +93,83 @@ def test_export_json_states_the_cost_per_query(model, tmp_path, capsys):
     (estimate,) = cost["estimates"]
     assert estimate["chip"] == "Loihi 1" and estimate["energy_uj"] > 0 and estimate["latency_ms"] > 0
     assert read_export(out).cost == cost
+
+
+# ------------------------------------------------------------------ files stay in their folder (issue 31)
+
+
+def edit_manifest(folder, change):
+    data = json.loads((folder / MANIFEST_NAME).read_text())
+    change(data)
+    (folder / MANIFEST_NAME).write_text(json.dumps(data))
+
+
+def test_export_json_records_paths_relative_to_its_folder_and_reads_from_anywhere(model, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    listed = json.loads((out / MANIFEST_NAME).read_text())["files"]
+    assert listed["onnx"][0]["path"] == "model.onnx" and listed["loihi"][0]["path"].startswith("loihi/")
+    moved = tmp_path / "renamed"
+    out.rename(moved)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    result = read_export(moved)
+    assert result.written("onnx") == moved / "model.onnx" and result.folder == moved
+    frames = synthetic_route(3, ("winter",))["winter"]
+    for index, frame in enumerate(frames):
+        cv2.imwrite(str(elsewhere / f"f{index}.png"), frame)
+    capsys.readouterr()
+    assert main(["localize", model, "--onnx", str(moved), "--frames", str(elsewhere), "--quiet"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == 3  # one decision per frame, by the checked graph
+
+
+@pytest.mark.parametrize(
+    "path", ["../evil.onnx", "deploy/../evil.onnx", "sub/../../evil.onnx", "/tmp/evil.onnx", "."], ids=str
+)
+def test_a_listed_path_that_leaves_the_folder_is_refused(model, tmp_path, path):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    (tmp_path / "evil.onnx").write_bytes((out / "model.onnx").read_bytes())  # same bytes: the hash would pass
+    edit_manifest(out, lambda data: data["files"]["onnx"][0].update(path=path))
+    with pytest.raises(ModelFileError, match="leaves its folder|absolute path|outside its folder"):
+        read_export(out)
+
+
+def test_a_symbolic_link_out_of_the_folder_is_refused(model, tmp_path):
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    (tmp_path / "evil.onnx").write_bytes((out / "model.onnx").read_bytes())
+    (out / "model.onnx").unlink()
+    (out / "model.onnx").symlink_to(tmp_path / "evil.onnx")
+    with pytest.raises(ModelFileError, match="resolves outside its folder"):
+        read_export(out)
+
+
+def test_localize_runs_the_graph_it_checked_not_one_of_the_same_name_in_the_working_directory(
+    model, tmp_path, monkeypatch
+):
+    good = tmp_path / "good"
+    assert export(model, good) == 0
+    work = tmp_path / "work"
+    (work / "deploy").mkdir(parents=True)
+    (work / "deploy" / "model.onnx").write_bytes(b"not a graph")  # what the recorded cwd path would name
+    edit_manifest(good, lambda data: data.update(folder="deploy"))
+    edit_manifest(good, lambda data: [e.update(path="deploy/" + e["path"]) for e in data["files"]["onnx"]])
+    monkeypatch.chdir(work)
+    assert read_export(good).written("onnx") == good / "model.onnx"  # an earlier version's cwd-relative path
+
+
+@pytest.mark.parametrize("name", ["../network.npz", "/tmp/network.npz", "sub/network.npz", "", 5], ids=str)
+def test_a_loihi_header_naming_an_arrays_file_outside_its_folder_is_refused(model, tmp_path, name):
+    from vprsnn_export.targets.loihi_target import read_loihi
+
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    head = out / "loihi" / "network.json"
+    (tmp_path / "network.npz").write_bytes((out / "loihi" / "network.npz").read_bytes())
+    header = json.loads(head.read_text())
+    header["arrays"]["file"] = name
+    head.write_text(json.dumps(header))
+    with pytest.raises(ModelFileError, match="arrays file"):
+        read_loihi(head)

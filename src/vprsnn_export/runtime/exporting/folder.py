@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -134,12 +134,51 @@ def export_and_check(
             checks=checks,
             cost=None if model is None else deployment_cost(model, spikes, spikes_label),
         )
-        atomic_write_text(staging / MANIFEST_NAME, json.dumps(result.to_dict(), indent=2))
+        atomic_write_text(staging / MANIFEST_NAME, json.dumps(manifest_dict(result), indent=2))
         publish_folder(staging, out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return result
+
+
+def manifest_dict(result: ExportResult) -> dict[str, Any]:
+    """export.json's content: :meth:`ExportResult.to_dict` with every file's path relative to the deploy folder
+    (``model.onnx``, ``loihi/network.json``), so that the folder reads the same from any working directory
+    and after a rename."""
+    data = result.to_dict()
+    data["files"] = {
+        target: [{**entry, "path": Path(entry["path"]).relative_to(result.folder).as_posix()} for entry in entries]
+        for target, entries in data["files"].items()
+    }
+    return data
+
+
+def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
+    """The file export.json lists, inside ``folder``: a path relative to the folder (or, as export.json files
+    of earlier versions recorded it, to the working directory, starting with the recorded folder).
+    ModelFileError for an absolute path, a ``..`` part, or a path (symbolic links followed) outside ``folder``."""
+    if listed.is_absolute() or listed.drive:
+        raise ModelFileError(f"{MANIFEST_NAME} lists the absolute path {listed}: files must lie in its folder", folder)
+    base = Path(recorded_folder)
+    if (
+        recorded_folder
+        and not base.is_absolute()
+        and base.parts
+        and base.parts[0] not in (".", "..")
+        and (listed.parts[: len(base.parts)] == base.parts)
+    ):
+        listed = listed.relative_to(base)  # an earlier version's path, relative to the working directory
+    if ".." in listed.parts or not listed.parts:
+        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which leaves its folder", folder)
+    path = folder / listed
+    try:
+        inside = path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError):
+        inside = False
+    if not inside:
+        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which resolves outside its folder", folder)
+    return path
 
 
 def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
@@ -190,15 +229,17 @@ def read_export(folder: str | Path) -> ExportResult:
         AttributeError,
     ) as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
-    base = Path(str(data.get("folder", "")))
-    for entries in files.values():
+    recorded = str(data.get("folder", ""))
+    checked: dict[str, tuple[WrittenFile, ...]] = {}
+    for target, entries in files.items():
+        paths = []
         for entry in entries:
-            try:
-                path = folder / entry.path.relative_to(base)
-            except ValueError:
-                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, outside its folder {base}", folder) from None
+            path = contained_file(folder, entry.path, recorded)
             if not path.is_file():
                 raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, which is missing", folder)
             if sha256_file(path) != entry.sha256:
                 raise ModelFileError(f"{entry.path} differs from what export wrote (sha256 mismatch)", folder)
-    return result
+            paths.append(WrittenFile(path, entry.sha256))
+        checked[target] = tuple(paths)
+    # the paths returned are the files just checked, under the folder as given here (not as recorded)
+    return replace(result, folder=folder, files=checked)

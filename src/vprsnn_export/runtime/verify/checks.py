@@ -9,7 +9,7 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.metrics import is_correct, pr_curve, predicted_place_ids
+from vprsnn_export.readout.metrics import Tolerance, is_correct, pr_curve, predicted_place_ids
 from vprsnn_export.readout.scoring import region_accuracies
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
@@ -176,7 +176,7 @@ def module_rows(
     int_aggregated: Mapping[int, np.ndarray],
     float_raster: torch.Tensor,
     int_raster: torch.Tensor,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> tuple[ModuleRow, ...]:
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
     and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
@@ -230,7 +230,7 @@ def pr_points(
     strategy: str,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
-    tolerance: int,
+    tolerance: Tolerance,
 ) -> PrCurve:
     """The exact PR operating points of one score matrix, for the report's plots."""
     predicted, confidence = decide(distribution, strategy)

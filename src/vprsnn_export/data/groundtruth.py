@@ -1,0 +1,192 @@
+"""Ground-truth files of a (reference, query) pair of traversals, read strictly.
+
+Every form is turned into one boolean matrix ``GT[reference, query]`` (True: that reference frame is
+a correct match of that query frame):
+
+* a 0/1 matrix in a ``.npy`` (bool, integer or float holding only 0 and 1), in either orientation:
+  ``(references, queries)`` or ``(queries, references)``, told apart by the traversal sizes. A square
+  matrix (equal sizes) must be symmetric (the identity is), else its orientation is ambiguous and it is
+  refused: give a CSV of pairs instead. Soft ground truth (values strictly between 0 and 1) is not
+  supported and refused;
+* VPR-Bench's ``ground_truth_new.npy``: an ``(N, 2)`` object array of ``[query index, list of reference
+  indices]``, or a 1-D object array holding one list of reference indices per query. Object arrays are
+  pickled; they are read by :func:`vprsnn_export.io.npyload.load_npy`, which runs no code;
+* a CSV with columns ``query,reference`` (ASCII decimal integers), one row per matching pair.
+
+Anything else (NaN, -1, 0.1, strings, complex, datetime, booleans or floats used as indices, ``1_0``,
+non-ASCII digits, an index outside the traversal) is a DataError naming the file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Iterable
+from numbers import Integral
+from pathlib import Path
+
+import numpy as np
+
+from ..arguments import ascii_uint
+from ..errors import DataError
+from ..io.npyload import load_npy
+
+GT_SUFFIXES = ("_GT.npy", "_GT.csv")
+VPR_BENCH_GT = "ground_truth_new.npy"  # VPR-Bench: <dataset>/ref/, <dataset>/query/, ground_truth_new.npy
+VPR_BENCH_PAIR = ("ref", "query")
+
+
+def ground_truth_files(folder: Path, reference: str, query: str) -> list[tuple[Path, bool]]:
+    """The files that hold the ground truth of (reference, query), each with whether its name puts the
+    reference first: ``<reference>_<query>_GT.npy|csv``, ``<query>_<reference>_GT.npy|csv`` (LENS names
+    either way) and VPR-Bench's ``ground_truth_new.npy`` for the pair (``ref``, ``query``)."""
+    found = [
+        (folder / f"{first}_{second}{suffix}", first == reference)
+        for first, second in ((reference, query), (query, reference))
+        for suffix in GT_SUFFIXES
+    ]
+    if (reference, query) == VPR_BENCH_PAIR:
+        found.append((folder / VPR_BENCH_GT, True))
+    return [(path, forward) for path, forward in found if path.is_file()]
+
+
+def read_ground_truth(path: Path, n_reference: int, n_query: int, reference_first: bool = True) -> np.ndarray:
+    """The file as a boolean matrix ``GT[reference, query]`` of shape (n_reference, n_query); DataError on any
+    defect. ``reference_first``: a CSV's file name puts the reference traversal first (its columns are then
+    query,reference of that naming; otherwise the two are swapped)."""
+    if path.suffix.lower() == ".csv":
+        return _csv_matrix(path, n_reference, n_query, reference_first)
+    raw = load_npy(path, "ground truth")
+    if raw.dtype.hasobject:
+        return _object_matrix(raw, path, n_reference, n_query)
+    return _numeric_matrix(raw, path, n_reference, n_query)
+
+
+def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
+    if raw.dtype.kind not in "biuf" or raw.ndim != 2:
+        raise DataError(
+            f"expected a 2-D 0/1 matrix (bool, integer or float), got shape {raw.shape} dtype {raw.dtype}", path
+        )
+    values = raw.astype(np.float64) if raw.dtype.kind == "f" else raw
+    bad = ~((values == 0) | (values == 1))
+    if bad.any():
+        where = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise DataError(
+            f"entries must be 0 or 1 (soft ground truth is not supported): {raw[where].item()!r} at {list(where)}", path
+        )
+    matrix = values != 0
+    forward, backward = raw.shape == (n_reference, n_query), raw.shape == (n_query, n_reference)
+    if forward and backward and not np.array_equal(matrix, matrix.T):
+        raise DataError(
+            f"a square {raw.shape} matrix that is not symmetric: whether it is GT[reference, query] or "
+            "GT[query, reference] cannot be told from the traversal sizes; give the pairs as a CSV "
+            "(<reference>_<query>_GT.csv with columns query,reference)",
+            path,
+        )
+    if forward:
+        return matrix
+    if backward:
+        return matrix.T
+    raise DataError(
+        f"matrix of shape {raw.shape}, expected (references, queries) = {(n_reference, n_query)} "
+        f"or (queries, references) = {(n_query, n_reference)}",
+        path,
+    )
+
+
+def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
+    """Indices ``0..high-1`` from an int, a list/tuple of ints or an integer array (never bool or float)."""
+    items: Iterable[object]
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "iu" and not (value.dtype.hasobject or value.size == 0):
+            raise DataError(f"{what} is an array of {value.dtype}, expected integer indices", path)
+        items = value.reshape(-1).tolist()
+    elif isinstance(value, list | tuple):
+        items = value
+    else:
+        items = [value]
+    indices = []
+    for item in items:
+        if isinstance(item, bool | np.bool_) or not isinstance(item, Integral):
+            raise DataError(f"{what} holds {item!r} ({type(item).__name__}), expected integer indices", path)
+        if not 0 <= int(item) < high:
+            raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
+        indices.append(int(item))
+    return np.asarray(indices, dtype=np.int64)
+
+
+def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
+    if isinstance(value, bool | np.bool_) or not isinstance(value, Integral) or not 0 <= int(value) < n_query:
+        raise DataError(f"row {row}: query index {value!r} is not an integer in 0..{n_query - 1}", path)
+    return int(value)
+
+
+def _object_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
+    """VPR-Bench's (N, 2) [query, references] rows, or one list of references per query."""
+    matrix = np.zeros((n_reference, n_query), dtype=bool)
+    if raw.ndim == 2 and raw.shape[1] == 2:
+        queries = [_query_index(q, row, path, n_query) for row, q in enumerate(raw[:, 0])]
+        if len(set(queries)) != len(queries):
+            raise DataError("the query column lists a query index twice", path)
+        lists = raw[:, 1]
+    elif raw.ndim == 1 and len(raw) == n_query:
+        queries, lists = list(range(n_query)), raw
+    else:
+        raise DataError(
+            f"expected VPR-Bench's (N, 2) rows of [query index, reference indices] or one list of reference "
+            f"indices per query ({n_query}), got an object array of shape {raw.shape}",
+            path,
+        )
+    for query, matches in zip(queries, lists, strict=True):
+        matrix[_index_list(matches, f"query {query}'s reference list", path, n_reference), query] = True
+    return matrix
+
+
+def _csv_matrix(path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
+    """Rows ``query,reference`` of ASCII decimal integers; with ``reference_first`` False the names are swapped."""
+    rows_of, cols_of = (n_query, n_reference) if reference_first else (n_reference, n_query)
+    try:
+        reader = csv.DictReader(io.StringIO(path.read_text(encoding="utf-8-sig"), newline=""))
+        if reader.fieldnames is None or not {"query", "reference"} <= {f.strip() for f in reader.fieldnames}:
+            raise DataError(f"expected a CSV with columns query,reference, got {reader.fieldnames}", path)
+        pairs = []
+        for row in reader:
+            cells = {key.strip(): (value or "").strip() for key, value in row.items() if key is not None}
+            query, reference = ascii_uint(cells.get("query", "")), ascii_uint(cells.get("reference", ""))
+            if query is None or reference is None:
+                raise DataError(
+                    f"line {reader.line_num}: {cells.get('query')!r},{cells.get('reference')!r} are not "
+                    "ASCII decimal integers",
+                    path,
+                )
+            if query >= rows_of or reference >= cols_of:
+                raise DataError(
+                    f"line {reader.line_num}: query {query} or reference {reference} is outside "
+                    f"0..{rows_of - 1} / 0..{cols_of - 1}",
+                    path,
+                )
+            pairs.append((query, reference))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(f"expected a UTF-8 CSV with integer columns query,reference ({exc})", path) from None
+    if not pairs:
+        raise DataError("the ground-truth CSV lists no pairs", path)
+    index = np.asarray(pairs, dtype=np.int64)
+    matrix = np.zeros((cols_of, rows_of), dtype=bool)
+    matrix[index[:, 1], index[:, 0]] = True
+    return matrix if reference_first else matrix.T
+
+
+def pair_ground_truth(
+    folder: Path, reference: str, query: str, n_reference: int, n_query: int
+) -> tuple[np.ndarray, Path] | None:
+    """GT[reference, query] from every file of the pair (:func:`ground_truth_files`), which must agree;
+    None without one. DataError naming both files when two disagree."""
+    found = ground_truth_files(folder, reference, query)
+    if not found:
+        return None
+    first_path, forward = found[0]
+    matrix = read_ground_truth(first_path, n_reference, n_query, forward)
+    for other, other_forward in found[1:]:
+        if not np.array_equal(read_ground_truth(other, n_reference, n_query, other_forward), matrix):
+            raise DataError(f"this ground truth disagrees with {other}: keep one of the two", first_path)
+    return matrix, first_path
