@@ -20,7 +20,9 @@ from vprsnn_export.data.dataset import load_dataset, scoring_truth
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.readout.metrics import MatchTruth, is_correct
-from vprsnn_export.runtime.evaluation import ReadoutOptions, evaluate_float, readout_rows
+from vprsnn_export.readout.scoring import readout_rows
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
 
 N_REFERENCE, N_QUERY, OFFSET = 30, 20, 6  # query j is reference place j + OFFSET
 TINY = ["--timesteps", "20", "--epochs", "1", "--neurons", "24", "--quiet"]
@@ -81,7 +83,7 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
     dataset = load_dataset(data, [query], ckpt.config.preprocess)
     truth = scoring_truth(dataset, [reference], query)
     assert isinstance(truth, MatchTruth) and truth.matrix.shape == (N_REFERENCE, N_QUERY)
-    options = ReadoutOptions.from_config(ckpt.config, ks=(1, 3), tolerance=truth)
+    options = SequenceOptions(ks=(1, 3), tolerance=truth)
     result = evaluate_float(ckpt, dataset.traversal(query), dataset.place_ids, query, options)
     assert dicts(result.rows) == rows  # the command scored against the file
     # a hand-made GT-exact manifest: query j under the reference's place id j + OFFSET, exact match
@@ -91,6 +93,7 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
         ckpt.reference_place_ids,
         dataset.place_ids + OFFSET,
         replace(options, tolerance=0),
+        ckpt.config,
     )
     assert dicts(manifest_rows) == rows
     by_index = readout_rows(
@@ -99,6 +102,7 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
         ckpt.reference_place_ids,
         dataset.place_ids,
         replace(options, tolerance=0),
+        ckpt.config,
     )
     assert max(r["accuracy"] for r in rows) > 0 and dicts(by_index) != rows  # the index score was the wrong one
 

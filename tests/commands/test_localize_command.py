@@ -42,6 +42,14 @@ def write_models(folder: Path, ckpt: Checkpoint, data: Dataset) -> tuple[Path, P
     return net, fixed, write_onnx(model, folder / "q4.onnx")
 
 
+def trained_models(folder: Path, data_source: str, places: str | None) -> tuple[Path, Path, Path]:
+    """A tiny network trained on ``data_source`` and its models (:func:`write_models`)."""
+    cfg = Config().replace(**TINY)
+    data = load_dataset(data_source, ["summer", "winter"], cfg.preprocess, places=places)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": places})
+    return write_models(folder, ckpt, data)
+
+
 def video(frames: list[np.ndarray], path: Path) -> Path:
     """An MJPEG .avi of greyscale frames (lossy: the frames differ slightly from the images)."""
     height, width = frames[0].shape
@@ -176,7 +184,7 @@ def manifest_route(folder: Path, n: int = 12) -> Path:
 def test_calibration_and_predictions_refuse_to_overwrite_an_input(tmp_path, capsys):
     places = manifest_route(tmp_path / "data")
     subset = places.with_name("subset.csv")
-    net, fixed, _ = write_models(tmp_path, str(places), None, 12)
+    net, fixed, _ = trained_models(tmp_path, str(places), None)
     before = {path: path.read_bytes() for path in (places, subset, net, fixed)}
     data = ["--data", str(places), "--subset", str(subset)]
     for model, output in ((fixed, fixed), (net, net), (fixed, places), (fixed, subset)):

@@ -337,12 +337,13 @@ def query_data(
     )
 
 
-def scored_tolerance(match_window: int, dataset: Dataset, references: Sequence[str], query: str) -> Tolerance:
+def scored_tolerance(match_window: int | None, dataset: Dataset, references: Sequence[str], query: str) -> Tolerance:
     """How ``query``'s decisions are judged: the data set's ground truth when it has one (then --match-window,
-    which is for index-aligned data, is refused), else ``match_window`` places around the query's own id."""
+    which is for index-aligned data, is refused), else ``match_window`` places around the query's own id (None:
+    not given, exact match)."""
     truth = scoring_truth(dataset, references, query)
     if truth is None:
-        return match_window
+        return match_window or 0
     if match_window:
         raise InvalidValueError(
             f"--match-window {match_window}: {truth.source} says which reference frames match each query; "
