@@ -258,7 +258,7 @@ def degenerate(metric: str, float_value: float) -> str | None:
     if float_value > 0:
         return None
     if metric == "r_at_100p":
-        return "not judged: float R@100P = 0 (the float network accepts no decision at 100 % precision)"
+        return "not judged: float R@100P = 0 (no decision accepted at 100 % precision)"
     return f"not judged: the float network's {metric} is 0"
 
 

@@ -9,7 +9,7 @@ renderer and the commands read attributes, never nested string keys.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -100,6 +100,46 @@ class ToleranceCheck(JsonDataclass):
         metadata=json_options(missing_from=lambda data: data["limit"])
     )  # older files: the limit set
     passed: bool
+
+
+@dataclass(frozen=True)
+class PairedCheck(JsonDataclass):
+    """One metric of one readout (strategy at k), float vs deployed on the same queries, judged as a pair.
+
+    ``float_right_deployed_wrong`` (b) and ``float_wrong_deployed_right`` (c) are the per-query flips of
+    correctness; ``difference`` is deployed - float; [``low``, ``high``] its paired interval at the report's
+    confidence level (``method``: exact McNemar for accuracy at k=1, the paired bootstrap otherwise, in
+    blocks of k queries for k > 1); ``limit`` the drop limit applied (None: the metric has no tolerance
+    there, reported only). ``verdict``: holds / fails / undecided / not judged (readout/paired.py), None
+    when unchecked; ``queries_to_decide``: for an undecided check, roughly how many queries would decide it.
+    """
+
+    strategy: str
+    k: int
+    metric: str
+    n_queries: int
+    float_right_deployed_wrong: int
+    float_wrong_deployed_right: int
+    float_value: float
+    difference: float
+    low: float
+    high: float
+    method: str
+    p_value: float | None = field(default=None, metadata=json_options(omit="none"))  # exact McNemar, k=1 accuracy
+    limit: float | None = None
+    verdict: str | None = None
+    queries_to_decide: int | None = field(default=None, metadata=json_options(omit="none"))
+    note: str | None = field(default=None, metadata=json_options(omit="none"))
+
+
+#: The verdicts of a bit width (and of a run or report): the worst of its checks, in this order.
+VERDICTS = ("fails", "undecided", "holds")
+
+
+def worst_verdict(verdicts: Iterable[str]) -> str:
+    """The worst of several verdicts (fails > undecided > holds); holds when there are none."""
+    found = set(verdicts)
+    return next((v for v in VERDICTS if v in found), "holds")
 
 
 # ---------------------------------------------------------------------------- spike and decision level
@@ -290,6 +330,17 @@ class BitsResult(JsonDataclass):
     passed: bool
     seconds: Mapping[str, float] = field(default_factory=dict)
     modules: tuple[ModuleRow, ...] = ()  # an ensemble's modules (empty for one network)
+    paired: tuple[PairedCheck, ...] = ()  # the paired statistics of every readout (older files: none)
+
+    __json_extra__ = ("verdict",)
+
+    @property
+    def verdict(self) -> str:
+        """fails (a check failed: cross-implementation, a non-metric limit or a paired interval outside its
+        tolerance), undecided (a paired interval straddles its tolerance), else holds."""
+        if not self.passed:
+            return "fails"
+        return worst_verdict(p.verdict for p in self.paired if p.verdict is not None)
 
     def row(self, strategy: str, k: int) -> MetricRow:
         row = find_row(self.metrics, strategy, k)
@@ -330,15 +381,19 @@ class VerifiedRun(JsonDataclass):
     # queries of the step-level checks (None: all; runtime.verify.run.RASTER_BUDGET)
     recorded_queries: int | None = field(default=None, metadata=json_options(omit="none"))
 
-    __json_extra__ = ("passed",)
+    __json_extra__ = ("passed", "verdict")
     __json_order__ = (
         *("label", "seed", "config", "checkpoint_sha256", "checkpoint_data", "query", "n_queries"),
-        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed"),
+        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed", "verdict"),
     )
 
     @property
     def passed(self) -> bool:
         return all(r.passed for r in self.bits)
+
+    @property
+    def verdict(self) -> str:
+        return worst_verdict(r.verdict for r in self.bits)
 
     @property
     def ks(self) -> list[int]:
@@ -374,6 +429,7 @@ class BitsSummary(JsonDataclass):
     top1_agreement: Mapping[str, MeanStd]
     wprob_tv_mean: MeanStd
     aggregated_agreement: Mapping[int, MeanStd]
+    verdicts: Mapping[str, int] = field(default_factory=dict)  # networks per verdict (older files: none)
 
     def row(self, strategy: str, k: int) -> SummaryRow | None:
         return next((r for r in self.metrics if r.strategy == strategy and r.k == k), None)
@@ -405,8 +461,11 @@ class VerifyReport(JsonDataclass):
     commands: tuple[tuple[str, ...] | None, ...] | None = field(default=None, metadata=json_options(omit="none"))
     settings_differ: tuple[str, ...] | None = field(default=None, metadata=json_options(omit="none"))
 
-    __json_extra__ = ("schema", "passed")
-    __json_order__ = ("schema", "created", "command", "seconds", "versions", "settings", "runs", "summary", "passed")
+    __json_extra__ = ("schema", "passed", "verdict")
+    __json_order__ = (
+        *("schema", "created", "command", "seconds", "versions", "settings", "runs", "summary", "passed"),
+        "verdict",
+    )
 
     @property
     def schema(self) -> str:
@@ -415,6 +474,11 @@ class VerifyReport(JsonDataclass):
     @property
     def passed(self) -> bool:
         return all(r.passed for r in self.runs)
+
+    @property
+    def verdict(self) -> str:
+        """fails, undecided or holds: the worst verdict of every network at every bit width."""
+        return worst_verdict(r.verdict for r in self.runs)
 
     @property
     def n_passed(self) -> int:
@@ -453,6 +517,7 @@ __all__ = [
     "LevelHistogram",
     "MetricRow",
     "MetricValues",
+    "PairedCheck",
     "PrCurve",
     "ReportError",
     "RunSummary",
@@ -463,4 +528,5 @@ __all__ = [
     "VerifyReport",
     "WeightHistogram",
     "find_row",
+    "worst_verdict",
 ]
