@@ -69,7 +69,11 @@ def test_report_json_schema(passed, checkpoint):
         cross = result["cross_implementation"]
         assert cross["passed"] and cross["reference_queries"] == 1
         assert set(cross["files"]) == {"onnx", "nir", "loihi", "model"}
-        assert all(c["equal"] for c in cross["checks"])
+        exact = [c for c in cross["checks"] if "tolerance" not in c]
+        assert all(c["equal"] and c["passed"] for c in exact) and cross["n_identical"] == cross["n_exact"] == len(exact)
+        for row in (c for c in cross["checks"] if "tolerance" in c):  # a float consumer: never counted as exact
+            assert row["passed"] and row["equal"] is (row.get("n_differences") == 0)
+        assert cross["n_exact"] + cross["n_tolerance"] == cross["n_checks"]
     assert [b["bits"] for b in data["summary"]["bits"]] == [8, 3]
 
 

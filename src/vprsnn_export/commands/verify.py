@@ -29,7 +29,7 @@ from ..readout.strategies import STRATEGIES
 from ..runtime.conformance import parse_targets
 from ..runtime.evaluation import sequence_warning
 from ..runtime.report import write_report
-from ..runtime.report.labels import PAIRED_COLUMNS, paired_cells, shown_paired, verdict_counts
+from ..runtime.report.labels import PAIRED_COLUMNS, cross_counts, paired_cells, shown_paired, verdict_counts
 from ..runtime.results import MetricRow, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, parse_tolerances, verify_checkpoint
 from ..targets.registry import TARGETS
@@ -284,7 +284,7 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
                     "bits": result.bits,
                     "verdict": result.verdict,
                     "paired": verdict_counts(result.paired) or "-",
-                    "cross": f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
+                    "cross": cross_counts([cross]),
                     "accuracy": f"{100 * worst:+.1f}",
                     "r_at_100p": f"{100 * _delta(result.row('wprob', top), 'r_at_100p'):+.1f} (k={top})",
                     "winner": f"{100 * result.spike_level.winner_agreement:.1f}",

@@ -9,6 +9,7 @@ renderer and the commands read attributes, never nested string keys.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -184,7 +185,10 @@ class Comparison(JsonDataclass):
     """One comparison of two implementations' outputs (``kind`` says how: "exact" or a bound).
 
     ``family`` is what was compared: "array" (element by element), "distribution"
-    (W+Prob: identical decisions, |diff| bounded) or "config" (equal or not).
+    (W+Prob: identical decisions, |diff| bounded) or "config" (equal or not). ``equal`` says the
+    outputs are identical. A **tolerance row** (``tolerance`` set: a float consumer's decisions must
+    agree on at least that share of the ``n_elements`` decisions) passes within its tolerance while
+    ``n_differences`` decisions differ; it is never counted as exact.
     """
 
     check: str
@@ -194,7 +198,9 @@ class Comparison(JsonDataclass):
     equal: bool
     detail: str
     n_differences: int | None = None
-    n_elements: int | None = field(default=None, metadata=json_options(omit=lambda c: c.family != "array"))
+    n_elements: int | None = field(
+        default=None, metadata=json_options(omit=lambda c: c.family != "array" and c.tolerance is None)
+    )
     first_difference: tuple[int, ...] | None = field(
         default=None, metadata=json_options(omit=lambda c: c.family != "array")
     )
@@ -202,17 +208,42 @@ class Comparison(JsonDataclass):
         default=None, metadata=json_options(omit=lambda c: c.family != "distribution")
     )
     family: str = field(default="array", metadata=json_options(write=False, missing_from=lambda data: _family(data)))
+    tolerance: float | None = field(
+        default=None, metadata=json_options(omit="none", missing_from=lambda data: _stated_tolerance(data))
+    )
 
     # the keys each family writes, in this order
+    __json_extra__ = ("passed",)
     __json_order__: ClassVar[tuple[str, ...]] = (
-        *("check", "a", "b", "kind", "equal", "n_elements", "max_abs_difference", "n_differences"),
-        *("first_difference", "detail"),
+        *("check", "a", "b", "kind", "equal", "tolerance", "passed", "n_elements", "max_abs_difference"),
+        *("n_differences", "first_difference", "detail"),
     )
+
+    @property
+    def passed(self) -> bool:
+        """Exact rows: identical. Tolerance rows: the agreeing share 1 - n_differences / n_elements reaches the
+        tolerance (a row that compared nothing, a consumer refusing the file, is not gated)."""
+        if self.tolerance is None:
+            return self.equal
+        if not self.n_elements:
+            return True
+        return 1.0 - (self.n_differences or 0) / self.n_elements >= self.tolerance - 1e-12
+
+    @property
+    def difference(self) -> float | None:
+        """A tolerance row's measured difference: the share of decisions that differ (None when none compared)."""
+        return None if not self.n_elements else (self.n_differences or 0) / self.n_elements
 
 
 def _family(data: Mapping[str, Any]) -> str:
     """A comparison's family, from the keys its JSON object holds."""
     return "distribution" if "max_abs_difference" in data else "array" if "n_elements" in data else "config"
+
+
+def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
+    """An older file's tolerance row: its kind ``decision agreement >= 95.0%`` (exact rows: None)."""
+    match = re.fullmatch(r"decision agreement >= ([0-9.]+)%", str(data.get("kind", "")))
+    return None if match is None else float(match.group(1)) / 100
 
 
 @dataclass(frozen=True)
@@ -224,12 +255,12 @@ class ConformanceResult(JsonDataclass):
     skipped: Mapping[str, str] = field(default_factory=dict)
     files: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
-    __json_extra__ = ("passed", "n_checks", "n_failed")
+    __json_extra__ = ("passed", "n_checks", "n_failed", "n_exact", "n_identical", "n_tolerance", "n_within_tolerance")
     __json_order__ = ("checks", *__json_extra__, "reference_queries", "skipped", "files")
 
     @property
     def passed(self) -> bool:
-        return all(c.equal for c in self.comparisons)
+        return all(c.passed for c in self.comparisons)
 
     @property
     def n_checks(self) -> int:
@@ -237,11 +268,38 @@ class ConformanceResult(JsonDataclass):
 
     @property
     def n_failed(self) -> int:
-        return sum(not c.equal for c in self.comparisons)
+        return sum(not c.passed for c in self.comparisons)
+
+    @property
+    def exact(self) -> tuple[Comparison, ...]:
+        """The exact rows (any difference fails)."""
+        return tuple(c for c in self.comparisons if c.tolerance is None)
+
+    @property
+    def tolerance_rows(self) -> tuple[Comparison, ...]:
+        """The rows judged within a stated tolerance (the float NIR consumers' decisions)."""
+        return tuple(c for c in self.comparisons if c.tolerance is not None)
+
+    @property
+    def n_exact(self) -> int:
+        return len(self.exact)
+
+    @property
+    def n_identical(self) -> int:
+        """Exact rows whose outputs are identical."""
+        return sum(c.equal for c in self.exact)
+
+    @property
+    def n_tolerance(self) -> int:
+        return len(self.tolerance_rows)
+
+    @property
+    def n_within_tolerance(self) -> int:
+        return sum(c.passed for c in self.tolerance_rows)
 
     @property
     def failures(self) -> tuple[Comparison, ...]:
-        return tuple(c for c in self.comparisons if not c.equal)
+        return tuple(c for c in self.comparisons if not c.passed)
 
     def with_files(self, name: str, paths: Sequence[str]) -> ConformanceResult:
         """This result with one more entry in ``files``."""

@@ -55,7 +55,9 @@ def test_three_queries_lost_of_100_is_undecided_and_does_not_fail_the_width():
     table = _table(f_correct, f_conf, d_correct, f_conf)
     acc = table[("standard", "accuracy")]
     assert (acc.float_right_deployed_wrong, acc.float_wrong_deployed_right) == (3, 0)
-    assert acc.difference == pytest.approx(-0.03) and acc.method == "exact McNemar" and acc.p_value == pytest.approx(0.25)
+    assert (
+        acc.difference == pytest.approx(-0.03) and acc.method == "exact McNemar" and acc.p_value == pytest.approx(0.25)
+    )
     assert acc.low < -0.02 < acc.high and acc.verdict == "undecided" and acc.queries_to_decide > Q
     assert table[("standard", "auc_pr")].verdict is None  # no tolerance: reported only
     assert bits_passed(True, [], tuple(table.values()))

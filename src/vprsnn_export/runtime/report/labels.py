@@ -8,7 +8,7 @@ from typing import Any
 from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import MeanStd
 
-from ..results import PairedCheck, VerifiedRun
+from ..results import ConformanceResult, PairedCheck, VerifiedRun
 
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 
@@ -108,3 +108,25 @@ def verdict_counts(checks: Sequence[PairedCheck]) -> str:
 
 
 _ORDER = ("fails", "undecided", "not judged", "holds")
+
+
+def cross_counts(results: Sequence[ConformanceResult]) -> str:
+    """ "37/37 exact, 2/2 within tolerance": the exact rows that are identical, and the tolerance rows (float
+    consumers) within their stated agreement, summed over ``results``; the terminal and the report show this."""
+    exact = f"{sum(r.n_identical for r in results)}/{sum(r.n_exact for r in results)} exact"
+    tolerance = sum(r.n_tolerance for r in results)
+    return exact + (f", {sum(r.n_within_tolerance for r in results)}/{tolerance} within tolerance" if tolerance else "")
+
+
+def tolerance_differences(result: ConformanceResult) -> str:
+    """Each tolerance row's measured difference: "snntorch: 1.9 % of 100 decisions differ (limit 5.0 %)"."""
+    cells = []
+    for row in result.tolerance_rows:
+        limit = 100 * (1 - (row.tolerance or 0.0))
+        if row.difference is None:
+            cells.append(f"{row.a}: not gated (refuses the file)")
+        else:
+            cells.append(
+                f"{row.a}: {100 * row.difference:.1f} % of {row.n_elements} decisions differ (limit {limit:.1f} %)"
+            )
+    return "; ".join(cells) or "-"
