@@ -152,37 +152,39 @@ def bootstrap_indices(n_queries: int, resamples: int, block: int, rng: np.random
 
 
 def resampled_metrics(correct: np.ndarray, confidence: np.ndarray, indices: np.ndarray) -> dict[str, np.ndarray]:
-    """Accuracy, P@100R, R@100P and AUC-PR of every resample (rows of ``indices``), vectorised.
+    """Accuracy, P@100R, R@100P and AUC-PR of every resample (rows of ``indices``), vectorised, no sort.
 
-    Exactly :func:`readout.metrics.pr_metrics` per row: queries sorted by confidence (descending; equal
-    confidences never split), TP_i the running count of correct ones, N_i = i the accepted ones, and over
-    the ends e of the runs of equal confidence:
+    Exactly :func:`readout.metrics.pr_metrics` per row. The queries are ranked once by confidence
+    (descending); a resample is then the count m_{b,r} of each ranked query r in it. Over the groups g of
+    equal confidence (ties are never split), TP and N are running sums:
 
-    .. math:: \\mathrm{R@100P} = \\max_e \\{TP_e / Q : TP_e = N_e\\}, \\qquad
-              \\mathrm{AUC} = \\frac{1}{Q} \\sum_i \\mathrm{correct}_i \\, \\frac{TP_{e(i)}}{N_{e(i)}}
+    .. math:: TP_{b,g} = \\sum_{r \\le \\mathrm{end}(g)} m_{b,r} \\, \\mathrm{correct}_r, \\qquad
+              N_{b,g} = \\sum_{r \\le \\mathrm{end}(g)} m_{b,r}
 
-    with e(i) the end of query i's run (the area of the step curve, group by group);
-    accuracy = P@100R = TP_Q / Q.
+    .. math:: \\mathrm{R@100P}_b = \\max_g \\{TP_{b,g} / Q : TP_{b,g} = N_{b,g}\\}, \\qquad
+              \\mathrm{AUC}_b = \\frac{1}{Q} \\sum_g (TP_{b,g} - TP_{b,g-1}) \\frac{TP_{b,g}}{N_{b,g}}
+
+    (a group absent from a resample adds nothing); accuracy = P@100R = TP_{b,last} / Q.
     """
     c, conf = _pair(correct, confidence, second_real=True)
     order = np.argsort(-conf, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    keys = np.sort(rank[np.asarray(indices)], axis=1)  # each resample in descending confidence
-    c_sorted, conf_sorted = c[order][keys], conf[order][keys]
-    n = keys.shape[1]
-    tp = np.cumsum(c_sorted, axis=1)
-    accepted = np.arange(1, n + 1)
-    ends = np.ones(keys.shape, dtype=bool)
-    ends[:, :-1] = conf_sorted[:, 1:] != conf_sorted[:, :-1]
-    end_of = np.minimum.accumulate(np.where(ends, accepted - 1, n - 1)[:, ::-1], axis=1)[:, ::-1]
-    precision_at_end = np.take_along_axis(tp / accepted, end_of, axis=1)
+    idx = np.asarray(indices)
+    resamples, n = idx.shape
+    flat = (np.arange(resamples)[:, None] * c.size + rank[idx]).ravel()
+    counts = np.bincount(flat, minlength=resamples * c.size).reshape(resamples, c.size)
+    conf_sorted = conf[order]
+    ends = np.flatnonzero(np.append(conf_sorted[1:] != conf_sorted[:-1], True))
+    tp = np.cumsum(counts * c[order], axis=1)[:, ends]
+    accepted = np.cumsum(counts, axis=1)[:, ends]
+    gained = np.diff(tp, axis=1, prepend=0)
     accuracy = tp[:, -1] / n
     return {
         "accuracy": accuracy,
         "p_at_100r": accuracy,
-        "r_at_100p": np.where(ends & (tp == accepted), tp, 0).max(axis=1) / n,
-        "auc_pr": (c_sorted * precision_at_end).sum(axis=1) / n,
+        "r_at_100p": np.where(tp == accepted, tp, 0).max(axis=1) / n,
+        "auc_pr": (gained * tp / np.maximum(accepted, 1)).sum(axis=1) / n,
     }
 
 
