@@ -388,7 +388,8 @@ class BitsResult(JsonDataclass):
     passed: bool
     seconds: Mapping[str, float] = field(default_factory=dict)
     modules: tuple[ModuleRow, ...] = ()  # an ensemble's modules (empty for one network)
-    paired: tuple[PairedCheck, ...] = ()  # the paired statistics of every readout (older files: none)
+    # the paired statistics of every readout (older files: none)
+    paired: tuple[PairedCheck, ...] = field(default=(), metadata=json_options(omit=lambda r: not r.paired))
 
     __json_extra__ = ("verdict",)
 
@@ -487,7 +488,8 @@ class BitsSummary(JsonDataclass):
     top1_agreement: Mapping[str, MeanStd]
     wprob_tv_mean: MeanStd
     aggregated_agreement: Mapping[int, MeanStd]
-    verdicts: Mapping[str, int] = field(default_factory=dict)  # networks per verdict (older files: none)
+    # networks per verdict (older files: none)
+    verdicts: Mapping[str, int] = field(default_factory=dict, metadata=json_options(omit=lambda b: not b.verdicts))
 
     def row(self, strategy: str, k: int) -> SummaryRow | None:
         return next((r for r in self.metrics if r.strategy == strategy and r.k == k), None)
