@@ -3,11 +3,11 @@
 The "deployed" side is the same float network on query spikes drawn with another encoder seed, so
 every difference is sampling noise and a "fails" verdict is a false alarm. For each encoder seed
 s in SEEDS the float readout on the checkpoint's own query spikes (seed = config.seed) and the one
-on seed s are judged exactly as `verify` judges a bit width (runtime/verify/paired.py: the default
+on seed s are judged (``--pairs``: seed s against seed s + N, N independent pairs, each with its own base) exactly as `verify` judges a bit width (runtime/verify/paired.py: the default
 tolerances, the VerifyConfig statistics); the point checks (tolerance_checks on the point
 differences, what `verify` judged before) are counted beside it. Run from the repository root:
 
-    OMP_NUM_THREADS=1 python tools/false_alarm.py NET.npz --query winter --seeds 1:40 [--k 1,3,5]
+    OMP_NUM_THREADS=1 python tools/false_alarm.py NET.npz --query winter --seeds 1:40 [--pairs] [--k 1,3,5]
 
 NET's data source and place selection are used (its checkpoint records them). Prints one row per
 seed and the rates; exit 0.
@@ -38,6 +38,7 @@ def main() -> None:
     parser.add_argument("--query", required=True)
     parser.add_argument("--seeds", default="1:20", help="encoder seeds FIRST:LAST (inclusive)")
     parser.add_argument("--k", default="1,3,5")
+    parser.add_argument("--pairs", action="store_true", help="judge seed s against seed s + N (own base each)")
     args = parser.parse_args()
     first, last = (int(v) for v in args.seeds.split(":"))
     ckpt = load_checkpoint(args.checkpoint)
@@ -63,16 +64,19 @@ def main() -> None:
         rows, scores, agg = scored_once(ckpt.calibration, counts, ckpt.reference_place_ids, ids, readout, layout)
         return rows, readout_decisions(scores, agg, ckpt.reference_place_ids, ids, readout.tolerance)
 
-    base_rows, base_decisions = readout_of(cfg.seed)
-    print(f"checkpoint {args.checkpoint}: {len(ids)} queries, base encoder seed {cfg.seed}, judged k: "
+    base = readout_of(cfg.seed)
+    n_seeds = last - first + 1
+    base_text = f"seed s + {n_seeds} against seed s" if args.pairs else f"base encoder seed {cfg.seed}"
+    print(f"checkpoint {args.checkpoint}: {len(ids)} queries, {base_text}, judged k: "
           f"{sorted({k for _, _, k in limits})}, statistics {settings}")  # fmt: skip
     print("seed  verdict    point-check fails  acc Std / Wt / W+P k=1 Δ (pts)  R@100P k=1 Δ  failing paired checks")
     verdicts: Counter[str] = Counter()
     point_fails = 0
     for seed in range(first, last + 1):
-        if seed == cfg.seed:
+        if seed == cfg.seed and not args.pairs:
             continue
-        rows, decisions = readout_of(seed)
+        base_rows, base_decisions = readout_of(seed) if args.pairs else base
+        rows, decisions = readout_of(seed + n_seeds if args.pairs else seed)
         rows = metric_deltas(base_rows, rows)
         table = paired_checks(base_decisions, decisions, rows, limits, settings)
         verdict = worst_verdict(c.verdict for c in table if c.verdict in ("holds", "fails", "undecided"))
@@ -95,8 +99,10 @@ def main() -> None:
         f"({100 * verdicts['holds'] / n:.1f} %); point checks (the previous verdict) fail {point_fails} "
         f"({100 * point_fails / n:.1f} %)"
     )
-    float_acc = {r.strategy: r.values.accuracy for r in base_rows if r.k == 1}
-    print("float network (base seed): " + ", ".join(f"{s} {100 * v:.1f} %" for s, v in float_acc.items()))
+    float_acc = {r.strategy: r.values.accuracy for r in base[0] if r.k == 1}
+    print(
+        f"float network (encoder seed {cfg.seed}): " + ", ".join(f"{s} {100 * v:.1f} %" for s, v in float_acc.items())
+    )
 
 
 if __name__ == "__main__":
