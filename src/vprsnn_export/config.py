@@ -140,6 +140,30 @@ OPTIONAL_SECTIONS = ("early",)
 
 
 @dataclass(frozen=True)
+class VerifyConfig:
+    """How ``verify`` judges a deployed network against float (docs/verify.md, readout/paired.py).
+
+    Not a section of :class:`Config`: these settings judge a network and never change one, so a
+    checkpoint's bytes do not depend on them; every verify report writes them into its settings.
+    ``confidence``: level of every paired interval; ``resamples``: paired bootstrap resamples;
+    ``seed``: the bootstrap's random generator seed (the verdict is deterministic).
+    """
+
+    confidence: float = 0.95
+    resamples: int = 2000
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for item in fields(self):
+            check_range(f"verify.{item.name}", getattr(self, item.name))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> VerifyConfig:
+        """Rebuild the settings; unknown keys are an error, missing keys take the defaults."""
+        return _build(cls, data, "verify")
+
+
+@dataclass(frozen=True)
 class Config:
     seed: int = 42
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
@@ -250,6 +274,9 @@ RANGES: dict[str, tuple[float, float, bool, bool]] = {
     "assignment.hyperactive_share": (0.0, 1.0, True, True),
     "assignment.outside_weight": (0.0, 1.0, True, True),
     "early.spikes": (0, 100_000_000, True, True),
+    "verify.confidence": (0.0, 1.0, False, False),
+    "verify.resamples": (1, 1_000_000, True, True),
+    "verify.seed": (0, 2**63 - 1, True, True),
 }
 
 

@@ -1,6 +1,7 @@
 """`vprsnn-export demo`: the whole chain (train, quantise, export, verify, report), tiny with --quick."""
 
 import json
+import shlex
 
 from vprsnn_export.cli import main
 from vprsnn_export.commands.demo import DEMO_BITS
@@ -15,11 +16,27 @@ def test_quick_demo_runs_the_whole_chain(tmp_path, capsys):
     code = main(["demo", "--quick", "--out", str(out), "--quiet"])
     printed = capsys.readouterr().out.strip().splitlines()
     assert printed[-2].startswith("report: ") and printed[-2].endswith("report.html")
-    passed = json.loads((out / "report" / "report.json").read_text())["passed"]
-    assert code == (0 if passed else 1)  # the exit code, the verdict line and the HTML agree
-    assert printed[-1].startswith(f"Verdict: {'PASS' if passed else 'FAIL'}")
+    stored = json.loads((out / "report" / "report.json").read_text())
+    verdict = stored["verdict"]
+    assert code == (1 if verdict == "fails" else 0)  # the exit code, the verdict line and the HTML agree
+    assert printed[-1].startswith(f"Verdict: {verdict.upper()} ")
     html = (out / "report" / "report.html").read_text()
-    assert f"Verdict: {'PASS' if passed else 'FAIL'}" in html
+    assert f"Verdict: {verdict.upper()}" in html
+    # the first line says what to conclude, naming every width with its verdict
+    widths = {r["bits"]: r["verdict"] for r in stored["runs"][0]["bits"]}
+    assert printed[0].startswith("Conclusion: ") and sorted(widths) == sorted(DEMO_BITS) == [2, 4, 8]
+    for bits, width_verdict in widths.items():
+        row = next(line.split() for line in printed if line.split()[:1] == [str(bits)])
+        assert row[1] == width_verdict.split()[0]
+        assert str(bits) in printed[0]
+    # every hint runs as written
+    hints = [line.removeprefix("  $ ") for line in printed if line.startswith("  $ vprsnn-export ")]
+    assert len(hints) == 2
+    for hint in hints:
+        assert main([*shlex.split(hint)[1:], "--quiet"]) in (0, 1, 3), hint
+    rerun = json.loads((out / "verify" / "report.json").read_text())
+    assert rerun["verdict"] == verdict  # the verify hint reproduces the demo's verdict
+    assert [r["verdict"] for r in rerun["runs"][0]["bits"]] == [widths[b] for b in DEMO_BITS]
     assert not any(" = 0.0" in line for line in printed if "limit" in line)  # points, never fractions
     assert (out / "float.npz").is_file()
     for bits in DEMO_BITS:

@@ -5,7 +5,9 @@ import json
 import pytest
 
 from vprsnn_export.cli import main
+from vprsnn_export.commands.verify import EXIT_UNDECIDED, conclusion
 from vprsnn_export.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from vprsnn_export.runtime.results import VerifyReport
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
 LENIENT = "accuracy=1,r_at_100p=1"
@@ -67,8 +69,55 @@ def test_report_json_schema(passed, checkpoint):
         cross = result["cross_implementation"]
         assert cross["passed"] and cross["reference_queries"] == 1
         assert set(cross["files"]) == {"onnx", "nir", "loihi", "model"}
-        assert all(c["equal"] for c in cross["checks"])
+        exact = [c for c in cross["checks"] if "tolerance" not in c]
+        assert all(c["equal"] and c["passed"] for c in exact) and cross["n_identical"] == cross["n_exact"] == len(exact)
+        for row in (c for c in cross["checks"] if "tolerance" in c):  # a float consumer: never counted as exact
+            assert row["passed"] and (not row["equal"] or row.get("n_differences") == 0)
+            parts = row["detail"].split("; ")  # "...decisions agree...; N of M raster entries differ...; ..."
+            identical = len(parts) > 1 and parts[1].startswith("0 of ") and row.get("n_differences") == 0
+            assert row["equal"] is identical
+        assert cross["n_exact"] + cross["n_tolerance"] == cross["n_checks"]
     assert [b["bits"] for b in data["summary"]["bits"]] == [8, 3]
+
+
+def test_paired_table_in_json_and_markdown(passed):
+    _, report = passed
+    data = json.loads((report / "report.json").read_text())
+    assert data["verdict"] == "holds" and data["settings"]["statistics"] == {
+        "confidence": 0.95,
+        "resamples": 2000,
+        "seed": 0,
+    }
+    for result in data["runs"][0]["bits"]:
+        paired = {(c["strategy"], c["k"], c["metric"]): c for c in result["paired"]}
+        assert {"float_right_deployed_wrong", "float_wrong_deployed_right", "low", "high"} <= set(
+            paired[("wprob", 3, "accuracy")]
+        )
+        assert paired[("standard", 1, "accuracy")]["method"] == "exact McNemar"
+        assert paired[("wprob", 3, "r_at_100p")]["method"] == "paired block bootstrap (blocks of 3)"
+        assert result["verdict"] == "holds"
+    md = (report / "report.md").read_text()
+    assert "## Paired verdict" in md and "flips -/+" in md
+
+
+def test_undecided_exits_0_and_3_with_strict(passed):
+    _, folder = passed
+    data = json.loads((folder / "report.json").read_text())
+    check = next(c for c in data["runs"][0]["bits"][0]["paired"] if c["verdict"] == "holds")
+    check.update(verdict="undecided", queries_to_decide=400)
+    report = VerifyReport.from_dict(data)
+    assert report.verdict == "undecided" and report.passed
+    line, code = conclusion(report, strict=False)
+    assert code == 0 and line.startswith("UNDECIDED") and "about 400 queries" in line
+    assert conclusion(report, strict=True)[1] == EXIT_UNDECIDED
+
+
+def test_the_exit_code_follows_the_reported_verdict(checkpoint, tmp_path, capsys):
+    code = verify(checkpoint, tmp_path, "--bits", "2", "--targets", "none", "--strict")
+    out = capsys.readouterr().out
+    verdict = json.loads((tmp_path / "report.json").read_text())["verdict"]
+    assert code == {"holds": 0, "undecided": EXIT_UNDECIDED, "fails": EXIT_CHECK_FAILED}[verdict]
+    assert out.splitlines()[-1].startswith(verdict.upper()) and "flips -/+" in out
 
 
 def test_impossible_tolerance_exits_1(checkpoint, tmp_path, capsys):
@@ -77,7 +126,7 @@ def test_impossible_tolerance_exits_1(checkpoint, tmp_path, capsys):
         == EXIT_CHECK_FAILED
     )
     out = capsys.readouterr().out
-    assert "FAIL" in out and "report.html" in out
+    assert "FAILS" in out and "report.html" in out
     data = json.loads((tmp_path / "report.json").read_text())
     checks = data["runs"][0]["bits"][0]["tolerance_checks"]
     assert any(c["check"] == "winner_agreement" and not c["passed"] for c in checks)

@@ -101,7 +101,7 @@ def test_the_non_leaky_model_is_exact_in_every_float_consumer_and_passes(tmp_pat
     assert statement["exact"] is True and statement["decision_tolerance"] == 1.0
     spikes = gate_spikes()
     rows = consumer_gate(tmp_path / "m.nir", model, simulate(model, spikes, record=True).raster, spikes)
-    assert rows and all(r.equal for r in rows)
+    assert rows and all(r.passed for r in rows)
     assert all("100.0% of 2" in r.detail for r in rows if "refuses" not in r.detail)
     result = export_and_check(ExportSource.of(model, "ef" * 32), model, ["nir"], tmp_path / "x", spikes=spikes)
     assert result.passed
@@ -112,8 +112,8 @@ def test_a_stated_tolerance_below_the_measured_agreement_passes(tmp_path):
     spikes = gate_spikes()
     path = write_nir(model, tmp_path / "m.nir")
     raster = simulate(model, spikes, record=True).raster
-    assert all(r.equal for r in consumer_gate(path, model, raster, spikes, tolerance=0.0))
-    assert not all(r.equal for r in consumer_gate(path, model, raster, spikes, tolerance=0.5))
+    assert all(r.passed for r in consumer_gate(path, model, raster, spikes, tolerance=0.0))
+    assert not all(r.passed for r in consumer_gate(path, model, raster, spikes, tolerance=0.5))
 
 
 def test_the_file_states_its_integer_semantics_machine_readably(tmp_path):
@@ -145,4 +145,4 @@ def test_the_gate_uses_the_network_raster_it_is_given(tmp_path):
     spikes = gate_spikes()
     raster = simulate(dataclasses.replace(model), spikes, record=True).raster.clone()
     raster[..., 1] = False
-    assert all(r.equal for r in consumer_gate(write_nir(model, tmp_path / "m.nir"), model, raster, spikes))
+    assert all(r.passed for r in consumer_gate(write_nir(model, tmp_path / "m.nir"), model, raster, spikes))

@@ -1,7 +1,10 @@
 """`vprsnn-export verify`: quantise, export and run every implementation; judge each bit width against float.
 
-Exit codes: 0 when every requested check passes at every bit width (and for every
-network), 1 when a check fails, 2 on bad input (files, options, data).
+Every metric tolerance is judged on the paired table (float and deployed see the same spikes: each
+query is a pair): holds (the interval of the difference lies inside the tolerance), fails (entirely
+outside), undecided (it straddles: more queries would decide it). Exit codes: 0 when nothing fails
+(undecided included), 1 when a check fails, 2 on bad input (files, options, data), 3 with
+``--strict`` when nothing fails but a check is undecided.
 """
 
 from __future__ import annotations
@@ -41,12 +44,15 @@ from ._common import (
 if TYPE_CHECKING:
     from ..runtime.verify import VerifyOptions
 
+#: `--strict`: the exit code of a run in which nothing fails but a paired check is undecided.
+EXIT_UNDECIDED = 3
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 ALL_TARGETS = ",".join(TARGETS)
 TABLE_COLUMNS = (
     ("network", "network"),
     ("bits", "bits"),
     ("verdict", "verdict"),
+    ("paired", "paired checks"),
     ("cross", "cross-impl."),
     ("accuracy", "worst acc. Δ k=1"),
     ("r_at_100p", "R@100P Δ"),
@@ -61,8 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="quantise and export at several bit widths; check every implementation against the float network",
         description="For each bit width: quantise, run the integer simulator, the ONNX graph, the NIR and Loihi-style "
         "files read back and the reference stepper on the float network's very input spikes; compare exactly across "
-        "implementations and within tolerances against float; write report.json, report.md and report.html. "
-        "Exit 0: every check passed; 1: a check failed; 2: bad input.",
+        "implementations and against float, each metric judged on paired queries (holds / fails / undecided); "
+        "write report.json, report.md and report.html. Exit 0: nothing fails (undecided included); 1: a check "
+        "fails; 2: bad input; 3: with --strict, nothing fails but a check is undecided.",
     )
     parser.add_argument("checkpoints", nargs="+", metavar="CKPT", help="float checkpoint(s) written by train")
     parser.add_argument(
@@ -78,6 +85,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="override tolerances, e.g. r_at_100p=0.01,accuracy=0.02,auc_pr=0.02 (fractions; 'off' disables); "
         "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations, query_slack "
         "(docs/verify.md)",
+    )
+    checks.add_argument(
+        "--strict",
+        action="store_true",
+        help=f"exit {EXIT_UNDECIDED} when nothing fails but a paired check is undecided (its interval straddles "
+        "its tolerance: too few queries to decide); without it an undecided check exits 0 with a note",
     )
     checks.add_argument(
         "--reference-queries",
@@ -240,6 +253,8 @@ def folder_name(label: str, index: int) -> str:
 
 def verdict_rows(report: VerifyReport) -> list[dict]:
     """One row per network and bit width for the terminal table."""
+    from ..runtime.report.labels import cross_counts, verdict_counts
+
     rows = []
     for index, run in enumerate(report.runs):
         top = max(run.ks)
@@ -250,8 +265,9 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
                 {
                     "network": run.label or str(index + 1),
                     "bits": result.bits,
-                    "verdict": "PASS" if result.passed else "FAIL",
-                    "cross": f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
+                    "verdict": result.verdict,
+                    "paired": verdict_counts(result.paired) or "-",
+                    "cross": cross_counts([cross]),
                     "accuracy": f"{100 * worst:+.1f}",
                     "r_at_100p": f"{100 * _delta(result.row('wprob', top), 'r_at_100p'):+.1f} (k={top})",
                     "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
@@ -259,6 +275,38 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
                 }
             )
     return rows
+
+
+def paired_rows(report: VerifyReport) -> list[dict]:
+    """The paired table of every network and bit width: every judged check and every readout's accuracy."""
+    from ..runtime.report.labels import paired_cells, shown_paired
+
+    return [
+        {"network": run.label or str(index + 1), "bits": result.bits, **paired_cells(check)}
+        for index, run in enumerate(report.runs)
+        for result in run.bits
+        for check in shown_paired(result.paired)
+    ]
+
+
+def conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
+    """The last line and the exit code: FAILS (1), UNDECIDED (0, or 3 with --strict) or HOLDS (0)."""
+    verdict = report.verdict
+    checks = [c for run in report.runs for r in run.bits for c in r.paired if c.verdict == "undecided"]
+    if verdict == "fails":
+        return f"FAILS: {len(report.runs) - report.n_passed} of {len(report.runs)} network(s) fail a check", (
+            EXIT_CHECK_FAILED
+        )
+    if verdict == "undecided":
+        needed = [c.queries_to_decide for c in checks if c.queries_to_decide]
+        more = f" (about {max(needed)} queries would decide them)" if needed else ""
+        code = EXIT_UNDECIDED if strict else 0
+        return (
+            f"UNDECIDED: nothing fails, but {len(checks)} paired check(s) straddle their tolerance{more}; "
+            f"exit {code}" + ("" if strict else f" ({EXIT_UNDECIDED} with --strict)"),
+            code,
+        )
+    return "HOLDS: every check holds at every bit width", 0
 
 
 def _delta(row: MetricRow, metric: str) -> float:
@@ -271,6 +319,7 @@ MAX_SEEDS = 1000  # networks trained by one verify run
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.report import write_report
+    from ..runtime.report.labels import PAIRED_COLUMNS
     from ..runtime.verify import build_report, verify_checkpoint
 
     started = time.perf_counter()
@@ -337,12 +386,21 @@ def run(args: argparse.Namespace) -> int:
         )
         report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
+    line, code = conclusion(report, args.strict)
     if args.json:
         print_json(
             {
                 "passed": report.passed,
+                "verdict": report.verdict,
+                "exit_code": code,
                 "report": {k: str(v) for k, v in written.items()},
                 "summary": report.summary.to_dict(),
+                "paired": [
+                    {"network": run.label or str(i + 1), "bits": r.bits, **c.to_dict()}
+                    for i, run in enumerate(report.runs)
+                    for r in run.bits
+                    for c in r.paired
+                ],
             }
         )
     else:
@@ -350,8 +408,11 @@ def run(args: argparse.Namespace) -> int:
         for run in report.runs:
             if run.float.cost is not None:
                 print(f"{run.label}: {run.float.cost.line()}", file=sys.stderr)
+        level = 100 * options.statistics.confidence
         print(
-            f"\n{'PASS' if report.passed else 'FAIL'}: {report.n_passed} of {len(runs)} network(s) "
-            f"pass every check; report: {written['html']}"
+            f"\npaired checks (float and deployed on the same queries; Δ = deployed - float, {level:g} % interval; "
+            "flips: float right/deployed wrong and the reverse):"
         )
-    return 0 if report.passed else EXIT_CHECK_FAILED
+        print(format_table(paired_rows(report), (("network", "network"), ("bits", "bits"), *PAIRED_COLUMNS)))
+        print(f"\n{line}; report: {written['html']}")
+    return code

@@ -315,7 +315,7 @@ def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | N
             {
                 "target": names.get(prefix, prefix),
                 "check": f"{what or prefix}: {check.a} vs {check.b}",
-                "result": "ok" if check.equal else "FAILED",
+                "result": "ok" if check.passed else "FAILED",
                 "detail": check.detail,
             }
         )

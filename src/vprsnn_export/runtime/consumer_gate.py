@@ -84,7 +84,8 @@ def consumer_gate(
             candidates = run_consumer(consumer, graph, spikes)
         except (AssertionError, ValueError, ConsumerUnavailable) as exc:  # snnTorch asserts, SpikingJelly raises
             detail = f"not gated: the consumer refuses the file ({type(exc).__name__}: {str(exc).splitlines()[0]})"
-            rows.append(Comparison(f"{GATE_LABEL}: {consumer} + readout rule", consumer, "network", kind, True, detail))
+            label = f"{GATE_LABEL}: {consumer} + readout rule"
+            rows.append(Comparison(label, consumer, "network", kind, False, detail, tolerance=limit))
             continue
         ruled = apply_readout_rule(graph, spikes, candidates)
         agree = decided_places(network, ruled.sum(dim=1).numpy()) == places
@@ -101,10 +102,11 @@ def consumer_gate(
                 consumer,
                 "network",
                 kind,
-                share >= limit,
+                bool(agree.all() and differing == 0),  # identical: a tolerance row is never counted as exact
                 detail,
                 n_differences=int((~agree).sum()),
                 n_elements=int(agree.size),
+                tolerance=limit,
             )
         )
     return tuple(rows)

@@ -9,7 +9,8 @@ renderer and the commands read attributes, never nested string keys.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import re
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -42,6 +43,46 @@ class ToleranceCheck(JsonDataclass):
         metadata=json_options(missing_from=lambda data: data["limit"])
     )  # older files: the limit set
     passed: bool
+
+
+@dataclass(frozen=True)
+class PairedCheck(JsonDataclass):
+    """One metric of one readout (strategy at k), float vs deployed on the same queries, judged as a pair.
+
+    ``float_right_deployed_wrong`` (b) and ``float_wrong_deployed_right`` (c) are the per-query flips of
+    correctness; ``difference`` is deployed - float; [``low``, ``high``] its paired interval at the report's
+    confidence level (``method``: exact McNemar for accuracy at k=1, the paired bootstrap otherwise, in
+    blocks of k queries for k > 1); ``limit`` the drop limit applied (None: the metric has no tolerance
+    there, reported only). ``verdict``: holds / fails / undecided / not judged (readout/paired.py), None
+    when unchecked; ``queries_to_decide``: for an undecided check, roughly how many queries would decide it.
+    """
+
+    strategy: str
+    k: int
+    metric: str
+    n_queries: int
+    float_right_deployed_wrong: int
+    float_wrong_deployed_right: int
+    float_value: float
+    difference: float
+    low: float
+    high: float
+    method: str
+    p_value: float | None = field(default=None, metadata=json_options(omit="none"))  # exact McNemar, k=1 accuracy
+    limit: float | None = None
+    verdict: str | None = None
+    queries_to_decide: int | None = field(default=None, metadata=json_options(omit="none"))
+    note: str | None = field(default=None, metadata=json_options(omit="none"))
+
+
+#: The verdicts of a bit width (and of a run or report): the worst of its checks, in this order.
+VERDICTS = ("fails", "undecided", "holds")
+
+
+def worst_verdict(verdicts: Iterable[str]) -> str:
+    """The worst of several verdicts (fails > undecided > holds); holds when there are none."""
+    found = set(verdicts)
+    return next((v for v in VERDICTS if v in found), "holds")
 
 
 # ---------------------------------------------------------------------------- spike and decision level
@@ -86,7 +127,10 @@ class Comparison(JsonDataclass):
     """One comparison of two implementations' outputs (``kind`` says how: "exact" or a bound).
 
     ``family`` is what was compared: "array" (element by element), "distribution"
-    (W+Prob: identical decisions, |diff| bounded) or "config" (equal or not).
+    (W+Prob: identical decisions, |diff| bounded) or "config" (equal or not). ``equal`` says the
+    outputs are identical. A **tolerance row** (``tolerance`` set: a float consumer's decisions must
+    agree on at least that share of the ``n_elements`` decisions) passes within its tolerance while
+    ``n_differences`` decisions differ; it is never counted as exact.
     """
 
     check: str
@@ -96,7 +140,9 @@ class Comparison(JsonDataclass):
     equal: bool
     detail: str
     n_differences: int | None = None
-    n_elements: int | None = field(default=None, metadata=json_options(omit=lambda c: c.family != "array"))
+    n_elements: int | None = field(
+        default=None, metadata=json_options(omit=lambda c: c.family != "array" and c.tolerance is None)
+    )
     first_difference: tuple[int, ...] | None = field(
         default=None, metadata=json_options(omit=lambda c: c.family != "array")
     )
@@ -104,17 +150,42 @@ class Comparison(JsonDataclass):
         default=None, metadata=json_options(omit=lambda c: c.family != "distribution")
     )
     family: str = field(default="array", metadata=json_options(write=False, missing_from=lambda data: _family(data)))
+    tolerance: float | None = field(
+        default=None, metadata=json_options(omit="none", missing_from=lambda data: _stated_tolerance(data))
+    )
 
     # the keys each family writes, in this order
+    __json_extra__ = ("passed",)
     __json_order__: ClassVar[tuple[str, ...]] = (
-        *("check", "a", "b", "kind", "equal", "n_elements", "max_abs_difference", "n_differences"),
-        *("first_difference", "detail"),
+        *("check", "a", "b", "kind", "equal", "tolerance", "passed", "n_elements", "max_abs_difference"),
+        *("n_differences", "first_difference", "detail"),
     )
+
+    @property
+    def passed(self) -> bool:
+        """Exact rows: identical. Tolerance rows: the agreeing share 1 - n_differences / n_elements reaches the
+        tolerance (a row that compared nothing, a consumer refusing the file, is not gated)."""
+        if self.tolerance is None:
+            return self.equal
+        if not self.n_elements:
+            return True
+        return 1.0 - (self.n_differences or 0) / self.n_elements >= self.tolerance - 1e-12
+
+    @property
+    def difference(self) -> float | None:
+        """A tolerance row's measured difference: the share of decisions that differ (None when none compared)."""
+        return None if not self.n_elements else (self.n_differences or 0) / self.n_elements
 
 
 def _family(data: Mapping[str, Any]) -> str:
     """A comparison's family, from the keys its JSON object holds."""
     return "distribution" if "max_abs_difference" in data else "array" if "n_elements" in data else "config"
+
+
+def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
+    """An older file's tolerance row: its kind ``decision agreement >= 95.0%`` (exact rows: None)."""
+    match = re.fullmatch(r"decision agreement >= ([0-9.]+)%", str(data.get("kind", "")))
+    return None if match is None else float(match.group(1)) / 100
 
 
 @dataclass(frozen=True)
@@ -126,12 +197,12 @@ class ConformanceResult(JsonDataclass):
     skipped: Mapping[str, str] = field(default_factory=dict)
     files: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
 
-    __json_extra__ = ("passed", "n_checks", "n_failed")
+    __json_extra__ = ("passed", "n_checks", "n_failed", "n_exact", "n_identical", "n_tolerance", "n_within_tolerance")
     __json_order__ = ("checks", *__json_extra__, "reference_queries", "skipped", "files")
 
     @property
     def passed(self) -> bool:
-        return all(c.equal for c in self.comparisons)
+        return all(c.passed for c in self.comparisons)
 
     @property
     def n_checks(self) -> int:
@@ -139,11 +210,38 @@ class ConformanceResult(JsonDataclass):
 
     @property
     def n_failed(self) -> int:
-        return sum(not c.equal for c in self.comparisons)
+        return sum(not c.passed for c in self.comparisons)
+
+    @property
+    def exact(self) -> tuple[Comparison, ...]:
+        """The exact rows (any difference fails)."""
+        return tuple(c for c in self.comparisons if c.tolerance is None)
+
+    @property
+    def tolerance_rows(self) -> tuple[Comparison, ...]:
+        """The rows judged within a stated tolerance (the float NIR consumers' decisions)."""
+        return tuple(c for c in self.comparisons if c.tolerance is not None)
+
+    @property
+    def n_exact(self) -> int:
+        return len(self.exact)
+
+    @property
+    def n_identical(self) -> int:
+        """Exact rows whose outputs are identical."""
+        return sum(c.equal for c in self.exact)
+
+    @property
+    def n_tolerance(self) -> int:
+        return len(self.tolerance_rows)
+
+    @property
+    def n_within_tolerance(self) -> int:
+        return sum(c.passed for c in self.tolerance_rows)
 
     @property
     def failures(self) -> tuple[Comparison, ...]:
-        return tuple(c for c in self.comparisons if not c.equal)
+        return tuple(c for c in self.comparisons if not c.passed)
 
     def with_files(self, name: str, paths: Sequence[str]) -> ConformanceResult:
         """This result with one more entry in ``files``."""
@@ -232,6 +330,18 @@ class BitsResult(JsonDataclass):
     passed: bool
     seconds: Mapping[str, float] = field(default_factory=dict)
     modules: tuple[ModuleRow, ...] = ()  # an ensemble's modules (empty for one network)
+    # the paired statistics of every readout (older files: none)
+    paired: tuple[PairedCheck, ...] = field(default=(), metadata=json_options(omit=lambda r: not r.paired))
+
+    __json_extra__ = ("verdict",)
+
+    @property
+    def verdict(self) -> str:
+        """fails (a check failed: cross-implementation, a non-metric limit or a paired interval outside its
+        tolerance), undecided (a paired interval straddles its tolerance), else holds."""
+        if not self.passed:
+            return "fails"
+        return worst_verdict(p.verdict for p in self.paired if p.verdict is not None)
 
     def row(self, strategy: str, k: int) -> MetricRow:
         row = find_row(self.metrics, strategy, k)
@@ -273,15 +383,19 @@ class VerifiedRun(JsonDataclass):
     # queries of the step-level checks (None: all; runtime.verify.run.RASTER_BUDGET)
     recorded_queries: int | None = field(default=None, metadata=json_options(omit="none"))
 
-    __json_extra__ = ("passed",)
+    __json_extra__ = ("passed", "verdict")
     __json_order__ = (
         *("label", "seed", "config", "checkpoint_sha256", "checkpoint_data", "query", "n_queries"),
-        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed"),
+        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed", "verdict"),
     )
 
     @property
     def passed(self) -> bool:
         return all(r.passed for r in self.bits)
+
+    @property
+    def verdict(self) -> str:
+        return worst_verdict(r.verdict for r in self.bits)
 
     @property
     def ks(self) -> list[int]:
@@ -317,6 +431,8 @@ class BitsSummary(JsonDataclass):
     top1_agreement: Mapping[str, MeanStd]
     wprob_tv_mean: MeanStd
     aggregated_agreement: Mapping[int, MeanStd]
+    # networks per verdict (older files: none)
+    verdicts: Mapping[str, int] = field(default_factory=dict, metadata=json_options(omit=lambda b: not b.verdicts))
 
     def row(self, strategy: str, k: int) -> SummaryRow | None:
         return next((r for r in self.metrics if r.strategy == strategy and r.k == k), None)
@@ -348,8 +464,11 @@ class VerifyReport(JsonDataclass):
     commands: tuple[tuple[str, ...] | None, ...] | None = field(default=None, metadata=json_options(omit="none"))
     settings_differ: tuple[str, ...] | None = field(default=None, metadata=json_options(omit="none"))
 
-    __json_extra__ = ("schema", "passed")
-    __json_order__ = ("schema", "created", "command", "seconds", "versions", "settings", "runs", "summary", "passed")
+    __json_extra__ = ("schema", "passed", "verdict")
+    __json_order__ = (
+        *("schema", "created", "command", "seconds", "versions", "settings", "runs", "summary", "passed"),
+        "verdict",
+    )
 
     @property
     def schema(self) -> str:
@@ -358,6 +477,11 @@ class VerifyReport(JsonDataclass):
     @property
     def passed(self) -> bool:
         return all(r.passed for r in self.runs)
+
+    @property
+    def verdict(self) -> str:
+        """fails, undecided or holds: the worst verdict of every network at every bit width."""
+        return worst_verdict(r.verdict for r in self.runs)
 
     @property
     def n_passed(self) -> int:
@@ -396,6 +520,7 @@ __all__ = [
     "LevelHistogram",
     "MetricRow",
     "MetricValues",
+    "PairedCheck",
     "PrCurve",
     "ReportError",
     "RunSummary",
@@ -406,4 +531,5 @@ __all__ = [
     "VerifyReport",
     "WeightHistogram",
     "find_row",
+    "worst_verdict",
 ]

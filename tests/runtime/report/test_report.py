@@ -72,7 +72,8 @@ def test_writes_json_markdown_and_self_contained_html(report, tmp_path):
     assert json.loads((tmp_path / REPORT_JSON).read_text()) == json.loads(json.dumps(report.to_dict()))
     md = (tmp_path / REPORT_MD).read_text()
     for heading in (
-        "Pass / fail per bit width",
+        "Verdict per bit width",
+        "Paired verdict",
         "Metric level",
         "Spike level",
         "Decision level",

@@ -310,6 +310,10 @@ def test_verify_checkpoint_schema(verified, tiny):
             "passed",
             "n_checks",
             "n_failed",
+            "n_exact",
+            "n_identical",
+            "n_tolerance",
+            "n_within_tolerance",
             "reference_queries",
             "skipped",
             "files",
@@ -467,3 +471,27 @@ def test_step_checks_on_the_first_queries_leave_the_metrics_alone(tmp_path, monk
     for a, b in zip(whole.bits, part.bits, strict=True):
         assert a.metrics == b.metrics and a.spike_level.count_correlation == b.spike_level.count_correlation
         assert [m.accuracy_k for m in a.modules] == [m.accuracy_k for m in b.modules]
+
+
+def test_a_tolerance_row_is_counted_on_its_own_with_its_measured_difference():
+    from vprsnn_export.runtime.report.labels import cross_counts, tolerance_differences
+    from vprsnn_export.runtime.results import Comparison, ConformanceResult
+
+    exact = Comparison("ONNX: raster", "intsim", "onnx", "exact", True, "identical", 0, 10)
+    row = Comparison(
+        "NIR read back: snntorch + readout rule", "snntorch", "network", "decision agreement >= 95.0%", False,
+        "98.0% of 100 decisions agree", n_differences=2, n_elements=100, tolerance=0.95,
+    )  # fmt: skip
+    below = dataclasses.replace(row, n_differences=6)
+    assert not row.equal and row.passed and row.difference == 0.02 and not below.passed
+    result = ConformanceResult((exact, row), reference_queries=1)
+    data = result.to_dict()
+    assert data["passed"] and (data["n_exact"], data["n_identical"], data["n_tolerance"]) == (1, 1, 1)
+    assert data["checks"][1]["equal"] is False and data["checks"][1]["passed"] is True
+    assert ConformanceResult.from_dict(data) == result
+    assert cross_counts([result]) == "1/1 exact, 1/1 within tolerance"
+    assert tolerance_differences(result) == "snntorch: 2.0 % of 100 decisions differ (limit 5.0 %)"
+    assert not ConformanceResult((exact, below), reference_queries=1).passed
+    older = {**data["checks"][1], "equal": True}  # files written before: no tolerance key, equal meant "passed"
+    del older["tolerance"], older["passed"]
+    assert Comparison.from_dict(older).tolerance == 0.95 and Comparison.from_dict(older).passed

@@ -63,7 +63,7 @@ class ExportChecks:
 
     @property
     def passed(self) -> bool:
-        return all(c.equal for c in self.comparisons)
+        return all(c.passed for c in self.comparisons)
 
     @property
     def rows(self) -> list[CheckRow]:

@@ -10,7 +10,23 @@ from vprsnn_export.readout.strategies import STRATEGIES
 
 from ..results import METRICS, RunSummary, VerifiedRun, VerifyReport
 from ..verify.checks import TOLERANCE_MEANING
-from .labels import METRIC_TITLES, data_note, ms, network_label, points, row_label, signed_pct, strategy_title, verdict
+from .labels import (
+    METRIC_TITLES,
+    PAIRED_COLUMNS,
+    cross_counts,
+    data_note,
+    ms,
+    network_label,
+    paired_cells,
+    points,
+    row_label,
+    shown_paired,
+    signed_pct,
+    strategy_title,
+    tolerance_differences,
+    verdict,
+    verdict_counts,
+)
 from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weights
 
 
@@ -37,10 +53,35 @@ def failure_lines(report: VerifyReport) -> list[str]:
                     f"{network}, {result.bits} bits: {result.cross_implementation.n_failed} cross-implementation differences"
                 )
             for check in result.tolerance_checks:
-                if not check.passed:
+                if not check.passed and check.check in POINT_CHECKS:
                     value, limit = points(check.check, check.value), points(check.check, check.applied_limit)
                     lines.append(f"{network}, {result.bits} bits: {check.what} = {value} (limit {limit})")
+            for paired in result.paired:
+                if paired.verdict == "fails":
+                    cells = paired_cells(paired)
+                    lines.append(
+                        f"{network}, {result.bits} bits: {cells['metric']} {cells['readout']} Δ {cells['difference']} "
+                        f"pts, interval {cells['interval']} beyond the {cells['limit']}-point limit"
+                    )
     return lines
+
+
+#: Tolerances judged on one measured number (the metric tolerances are judged on the paired table).
+POINT_CHECKS = ("winner_agreement", "top1_agreement", "saturations")
+
+
+def conclusion(report: VerifyReport) -> str:
+    """What the verdict means, in one sentence."""
+    n_runs = len(report.runs)
+    if report.verdict == "fails":
+        return f"{n_runs - report.n_passed} of {n_runs} network(s) fail a check at some bit width"
+    if report.verdict == "undecided":
+        n = sum(c.verdict == "undecided" for run in report.runs for r in run.bits for c in r.paired)
+        return (
+            f"nothing fails, but {n} paired check(s) straddle their tolerance: on these queries the difference "
+            "cannot be told from the paired sampling noise (the paired table says how many queries would decide)"
+        )
+    return "every check holds at every bit width (each paired interval lies inside its tolerance)"
 
 
 def blocks_of(report: VerifyReport) -> list[Block]:
@@ -57,8 +98,8 @@ def blocks_of(report: VerifyReport) -> list[Block]:
         Block(
             "p",
             (
-                f"**Verdict: {verdict(report.passed)}** — {report.n_passed} of {n_runs} network(s) pass every "
-                f"check at every bit width. Query traversal **{first.query}**, {first.n_queries} queries"
+                f"**Verdict: {report.verdict.upper()}** — {conclusion(report)}. Query traversal "
+                f"**{first.query}**, {first.n_queries} queries"
                 f"{data_note(report.settings)}; {networks}. Generated {report.created}"
                 + (f" in {report.seconds:.0f} s" if report.seconds else "")
                 + "."
@@ -78,6 +119,7 @@ def blocks_of(report: VerifyReport) -> list[Block]:
             )
         )
     blocks += verdict_blocks(report, top_k)
+    blocks += paired_blocks(report)
     blocks += metric_blocks(summary, ks)
     blocks.append(
         Block(
@@ -134,6 +176,10 @@ def blocks_of(report: VerifyReport) -> list[Block]:
 def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
     tolerances = report.settings.get("tolerances", {})
     rows, status = [], []
+    cross = {
+        bits.bits: [r.cross_implementation for run in report.runs for r in run.bits if r.bits == bits.bits]
+        for bits in report.summary.bits
+    }
     for bits in report.summary.bits:
         worst_acc = min(
             (
@@ -147,11 +193,12 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
         )
         top = bits.row("wprob", top_k)
         ok = bits.n_passed == bits.n_runs
+        counts = ", ".join(f"{n} {v}" for v, n in bits.verdicts.items() if n) or f"{verdict(ok)} ({bits.n_passed})"
         rows.append(
             [
                 f"{bits.bits}",
-                f"{verdict(ok)} ({bits.n_passed}/{bits.n_runs})",
-                f"{bits.cross_implementation_passed}/{bits.n_runs} exact",
+                f"{counts} (of {bits.n_runs})",
+                cross_counts(cross[bits.bits]),
                 signed_pct(worst_acc),
                 ms(top.delta["r_at_100p"], signed=True) if top and top.delta else "-",
                 ms(top.values["r_at_100p"]) if top else "-",
@@ -162,7 +209,7 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
         status.append("pass" if ok else "fail")
     limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
     return [
-        Block("h2", "Pass / fail per bit width"),
+        Block("h2", "Verdict per bit width"),
         Block(
             "table",
             headers=[
@@ -182,6 +229,46 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
             "p",
             f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
             "Δ = quantised - float, in percentage points; negative is worse.",
+        ),
+    ]
+
+
+def paired_blocks(report: VerifyReport) -> list[Block]:
+    """The paired table: per network and bit width every judged metric (and every readout's accuracy) with its
+    flips, the difference, its interval and the verdict."""
+    stats = report.settings.get("statistics") or {}
+    rows, status = [], []
+    for index, run in enumerate(report.runs):
+        for result in run.bits:
+            for check in shown_paired(result.paired):
+                cells = paired_cells(check)
+                rows.append([network_label(run, index), f"{result.bits}", *(cells[k] for k, _ in PAIRED_COLUMNS)])
+                status.append({"holds": "pass", "fails": "fail"}.get(check.verdict or ""))
+    if not rows:
+        return []
+    counts = "; ".join(
+        f"{network_label(run, i)}, {r.bits} bits: {verdict_counts(r.paired) or 'nothing judged'}"
+        for i, run in enumerate(report.runs)
+        for r in run.bits
+    )
+    return [
+        Block("h2", "Paired verdict"),
+        Block(
+            "p",
+            "Float and deployed see the same spikes, so each query is a pair. Flips: queries the float network "
+            "gets right and the deployed one wrong / the reverse. Δ = deployed - float, in points, with its "
+            f"{100 * float(stats.get('confidence', 0.95)):g} % paired interval: exact McNemar for accuracy at k=1, "
+            f"the paired bootstrap otherwise ({stats.get('resamples', '?')} resamples, seed {stats.get('seed', '?')};"
+            " blocks of k consecutive queries for k > 1). A check **holds** when the whole interval lies inside "
+            "its drop limit, **fails** when it lies entirely beyond it, and is **undecided** when it straddles "
+            "the limit (with roughly how many queries would decide it); a float R@100P of 0 is **not judged**. "
+            "Checks without a limit are reported only. " + counts + ".",
+        ),
+        Block(
+            "table",
+            headers=["network", "bits", *(title for _, title in PAIRED_COLUMNS)],
+            rows=rows,
+            status=status,
         ),
     ]
 
@@ -283,7 +370,8 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
                 [
                     network_label(run, index),
                     f"{result.bits}",
-                    f"{cross.n_checks - cross.n_failed}/{cross.n_checks}",
+                    cross_counts([cross]),
+                    tolerance_differences(cross),
                     verdict(cross.passed),
                     str(cross.reference_queries),
                     "; ".join(kinds) + skipped,
@@ -299,11 +387,21 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
             "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
             "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
             "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
-            "difference fails.",
+            "difference fails. Tolerance rows (float NIR consumers + the file's readout rule, judged on their "
+            "stated decision agreement) are counted on their own, with their measured difference: never as "
+            "exact.",
         ),
         Block(
             "table",
-            headers=["network", "bits", "identical", "verdict", "reference-stepper queries", "implementations"],
+            headers=[
+                "network",
+                "bits",
+                "identical",
+                "tolerance rows: decisions that differ",
+                "verdict",
+                "reference-stepper queries",
+                "implementations",
+            ],
             rows=rows,
             status=status,
         ),

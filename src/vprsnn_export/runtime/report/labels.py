@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import MeanStd
 
-from ..results import VerifiedRun
+from ..results import ConformanceResult, PairedCheck, VerifiedRun
 
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 
@@ -55,3 +55,78 @@ def network_label(run: VerifiedRun, index: int) -> str:
 def points(check: str, value: float) -> str:
     """A tolerance value in the unit the terminal also uses: percentage points, or a count (saturations)."""
     return str(int(value)) if check == "saturations" else f"{100 * value:.1f} pts"
+
+
+#: The paired table's columns (key, title), the same in the terminal, report.md and report.html.
+PAIRED_COLUMNS = (
+    ("readout", "readout"),
+    ("metric", "metric"),
+    ("float", "float %"),
+    ("difference", "Δ (pts)"),
+    ("interval", "interval (pts)"),
+    ("flips", "flips -/+"),
+    ("limit", "drop limit (pts)"),
+    ("verdict", "verdict"),
+)
+
+
+def paired_cells(check: PairedCheck) -> dict[str, str]:
+    """One paired check as text cells: Δ and its interval in points, the flips (float right / deployed wrong,
+    and the reverse), the limit applied, the verdict (with the queries that would decide an undecided one)."""
+    verdict_text = check.verdict or "reported"
+    if check.verdict == "undecided":
+        verdict_text += (
+            f" (~{check.queries_to_decide} queries decide)" if check.queries_to_decide else " (on the limit)"
+        )
+    elif check.note and check.verdict == "not judged":
+        verdict_text = check.note
+    return {
+        "readout": row_label(check.strategy, check.k),
+        "metric": METRIC_TITLES.get(check.metric, check.metric),
+        "float": f"{100 * check.float_value:.1f}",
+        "difference": signed_pct(check.difference),
+        "interval": f"[{signed_pct(check.low)}, {signed_pct(check.high)}]",
+        "flips": f"{check.float_right_deployed_wrong}/{check.float_wrong_deployed_right}",
+        "limit": "-" if check.limit is None else f"{100 * check.limit:.1f}",
+        "verdict": verdict_text,
+    }
+
+
+def shown_paired(checks: Sequence[PairedCheck]) -> list[PairedCheck]:
+    """The paired checks a table shows: every judged one, and the accuracy of every readout (its flips)."""
+    return [c for c in checks if c.limit is not None or c.metric == "accuracy"]
+
+
+def verdict_counts(checks: Sequence[PairedCheck]) -> str:
+    """ "2 hold, 1 undecided" over the judged checks."""
+    counts: dict[str, int] = {}
+    for check in checks:
+        if check.verdict is not None:
+            counts[check.verdict] = counts.get(check.verdict, 0) + 1
+    names = {"holds": "hold", "fails": "fail"}
+    return ", ".join(f"{n} {names.get(v, v)}" for v, n in sorted(counts.items(), key=lambda kv: _ORDER.index(kv[0])))
+
+
+_ORDER = ("fails", "undecided", "not judged", "holds")
+
+
+def cross_counts(results: Sequence[ConformanceResult]) -> str:
+    """ "37/37 exact, 2/2 within tolerance": the exact rows that are identical, and the tolerance rows (float
+    consumers) within their stated agreement, summed over ``results``; the terminal and the report show this."""
+    exact = f"{sum(r.n_identical for r in results)}/{sum(r.n_exact for r in results)} exact"
+    tolerance = sum(r.n_tolerance for r in results)
+    return exact + (f", {sum(r.n_within_tolerance for r in results)}/{tolerance} within tolerance" if tolerance else "")
+
+
+def tolerance_differences(result: ConformanceResult) -> str:
+    """Each tolerance row's measured difference: "snntorch: 1.9 % of 100 decisions differ (limit 5.0 %)"."""
+    cells = []
+    for row in result.tolerance_rows:
+        limit = 100 * (1 - (row.tolerance or 0.0))
+        if row.difference is None:
+            cells.append(f"{row.a}: not gated (refuses the file)")
+        else:
+            cells.append(
+                f"{row.a}: {100 * row.difference:.1f} % of {row.n_elements} decisions differ (limit {limit:.1f} %)"
+            )
+    return "; ".join(cells) or "-"

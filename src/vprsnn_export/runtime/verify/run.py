@@ -16,7 +16,7 @@ import torch
 from tqdm import tqdm
 
 from vprsnn_export.arguments import require_type
-from vprsnn_export.config import Config
+from vprsnn_export.config import Config, VerifyConfig
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
@@ -44,6 +44,7 @@ from .checks import (
     tolerance_checks,
     weight_histograms,
 )
+from .paired import bits_passed, judged_limits, paired_checks, readout_decisions
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,7 @@ class VerifyOptions:
     reference_queries: int = 3  # presentations run on the slow reference stepper
     targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
+    statistics: VerifyConfig = field(default_factory=VerifyConfig)  # the paired verdict's settings
 
     def to_dict(self, config: Config) -> dict[str, Any]:
         """The settings of a report; its readout with the gamma of ``config`` (the networks' config)."""
@@ -124,6 +126,9 @@ def verify_checkpoint(
     float_rows, float_scores, float_agg = Readout.of(ckpt.calibration, ckpt.config, readout).scored(
         float_counts, ref_ids, query_place_ids
     )
+    sequences = readout.warning(query_place_ids) is None
+    limits = judged_limits(options.tolerances, readout.ks, len(query_place_ids), sequences=sequences)
+    float_decisions = readout_decisions(float_scores, float_agg, ref_ids, query_place_ids, readout.tolerance)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
     results: list[BitsResult] = []
@@ -199,8 +204,10 @@ def verify_checkpoint(
                 decision,
                 options.tolerances,
                 readout.ks,
-                sequences=readout.warning(query_place_ids) is None,
+                sequences=sequences,
             )
+            decisions = readout_decisions(scores, agg, ref_ids, query_place_ids, readout.tolerance)
+            table = paired_checks(float_decisions, decisions, rows, limits, options.statistics)
             modules = (
                 module_rows(
                     regions,
@@ -228,9 +235,10 @@ def verify_checkpoint(
                     tolerance_checks=tuple(checks),
                     pr_curves=curves(scores, agg, ref_ids, query_place_ids, readout),
                     weight_levels=level_histogram(model),
-                    passed=bool(cross.passed and all(c.passed for c in checks)),
+                    passed=bits_passed(cross.passed, checks, table),
                     seconds={k: round(v, 3) for k, v in seconds.items()},
                     modules=modules,
+                    paired=table,
                 )
             )
             stages.update(1)

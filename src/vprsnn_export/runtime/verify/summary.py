@@ -14,7 +14,17 @@ from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import mean_std
 from vprsnn_export.version import __version__
 
-from ..results import METRICS, BitsResult, BitsSummary, MetricRow, RunSummary, SummaryRow, VerifiedRun, VerifyReport
+from ..results import (
+    METRICS,
+    VERDICTS,
+    BitsResult,
+    BitsSummary,
+    MetricRow,
+    RunSummary,
+    SummaryRow,
+    VerifiedRun,
+    VerifyReport,
+)
 
 
 def summary_rows(rows_per_run: Sequence[Sequence[MetricRow]], with_delta: bool) -> tuple[SummaryRow, ...]:
@@ -50,6 +60,7 @@ def summarise_bits(bits: int, results: Sequence[BitsResult]) -> BitsSummary:
         top1_agreement={s: mean_std(r.decision_level.top1_agreement[s] for r in results) for s in STRATEGIES},
         wprob_tv_mean=mean_std(r.decision_level.wprob_tv_mean for r in results),
         aggregated_agreement={k: mean_std(r.decision_level.aggregated_agreement.get(k) for r in results) for k in ks},
+        verdicts={v: sum(r.verdict == v for r in results) for v in VERDICTS},
     )
 
 

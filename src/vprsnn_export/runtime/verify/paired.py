@@ -1,0 +1,142 @@
+"""The paired table of `verify`: every readout (strategy at k) of float and deployed judged as pairs of queries.
+
+The statistics are :mod:`vprsnn_export.readout.paired`'s; this module picks what each readout is judged
+against (the tolerances, as :func:`.checks.tolerance_checks` applies them) and builds the typed
+:class:`~vprsnn_export.runtime.results.PairedCheck` rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from vprsnn_export.config import VerifyConfig
+from vprsnn_export.readout import paired
+from vprsnn_export.readout.metrics import Tolerance, is_correct, predicted_place_ids
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
+
+from ..results import MetricRow, PairedCheck, ToleranceCheck, find_row
+
+#: The metrics of the paired table (P@100R equals accuracy: it is added only when its tolerance is on).
+TABLE_METRICS = ("accuracy", "r_at_100p", "auc_pr")
+#: The tolerances the paired verdicts judge (the others, winner agreement, top-1 agreement, saturations, are
+#: bounds on one measured number and stay point checks).
+PAIRED_TOLERANCES = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
+#: One readout's per-query (correct, confidence).
+Decisions = dict[tuple[str, int], tuple[np.ndarray, np.ndarray]]
+
+
+def readout_decisions(
+    scores: Mapping[str, np.ndarray],
+    aggregates: Mapping[int, np.ndarray],
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    tolerance: Tolerance,
+) -> Decisions:
+    """Per readout (every strategy at k=1, W+Prob at every k > 1) the per-query correctness and confidence,
+    exactly as :func:`~vprsnn_export.readout.scoring.decision_metrics` scores them."""
+    matrices = {(s, 1): (s, scores[s]) for s in STRATEGIES}
+    matrices |= {(SEQUENCE_STRATEGY, k): (SEQUENCE_STRATEGY, aggregates[k]) for k in sorted(aggregates) if k > 1}
+    out: Decisions = {}
+    for key, (strategy, matrix) in matrices.items():
+        predicted, confidence = decide(matrix, strategy)
+        ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
+        out[key] = (is_correct(ids, query_place_ids, tolerance), np.asarray(confidence, dtype=np.float64))
+    return out
+
+
+def judged_limits(
+    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
+) -> dict[tuple[str, str, int], float]:
+    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on.
+
+    The same readouts :func:`.checks.tolerance_checks` judges: accuracy and P@100R of every strategy at k=1,
+    R@100P of W+Prob at every judged k, AUC-PR at the largest; judged k are 1 and, on consecutive queries
+    (``sequences``), every k > 1. Applied limit: max(limit, query_slack / Q).
+    """
+    judged = sorted(k for k in set(ks) | {1} if k == 1 or sequences)
+    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
+    where = {
+        "accuracy": [(s, 1) for s in STRATEGIES],
+        "p_at_100r": [(s, 1) for s in STRATEGIES],
+        "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
+        "auc_pr": [(SEQUENCE_STRATEGY, judged[-1])],
+    }
+    return {
+        (metric, strategy, k): max(float(limit), slack)
+        for metric, readouts in where.items()
+        if (limit := tolerances.get(metric)) is not None
+        for strategy, k in readouts
+    }
+
+
+def paired_checks(
+    float_decisions: Decisions,
+    decisions: Decisions,
+    rows: Sequence[MetricRow],
+    limits: Mapping[tuple[str, str, int], float],
+    settings: VerifyConfig,
+) -> tuple[PairedCheck, ...]:
+    """The paired table of one bit width: per readout and metric the flips, the difference, its interval
+    and the verdict against ``limits`` (:func:`judged_limits`); ``rows`` are the deployed rows with their
+    float values (:func:`.checks.metric_deltas`)."""
+    out = []
+    for (strategy, k), (f_correct, f_confidence) in float_decisions.items():
+        d_correct, d_confidence = decisions[(strategy, k)]
+        row = find_row(rows, strategy, k)
+        if row is None or row.delta is None or row.float_values is None:
+            continue
+        boot = paired.paired_bootstrap(
+            f_correct,
+            f_confidence,
+            d_correct,
+            d_confidence,
+            block=k,
+            resamples=settings.resamples,
+            level=settings.confidence,
+            seed=settings.seed,
+        )
+        b, c = paired.flips(f_correct, d_correct)
+        n = row.n_queries
+        metrics = [*TABLE_METRICS, *(["p_at_100r"] if ("p_at_100r", strategy, k) in limits else [])]
+        for metric in metrics:
+            exact = metric == "accuracy" and k == 1
+            low, high = paired.accuracy_interval(b, c, n, settings.confidence) if exact else boot[metric]
+            estimate = row.delta.get(metric)
+            limit = limits.get((metric, strategy, k))
+            note = None if limit is None else paired.degenerate(metric, row.float_values.get(metric))
+            verdict = None if limit is None else paired.NOT_JUDGED if note else paired.verdict(low, high, limit)
+            out.append(
+                PairedCheck(
+                    strategy=strategy,
+                    k=k,
+                    metric=metric,
+                    n_queries=n,
+                    float_right_deployed_wrong=b,
+                    float_wrong_deployed_right=c,
+                    float_value=row.float_values.get(metric),
+                    difference=estimate,
+                    low=low,
+                    high=high,
+                    method="exact McNemar"
+                    if exact
+                    else ("paired bootstrap" if k == 1 else f"paired block bootstrap (blocks of {k})"),
+                    p_value=paired.mcnemar_exact(b, c) if exact else None,
+                    limit=limit,
+                    verdict=verdict,
+                    queries_to_decide=paired.queries_to_decide(estimate, low, high, limit, n)
+                    if verdict == paired.UNDECIDED and limit is not None
+                    else None,
+                    note=note,
+                )
+            )
+    return tuple(out)
+
+
+def bits_passed(cross_passed: bool, checks: Sequence[ToleranceCheck], table: Sequence[PairedCheck]) -> bool:
+    """A bit width passes when every cross-implementation check is exact, every point check that is not a
+    metric's (winner agreement, top-1 agreement, saturations) holds, and no paired interval fails: a metric
+    tolerance is judged by its paired verdict, never by the point difference alone."""
+    points = all(c.passed for c in checks if c.check not in PAIRED_TOLERANCES)
+    return bool(cross_passed and points and not any(c.verdict == paired.FAILS for c in table))
