@@ -34,10 +34,9 @@ from ..network.modules import module_count
 from ..runtime.evaluation import ReadoutOptions
 from ..runtime.report import write_report
 from ..runtime.report.blocks import POINT_CHECKS
-from ..runtime.report.labels import paired_cells, points, verdict_counts
+from ..runtime.report.labels import cross_counts, paired_cells, points, verdict_counts
 from ..runtime.results import BitsResult, VerifiedRun, VerifyReport
 from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
-from ..targets.registry import TARGETS
 from ..trainer.pipeline import train_and_calibrate
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
@@ -168,7 +167,6 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
     rows = []
     for result in run_result.bits:
         cross = result.cross_implementation
-        targets = [t for t in TARGETS if t in cross.files]
         wprob, aggregated = result.row("wprob", 1), result.row("wprob", top)
         delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
         weakest = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement), default=None)
@@ -177,7 +175,7 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
                 "bits": result.bits,
                 "verdict": result.verdict,
                 "paired": verdict_counts(result.paired) or "-",
-                "exports": ("exact" if cross.passed else f"{cross.n_failed} DIFFER") + f" ({len(targets)} targets)",
+                "exports": cross_counts([cross]) + ("" if cross.passed else f", {cross.n_failed} DIFFER"),
                 "accuracy": f"{100 * wprob.accuracy:.1f}",
                 "r_at_100p": f"{100 * aggregated.r_at_100p:.1f}",
                 "delta": f"{100 * delta:+.1f}",
