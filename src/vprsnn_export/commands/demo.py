@@ -33,7 +33,6 @@ from ..network.modules import module_count
 from ..readout.sequence import SequenceOptions
 from ..readout.strategies import SEQUENCE_STRATEGY
 from ..runtime.results import BitsResult, VerifiedRun, VerifyReport
-from ..targets.registry import TARGETS
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
 DEMO_DATA = "synthetic"
@@ -162,13 +161,12 @@ def hints(out: Path, data: str) -> list[str]:
 
 
 def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
-    from ..runtime.report.labels import verdict_counts
+    from ..runtime.report.labels import cross_counts, verdict_counts
 
     top = max(DEMO_KS)
     rows = []
     for result in run_result.bits:
         cross = result.cross_implementation
-        targets = [t for t in TARGETS if t in cross.files]
         wprob, aggregated = result.row(SEQUENCE_STRATEGY, 1), result.row(SEQUENCE_STRATEGY, top)
         delta = 0.0 if aggregated.delta is None else aggregated.delta.r_at_100p
         weakest = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement), default=None)
@@ -177,7 +175,7 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
                 "bits": result.bits,
                 "verdict": result.verdict,
                 "paired": verdict_counts(result.paired) or "-",
-                "exports": ("exact" if cross.passed else f"{cross.n_failed} DIFFER") + f" ({len(targets)} targets)",
+                "exports": cross_counts([cross]) + ("" if cross.passed else f", {cross.n_failed} DIFFER"),
                 "accuracy": f"{100 * wprob.accuracy:.1f}",
                 "r_at_100p": f"{100 * aggregated.r_at_100p:.1f}",
                 "delta": f"{100 * delta:+.1f}",
