@@ -187,3 +187,12 @@ def test_a_wrong_layout_or_width_is_refused_by_onnxruntime(exported):
     for wrong in (spikes, spikes[:, :, : inputs // 2].transpose(1, 0, 2)):  # (N, T, inputs); half the width
         with pytest.raises(Exception, match="[Ii]nvalid dimensions"):
             sess.run(["counts"], {"spikes": wrong})
+
+
+def test_the_added_metadata_keeps_the_file_deterministic(exported, tmp_path):
+    from vprsnn_export.targets.onnx_target import write_onnx
+
+    model, _, onnx_path, _ = exported
+    assert write_onnx(model, tmp_path / "again.onnx").read_bytes() == onnx_path.read_bytes()
+    props = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).get_modelmeta()
+    assert json.loads(props.custom_metadata_map["vprsnn.reference_place_ids"]) == model.reference_place_ids.tolist()
