@@ -107,20 +107,26 @@ def outsider_nir(path: str, pixels: np.ndarray, query_ids: np.ndarray, traversal
 ROUTE_PLACES, ROUTE_SEED, FIRST_ID, QUERY = 31, 11, 700, "winter"
 
 
-@pytest.fixture(scope="module")
-def unseen_route():
-    """A network (Config defaults, 40 steps, 2 epochs, 16 neurons) trained on a route no other test uses."""
+def train_unseen(**overrides):
+    """A network (Config defaults, 40 steps, 2 epochs, 16 neurons, ``overrides``) trained on a route no other test
+    uses, and its data set."""
     from vprsnn_export.config import Config
     from vprsnn_export.data.dataset import Dataset
     from vprsnn_export.data.synthetic import synthetic_route
     from vprsnn_export.trainer.pipeline import train_and_calibrate
 
-    cfg = Config().replace(**{"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16, "seed": 5})
+    settings = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16, "seed": 5, **overrides}
+    cfg = Config().replace(**settings)
     route = synthetic_route(ROUTE_PLACES, ("summer", QUERY), seed=ROUTE_SEED)
     ids = np.arange(FIRST_ID, FIRST_ID + ROUTE_PLACES)
     data = Dataset.from_arrays(route, cfg.preprocess, place_ids=ids, source="synthetic-unseen")
     ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": None, "places": None})
     return ckpt, data
+
+
+@pytest.fixture(scope="module")
+def unseen_route():
+    return train_unseen()
 
 
 def project_decisions(model, data) -> tuple[np.ndarray, np.ndarray]:
@@ -154,6 +160,22 @@ def test_the_onnx_file_alone_makes_the_projects_decisions(exported):
     expected_places, expected_confidence = project_decisions(model, data)
     assert len(places) == ROUTE_PLACES and (places >= FIRST_ID).sum() > ROUTE_PLACES // 2  # ids, not indices
     assert np.array_equal(places, expected_places)  # 100 % of queries
+    np.testing.assert_allclose(confidence, expected_confidence, rtol=1e-12, atol=1e-15)
+
+
+def test_an_ensembles_onnx_file_alone_makes_the_projects_decisions(tmp_path):
+    """Three modules (11, 11 and 9 places): the graph's head carries the region readout, the outsider code is the same."""
+    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.targets.onnx_target import write_onnx
+
+    ckpt, data = train_unseen(**{"train.module_size": 11})
+    model = quantize_checkpoint(ckpt, "0" * 64, 4, per_neuron=True, scale_method="max")
+    assert model.n_neurons == 3 * 16
+    places, confidence = outsider_onnx(
+        str(write_onnx(model, tmp_path / "m.onnx")), data.traversal(QUERY), data.place_ids, QUERY
+    )
+    expected_places, expected_confidence = project_decisions(model, data)
+    assert (places >= FIRST_ID).sum() > ROUTE_PLACES // 2 and np.array_equal(places, expected_places)
     np.testing.assert_allclose(confidence, expected_confidence, rtol=1e-12, atol=1e-15)
 
 
