@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from pathlib import Path
 
 import nir
 import numpy as np
@@ -218,3 +219,32 @@ def test_the_added_metadata_keeps_the_file_deterministic(exported, tmp_path):
     assert write_onnx(model, tmp_path / "again.onnx").read_bytes() == onnx_path.read_bytes()
     props = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).get_modelmeta()
     assert json.loads(props.custom_metadata_map["vprsnn.reference_place_ids"]) == model.reference_place_ids.tolist()
+
+
+NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not NORDLAND.is_dir(), reason="the Nordland data folder is absent")
+def test_real_subset_files_alone_make_the_projects_decisions(tmp_path):
+    """The default network (3 epochs to bound the test) on the real 100-place subset: ONNX and NIR files decide alone."""
+    from vprsnn_export.config import Config
+    from vprsnn_export.data.dataset import load_dataset
+    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.targets.nir_target import write_nir
+    from vprsnn_export.targets.onnx_target import write_onnx
+    from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+    cfg = Config().replace(**{"train.epochs": 3, "seed": 1})
+    subset = NORDLAND / "subset_100_places.csv"
+    data = load_dataset(NORDLAND / "places.csv", ["summer", QUERY], cfg.preprocess, subset=subset)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": str(subset), "places": None})
+    for bits in (8, 2):
+        model = quantize_checkpoint(ckpt, "0" * 64, bits, per_neuron=True, scale_method="max")
+        expected, _ = project_decisions(model, data)
+        for outsider, path in (
+            (outsider_onnx, write_onnx(model, tmp_path / f"m{bits}.onnx")),
+            (outsider_nir, write_nir(model, tmp_path / f"m{bits}.nir")),
+        ):
+            places, _ = outsider(str(path), data.traversal(QUERY), data.place_ids, QUERY)
+            assert np.array_equal(places, expected), (bits, path.name)
