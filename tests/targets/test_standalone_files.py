@@ -212,6 +212,18 @@ def test_a_wrong_layout_or_width_is_refused_by_onnxruntime(exported):
             sess.run(["counts"], {"spikes": wrong})
 
 
+def test_the_projects_runner_refuses_another_time_length_or_width_in_one_line(exported):
+    from vprsnn_export.errors import InvalidValueError
+    from vprsnn_export.targets.onnx_session import run_onnx
+
+    model, _, onnx_path, _ = exported
+    steps, inputs = model.config.encoder.timesteps, model.n_inputs
+    assert run_onnx(onnx_path, np.zeros((2, steps, inputs), dtype=np.uint8)).shape == (2, model.n_neurons)
+    for shape in ((2, steps + 1, inputs), (2, steps, inputs - 1), (steps, 2, inputs)):
+        with pytest.raises(InvalidValueError, match=rf"\(N, {steps}, {inputs}\) for this graph"):
+            run_onnx(onnx_path, np.zeros(shape, dtype=np.uint8))
+
+
 def test_the_added_metadata_keeps_the_file_deterministic(exported, tmp_path):
     from vprsnn_export.targets.onnx_target import write_onnx
 
