@@ -66,3 +66,13 @@ def test_targets_page_gives_the_default_and_the_paper_input_widths():
     assert f"[{steps}, batch, {default}] for the default network" in onnx_input
     assert f"[{steps}, batch, {paper}] for the paper preset" in onnx_input
     assert f"**{default} inputs**" in text and "runtime.inference" not in text
+
+
+def test_fixed_point_page_gives_the_default_networks_current_bounds():
+    """docs/fixed-point.md §1 and §4: the largest 8-bit current of Config()'s width, and its float32-matmul bound."""
+    text = " ".join((DOCS / "fixed-point.md").read_text().split())
+    inputs = Config().network.n_inputs
+    largest = inputs * (2**8 - 1)
+    assert f"{largest:,} at the default {inputs} inputs, 8 bits" in text
+    assert f"can reach {largest * 64:,} at 8 bits" in text and largest * 64 > 2**24
+    assert f"a_j <= {largest:,} < 2^{largest.bit_length()}" in text
