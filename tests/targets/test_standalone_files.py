@@ -260,3 +260,17 @@ def test_real_subset_files_alone_make_the_projects_decisions(tmp_path):
         ):
             places, _ = outsider(str(path), data.traversal(QUERY), data.place_ids, QUERY)
             assert np.array_equal(places, expected), (bits, path.name)
+
+
+def test_the_loihi_header_states_the_same_contract_place_ids_and_width(exported, tmp_path):
+    from vprsnn_export.targets.loihi_target import write_loihi
+
+    model, _, onnx_path, _ = exported
+    write_loihi(model, tmp_path / "loihi")
+    header = json.loads((tmp_path / "loihi" / "network.json").read_text())
+    props = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).get_modelmeta()
+    source = header["populations"][0]
+    assert source["encoder"]["contract"] == json.loads(props.custom_metadata_map["vprsnn.encoder_contract"])
+    assert header["readout"]["place_ids"] == model.reference_place_ids.tolist()
+    assert f"spikes ({model.n_inputs}, steps)" in source["lava"] and source["size"] == model.n_inputs
+    assert header["readout"]["decision"]["place"].startswith("reference_place_ids[argmax")
