@@ -40,6 +40,7 @@ def make_model(
     dv=205,
     multipliers=(1, 2**16),
     places=4,
+    timesteps=20,
 ) -> FixedPointModel:
     side = int(round(n_inputs**0.5))
     cfg = preset("paper").replace(
@@ -50,7 +51,7 @@ def make_model(
             "network.n_neurons": n_neurons,
             "network.wta": wta,
             "network.state_isolation": isolation,
-            "encoder.timesteps": 20,
+            "encoder.timesteps": timesteps,
         }
     )
     return FixedPointModel(
@@ -103,20 +104,20 @@ def test_onnx_backend_returns_a_spike_run(tmp_path):
 @pytest.mark.parametrize("bits", [2, 4, 8])
 @pytest.mark.parametrize("wta", [True, False])
 def test_onnxruntime_matches_the_integer_simulator(tmp_path, bits, wta):
-    model = make_model(np.random.default_rng(bits), bits=bits, wta=wta)
+    model = make_model(np.random.default_rng(bits), bits=bits, wta=wta, timesteps=25)
     assert_identical(model, random_spikes(bits, 7, 25, 16), tmp_path / "m.onnx")
 
 
 def test_saturation_is_clipped_and_counted_like_the_simulator(tmp_path):
     rng = np.random.default_rng(3)
-    model = make_model(rng, n_inputs=64, bits=8, thresholds=(131000, 131071), dv=0)
+    model = make_model(rng, n_inputs=64, bits=8, thresholds=(131000, 131071), dv=0, timesteps=60)
     spikes = random_spikes(3, 4, 60, 64, p=0.9)
     assert simulate(model, spikes).saturations > 0
     assert_identical(model, spikes, tmp_path / "sat.onnx")
 
 
 def test_wta_ties_go_to_the_lowest_index(tmp_path):
-    model = make_model(np.random.default_rng(4), n_neurons=5, multipliers=(7, 8), thresholds=(1, 2))
+    model = make_model(np.random.default_rng(4), n_neurons=5, multipliers=(7, 8), thresholds=(1, 2), timesteps=10)
     model.weight_mantissa[:] = model.weight_mantissa[:, :1]  # identical columns: equal scores every step
     spikes = random_spikes(4, 3, 10, 16)
     write_onnx(model, tmp_path / "tie.onnx")
@@ -137,7 +138,13 @@ def test_wta_ties_go_to_the_lowest_index(tmp_path):
 def test_property_onnx_equals_simulator(tmp_path, seed, bits, wta, dv, n_neurons, small_multipliers):
     rng = np.random.default_rng(seed)
     model = make_model(
-        rng, n_neurons=n_neurons, bits=bits, wta=wta, dv=dv, multipliers=(1, 3) if small_multipliers else (1, 2**16)
+        rng,
+        n_neurons=n_neurons,
+        bits=bits,
+        wta=wta,
+        dv=dv,
+        multipliers=(1, 3) if small_multipliers else (1, 2**16),
+        timesteps=15,
     )
     assert_identical(model, random_spikes(seed % 1000, 4, 15, 16, p=float(rng.uniform(0.05, 0.9))), tmp_path / "p.onnx")
 

@@ -15,6 +15,7 @@ from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, validate
 from vprsnn_export.network.modules import module_regions
+from vprsnn_export.targets.contract import decision_rule, encoder_contract
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.packing import describe_packing, pack_bits
 from vprsnn_export.version import __version__
@@ -117,8 +118,9 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
                     "seed": cfg.seed,
                     "keys": "one generator per presentation, keyed by (seed, stream, traversal, place_id)",
                     "preprocess": cfg.to_dict()["preprocess"],
+                    "contract": encoder_contract(cfg),
                 },
-                "lava": "lava.proc.io.source.RingBuffer(data=spikes (784, steps)) or any 1-bit spike source",
+                "lava": f"lava.proc.io.source.RingBuffer(data=spikes ({n_in}, steps)) or any 1-bit spike source",
             },
             {
                 "name": "exc",
@@ -175,7 +177,9 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
         "readout": {
             "calibration": "calibration (neurons, places): S^R of the deployed network",
             "reference_place_ids": "reference_place_ids",
+            "place_ids": model.reference_place_ids.astype(int).tolist(),
             "gamma": cfg.assignment.gamma,
+            "decision": decision_rule("the W+Prob distribution of the output counts (eq. 9-13)"),
         },
         "arithmetic": model.header()["arithmetic"],
         "fixed_point_model": model.header(),

@@ -49,6 +49,7 @@ from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_header, validate_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, parse_json
 from vprsnn_export.network.modules import module_count, module_regions
+from vprsnn_export.targets.contract import decision_rule, encoder_contract
 from vprsnn_export.targets.nir_semantics import WTA_INHIBITION, float_consumers, integer_semantics
 from vprsnn_export.version import __version__
 
@@ -60,6 +61,16 @@ PLAIN_EDGES = [("input", "linear"), ("linear", "lif"), ("lif", "output")]
 EDGES = PLAIN_EDGES + [("lif", "wta"), ("wta", "lif")]
 
 Source = Checkpoint | FixedPointModel
+#: The W+Prob distribution of a single network's output counts c (neurons,), as the project computes it
+#: (:mod:`vprsnn_export.readout.assignment`, eq. 9-13); stated in the metadata for consumers without the project.
+WPROB_RULE = (
+    "S = calibration (neurons, places) as float64, gamma from header_json assignment.gamma, c the counts (float64); "
+    "omega_j = #{l: S_jl > 0}; S1_jl = S_jl / omega_j where omega_j > gamma * places, else S_jl; "
+    "S2_jl = S1_jl * S_jl / sum_m S_jm (0 for a silent row); "
+    "score_l = (c S2)_l * ([c > 0] S)_l / sum_j S_jl (0 where that sum is 0); "
+    "P = (score - min score) / (max score - min score), then P / sum P; uniform 1 / places where max == min. "
+    "An ensemble (modules > 1) first regularises S by its regions (vprsnn_export.readout.regions)"
+)
 
 
 def effective_beta(source: Source) -> float:
@@ -196,6 +207,11 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "timesteps": cfg.encoder.timesteps,
         "encoder": f"s_i[t] ~ Bernoulli(clip({cfg.encoder.rate_scale} * pixel_i, 0, 1)), t = 0..{cfg.encoder.timesteps - 1}",
         "seed": cfg.seed,
+        "encoder_contract": json.dumps(encoder_contract(cfg), sort_keys=True),
+        "decision": json.dumps(
+            decision_rule("the W+Prob distribution of the output counts (wprob_rule)"), sort_keys=True
+        ),
+        "wprob_rule": WPROB_RULE,
         "state": "v = 0 at the start of every presentation"
         if cfg.network.state_isolation
         else "v carried across presentations",

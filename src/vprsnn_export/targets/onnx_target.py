@@ -1,12 +1,16 @@
 """The integer inference of a fixed-point model as an ONNX graph, and a runner on onnxruntime.
 
-Graph inputs and outputs:
+Graph inputs and outputs (T and inputs are fixed numbers: onnxruntime refuses another time length or
+width, so a (batch, T, inputs) array fed by mistake fails its shape check unless batch = T):
 
-    spikes       [T, batch, inputs]  uint8 (0/1)
+    spikes       [T, batch, inputs]  uint8 (0/1)  time first (denotations DATA_TIME, DATA_BATCH, DATA_FEATURE)
     counts       [batch, neurons]    int64   output spike counts
     saturations  [batch]             int64   voltage clips to +-(2**23 - 1)
     wprob        [batch, places]     float64 W+Prob distribution P(l | Q)   (optional)
     raster       [T, batch, neurons] bool    output spikes per step           (optional)
+
+What a user needs without the project is in metadata_props (:func:`metadata_props`): the reference
+place ids, the input layout, the encoder contract and the decision rule (:mod:`targets.contract`).
 
 Computation (every operation integer; the contract of :mod:`export.model`):
 
@@ -54,12 +58,14 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.io.fileio import atomic_write_bytes
 from vprsnn_export.readout.regions import module_layout, regularised_calibration
+from vprsnn_export.targets.contract import as_json, decision_rule, encoder_contract
 from vprsnn_export.targets.packing import PACKING, pack_bits
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
 DOMAIN = "vprsnn-export"
 INPUT = "spikes"
+INPUT_DENOTATION = ("DATA_TIME", "DATA_BATCH", "DATA_FEATURE")  # ONNX dimension denotations of [T, batch, inputs]
 OUTPUTS = ("counts", "saturations", "wprob", "raster")
 NATIVE_SUB_BYTE = {4: TensorProto.UINT4}  # widths stored in an ONNX sub-byte type that onnxruntime casts (opset 21)
 
@@ -401,7 +407,7 @@ def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Tens
 def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: bool = False) -> onnx.ModelProto:
     """The ONNX model of ``model``'s integer inference (see the module docstring)."""
     check_exportable(model)
-    n = model.n_neurons
+    n, timesteps = model.n_neurons, model.config.encoder.timesteps
     nodes, inits = currents_nodes(model)
     per_neuron, per_neuron_inits = neuron_nodes(model)
     nodes += per_neuron
@@ -428,11 +434,19 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
             helper.make_tensor_value_info("wprob", TensorProto.DOUBLE, ["batch", model.calibration.shape[1]])
         )
     if with_raster:
-        outputs.append(helper.make_tensor_value_info("raster", TensorProto.BOOL, ["T", "batch", n]))
+        outputs.append(helper.make_tensor_value_info("raster", TensorProto.BOOL, [timesteps, "batch", n]))
     graph = helper.make_graph(
         nodes,
         "vprsnn_integer_inference",
-        [helper.make_tensor_value_info(INPUT, TensorProto.UINT8, ["T", "batch", model.n_inputs])],
+        [
+            helper.make_tensor_value_info(
+                INPUT,
+                TensorProto.UINT8,
+                [timesteps, "batch", model.n_inputs],
+                doc_string=input_layout(model),
+                shape_denotation=list(INPUT_DENOTATION),
+            )
+        ],
         outputs,
         inits,
     )
@@ -444,14 +458,31 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
         doc_string=__doc__,
     )
     onnx_model.domain = DOMAIN
-    helper.set_model_props(onnx_model, metadata_props(model))
+    helper.set_model_props(onnx_model, metadata_props(model, with_wprob=with_wprob))
     onnx.checker.check_model(onnx_model, full_check=True)
     return onnx_model
 
 
-def metadata_props(model: FixedPointModel) -> dict[str, str]:
-    """Key facts as ONNX metadata_props (strings): widths, scales, encoder, T, source hash."""
+def input_layout(model: FixedPointModel) -> str:
+    """The ``spikes`` input's layout in words (its doc_string and the ``vprsnn.input_layout`` property)."""
+    timesteps = model.config.encoder.timesteps
+    return (
+        f"spikes [T = {timesteps}, batch, inputs = {model.n_inputs}] uint8 0/1, time first: presentations held as "
+        f"(batch, T, inputs) are fed as x.transpose(1, 0, 2); onnxruntime refuses another T or width"
+    )
+
+
+def metadata_props(model: FixedPointModel, *, with_wprob: bool = True) -> dict[str, str]:
+    """Key facts as ONNX metadata_props (strings): widths, scales, encoder, T, source hash, and what a user needs
+    to decide without the project: reference place ids, input layout, encoder contract, decision rule (JSON)."""
     cfg = model.config
+    standalone = {
+        "vprsnn.reference_place_ids": as_json(model.reference_place_ids.astype(int).tolist()),
+        "vprsnn.input_layout": input_layout(model),
+        "vprsnn.encoder_contract": as_json(encoder_contract(cfg)),
+    }
+    if with_wprob:
+        standalone["vprsnn.decision"] = as_json(decision_rule("wprob"))
     return {
         "vprsnn.format": "vprsnn-onnx/1",
         "vprsnn.bits": str(model.bits),
@@ -467,6 +498,7 @@ def metadata_props(model: FixedPointModel) -> dict[str, str]:
         "vprsnn.source_sha256": model.source_sha256,
         "vprsnn.gamma": repr(cfg.assignment.gamma),
         "vprsnn.weight_storage": weight_storage(model.bits),
+        **standalone,
     }
 
 

@@ -1,0 +1,74 @@
+"""What every exported file states so that a user reproduces the project's decisions without the project.
+
+The encoder contract (:func:`encoder_contract`): the query spikes of a preprocessed image x (inputs,)
+of place id ``place_id`` in the traversal named ``traversal``, bit for bit
+:func:`vprsnn_export.data.encoding.query_spikes`:
+
+    p_i     = clip(rate_scale x_i, 0, 1)                                              (float32)
+    g       = int.from_bytes(sha256("vprsnn/v1|<seed>|query|<traversal>|<place_id>|0")[:8], "little") mod 2**63
+    w_k     = the k-th 32-bit word of MT19937 after init_genrand(g mod 2**32)        (k = t inputs + i)
+    s[t, i] = (w_k mod 2**24) < ceil(p_i 2**24)
+
+The decision rule (:func:`decision_rule`): the W+Prob distribution P(l | Q) of one frame (the
+ONNX ``wprob`` output) decides place ``reference_place_ids[argmax_l P]`` (first l on ties), none
+when P is flat (max == min), with confidence max_l P (:func:`vprsnn_export.readout.strategies.decide`).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from vprsnn_export.config import Config
+from vprsnn_export.data.encoding import STREAM_QUERY
+from vprsnn_export.data.preprocess import CHANNELS
+
+CONTRACT_VERSION = 1
+
+
+def encoder_contract(cfg: Config) -> dict[str, Any]:
+    """The preprocessing and the spike generator with its seed rule (module docstring), as JSON-ready facts."""
+    enc, pre = cfg.encoder, cfg.preprocess
+    inputs = cfg.network.n_inputs
+    return {
+        "version": CONTRACT_VERSION,
+        "input": f"x: one preprocessed image, {inputs} float32 values in [0, 1]",
+        "preprocess": {
+            **cfg.to_dict()["preprocess"],
+            "inputs": inputs,
+            "rule": f"greyscale, resize to {pre.image_size} x {pre.image_size} (OpenCV INTER_AREA), then the "
+            f"'{pre.channels}' channels ({CHANNELS.get(pre.channels).label}; the equations: the docstring of "
+            "vprsnn_export.data.preprocess), flattened row-major",
+        },
+        "rate_scale": enc.rate_scale,
+        "timesteps": enc.timesteps,
+        "seed": cfg.seed,
+        "probability": "p_i = clip(rate_scale * x_i, 0, 1) in float32",
+        "generator_seed": "g = int.from_bytes(hashlib.sha256(key.encode('utf-8')).digest()[:8], 'little') "
+        f"& (2**63 - 1), key = 'vprsnn/v1|{cfg.seed}|{STREAM_QUERY}|<traversal>|<place_id>|0' "
+        "(the query traversal's name and the query's place id, a decimal integer)",
+        "generator": "MT19937 initialised by init_genrand(g mod 2**32) (torch.Generator().manual_seed(g); numpy: "
+        f"numpy.random.RandomState(g % 2**32).randint(0, 2**32, size={enc.timesteps} * {inputs}, "
+        "dtype=numpy.uint32)); word k = t * inputs + i",
+        "spike": "s[t, i] = 1 if (word_k mod 2**24) < ceil(p_i * 2**24) else 0 (p_i as float64), i.e. "
+        "torch.rand((timesteps, inputs), generator) < p",
+        "project_function": "vprsnn_export.data.encoding.query_spikes(images, place_ids, traversal, config) "
+        "returns these spikes (N, timesteps, inputs) uint8; numpy.save writes them beside the model",
+    }
+
+
+def decision_rule(output: str) -> dict[str, Any]:
+    """How the W+Prob distribution named ``output`` of one frame becomes the project's decision (module docstring)."""
+    return {
+        "version": CONTRACT_VERSION,
+        "strategy": "W+Prob, one frame (k = 1)",
+        "distribution": f"P = {output}[n] (places,)",
+        "place": "reference_place_ids[argmax_l P[l]], the first l on ties",
+        "no_match": "no decision (place -1, confidence 0) when every P[l] is equal (max == min)",
+        "confidence": "max_l P[l]",
+    }
+
+
+def as_json(facts: Any) -> str:
+    """The compact, key-sorted JSON of ``facts`` a file stores as one metadata string."""
+    return json.dumps(facts, sort_keys=True, separators=(",", ":"))
