@@ -130,7 +130,11 @@ def iter_frames(
         return bag_frames(path, topic)
     if path.is_file() and path.suffix.lower() in EVENT_SUFFIXES:
         if events is None:
-            raise DataError("an event recording is binned into frames by --event-window-us or --event-count", path)
+            raise DataError(
+                "not a video or bag; read as an event recording, it is binned into frames by --event-window-us or "
+                "--event-count",
+                path,
+            )
         return event_frames(path, events, shape)
     if path.is_dir():
         return ((p.name, read_grey_image(p)) for p in image_files(path))
