@@ -22,6 +22,8 @@ refused), else ``(max y + 1, max x + 1)`` of the recording. Times must not decre
 
 from __future__ import annotations
 
+import warnings
+import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,10 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, InvalidValueError
+from ..resources import MemoryNeed, check_memory, format_size
 
 EVENT_SUFFIXES = frozenset({".npy", ".npz", ".txt"})
 FIELDS = ("x", "y", "t", "p")
 MAX_COUNT = 255  # counts saturate at the top of uint8
+LIMIT = 2**62  # |t| in microseconds and x, y in pixels: beyond it a value is not a time or a pixel (int64 headroom)
 
 
 @dataclass(frozen=True)
@@ -63,7 +67,11 @@ class Events:
 def _columns(path: Path) -> dict[str, np.ndarray]:
     suffix = path.suffix.lower()
     if suffix == ".txt":
-        table = np.loadtxt(path, dtype=np.float64, comments="#", ndmin=2)
+        with warnings.catch_warnings():  # an empty file: "input contained no data" (refused below)
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(path, dtype=np.float64, comments="#", ndmin=2)
+        if table.size == 0:
+            raise DataError("the recording holds no events", path)
         if table.shape[1] != 4:
             raise DataError(f"expected 4 columns 't x y p' per line, got {table.shape[1]}", path)
         return {"t": table[:, 0] * 1e6, "x": table[:, 1], "y": table[:, 2], "p": table[:, 3]}
@@ -88,20 +96,37 @@ def _integers(values: np.ndarray, name: str, path: Path) -> np.ndarray:
     values = np.asarray(values)
     if values.dtype.kind in "iu":
         return values.astype(np.int64)
-    if values.dtype.kind != "f" or not np.all(np.isfinite(values)):
-        raise DataError(f"event field {name!r} must hold finite numbers, got dtype {values.dtype}", path)
+    if values.dtype.kind != "f" or not np.all(np.abs(values) < LIMIT):
+        raise DataError(f"event field {name!r} must hold finite numbers below 2**62, got dtype {values.dtype}", path)
     rounded = np.rint(values)
     if name != "t" and not np.array_equal(rounded, values):
         raise DataError(f"event field {name!r} must hold whole pixel numbers", path)
     return rounded.astype(np.int64)
 
 
+def load_need(path: Path) -> MemoryNeed:
+    """Reading ``path``'s events: ``9 B`` bytes for ``B`` bytes of event data (the file, or an .npz's members
+    uncompressed): an event takes at least 4 bytes there (4 one-byte fields, or 8 characters of text a line)
+    and at most 36 in memory (x, y, t, their flat pixel index as int64 and the text parser's row), so 9 B
+    bounds it; checked before reading."""
+    size = path.stat().st_size
+    if path.suffix.lower() == ".npz" and zipfile.is_zipfile(path):
+        with zipfile.ZipFile(path) as archive:
+            size = sum(info.file_size for info in archive.infolist())
+    return MemoryNeed(((f"events of {format_size(size)} of data", 9 * size),))
+
+
 def read_events(path: str | Path) -> Events:
     """The events of ``path`` (``.npy``, ``.npz`` or ``.txt``, module docstring), checked; DataError naming it."""
     path = Path(path)
     try:
+        need = load_need(path)
+    except (OSError, zipfile.BadZipFile) as exc:
+        raise DataError(f"cannot read events ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
+    check_memory(need, f"reading {path}", "a shorter recording would")
+    try:
         columns = _columns(path)
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         raise DataError(f"cannot read events ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
     sizes = {name: np.shape(columns[name]) for name in FIELDS}
     if len(set(sizes.values())) != 1 or len(sizes["t"]) != 1:
@@ -116,23 +141,28 @@ def read_events(path: str | Path) -> Events:
     return Events(x, y, t)
 
 
-def window_bounds(t: np.ndarray, window: EventWindow) -> np.ndarray:
-    """Indices ``b`` with frame ``i`` = events ``b[i] .. b[i+1]-1`` (module docstring)."""
+def window_bounds(t: np.ndarray, window: EventWindow) -> Iterator[tuple[int, int]]:
+    """(start, stop) per frame: frame ``i`` holds events ``start .. stop-1`` (module docstring); a time window
+    with no event gives ``start == stop`` (an empty frame). One ``searchsorted`` per frame, as it is asked for."""
     n = t.size
     if window.count is not None:
-        return np.append(np.arange(0, n, window.count), n)
+        for start in range(0, n, window.count):
+            yield start, min(start + window.count, n)
+        return
     assert window.window_us is not None
-    frames = (int(t[-1]) - int(t[0])) // window.window_us + 1
-    edges = int(t[0]) + window.window_us * np.arange(frames + 1, dtype=np.int64)
-    return np.searchsorted(t, edges, side="left")
+    start, edge = 0, int(t[0])
+    while start < n:
+        edge += window.window_us
+        stop = int(np.searchsorted(t, edge, side="left"))
+        yield start, stop
+        start = stop
 
 
 def bin_frames(events: Events, window: EventWindow, shape: tuple[int, int]) -> Iterator[np.ndarray]:
     """The uint8 count frames ``F_i`` (module docstring) of ``shape`` (height, width), one at a time."""
     height, width = shape
-    bounds = window_bounds(events.t, window)
     flat = events.y * width + events.x
-    for start, stop in zip(bounds[:-1], bounds[1:], strict=True):
+    for start, stop in window_bounds(events.t, window):
         counts = np.bincount(flat[start:stop], minlength=height * width)
         yield np.minimum(counts, MAX_COUNT).astype(np.uint8).reshape(height, width)
 
@@ -147,6 +177,8 @@ def event_frames(
     extent = (int(events.y.max()) + 1, int(events.x.max()) + 1)
     if shape is None:
         shape = extent
+        need = MemoryNeed(((f"event frame {shape[1]} x {shape[0]} (int64 counts)", 9 * shape[0] * shape[1]),))
+        check_memory(need, f"binning {path}", "a recording of a smaller sensor would")
     elif extent[0] > shape[0] or extent[1] > shape[1]:
         raise DataError(
             f"events reach pixel (x={extent[1] - 1}, y={extent[0] - 1}), outside the model's "

@@ -95,3 +95,17 @@ def test_a_damaged_bag_is_one_error(tmp_path):
     with pytest.raises(DataError, match="cannot read this bag") as caught:
         list(iter_frames(bag))
     assert "\n" not in str(caught.value)
+
+
+def test_a_compressed_frame_is_checked_against_the_memory_limit_before_decoding(tmp_path, greys):
+    from vprsnn_export.errors import InvalidValueError
+    from vprsnn_export.resources import set_memory_limit
+
+    bag = write_bag(tmp_path / "png", {"/png": [("png", np.zeros((300, 400), np.uint8))]})
+    try:
+        set_memory_limit("100K")  # 4 x 400 x 300 = 469 KiB to decode
+        with pytest.raises(InvalidValueError, match=r"decoded image 400 x 300, 468\.8 KiB\), over the limit"):
+            list(iter_frames(bag))
+    finally:
+        set_memory_limit(None)
+    assert next(iter_frames(bag))[1].shape == (300, 400)

@@ -91,3 +91,25 @@ def test_bad_recordings_are_one_error(tmp_path, frames):
             EventWindow(**bad)
     with pytest.raises(DataError, match="are for an event recording"):
         iter_frames(tmp_path, events=EventWindow(count=5))
+
+
+def test_memory_is_checked_before_reading_or_binning(tmp_path, frames):
+    from vprsnn_export.resources import set_memory_limit
+
+    np.save(tmp_path / "e.npy", frames_to_events(frames, 1000))
+    (tmp_path / "wide.txt").write_text("0 100000 100000 1\n")
+    try:
+        set_memory_limit("1K")
+        with pytest.raises(InvalidValueError, match=r"reading .*e\.npy needs about .* over the limit of 1\.0 KiB"):
+            iter_frames(tmp_path / "e.npy", events=EventWindow(count=5))
+        set_memory_limit("1M")
+        with pytest.raises(InvalidValueError, match=r"event frame 100001 x 100001"):
+            iter_frames(tmp_path / "wide.txt", events=EventWindow(count=5))
+    finally:
+        set_memory_limit(None)
+
+
+def test_a_gap_in_time_gives_empty_frames(tmp_path):
+    (tmp_path / "gap.txt").write_text("0 1 1 1\n0.5 1 1 1\n")
+    binned = [grey for _, grey in iter_frames(tmp_path / "gap.txt", events=EventWindow(window_us=100_000))]
+    assert [int(f.sum()) for f in binned] == [1, 0, 0, 0, 0, 1]
