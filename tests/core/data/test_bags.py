@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("rosbags")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
+from rosbags.rosbag2 import StoragePlugin  # noqa: E402
 from rosbags.rosbag2 import Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
@@ -47,10 +48,12 @@ def compressed_message(store, grey: np.ndarray, ros1: bool):
     return types[COMPRESSED](header=header, format="png", data=cv2.imencode(".png", grey)[1].ravel())
 
 
-def write_bag(path: Path, topics: dict[str, list], ros1: bool = False) -> Path:
-    """A bag at ``path`` with ``topics``: name -> list of (kind, grey) with kind mono8/rgb8/bgr8/png."""
+def write_bag(path: Path, topics: dict[str, list], ros1: bool = False, mcap: bool = False) -> Path:
+    """A bag at ``path`` with ``topics``: name -> list of (kind, grey) with kind mono8/rgb8/bgr8/png (ROS 2:
+    sqlite3 storage, or MCAP)."""
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    writer = Writer1(path) if ros1 else Writer2(path, version=9)
+    storage = StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3
+    writer = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=storage)
     with writer:
         for topic, frames in topics.items():
             msgtype = COMPRESSED if frames[0][0] == "png" else IMAGE
@@ -67,10 +70,11 @@ def greys() -> list[np.ndarray]:
     return [np.random.default_rng(i).integers(0, 256, (6, 5), dtype=np.uint8) for i in range(4)]
 
 
-@pytest.mark.parametrize("ros1", [False, True], ids=["ros2", "ros1"])
-def test_a_bag_gives_back_its_frames_in_order(tmp_path, greys, ros1):
+@pytest.mark.parametrize(("ros1", "mcap"), [(False, False), (False, True), (True, False)], ids=["ros2", "mcap", "ros1"])
+def test_a_bag_gives_back_its_frames_in_order(tmp_path, greys, ros1, mcap):
     kinds = ["mono8", "rgb8", "bgr8", "mono8"]
-    bag = write_bag(tmp_path / ("run.bag" if ros1 else "run"), {"/cam": list(zip(kinds, greys, strict=True))}, ros1)
+    frames = {"/cam": list(zip(kinds, greys, strict=True))}
+    bag = write_bag(tmp_path / ("run.bag" if ros1 else "run"), frames, ros1, mcap)
     frames = list(iter_frames(bag))
     assert [name for name, _ in frames] == [f"{bag.name}#{i}" for i in range(4)]
     for (_, grey), expected in zip(frames, greys, strict=True):
@@ -109,3 +113,9 @@ def test_a_compressed_frame_is_checked_against_the_memory_limit_before_decoding(
     finally:
         set_memory_limit(None)
     assert next(iter_frames(bag))[1].shape == (300, 400)
+
+
+def test_an_encoding_not_read_is_one_error(tmp_path, greys):
+    bag = write_bag(tmp_path / "depth", {"/depth": [("mono16", greys[0])]})
+    with pytest.raises(DataError, match=r"#0: image encoding 'mono16' is not read \(only mono8, rgb8"):
+        list(iter_frames(bag))
