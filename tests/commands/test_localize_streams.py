@@ -150,3 +150,16 @@ def test_a_damaged_video_prints_nothing_above_the_error(model, tmp_path, capfd):
     assert main(["localize", str(model), "--frames", str(clip), *ARGS]) == 2
     out, err = capfd.readouterr()
     assert out == "" and len(err.strip().splitlines()) == 1, err
+
+
+def test_stdin_that_is_not_text_is_one_line(model, capsys, monkeypatch):
+    monkeypatch.setattr("sys.stdin", io.TextIOWrapper(io.BytesIO(b"\xff\xfe\x00garbage\n"), encoding="utf-8"))
+    assert main(["localize", str(model), "--frames", "-", *ARGS]) == 2
+    err = capsys.readouterr().err
+    assert "stdin" in err and len(err.strip().splitlines()) == 1
+
+
+def test_stream_options_are_refused_with_calibrate(model, capsys):
+    assert main(["localize", str(model), "--calibrate", "winter", "--topic", "/cam", *ARGS]) == 2
+    err = capsys.readouterr().err
+    assert "are for --frames, not --calibrate" in err and len(err.strip().splitlines()) == 1

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from ..errors import DataError
-from .preprocess import check_decodable, decode_grey, decoder_said
+from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
@@ -61,6 +61,9 @@ def compressed_grey(msg, where: str) -> np.ndarray:
     image, noise = decode_grey(data)
     if image is None or image.size == 0:
         raise DataError(f"{where}: OpenCV could not decode this {msg.format!r} image{decoder_said(noise)}")
+    lost = [line for line in noise if DATA_LOSS in line.lower()]
+    if lost:
+        raise DataError(f"{where}: truncated or corrupt {msg.format!r} image (the decoder said: {lost[0]})")
     return image
 
 

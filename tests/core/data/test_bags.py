@@ -41,11 +41,14 @@ def image_message(store, grey: np.ndarray, encoding: str, ros1: bool):
     )
 
 
-def compressed_message(store, grey: np.ndarray, ros1: bool):
+def compressed_message(store, grey: np.ndarray, ros1: bool, kind: str = "png"):
+    """A sensor_msgs/CompressedImage of ``grey``: png, jpeg, or "cut" (a JPEG cut in half, its end marker kept: OpenCV decodes it partly)."""
     types = store.types
     stamp = types["builtin_interfaces/msg/Time"](sec=0, nanosec=0)
     header = types["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=stamp, frame_id="cam")
-    return types[COMPRESSED](header=header, format="png", data=cv2.imencode(".png", grey)[1].ravel())
+    data = cv2.imencode(".png" if kind == "png" else ".jpg", grey)[1].ravel()
+    data = np.append(data[: data.size // 2], [0xFF, 0xD9]).astype(np.uint8) if kind == "cut" else data
+    return types[COMPRESSED](header=header, format="png" if kind == "png" else "jpeg", data=data)
 
 
 def write_bag(path: Path, topics: dict[str, list], ros1: bool = False, mcap: bool = False) -> Path:
@@ -56,10 +59,15 @@ def write_bag(path: Path, topics: dict[str, list], ros1: bool = False, mcap: boo
     writer = Writer1(path) if ros1 else Writer2(path, version=9, storage_plugin=storage)
     with writer:
         for topic, frames in topics.items():
-            msgtype = COMPRESSED if frames[0][0] == "png" else IMAGE
+            msgtype = COMPRESSED if frames[0][0] in ("png", "jpeg", "cut") else IMAGE
             connection = writer.add_connection(topic, msgtype, typestore=store)
             for index, (kind, grey) in enumerate(frames):
-                msg = compressed_message(store, grey, ros1) if kind == "png" else image_message(store, grey, kind, ros1)
+                compressed = msgtype == COMPRESSED
+                msg = (
+                    compressed_message(store, grey, ros1, kind)
+                    if compressed
+                    else image_message(store, grey, kind, ros1)
+                )
                 data = store.serialize_ros1(msg, msgtype) if ros1 else store.serialize_cdr(msg, msgtype)
                 writer.write(connection, 1_000_000 * (index + 1), data)
     return path
@@ -119,3 +127,15 @@ def test_an_encoding_not_read_is_one_error(tmp_path, greys):
     bag = write_bag(tmp_path / "depth", {"/depth": [("mono16", greys[0])]})
     with pytest.raises(DataError, match=r"#0: image encoding 'mono16' is not read \(only mono8, rgb8"):
         list(iter_frames(bag))
+
+
+def test_a_truncated_jpeg_frame_is_one_error(tmp_path, capfd):
+    grey = np.random.default_rng(0).integers(0, 256, (64, 64), dtype=np.uint8)
+    bag = write_bag(tmp_path / "jpeg", {"/jpeg": [("jpeg", grey), ("cut", grey)]})
+    frames = iter_frames(bag)
+    assert next(frames)[1].shape == (64, 64)
+    with pytest.raises(
+        DataError, match=r"#1: truncated or corrupt 'jpeg' image \(the decoder said: .*[Pp]remature end"
+    ):
+        next(frames)
+    assert capfd.readouterr().err == ""  # libjpeg's own warning is captured, quoted in the error
