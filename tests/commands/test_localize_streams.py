@@ -163,3 +163,20 @@ def test_stream_options_are_refused_with_calibrate(model, capsys):
     assert main(["localize", str(model), "--calibrate", "winter", "--topic", "/cam", *ARGS]) == 2
     err = capsys.readouterr().err
     assert "are for --frames, not --calibrate" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_cut_video_ends_with_one_error_after_its_good_frames(model, tmp_path, capfd):
+    clip = tmp_path / "run.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 32), isColor=True)
+    for grey in synthetic_route(20, ("winter",))["winter"]:
+        writer.write(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    assert main(["localize", str(model), "--frames", str(clip), *ARGS]) == 0
+    assert len(capfd.readouterr().out.splitlines()) == 20  # the whole video: no error
+    data = clip.read_bytes()
+    clip.write_bytes(data[: len(data) * 2 // 3])
+    assert main(["localize", str(model), "--frames", str(clip), *ARGS]) == 2
+    out, err = capfd.readouterr()
+    decided = len(out.splitlines())
+    assert 0 < decided < 20 and f"ended after {decided} of the 20 frames it declares" in err
+    assert len(err.strip().splitlines()) == 1

@@ -73,7 +73,9 @@ def to_grey(frame: np.ndarray) -> np.ndarray:
 
 
 def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:
-    """Frames of a video file in order, as ``("name#index", grey)``; DataError when OpenCV cannot open it."""
+    """Frames of a video file in order, as ``("name#index", grey)``; DataError when OpenCV cannot open it, and after
+    the last frame when the video ended more than one frame short of the count its container declares (a cut
+    or damaged file: the frames before are decided, the run still ends with the error, quoting the decoder)."""
     path = Path(path)
     with captured_stderr() as noise:
         capture = cv2.VideoCapture(str(path))
@@ -82,16 +84,23 @@ def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:
             raise DataError(
                 f"cannot open this video (OpenCV's VideoCapture could not decode it{decoder_said(noise)})", path
             )
+        declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))  # <= 0 where the container does not say
         index = 0
         while True:
-            with captured_stderr():
+            with captured_stderr() as noise:
                 ok, frame = capture.read()
             if not ok:
                 break
             yield f"{path.name}#{index}", to_grey(frame)
             index += 1
         if index == 0:
-            raise DataError("the video holds no frames", path)
+            raise DataError(f"the video holds no frames{decoder_said(noise)}", path)
+        if index + 1 < declared:
+            raise DataError(
+                f"the video ended after {index} of the {declared} frames it declares: truncated or damaged"
+                f"{decoder_said(noise)}",
+                path,
+            )
     finally:
         capture.release()
 
