@@ -784,6 +784,81 @@ def write_resized_streams(fx: Path, images: Path) -> None:
             cv2.imwrite(str(fx / f"frames_{name}" / path.name), change(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)))
 
 
+def huge_png(path: Path, side: int) -> None:
+    """A real ``side x side`` all-black greyscale PNG, written row by row (a few hundred kB; side**2 bytes decoded)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    packer, row = zlib.compressobj(9), bytes(side + 1)  # filter byte 0, then the row
+    idat = b"".join(packer.compress(row) for _ in range(side)) + packer.flush()
+    ihdr = struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b""))
+
+
+def write_bag(path: Path, topics: Mapping[str, Sequence[np.ndarray]]) -> None:
+    """A ROS 2 bag of mono8 sensor_msgs/Image messages, one topic per entry of ``topics`` (rosbags' writer)."""
+    rosbag2 = importlib.import_module("rosbags.rosbag2")
+    typesys = importlib.import_module("rosbags.typesys")
+    store = typesys.get_typestore(typesys.Stores.ROS2_HUMBLE)
+    image, header = store.types["sensor_msgs/msg/Image"], store.types["std_msgs/msg/Header"]
+    stamp = store.types["builtin_interfaces/msg/Time"](sec=0, nanosec=0)
+    with rosbag2.Writer(path, version=9) as writer:
+        for topic, frames in topics.items():
+            connection = writer.add_connection(topic, "sensor_msgs/msg/Image", typestore=store)
+            for index, grey in enumerate(frames):
+                msg = image(
+                    header=header(stamp=stamp, frame_id="cam"),
+                    height=grey.shape[0],
+                    width=grey.shape[1],
+                    encoding="mono8",
+                    is_bigendian=0,
+                    step=grey.shape[1],
+                    data=grey.ravel(),
+                )
+                writer.write(connection, index + 1, store.serialize_cdr(msg, "sensor_msgs/msg/Image"))
+
+
+def count_events(frames: np.ndarray, window_us: int) -> np.ndarray:
+    """A structured x, y, t, p event array whose ``window_us`` time bins count back to ``frames`` (N, H, W)."""
+    index, y, x = np.nonzero(frames)
+    repeats = frames[index, y, x].astype(np.int64)
+    events = np.zeros(int(repeats.sum()), [("x", "<u2"), ("y", "<u2"), ("t", "<i8"), ("p", "i1")])
+    events["x"], events["y"], events["t"] = (
+        np.repeat(x, repeats),
+        np.repeat(y, repeats),
+        np.repeat(index, repeats) * window_us,
+    )
+    events["p"] = 1
+    return events
+
+
+def write_stream_inputs(fx: Path, images: Path) -> None:
+    """Bags, event recordings, a cut video and a 20000 x 20000 PNG for the stream cases (issue 31)."""
+    cv2 = importlib.import_module("cv2")
+    winter = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted((images / "winter").iterdir())[:6]]
+    (fx / "frames_huge").mkdir()
+    huge_png(fx / "frames_huge" / "f0.png", 20000)
+    write_bag(fx / "bag_one", {"/camera": winter})
+    write_bag(fx / "bag_two", {"/left": winter, "/right": winter})
+    (fx / "damaged.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
+    counts = np.stack(winter) // 16  # 0..15 events per pixel and frame
+    counts[:, 0, 0] = np.maximum(counts[:, 0, 0], 1)
+    np.save(fx / "events.npy", count_events(counts, 1000))
+    wide = count_events(np.ones((2, winter[0].shape[0] + 5, winter[0].shape[1] + 5), np.uint8), 1000)
+    np.save(fx / "events_wide.npy", wide)
+    np.save(fx / "events_pickle.npy", np.array([{"x": 1}], dtype=object), allow_pickle=True)
+    (fx / "events_empty.txt").write_text("# t x y p\n")
+    clip = fx / "cut.avi"
+    writer = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 10, winter[0].shape[::-1], isColor=True)
+    for grey in winter * 3:
+        writer.write(cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    clip.write_bytes(clip.read_bytes()[: clip.stat().st_size * 2 // 3])
+
+
 def write_ground_truths(fx: Path, images: Path, n: int) -> None:
     """One folder data set per defective ground truth: summer/ and winter/ linked to ``images``, plus the file."""
     for name, (file_name, content) in ground_truth_variants(n).items():
@@ -923,6 +998,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     write_ground_truths(fx, only_images, len(names))
     write_offset_routes(fx, only_images, len(names))
     write_resized_streams(fx, only_images)
+    write_stream_inputs(fx, only_images)
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1642,6 +1718,8 @@ def output_cases() -> list[Case]:
 #: Legal extremes that must run (besides the legal values of the option lists above): id -> command line.
 LEGAL_LINES: dict[str, str] = {
     "localize-frames-reference-size": f"localize {M8} --frames {{fx}}/nord/winter --threshold 0.5",
+    "localize-frames-bag": f"localize {M8} --frames {{fx}}/bag_one --threshold 0.5",
+    "localize-frames-events": f"localize {M8} --frames {{fx}}/events.npy --event-window-us 1000 --threshold 0.5",
     "evaluate-gt-offset": "evaluate {fx}/net.npz --data {fx}/gt_offset --query winter --k 1,3",
     "simulate-gt-offset": f"simulate {M8} --data {{fx}}/gt_offset --query winter",
     "train-T1-one-neuron-0-epochs": "train --data synthetic:10 --reference summer --timesteps 1 --neurons 1 --epochs 0 --out e.npz",
@@ -1750,10 +1828,23 @@ def contained_file_cases() -> list[Case]:
 
 
 def stream_cases() -> list[Case]:
-    """A stream of frames cropped or rescaled from the reference images' size is refused before any decision."""
+    """A stream of frames cropped or rescaled from the reference images' size is refused before any decision;
+    bags, event recordings, a cut video and an image too large for --memory-limit are one line (issue 31)."""
+    frames = ("localize", M8, "--threshold", "0.5", "--frames")
     return [
-        bad(f"localize-frames-{name}", "localize", M8, "--frames", f"{{fx}}/frames_{name}", "--threshold", "0.5")
-        for name in ("cropped", "rescaled")
+        *(bad(f"localize-frames-{name}", *frames, f"{{fx}}/frames_{name}") for name in ("cropped", "rescaled")),
+        bad("localize-stream-huge-png", *frames, "{fx}/frames_huge", "--memory-limit", "100M"),
+        bad("localize-stream-bag-two-topics", *frames, "{fx}/bag_two"),
+        bad("localize-stream-bag-no-such-topic", *frames, "{fx}/bag_two", "--topic", "/depth"),
+        bad("localize-stream-bag-damaged", *frames, "{fx}/damaged.bag"),
+        bad("localize-stream-topic-not-a-bag", *frames, "{fx}/nord/winter", "--topic", "/camera"),
+        bad("localize-stream-events-no-window", *frames, "{fx}/events.npy"),
+        bad("localize-stream-events-window-0", *frames, "{fx}/events.npy", "--event-window-us", "0"),
+        bad("localize-stream-events-count-digits", *frames, "{fx}/events.npy", "--event-count", "1_0"),
+        bad("localize-stream-events-other-sensor", *frames, "{fx}/events_wide.npy", "--event-count", "100"),
+        bad("localize-stream-events-pickle", *frames, "{fx}/events_pickle.npy", "--event-count", "100"),
+        bad("localize-stream-events-empty", *frames, "{fx}/events_empty.txt", "--event-count", "100"),
+        bad("localize-stream-video-cut", *frames, "{fx}/cut.avi"),
     ]
 
 

@@ -12,6 +12,8 @@ kernel's out-of-memory kill. The prediction counts the arrays that grow with the
     scores            8 N P x 4                   (float64 score matrices of the readout)
     raster            N T K                       (bool, per recorded run; state isolation off records one)
     STDP scratch      8 D n x threads              (float32 P^T and D of one module per thread)
+    decoded image     4 W H                        (an image of W x H pixels read from its header before
+                                                    decoding: up to 4 channels of uint8 while it becomes grey)
 
 The limit (:func:`memory_limit`): ``--memory-limit`` on the command line or :func:`set_memory_limit`,
 else the environment variable ``VPRSNN_MEMORY_LIMIT``, else 90 % of the memory the machine has
@@ -167,6 +169,11 @@ def spikes_need(presentations: int, timesteps: int, n_inputs: int) -> MemoryNeed
     return MemoryNeed(
         ((f"input spikes {presentations} x {timesteps} x {n_inputs}", presentations * timesteps * n_inputs),)
     )
+
+
+def decode_need(width: int, height: int) -> MemoryNeed:
+    """Decoding one ``width x height`` image: ``4 W H`` bytes (up to 4 uint8 channels before the grey copy)."""
+    return MemoryNeed(((f"decoded image {width} x {height}", 4 * width * height),))
 
 
 LOWER_RUN = "fewer places (--places) or timesteps (--timesteps, encoder.timesteps)"

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..data.dataset import dataset_files, reference_frame_shape
+from ..data.events import EventWindow
 from ..data.frames import iter_frames
 from ..errors import DataError, InvalidValueError
 from ..io.fileio import check_output
@@ -55,8 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     mode = parser.add_mutually_exclusive_group(required=True)
     mode.add_argument(
         "--frames",
-        metavar="DIR|VIDEO|-",
-        help="a folder of images (name order), a video, or - (image paths on stdin, one per line)",
+        metavar="DIR|VIDEO|BAG|EVENTS|-",
+        help="a folder of images (name order), a video, a ROS 1 bag (.bag) or ROS 2 bag folder, an event recording "
+        "(.npy/.npz/.txt of x, y, t, p), or - (image paths on stdin, one per line)",
     )
     mode.add_argument("--calibrate", metavar="QUERY", help="labelled query traversal: store the operating point")
     parser.add_argument(
@@ -69,6 +71,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--onnx", metavar="FILE|DEPLOY", help="the ONNX graph exported from MODEL (or its deploy folder)"
     )
+    stream = parser.add_argument_group("frame sources (docs/localize.md)")
+    stream.add_argument("--topic", metavar="NAME", help="a bag's image topic (needed when it holds several)")
+    window = stream.add_mutually_exclusive_group()
+    window.add_argument(
+        "--event-window-us", type=positive_int, metavar="US", help="events: one frame per US microseconds"
+    )
+    window.add_argument("--event-count", type=positive_int, metavar="N", help="events: one frame per N events")
     add_sequence_options(parser, stream=True, old_window_option=None, json=False)
     point = parser.add_argument_group("operating point")
     accept = point.add_mutually_exclusive_group()
@@ -88,6 +97,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
     parser.set_defaults(handler=run, file_output=calibration_output)
+
+
+def positive_int(text: str) -> int:
+    """An ASCII decimal integer >= 1 (argparse type: '1_0', '١٠' and '0' are refused)."""
+    if not (text.isascii() and text.isdigit() and int(text) >= 1):
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
+    return int(text)
 
 
 def calibration_output(args: argparse.Namespace) -> str | None:
@@ -127,11 +143,14 @@ def run(args: argparse.Namespace) -> int:
     from ..runtime.localize import Localizer, load_operating_point, operating_point_path
 
     source = load_source(args.model)
-    frames = None if args.frames is None else iter_frames(args.frames)  # a bad source fails before any output
+    expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
+    frames = None if args.frames is None else stream_frames(args, expected)  # a bad source fails before any output
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
     onnx = onnx_file(args.onnx)
     device = resolve_device(args.device)
     if args.calibrate:
+        if args.topic is not None or args.event_window_us is not None or args.event_count is not None:
+            raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
         return calibrate(args, source, point_path, onnx, device)
     if args.threshold is not None and not math.isfinite(args.threshold):
         raise InvalidValueError(f"--threshold expects a finite confidence, got {args.threshold}")
@@ -152,11 +171,18 @@ def run(args: argparse.Namespace) -> int:
     backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     localizer = Localizer(source.network, options=options, threshold=threshold, **backend)
     assert frames is not None
-    expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
     for decision in localizer.run(sized_frames(frames, expected)):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")
         sys.stdout.flush()
     return 0
+
+
+def stream_frames(args: argparse.Namespace, expected: tuple[int, int] | None) -> Iterator[tuple[str, np.ndarray]]:
+    """--frames with its source options: a bag's --topic, an event recording's window (binned at ``expected``)."""
+    window = None
+    if args.event_window_us is not None or args.event_count is not None:
+        window = EventWindow(window_us=args.event_window_us, count=args.event_count)
+    return iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
 
 
 def sized_frames(

@@ -1,13 +1,22 @@
-"""Frames in time order from a folder of images, a video file or a list of paths on stdin.
+"""Frames in time order from a folder of images, a video, stdin, a ROS bag or an event-camera recording.
 
-A robot (or a recorded run) hands the localiser one greyscale frame at a time. Three sources:
+A robot (or a recorded run) hands the localiser one greyscale frame at a time. The sources:
 
 * a **folder**: every image file in it (``IMAGE_SUFFIXES``), in the *natural* order of their
   names (``frame2.png`` before ``frame10.png``): name frames so that this is their time order;
 * a **video file** (``VIDEO_SUFFIXES``), decoded frame by frame with ``cv2.VideoCapture``;
 * ``-``: **paths on stdin**, one image path per line (blank lines skipped), read as they arrive,
   so another process can push frames while the localiser runs. Raw pixels on stdin are not
-  accepted: a path names the frame in the output and carries its own size.
+  accepted: a path names the frame in the output and carries its own size. A line is at most
+  ``MAX_LINE`` characters (a path longer than any file system allows): a longer one, or input
+  without newlines, stops with one error instead of growing in memory;
+* a **ROS 1 bag** (``.bag``) or **ROS 2 bag** (a folder with ``metadata.yaml``): the messages of one
+  image topic (:mod:`.bags`);
+* an **event-camera recording** (``.npy``, ``.npz``, ``.txt`` of events x, y, t, p), binned into
+  count frames by a time or count window (:mod:`.events`).
+
+An image is checked against the memory limit from its header before it is decoded; what OpenCV
+or FFmpeg print while decoding never reaches the terminal (it is quoted in the error, if any).
 
 Each frame comes out as ``(name, grey)``: a display name (file name, ``video.mp4#17``) and a
 2-D uint8 image of any size; the localiser resizes and preprocesses it like the training data.
@@ -25,11 +34,14 @@ import cv2
 import numpy as np
 
 from ..errors import DataError
-from .preprocess import read_grey_image
+from .bags import bag_frames, is_bag
+from .events import EVENT_SUFFIXES, EventWindow, event_frames
+from .preprocess import captured_stderr, decoder_said, read_grey_image
 
 IMAGE_SUFFIXES = frozenset({".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"})
 VIDEO_SUFFIXES = frozenset({".mp4", ".avi", ".mkv", ".mov", ".webm", ".mpg", ".mpeg", ".m4v"})
 STDIN = "-"
+MAX_LINE = 4096  # characters in one stdin line: PATH_MAX on Linux, longer than any path that can be opened
 _DIGITS = re.compile(r"(\d+)")
 
 
@@ -61,46 +73,94 @@ def to_grey(frame: np.ndarray) -> np.ndarray:
 
 
 def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:
-    """Frames of a video file in order, as ``("name#index", grey)``; DataError when OpenCV cannot open it."""
+    """Frames of a video file in order, as ``("name#index", grey)``; DataError when OpenCV cannot open it, and after
+    the last frame when the video ended more than one frame short of the count its container declares (a cut
+    or damaged file: the frames before are decided, the run still ends with the error, quoting the decoder)."""
     path = Path(path)
-    capture = cv2.VideoCapture(str(path))
+    with captured_stderr() as noise:
+        capture = cv2.VideoCapture(str(path))
     try:
         if not capture.isOpened():
-            raise DataError("cannot open this video (OpenCV's VideoCapture could not decode it)", path)
+            raise DataError(
+                f"cannot open this video (OpenCV's VideoCapture could not decode it{decoder_said(noise)})", path
+            )
+        declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))  # <= 0 where the container does not say
         index = 0
         while True:
-            ok, frame = capture.read()
+            with captured_stderr() as noise:
+                ok, frame = capture.read()
             if not ok:
                 break
             yield f"{path.name}#{index}", to_grey(frame)
             index += 1
         if index == 0:
-            raise DataError("the video holds no frames", path)
+            raise DataError(f"the video holds no frames{decoder_said(noise)}", path)
+        if index + 1 < declared:
+            raise DataError(
+                f"the video ended after {index} of the {declared} frames it declares: truncated or damaged"
+                f"{decoder_said(noise)}",
+                path,
+            )
     finally:
         capture.release()
 
 
 def stdin_frames(stream: TextIO) -> Iterator[tuple[str, np.ndarray]]:
-    """One image path per line of ``stream``, decoded as it arrives (blank lines skipped)."""
-    for line in stream:
+    """One image path per line of ``stream``, decoded as it arrives (blank lines skipped); a line of more than
+    :data:`MAX_LINE` characters is refused once that many are read (memory stays bounded)."""
+    while line := _stdin_line(stream):
+        if len(line) > MAX_LINE:
+            raise DataError(f"a line on stdin is longer than {MAX_LINE} characters: give one image path per line")
         path = line.strip()
         if path:
             yield path, read_grey_image(Path(path), "a frame path read from stdin")
 
 
-def iter_frames(source: str | Path, stdin: TextIO | None = None) -> Iterator[tuple[str, np.ndarray]]:
-    """The frames of ``source``: a folder of images, a video file, or ``-`` (paths on ``stdin``)."""
+def _stdin_line(stream: TextIO) -> str:
+    """The next line of ``stream``, at most ``MAX_LINE + 1`` characters; DataError when it is not text."""
+    try:
+        return stream.readline(MAX_LINE + 1)
+    except UnicodeDecodeError as exc:
+        raise DataError(f"stdin is not text in its encoding ({exc.encoding}): give one image path per line") from None
+
+
+def iter_frames(
+    source: str | Path,
+    stdin: TextIO | None = None,
+    *,
+    topic: str | None = None,
+    events: EventWindow | None = None,
+    shape: tuple[int, int] | None = None,
+) -> Iterator[tuple[str, np.ndarray]]:
+    """The frames of ``source``: a folder of images, a video file, ``-`` (paths on ``stdin``), a ROS bag (its image
+    topic, or ``topic``) or an event recording (binned by ``events``; ``shape``: the sensor's (height, width))."""
+    path = Path(source)
+    if topic is not None and not is_bag(path):
+        raise DataError("--topic is for a ROS bag (a .bag file or a ROS 2 bag folder)", path)
+    if events is not None and path.suffix.lower() not in EVENT_SUFFIXES:
+        raise DataError(
+            f"--event-window-us / --event-count are for an event recording ({', '.join(sorted(EVENT_SUFFIXES))})", path
+        )
     if str(source) == STDIN:
         return stdin_frames(sys.stdin if stdin is None else stdin)
-    path = Path(source)
+    if is_bag(path):
+        return bag_frames(path, topic)
+    if path.is_file() and path.suffix.lower() in EVENT_SUFFIXES:
+        if events is None:
+            raise DataError(
+                "not a video or bag; read as an event recording, it is binned into frames by --event-window-us or "
+                "--event-count",
+                path,
+            )
+        return event_frames(path, events, shape)
     if path.is_dir():
         return ((p.name, read_grey_image(p)) for p in image_files(path))
     if not path.is_file():
-        raise DataError("no such folder or video file (--frames takes a folder of images, a video or -)", path)
+        raise DataError("no such folder or file (--frames takes a folder of images, a video, a bag, events or -)", path)
     if path.suffix.lower() in VIDEO_SUFFIXES:
         return video_frames(path)
     raise DataError(
-        f"not a video file (suffixes {', '.join(sorted(VIDEO_SUFFIXES))}); --frames takes a folder of images, "
-        "a video or - (image paths on stdin)",
+        f"not a video ({', '.join(sorted(VIDEO_SUFFIXES))}), ROS bag (.bag) or event recording "
+        f"({', '.join(sorted(EVENT_SUFFIXES))}); --frames also takes a folder of images or - (image paths on stdin)",
         path,
     )

@@ -44,6 +44,8 @@ import numpy as np
 
 from ..errors import DataError, InvalidValueError
 from ..registry import Registry
+from ..resources import check_memory, decode_need
+from .imageheader import image_dimensions
 
 
 class PreprocessSettings(Protocol):
@@ -102,6 +104,14 @@ def captured_stderr() -> Iterator[list[str]]:
                 lines.extend(OPENCV_LOG.sub("", line.strip()) for line in text.splitlines() if line.strip())
 
 
+def check_decodable(data: bytes, where: object) -> None:
+    """InvalidValueError (one line) when the image ``data``'s header names more pixels than the memory limit
+    lets a decode allocate (:func:`~vprsnn_export.resources.decode_need`): refused before any pixel is decoded."""
+    size = image_dimensions(data)
+    if size is not None:
+        check_memory(decode_need(*size), f"decoding {where}", "a smaller image would")
+
+
 def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
     """``cv2.imdecode(data, IMREAD_GRAYSCALE)`` with the decoder's stderr lines captured; None if undecodable."""
     with captured_stderr() as noise:
@@ -138,6 +148,7 @@ def read_grey_image(path: Path, context: str = "") -> np.ndarray:
         raise DataError(f"image file not found{suffix}", path)
     if not data:
         raise DataError(f"empty image file{suffix}", path)
+    check_decodable(data, path)
     image, noise = decode_grey(data)
     if image is None or image.size == 0:
         raise DataError(f"unreadable or corrupt image (OpenCV could not decode it{decoder_said(noise)}){suffix}", path)

@@ -1,0 +1,113 @@
+"""Frames from the image topic of a ROS 1 bag (``.bag``) or a ROS 2 bag (a folder with ``metadata.yaml``).
+
+Robots record their cameras as bags. They are read with the ``rosbags`` library (pure Python: no ROS
+install), in the bag's time order, one frame per message of one topic:
+
+* ``sensor_msgs/msg/Image`` with encoding ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of
+  ``step`` bytes, padding dropped); colour becomes grey with OpenCV's weights;
+* ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its size
+  checked against the memory limit first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
+
+With one image topic in the bag it is read; with several, ``topic`` names one (one error lists them).
+Frames are named ``<bag>#<index>``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import DataError
+from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
+
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED = "sensor_msgs/msg/CompressedImage"
+ENCODINGS = {"mono8": None, "rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY}
+ENCODINGS |= {"rgba8": cv2.COLOR_RGBA2GRAY, "bgra8": cv2.COLOR_BGRA2GRAY}
+BAG_SUFFIX = ".bag"
+ROS2_METADATA = "metadata.yaml"
+
+
+def is_bag(path: Path) -> bool:
+    """A ROS 1 bag file (``.bag``) or a ROS 2 bag folder (holding ``metadata.yaml``)."""
+    return (path.is_file() and path.suffix.lower() == BAG_SUFFIX) or (path / ROS2_METADATA).is_file()
+
+
+def image_grey(msg, where: str) -> np.ndarray:
+    """A deserialised ``sensor_msgs/Image`` as 2-D uint8 grey: ``data`` as ``height`` rows of ``step`` bytes."""
+    encoding = str(msg.encoding).lower()
+    if encoding not in ENCODINGS:
+        raise DataError(f"{where}: image encoding {msg.encoding!r} is not read (only {', '.join(ENCODINGS)})")
+    channels = 1 if ENCODINGS[encoding] is None else len(encoding) - 1
+    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if height < 1 or width < 1 or step < width * channels or data.size != height * step:
+        raise DataError(
+            f"{where}: a {width}x{height} {encoding} image with step {step} cannot hold {data.size} bytes of data"
+        )
+    pixels = data.reshape(height, step)[:, : width * channels].reshape(height, width, channels)
+    code = ENCODINGS[encoding]
+    return pixels[:, :, 0].copy() if code is None else cv2.cvtColor(np.ascontiguousarray(pixels), code)
+
+
+def compressed_grey(msg, where: str) -> np.ndarray:
+    """A deserialised ``sensor_msgs/CompressedImage`` decoded as grey (header size checked first)."""
+    data = bytes(np.asarray(msg.data, dtype=np.uint8))
+    check_decodable(data, where)
+    image, noise = decode_grey(data)
+    if image is None or image.size == 0:
+        raise DataError(f"{where}: OpenCV could not decode this {msg.format!r} image{decoder_said(noise)}")
+    lost = [line for line in noise if DATA_LOSS in line.lower()]
+    if lost:
+        raise DataError(f"{where}: truncated or corrupt {msg.format!r} image (the decoder said: {lost[0]})")
+    return image
+
+
+def bag_frames(path: str | Path, topic: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
+    """The frames of ``topic`` (or the bag's one image topic) in ``path``; the bag is opened and the topic
+    chosen now, so a bad bag or topic fails before the first frame is asked for."""
+    from rosbags.highlevel import AnyReader
+
+    path = Path(path)
+    reader = AnyReader([path])
+    try:
+        reader.open()
+    except Exception as exc:  # rosbags raises its own reader errors, and OSError or KeyError on damaged files
+        raise DataError(f"cannot read this bag ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
+    images = sorted({c.topic for c in reader.connections if c.msgtype in (IMAGE, COMPRESSED)})
+    if topic is None and len(images) != 1:
+        reader.close()
+        found = f"image topics {', '.join(images)}: give --topic" if images else "no image topic"
+        raise DataError(f"this bag holds {found} ({IMAGE} or {COMPRESSED})", path)
+    if topic is not None and topic not in images:
+        reader.close()
+        raise DataError(f"no image topic {topic!r} in this bag (its image topics: {', '.join(images) or 'none'})", path)
+    chosen = topic if topic is not None else images[0]
+    return _messages(reader, path, chosen)
+
+
+def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]]:
+    connections = [c for c in reader.connections if c.topic == topic]
+    messages = reader.messages(connections=connections)
+    try:
+        for index in itertools.count():
+            try:
+                connection, _, raw = next(messages)
+                msg = reader.deserialize(raw, connection.msgtype)
+            except StopIteration:
+                break
+            except Exception as exc:  # a damaged or truncated bag, a message that does not deserialise
+                raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
+            where = f"{path}#{index}"
+            yield (
+                f"{path.name}#{index}",
+                image_grey(msg, where) if connection.msgtype == IMAGE else compressed_grey(msg, where),
+            )
+        if index == 0:
+            raise DataError(f"the topic {topic} holds no message", path)
+    finally:
+        reader.close()
