@@ -68,7 +68,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 NORDLAND = ROOT.parent / "shared" / "data" / "nordland_64x32_summer_winter"
-COMMANDS = ("train", "evaluate", "quantize", "simulate", "export", "verify", "report", "experiment", "demo")
+COMMANDS = ("train", "evaluate", "quantize", "simulate", "export", "verify", "report", "experiment", "demo", "localize")
 SECTIONS = ("cli", "api", "faults")
 API_TOOL = Path(__file__).resolve().with_name("bad_input_api.py")
 BAD_CLASSES = ("clean", "traceback", "multi-line", "accepted", "write-then-refuse", "crash", "timeout", "other")
@@ -1103,11 +1103,13 @@ def config_cases() -> list[Case]:
     """--set with bad values for every config key (config.RANGES), cross-field conflicts, unknown keys."""
     config = importlib.import_module("vprsnn_export.config")
     ranges: Mapping[str, tuple[float, float, bool, bool]] = config.RANGES
-    defaults = config.Config().to_dict()
+    defaults = config.Config()  # every section, the optional ones too (to_dict leaves those out at their defaults)
     cases = []
     for key, limits in ranges.items():
         section, _, name = key.rpartition(".")
-        default = defaults[section][name] if section else defaults[name]
+        if section and not hasattr(defaults, section):
+            continue  # not a section of the network's config (verify.*: VerifyConfig, not a --set key of train)
+        default = getattr(getattr(defaults, section), name) if section else getattr(defaults, name)
         integer = isinstance(default, int) and not isinstance(default, bool)
         for label, value in range_values(*limits, integer=integer).items():
             cases.append(bad(f"train-set-{key}-{label}", *TRAIN, "--set", f"{key}={value}"))
