@@ -31,7 +31,8 @@ from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.readout.baseline import cosine_similarities, diagonal_sums, nearest_neighbour
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
 from vprsnn_export.readout.strategies import decide
-from vprsnn_export.runtime.evaluation import ReadoutOptions, aggregated, ensemble_layout, readout_scores
+from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.sequence import SequenceOptions
 
 KS = (1, 5, 10)
 
@@ -121,17 +122,16 @@ def main(argv: list[str] | None = None) -> int:
     tag = hashlib.sha256(Path(args.checkpoint).read_bytes()).hexdigest()[:12]
     key = f"{tag}_T{cfg.encoder.timesteps}_r{cfg.encoder.rate_scale:g}_th{args.theta.replace(':', '')}"
     sr, sq, seconds = counts(ckpt, cfg, theta, ref, qry, ids, args.query, cache, key)
-    layout = ensemble_layout(cfg, len(ids))
+    readout = Readout.of(sr, cfg, SequenceOptions(ks=KS))
     size = cfg.train.module_size or len(ids)
     truth = np.arange(len(ids))
-    wprob = readout_scores(sr, sq, cfg.assignment.gamma, layout)["wprob"]
+    wprob = readout.scores(sq)["wprob"]
     cos = cosine_similarities(ref, qry)
     out = {"variant": key, "seconds": seconds, "spikes_per_query": float(sq.sum(axis=1).mean())}
     out["snn"] = decomposition(wprob, truth, size)
     out["cosine"] = decomposition(cos, truth, size)
-    options = ReadoutOptions.from_config(cfg, ks=KS)
     for k in KS:
-        dist = aggregated(wprob, k, options, None)
+        dist = readout.options.aggregate(wprob, k)
         pred, conf = decide(dist, "wprob")
         m = pr_metrics(is_correct(predicted_place_ids(pred, ids), ids, 0), conf)
         out["snn"][f"k{k}"] = (100 * m["accuracy"], 100 * m["r_at_100p"])
