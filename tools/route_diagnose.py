@@ -30,9 +30,9 @@ import vprsnn_export as vx
 from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.readout.baseline import cosine_similarities, diagonal_sums, nearest_neighbour
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
-from vprsnn_export.readout.strategies import decide
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.readout.strategies import decide
 
 KS = (1, 5, 10)
 
