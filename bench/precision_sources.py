@@ -10,7 +10,8 @@ step at a time) with each rounding added in turn and prints, per bit width, the 
 `verify`), how the differing steps split (same candidate set, i.e. only the WTA order differs,
 or a different candidate set), how often the float network's top-2 current margin is below one
 weight step s_j of its winner, and the agreement of b = 8..12-bit round-to-nearest weights
-(float dynamics otherwise). The last row of each width is the integer simulator itself, and the
+(float dynamics otherwise), and the agreement when uniform noise of one (and of a quarter) 8-bit
+weight step replaces the rounding. The last row of each width is the integer simulator itself, and the
 emulation is checked equal to it step for step.
 """
 
@@ -120,6 +121,17 @@ def main() -> None:
         rounded = np.clip(np.floor(weights / scale + 0.5), 0, levels) * scale
         plain[bits] = float((run(inputs @ rounded, theta, lambda v: beta * v)[0] == reference).mean())
     out["b-bit weights, float dynamics"] = plain
+    rng = np.random.default_rng(0)  # uniform noise of one and of a quarter 8-bit weight step instead of rounding
+    step8 = np.where(weights.max(axis=0) > 0, weights.max(axis=0) / 255, 1.0)
+    out["8-bit step noise, float dynamics"] = {
+        f"U(-{f} s/2, {f} s/2)": float(
+            (
+                run(inputs @ (weights + f * (rng.random(weights.shape) - 0.5) * step8), theta, lambda v: beta * v)[0]
+                == reference
+            ).mean()
+        )
+        for f in (1.0, 0.25)
+    }
     print(json.dumps(out, indent=1))
 
 
