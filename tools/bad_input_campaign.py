@@ -518,7 +518,25 @@ REPORT_EDITS: dict[str, Callable[[Any], Any]] = {
     "summary-missing": lambda r: without(r, "summary"),
     "passed-string": lambda r: {**r, "passed": "yes"},
     "n-queries-string": lambda r: {**r, "runs": [{**r["runs"][0], "n_queries": "ten"}]},
+    # values out of their range (issue 31): refused naming the file, never rendered
+    "accuracy-5": lambda r: edit_metric(r, "accuracy", 5),
+    "accuracy-neg": lambda r: edit_metric(r, "accuracy", -1),
+    "accuracy-nan": lambda r: edit_metric(r, "accuracy", float("nan")),
+    "bits-99": lambda r: {**r, "runs": [{**r["runs"][0], "bits": [{**r["runs"][0]["bits"][0], "bits": 99}]}]},
 }
+#: report.json with a line break in a stored string: renders, and no line of report.md is forged (issue 31).
+REPORT_LEGAL_EDITS: dict[str, Callable[[Any], Any]] = {
+    "label-newline": lambda r: {**r, "runs": [{**r["runs"][0], "label": "a\n# all checks passed"}]},
+    "command-fence": lambda r: {**r, "command": ["vprsnn-export", "verify\n```\n# all checks passed\n```"]},
+}
+
+
+def edit_metric(report: Any, metric: str, value: float) -> Any:
+    """``report`` with ``metric`` of the first run's first quantised readout set to ``value``."""
+    run, result = report["runs"][0], report["runs"][0]["bits"][0]
+    rows = [{**result["metrics"][0], metric: value}, *result["metrics"][1:]]
+    return {**report, "runs": [{**run, "bits": [{**result, "metrics": rows}, *run["bits"][1:]]}]}
+
 
 #: Byte-level defects written for checkpoints (ck_), models (fp_) alike.
 RAW_DEFECTS = ("truncated", "bad-crc", "member-garbage", "header-not-json", "header-not-utf8", "no-header", "plain-npy")
@@ -583,7 +601,8 @@ def write_reports(fx: Path) -> None:
     """rp_NAME/ folders: the rep fixture with an edited report.json (and raw defects)."""
     source = fx / "rep" / "report.json"
     report = json.loads(source.read_text(encoding="utf-8"))
-    texts = {name: json.dumps(edit(json.loads(json.dumps(report)))) for name, edit in REPORT_EDITS.items()}
+    edits = {**REPORT_EDITS, **REPORT_LEGAL_EDITS}
+    texts = {name: json.dumps(edit(json.loads(json.dumps(report)))) for name, edit in edits.items()}
     texts["truncated"] = source.read_text(encoding="utf-8")[:500]
     texts["empty-file"] = ""
     for name, text in texts.items():
@@ -1554,6 +1573,12 @@ def report_cases() -> list[Case]:
         bad("report-same-twice", "report", "rep", "rep", "--out", "c", copy=("rep",)),
         bad("report-same-twice-json", "report", "rep", "rep/report.json", "--out", "c", copy=("rep",)),
         bad("report-empty-name", "report", ""),
+    ]
+    cases += [
+        legal(
+            f"report-{edit}", "report", f"rp_{edit}", copy=(f"rp_{edit}",), note="renders with the string on one line"
+        )
+        for edit in REPORT_LEGAL_EDITS
     ]
     return cases
 
