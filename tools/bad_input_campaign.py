@@ -792,11 +792,14 @@ def write_escaping_deploys(fx: Path) -> None:
 
 
 def write_resized_streams(fx: Path, images: Path) -> None:
-    """``frames_cropped`` (a row and a column short) and ``frames_rescaled`` (twice the size) of the winter frames."""
+    """``frames_cropped`` (a row and a column short), ``frames_rescaled`` (twice the size), ``frames_one-pixel``
+    (1x1) and ``frames_flat`` (uniform grey, the right size) of the winter frames."""
     cv2 = importlib.import_module("cv2")
     for name, change in (
         ("cropped", lambda im: im[:-1, :-1]),
         ("rescaled", lambda im: cv2.resize(im, None, fx=2, fy=2)),
+        ("one-pixel", lambda im: im[:1, :1]),
+        ("flat", lambda im: np.full_like(im, 128)),
     ):
         (fx / f"frames_{name}").mkdir()
         for path in sorted((images / "winter").iterdir())[:3]:
@@ -1859,7 +1862,12 @@ def stream_cases() -> list[Case]:
     bags, event recordings, a cut video and an image too large for --memory-limit are one line (issue 31)."""
     frames = ("localize", M8, "--threshold", "0.5", "--frames")
     return [
-        *(bad(f"localize-frames-{name}", *frames, f"{{fx}}/frames_{name}") for name in ("cropped", "rescaled")),
+        *(
+            bad(f"localize-frames-{name}", *frames, f"{{fx}}/frames_{name}")
+            for name in ("cropped", "rescaled", "one-pixel")
+        ),
+        # a flat frame carries no place: it runs, and its decision is none ("reason": "no contrast")
+        legal("localize-frames-flat", *frames, "{fx}/frames_flat", note="no decision on a flat frame"),
         bad("localize-stream-huge-png", *frames, "{fx}/frames_huge", "--memory-limit", "100M"),
         bad("localize-stream-bag-two-topics", *frames, "{fx}/bag_two"),
         bad("localize-stream-bag-no-such-topic", *frames, "{fx}/bag_two", "--topic", "/depth"),
