@@ -1303,6 +1303,13 @@ def train_cases() -> list[Case]:
         "one-unknown": "summer,autumn",
     }
     cases += numeric("train", TRAIN, "--reference", values=references)
+    # --cluster (issue 31): a port out of range, a head nothing answers on (refused at once, not after 35 s)
+    clusters = {
+        "port-99999": "ray://127.0.0.1:99999",
+        "port-0": "ray://127.0.0.1:0",
+        "unreachable": "ray://127.0.0.1:1",
+    }
+    cases += [bad(f"train-cluster-{name}", *TRAIN, "--cluster", value) for name, value in clusters.items()]
     return cases
 
 

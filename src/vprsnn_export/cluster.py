@@ -15,11 +15,14 @@ Ray is optional (``pip install "vprsnn-export[cluster]"``) and imported only whe
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import socket
 import sys
+import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +31,8 @@ from tqdm import tqdm
 from .errors import InvalidValueError
 
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
+#: Seconds to wait for a ray:// head to accept a connection before giving up (Ray Client alone retries for 35 s).
+CONNECT_TIMEOUT_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -57,7 +62,12 @@ def parse_cluster(text: str, *, threads: int | None = None, option: str = "--clu
                 f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
             )
         return Cluster("local", workers, count)
-    if value == "auto" or re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:\d{1,5}", value):
+    if value == "auto":
+        return Cluster(value, None, count)
+    match = re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:(\d{1,5})", value)
+    if match:
+        if not 1 <= int(match.group(1)) <= 65535:
+            raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
         return Cluster(value, None, count)
     raise InvalidValueError(f"{option}: expected {CLUSTER_HELP}, got {text!r}")
 
@@ -177,6 +187,45 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+            if cluster.address.startswith("ray://"):
+                reachable(cluster.address)
+            with stderr_kept_back():  # Ray Client's warnings and retries: nothing above the one-line error
+                ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+    except InvalidValueError:
+        raise
     except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
-        raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({exc})") from None
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({reason})") from None
+
+
+def reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Nothing when the head of ``ray://HOST:PORT`` accepts a TCP connection within ``timeout`` seconds;
+    InvalidValueError naming the address otherwise (Ray Client would retry for 35 s and log each try)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise InvalidValueError(
+            f"--cluster {address}: no Ray head answers there within {timeout:g} s ({exc.strerror or exc})"
+        ) from None
+
+
+@contextlib.contextmanager
+def stderr_kept_back() -> Iterator[None]:
+    """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
+    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        caught.seek(0)
+        text = caught.read()
+        if text:
+            sys.stderr.buffer.write(text)
+            sys.stderr.flush()
