@@ -18,7 +18,10 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import select
+import signal
 import socket
+import subprocess
 import sys
 import tempfile
 import time
@@ -31,6 +34,8 @@ from tqdm import tqdm
 from .errors import InvalidValueError
 
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
+#: Seconds between two looks of the watchdog at the processes of a local Ray cluster (:func:`watch_cluster`).
+WATCH_INTERVAL_S = 0.5
 #: Seconds to wait for a ray:// head to accept a connection before giving up (Ray Client alone retries for 35 s).
 CONNECT_TIMEOUT_S = 5.0
 
@@ -149,9 +154,10 @@ def _ray_map(
 ) -> list[tuple[Any, float]]:
     ray = _ray()
     started_here = not ray.is_initialized()
-    if started_here:
-        connect(cluster)
+    watchdog = start_watchdog() if started_here and cluster.is_local else None
     try:
+        if started_here:
+            connect(cluster)
         remote = ray.remote(num_cpus=cluster.threads)(_timed)
         shared: dict[int, Any] = {}
 
@@ -171,8 +177,9 @@ def _ray_map(
                 bar.update(len(ready))
         return list(ray.get(refs))
     finally:
-        if started_here:
+        if started_here and ray.is_initialized():
             ray.shutdown()
+        stop_watchdog(watchdog)
 
 
 def connect(cluster: Cluster) -> None:
@@ -229,3 +236,91 @@ def stderr_kept_back() -> Iterator[None]:
         if text:
             sys.stderr.buffer.write(text)
             sys.stderr.flush()
+
+
+# ---------------------------------------------------------------------------- a local cluster ends with the command
+
+
+def process_table() -> dict[int, tuple[int, str]]:
+    """pid -> (parent pid, start time in clock ticks since boot) of every process, from /proc (Linux)."""
+    table = {}
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            try:
+                with open(f"/proc/{entry.name}/stat", encoding="ascii", errors="replace") as handle:
+                    fields = handle.read().rsplit(")", 1)[1].split()  # after "pid (comm)": state, ppid, ...
+            except (OSError, IndexError):
+                continue
+            table[int(entry.name)] = (int(fields[1]), fields[19])  # fields 4 and 22 of proc(5)
+    return table
+
+
+def descendants(root: int, table: dict[int, tuple[int, str]]) -> dict[int, str]:
+    """pid -> start time of every process below ``root`` in ``table`` (children, their children, ...)."""
+    children: dict[int, list[int]] = {}
+    for pid, (parent, _) in table.items():
+        children.setdefault(parent, []).append(pid)
+    found: dict[int, str] = {}
+    stack = list(children.get(root, ()))
+    while stack:
+        pid = stack.pop()
+        if pid not in found:
+            found[pid] = table[pid][1]
+            stack += children.get(pid, ())
+    return found
+
+
+def watch_cluster(parent: int, parent_start: str) -> None:
+    """The watchdog of a local Ray cluster (a process of its own, :func:`start_watchdog`).
+
+    Every WATCH_INTERVAL_S it notes the processes that appeared below ``parent`` since it started (Ray's
+    GCS, raylet, agents and workers); when its standard input closes and ``parent`` has ended (whatever
+    ended it, SIGKILL included: Ray's agents outlive their raylet), it kills those still running, each
+    checked by its start time (a pid the system gave to another process is left alone). A parent that
+    closes the pipe itself (after ``ray.shutdown``) leaves everything as it is.
+    """
+    me = os.getpid()
+    before = set(descendants(parent, process_table()))
+    seen: dict[int, str] = {}
+    while True:
+        table = process_table()
+        seen.update({pid: start for pid, start in descendants(parent, table).items() if pid not in before})
+        seen.pop(me, None)
+        ready, _, _ = select.select([0], [], [], WATCH_INTERVAL_S)
+        if ready and not os.read(0, 4096):
+            break
+    table = process_table()
+    if table.get(parent, (0, ""))[1] == parent_start:
+        return  # the command shut its cluster down and goes on
+    for pid, start in seen.items():
+        if table.get(pid, (0, ""))[1] == start:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def start_watchdog() -> subprocess.Popen | None:
+    """A :func:`watch_cluster` process for this one, in a session of its own (None where /proc is absent)."""
+    me = os.getpid()
+    started = process_table().get(me) if os.path.isdir("/proc") else None
+    if started is None:
+        return None
+    code = "import sys; from vprsnn_export.cluster import watch_cluster; watch_cluster(int(sys.argv[1]), sys.argv[2])"
+    return subprocess.Popen(
+        [sys.executable, "-c", code, str(me), started[1]],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},
+    )
+
+
+def stop_watchdog(watchdog: subprocess.Popen | None) -> None:
+    """Close the watchdog's pipe (this process lives on: it kills nothing) and wait for it to end."""
+    if watchdog is not None and watchdog.stdin is not None:
+        watchdog.stdin.close()
+        try:
+            watchdog.wait(timeout=10 * WATCH_INTERVAL_S)
+        except subprocess.TimeoutExpired:
+            watchdog.kill()
+            watchdog.wait()
