@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
 import importlib
 import importlib.util
 import json
@@ -2270,6 +2271,45 @@ def interrupt_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path,
     return Fault(fault_id, line, raw, tuple(failed))
 
 
+def cluster_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path, timeout: float) -> Fault:
+    """SIGKILL of the command alone (not its process group) while its tasks run on the local Ray cluster it
+    started (issue 31): every process it started must end within 15 s (those left are then killed, by pid)."""
+    cluster = importlib.import_module("vprsnn_export.cluster")
+    started = time.perf_counter()
+    process = start(program, argv, cwd)
+    below: dict[int, str] = {}
+    failed = []
+    while process.poll() is None and time.perf_counter() - started < timeout:
+        below = cluster.descendants(process.pid, cluster.process_table())
+        if any(
+            b"ray::_timed" in Path(f"/proc/{pid}/cmdline").read_bytes()
+            for pid in below
+            if os.path.exists(f"/proc/{pid}")
+        ):
+            break
+        time.sleep(0.2)
+    if process.poll() is not None:
+        failed.append("the command ended before its Ray tasks ran")
+    os.kill(process.pid, signal.SIGKILL)
+    raw = finish(process, started, timeout)
+
+    def running() -> list[int]:
+        table = cluster.process_table()
+        return [pid for pid, start in below.items() if table.get(pid, (0, ""))[1] == start]
+
+    deadline = time.perf_counter() + 15
+    while running() and time.perf_counter() < deadline:
+        time.sleep(0.5)
+    left = running()
+    if left:
+        failed.append(f"{len(left)} of its {len(below)} processes still ran 15 s after the SIGKILL")
+    for pid in left:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    line = shlex.join(["vprsnn-export", *argv]) + "  # SIGKILL of the command while its Ray tasks run"
+    return Fault(fault_id, line, Raw(raw.rc, "", "", raw.seconds, raw.timed_out), tuple(failed))
+
+
 def fault_section(work: Path, fx: Path, timeout: float, only: str | None) -> list[Outcome]:
     """The fault cases (see the module docstring), each in its own folder under ``work``."""
     program = ExecRunner(timeout).program
@@ -2281,6 +2321,9 @@ def fault_section(work: Path, fx: Path, timeout: float, only: str | None) -> lis
             cwd, cwd / "q", timeout),
         "fault-sigkill-train": lambda cwd: sigkill_fault(
             program, "fault-sigkill-train", [*train, "--out", "t.npz"], cwd, cwd / "t.npz", timeout),
+        "fault-sigkill-cluster-local": lambda cwd: cluster_fault(
+            program, "fault-sigkill-cluster-local",
+            [*train, "--epochs", "200", "--module-size", "8", "--cluster", "local:2", "--out", "c.npz"], cwd, timeout),
         "fault-dev-full-help": lambda cwd: stdout_fault(program, "fault-dev-full-help", ["--help"], cwd, timeout, True),
         "fault-dev-full-evaluate": lambda cwd: stdout_fault(
             program, "fault-dev-full-evaluate", ["evaluate", ck, "--query", "winter"], cwd, timeout, True),

@@ -242,7 +242,8 @@ def stderr_kept_back() -> Iterator[None]:
 
 
 def process_table() -> dict[int, tuple[int, str]]:
-    """pid -> (parent pid, start time in clock ticks since boot) of every process, from /proc (Linux)."""
+    """pid -> (parent pid, start time in clock ticks since boot) of every running process (zombies left out),
+    from /proc (Linux)."""
     table = {}
     for entry in os.scandir("/proc"):
         if entry.name.isdigit():
@@ -251,7 +252,8 @@ def process_table() -> dict[int, tuple[int, str]]:
                     fields = handle.read().rsplit(")", 1)[1].split()  # after "pid (comm)": state, ppid, ...
             except (OSError, IndexError):
                 continue
-            table[int(entry.name)] = (int(fields[1]), fields[19])  # fields 4 and 22 of proc(5)
+            if fields[0] != "Z":  # a zombie has ended already
+                table[int(entry.name)] = (int(fields[1]), fields[19])  # fields 4 and 22 of proc(5)
     return table
 
 
