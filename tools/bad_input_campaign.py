@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
 import importlib
 import importlib.util
 import json
@@ -518,7 +519,25 @@ REPORT_EDITS: dict[str, Callable[[Any], Any]] = {
     "summary-missing": lambda r: without(r, "summary"),
     "passed-string": lambda r: {**r, "passed": "yes"},
     "n-queries-string": lambda r: {**r, "runs": [{**r["runs"][0], "n_queries": "ten"}]},
+    # values out of their range (issue 31): refused naming the file, never rendered
+    "accuracy-5": lambda r: edit_metric(r, "accuracy", 5),
+    "accuracy-neg": lambda r: edit_metric(r, "accuracy", -1),
+    "accuracy-nan": lambda r: edit_metric(r, "accuracy", float("nan")),
+    "bits-99": lambda r: {**r, "runs": [{**r["runs"][0], "bits": [{**r["runs"][0]["bits"][0], "bits": 99}]}]},
 }
+#: report.json with a line break in a stored string: renders, and no line of report.md is forged (issue 31).
+REPORT_LEGAL_EDITS: dict[str, Callable[[Any], Any]] = {
+    "label-newline": lambda r: {**r, "runs": [{**r["runs"][0], "label": "a\n# all checks passed"}]},
+    "command-fence": lambda r: {**r, "command": ["vprsnn-export", "verify\n```\n# all checks passed\n```"]},
+}
+
+
+def edit_metric(report: Any, metric: str, value: float) -> Any:
+    """``report`` with ``metric`` of the first run's first quantised readout set to ``value``."""
+    run, result = report["runs"][0], report["runs"][0]["bits"][0]
+    rows = [{**result["metrics"][0], metric: value}, *result["metrics"][1:]]
+    return {**report, "runs": [{**run, "bits": [{**result, "metrics": rows}, *run["bits"][1:]]}]}
+
 
 #: Byte-level defects written for checkpoints (ck_), models (fp_) alike.
 RAW_DEFECTS = ("truncated", "bad-crc", "member-garbage", "header-not-json", "header-not-utf8", "no-header", "plain-npy")
@@ -583,7 +602,8 @@ def write_reports(fx: Path) -> None:
     """rp_NAME/ folders: the rep fixture with an edited report.json (and raw defects)."""
     source = fx / "rep" / "report.json"
     report = json.loads(source.read_text(encoding="utf-8"))
-    texts = {name: json.dumps(edit(json.loads(json.dumps(report)))) for name, edit in REPORT_EDITS.items()}
+    edits = {**REPORT_EDITS, **REPORT_LEGAL_EDITS}
+    texts = {name: json.dumps(edit(json.loads(json.dumps(report)))) for name, edit in edits.items()}
     texts["truncated"] = source.read_text(encoding="utf-8")[:500]
     texts["empty-file"] = ""
     for name, text in texts.items():
@@ -773,11 +793,14 @@ def write_escaping_deploys(fx: Path) -> None:
 
 
 def write_resized_streams(fx: Path, images: Path) -> None:
-    """``frames_cropped`` (a row and a column short) and ``frames_rescaled`` (twice the size) of the winter frames."""
+    """``frames_cropped`` (a row and a column short), ``frames_rescaled`` (twice the size), ``frames_one-pixel``
+    (1x1) and ``frames_flat`` (uniform grey, the right size) of the winter frames."""
     cv2 = importlib.import_module("cv2")
     for name, change in (
         ("cropped", lambda im: im[:-1, :-1]),
         ("rescaled", lambda im: cv2.resize(im, None, fx=2, fy=2)),
+        ("one-pixel", lambda im: im[:1, :1]),
+        ("flat", lambda im: np.full_like(im, 128)),
     ):
         (fx / f"frames_{name}").mkdir()
         for path in sorted((images / "winter").iterdir())[:3]:
@@ -1281,6 +1304,13 @@ def train_cases() -> list[Case]:
         "one-unknown": "summer,autumn",
     }
     cases += numeric("train", TRAIN, "--reference", values=references)
+    # --cluster (issue 31): a port out of range, a head nothing answers on (refused at once, not after 35 s)
+    clusters = {
+        "port-99999": "ray://127.0.0.1:99999",
+        "port-0": "ray://127.0.0.1:0",
+        "unreachable": "ray://127.0.0.1:1",
+    }
+    cases += [bad(f"train-cluster-{name}", *TRAIN, "--cluster", value) for name, value in clusters.items()]
     return cases
 
 
@@ -1554,6 +1584,12 @@ def report_cases() -> list[Case]:
         bad("report-same-twice", "report", "rep", "rep", "--out", "c", copy=("rep",)),
         bad("report-same-twice-json", "report", "rep", "rep/report.json", "--out", "c", copy=("rep",)),
         bad("report-empty-name", "report", ""),
+    ]
+    cases += [
+        legal(
+            f"report-{edit}", "report", f"rp_{edit}", copy=(f"rp_{edit}",), note="renders with the string on one line"
+        )
+        for edit in REPORT_LEGAL_EDITS
     ]
     return cases
 
@@ -1834,7 +1870,12 @@ def stream_cases() -> list[Case]:
     bags, event recordings, a cut video and an image too large for --memory-limit are one line (issue 31)."""
     frames = ("localize", M8, "--threshold", "0.5", "--frames")
     return [
-        *(bad(f"localize-frames-{name}", *frames, f"{{fx}}/frames_{name}") for name in ("cropped", "rescaled")),
+        *(
+            bad(f"localize-frames-{name}", *frames, f"{{fx}}/frames_{name}")
+            for name in ("cropped", "rescaled", "one-pixel")
+        ),
+        # a flat frame carries no place: it runs, and its decision is none ("reason": "no contrast")
+        legal("localize-frames-flat", *frames, "{fx}/frames_flat", note="no decision on a flat frame"),
         bad("localize-stream-huge-png", *frames, "{fx}/frames_huge", "--memory-limit", "100M"),
         bad("localize-stream-bag-two-topics", *frames, "{fx}/bag_two"),
         bad("localize-stream-bag-no-such-topic", *frames, "{fx}/bag_two", "--topic", "/depth"),
@@ -2230,6 +2271,45 @@ def interrupt_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path,
     return Fault(fault_id, line, raw, tuple(failed))
 
 
+def cluster_fault(program: str, fault_id: str, argv: Sequence[str], cwd: Path, timeout: float) -> Fault:
+    """SIGKILL of the command alone (not its process group) while its tasks run on the local Ray cluster it
+    started (issue 31): every process it started must end within 15 s (those left are then killed, by pid)."""
+    cluster = importlib.import_module("vprsnn_export.cluster")
+    started = time.perf_counter()
+    process = start(program, argv, cwd)
+    below: dict[int, str] = {}
+    failed = []
+    while process.poll() is None and time.perf_counter() - started < timeout:
+        below = cluster.descendants(process.pid, cluster.process_table())
+        if any(
+            b"ray::_timed" in Path(f"/proc/{pid}/cmdline").read_bytes()
+            for pid in below
+            if os.path.exists(f"/proc/{pid}")
+        ):
+            break
+        time.sleep(0.2)
+    if process.poll() is not None:
+        failed.append("the command ended before its Ray tasks ran")
+    os.kill(process.pid, signal.SIGKILL)
+    raw = finish(process, started, timeout)
+
+    def running() -> list[int]:
+        table = cluster.process_table()
+        return [pid for pid, start in below.items() if table.get(pid, (0, ""))[1] == start]
+
+    deadline = time.perf_counter() + 15
+    while running() and time.perf_counter() < deadline:
+        time.sleep(0.5)
+    left = running()
+    if left:
+        failed.append(f"{len(left)} of its {len(below)} processes still ran 15 s after the SIGKILL")
+    for pid in left:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    line = shlex.join(["vprsnn-export", *argv]) + "  # SIGKILL of the command while its Ray tasks run"
+    return Fault(fault_id, line, Raw(raw.rc, "", "", raw.seconds, raw.timed_out), tuple(failed))
+
+
 def fault_section(work: Path, fx: Path, timeout: float, only: str | None) -> list[Outcome]:
     """The fault cases (see the module docstring), each in its own folder under ``work``."""
     program = ExecRunner(timeout).program
@@ -2241,6 +2321,9 @@ def fault_section(work: Path, fx: Path, timeout: float, only: str | None) -> lis
             cwd, cwd / "q", timeout),
         "fault-sigkill-train": lambda cwd: sigkill_fault(
             program, "fault-sigkill-train", [*train, "--out", "t.npz"], cwd, cwd / "t.npz", timeout),
+        "fault-sigkill-cluster-local": lambda cwd: cluster_fault(
+            program, "fault-sigkill-cluster-local",
+            [*train, "--epochs", "200", "--module-size", "8", "--cluster", "local:2", "--out", "c.npz"], cwd, timeout),
         "fault-dev-full-help": lambda cwd: stdout_fault(program, "fault-dev-full-help", ["--help"], cwd, timeout, True),
         "fault-dev-full-evaluate": lambda cwd: stdout_fault(
             program, "fault-dev-full-evaluate", ["evaluate", ck, "--query", "winter"], cwd, timeout, True),

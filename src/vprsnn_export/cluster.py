@@ -15,11 +15,17 @@ Ray is optional (``pip install "vprsnn-export[cluster]"``) and imported only whe
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
+import select
+import signal
+import socket
+import subprocess
 import sys
+import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,6 +34,10 @@ from tqdm import tqdm
 from .errors import InvalidValueError
 
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
+#: Seconds between two looks of the watchdog at the processes of a local Ray cluster (:func:`watch_cluster`).
+WATCH_INTERVAL_S = 0.5
+#: Seconds to wait for a ray:// head to accept a connection before giving up (Ray Client alone retries for 35 s).
+CONNECT_TIMEOUT_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -57,7 +67,12 @@ def parse_cluster(text: str, *, threads: int | None = None, option: str = "--clu
                 f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
             )
         return Cluster("local", workers, count)
-    if value == "auto" or re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:\d{1,5}", value):
+    if value == "auto":
+        return Cluster(value, None, count)
+    match = re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:(\d{1,5})", value)
+    if match:
+        if not 1 <= int(match.group(1)) <= 65535:
+            raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
         return Cluster(value, None, count)
     raise InvalidValueError(f"{option}: expected {CLUSTER_HELP}, got {text!r}")
 
@@ -139,9 +154,10 @@ def _ray_map(
 ) -> list[tuple[Any, float]]:
     ray = _ray()
     started_here = not ray.is_initialized()
-    if started_here:
-        connect(cluster)
+    watchdog = start_watchdog() if started_here and cluster.is_local else None
     try:
+        if started_here:
+            connect(cluster)
         remote = ray.remote(num_cpus=cluster.threads)(_timed)
         shared: dict[int, Any] = {}
 
@@ -161,8 +177,9 @@ def _ray_map(
                 bar.update(len(ready))
         return list(ray.get(refs))
     finally:
-        if started_here:
+        if started_here and ray.is_initialized():
             ray.shutdown()
+        stop_watchdog(watchdog)
 
 
 def connect(cluster: Cluster) -> None:
@@ -177,6 +194,135 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+            if cluster.address.startswith("ray://"):
+                reachable(cluster.address)
+            with stderr_kept_back():  # Ray Client's warnings and retries: nothing above the one-line error
+                ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+    except InvalidValueError:
+        raise
     except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
-        raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({exc})") from None
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({reason})") from None
+
+
+def reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Nothing when the head of ``ray://HOST:PORT`` accepts a TCP connection within ``timeout`` seconds;
+    InvalidValueError naming the address otherwise (Ray Client would retry for 35 s and log each try)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise InvalidValueError(
+            f"--cluster {address}: no Ray head answers there within {timeout:g} s ({exc.strerror or exc})"
+        ) from None
+
+
+@contextlib.contextmanager
+def stderr_kept_back() -> Iterator[None]:
+    """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
+    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        caught.seek(0)
+        text = caught.read()
+        if text:
+            sys.stderr.buffer.write(text)
+            sys.stderr.flush()
+
+
+# ---------------------------------------------------------------------------- a local cluster ends with the command
+
+
+def process_table() -> dict[int, tuple[int, str]]:
+    """pid -> (parent pid, start time in clock ticks since boot) of every running process (zombies left out),
+    from /proc (Linux)."""
+    table = {}
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            try:
+                with open(f"/proc/{entry.name}/stat", encoding="ascii", errors="replace") as handle:
+                    fields = handle.read().rsplit(")", 1)[1].split()  # after "pid (comm)": state, ppid, ...
+            except (OSError, IndexError):
+                continue
+            if fields[0] != "Z":  # a zombie has ended already
+                table[int(entry.name)] = (int(fields[1]), fields[19])  # fields 4 and 22 of proc(5)
+    return table
+
+
+def descendants(root: int, table: dict[int, tuple[int, str]]) -> dict[int, str]:
+    """pid -> start time of every process below ``root`` in ``table`` (children, their children, ...)."""
+    children: dict[int, list[int]] = {}
+    for pid, (parent, _) in table.items():
+        children.setdefault(parent, []).append(pid)
+    found: dict[int, str] = {}
+    stack = list(children.get(root, ()))
+    while stack:
+        pid = stack.pop()
+        if pid not in found:
+            found[pid] = table[pid][1]
+            stack += children.get(pid, ())
+    return found
+
+
+def watch_cluster(parent: int, parent_start: str) -> None:
+    """The watchdog of a local Ray cluster (a process of its own, :func:`start_watchdog`).
+
+    Every WATCH_INTERVAL_S it notes the processes that appeared below ``parent`` since it started (Ray's
+    GCS, raylet, agents and workers); when its standard input closes and ``parent`` has ended (whatever
+    ended it, SIGKILL included: Ray's agents outlive their raylet), it kills those still running, each
+    checked by its start time (a pid the system gave to another process is left alone). A parent that
+    closes the pipe itself (after ``ray.shutdown``) leaves everything as it is.
+    """
+    me = os.getpid()
+    before = set(descendants(parent, process_table()))
+    seen: dict[int, str] = {}
+    while True:
+        table = process_table()
+        seen.update({pid: start for pid, start in descendants(parent, table).items() if pid not in before})
+        seen.pop(me, None)
+        ready, _, _ = select.select([0], [], [], WATCH_INTERVAL_S)
+        if ready and not os.read(0, 4096):
+            break
+    table = process_table()
+    if table.get(parent, (0, ""))[1] == parent_start:
+        return  # the command shut its cluster down and goes on
+    for pid, start in seen.items():
+        if table.get(pid, (0, ""))[1] == start:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+
+
+def start_watchdog() -> subprocess.Popen | None:
+    """A :func:`watch_cluster` process for this one, in a session of its own (None where /proc is absent)."""
+    me = os.getpid()
+    started = process_table().get(me) if os.path.isdir("/proc") else None
+    if started is None:
+        return None
+    code = "import sys; from vprsnn_export.cluster import watch_cluster; watch_cluster(int(sys.argv[1]), sys.argv[2])"
+    return subprocess.Popen(
+        [sys.executable, "-c", code, str(me), started[1]],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},
+    )
+
+
+def stop_watchdog(watchdog: subprocess.Popen | None) -> None:
+    """Close the watchdog's pipe (this process lives on: it kills nothing) and wait for it to end."""
+    if watchdog is not None and watchdog.stdin is not None:
+        watchdog.stdin.close()
+        try:
+            watchdog.wait(timeout=10 * WATCH_INTERVAL_S)
+        except subprocess.TimeoutExpired:
+            watchdog.kill()
+            watchdog.wait()

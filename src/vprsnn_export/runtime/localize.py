@@ -66,7 +66,8 @@ OPERATING_POINT_SUFFIX = ".operating-point.json"
 @dataclass(frozen=True)
 class Decision:
     """One frame's answer: the place (None: no match), its confidence, whether it is accepted, the
-    velocity used and the latency from the decoded frame to the decision."""
+    velocity used and the latency from the decoded frame to the decision. ``reason`` (None: decided) says
+    why a frame that carries no place has no decision (:func:`no_place_reasons`)."""
 
     frame: int
     name: str
@@ -75,9 +76,31 @@ class Decision:
     accepted: bool
     velocity: float
     latency_ms: float
+    reason: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The JSON line of the decision (``reason`` only on a frame without a decision)."""
+        data = asdict(self)
+        if self.reason is None:
+            del data["reason"]
+        return data
+
+
+#: Why a frame carries no place, in the order they are checked (:func:`no_place_reasons`).
+NO_PLACE = ("no contrast", "no input spike", "no output spike")
+
+
+def no_place_reasons(flat: np.ndarray, spikes: torch.Tensor, counts: np.ndarray) -> list[str | None]:
+    """Per frame, why it carries no place (None: it does): ``flat``, its resized image is uniform (a 1x1 or
+    flat grey frame, ``max R = min R``: what the input channels then show is their own border, not the
+    scene), its spike train holds no spike (``sum_{t,i} s_{ti} = 0``) or the network answered with none
+    (``sum_n c_n = 0``). Such a frame is no evidence of any place, so it gets no decision, whatever the
+    recent frames say."""
+    n = len(counts)
+    silent_input = spikes.reshape(n, -1).sum(dim=1).cpu().numpy() == 0
+    silent_output = np.asarray(counts).reshape(n, -1).sum(axis=1) == 0
+    reason = np.select([np.asarray(flat, dtype=bool), silent_input, silent_output], list(NO_PLACE), default="")
+    return [str(r) or None for r in reason]
 
 
 @dataclass(frozen=True)
@@ -147,8 +170,10 @@ class Localizer:
 
     def preprocess(self, grey: np.ndarray) -> np.ndarray:
         """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
-        size = self.config.preprocess.image_size
-        return normalise_resized(resize_image(np.asarray(grey), size)[None], self.config.preprocess)
+        return normalise_resized(self._resized(np.asarray(grey))[None], self.config.preprocess)
+
+    def _resized(self, grey: np.ndarray) -> np.ndarray:
+        return resize_image(grey, self.config.preprocess.image_size)
 
     def spikes(self, images: np.ndarray, first_frame: int) -> torch.Tensor:
         """Spike trains of preprocessed frames numbered from ``first_frame`` (N, T, inputs) uint8."""
@@ -162,8 +187,10 @@ class Localizer:
     def push(self, grey: np.ndarray, name: str = "") -> Decision:
         """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
         began = time.perf_counter()
-        counts = self.counts(self.preprocess(grey), self.frame)[0]
-        return self._decide(counts, name, began)
+        resized = self._resized(np.asarray(grey))
+        spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
+        counts = self._counts(spikes)
+        return self._decide(counts[0], name, began, no_place_reasons(np.ptp(resized)[None] == 0, spikes, counts)[0])
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
@@ -173,35 +200,47 @@ class Localizer:
     def run_batch(self, grey_frames: np.ndarray | list[np.ndarray], names: list[str] | None = None) -> list[Decision]:
         """The decisions ``push`` would give on these greyscale frames (in order, from frame 0), with the
         network run once over all of them; ``latency_ms`` is the per-frame share."""
-        size = self.config.preprocess.image_size
-        resized = np.stack([resize_image(np.asarray(g), size) for g in grey_frames])
-        return self.run_inputs(normalise_resized(resized, self.config.preprocess), names)
+        resized = np.stack([self._resized(np.asarray(g)) for g in grey_frames])
+        flat = np.ptp(resized.reshape(len(resized), -1), axis=1) == 0
+        return self.run_inputs(normalise_resized(resized, self.config.preprocess), names, flat)
 
-    def run_inputs(self, inputs: np.ndarray, names: list[str] | None = None) -> list[Decision]:
+    def run_inputs(
+        self, inputs: np.ndarray, names: list[str] | None = None, flat: np.ndarray | None = None
+    ) -> list[Decision]:
         """:meth:`run_batch` on preprocessed frames (N, inputs), e.g. a :class:`~vprsnn_export.data.dataset.Dataset`'s.
 
         The integer simulator and the ONNX graph give exactly ``push``'s decisions. The float network
         sums its input currents in this machine's BLAS order, which depends on the batch size, so a
-        batched float run may differ from ``push`` in the last bit of a current (rarely a spike).
+        batched float run may differ from ``push`` in the last bit of a current (rarely a spike). ``flat``: per
+        frame, whether its resized image was uniform (:func:`no_place_reasons`; None: none was).
         """
         self.reset()
         began = time.perf_counter()
-        counts = self.counts(np.asarray(inputs, dtype=np.float32), 0)
+        inputs = np.asarray(inputs, dtype=np.float32)
+        spikes = self.spikes(inputs, 0)
+        counts = self._counts(spikes)
+        reasons = no_place_reasons(np.zeros(len(inputs), bool) if flat is None else flat, spikes, counts)
         share = (time.perf_counter() - began) / max(len(counts), 1)
         labels = names if names is not None else [str(i) for i in range(len(counts))]
-        return [self._decide(row, name, time.perf_counter() - share) for row, name in zip(counts, labels, strict=True)]
+        return [
+            self._decide(row, name, time.perf_counter() - share, reason)
+            for row, name, reason in zip(counts, labels, reasons, strict=True)
+        ]
 
-    def _decide(self, counts: np.ndarray, name: str, began: float) -> Decision:
+    def _decide(self, counts: np.ndarray, name: str, began: float, reason: str | None = None) -> Decision:
+        """The readout's causal decision on one frame's counts; none (place None, not accepted) with ``reason``
+        for a frame that carries no place (the frame still enters the readout's window, as in a batch)."""
         index, conf, velocity = self.readout.push(counts)
-        place = None if index < 0 else int(self.network.reference_place_ids[index])
+        place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
         decision = Decision(
             frame=self.frame,
             name=name,
             place_id=place,
-            confidence=conf,
+            confidence=0.0 if place is None else conf,
             accepted=self.threshold is not None and place is not None and conf >= self.threshold,
             velocity=float(velocity),
             latency_ms=1000 * (time.perf_counter() - began),
+            reason=reason,
         )
         self.frame += 1
         return decision

@@ -9,13 +9,14 @@ renderer and the commands read attributes, never nested string keys.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from vprsnn_export.errors import VprError
-from vprsnn_export.export.model import QuantisationReport
+from vprsnn_export.export.model import SUPPORTED_BITS, QuantisationReport
 from vprsnn_export.io.serial import JsonDataclass, from_json_dict, json_options
 from vprsnn_export.network.cost import CostSummary
 from vprsnn_export.readout.metrics import METRICS, MetricRow, MetricValues, find_row
@@ -501,11 +502,65 @@ class VerifyReport(JsonDataclass):
             raise ReportError(f"malformed verify report ({type(exc).__name__}: {exc})", source) from None
         if any(not run.bits for run in report.runs):
             raise ReportError("a run of the report holds no bit widths", source)
+        problem = _non_finite(data) or _out_of_range(report)
+        if problem:
+            raise ReportError(problem, source)
         if data.get("passed") is not report.passed:
             raise ReportError(
                 f"the stored verdict passed={data.get('passed')!r} does not match the report's checks", source
             )
         return report
+
+
+def _non_finite(data: Any, where: str = "") -> str | None:
+    """The first NaN or infinite number of a parsed JSON value, as "NaN at runs[0].float"; None when all are finite."""
+    stack: list[tuple[Any, str]] = [(data, where)]
+    while stack:
+        item, path = stack.pop()
+        if isinstance(item, float) and not math.isfinite(item):
+            return f"{item} at {path.lstrip('.') or 'the top'}: a report holds finite numbers only"
+        if isinstance(item, Mapping):
+            stack += [(value, f"{path}.{key}") for key, value in item.items()]
+        elif isinstance(item, list):
+            stack += [(value, f"{path}[{index}]") for index, value in enumerate(item)]
+    return None
+
+
+def _fractions(report: VerifyReport) -> Iterable[tuple[str, float | None]]:
+    """Every stored fraction of ``report`` (metric values, accuracies, agreements) with its name; each lies in [0, 1]."""
+    for run in report.runs:
+        results = (("float", run.float.metrics), *((f"{r.bits} bits", r.metrics) for r in run.bits))
+        for name, rows in results:
+            for row in rows:
+                for values in (row.values, row.float_values):
+                    if values is not None:
+                        yield from ((f"{name} {row.strategy} k={row.k} {m}", values.get(m)) for m in METRICS)
+        for result in run.bits:
+            yield from ((f"{result.bits} bits paired {p.metric} float", p.float_value) for p in result.paired)
+            yield from (
+                (f"{result.bits} bits module {m.module} accuracy", a)
+                for m in result.modules
+                for a in (m.float_accuracy, m.accuracy, m.float_accuracy_k, m.accuracy_k)
+            )
+            yield f"{result.bits} bits winner agreement", result.spike_level.winner_agreement
+            yield from (
+                (f"{result.bits} bits top-1 agreement {s}", v) for s, v in result.decision_level.top1_agreement.items()
+            )
+    for mean_row in (*report.summary.float, *(row for bits in report.summary.bits for row in bits.metrics)):
+        yield from ((f"summary {mean_row.strategy} k={mean_row.k} {m}", v.mean) for m, v in mean_row.values.items())
+
+
+def _out_of_range(report: VerifyReport) -> str | None:
+    """The first stored value outside its range (a fraction outside [0, 1], a bit width the project does not
+    support); None when every one lies inside."""
+    widths = [r.bits for run in report.runs for r in run.bits] + [b.bits for b in report.summary.bits]
+    wrong = next((b for b in widths if isinstance(b, bool) or b not in SUPPORTED_BITS), None)
+    if wrong is not None:
+        return f"bits {wrong!r}: supported widths are {SUPPORTED_BITS[0]} to {SUPPORTED_BITS[-1]}"
+    for name, value in _fractions(report):
+        if value is not None and not (isinstance(value, int | float) and 0.0 <= value <= 1.0):
+            return f"{name} = {value!r}: a fraction lies in [0, 1]"
+    return None
 
 
 __all__ = [

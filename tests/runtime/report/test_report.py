@@ -107,11 +107,12 @@ def test_report_rebuilds_from_json_alone(report, tmp_path):
 
 def test_combining_runs_gives_mean_and_std(report, tmp_path):
     second = json.loads(json.dumps(report.to_dict()))
-    for result in second["runs"][0]["bits"]:  # a second "network" whose 3-bit accuracy is 10 points lower
+    for result in second["runs"][0]["bits"]:  # a second "network" whose 3-bit accuracy is 10 points apart
         for row in result["metrics"]:
             if result["bits"] == 3:
-                row["accuracy"] -= 0.1
-                row["delta"]["accuracy"] -= 0.1
+                shift = 0.1 if row["accuracy"] <= 0.9 else -0.1  # an accuracy stays in [0, 1]
+                row["accuracy"] += shift
+                row["delta"]["accuracy"] += shift
     combined = combine_reports([report, VerifyReport.from_dict(second)], ["a", "b"])
     assert combined.summary.n_runs == 2 and combined.to_dict()["combined_from"] == ["a", "b"]
     by_bits = {b.bits: b for b in combined.summary.bits}

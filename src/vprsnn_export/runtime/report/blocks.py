@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -28,6 +29,15 @@ from .labels import (
     verdict_counts,
 )
 from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weights
+
+#: Characters that end or break a line (and other control characters): a stored string holding one could
+#: start a line of its own in report.md (a forged heading), so each becomes a space.
+LINE_BREAKING = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
+
+
+def one_line(text: object) -> str:
+    """``text`` on one line: every line break or control character replaced by a space."""
+    return LINE_BREAKING.sub(" ", str(text))
 
 
 @dataclass
@@ -547,9 +557,9 @@ def provenance_blocks(report: VerifyReport) -> list[Block]:
             ]
         )
     if report.command:
-        text = " ".join(report.command)
+        text = " ".join(map(one_line, report.command))
     else:
-        text = "\n".join(" ".join(c) for c in report.commands or () if c) or "-"
+        text = "\n".join(" ".join(map(one_line, c)) for c in report.commands or () if c) or "-"
     return [
         Block("h2", "Networks"),
         Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),

@@ -12,7 +12,7 @@ from pathlib import Path
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 
 from ..results import VerifyReport
-from .blocks import Block, blocks_of
+from .blocks import Block, blocks_of, one_line
 from .load import REPORT_JSON
 
 REPORT_MD = "report.md"
@@ -20,31 +20,50 @@ REPORT_HTML = "report.html"
 PLOTS_DIR = "plots"
 
 
+#: Markdown's inline control characters, escaped in table cells (which hold stored strings: labels, paths).
+MARKDOWN_SPECIAL = re.compile(r"([\\`*_\[\]<>|~#!])")
+
+
+def markdown_cell(value: object) -> str:
+    """A table cell's text, on one line and with Markdown's control characters escaped (``|`` -> ``\\|``)."""
+    return MARKDOWN_SPECIAL.sub(r"\\\1", one_line(value))
+
+
+def fence(text: str) -> str:
+    """A code fence longer than any run of backticks in ``text`` (so ``text`` cannot close it)."""
+    longest = max((len(run) for run in re.findall(r"`+", text)), default=0)
+    return "`" * max(3, longest + 1)
+
+
 def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
+    """The blocks as Markdown; every stored string stays on its own line's text (no line of it can be forged)."""
     lines: list[str] = []
     for block in blocks:
+        # one line each, with no HTML tag (a Markdown viewer would render a stored <script>)
+        text, title = (one_line(value).replace("<", "&lt;") for value in (block.text, block.title))
         if block.kind == "h1":
-            lines += [f"# {block.text}", ""]
+            lines += [f"# {text}", ""]
         elif block.kind == "h2":
-            lines += [f"## {block.text}", ""]
+            lines += [f"## {text}", ""]
         elif block.kind == "h3":
-            lines += [f"### {block.text}", ""]
+            lines += [f"### {text}", ""]
         elif block.kind == "p":
-            lines += [block.text, ""]
+            lines += [text, ""]
         elif block.kind == "pre":
-            lines += ([f"{block.title}:", ""] if block.title else []) + ["```", block.text, "```", ""]
+            mark = fence(block.text)
+            lines += ([f"{title}:", ""] if block.title else []) + [mark, block.text, mark, ""]
         elif block.kind == "table":
-            lines.append("| " + " | ".join(block.headers) + " |")
+            lines.append("| " + " | ".join(one_line(h).replace("|", "\\|") for h in block.headers) + " |")
             lines.append("|" + "---|" * len(block.headers))
-            lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in block.rows]
+            lines += ["| " + " | ".join(markdown_cell(c) for c in row) + " |" for row in block.rows]
             lines.append("")
         elif block.kind == "figure":
             lines += [
-                f"### {block.title}",
+                f"### {title}",
                 "",
-                f"![{block.title}]({plots_dir}/{block.name})",
+                f"![{markdown_cell(title)}]({plots_dir}/{block.name})",
                 "",
-                f"*{block.text}*",
+                f"*{text}*",
                 "",
             ]
     return "\n".join(lines)
