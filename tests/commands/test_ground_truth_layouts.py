@@ -176,4 +176,6 @@ def test_no_output_replaces_the_ground_truth_it_was_scored_by(tmp_path, capsys):
         capsys.readouterr()
         assert main([*argv, "--quiet"]) == 2
         assert "one of this command's input files" in capsys.readouterr().err
+    train = ["train", "--data", str(data), "--reference", "sunset1", *TINY, "--out", str(gt), "--force"]
+    assert main(train) == 2 and "one of this command's input files" in capsys.readouterr().err
     assert gt.read_text(encoding="utf-8") == "query,reference\n" + pairs

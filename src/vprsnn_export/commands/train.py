@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..config import Config
-from ..data.dataset import load_dataset, selection_record
+from ..data.dataset import dataset_files, load_dataset, selection_record
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = load_dataset(
         args.data, references, cfg.preprocess, subset=args.subset, places=args.places, progress=not args.quiet
     )
+    check_output(args.out, overwrite=args.force, inputs=dataset_files(dataset, args.subset))  # nor a GT file
     started = time.perf_counter()
     ckpt = train_and_calibrate(
         dataset,
