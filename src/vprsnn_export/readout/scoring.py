@@ -35,6 +35,19 @@ from .strategies import SEQUENCE_STRATEGY, STRATEGIES, all_scores, decide
 from .velocity import VELOCITY_ESTIMATES, causal_estimates
 
 
+def scored_decisions(
+    distribution: np.ndarray,
+    strategy: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    tolerance: Tolerance,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per query of one score matrix (Q, places): (correct, confidence) of the strategy's decision."""
+    predicted, confidence = decide(distribution, strategy)
+    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
+    return is_correct(ids, query_place_ids, tolerance), np.asarray(confidence, dtype=np.float64)
+
+
 def decision_metrics(
     distribution: np.ndarray,
     strategy: str,
@@ -43,9 +56,7 @@ def decision_metrics(
     tolerance: Tolerance,
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
-    predicted, confidence = decide(distribution, strategy)
-    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
-    return pr_metrics(correct, confidence)
+    return pr_metrics(*scored_decisions(distribution, strategy, reference_place_ids, query_place_ids, tolerance))
 
 
 def columns(

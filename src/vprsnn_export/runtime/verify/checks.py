@@ -9,8 +9,8 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.metrics import Tolerance, is_correct, pr_curve, predicted_place_ids
-from vprsnn_export.readout.scoring import region_accuracies
+from vprsnn_export.readout.metrics import Tolerance, pr_curve
+from vprsnn_export.readout.scoring import region_accuracies, scored_decisions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 from vprsnn_export.targets.intsim import step_agreement
@@ -233,9 +233,7 @@ def pr_points(
     tolerance: Tolerance,
 ) -> PrCurve:
     """The exact PR operating points of one score matrix, for the report's plots."""
-    predicted, confidence = decide(distribution, strategy)
-    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
-    correct = is_correct(ids, query_place_ids, tolerance)
+    correct, confidence = scored_decisions(distribution, strategy, reference_place_ids, query_place_ids, tolerance)
     precision, recall, _ = pr_curve(correct, confidence)
     return PrCurve(tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall))
 

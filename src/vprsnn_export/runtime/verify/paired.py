@@ -13,8 +13,9 @@ import numpy as np
 
 from vprsnn_export.config import VerifyConfig
 from vprsnn_export.readout import paired
-from vprsnn_export.readout.metrics import Tolerance, is_correct, predicted_place_ids
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
+from vprsnn_export.readout.metrics import Tolerance
+from vprsnn_export.readout.scoring import scored_decisions
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 
 from ..results import MetricRow, PairedCheck, ToleranceCheck, find_row
 
@@ -38,12 +39,10 @@ def readout_decisions(
     exactly as :func:`~vprsnn_export.readout.scoring.decision_metrics` scores them."""
     matrices = {(s, 1): (s, scores[s]) for s in STRATEGIES}
     matrices |= {(SEQUENCE_STRATEGY, k): (SEQUENCE_STRATEGY, aggregates[k]) for k in sorted(aggregates) if k > 1}
-    out: Decisions = {}
-    for key, (strategy, matrix) in matrices.items():
-        predicted, confidence = decide(matrix, strategy)
-        ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
-        out[key] = (is_correct(ids, query_place_ids, tolerance), np.asarray(confidence, dtype=np.float64))
-    return out
+    return {
+        key: scored_decisions(matrix, strategy, reference_place_ids, query_place_ids, tolerance)
+        for key, (strategy, matrix) in matrices.items()
+    }
 
 
 def judged_limits(
