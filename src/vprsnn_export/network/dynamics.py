@@ -32,7 +32,6 @@ from ..device import check_device
 from ..errors import InvalidValueError
 from ..resources import LOWER_RUN, MemoryNeed, check_memory, run_need
 from .dynamics_kernel import QUERY_CHUNK, float_run
-from .kernel_sums import blas_block
 from .runs import SpikeRun, run_in_chunks
 
 
@@ -92,12 +91,6 @@ def input_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
     return torch.matmul(spikes.to(weights.dtype), weights)
 
 
-def _blas_order_known(spikes: torch.Tensor, weights: torch.Tensor) -> bool:
-    """Whether the kernel can sum currents in the order this machine's BLAS uses (else: the torch loop)."""
-    n, timesteps, n_inputs = spikes.shape
-    return blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, weights.shape[1]) is not None
-
-
 def run_network(
     spikes: torch.Tensor,
     weights: torch.Tensor,
@@ -115,8 +108,8 @@ def run_network(
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
     On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the same counts bit for bit, the currents summed
-    in this machine's BLAS order); ``compiled=False`` (and any GPU) runs the torch loop below,
+    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the same counts bit for bit where the currents
+    can be summed in this machine's BLAS order, :func:`vprsnn_export.network.kernel_sums.kernel_block`); ``compiled=False`` (and any GPU) runs the torch loop below,
     one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
     moved to ``weights.device`` chunk by chunk.
     """
@@ -125,7 +118,6 @@ def run_network(
         compiled
         and weights.device.type == "cpu"
         and weights.dtype == torch.float32
-        and _blas_order_known(spikes, weights)
     ):
         run = float_run(
             spikes, weights, theta, beta=beta, wta=wta, isolation=state_isolation, record=record, group=group

@@ -25,7 +25,7 @@ import torch
 
 from ..errors import InvalidValueError
 from .kernel_checks import require_array, require_groups, require_int
-from .kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, _numpy, as_spike_array, blas_block, compiled
+from .kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, _numpy, as_spike_array, compiled, kernel_block
 from .parallel import check_group, neuron_tile, run_parts, run_threads
 from .runs import SpikeRun
 
@@ -218,7 +218,7 @@ def float_run(
     Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`. Each step's currents are the
     active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
     :func:`_blocked_sum`); by default the block that reproduces this machine's BLAS on the
-    shape ``run_network`` multiplies (:func:`blas_block`), so the counts are those of
+    shape ``run_network`` multiplies (:func:`kernel_block`), so the counts are those of
     ``run_network`` bit for bit wherever the probe succeeds. ``final_voltage`` is reported
     with and without isolation.
     """
@@ -228,7 +228,7 @@ def float_run(
         raise InvalidValueError(f"weights: spikes {array.shape} do not match weights {w.shape}")
     n, timesteps, n_inputs = array.shape
     if block is None:
-        block = blas_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1]) or n_inputs
+        block = kernel_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1])
     n_neurons = w.shape[1]
     size = check_group(n_neurons, group)
     counts = np.zeros((n, n_neurons), dtype=np.int64)

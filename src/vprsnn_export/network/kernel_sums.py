@@ -4,9 +4,11 @@ active inputs, the blocked sum of their weight rows and the probes of this machi
 The input is sparse (about 98 of 784 inputs spike per step), so instead of a dense matmul each
 step sums only the weight rows of the inputs that spiked (:func:`_blocked_sum`), and the whole
 recurrence over presentations, steps and neurons runs in one numba-compiled loop (no Python call
-per step). Float sums follow the order this machine's BLAS uses for the dense matmul (probed:
-:func:`blas_block`, :func:`batch_sums_in_order`), so the compiled paths reproduce the torch ones
-bit for bit where the probe succeeds.
+per step). Float sums follow the order this machine's BLAS uses for the dense matmul where a
+probe finds it (:func:`blas_block`, :func:`batch_sums_in_order`), so the compiled paths reproduce
+the torch ones bit for bit there; elsewhere they sum in their own fixed order (:func:`kernel_block`:
+inputs left to right), which is the same on every CPU, so a seed still fixes every weight and
+spike, and the torch loop (GPU, ``compiled=False``) agrees with them to float32 rounding.
 
 The kernels, each beside its caller with its checked entry point: the Bernoulli encoder
 (:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.network.dynamics_kernel`),
@@ -225,6 +227,22 @@ def _probe_batch_sums(batch: int, n_inputs: int, n_neurons: int, threads: int) -
         if not np.array_equal(total, expected):
             return False
     return True
+
+
+def kernel_block(rows: int, n_inputs: int, n_neurons: int) -> int:
+    """The K-block the compiled kernels sum currents in: :func:`blas_block` where it is found, else all
+    inputs left to right (one block), an order that does not depend on the machine.
+
+    MKL 2024.2 on AVX-512 blocks by 384 from about 200 rows but uses an order none of the
+    candidates reproduces for the training batch (64 rows): there the kernels keep their own
+    order rather than fall back to the torch loop (about 30x slower).
+    """
+    return blas_block(rows, n_inputs, n_neurons) or n_inputs
+
+
+def matches_torch(rows: int, n_inputs: int, n_neurons: int) -> bool:
+    """Whether the compiled kernels reproduce torch's CPU matmul bit for bit for this shape (both probes succeed)."""
+    return blas_block(rows, n_inputs, n_neurons) is not None and batch_sums_in_order(rows, n_inputs, n_neurons)
 
 
 def batch_sums_in_order(batch: int, n_inputs: int, n_neurons: int) -> bool:

@@ -64,8 +64,8 @@ def _kernel_batch(
     cfg: Config,
     epoch: int,
     threads: int,
-) -> torch.Tensor | None:
-    """Every module's batch through the compiled kernel (weights updated in place); None if it cannot run."""
+) -> torch.Tensor:
+    """Every module's batch through the compiled kernel (weights updated in place)."""
     sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
     limits = np.zeros((len(batch_rows), int(sizes.max()), images.shape[1]), dtype=np.int32)
     seeds = np.zeros(limits.shape[:2], dtype=np.int64)
@@ -73,8 +73,7 @@ def _kernel_batch(
         if len(rows):
             limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.encoder).numpy())
             seeds[m, : len(rows)] = generator_seeds(training_seeds(cfg, presentations, rows, epoch))
-    fired = stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads)
-    return None if fired is None else torch.from_numpy(fired)
+    return torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
 
 
 def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cfg: Config) -> torch.Tensor:
@@ -158,17 +157,13 @@ def module_epochs(
         for first in range(0, int(n_rows.max()), batch):
             batch_rows = [r[orders[len(r)][first : first + batch]] for r in rows]
             sizes = np.array([len(b) for b in batch_rows], dtype=np.int64)
-            batch_fired = (
-                _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
-                if use_kernel
-                else None
-            )
-            if batch_fired is None:
+            if use_kernel:
+                batch_fired = _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
+                theta = _homeostasis(theta, batch_fired, sizes, cfg)
+            else:
                 weights, theta, batch_fired = _torch_batch(
                     weights, theta, images, presentations, batch_rows, cfg, epoch
                 )
-            else:
-                theta = _homeostasis(theta, batch_fired, sizes, cfg)
             fired += batch_fired
         yield EpochState(epoch, time.perf_counter() - started, fired, theta, weights)
 

@@ -3,7 +3,8 @@
 :func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column normalisation)
 with every float32 operation in the torch loop's order, so the weights are bit for bit those of
 the torch loop where this machine's BLAS orders its sums as probed
-(:func:`vprsnn_export.network.kernel_sums.blas_block`, :func:`vprsnn_export.network.kernel_sums.batch_sums_in_order`).
+(:func:`vprsnn_export.network.kernel_sums.matches_torch`); elsewhere the currents are summed in the
+kernels' own machine-independent order (:func:`vprsnn_export.network.kernel_sums.kernel_block`).
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
 encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
@@ -27,9 +28,8 @@ from vprsnn_export.network.kernel_sums import (
     _active_inputs,
     _blocked_sum,
     as_spike_array,
-    batch_sums_in_order,
-    blas_block,
     compiled,
+    kernel_block,
 )
 from vprsnn_export.network.parallel import module_slices
 
@@ -287,7 +287,7 @@ def _stdp_windows(
     limits: np.ndarray,  # (M, B, inputs) int32: bernoulli_limits of each row's firing probabilities
     seeds: np.ndarray,  # (M, B) int64: generator_seeds of each row's presentation seed
     sizes: np.ndarray,  # (M,) int64: rows of module m in this batch (0: it sits the batch out)
-    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (blas_block of its rows)
+    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (kernel_block of its rows)
     timesteps: int,
     weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
     theta: np.ndarray,  # (M, neurons) float32
@@ -395,17 +395,15 @@ def stdp_window(
     Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
     and column normalisation, each float32 operation in torch's order, so the weights are bit
     for bit those of the torch loop when this machine's BLAS orders its sums as probed
-    (:func:`blas_block`, :func:`batch_sums_in_order`). Returns (new weights, spikes per neuron
-    in the batch as float32), or ``None`` when the tensors are not float32 on the CPU or the
-    BLAS order is not reproducible: the caller then runs the torch loop. Homeostasis is the caller's.
+    (:func:`matches_torch`; else in :func:`kernel_block`'s fixed order). Returns (new weights, spikes
+    per neuron in the batch as float32), or ``None`` when the tensors are not float32 on the CPU:
+    the caller then runs the torch loop. Homeostasis is the caller's.
     """
     batch, _, n_inputs = spikes.shape
     n_neurons = weights.shape[1]
     if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
         return None
-    block = blas_block(batch, n_inputs, n_neurons)
-    if block is None or not batch_sums_in_order(batch, n_inputs, n_neurons):
-        return None
+    block = kernel_block(batch, n_inputs, n_neurons)
     updated = weights.detach().clone().contiguous()
     fired = stdp_window_kernel(
         as_spike_array(spikes),
@@ -433,7 +431,7 @@ def stdp_windows(
     cfg: Config,
     *,
     threads: int = 1,
-) -> np.ndarray | None:
+) -> np.ndarray:
     """One training batch of M independent modules, compiled: :func:`stdp_window` for each, side by side.
 
     ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
@@ -442,17 +440,13 @@ def stdp_windows(
     kernel exactly as :func:`bernoulli_spikes` encodes them, so module m's weights are those of
     ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
     modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
-    not used). Returns the spikes per neuron (M, n) float32, or ``None`` when this machine's BLAS
-    order is not reproducible for some batch size (the caller then runs the torch loop).
+    not used). Returns the spikes per neuron (M, n) float32.
     """
     n_modules, _, n_inputs = limits.shape
     n_neurons = weights.shape[2]
     blocks = np.zeros(n_modules, dtype=np.int64)
     for size in sorted({int(s) for s in sizes if s > 0}):
-        block = blas_block(size, n_inputs, n_neurons)
-        if block is None or not batch_sums_in_order(size, n_inputs, n_neurons):
-            return None
-        blocks[np.asarray(sizes) == size] = block
+        blocks[np.asarray(sizes) == size] = kernel_block(size, n_inputs, n_neurons)
     args = (
         np.float32(cfg.network.beta),
         bool(cfg.network.wta),
