@@ -114,11 +114,7 @@ def run_network(
     moved to ``weights.device`` chunk by chunk.
     """
     check_network(spikes, weights, theta)
-    if (
-        compiled
-        and weights.device.type == "cpu"
-        and weights.dtype == torch.float32
-    ):
+    if compiled and weights.device.type == "cpu" and weights.dtype == torch.float32:
         run = float_run(
             spikes, weights, theta, beta=beta, wta=wta, isolation=state_isolation, record=record, group=group
         )
