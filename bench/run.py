@@ -8,9 +8,12 @@ memory, all measured side by side in one run on this machine.
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
-from vprsnn_export.experiments import timing
-from vprsnn_export.experiments.common import Settings
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root: its lab, experiments/
+from experiments import timing  # noqa: E402
+from experiments.common import Settings  # noqa: E402
 
 
 def main() -> None:

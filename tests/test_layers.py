@@ -4,6 +4,8 @@ Every ``import`` of a ``vprsnn_export`` module, at module top or inside a functi
 point to the same layer or an earlier one; first-party imports sit at module top, except in
 the modules the command line's ``--help`` imports (:data:`LOADS_ON_USE`), which load the library
 when a command runs (tests/test_cli_startup.py); and no modules import each other in a circle.
+The lab (the repository's ``experiments/``, not installed) may import any layer of the package; nothing
+under src/ imports the lab (the ``experiment`` command loads it by name from a checkout).
 """
 
 from __future__ import annotations
@@ -16,28 +18,42 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: Layers in dependency order: a module may import from its own layer or an earlier one.
-LAYERS = ("core", "trainer", "export", "targets", "runtime", "experiments", "api", "commands")
+#: Layers in dependency order: a module may import from its own layer or an earlier one. The lab comes last:
+#: it may import every layer, and an import of it from the package is a back-edge.
+LAYERS = ("core", "trainer", "export", "targets", "runtime", "api", "commands", "lab")
+
+with (ROOT / "pyproject.toml").open("rb") as _handle:
+    _TOOL = tomllib.load(_handle)["tool"]
+
+#: The lab's package, a folder of the repository root (pyproject's [tool.vprsnn-export], read also by tools/typecheck).
+LAB = _TOOL["vprsnn-export"]["lab"]
+FIRST_PARTY = ("vprsnn_export", LAB)
 
 
 def package_root() -> Path:
     """The folder that holds ``vprsnn_export``, read from pyproject.toml (the one place that names it)."""
-    with (ROOT / "pyproject.toml").open("rb") as handle:
-        where = tomllib.load(handle)["tool"]["setuptools"]["packages"]["find"]["where"]
-    return ROOT / where[0] / "vprsnn_export"
+    return ROOT / _TOOL["setuptools"]["packages"]["find"]["where"][0] / "vprsnn_export"
 
 
 #: Modules whose first-party imports may sit inside functions: the commands (their parsers are built
 #: without torch; the library loads in the handler) and the targets' registry (its writers and readers).
-LOADS_ON_USE = ("vprsnn_export.commands.", "vprsnn_export.targets.registry", "vprsnn_export.runtime.backends")
+#: The lab's command module is one of them (the experiments load when one runs).
+LOADS_ON_USE = (
+    "vprsnn_export.commands.",
+    "vprsnn_export.targets.registry",
+    "vprsnn_export.runtime.backends",
+    f"{LAB}.command",
+)
 
 
 def layer_of(module: str) -> str:
-    """The layer of a dotted module name inside the package."""
+    """The layer of a dotted module name inside the package, or "lab"."""
     parts = module.split(".")
+    if parts[0] == LAB:
+        return "lab"
     if module in ("vprsnn_export", "vprsnn_export.api"):
         return "api"
-    if len(parts) > 1 and parts[1] in ("trainer", "export", "targets", "runtime", "experiments"):
+    if len(parts) > 1 and parts[1] in ("trainer", "export", "targets", "runtime"):
         return parts[1]
     if len(parts) > 1 and parts[1] in ("commands", "cli", "__main__"):
         return "commands"
@@ -45,13 +61,13 @@ def layer_of(module: str) -> str:
 
 
 def package_modules() -> dict[str, Path]:
-    """Every module of the package with its file."""
+    """Every module of the package and of the lab with its file."""
     modules: dict[str, Path] = {}
-    folder = package_root()
-    for path in sorted(folder.rglob("*.py")):
-        relative = path.relative_to(folder).with_suffix("")
-        parts = [p for p in relative.parts if p != "__init__"]
-        modules[".".join(["vprsnn_export", *parts])] = path
+    for package, folder in (("vprsnn_export", package_root()), (LAB, ROOT / LAB)):
+        for path in sorted(folder.rglob("*.py")):
+            relative = path.relative_to(folder).with_suffix("")
+            parts = [p for p in relative.parts if p != "__init__"]
+            modules[".".join([package, *parts])] = path
     return modules
 
 
@@ -79,7 +95,7 @@ def imports_of(module: str, path: Path) -> list[tuple[str, int, bool]]:
                     f"{target}.{alias.name}" if f"{target}.{alias.name}" in MODULES else target for alias in node.names
                 ]
         at_top = id(node) in top_level or _inside_type_checking(tree, node)
-        found += [(name, node.lineno, at_top) for name in names if name.split(".")[0] == "vprsnn_export"]
+        found += [(name, node.lineno, at_top) for name in names if name.split(".")[0] in FIRST_PARTY]
     return found
 
 
@@ -96,7 +112,34 @@ MODULES = package_modules()
 
 def test_the_package_has_the_expected_modules():
     assert "vprsnn_export.config" in MODULES and "vprsnn_export.targets.intsim" in MODULES
+    assert f"{LAB}.common" in MODULES and f"{LAB}.sourcehash" in MODULES
     assert {layer_of(m) for m in MODULES} == set(LAYERS)
+
+
+def test_the_lab_is_outside_the_installed_package():
+    """The lab is a folder of the repository, not under the package root, and pyproject installs only the package."""
+    assert not (package_root() / LAB).exists() and (ROOT / LAB / "__init__.py").is_file()
+    assert _TOOL["setuptools"]["packages"]["find"]["include"] == ["vprsnn_export*"]
+
+
+def test_nothing_under_src_imports_the_lab():
+    """No file under src/ (every one a module of the package) imports the lab: at top, inside a function or
+    for type checkers."""
+    assert set(package_root().parent.rglob("*.py")) <= set(MODULES.values())
+    found = [
+        f"{MODULES[module].relative_to(ROOT)} line {line}: {target}"
+        for module in MODULES
+        if layer_of(module) != "lab"
+        for target, line, _ in imports_of(module, MODULES[module])
+        if layer_of(target) == "lab"
+    ]
+    assert not found, f"the package imports the lab: {found}"
+
+
+def test_an_import_of_the_lab_is_detected(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text(f"def f():\n    from {LAB}.common import document\n")
+    assert [(t, layer_of(t)) for t, _, _ in imports_of("vprsnn_export.commands.bad", bad)] == [(f"{LAB}.common", "lab")]
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))

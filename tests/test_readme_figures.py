@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from vprsnn_export.experiments.common import pct
+from experiments.common import pct
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"

@@ -188,5 +188,5 @@ def test_seeds_train_independent_networks(checkpoint, tmp_path, monkeypatch):
     assert data["runs"][0]["checkpoint_sha256"] != data["runs"][1]["checkpoint_sha256"]
     assert data["summary"]["n_runs"] == 2 and data["summary"]["bits"][0]["metrics"][0]["accuracy"]["n"] == 2
     assert (report / "checkpoints" / "seed1.npz").is_file() and (report / "checkpoints" / "seed2.npz").is_file()
-    assert len(list((tmp_path / "cache").glob("*.npz"))) == 2
+    assert not (tmp_path / "cache").exists()  # the experiments' cache is the lab's: verify trains its own
     assert "±" in (report / "report.md").read_text()

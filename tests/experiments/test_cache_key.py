@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from vprsnn_export.experiments import common
-from vprsnn_export.experiments.common import Settings, checkpoint_path, code_version, load
+from experiments import common
+from experiments.common import Settings, checkpoint_path, code_version, load
 from vprsnn_export.version import __version__
 
 

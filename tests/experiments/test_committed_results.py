@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from vprsnn_export.experiments.common import document
+from experiments.common import document
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 PAGES = sorted(p.stem for p in RESULTS.glob("*.json"))
@@ -20,7 +20,7 @@ def test_every_json_has_its_page():
 
 @pytest.mark.parametrize("stem", PAGES)
 def test_page_matches_its_json(stem, tmp_path):
-    module = importlib.import_module(f"vprsnn_export.experiments.{stem}")
+    module = importlib.import_module(f"experiments.{stem}")
     results = json.loads((RESULTS / f"{stem}.json").read_text())
     page = document(stem, module.DESCRIPTION, stem, results, module.render(results, tmp_path, stem))
     assert page == (RESULTS / f"{stem}.md").read_text(), (

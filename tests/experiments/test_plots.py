@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from vprsnn_export.experiments.plots import merge_identical, spaced
+from experiments.plots import merge_identical, spaced
 
 
 def test_identical_series_are_drawn_once_under_both_names():

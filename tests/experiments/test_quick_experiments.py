@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
+from experiments.command import experiment_modules
+from experiments.common import regenerating_command
+from experiments.settings import DOCS_RESULTS, NORDLAND, SUBSET, data_settings
 from vprsnn_export.cli import build_parser, main
-from vprsnn_export.commands.experiment import experiment_modules
 from vprsnn_export.errors import DataError
-from vprsnn_export.experiments.common import regenerating_command
-from vprsnn_export.experiments.settings import DOCS_RESULTS, NORDLAND, SUBSET, data_settings
 
 NAMES = sorted(experiment_modules())
 

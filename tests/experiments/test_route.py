@@ -2,9 +2,9 @@
 
 import pytest
 
+from experiments import route
+from experiments.common import Settings
 from vprsnn_export.cli import main
-from vprsnn_export.experiments import route
-from vprsnn_export.experiments.common import Settings
 
 
 @pytest.fixture(autouse=True)

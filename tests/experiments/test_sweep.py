@@ -4,9 +4,9 @@ import json
 
 import pytest
 
+from experiments import common, sweep
+from experiments.common import document
 from vprsnn_export.cli import main
-from vprsnn_export.experiments import common, sweep
-from vprsnn_export.experiments.common import document
 
 
 class CountingTrainer:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from experiments import envelope
+from experiments.common import summarise_rows
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.experiments import envelope
-from vprsnn_export.experiments.common import summarise_rows
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
 from vprsnn_export.readout.sequence import SequenceOptions
 

@@ -13,7 +13,7 @@ from vprsnn_export.config import Config, preset
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 PAGES = ("targets.md", "fixed-point.md")
-PACKAGES = ("runtime", "targets", "readout", "trainer", "data", "export", "io", "commands", "experiments", "network")
+PACKAGES = ("runtime", "targets", "readout", "trainer", "data", "export", "io", "commands", "network")
 
 
 def resolves(dotted: str) -> bool:

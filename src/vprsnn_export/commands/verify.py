@@ -196,25 +196,17 @@ def seed_networks(
     device_name: str,
     progress: bool,
 ) -> Iterator[tuple[str, Checkpoint, Path]]:
-    """Seeds 1..N trained with the template's config on its reference traversals, one at a time.
-
-    Training goes through the experiments' checkpoint cache (same key), so a network the
-    experiments already trained is reused; each is also written to DIR/checkpoints/seedN.npz.
-    """
+    """Seeds 1..N trained with the template's config on its reference traversals, one at a time, each
+    written to DIR/checkpoints/seedN.npz (training is deterministic: the experiments' networks of that
+    config, data and seed are the same bytes)."""
     from ..device import resolve_device
-    from ..experiments.common import Settings, trained_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
-    key = "subset" if subset else ("consecutive" if places else "all")
     for seed in range(1, n_seeds + 1):
         cfg = template.config.replace(seed=seed)
-        if len(template.reference_traversals) == 1:
-            settings = Settings(reference=template.reference_traversals[0], device=device_name, progress=progress)
-            ckpt = trained_checkpoint(settings, dataset, cfg, key)
-        else:
-            ckpt = train_and_calibrate(
-                dataset, template.reference_traversals, cfg, device=resolve_device(device_name), progress=progress
-            )
+        ckpt = train_and_calibrate(
+            dataset, template.reference_traversals, cfg, device=resolve_device(device_name), progress=progress
+        )
         ckpt = dataclasses.replace(ckpt, data={**ckpt.data, "source": source, "subset": subset, "places": places})
         path = save_checkpoint(out / "checkpoints" / f"seed{seed}.npz", ckpt)
         yield f"seed {seed}", ckpt, path

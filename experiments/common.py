@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from experiments.settings import Settings as Settings  # the experiments import it from here
+from experiments.settings import Variant as Variant
+from experiments.sourcehash import source_fingerprint
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
-from vprsnn_export.experiments.settings import Settings as Settings  # the experiments import it from here
-from vprsnn_export.experiments.settings import Variant as Variant
-from vprsnn_export.experiments.sourcehash import source_fingerprint
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.network.dynamics import FloatNetwork
@@ -31,7 +31,7 @@ from vprsnn_export.version import __version__
 
 #: The module whose functions compute what is cached (training, calibration, query spike counts): the
 #: source it imports, transitively, is hashed into every cache key (:func:`code_version`).
-CACHED_BY = ("vprsnn_export.experiments.common",)
+CACHED_BY = ("experiments.common",)
 
 
 def load(settings: Settings, selection: str, cfg: Config) -> Dataset:
@@ -89,7 +89,7 @@ def cache_dir() -> Path:
 
 def code_version() -> str:
     """The package version and a sha256 of the source that computes cached results
-    (:func:`vprsnn_export.experiments.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
+    (:func:`experiments.sourcehash.source_fingerprint` of :data:`CACHED_BY`): any edit to training,
     calibration, the network or the data loading gives new cache keys, so a stale cache is never reused."""
     return f"{__version__}+{source_fingerprint(CACHED_BY)}"
 
