@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 from vprsnn_export.errors import VprError
 from vprsnn_export.export.model import SUPPORTED_BITS, QuantisationReport
-from vprsnn_export.io.serial import JsonDataclass, from_json_dict, json_options
+from vprsnn_export.io.serial import READ_ERRORS, JsonDataclass, describe, from_json_dict, json_options
 from vprsnn_export.network.cost import CostSummary
 from vprsnn_export.readout.metrics import METRICS, MetricRow, MetricValues, find_row
 from vprsnn_export.stats import MeanStd
@@ -498,8 +498,8 @@ class VerifyReport(JsonDataclass):
             raise ReportError("the report holds no runs", source)
         try:
             report = from_json_dict(cls, data)
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise ReportError(f"malformed verify report ({type(exc).__name__}: {exc})", source) from None
+        except READ_ERRORS as exc:
+            raise ReportError(f"malformed verify report ({describe(exc)})", source) from None
         if any(not run.bits for run in report.runs):
             raise ReportError("a run of the report holds no bit widths", source)
         problem = _non_finite(data) or _out_of_range(report)
