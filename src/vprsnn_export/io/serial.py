@@ -80,23 +80,26 @@ def to_json(value: Any) -> Any:
 def to_json_dict(obj: Any) -> dict[str, Any]:
     """The JSON object of one dataclass instance: its fields (by their options), then its extra keys, in order."""
     data: dict[str, Any] = {}
+    cls: Any = type(obj)
     for item in dataclasses.fields(obj):
         value, options = getattr(obj, item.name), _options(item)
         omit = options["omit"]
         if not options["write"] or (omit == "none" and value is None) or (callable(omit) and omit(obj)):
             continue
-        encoded = _encode(_hints(type(obj))[item.name], value)
+        encoded = _encode(_hints(cls)[item.name], value)
         flatten = options["flatten"]
         if flatten:
             data.update({k: encoded[k] for k in (encoded if flatten is True else flatten)})
         else:
             data[options["key"]] = encoded
-    data.update({name: to_json(getattr(obj, name)) for name in getattr(type(obj), "__json_extra__", ())})
-    order = getattr(type(obj), "__json_order__", ())
+    data.update({name: to_json(getattr(obj, name)) for name in getattr(cls, "__json_extra__", ())})
+    order = getattr(cls, "__json_order__", ())
     return {k: data[k] for k in order if k in data} | {k: v for k, v in data.items() if k not in order}
 
 
-_hints = functools.cache(typing.get_type_hints)
+@functools.cache
+def _hints(cls: Any) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
 
 
 def _encode(hint: Any, value: Any) -> Any:
@@ -141,11 +144,8 @@ def _read(item: dataclasses.Field[Any], data: Mapping[str, Any]) -> Any:
 def describe(exc: Exception) -> str:
     """One line saying what :func:`from_json_dict` found wrong: ``runs.n_queries: expected int, got 'many'``."""
     if isinstance(exc, dacite.WrongTypeError):
-        kind = (
-            exc.field_type.__name__
-            if isinstance(exc.field_type, type)
-            else re.sub(r"\b(\w+\.)+", "", str(exc.field_type))
-        )
+        tp = exc.field_type
+        kind = tp.__name__ if isinstance(tp, type) else re.sub(r"\b(\w+\.)+", "", str(tp))  # Mapping[int, float]
         return f"{exc.field_path or 'the value'}: expected {kind}, got {reprlib.repr(exc.value)}"
     if isinstance(exc, dacite.MissingValueError):
         return f"{exc.field_path}: missing"
