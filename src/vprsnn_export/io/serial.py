@@ -3,8 +3,8 @@
 ``to_json(value)`` is the plain JSON value of ``value`` (dataclasses by ``to_dict``, mappings with string
 keys, tuples as lists, numpy scalars and arrays as numbers and lists). ``JsonDataclass.from_dict`` reads
 one back with dacite: every value is checked against its field's type hint (nested dataclasses,
-``X | None``, tuples from JSON arrays, ``Mapping[int, X]`` from an object with string keys), and the
-first one that does not fit is one error naming its field (``runs.bits.n_queries: expected int, got
+``X | None``, tuples from JSON arrays, ``Mapping[int, X]`` from an object with string keys, a float from
+an integer, numpy scalars as Python ones), and the first one that does not fit is one error naming its field (``runs.bits.n_queries: expected int, got
 'many'``). ``Type.from_dict(json.loads(json.dumps(x.to_dict()))) == x``.
 
 A field's JSON form is the field name and its value, unless its metadata
@@ -159,6 +159,10 @@ def _reader(tp: Any) -> Callable[[Any], Any] | None:
         return functools.partial(from_json_dict, tp)
     if isinstance(tp, type) and dataclasses.is_dataclass(tp) and hasattr(tp, "from_dict"):
         return typing.cast(Any, tp).from_dict
+    if tp is float:  # an integer or numpy number as a float, as Python's float(x)
+        return lambda data: float(data) if isinstance(data, int | np.number) else data
+    if tp is int:
+        return lambda data: int(data) if isinstance(data, np.integer) else data
     if typing.get_origin(tp) is tuple:
         return lambda data: tuple(data) if isinstance(data, list) else data
     if typing.get_origin(tp) is Mapping and typing.get_args(tp)[0] is int:

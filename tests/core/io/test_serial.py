@@ -122,3 +122,11 @@ def test_numpy_scalars_and_arrays_become_json():
         "b": [True],
     }
     assert json.dumps(to_json(Inner(np.int64(2), np.float64(0.5)))) == '{"a": 2, "b": 0.5}'
+
+
+def test_numbers_are_read_as_their_field_types():
+    """An integer in a float field is a float (written back as 2.0), numpy scalars are Python numbers."""
+    loaded = Inner.from_dict({"a": np.int64(2), "b": 2})
+    assert type(loaded.a) is int and type(loaded.b) is float and json.dumps(loaded.to_dict()) == '{"a": 2, "b": 2.0}'
+    with pytest.raises(InvalidValueError, match=r"a: expected int, got 2\.5"):
+        Inner.from_dict({"a": 2.5})
