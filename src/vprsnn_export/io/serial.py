@@ -163,19 +163,22 @@ def _reader(tp: Any) -> Callable[[Any], Any] | None:
         return lambda data: float(data) if isinstance(data, int | np.number) else data
     if tp is int:
         return lambda data: int(data) if isinstance(data, np.integer) else data
-    if typing.get_origin(tp) is tuple:
-        return lambda data: tuple(data) if isinstance(data, list) else data
-    if typing.get_origin(tp) is Mapping and typing.get_args(tp)[0] is int:
-        return _int_keys
+    if typing.get_origin(tp) in (tuple, Mapping):
+        return functools.partial(_collection, tp)
     return None
 
 
-def _int_keys(data: Any) -> Any:
-    """An object's string keys as integers (left as they are when they are not: dacite names the field)."""
-    try:
-        return {int(k): v for k, v in data.items()}
-    except (AttributeError, TypeError, ValueError):
-        return data
+def _collection(tp: Any, data: Any) -> Any:
+    """A JSON array as a tuple, a JSON object as a mapping (``Mapping[int, X]``: its keys as integers, left as they
+    are when they are not: dacite names the field); anything else (a string, a number) is a WrongTypeError."""
+    if typing.get_origin(tp) is tuple and isinstance(data, list | tuple):
+        return tuple(data)
+    if typing.get_origin(tp) is Mapping and isinstance(data, Mapping):
+        try:
+            return {int(k): v for k, v in data.items()} if typing.get_args(tp)[0] is int else data
+        except (TypeError, ValueError):
+            return data
+    raise dacite.WrongTypeError(field_type=tp, value=data)
 
 
 class _Readers(dict[Any, Any]):
