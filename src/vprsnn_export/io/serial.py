@@ -4,8 +4,8 @@
 keys, tuples as lists, numpy scalars and arrays as numbers and lists). ``JsonDataclass.from_dict`` reads
 one back with dacite: every value is checked against its field's type hint (nested dataclasses,
 ``X | None``, tuples from JSON arrays, ``Mapping[int, X]`` from an object with string keys, a float from
-an integer, numpy scalars as Python ones), and the first one that does not fit is one error naming its field (``runs.bits.n_queries: expected int, got
-'many'``). ``Type.from_dict(json.loads(json.dumps(x.to_dict()))) == x``.
+an integer, numpy scalars as Python ones), and the first one that does not fit is one error naming its
+field (``runs.n_queries: expected int, got 'many'``). ``Type.from_dict(json.loads(json.dumps(x.to_dict()))) == x``.
 
 A field's JSON form is the field name and its value, unless its metadata
 (``field(metadata=json_options(...))``) says otherwise:
