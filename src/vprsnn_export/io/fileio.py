@@ -38,6 +38,15 @@ class OutputError(VprError):
 META_KEY = "__meta__"
 
 
+@contextlib.contextmanager
+def _writing(path: str | Path) -> Iterator[None]:
+    """Turn an OSError of the ``with`` block into one OutputError naming ``path`` ("cannot write here")."""
+    try:
+        yield
+    except OSError as exc:
+        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (temp file in the same folder, fsync, rename)."""
     return atomic_write(path, lambda handle: handle.write(data))
@@ -47,12 +56,8 @@ def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str 
     """The output file ``path`` if it may be written: OutputError when it is empty, a folder, a device or
     other special file, a symbolic link, one of the command's ``inputs``, a name too long for the file
     system, under a file, or (``overwrite=False``) an existing file."""
-    if str(path).strip() == "":
-        raise OutputError("empty output path")
-    path = Path(path)
-    try:
-        if path.is_symlink():
-            raise OutputError("is a symbolic link: give the path of the file itself", path)
+    path = _not_a_link(path, "file")
+    with _writing(path):
         if path.exists():
             mode = path.stat().st_mode
             if stat.S_ISDIR(mode):
@@ -64,38 +69,38 @@ def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str 
             if not overwrite:
                 raise OutputError("exists already: give another name, or --force to replace it", path)
         _check_ancestors(path)
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
     return path
 
 
 def check_output_folder(path: str | Path) -> Path:
     """The output folder ``path`` if it may be created or written into: OutputError when it is empty, a
     symbolic link, an existing file or special file, under a file, or a name too long for the file system."""
-    if str(path).strip() == "":
-        raise OutputError("empty output path")
-    path = Path(path)
-    try:
-        if path.is_symlink():
-            raise OutputError("is a symbolic link: give the path of the folder itself", path)
+    path = _not_a_link(path, "folder")
+    with _writing(path):
         if path.exists() and not path.is_dir():
             raise OutputError("is not a folder: give a new or existing folder", path)
         _check_ancestors(path)
         if path.is_dir():
             tempfile.TemporaryFile(dir=path).close()  # writable, whatever os.access says for root
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
     return path
 
 
+def _not_a_link(path: str | Path, what: str) -> Path:
+    """``path`` as a Path; OutputError when it is empty or a symbolic link (the ``what``: file or folder)."""
+    if str(path).strip() == "":
+        raise OutputError("empty output path")
+    with _writing(path):
+        if Path(path).is_symlink():
+            raise OutputError(f"is a symbolic link: give the path of the {what} itself", path)
+    return Path(path)
+
+
 def _check_ancestors(path: Path) -> None:
-    """OutputError when an existing ancestor of ``path`` is not a folder; OSError for a name too long."""
-    for parent in path.absolute().parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise OutputError(f"{parent} is not a folder", path)
-            break
-    if len(os.fsencode(path.name)) > os.pathconf(_existing_ancestor(path), "PC_NAME_MAX"):
+    """OutputError when the nearest existing ancestor of ``path`` is not a folder or the name is too long for it."""
+    parent = next((p for p in path.absolute().parents if p.exists()), Path("/"))
+    if not parent.is_dir():
+        raise OutputError(f"{parent} is not a folder", path)
+    if len(os.fsencode(path.name)) > os.pathconf(parent, "PC_NAME_MAX"):
         raise OutputError("the file name is too long for this file system", path)
 
 
@@ -112,24 +117,20 @@ def atomic_write(path: str | Path, write: Callable[[Any], Any]) -> Path:
     file is removed on any failure or interrupt; an unwritable place is one OutputError.
     """
     path = check_output(path)
-    try:
+    with _writing(path):
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp_name, 0o666 & ~_umask())
-        os.replace(tmp_name, path)
-    except BaseException as exc:
-        if os.path.exists(tmp_name):
-            os.unlink(tmp_name)
-        if isinstance(exc, OSError):
-            raise OutputError(f"cannot write here ({exc.strerror or exc})", path) from None
-        raise
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                write(handle)
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.chmod(tmp_name, 0o666 & ~_umask())
+            os.replace(tmp_name, path)
+        except BaseException:
+            if os.path.exists(tmp_name):
+                os.unlink(tmp_name)
+            raise
     return path
 
 
@@ -138,6 +139,7 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 
 
 def _existing_ancestor(path: Path) -> Path:
+    """The nearest folder above ``path`` that exists."""
     for candidate in path.absolute().parents:
         if candidate.is_dir():
             return candidate
@@ -162,8 +164,7 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
         yield
         return
     target = Path(path)
-    home = target.absolute().parent if target.absolute().parent.is_dir() else _existing_ancestor(target)
-    lock_path = home / f".{target.name or 'output'}.lock"
+    lock_path = _existing_ancestor(target) / f".{target.name or 'output'}.lock"
     fd = _acquire(lock_path, target)
     try:
         if target.parent.is_dir():
@@ -182,10 +183,8 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
 def _acquire(lock_path: Path, target: Path) -> int:
     """An fd holding the flock of ``lock_path``; retried when the file was unlinked by a finishing holder."""
     for _ in range(3):
-        try:
+        with _writing(target):
             fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
-        except OSError as exc:
-            raise OutputError(f"cannot write here ({exc.strerror or exc})", target) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -206,11 +205,7 @@ def _remove_leftovers(target: Path) -> None:
     """Temp files and staging folders of ``target`` left by a killed run (call with the lock held)."""
     for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
         for leftover in target.parent.glob(pattern):
-            if leftover.is_dir() and not leftover.is_symlink():
-                shutil.rmtree(leftover, ignore_errors=True)
-            else:
-                with contextlib.suppress(OSError):
-                    leftover.unlink()
+            _remove(leftover, leftover.is_dir() and not leftover.is_symlink())
 
 
 # what atomic_write, staging_folder and publish_folder name their temporaries (mkstemp's 8 random characters)
@@ -230,13 +225,18 @@ def _remove_leftovers_inside(folder: Path, depth: int) -> None:
         is_dir = entry.is_dir(follow_symlinks=False)
         match = (LEFTOVER_FOLDER if is_dir else LEFTOVER_FILE).match(entry.name)
         if match and not _locked_by_another_run(folder / f".{match['name']}.lock"):
-            if is_dir:
-                shutil.rmtree(entry.path, ignore_errors=True)
-            else:
-                with contextlib.suppress(OSError):
-                    os.unlink(entry.path)
+            _remove(Path(entry.path), is_dir)
         elif is_dir and depth > 0:
             _remove_leftovers_inside(Path(entry.path), depth - 1)
+
+
+def _remove(path: Path, is_dir: bool) -> None:
+    """Remove a leftover file or folder (not following links); one another process removed first is gone already."""
+    if is_dir:
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 def _locked_by_another_run(lock_path: Path) -> bool:
@@ -256,11 +256,9 @@ def _locked_by_another_run(lock_path: Path) -> bool:
 
 def staging_folder(out: Path) -> Path:
     """A new hidden folder beside ``out`` (same file system) to build its content in before :func:`publish_folder`."""
-    try:
+    with _writing(out):
         out.absolute().parent.mkdir(parents=True, exist_ok=True)
         return Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=out.absolute().parent))
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
 
 
 def publish_folder(staging: Path, out: Path) -> Path:
@@ -272,7 +270,7 @@ def publish_folder(staging: Path, out: Path) -> Path:
     """
     out = Path(out)
     os.chmod(staging, 0o777 & ~_umask())
-    try:
+    with _writing(out):
         if out.exists():
             aside = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.absolute().parent))
             os.replace(out, aside / out.name)
@@ -280,8 +278,6 @@ def publish_folder(staging: Path, out: Path) -> Path:
             shutil.rmtree(aside, ignore_errors=True)
         else:
             os.replace(staging, out)
-    except OSError as exc:
-        raise OutputError(f"cannot write here ({exc.strerror or exc})", out) from None
     return out
 
 
@@ -343,6 +339,12 @@ def is_readable_file(path: str | Path) -> bool:
         return False
 
 
+#: What reading a truncated or corrupt .npz raises (zipfile: corrupt flags read as "encrypted"/"patched data" and
+#: NotImplementedError/RuntimeError; numpy: a corrupt .npy header as SyntaxError or a tokenize error).
+_CORRUPT: tuple[type[Exception], ...] = (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError)
+_CORRUPT += (TypeError, NotImplementedError, RuntimeError, SyntaxError, tokenize.TokenError)
+
+
 def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Read a container written by :func:`write_container`; any defect is a ModelFileError naming the file."""
     require_path("path", path)
@@ -360,19 +362,7 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
         foreign = sorted(name for name, value in arrays.items() if not isinstance(value, np.ndarray))
         if foreign:
             raise ModelFileError(f"not a {kind}: members {foreign} are not .npy arrays", path)
-    except (
-        zipfile.BadZipFile,
-        zlib.error,
-        EOFError,
-        OSError,
-        ValueError,
-        KeyError,
-        TypeError,
-        NotImplementedError,
-        RuntimeError,
-        SyntaxError,
-        tokenize.TokenError,
-    ) as exc:  # zipfile: corrupt flags read as "encrypted"/"patched data"; numpy: a corrupt .npy header
+    except _CORRUPT as exc:
         raise ModelFileError(f"not a readable {kind} (truncated or corrupt: {exc})", path) from None
     if META_KEY not in arrays:
         raise ModelFileError(f"not a {kind}: the JSON header is missing", path)
