@@ -211,3 +211,20 @@ def plot_spikes(report: VerifyReport) -> bytes:
     right.set_ylim(-0.05, 1.05)
     right.grid(alpha=0.3)
     return png(fig)
+
+
+def plot_precision_recall(
+    recall: np.ndarray, precision: np.ndarray, target: float, chosen: tuple[float, float, float] | None, title: str
+) -> bytes:
+    """A calibration curve (``localize --calibrate``): precision vs recall, a point per threshold, the target
+    precision dashed and the chosen (recall, precision, threshold) marked."""
+    fig, ax = pyplot().subplots(figsize=(5, 4))
+    ax.plot(recall, precision, ".-", color="black", label="calibration (a point per threshold)")
+    ax.axhline(target, color="tab:red", linestyle="--", linewidth=1, label="target precision")
+    if chosen is not None:
+        ax.plot([chosen[0]], [chosen[1]], "o", color="tab:red", label=f"operating point ({chosen[2]:.4g})")
+    ax.set(xlim=(0, 1.02), ylim=(0, 1.05), xlabel="recall", ylabel="precision")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    return png(fig)
