@@ -14,8 +14,10 @@ from ..verify.checks import TOLERANCE_MEANING
 from .labels import (
     METRIC_TITLES,
     PAIRED_COLUMNS,
-    cross_counts,
+    VERDICT_COLUMNS,
+    data_label,
     data_note,
+    exact_counts,
     ms,
     network_label,
     paired_cells,
@@ -24,8 +26,10 @@ from .labels import (
     shown_paired,
     signed_pct,
     strategy_title,
+    tolerance_counts,
     tolerance_differences,
     verdict,
+    verdict_cells,
     verdict_counts,
 )
 from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weights
@@ -128,7 +132,7 @@ def blocks_of(report: VerifyReport) -> list[Block]:
                 + " (settings shown are the first report's).",
             )
         )
-    blocks += verdict_blocks(report, top_k)
+    blocks += verdict_blocks(report)
     blocks += paired_blocks(report)
     blocks += metric_blocks(summary, ks)
     blocks.append(
@@ -183,64 +187,31 @@ def blocks_of(report: VerifyReport) -> list[Block]:
     return blocks
 
 
-def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
+def verdict_blocks(report: VerifyReport) -> list[Block]:
+    """Per network and bit width, the columns the terminal shows too (:data:`.labels.VERDICT_COLUMNS`)."""
     tolerances = report.settings.get("tolerances", {})
-    rows, status = [], []
-    cross = {
-        bits.bits: [r.cross_implementation for run in report.runs for r in run.bits if r.bits == bits.bits]
-        for bits in report.summary.bits
-    }
-    for bits in report.summary.bits:
-        worst_acc = min(
-            (
-                row.delta["accuracy"].mean
-                for s in STRATEGIES
-                if (row := bits.row(s, 1)) is not None
-                and row.delta is not None
-                and row.delta["accuracy"].mean is not None
-            ),
-            default=None,
-        )
-        top = bits.row("wprob", top_k)
-        ok = bits.n_passed == bits.n_runs
-        counts = ", ".join(f"{n} {v}" for v, n in bits.verdicts.items() if n) or f"{verdict(ok)} ({bits.n_passed})"
-        rows.append(
-            [
-                f"{bits.bits}",
-                f"{counts} (of {bits.n_runs})",
-                cross_counts(cross[bits.bits]),
-                signed_pct(worst_acc),
-                ms(top.delta["r_at_100p"], signed=True) if top and top.delta else "-",
-                ms(top.values["r_at_100p"]) if top else "-",
-                ms(bits.winner_agreement),
-                ms(bits.saturations, percent=False, digits=0),
-            ]
-        )
-        status.append("pass" if ok else "fail")
+    results = [(index, run, result) for index, run in enumerate(report.runs) for result in run.bits]
+    rows = [[verdict_cells(run, index, result)[key] for key, _ in VERDICT_COLUMNS] for index, run, result in results]
     limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
     return [
         Block("h2", "Verdict per bit width"),
         Block(
             "table",
-            headers=[
-                "bits",
-                "verdict (networks)",
-                "cross-implementation",
-                "worst accuracy Δ k=1 (pts)",
-                f"R@100P Δ W+Prob k={top_k} (pts)",
-                f"R@100P W+Prob k={top_k} %",
-                "same winner %",
-                "saturations",
-            ],
+            headers=[title for _, title in VERDICT_COLUMNS],
             rows=rows,
-            status=status,
+            status=[VERDICT_STATUS.get(result.verdict) for _, _, result in results],
         ),
         Block(
             "p",
             f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
-            "Δ = quantised - float, in percentage points; negative is worse.",
+            "Δ = quantised - float, in percentage points; negative is worse. Exact rows: implementations that "
+            "must agree bit for bit; tolerance rows: float consumers judged on their stated decision agreement.",
         ),
     ]
+
+
+#: A verdict's row colour in the HTML tables.
+VERDICT_STATUS = {"holds": "pass", "fails": "fail"}
 
 
 def paired_blocks(report: VerifyReport) -> list[Block]:
@@ -253,7 +224,7 @@ def paired_blocks(report: VerifyReport) -> list[Block]:
             for check in shown_paired(result.paired):
                 cells = paired_cells(check)
                 rows.append([network_label(run, index), f"{result.bits}", *(cells[k] for k, _ in PAIRED_COLUMNS)])
-                status.append({"holds": "pass", "fails": "fail"}.get(check.verdict or ""))
+                status.append(VERDICT_STATUS.get(check.verdict or ""))
     if not rows:
         return []
     counts = "; ".join(
@@ -380,7 +351,8 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
                 [
                     network_label(run, index),
                     f"{result.bits}",
-                    cross_counts([cross]),
+                    exact_counts([cross]),
+                    tolerance_counts([cross]),
                     tolerance_differences(cross),
                     verdict(cross.passed),
                     str(cross.reference_queries),
@@ -406,7 +378,8 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
             headers=[
                 "network",
                 "bits",
-                "identical",
+                "exact rows identical",
+                "tolerance rows within",
                 "tolerance rows: decisions that differ",
                 "verdict",
                 "reference-stepper queries",
@@ -551,7 +524,8 @@ def provenance_blocks(report: VerifyReport) -> list[Block]:
                 network_label(run, index),
                 str(run.seed),
                 run.checkpoint_sha256[:16],
-                str(run.checkpoint_data.get("source")),
+                data_label(run.checkpoint_data),
+                f"{data_label(report.settings)}, '{run.query}'",
                 f"{run.n_queries}",
                 str(run.export_dir or "-"),
             ]
@@ -562,7 +536,11 @@ def provenance_blocks(report: VerifyReport) -> list[Block]:
         text = "\n".join(" ".join(map(one_line, c)) for c in report.commands or () if c) or "-"
     return [
         Block("h2", "Networks"),
-        Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),
+        Block(
+            "table",
+            headers=["network", "seed", "checkpoint sha256", "trained on", "evaluated on", "queries", "exports"],
+            rows=rows,
+        ),
         Block("h2", "Provenance"),
         Block("pre", "command: " + text),
         Block("pre", json.dumps(dict(report.settings), indent=2, sort_keys=True), title="settings"),

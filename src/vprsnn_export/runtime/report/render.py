@@ -74,7 +74,7 @@ body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; mar
        color: #1d1d1f; line-height: 1.45; padding: 0 1em; }
 h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
 h2 { margin-top: 1.8em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; }
+table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; display: block; overflow-x: auto; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f0f0f3; }
 td:first-child, th:first-child, td.t { text-align: left; }
@@ -84,7 +84,7 @@ tr.fail td { background: #fbe3e3; }
 figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 13px; color: #555; }
-pre { background: #f6f6f8; padding: .6em; overflow-x: auto; font-size: 12px; }
+pre { background: #f6f6f8; padding: .6em; font-size: 12px; white-space: pre-wrap; overflow-wrap: anywhere; }
 .verdict-pass { color: #17701f; } .verdict-fail { color: #b00020; }
 """
 
