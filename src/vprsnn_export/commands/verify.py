@@ -241,9 +241,9 @@ def folder_name(label: str, index: int) -> str:
 
 def verdict_rows(report: VerifyReport) -> list[dict]:
     """One row per network and bit width for the terminal table: the report's verdict table's cells."""
-    from ..runtime.report.labels import verdict_cells
+    from ..runtime.report.labels import results, verdict_cells
 
-    return [verdict_cells(run, index, result) for index, run in enumerate(report.runs) for result in run.bits]
+    return [verdict_cells(*item) for item in results(report)]
 
 
 def paired_rows(report: VerifyReport) -> list[dict]:

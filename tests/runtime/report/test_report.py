@@ -94,6 +94,8 @@ def test_writes_json_markdown_and_self_contained_html(report, tmp_path):
     for data in images:
         assert base64.b64decode(data).startswith(b"\x89PNG")
     assert "6-bit" in page and "3-bit" in page and "W+Prob k=3" in page
+    assert f'<strong class="verdict-{report.verdict.upper()}">Verdict: {report.verdict.upper()}</strong>' in page
+    assert f".verdict-{report.verdict.upper()} {{ color:" in page  # the verdict's colour
 
 
 def test_report_rebuilds_from_json_alone(report, tmp_path):

@@ -8,7 +8,7 @@ from typing import Any
 from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import MeanStd
 
-from ..results import BitsResult, ConformanceResult, PairedCheck, VerifiedRun
+from ..results import BitsResult, ConformanceResult, PairedCheck, VerifiedRun, VerifyReport
 
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 
@@ -149,7 +149,12 @@ VERDICT_COLUMNS = (
 )
 
 
-def verdict_cells(run: VerifiedRun, index: int, result: BitsResult) -> dict[str, str]:
+def results(report: VerifyReport) -> list[tuple[str, VerifiedRun, BitsResult]]:
+    """(network label, network, its result at one bit width) of every network and bit width, in order."""
+    return [(network_label(run, i), run, result) for i, run in enumerate(report.runs) for result in run.bits]
+
+
+def verdict_cells(label: str, run: VerifiedRun, result: BitsResult) -> dict[str, str]:
     """One network's bit width as the verdict table's cells (:data:`VERDICT_COLUMNS`)."""
     top = max(run.ks)
 
@@ -159,7 +164,7 @@ def verdict_cells(run: VerifiedRun, index: int, result: BitsResult) -> dict[str,
 
     cross = [result.cross_implementation]
     return {
-        "network": network_label(run, index),
+        "network": label,
         "bits": str(result.bits),
         "verdict": result.verdict,
         "paired": verdict_counts(result.paired) or "-",

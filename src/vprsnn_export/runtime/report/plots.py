@@ -47,13 +47,16 @@ def merged(series: Sequence[tuple[str, Any]]) -> list[tuple[str, Any, int]]:
     return [(" = ".join(labels), data, index) for labels, data, index in groups]
 
 
+def percent(value: MeanStd) -> tuple[float, float]:
+    """(mean %, std %) of a fraction's mean ± std (0 where unknown)."""
+    return 100 * (value.mean or 0.0), 100 * (value.std or 0.0)
+
+
 def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[tuple[int, float, float], ...]:
     """(bits, mean %, std %) of one readout's metric at every bit width that has it."""
     rows = ((bits.bits, bits.row(*key)) for bits in summary.bits)
     return tuple(
-        (b, 100 * (row.values[metric].mean or 0.0), 100 * (row.values[metric].std or 0.0))
-        for b, row in rows
-        if row is not None and row.values[metric].mean is not None
+        (b, *percent(r.values[metric])) for b, r in rows if r is not None and r.values[metric].mean is not None
     )
 
 
@@ -63,14 +66,10 @@ def bars(ax: Any, x: np.ndarray, values: Sequence[tuple[float, float]], width: f
     ax.bar(x, means, width, yerr=stds if any(stds) else None, capsize=3, **style)
 
 
-def bar_limit(values: Sequence[float]) -> float:
-    """The top of a percentage bar chart: 15 % above its highest bar (at least 5, at most 102)."""
-    return min(max(5.0, 1.15 * max(values, default=0.0)), 102.0)
-
-
 def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
     """Each metric vs bit width, a line per readout over its float value (dashed); with one bit width, bars
-    (float and quantised side by side per readout) instead of single points on a wide axis."""
+    (float and quantised side by side per readout, the top 15 % above the highest) instead of single points
+    on a wide axis."""
     plt = pyplot()
     keys = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
@@ -78,46 +77,31 @@ def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     bits = sorted({b.bits for b in summary.bits})
     for ax, metric in zip(axes.ravel(), METRICS, strict=True):
-        floats = {key: float_rows[key].values[metric] for key in keys if key in float_rows}
+        floats = {key: percent(row.values[metric]) for key, row in float_rows.items()}
+        series = [(row_label(*key), (_series(summary, key, metric), floats.get(key))) for key in keys]
         if len(bits) == 1:
-            shown = [key for key in keys if _series(summary, key, metric)]
+            shown = [(label, points[0][1:], ref or (0.0, 0.0)) for label, (points, ref) in series if points]
             x = np.arange(len(shown))
-            quantised = [_series(summary, key, metric)[0] for key in shown]
-            ref = [
-                (100 * (floats[k].mean or 0.0), 100 * (floats[k].std or 0.0)) if k in floats else (0, 0) for k in shown
-            ]
-            bars(ax, x - 0.2, ref, 0.4, color="0.75", label="float")
-            bars(ax, x + 0.2, [(m, sd) for _, m, sd in quantised], 0.4, color=colours[0], label=f"{bits[0]}-bit")
-            ax.set_xticks(x, [row_label(*key) for key in shown], fontsize=8)
-            ax.set_ylim(0, bar_limit([m for m, _ in ref] + [m for _, m, _ in quantised]))
-            ax.legend(fontsize=8)
+            bars(ax, x - 0.2, [ref for *_, ref in shown], 0.4, color="0.75", label="float")
+            bars(ax, x + 0.2, [value for _, value, _ in shown], 0.4, color=colours[0], label=f"{bits[0]}-bit")
+            ax.set_xticks(x, [label for label, *_ in shown], fontsize=8)
+            top = max((max(value[0], ref[0]) for _, value, ref in shown), default=0.0)
+            ax.set_ylim(0, min(max(5.0, 1.15 * top), 102.0))
         else:
-            series = [
-                (row_label(*key), (_series(summary, key, metric), floats[key].mean if key in floats else None))
-                for key in keys
-            ]
-            for label, (points, float_mean), index in merged(series):
+            for label, (points, ref), index in merged(series):
                 colour = colours[index % len(colours)]
                 if points:
                     xs, means, stds = zip(*points, strict=True)
                     ax.errorbar(
-                        xs,
-                        means,
-                        yerr=stds,
-                        marker="osD^vP*X"[index % 8],
-                        capsize=3,
-                        color=colour,
-                        label=label,
-                        alpha=0.9,
+                        xs, means, yerr=stds, capsize=3, color=colour, label=label, marker="osD^vP*X"[index % 8]
                     )
-                if float_mean is not None:
-                    ax.axhline(100 * float_mean, color=colour, linestyle="--", linewidth=1)
+                if ref is not None:
+                    ax.axhline(ref[0], color=colour, linestyle="--", linewidth=1)
             ax.set_xticks(bits)
             ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
-            ax.legend(fontsize=7)
             ax.set_xlabel("weight bits (dashed: float)")
-        ax.set_title(METRIC_TITLES[metric])
-        ax.set_ylabel("%")
+        ax.legend(fontsize=7)
+        ax.set(title=METRIC_TITLES[metric], ylabel="%")
         ax.grid(alpha=0.3)
     fig.tight_layout()
     return png(fig)
