@@ -100,9 +100,22 @@ def test_folder_stdin_and_backends(synthetic, capsys, monkeypatch):
 def test_calibrate_stores_the_operating_point_beside_the_model(synthetic, capsys):
     _, fixed, graph, frames, _ = synthetic
     assert main(["localize", str(fixed), "--calibrate", "winter", "--k", "3", "--precision", "1.0"]) == 0
-    assert "precision 100.0 %" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "precision 100.0 %" in out
     stored = json.loads(fixed.with_name("q4.operating-point.json").read_text())
     assert stored["options"]["ks"] == [3] and stored["precision"] == 1.0
+    # the curve it was chosen from, beside it: its chosen point is the stored threshold, printed with its neighbours
+    curve = json.loads(fixed.with_name("q4.operating-point.curve.json").read_text())
+    assert curve["threshold"] == stored["threshold"] and curve["n_queries"] == 24
+    points = curve["points"]
+    chosen = [p for p in points if p["threshold"] == stored["threshold"]]
+    assert len(chosen) == 1 and chosen[0]["precision"] == 1.0 and chosen[0]["recall"] == stored["recall"]
+    lower = [p for p in points if p["threshold"] < stored["threshold"]]
+    assert all(p["precision"] < 1.0 for p in lower)  # the lowest threshold that keeps precision 1.0
+    assert [p["accepted"] for p in points] == sorted(p["accepted"] for p in points)
+    assert fixed.with_name("q4.operating-point.curve.png").read_bytes().startswith(b"\x89PNG")
+    marked = [line for line in out.splitlines() if "<- operating point" in line]
+    assert len(marked) == 1 and marked[0].split()[0] == f"{stored['threshold']:.6f}"
     lines = localize(capsys, fixed, "--frames", frames, "--precision", "1.0", "--onnx", graph)
     assert all(d["accepted"] == (d["place_id"] is not None and d["confidence"] >= stored["threshold"]) for d in lines)
     accepted = [d for d in lines if d["accepted"]]
@@ -228,6 +241,7 @@ def test_an_operating_point_that_accepts_nothing_is_not_written(tmp_path, capsys
     assert main([*argv, "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "accepts nothing is not written" in err[0] and not point.exists()
+    assert not list(tmp_path.glob("weak.curve.*"))  # nor the curve of a point that is not written
 
 
 @pytest.mark.parametrize(

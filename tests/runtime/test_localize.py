@@ -16,6 +16,8 @@ from vprsnn_export.readout.strategies import decide
 from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.localize import (
     Localizer,
+    PrecisionRecallCurve,
+    calibration_curve,
     load_operating_point,
     operating_point,
     precision_threshold,
@@ -79,6 +81,12 @@ def test_precision_threshold_is_the_lowest_that_keeps_precision():
     assert precision_threshold(confidence, correct, 1.0) == 0.9  # 0.8 admits a wrong decision
     assert precision_threshold(confidence, correct, 0.75) == 0.6
     assert precision_threshold(confidence, np.zeros(6, bool), 1.0) is None
+    curve = PrecisionRecallCurve.of(confidence, correct)  # one point per distinct confidence > 0, descending
+    assert curve.threshold.tolist() == [0.9, 0.8, 0.7, 0.6] and curve.accepted.tolist() == [1, 3, 4, 5]
+    assert curve.precision.tolist() == pytest.approx([1, 2 / 3, 3 / 4, 4 / 5])
+    assert curve.recall.tolist() == pytest.approx([1 / 6, 2 / 6, 3 / 6, 4 / 6])  # over all 6 queries
+    assert curve.index_for(1.0) == 0 and curve.index_for(0.75) == 3 and curve.index_for(0.9) == 0
+    assert curve.rows(3, n=1) == [(0.7, 0.75, 0.5, 4), (0.6, 0.8, 4 / 6, 5)]
 
 
 def test_operating_point_reaches_its_precision_and_round_trips(networks, tmp_path):
@@ -91,6 +99,10 @@ def test_operating_point_reaches_its_precision_and_round_trips(networks, tmp_pat
     accepted = [d for d in decisions if point.accepts(d.confidence, d.place_id)]
     assert accepted and all(d.place_id == data.place_ids[d.frame] for d in accepted)
     assert len(accepted) == round(point.recall * 24)
+    curve = calibration_curve(decisions, data.place_ids)  # the curve it was chosen from
+    chosen = curve.index_for(1.0)
+    assert chosen is not None and curve.threshold[chosen] == point.threshold and curve.recall[chosen] == point.recall
+    assert curve.accepted[chosen] == len(accepted)
     path = save_operating_point(point, tmp_path / "net.operating-point.json")
     assert load_operating_point(path, "ab" * 32) == point
     with pytest.raises(ModelFileError, match="another model"):

@@ -202,29 +202,44 @@ def sized_frames(
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
-    from ..runtime.localize import Localizer, operating_point, save_operating_point
+    from ..runtime.localize import (
+        Localizer,
+        calibration_curve,
+        curve_paths,
+        operating_point,
+        save_curve,
+        save_operating_point,
+    )
+    from ..runtime.report.plots import plot_precision_recall
 
     if args.threshold is not None:
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network
     options = sequence_options(args)
-    check_output(point_path, inputs=(args.model, onnx))
+    outputs = (point_path, *curve_paths(point_path))
+    for output in outputs:
+        check_output(output, inputs=(args.model, onnx))
     dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate])
-    check_output(
-        point_path, inputs=(args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
-    )
+    inputs = (args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
+    for output in outputs:
+        check_output(output, inputs=inputs)
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
-    point, _ = operating_point(
+    match_window = scored_tolerance(args.match_window, dataset, network.reference_traversals, args.calibrate)
+    point, decisions = operating_point(
         localizer,
         dataset.traversal(args.calibrate),
         dataset.place_ids,
         precision=1.0 if args.precision is None else args.precision,
-        match_window=scored_tolerance(args.match_window, dataset, network.reference_traversals, args.calibrate),
+        match_window=match_window,
         model_sha256=source.sha256,
         query=args.calibrate,
     )
+    curve = calibration_curve(decisions, dataset.place_ids, match_window)
+    chosen = curve.index_for(point.precision_target)
+    best = int(np.argmax(curve.precision)) if len(curve.threshold) else None
+    print(curve_table(curve, best if chosen is None else chosen, chosen))
     if point.threshold is None:
         raise InvalidValueError(
             f"no confidence threshold reaches precision {point.precision_target:g} on the {point.n_queries} "
@@ -238,5 +253,21 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
         f"recall {100 * point.recall:.1f} %"
     )
-    print(f"wrote {point_path}")
+    chosen_point = (point.recall, point.precision, point.threshold)
+    title = f"'{point.query}': {point.n_queries} queries, k={localizer.readout.k}"
+    plot = plot_precision_recall(curve.recall, curve.precision, point.precision_target, chosen_point, title)
+    print(f"wrote {point_path}, " + " and ".join(map(str, save_curve(curve, point, point_path, plot))))
     return 0
+
+
+def curve_table(curve, around: int | None, chosen: int | None) -> str:
+    """A few points of the calibration curve around point ``around``, the chosen one marked."""
+    if around is None:
+        return f"precision/recall curve: no decision with a place on the {curve.n_queries} queries"
+    lines = [f"{'threshold':>10}  {'precision':>9}  {'recall':>7}  {'accepted':>8}"]
+    first = max(around - 3, 0)
+    for index, (threshold, precision, recall, accepted) in enumerate(curve.rows(around), start=first):
+        mark = "  <- operating point" if index == chosen else ""
+        lines.append(f"{threshold:10.6f}  {100 * precision:8.1f}%  {100 * recall:6.1f}%  {accepted:8d}{mark}")
+    which = "the chosen one" if chosen is not None else "the highest precision"
+    return f"precision/recall curve (a few points around {which}):\n" + "\n".join(lines)

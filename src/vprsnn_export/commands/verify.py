@@ -25,8 +25,7 @@ from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..readout.metrics import MatchTruth
-from ..readout.strategies import STRATEGIES
-from ..runtime.results import MetricRow, VerifyReport
+from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
     PER_TENSOR_HELP,
@@ -48,17 +47,6 @@ if TYPE_CHECKING:
 EXIT_UNDECIDED = 3
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 ALL_TARGETS = ",".join(TARGETS)
-TABLE_COLUMNS = (
-    ("network", "network"),
-    ("bits", "bits"),
-    ("verdict", "verdict"),
-    ("paired", "paired checks"),
-    ("cross", "cross-impl."),
-    ("accuracy", "worst acc. Δ k=1"),
-    ("r_at_100p", "R@100P Δ"),
-    ("winner", "same winner %"),
-    ("saturations", "saturations"),
-)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -244,29 +232,10 @@ def folder_name(label: str, index: int) -> str:
 
 
 def verdict_rows(report: VerifyReport) -> list[dict]:
-    """One row per network and bit width for the terminal table."""
-    from ..runtime.report.labels import cross_counts, verdict_counts
+    """One row per network and bit width for the terminal table: the report's verdict table's cells."""
+    from ..runtime.report.labels import results, verdict_cells
 
-    rows = []
-    for index, run in enumerate(report.runs):
-        top = max(run.ks)
-        for result in run.bits:
-            worst = min(_delta(result.row(s, 1), "accuracy") for s in STRATEGIES)
-            cross = result.cross_implementation
-            rows.append(
-                {
-                    "network": run.label or str(index + 1),
-                    "bits": result.bits,
-                    "verdict": result.verdict,
-                    "paired": verdict_counts(result.paired) or "-",
-                    "cross": cross_counts([cross]),
-                    "accuracy": f"{100 * worst:+.1f}",
-                    "r_at_100p": f"{100 * _delta(result.row('wprob', top), 'r_at_100p'):+.1f} (k={top})",
-                    "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
-                    "saturations": result.spike_level.saturations,
-                }
-            )
-    return rows
+    return [verdict_cells(*item) for item in results(report)]
 
 
 def paired_rows(report: VerifyReport) -> list[dict]:
@@ -301,17 +270,13 @@ def conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
     return "HOLDS: every check holds at every bit width", 0
 
 
-def _delta(row: MetricRow, metric: str) -> float:
-    return 0.0 if row.delta is None else row.delta.get(metric)
-
-
 MAX_SEEDS = 1000  # networks trained by one verify run
 
 
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.report import write_report
-    from ..runtime.report.labels import PAIRED_COLUMNS
+    from ..runtime.report.labels import PAIRED_COLUMNS, VERDICT_COLUMNS
     from ..runtime.verify import build_report, verify_checkpoint
 
     started = time.perf_counter()
@@ -396,7 +361,7 @@ def run(args: argparse.Namespace) -> int:
             }
         )
     else:
-        print(format_table(verdict_rows(report), TABLE_COLUMNS))
+        print(format_table(verdict_rows(report), VERDICT_COLUMNS))
         for run in report.runs:
             if run.float.cost is not None:
                 print(f"{run.label}: {run.float.cost.line()}", file=sys.stderr)

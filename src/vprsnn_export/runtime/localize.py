@@ -51,7 +51,7 @@ from vprsnn_export.data.preprocess import normalise_resized, resize_image
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.io.fileio import atomic_write_text, is_readable_file, parse_json
+from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -61,6 +61,7 @@ from .backends import open_backend
 STREAM = "localize"
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
+CURVE_FORMAT = "vprsnn-precision-recall/1"
 
 
 @dataclass(frozen=True)
@@ -246,28 +247,66 @@ class Localizer:
         return decision
 
 
+@dataclass(frozen=True, eq=False)
+class PrecisionRecallCurve:
+    """The calibration decisions' precision/recall curve, one point per distinct confidence ``theta``
+    (descending; only decisions with a place, confidence > 0, are ever accepted):
+
+    .. math:: A(\\theta) = |\\{j : c_j \\ge \\theta\\}|, \\quad
+              \\text{precision}(\\theta) = \\frac{|\\{j : c_j \\ge \\theta, \\text{correct}_j\\}|}{A(\\theta)}, \\quad
+              \\text{recall}(\\theta) = \\frac{|\\{j : c_j \\ge \\theta, \\text{correct}_j\\}|}{N}
+
+    over all ``N`` calibration queries (a query without a decision counts against the recall)."""
+
+    threshold: np.ndarray
+    precision: np.ndarray
+    recall: np.ndarray
+    accepted: np.ndarray
+    n_queries: int
+
+    @classmethod
+    def of(cls, confidence: np.ndarray, correct: np.ndarray) -> PrecisionRecallCurve:
+        c = np.asarray(confidence, dtype=np.float64)
+        ok = np.asarray(correct, dtype=bool)
+        keep = c > 0
+        order = np.argsort(-c[keep], kind="stable")
+        c, ok = c[keep][order], ok[keep][order]
+        end = np.r_[c[1:] != c[:-1], True] if c.size else np.zeros(0, bool)  # last of each run of equal confidences
+        hits = np.cumsum(ok)[end]
+        accepted = np.arange(1, c.size + 1)[end]
+        return cls(c[end], hits / accepted, hits / max(len(keep), 1), accepted, len(keep))
+
+    def index_for(self, precision: float) -> int | None:
+        """The point of the lowest threshold whose precision reaches ``precision`` (None: no point does)."""
+        reached = np.flatnonzero(self.precision >= precision - 1e-12)
+        return int(reached[-1]) if reached.size else None
+
+    def rows(self, around: int, n: int = 3) -> list[tuple[float, float, float, int]]:
+        """(threshold, precision, recall, accepted) of the ``n`` points either side of point ``around``."""
+        lo, hi = max(around - n, 0), min(around + n + 1, len(self.threshold))
+        columns = (self.threshold, self.precision, self.recall, self.accepted)
+        return [(float(t), float(p), float(r), int(a)) for t, p, r, a in zip(*(c[lo:hi] for c in columns), strict=True)]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n_queries": self.n_queries,
+            "points": [
+                dict(zip(("threshold", "precision", "recall", "accepted"), row, strict=True))
+                for row in self.rows(0, len(self.threshold))
+            ],
+        }
+
+
 def precision_threshold(confidence: np.ndarray, correct: np.ndarray, precision: float) -> float | None:
-    """The lowest confidence threshold whose accepted decisions reach ``precision``.
+    """The lowest confidence threshold whose accepted decisions reach ``precision``:
 
-    .. math:: \\theta = \\min \\{ c_i : \\frac{|\\{j : c_j \\ge c_i, \\text{correct}_j\\}|}
-                                        {|\\{j : c_j \\ge c_i\\}|} \\ge p \\}
+    .. math:: \\theta = \\min \\{ \\theta' : \\text{precision}(\\theta') \\ge p \\}
 
-    over the decisions with a place (confidence > 0); None when no threshold qualifies.
+    on :class:`PrecisionRecallCurve`; None when no threshold qualifies.
     """
-    c = np.asarray(confidence, dtype=np.float64)
-    ok = np.asarray(correct, dtype=bool)
-    keep = c > 0
-    c, ok = c[keep], ok[keep]
-    if c.size == 0:
-        return None
-    order = np.argsort(-c, kind="stable")
-    c, ok = c[order], ok[order]
-    hits = np.cumsum(ok)
-    group_end = np.r_[c[1:] != c[:-1], True]  # the last decision of each run of equal confidences
-    reached = (hits / np.arange(1, c.size + 1) >= precision - 1e-12) & group_end
-    if not reached.any():
-        return None
-    return float(c[np.flatnonzero(reached)[-1]])
+    curve = PrecisionRecallCurve.of(confidence, correct)
+    index = curve.index_for(precision)
+    return None if index is None else float(curve.threshold[index])
 
 
 def operating_point(
@@ -282,27 +321,18 @@ def operating_point(
 ) -> tuple[OperatingPoint, list[Decision]]:
     """Run the localiser over labelled preprocessed frames (N, inputs) in stream order (a query traversal)
     and choose the threshold for ``precision``; a decision within ``match_window`` places is right (or, with
-    the data set's ground truth as ``match_window``, a reference it names)."""
+    the data set's ground truth as ``match_window``, a reference it names). :func:`calibration_curve` gives the
+    curve it was chosen from."""
     if not 0 < precision <= 1:
         raise InvalidValueError(f"--precision must lie in (0, 1], got {precision}")
     decisions = localizer.run_inputs(inputs)
-    predicted = np.ma.MaskedArray(
-        np.asarray([-1 if d.place_id is None else d.place_id for d in decisions], dtype=np.int64),
-        mask=np.asarray([d.place_id is None for d in decisions], dtype=bool),
-    )
-    correct = is_correct(predicted, np.asarray(place_ids), match_window)
-    confidence = np.asarray([d.confidence for d in decisions])
-    threshold = precision_threshold(confidence, correct, precision)
-    accepted = (
-        (confidence >= threshold) & ~np.ma.getmaskarray(predicted)
-        if threshold is not None
-        else np.zeros(len(decisions), bool)
-    )
+    curve = calibration_curve(decisions, place_ids, match_window)
+    index = curve.index_for(precision)
     point = OperatingPoint(
-        threshold=threshold,
+        threshold=None if index is None else float(curve.threshold[index]),
         precision_target=float(precision),
-        precision=float(correct[accepted].mean()) if accepted.any() else 1.0,
-        recall=float((correct & accepted).sum() / len(decisions)),
+        precision=1.0 if index is None else float(curve.precision[index]),
+        recall=0.0 if index is None else float(curve.recall[index]),
         n_queries=len(decisions),
         options=localizer.options,
         model_sha256=model_sha256,
@@ -312,6 +342,17 @@ def operating_point(
         ground_truth=match_window.source if isinstance(match_window, MatchTruth) else "",
     )
     return point, decisions
+
+
+def calibration_curve(
+    decisions: list[Decision], place_ids: np.ndarray, match_window: Tolerance = 0
+) -> PrecisionRecallCurve:
+    """The precision/recall curve of labelled decisions (:class:`PrecisionRecallCurve`); right as in
+    :func:`operating_point`."""
+    placed = np.asarray([d.place_id is not None for d in decisions], dtype=bool)
+    predicted = np.ma.MaskedArray([d.place_id or 0 for d in decisions], mask=~placed, dtype=np.int64)
+    correct = is_correct(predicted, np.asarray(place_ids), match_window)
+    return PrecisionRecallCurve.of(np.asarray([d.confidence for d in decisions]), correct)  # no place: confidence 0
 
 
 def _is_real(value: object) -> bool:
@@ -348,6 +389,23 @@ def operating_point_path(model_path: str | Path) -> Path:
 
 def save_operating_point(point: OperatingPoint, path: str | Path) -> Path:
     return atomic_write_text(path, json.dumps(point.to_dict(), indent=2) + "\n")
+
+
+def curve_paths(point_path: str | Path) -> tuple[Path, Path]:
+    """Where the curve an operating point was chosen from is written: beside it, ``<point>.curve.json`` and
+    ``<point>.curve.png`` (``net.operating-point.json`` -> ``net.operating-point.curve.json``)."""
+    base = Path(point_path).with_suffix("")
+    return base.with_name(base.name + ".curve.json"), base.with_name(base.name + ".curve.png")
+
+
+def save_curve(
+    curve: PrecisionRecallCurve, point: OperatingPoint, point_path: str | Path, png: bytes
+) -> tuple[Path, Path]:
+    """The curve as JSON (every point, the chosen threshold and target) and its plot ``png``, beside the point."""
+    data = {"format": CURVE_FORMAT, "threshold": point.threshold, "precision_target": point.precision_target}
+    json_path, png_path = curve_paths(point_path)
+    atomic_write_text(json_path, json.dumps({**data, **curve.to_dict()}, indent=1) + "\n")
+    return json_path, atomic_write_bytes(png_path, png)
 
 
 def load_operating_point(path: str | Path, model_sha256: str | None = None) -> OperatingPoint:

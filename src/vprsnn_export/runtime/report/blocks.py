@@ -4,28 +4,35 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 from vprsnn_export.readout.strategies import STRATEGIES
 
-from ..results import METRICS, RunSummary, VerifiedRun, VerifyReport
+from ..results import METRICS, BitsResult, RunSummary, VerifiedRun, VerifyReport
 from ..verify.checks import TOLERANCE_MEANING
 from .labels import (
     METRIC_TITLES,
     PAIRED_COLUMNS,
-    cross_counts,
+    VERDICT_COLUMNS,
+    data_label,
     data_note,
+    exact_counts,
     ms,
     network_label,
     paired_cells,
     points,
+    results,
     row_label,
     shown_paired,
     signed_pct,
     strategy_title,
+    tolerance_counts,
     tolerance_differences,
     verdict,
+    verdict_cells,
     verdict_counts,
 )
 from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weights
@@ -34,10 +41,17 @@ from .plots import plot_metrics, plot_modules, plot_pr, plot_spikes, plot_weight
 #: start a line of its own in report.md (a forged heading), so each becomes a space.
 LINE_BREAKING = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")
 
+#: A verdict's row colour in the HTML tables.
+VERDICT_STATUS = {"holds": "pass", "fails": "fail"}
+
 
 def one_line(text: object) -> str:
     """``text`` on one line: every line break or control character replaced by a space."""
     return LINE_BREAKING.sub(" ", str(text))
+
+
+#: A table's columns: title -> the cell of an item (a row).
+Columns = dict[str, Callable[[Any], str]]
 
 
 @dataclass
@@ -52,32 +66,38 @@ class Block:
     title: str = ""  # figures: the heading above the image (``text`` is the caption); pre: a collapsed summary
 
 
-def failure_lines(report: VerifyReport) -> list[str]:
-    """Each failed check, named with its network and bit width: what the verdict line's FAIL means."""
-    lines = []
-    for index, run in enumerate(report.runs):
-        network = run.label or f"network {index + 1}"
-        for result in run.bits:
-            if not result.cross_implementation.passed:
-                lines.append(
-                    f"{network}, {result.bits} bits: {result.cross_implementation.n_failed} cross-implementation differences"
-                )
-            for check in result.tolerance_checks:
-                if not check.passed and check.check in POINT_CHECKS:
-                    value, limit = points(check.check, check.value), points(check.check, check.applied_limit)
-                    lines.append(f"{network}, {result.bits} bits: {check.what} = {value} (limit {limit})")
-            for paired in result.paired:
-                if paired.verdict == "fails":
-                    cells = paired_cells(paired)
-                    lines.append(
-                        f"{network}, {result.bits} bits: {cells['metric']} {cells['readout']} Δ {cells['difference']} "
-                        f"pts, interval {cells['interval']} beyond the {cells['limit']}-point limit"
-                    )
-    return lines
+def table(columns: Mapping[str, Callable[[Any], str]], items: Iterable[Any], status: Callable | None = None) -> Block:
+    """One row per item, one column per ``title: cell(item)``; ``status(item)`` colours its row."""
+    items = list(items)
+    rows = [[cell(item) for cell in columns.values()] for item in items]
+    return Block("table", headers=list(columns), rows=rows, status=[status(i) for i in items] if status else ())
+
+
+def figure(title: str, name: str, image: bytes, caption: str) -> Block:
+    return Block("figure", title=title, name=name, image=image, text=caption)
 
 
 #: Tolerances judged on one measured number (the metric tolerances are judged on the paired table).
 POINT_CHECKS = ("winner_agreement", "top1_agreement", "saturations")
+
+
+def failure_lines(report: VerifyReport) -> list[str]:
+    """Each failed check, named with its network and bit width: what the verdict line's FAIL means."""
+    lines = []
+    for label, run, result in results(report):
+        where = f"{label if run.label else f'network {label}'}, {result.bits} bits"
+        if not result.cross_implementation.passed:
+            lines.append(f"{where}: {result.cross_implementation.n_failed} cross-implementation differences")
+        for check in result.tolerance_checks:
+            if not check.passed and check.check in POINT_CHECKS:
+                value, limit = points(check.check, check.value), points(check.check, check.applied_limit)
+                lines.append(f"{where}: {check.what} = {value} (limit {limit})")
+        for cells in (paired_cells(c) for c in result.paired if c.verdict == "fails"):
+            lines.append(
+                f"{where}: {cells['metric']} {cells['readout']} Δ {cells['difference']} pts, interval "
+                f"{cells['interval']} beyond the {cells['limit']}-point limit"
+            )
+    return lines
 
 
 def conclusion(report: VerifyReport) -> str:
@@ -96,149 +116,85 @@ def conclusion(report: VerifyReport) -> str:
 
 def blocks_of(report: VerifyReport) -> list[Block]:
     """The whole document, format-neutral."""
-    summary = report.summary
-    runs = report.runs
-    n_runs = len(runs)
-    first = runs[0]
+    summary, runs = report.summary, report.runs
+    first, n_runs = runs[0], len(runs)
     ks = first.ks
-    top_k = max(ks)
     networks = f"mean ± std over {n_runs} independently trained networks" if n_runs > 1 else "one network"
-    blocks: list[Block] = [Block("h1", "vprsnn-export verification report")]
-    blocks.append(
+    seconds = f" in {report.seconds:.0f} s" if report.seconds else ""
+    blocks = [
+        Block("h1", "vprsnn-export verification report"),
         Block(
             "p",
-            (
-                f"**Verdict: {report.verdict.upper()}** — {conclusion(report)}. Query traversal "
-                f"**{first.query}**, {first.n_queries} queries"
-                f"{data_note(report.settings)}; {networks}. Generated {report.created}"
-                + (f" in {report.seconds:.0f} s" if report.seconds else "")
-                + "."
-            ),
-        )
-    )
-    failures = failure_lines(report)
-    if failures:
+            f"**Verdict: {report.verdict.upper()}** — {conclusion(report)}. Query traversal **{first.query}**, "
+            f"{first.n_queries} queries{data_note(report.settings)}; {networks}. Generated {report.created}{seconds}.",
+        ),
+    ]
+    if failures := failure_lines(report):
         blocks.append(Block("p", "**Failed:** " + "; ".join(failures) + "."))
     if report.settings_differ:
+        differ = ", ".join(report.settings_differ)
         blocks.append(
-            Block(
-                "p",
-                "Combined reports whose settings differ in: "
-                + ", ".join(report.settings_differ)
-                + " (settings shown are the first report's).",
-            )
+            Block("p", f"Combined reports whose settings differ in: {differ} (settings shown are the first report's).")
         )
-    blocks += verdict_blocks(report, top_k)
-    blocks += paired_blocks(report)
-    blocks += metric_blocks(summary, ks)
-    blocks.append(
-        Block(
-            "figure",
-            title="Metrics vs weight bit width",
-            image=plot_metrics(summary, ks),
-            name="metrics_vs_bits.png",
-            text="Each metric vs bit width; the float network's value is the dashed line of the same colour"
+    which = f"; network {first.label or 1} of {n_runs}." if n_runs > 1 else "."
+    return [
+        *blocks,
+        *verdict_blocks(report),
+        *paired_blocks(report),
+        *metric_blocks(summary, ks),
+        figure(
+            "Metrics vs weight bit width",
+            "metrics_vs_bits.png",
+            plot_metrics(summary, ks),
+            "Each metric vs bit width; the float network's value is the dashed line of the same colour"
             + (" (mean ± std over networks)." if n_runs > 1 else "."),
-        )
-    )
-    blocks.append(
-        Block(
-            "figure",
-            title="Precision-recall curves",
-            image=plot_pr(first),
-            name="pr_curves.png",
-            text=f"W+Prob at k=1 and k={top_k}, float (black) vs each bit width"
-            + (f"; network {first.label or 1} of {n_runs}." if n_runs > 1 else "."),
-        )
-    )
-    blocks += spike_blocks(summary, runs)
-    blocks.append(
-        Block(
-            "figure",
-            title="Spike-count agreement",
-            image=plot_spikes(report),
-            name="spike_agreement.png",
-            text="Left: fraction of time steps with the float winner, top-1 agreement and mean per-query "
+        ),
+        figure(
+            "Precision-recall curves",
+            "pr_curves.png",
+            plot_pr(first),
+            f"W+Prob at k=1 and k={max(ks)}, float (black) vs each bit width{which}",
+        ),
+        *spike_blocks(summary, runs),
+        figure(
+            "Spike-count agreement",
+            "spike_agreement.png",
+            plot_spikes(report),
+            "Left: fraction of time steps with the float winner, top-1 agreement and mean per-query "
             "spike-count correlation vs bit width. Right: distribution of the per-query correlation "
             "of the float and quantised spike-count vectors (all networks pooled).",
-        )
-    )
-    blocks += decision_blocks(summary, ks)
-    blocks += module_blocks(first, n_runs)
-    blocks += cross_blocks(report)
-    blocks += quantisation_blocks(first)
-    blocks.append(
-        Block(
-            "figure",
-            title="Weight histograms",
-            image=plot_weights(first),
-            name="weight_histograms.png",
-            text="Float weights divided by their scale range "
-            f"({first.float.weights.normalised_by}): the share of weights on each quantised level "
-            "q / L, L = 2^b - 1 (bars), and the share of float weights within 1 / L around each point (line).",
-        )
-    )
-    blocks += tolerance_blocks(report)
-    blocks += provenance_blocks(report)
-    return blocks
+        ),
+        *decision_blocks(summary, ks),
+        *module_blocks(first, n_runs),
+        *cross_blocks(report),
+        *quantisation_blocks(first),
+        figure(
+            "Weight histograms",
+            "weight_histograms.png",
+            plot_weights(first),
+            f"Float weights divided by their scale range ({first.float.weights.normalised_by}): the share of "
+            "weights on each quantised level q / L, L = 2^b - 1 (bars), and the share of float weights within "
+            "1 / L around each point (line).",
+        ),
+        *tolerance_blocks(report),
+        *provenance_blocks(report),
+    ]
 
 
-def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
+def verdict_blocks(report: VerifyReport) -> list[Block]:
+    """Per network and bit width, the columns the terminal shows too (:data:`.labels.VERDICT_COLUMNS`)."""
+    cells = [(verdict_cells(*item), item[2]) for item in results(report)]
+    columns: Columns = {title: partial(lambda key, item: item[0][key], key) for key, title in VERDICT_COLUMNS}
     tolerances = report.settings.get("tolerances", {})
-    rows, status = [], []
-    cross = {
-        bits.bits: [r.cross_implementation for run in report.runs for r in run.bits if r.bits == bits.bits]
-        for bits in report.summary.bits
-    }
-    for bits in report.summary.bits:
-        worst_acc = min(
-            (
-                row.delta["accuracy"].mean
-                for s in STRATEGIES
-                if (row := bits.row(s, 1)) is not None
-                and row.delta is not None
-                and row.delta["accuracy"].mean is not None
-            ),
-            default=None,
-        )
-        top = bits.row("wprob", top_k)
-        ok = bits.n_passed == bits.n_runs
-        counts = ", ".join(f"{n} {v}" for v, n in bits.verdicts.items() if n) or f"{verdict(ok)} ({bits.n_passed})"
-        rows.append(
-            [
-                f"{bits.bits}",
-                f"{counts} (of {bits.n_runs})",
-                cross_counts(cross[bits.bits]),
-                signed_pct(worst_acc),
-                ms(top.delta["r_at_100p"], signed=True) if top and top.delta else "-",
-                ms(top.values["r_at_100p"]) if top else "-",
-                ms(bits.winner_agreement),
-                ms(bits.saturations, percent=False, digits=0),
-            ]
-        )
-        status.append("pass" if ok else "fail")
     limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
     return [
         Block("h2", "Verdict per bit width"),
-        Block(
-            "table",
-            headers=[
-                "bits",
-                "verdict (networks)",
-                "cross-implementation",
-                "worst accuracy Δ k=1 (pts)",
-                f"R@100P Δ W+Prob k={top_k} (pts)",
-                f"R@100P W+Prob k={top_k} %",
-                "same winner %",
-                "saturations",
-            ],
-            rows=rows,
-            status=status,
-        ),
+        table(columns, cells, lambda item: VERDICT_STATUS.get(item[1].verdict)),
         Block(
             "p",
             f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
-            "Δ = quantised - float, in percentage points; negative is worse.",
+            "Δ = quantised - float, in percentage points; negative is worse. Exact rows: implementations that "
+            "must agree bit for bit; tolerance rows: float consumers judged on their stated decision agreement.",
         ),
     ]
 
@@ -246,21 +202,15 @@ def verdict_blocks(report: VerifyReport, top_k: int) -> list[Block]:
 def paired_blocks(report: VerifyReport) -> list[Block]:
     """The paired table: per network and bit width every judged metric (and every readout's accuracy) with its
     flips, the difference, its interval and the verdict."""
-    stats = report.settings.get("statistics") or {}
-    rows, status = [], []
-    for index, run in enumerate(report.runs):
-        for result in run.bits:
-            for check in shown_paired(result.paired):
-                cells = paired_cells(check)
-                rows.append([network_label(run, index), f"{result.bits}", *(cells[k] for k, _ in PAIRED_COLUMNS)])
-                status.append({"holds": "pass", "fails": "fail"}.get(check.verdict or ""))
-    if not rows:
+    checks = [(label, r, c) for label, _, r in results(report) for c in shown_paired(r.paired)]
+    if not checks:
         return []
+    stats = report.settings.get("statistics") or {}
     counts = "; ".join(
-        f"{network_label(run, i)}, {r.bits} bits: {verdict_counts(r.paired) or 'nothing judged'}"
-        for i, run in enumerate(report.runs)
-        for r in run.bits
+        f"{n}, {r.bits} bits: {verdict_counts(r.paired) or 'nothing judged'}" for n, _, r in results(report)
     )
+    columns = {"network": lambda i: i[0], "bits": lambda i: str(i[1].bits)}
+    columns |= {title: partial(lambda key, i: paired_cells(i[2])[key], key) for key, title in PAIRED_COLUMNS}
     return [
         Block("h2", "Paired verdict"),
         Block(
@@ -272,48 +222,41 @@ def paired_blocks(report: VerifyReport) -> list[Block]:
             " blocks of k consecutive queries for k > 1). A check **holds** when the whole interval lies inside "
             "its drop limit, **fails** when it lies entirely beyond it, and is **undecided** when it straddles "
             "the limit (with roughly how many queries would decide it); a float R@100P of 0 is **not judged**. "
-            "Checks without a limit are reported only. " + counts + ".",
+            f"Checks without a limit are reported only. {counts}.",
         ),
-        Block(
-            "table",
-            headers=["network", "bits", *(title for _, title in PAIRED_COLUMNS)],
-            rows=rows,
-            status=status,
-        ),
+        table(columns, checks, lambda i: VERDICT_STATUS.get(i[2].verdict or "")),
     ]
 
 
 def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
-    blocks = [Block("h2", "Metric level")]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
-    labels = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
+    keys = [key for key in [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1] if key in float_rows]
+
+    def cell(row: Any, metric: str) -> str:
+        delta = "-" if row is None or row.delta is None else ms(row.delta[metric], signed=True)
+        return "-" if row is None else f"{ms(row.values[metric])} ({delta})"
+
+    blocks = [Block("h2", "Metric level")]
     for metric in METRICS:
-        headers = ["readout", "float %"] + [f"{b.bits}-bit % (Δ)" for b in summary.bits]
-        rows = []
-        for key in labels:
-            if key not in float_rows:
-                continue
-            cells = [row_label(*key), ms(float_rows[key].values[metric])]
-            for bits in summary.bits:
-                row = bits.row(*key)
-                delta = "-" if row is None or row.delta is None else ms(row.delta[metric], signed=True)
-                cells.append("-" if row is None else f"{ms(row.values[metric])} ({delta})")
-            rows.append(cells)
-        blocks += [Block("h3", METRIC_TITLES[metric]), Block("table", headers=headers, rows=rows)]
+        columns: Columns = {
+            "readout": lambda key: row_label(*key),
+            "float %": partial(lambda m, key: ms(float_rows[key].values[m]), metric),
+        }
+        columns |= {
+            f"{b.bits}-bit % (Δ)": partial(lambda b, m, key: cell(b.row(*key), m), b, metric) for b in summary.bits
+        }
+        blocks += [Block("h3", METRIC_TITLES[metric]), table(columns, keys)]
     return blocks
 
 
 def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun] = ()) -> list[Block]:
-    rows = [
-        [
-            f"{b.bits}",
-            ms(b.winner_agreement, digits=2),
-            ms(b.count_correlation, percent=False, digits=3),
-            ms(b.spike_ratio, percent=False, digits=3),
-            ms(b.saturations, percent=False, digits=0),
-        ]
-        for b in summary.bits
-    ]
+    columns = {
+        "bits": lambda b: str(b.bits),
+        "same winner %": lambda b: ms(b.winner_agreement, digits=2),
+        "count correlation": lambda b: ms(b.count_correlation, percent=False, digits=3),
+        "spike ratio": lambda b: ms(b.spike_ratio, percent=False, digits=3),
+        "saturations": lambda b: ms(b.saturations, percent=False, digits=0),
+    }
     return [
         Block("h2", "Spike level"),
         Block(
@@ -323,7 +266,7 @@ def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun] = ()) -> list[
             "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries."
             + recorded_note(runs),
         ),
-        Block("table", headers=["bits", "same winner %", "count correlation", "spike ratio", "saturations"], rows=rows),
+        table(columns, summary.bits),
     ]
 
 
@@ -332,30 +275,20 @@ def recorded_note(runs: Sequence[VerifiedRun]) -> str:
     partial = [run for run in runs if run.recorded_queries is not None and run.recorded_queries < run.n_queries]
     if not partial:
         return ""
-    run = partial[0]
     return (
         f" Same winner, the per-module agreement and the exported files' rasters are compared on the first "
-        f"{run.recorded_queries} of {run.n_queries} queries (a recorded raster of every query would not fit in "
-        "memory); counts, correlations, saturations and every metric use all queries."
+        f"{partial[0].recorded_queries} of {partial[0].n_queries} queries (a recorded raster of every query would "
+        "not fit in memory); counts, correlations, saturations and every metric use all queries."
     )
 
 
 def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
-    agg_ks = [k for k in ks if k > 1]
-    headers = (
-        ["bits"]
-        + [f"top-1 {strategy_title(s)} %" for s in STRATEGIES]
-        + ["W+Prob TV distance"]
-        + [f"agreement k={k} %" for k in agg_ks]
-    )
-    rows = []
-    for b in summary.bits:
-        rows.append(
-            [f"{b.bits}"]
-            + [ms(b.top1_agreement.get(s)) for s in STRATEGIES]
-            + [ms(b.wprob_tv_mean, percent=False, digits=3)]
-            + [ms(b.aggregated_agreement.get(k)) for k in agg_ks]
-        )
+    columns: Columns = {"bits": lambda b: str(b.bits)}
+    columns |= {
+        f"top-1 {strategy_title(s)} %": partial(lambda s, b: ms(b.top1_agreement.get(s)), s) for s in STRATEGIES
+    }
+    columns["W+Prob TV distance"] = lambda b: ms(b.wprob_tv_mean, percent=False, digits=3)
+    columns |= {f"agreement k={k} %": partial(lambda k, b: ms(b.aggregated_agreement.get(k)), k) for k in ks if k > 1}
     return [
         Block("h2", "Decision level"),
         Block(
@@ -365,30 +298,26 @@ def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
             "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
             "sequence aggregation.",
         ),
-        Block("table", headers=headers, rows=rows),
+        table(columns, summary.bits),
     ]
 
 
 def cross_blocks(report: VerifyReport) -> list[Block]:
-    rows, status, failures = [], [], []
-    for index, run in enumerate(report.runs):
-        for result in run.bits:
-            cross = result.cross_implementation
-            kinds = sorted({c.check.split(":")[0] for c in cross.comparisons})
-            skipped = "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.skipped.items()) if cross.skipped else ""
-            rows.append(
-                [
-                    network_label(run, index),
-                    f"{result.bits}",
-                    cross_counts([cross]),
-                    tolerance_differences(cross),
-                    verdict(cross.passed),
-                    str(cross.reference_queries),
-                    "; ".join(kinds) + skipped,
-                ]
-            )
-            status.append("pass" if cross.passed else "fail")
-            failures += [[network_label(run, index), f"{result.bits}", c.check, c.detail] for c in cross.failures]
+    def implementations(result: BitsResult) -> str:
+        cross = result.cross_implementation
+        skipped = "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.skipped.items()) if cross.skipped else ""
+        return "; ".join(sorted({c.check.split(":")[0] for c in cross.comparisons})) + skipped
+
+    columns = {
+        "network": lambda i: i[0],
+        "bits": lambda i: str(i[2].bits),
+        "exact rows identical": lambda i: exact_counts([i[2].cross_implementation]),
+        "tolerance rows within": lambda i: tolerance_counts([i[2].cross_implementation]),
+        "tolerance rows: decisions that differ": lambda i: tolerance_differences(i[2].cross_implementation),
+        "verdict": lambda i: verdict(i[2].cross_implementation.passed),
+        "reference-stepper queries": lambda i: str(i[2].cross_implementation.reference_queries),
+        "implementations": lambda i: implementations(i[2]),
+    }
     blocks = [
         Block("h2", "Cross-implementation (exact)"),
         Block(
@@ -401,53 +330,35 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
             "stated decision agreement) are counted on their own, with their measured difference: never as "
             "exact.",
         ),
-        Block(
-            "table",
-            headers=[
-                "network",
-                "bits",
-                "identical",
-                "tolerance rows: decisions that differ",
-                "verdict",
-                "reference-stepper queries",
-                "implementations",
-            ],
-            rows=rows,
-            status=status,
-        ),
+        table(columns, results(report), lambda i: "pass" if i[2].cross_implementation.passed else "fail"),
     ]
+    failures = [(n, r, c) for n, _, r in results(report) for c in r.cross_implementation.failures]
     if failures:
-        blocks += [
-            Block("h3", "Differences found"),
-            Block(
-                "table", headers=["network", "bits", "check", "detail"], rows=failures, status=["fail"] * len(failures)
-            ),
-        ]
+        columns = {"network": lambda f: f[0], "bits": lambda f: str(f[1].bits)}
+        columns |= {"check": lambda f: f[2].check, "detail": lambda f: f[2].detail}
+        blocks += [Block("h3", "Differences found"), table(columns, failures, lambda _: "fail")]
     return blocks
 
 
 def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
     """An ensemble's per-module table (whole-route accuracy on each region's queries) and its plot."""
-    if not any(result.modules for result in run.bits):
+    with_modules = [result for result in run.bits if result.modules]
+    if not with_modules:
         return []
-    first = next(result.modules for result in run.bits if result.modules)
+    first = with_modules[0].modules
     k = first[0].k
-    headers = ["module", "places", "queries", "float k=1 %", f"float k={k} %"]
-    for result in run.bits:
-        headers += [f"{result.bits}-bit k={k} % (Δ)", f"{result.bits}-bit same winner %"]
-    rows = []
-    for index, module in enumerate(first):
-        cells = [
-            str(module.module),
-            f"{module.first_place}-{module.last_place}",
-            str(module.n_queries),
-            f"{100 * module.float_accuracy:.1f}",
-            f"{100 * module.float_accuracy_k:.1f}",
-        ]
-        for result in run.bits:
-            row = result.modules[index]
-            cells += [f"{100 * row.accuracy_k:.1f} ({signed_pct(row.delta_k)})", f"{100 * row.winner_agreement:.1f}"]
-        rows.append(cells)
+    columns: Columns = {
+        "module": lambda i: str(first[i].module),
+        "places": lambda i: f"{first[i].first_place}-{first[i].last_place}",
+        "queries": lambda i: str(first[i].n_queries),
+        "float k=1 %": lambda i: f"{100 * first[i].float_accuracy:.1f}",
+        f"float k={k} %": lambda i: f"{100 * first[i].float_accuracy_k:.1f}",
+    }
+    for r in run.bits:
+        columns[f"{r.bits}-bit k={k} % (Δ)"] = partial(
+            lambda r, i: f"{100 * r.modules[i].accuracy_k:.1f} ({signed_pct(r.modules[i].delta_k)})", r
+        )
+        columns[f"{r.bits}-bit same winner %"] = partial(lambda r, i: f"{100 * r.modules[i].winner_agreement:.1f}", r)
     worst = []
     for result in run.bits:
         low = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement))
@@ -460,76 +371,55 @@ def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
         Block("h2", f"Modules of the ensemble{which}"),
         Block(
             "p",
-            f"{len(first)} modules. "
-            "Accuracy is the whole-route W+Prob decision (every module's neurons, every place) scored on the "
-            "queries whose true place lies in the module's region; same winner: the share of time steps on "
-            "which the module's WTA picks the float module's winner. The module that degrades most: "
-            + "; ".join(worst)
-            + ".",
+            f"{len(first)} modules. Accuracy is the whole-route W+Prob decision (every module's neurons, every "
+            "place) scored on the queries whose true place lies in the module's region; same winner: the share "
+            "of time steps on which the module's WTA picks the float module's winner. The module that degrades "
+            "most: " + "; ".join(worst) + ".",
         ),
-        Block("table", headers=headers, rows=rows),
-        Block(
-            "figure",
-            title="Accuracy per module",
-            image=plot_modules(run),
-            name="modules.png",
-            text=f"Whole-route W+Prob accuracy at k={k} on each module's region, float (black) vs each bit width.",
+        table(columns, range(len(first))),
+        figure(
+            "Accuracy per module",
+            "modules.png",
+            plot_modules(run),
+            f"Whole-route W+Prob accuracy at k={k} on each module's region, float (black) vs each bit width.",
         ),
     ]
 
 
 def quantisation_blocks(run: VerifiedRun) -> list[Block]:
-    rows = []
-    for result in run.bits:
-        q = result.quantisation
-        rows.append(
-            [
-                f"{result.bits}",
-                ("per-neuron" if q.per_neuron else "per-tensor") + f", {q.scale_method}",
-                f"{q.weight_relative_rmse or 0:.4f}",
-                str(q.weights_clipped),
-                f"{100 * (q.threshold_max_relative_error or 0):.3f}",
-                f"{100 * result.weight_levels.zero_fraction:.1f}",
-                str(q.max_current),
-                str(q.calibration),
-                str(q.calibration_saturations),
-            ]
-        )
-    return [
-        Block("h2", "Quantisation"),
-        Block(
-            "table",
-            headers=[
-                "bits",
-                "scales",
-                "weight rel. RMSE",
-                "clipped weights",
-                "max threshold error %",
-                "weights at 0 %",
-                "max current",
-                "calibration",
-                "calibration saturations",
-            ],
-            rows=rows,
+    columns = {
+        "bits": lambda r: str(r.bits),
+        "scales": lambda r: (
+            ("per-neuron" if r.quantisation.per_neuron else "per-tensor") + f", {r.quantisation.scale_method}"
         ),
-    ]
+        "weight rel. RMSE": lambda r: f"{r.quantisation.weight_relative_rmse or 0:.4f}",
+        "clipped weights": lambda r: str(r.quantisation.weights_clipped),
+        "max threshold error %": lambda r: f"{100 * (r.quantisation.threshold_max_relative_error or 0):.3f}",
+        "weights at 0 %": lambda r: f"{100 * r.weight_levels.zero_fraction:.1f}",
+        "max current": lambda r: str(r.quantisation.max_current),
+        "calibration": lambda r: str(r.quantisation.calibration),
+        "calibration saturations": lambda r: str(r.quantisation.calibration_saturations),
+    }
+    return [Block("h2", "Quantisation"), table(columns, run.bits)]
 
 
 def tolerance_blocks(report: VerifyReport) -> list[Block]:
-    rows, status = [], []
-    for index, run in enumerate(report.runs):
-        for result in run.bits:
-            for check in result.tolerance_checks:
-                percent = check.check not in ("saturations",)
-                value = f"{100 * check.value:.2f}" if percent else str(check.value)
-                applied = check.applied_limit
-                limit = f"{100 * applied:.2f}" if percent else f"{applied:g}"
-                if applied != check.limit:
-                    limit += f" (1 query; set {100 * check.limit:.2f})"
-                rows.append(
-                    [network_label(run, index), f"{result.bits}", check.what, value, limit, verdict(check.passed)]
-                )
-                status.append("pass" if check.passed else "fail")
+    def value(check: Any, number: float) -> str:
+        return str(number) if check.check == "saturations" else f"{100 * number:.2f}"
+
+    def limit(check: Any) -> str:
+        shown = f"{check.applied_limit:g}" if check.check == "saturations" else f"{100 * check.applied_limit:.2f}"
+        return shown + (f" (1 query; set {100 * check.limit:.2f})" if check.applied_limit != check.limit else "")
+
+    checks = [(n, r, c) for n, _, r in results(report) for c in r.tolerance_checks]
+    columns = {
+        "network": lambda i: i[0],
+        "bits": lambda i: str(i[1].bits),
+        "check": lambda i: i[2].what,
+        "value": lambda i: value(i[2], i[2].value),
+        "limit": lambda i: limit(i[2]),
+        "verdict": lambda i: verdict(i[2].passed),
+    }
     meaning = "; ".join(f"{k}: {TOLERANCE_MEANING[k]}" for k in TOLERANCE_MEANING)
     return [
         Block("h2", "Tolerance checks"),
@@ -539,33 +429,34 @@ def tolerance_blocks(report: VerifyReport) -> list[Block]:
             "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
             f"Keys — {meaning}.",
         ),
-        Block("table", headers=["network", "bits", "check", "value", "limit", "verdict"], rows=rows, status=status),
+        table(columns, checks, lambda i: "pass" if i[2].passed else "fail"),
     ]
 
 
 def provenance_blocks(report: VerifyReport) -> list[Block]:
-    rows = []
-    for index, run in enumerate(report.runs):
-        rows.append(
-            [
-                network_label(run, index),
-                str(run.seed),
-                run.checkpoint_sha256[:16],
-                str(run.checkpoint_data.get("source")),
-                f"{run.n_queries}",
-                str(run.export_dir or "-"),
-            ]
-        )
+    columns = {
+        "network": lambda i: network_label(report.runs[i], i),
+        "seed": lambda i: str(report.runs[i].seed),
+        "checkpoint sha256": lambda i: report.runs[i].checkpoint_sha256[:16],
+        "trained on": lambda i: data_label(report.runs[i].checkpoint_data),
+        "evaluated on": lambda i: f"{data_label(report.settings)}, '{report.runs[i].query}'",
+        "queries": lambda i: str(report.runs[i].n_queries),
+        "exports": lambda i: str(report.runs[i].export_dir or "-"),
+    }
     if report.command:
         text = " ".join(map(one_line, report.command))
     else:
         text = "\n".join(" ".join(map(one_line, c)) for c in report.commands or () if c) or "-"
+
+    def dump(title: str, data: Mapping) -> Block:
+        return Block("pre", json.dumps(dict(data), indent=2, sort_keys=True), title=title)
+
     return [
         Block("h2", "Networks"),
-        Block("table", headers=["network", "seed", "checkpoint sha256", "data", "queries", "exports"], rows=rows),
+        table(columns, range(len(report.runs))),
         Block("h2", "Provenance"),
         Block("pre", "command: " + text),
-        Block("pre", json.dumps(dict(report.settings), indent=2, sort_keys=True), title="settings"),
-        Block("pre", json.dumps(dict(report.runs[0].config), indent=2, sort_keys=True), title="config (first network)"),
-        Block("pre", json.dumps(dict(report.versions), indent=2, sort_keys=True), title="versions"),
+        dump("settings", report.settings),
+        dump("config (first network)", report.runs[0].config),
+        dump("versions", report.versions),
     ]

@@ -8,7 +8,7 @@ from typing import Any
 from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import MeanStd
 
-from ..results import ConformanceResult, PairedCheck, VerifiedRun
+from ..results import BitsResult, ConformanceResult, PairedCheck, VerifiedRun, VerifyReport
 
 METRIC_TITLES = {"accuracy": "Accuracy", "p_at_100r": "P@100R", "r_at_100p": "R@100P", "auc_pr": "AUC-PR"}
 
@@ -27,12 +27,18 @@ def ms(summary: MeanStd | None, *, percent: bool = True, signed: bool = False, d
     return mean if summary.n <= 1 else f"{mean} ± {scale * (summary.std or 0.0):.{digits}f}"
 
 
+def data_label(data: Mapping[str, Any]) -> str:
+    """ "DATA (selection)" of a ``{data or source, subset, places}`` mapping ("-" when it names no data)."""
+    source = data.get("data") or data.get("source")
+    if not source:
+        return "-"
+    selection = data.get("subset") or (f"places {data['places']}" if data.get("places") else "all places")
+    return f"{source} ({selection})"
+
+
 def data_note(settings: Mapping[str, Any]) -> str:
     """ " from DATA (selection)" when the settings name the data."""
-    if not settings.get("data"):
-        return ""
-    selection = settings.get("subset") or (f"places {settings['places']}" if settings.get("places") else "all places")
-    return f" from {settings['data']} ({selection})"
+    return f" from {data_label(settings)}" if settings.get("data") else ""
 
 
 def strategy_title(strategy: str) -> str:
@@ -110,12 +116,65 @@ def verdict_counts(checks: Sequence[PairedCheck]) -> str:
 _ORDER = ("fails", "undecided", "not judged", "holds")
 
 
+def exact_counts(results: Sequence[ConformanceResult]) -> str:
+    """ "37/37": the exact rows (any difference fails) that are identical, summed over ``results``."""
+    return f"{sum(r.n_identical for r in results)}/{sum(r.n_exact for r in results)}"
+
+
+def tolerance_counts(results: Sequence[ConformanceResult]) -> str:
+    """ "2/2": the tolerance rows (float consumers) within their stated agreement; "-" when there are none."""
+    total = sum(r.n_tolerance for r in results)
+    return f"{sum(r.n_within_tolerance for r in results)}/{total}" if total else "-"
+
+
 def cross_counts(results: Sequence[ConformanceResult]) -> str:
-    """ "37/37 exact, 2/2 within tolerance": the exact rows that are identical, and the tolerance rows (float
-    consumers) within their stated agreement, summed over ``results``; the terminal and the report show this."""
-    exact = f"{sum(r.n_identical for r in results)}/{sum(r.n_exact for r in results)} exact"
-    tolerance = sum(r.n_tolerance for r in results)
-    return exact + (f", {sum(r.n_within_tolerance for r in results)}/{tolerance} within tolerance" if tolerance else "")
+    """ "37/37 exact, 2/2 within tolerance" (:func:`exact_counts`, :func:`tolerance_counts`) on one line."""
+    tolerance = tolerance_counts(results)
+    return f"{exact_counts(results)} exact" + (f", {tolerance} within tolerance" if tolerance != "-" else "")
+
+
+#: The verdict table's columns (key, title), the same in the terminal, report.md and report.html: exact rows
+#: and tolerance rows (float consumers) in columns of their own.
+VERDICT_COLUMNS = (
+    ("network", "network"),
+    ("bits", "bits"),
+    ("verdict", "verdict"),
+    ("paired", "paired checks"),
+    ("exact", "exact rows identical"),
+    ("tolerance", "tolerance rows within"),
+    ("accuracy", "worst accuracy Δ k=1 (pts)"),
+    ("r_at_100p", "R@100P Δ W+Prob (pts)"),
+    ("winner", "same winner %"),
+    ("saturations", "saturations"),
+)
+
+
+def results(report: VerifyReport) -> list[tuple[str, VerifiedRun, BitsResult]]:
+    """(network label, network, its result at one bit width) of every network and bit width, in order."""
+    return [(network_label(run, i), run, result) for i, run in enumerate(report.runs) for result in run.bits]
+
+
+def verdict_cells(label: str, run: VerifiedRun, result: BitsResult) -> dict[str, str]:
+    """One network's bit width as the verdict table's cells (:data:`VERDICT_COLUMNS`)."""
+    top = max(run.ks)
+
+    def delta(strategy: str, k: int, metric: str) -> float:
+        row = result.row(strategy, k)
+        return 0.0 if row.delta is None else row.delta.get(metric)
+
+    cross = [result.cross_implementation]
+    return {
+        "network": label,
+        "bits": str(result.bits),
+        "verdict": result.verdict,
+        "paired": verdict_counts(result.paired) or "-",
+        "exact": exact_counts(cross),
+        "tolerance": tolerance_counts(cross),
+        "accuracy": signed_pct(min(delta(s, 1, "accuracy") for s in STRATEGIES)),
+        "r_at_100p": f"{signed_pct(delta('wprob', top, 'r_at_100p'))} (k={top})",
+        "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
+        "saturations": str(result.spike_level.saturations),
+    }
 
 
 def tolerance_differences(result: ConformanceResult) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import textwrap
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,70 +34,93 @@ def png(fig: Any) -> bytes:
     return buffer.getvalue()
 
 
-def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[list[int], list[float], list[float]]:
-    xs, means, stds = [], [], []
-    for bits in summary.bits:
-        row = bits.row(*key)
-        if row is not None and row.values[metric].mean is not None:
-            xs.append(bits.bits)
-            means.append(100 * (row.values[metric].mean or 0.0))
-            stds.append(100 * (row.values[metric].std or 0.0))
-    return xs, means, stds
+def merged(series: Sequence[tuple[str, Any]]) -> list[tuple[str, Any, int]]:
+    """``(label, data)`` series with identical data drawn once, labelled "A = B" (drawn apart, the later would
+    hide the earlier): ``(label, data, index of its first series)``, in first-seen order."""
+    groups: list[tuple[list[str], Any, int]] = []
+    for index, (label, data) in enumerate(series):
+        same = next((group for group in groups if group[1] == data), None)
+        if same is None:
+            groups.append(([label], data, index))
+        else:
+            same[0].append(label)
+    return [(" = ".join(labels), data, index) for labels, data, index in groups]
+
+
+def percent(value: MeanStd) -> tuple[float, float]:
+    """(mean %, std %) of a fraction's mean ± std (0 where unknown)."""
+    return 100 * (value.mean or 0.0), 100 * (value.std or 0.0)
+
+
+def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[tuple[int, float, float], ...]:
+    """(bits, mean %, std %) of one readout's metric at every bit width that has it."""
+    rows = ((bits.bits, bits.row(*key)) for bits in summary.bits)
+    return tuple(
+        (b, *percent(r.values[metric])) for b, r in rows if r is not None and r.values[metric].mean is not None
+    )
+
+
+def bars(ax: Any, x: np.ndarray, values: Sequence[tuple[float, float]], width: float, **style: Any) -> None:
+    """Bars of (mean, std), with error bars only when a std is > 0 (one network has none)."""
+    means, stds = (list(column) for column in zip(*values, strict=True)) if values else ([], [])
+    ax.bar(x, means, width, yerr=stds if any(stds) else None, capsize=3, **style)
 
 
 def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
+    """Each metric vs bit width, a line per readout over its float value (dashed); with one bit width, bars
+    (float and quantised side by side per readout, the top 15 % above the highest) instead of single points
+    on a wide axis."""
     plt = pyplot()
     keys = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    markers = "osD^vP*X"
     bits = sorted({b.bits for b in summary.bits})
     for ax, metric in zip(axes.ravel(), METRICS, strict=True):
-        for index, key in enumerate(keys):
-            colour = colours[index % len(colours)]
-            xs, means, stds = _series(summary, key, metric)
-            if xs:
-                ax.errorbar(
-                    xs,
-                    means,
-                    yerr=stds,
-                    marker=markers[index % len(markers)],
-                    capsize=3,
-                    color=colour,
-                    label=row_label(*key),
-                    markersize=8 - index,
-                    alpha=0.9,
-                )
-            mean = float_rows[key].values[metric].mean if key in float_rows else None
-            if mean is not None:
-                ax.axhline(100 * mean, color=colour, linestyle="--", linewidth=1)
-        ax.set_title(METRIC_TITLES[metric])
-        ax.set_ylabel("%")
+        floats = {key: percent(row.values[metric]) for key, row in float_rows.items()}
+        series = [(row_label(*key), (_series(summary, key, metric), floats.get(key))) for key in keys]
+        if len(bits) == 1:
+            shown = [(label, points[0][1:], ref or (0.0, 0.0)) for label, (points, ref) in series if points]
+            x = np.arange(len(shown))
+            bars(ax, x - 0.2, [ref for *_, ref in shown], 0.4, color="0.75", label="float")
+            bars(ax, x + 0.2, [value for _, value, _ in shown], 0.4, color=colours[0], label=f"{bits[0]}-bit")
+            ax.set_xticks(x, [label for label, *_ in shown], fontsize=8)
+            top = max((max(value[0], ref[0]) for _, value, ref in shown), default=0.0)
+            ax.set_ylim(0, min(max(5.0, 1.15 * top), 102.0))
+        else:
+            for label, (points, ref), index in merged(series):
+                colour = colours[index % len(colours)]
+                if points:
+                    xs, means, stds = zip(*points, strict=True)
+                    ax.errorbar(
+                        xs, means, yerr=stds, capsize=3, color=colour, label=label, marker="osD^vP*X"[index % 8]
+                    )
+                if ref is not None:
+                    ax.axhline(ref[0], color=colour, linestyle="--", linewidth=1)
+            ax.set_xticks(bits)
+            ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
+            ax.set_xlabel("weight bits (dashed: float)")
+        ax.legend(fontsize=7)
+        ax.set(title=METRIC_TITLES[metric], ylabel="%")
         ax.grid(alpha=0.3)
-        ax.set_xticks(bits)
-        ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
-    for ax in axes[1]:
-        ax.set_xlabel("weight bits (dashed: float)")
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, frameon=False)
+    fig.tight_layout()
     return png(fig)
 
 
 def plot_pr(run: VerifiedRun) -> bytes:
+    """W+Prob's PR curves per k: float (black) and each bit width; identical curves drawn once, "A = B"."""
     plt = pyplot()
     names = list(run.float.pr_curves)
     fig, axes = plt.subplots(1, len(names), figsize=(5 * len(names), 4.2), squeeze=False)
     cmap = plt.get_cmap("viridis")
     n = max(len(run.bits) - 1, 1)
     for ax, name in zip(axes[0], names, strict=True):
-        curve = run.float.pr_curves[name]
-        ax.step(curve.recall, curve.precision, where="post", color="black", linewidth=2, label="float")
-        for index, result in enumerate(run.bits):
-            if name in result.pr_curves:
-                c = result.pr_curves[name]
-                ax.step(c.recall, c.precision, where="post", color=cmap(index / n), label=f"{result.bits}-bit")
+        curves = [("float", run.float.pr_curves[name])]
+        curves += [(f"{r.bits}-bit", r.pr_curves[name]) for r in run.bits if name in r.pr_curves]
+        series = [(label, (tuple(c.recall), tuple(c.precision))) for label, c in curves]
+        for label, (recall, precision), index in merged(series):
+            style = {"color": "black", "linewidth": 2} if index == 0 else {"color": cmap((index - 1) / n)}
+            ax.step(recall, precision, where="post", label=label, **style)
         ax.set_xlim(0, 1.02)
         ax.set_ylim(0, 1.05)
         ax.set_xlabel("recall")
@@ -108,6 +132,8 @@ def plot_pr(run: VerifiedRun) -> bytes:
 
 
 def plot_modules(run: VerifiedRun) -> bytes:
+    """Per module: whole-route accuracy at k (float and each bit width) and the same-winner share; identical
+    series drawn once, "A = B"."""
     plt = pyplot()
     results = [result for result in run.bits if result.modules]
     modules = results[0].modules
@@ -115,20 +141,21 @@ def plot_modules(run: VerifiedRun) -> bytes:
     fig, axes = plt.subplots(2, 1, figsize=(max(6.0, 0.35 * len(modules) + 2), 5.2), sharex=True)
     cmap = plt.get_cmap("viridis")
     n = max(len(results) - 1, 1)
-    for index, result in enumerate(results):
-        color = cmap(index / n)
-        axes[0].plot(x, [100 * m.accuracy_k for m in result.modules], ".-", color=color, label=f"{result.bits}-bit")
-        axes[1].plot(x, [100 * m.winner_agreement for m in result.modules], ".-", color=color)
-    # float last, open circles and dashed: a bit width equal to it stays visible inside them
-    float_accuracy = [100 * m.float_accuracy_k for m in modules]
-    axes[0].plot(x, float_accuracy, "o--", color="black", markerfacecolor="none", markersize=8, label="float")
+    accuracy = [("float", tuple(100 * m.float_accuracy_k for m in modules))]
+    accuracy += [(f"{r.bits}-bit", tuple(100 * m.accuracy_k for m in r.modules)) for r in results]
+    winner = [(f"{r.bits}-bit", tuple(100 * m.winner_agreement for m in r.modules)) for r in results]
+    for ax, series, first in ((axes[0], accuracy, 1), (axes[1], winner, 0)):
+        for label, values, index in merged(series):
+            if index < first:  # float: black, open circles, dashed
+                ax.plot(x, values, "o--", color="black", markerfacecolor="none", markersize=8, label=label)
+            else:
+                ax.plot(x, values, ".-", color=cmap((index - first) / n), label=label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, ncol=len(series), loc="lower center", bbox_to_anchor=(0.5, 1.02))
     axes[0].set_ylabel(f"accuracy k={modules[0].k} %")
     axes[1].set_ylabel("same winner %")
     axes[1].set_xlabel("module (region of consecutive places)")
     axes[1].xaxis.set_major_locator(plt.MaxNLocator(integer=True))  # module numbers, never 0.5
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=len(results) + 1, loc="lower center", bbox_to_anchor=(0.5, 1.02))
     fig.tight_layout()
     return png(fig)
 
@@ -175,31 +202,37 @@ def plot_weights(run: VerifiedRun) -> bytes:
 
 
 def plot_spikes(report: VerifyReport) -> bytes:
+    """Left: the agreements vs bit width (bars with one bit width; identical series drawn once, "A = B").
+    Right: the per-query count correlations per bit width, all networks pooled."""
     plt = pyplot()
     summary = report.summary
     bits = [b.bits for b in summary.bits]
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
-    series: tuple[tuple[str, list[MeanStd]], ...] = (
+    agreements: tuple[tuple[str, list[MeanStd]], ...] = (
         ("same winner per step", [b.winner_agreement for b in summary.bits]),
         ("top-1 agreement W+Prob k=1", [b.top1_agreement["wprob"] for b in summary.bits]),
         ("mean count correlation", [b.count_correlation for b in summary.bits]),
     )
-    for label, values in series:
-        left.errorbar(
-            bits,
-            [100 * (v.mean or 0.0) for v in values],
-            yerr=[100 * (v.std or 0.0) for v in values],
-            marker="o",
-            capsize=3,
-            label=label,
-        )
-    left.set_xticks(sorted(bits))
-    left.set_xlim(max(bits) + 0.5, min(bits) - 0.5)
-    left.set_xlabel("weight bits")
+    series = [
+        (label, (tuple(100 * (v.mean or 0.0) for v in values), tuple(100 * (v.std or 0.0) for v in values)))
+        for label, values in agreements
+    ]
+    if len(bits) == 1:
+        shown = merged(series)
+        x = np.arange(len(shown))
+        bars(left, x, [(m[0], sd[0]) for _, (m, sd), _ in shown], 0.6)
+        left.set_xticks(x, [textwrap.fill(label, 18) for label, _, _ in shown], fontsize=8)
+        left.set_xlabel(f"{bits[0]}-bit")
+    else:
+        for label, (means, stds), _ in merged(series):
+            left.errorbar(bits, means, yerr=stds, marker="o", capsize=3, label=label)
+        left.set_xticks(sorted(bits))
+        left.set_xlim(max(bits) + 0.5, min(bits) - 0.5)
+        left.set_xlabel("weight bits")
+        left.legend(fontsize=8, loc="lower left")
     left.set_ylabel("%")
     left.set_ylim(0, 102)
     left.grid(alpha=0.3)
-    left.legend(fontsize=8, loc="lower left")
     pooled = [
         [c for run in report.runs for r in run.bits if r.bits == b for c in r.spike_level.count_correlation]
         for b in bits
@@ -210,4 +243,21 @@ def plot_spikes(report: VerifyReport) -> bytes:
     right.set_ylabel("per-query spike-count correlation")
     right.set_ylim(-0.05, 1.05)
     right.grid(alpha=0.3)
+    return png(fig)
+
+
+def plot_precision_recall(
+    recall: np.ndarray, precision: np.ndarray, target: float, chosen: tuple[float, float, float] | None, title: str
+) -> bytes:
+    """A calibration curve (``localize --calibrate``): precision vs recall, a point per threshold, the target
+    precision dashed and the chosen (recall, precision, threshold) marked."""
+    fig, ax = pyplot().subplots(figsize=(5, 4))
+    ax.plot(recall, precision, ".-", color="black", label="calibration (a point per threshold)")
+    ax.axhline(target, color="tab:red", linestyle="--", linewidth=1, label="target precision")
+    if chosen is not None:
+        ax.plot([chosen[0]], [chosen[1]], "o", color="tab:red", label=f"operating point ({chosen[2]:.4g})")
+    ax.set(xlim=(0, 1.02), ylim=(0, 1.05), xlabel="recall", ylabel="precision")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
     return png(fig)

@@ -18,6 +18,7 @@ from .load import REPORT_JSON
 REPORT_MD = "report.md"
 REPORT_HTML = "report.html"
 PLOTS_DIR = "plots"
+HEADINGS = ("h1", "h2", "h3")
 
 
 #: Markdown's inline control characters, escaped in table cells (which hold stored strings: labels, paths).
@@ -41,31 +42,19 @@ def render_markdown(blocks: Sequence[Block], plots_dir: str = PLOTS_DIR) -> str:
     for block in blocks:
         # one line each, with no HTML tag (a Markdown viewer would render a stored <script>)
         text, title = (one_line(value).replace("<", "&lt;") for value in (block.text, block.title))
-        if block.kind == "h1":
-            lines += [f"# {text}", ""]
-        elif block.kind == "h2":
-            lines += [f"## {text}", ""]
-        elif block.kind == "h3":
-            lines += [f"### {text}", ""]
+        if block.kind in HEADINGS:
+            lines += ["#" * int(block.kind[1]) + f" {text}", ""]
         elif block.kind == "p":
             lines += [text, ""]
         elif block.kind == "pre":
             mark = fence(block.text)
             lines += ([f"{title}:", ""] if block.title else []) + [mark, block.text, mark, ""]
         elif block.kind == "table":
-            lines.append("| " + " | ".join(one_line(h).replace("|", "\\|") for h in block.headers) + " |")
-            lines.append("|" + "---|" * len(block.headers))
-            lines += ["| " + " | ".join(markdown_cell(c) for c in row) + " |" for row in block.rows]
-            lines.append("")
+            head = "| " + " | ".join(one_line(h).replace("|", "\\|") for h in block.headers) + " |"
+            rows = ["| " + " | ".join(markdown_cell(c) for c in row) + " |" for row in block.rows]
+            lines += [head, "|" + "---|" * len(block.headers), *rows, ""]
         elif block.kind == "figure":
-            lines += [
-                f"### {title}",
-                "",
-                f"![{markdown_cell(title)}]({plots_dir}/{block.name})",
-                "",
-                f"*{text}*",
-                "",
-            ]
+            lines += [f"### {title}", "", f"![{markdown_cell(title)}]({plots_dir}/{block.name})", "", f"*{text}*", ""]
     return "\n".join(lines)
 
 
@@ -74,7 +63,7 @@ body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; mar
        color: #1d1d1f; line-height: 1.45; padding: 0 1em; }
 h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
 h2 { margin-top: 1.8em; border-bottom: 1px solid #ccc; }
-table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; }
+table { border-collapse: collapse; margin: .6em 0 1em; font-size: 13px; display: block; overflow-x: auto; }
 th, td { border: 1px solid #ccc; padding: 3px 8px; text-align: right; }
 th { background: #f0f0f3; }
 td:first-child, th:first-child, td.t { text-align: left; }
@@ -84,22 +73,16 @@ tr.fail td { background: #fbe3e3; }
 figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 13px; color: #555; }
-pre { background: #f6f6f8; padding: .6em; overflow-x: auto; font-size: 12px; }
-.verdict-pass { color: #17701f; } .verdict-fail { color: #b00020; }
+pre { background: #f6f6f8; padding: .6em; font-size: 12px; white-space: pre-wrap; overflow-wrap: anywhere; }
+.verdict-HOLDS { color: #17701f; } .verdict-FAILS { color: #b00020; } .verdict-UNDECIDED { color: #9a5b00; }
 """
 
 
 def _html_inline(text: str) -> str:
-    escaped = html.escape(text)
-    parts = escaped.split("**")
-    out = []
-    for index, part in enumerate(parts):
-        out.append(f"<strong>{part}</strong>" if index % 2 else part)
-    return (
-        "".join(out)
-        .replace("<strong>Verdict: PASS</strong>", '<strong class="verdict-pass">Verdict: PASS</strong>')
-        .replace("<strong>Verdict: FAIL</strong>", '<strong class="verdict-fail">Verdict: FAIL</strong>')
-    )
+    """A paragraph's text escaped, its ``**bold**`` runs as <strong>, the verdict's coloured by its class."""
+    parts = html.escape(text).split("**")
+    bold = "".join(f"<strong>{part}</strong>" if index % 2 else part for index, part in enumerate(parts))
+    return re.sub(r"<strong>(Verdict: (\w+))</strong>", r'<strong class="verdict-\2">\1</strong>', bold)
 
 
 NUMERIC = re.compile(r"^[-+]?[\d./]+( ± [\d.]+)?( \([-+]?[\d.]+( ± [\d.]+)?\))?( exact)?$")
@@ -115,7 +98,7 @@ def _cell(value: object) -> str:
 def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verification report") -> str:
     body: list[str] = []
     for block in blocks:
-        if block.kind in ("h1", "h2", "h3"):
+        if block.kind in HEADINGS:
             body.append(f"<{block.kind}>{html.escape(block.text)}</{block.kind}>")
         elif block.kind == "p":
             body.append(f"<p>{_html_inline(block.text)}</p>")
