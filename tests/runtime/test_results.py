@@ -66,9 +66,17 @@ def _without_added(written, old):
 
 
 def test_old_report_is_written_back_byte_for_byte(old_json):
+    """...but a float consumer's row that compared nothing (the consumer refused the file), which report_v1
+    marked ``equal: true`` for "passed", is written back ``equal: false`` (issue 32)."""
     report = VerifyReport.from_dict(old_json)
     written = report.to_dict()
-    assert json.dumps(_without_added(written, old_json), indent=1) == json.dumps(old_json, indent=1)
+    expected = copy.deepcopy(old_json)
+    checks = [c for run in expected["runs"] for b in run["bits"] for c in b["cross_implementation"]["checks"]]
+    refused = [c for c in checks if c["kind"].startswith("decision agreement") and c["n_elements"] is None]
+    assert refused
+    for row in refused:
+        row["equal"] = False
+    assert json.dumps(_without_added(written, old_json), indent=1) == json.dumps(expected, indent=1)
     assert written["verdict"] == ("holds" if old_json["passed"] else "fails")  # no paired table in an old file
 
 
@@ -178,3 +186,32 @@ def test_tolerance_check_and_conformance_keys():
     ]
     assert ConformanceResult.from_dict(result.with_files("onnx", ["m.onnx"]).to_dict()).files == {"onnx": ("m.onnx",)}
     assert VerifiedRun.__dataclass_fields__["float"].name == "float"
+
+
+def test_a_tolerance_row_never_claims_equality_it_did_not_measure(old_json):
+    """Issue 32: a float consumer's tolerance row is ``equal`` only when it compared decisions, none differ and
+    no raster entry differs; report_v1 wrote ``equal: true`` meaning "passed" (a consumer that refused the file
+    included), and such a file still loads, with the row's equal corrected and everything else as written."""
+    row = Comparison(
+        "NIR read back: eulerlif + readout rule", "eulerlif", "network", "decision agreement >= 95.0%", True,
+        "97.7% of 128 decisions agree (tolerance 95.0%); 2940 of 40960 raster entries differ after the rule",
+        n_differences=3, n_elements=128, tolerance=0.95,
+    )  # fmt: skip
+    assert not row.equal and row.passed and row.to_dict()["equal"] is False
+    raster_only = dataclasses.replace(row, equal=True, n_differences=0)
+    assert not raster_only.equal and raster_only.passed  # decisions agree, 2940 raster entries do not
+    agree = "100.0% of 128 decisions agree; 0 of 40960 raster entries differ after the rule"
+    identical = dataclasses.replace(row, equal=True, n_differences=0, detail=agree)
+    assert identical.equal
+    refused = dataclasses.replace(
+        row, equal=True, n_differences=None, n_elements=None, detail="not gated: the consumer refuses"
+    )
+    assert not refused.equal and refused.passed
+    exact = Comparison("ONNX: raster", "intsim", "onnx", "exact", True, "identical", 0, 10)
+    assert exact.equal  # an exact row keeps what it measured
+    checks = [c for run in old_json["runs"] for b in run["bits"] for c in b["cross_implementation"]["checks"]]
+    older = [c for c in checks if c["kind"].startswith("decision agreement")]
+    assert older and all(c["equal"] for c in older)  # what report_v1 wrote
+    loaded = [Comparison.from_dict(c) for c in older]
+    assert [c.equal for c in loaded] == [c["n_differences"] == 0 for c in older]  # the refused rows: False
+    assert not all(c.equal for c in loaded) and all(c.passed for c in loaded)

@@ -211,6 +211,12 @@ class Comparison(JsonDataclass):
         *("n_differences", "first_difference", "detail"),
     )
 
+    def __post_init__(self) -> None:
+        """A tolerance row claims ``equal`` only for what it measured identical (report_v1 wrote ``equal: true``
+        for "passed", a consumer that refused the file included): see :func:`_tolerance_row_identical`."""
+        if self.tolerance is not None and self.equal and not _tolerance_row_identical(self):
+            object.__setattr__(self, "equal", False)
+
     @property
     def passed(self) -> bool:
         """Exact rows: identical. Tolerance rows: the agreeing share 1 - n_differences / n_elements reaches the
@@ -225,6 +231,17 @@ class Comparison(JsonDataclass):
     def difference(self) -> float | None:
         """A tolerance row's measured difference: the share of decisions that differ (None when none compared)."""
         return None if not self.n_elements else (self.n_differences or 0) / self.n_elements
+
+
+#: How a float consumer's row says how many raster entries differ ("...; 2940 of 40960 raster entries differ ...").
+_RASTER_DIFFERENCES = re.compile(r"\b(\d+) of \d+ raster entries differ")
+
+
+def _tolerance_row_identical(row: Comparison) -> bool:
+    """A tolerance row's outputs are identical when it compared decisions (``n_elements`` > 0), none differ
+    (``n_differences`` = 0) and its detail names no differing raster entry."""
+    counted = _RASTER_DIFFERENCES.search(row.detail)
+    return bool(row.n_elements) and row.n_differences == 0 and (counted is None or counted.group(1) == "0")
 
 
 def _family(data: Mapping[str, Any]) -> str:
