@@ -106,6 +106,11 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
     )
     assert max(r["accuracy"] for r in rows) > 0 and dicts(by_index) != rows  # the index score was the wrong one
 
+    predictions = tmp_path / "p.jsonl"  # issue 31: the truth column holds the file's places, not the frame index
+    assert main(["evaluate", str(ckpt_path), "--query", query, "--k", "1,3", "--predictions", str(predictions)]) == 0
+    lines = [json.loads(line) for line in predictions.read_text().splitlines()]
+    assert {line["query"]: line["truth"] for line in lines} == {q: [q + OFFSET] for q in range(N_QUERY)}
+    assert all(line["correct"] == (line["place_id"] in line["truth"]) for line in lines)
     assert main(["evaluate", str(ckpt_path), "--query", query, "--match-window", "2", "--quiet"]) == 2
     assert "says which reference frames match" in capsys.readouterr().err
 

@@ -11,9 +11,10 @@ import pytest
 from vprsnn_export.cli import main
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
+from vprsnn_export.readout.metrics import MatchTruth
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.evaluation import evaluate_float
-from vprsnn_export.runtime.predictions import network_predictions
+from vprsnn_export.runtime.predictions import network_predictions, predictions
 
 
 def test_each_column_reproduces_its_metric_row(trained, tmp_path):
@@ -47,8 +48,31 @@ def test_evaluate_writes_predictions(trained, tmp_path, capsys):
     rows = json.loads(capsys.readouterr().out)["results"]
     lines = [json.loads(line) for line in out.read_text().splitlines()]
     wprob3 = [line for line in lines if (line["strategy"], line["k"]) == ("wprob", 3)]
-    assert len(wprob3) == 24 and all(line["truth"] == line["query"] for line in wprob3)
+    assert len(wprob3) == 24 and all(line["truth"] == [line["query"]] for line in wprob3)
     expected = next(r["accuracy"] for r in rows if (r["strategy"], r["k"]) == ("wprob", 3))
     assert np.mean([line["correct"] for line in wprob3]) == pytest.approx(expected)
     assert main([*argv, "--predictions", str(tmp_path / "p.txt")]) == 2
     assert ".csv or .jsonl" in capsys.readouterr().err
+
+
+def test_the_truth_column_holds_the_ground_truths_places_not_the_frame_index(tmp_path):
+    """Issue 31: with a ground truth, a query's truth is the reference place ids the file names for it (several,
+    one, or none: empty, said so), never the query's frame index; ``correct`` is membership in it."""
+    matrix = np.zeros((6, 3), dtype=bool)
+    matrix[[4, 5], 0] = True  # query 0 matches references 4 and 5
+    matrix[1, 1] = True
+    options = SequenceOptions(ks=(1,), tolerance=MatchTruth(matrix, "gt.npy"))
+    scores = {name: np.eye(6)[[5, 2, 3]] for name in ("standard", "weighted", "wprob")}
+    found = predictions(scores, np.arange(6), np.arange(3), options)
+    assert [t.tolist() for t in found.truth] == [[4, 5], [1], []]
+    rows = [r for r in found.rows() if r["strategy"] == "wprob"]
+    assert [(r["truth"], r["place_id"], r["correct"]) for r in rows] == [
+        ([4, 5], 5, True),
+        ([1], 2, False),
+        ([], 3, False),
+    ]
+    assert [r["note"] for r in rows] == ["", "", "the ground truth (gt.npy) names no reference place for this query"]
+    lines = list(csv.DictReader(found.write(tmp_path / "p.csv").open()))
+    assert [line["truth"] for line in lines if line["strategy"] == "wprob"] == ["4 5", "1", ""]
+    aligned = predictions(scores, np.arange(6), np.array([5, 2, 0]), SequenceOptions(ks=(1,), tolerance=0))
+    assert [r["truth"] for r in aligned.rows() if r["strategy"] == "wprob"] == [[5], [2], [0]]

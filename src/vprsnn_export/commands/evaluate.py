@@ -57,8 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--predictions",
         metavar="FILE",
-        help="also write every query's decision per strategy and k (query, truth, place_id, confidence, correct) "
-        "to FILE: .csv or .jsonl",
+        help="also write every query's decision per strategy and k (query, truth: the ground truth's place ids, "
+        "place_id, confidence, correct, note) to FILE: .csv or .jsonl",
     )
     add_runtime_options(parser)
     parser.add_argument(

@@ -5,10 +5,14 @@ For query ``q`` (in stream order), strategy ``s`` and sequence length ``k``:
 .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}^{(s, k)}_{ql}, \\quad c_q = \\text{confidence of } \\hat l_q,
           \\quad \\text{correct}_q = |\\mathrm{id}(\\hat l_q) - \\text{truth}_q| \\le \\text{match window}
 
-(with a data set's ground-truth file, ``correct_q = GT[id(l_q), truth_q]``, truth_q being the query's own
-frame index: ``readout.metrics.MatchTruth``), with the very scores the metric rows are computed from (``runtime.evaluation``: every strategy
-at k = 1, W+Prob aggregated at each k > 1), so the accuracy of a (strategy, k) column of
-:class:`Predictions` equals that row's accuracy.
+(with a data set's ground-truth file, ``correct_q = GT[id(l_q), q]``: ``readout.metrics.MatchTruth``), with the
+very scores the metric rows are computed from (``runtime.evaluation``: every strategy at k = 1, W+Prob
+aggregated at each k > 1), so the accuracy of a (strategy, k) column of :class:`Predictions` equals that row's
+accuracy.
+
+The ``truth`` column holds the query's true place ids: its own place id on index-aligned data, and with a
+ground truth the reference place ids the file names for it (``{r : GT[r, q]}``, several or none: then empty,
+and ``note`` says why), never the frame index. JSON lines write it as a list, CSV as ids separated by spaces.
 """
 
 from __future__ import annotations
@@ -27,13 +31,13 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text
-from vprsnn_export.readout.metrics import is_correct, predicted_place_ids
+from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct, predicted_place_ids
 from vprsnn_export.readout.scoring import Readout, columns
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 
 FORMATS = (".csv", ".jsonl")
-FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct")
+FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct", "note")
 
 
 @dataclass(frozen=True)
@@ -51,8 +55,9 @@ class Decided:
 class Predictions:
     """Every query's decision under every strategy and k; ``truth`` None when the queries are unlabelled."""
 
-    truth: np.ndarray | None  # (Q,) int64 true place ids
+    truth: tuple[np.ndarray, ...] | None  # per query, the int64 place ids a correct decision names
     decided: tuple[Decided, ...]
+    source: str = ""  # the ground-truth file the truth comes from ("": the queries' own place ids)
 
     @property
     def n_queries(self) -> int:
@@ -70,15 +75,19 @@ class Predictions:
         for q in range(self.n_queries):
             for entry in self.decided:
                 place = int(entry.place_id[q])
+                truth = None if self.truth is None else [int(r) for r in self.truth[q]]
                 out.append(
                     {
                         "query": q,
-                        "truth": None if self.truth is None else int(self.truth[q]),
+                        "truth": truth,
                         "strategy": entry.strategy,
                         "k": entry.k,
                         "place_id": None if place < 0 else place,
                         "confidence": float(entry.confidence[q]),
                         "correct": None if entry.correct is None else bool(entry.correct[q]),
+                        "note": f"the ground truth ({self.source}) names no reference place for this query"
+                        if truth == []
+                        else "",
                     }
                 )
         return out
@@ -88,6 +97,8 @@ class Predictions:
         writer = csv.DictWriter(buffer, fieldnames=FIELDS, lineterminator="\n")
         writer.writeheader()
         for row in self.rows():
+            truth = row["truth"]
+            row["truth"] = None if truth is None else " ".join(map(str, truth))
             writer.writerow({k: "" if v is None else v for k, v in row.items()})
         return buffer.getvalue()
 
@@ -116,8 +127,24 @@ def predictions(
         ids = predicted_place_ids(index, reference_place_ids)
         correct = None if query_place_ids is None else is_correct(ids, query_place_ids, options.tolerance)
         decided.append(Decided(strategy, k, np.asarray(ids.filled(-1), dtype=np.int64), confidence, correct))
-    truth = None if query_place_ids is None else np.asarray(query_place_ids, dtype=np.int64)
-    return Predictions(truth=truth, decided=tuple(decided))
+    if query_place_ids is None:
+        return Predictions(truth=None, decided=tuple(decided))
+    return Predictions(true_places(query_place_ids, options.tolerance), tuple(decided), _source(options.tolerance))
+
+
+def true_places(query_place_ids: np.ndarray, tolerance: Tolerance) -> tuple[np.ndarray, ...]:
+    """Each query's true place ids: ``{r : GT[r, q]}`` with a ground truth, else ``{q}`` (its own place id).
+
+    ``query_place_ids`` index the ground truth's columns (:func:`vprsnn_export.readout.metrics.truth_lookup`)."""
+    ids = np.asarray(query_place_ids, dtype=np.int64)
+    if not isinstance(tolerance, MatchTruth):
+        return tuple(ids[:, None])
+    queries, places = np.nonzero(tolerance.matrix[:, ids].T)  # row-major: queries ascending, places within each
+    return tuple(np.split(places.astype(np.int64), np.cumsum(np.bincount(queries, minlength=len(ids)))[:-1]))
+
+
+def _source(tolerance: Tolerance) -> str:
+    return tolerance.source if isinstance(tolerance, MatchTruth) else ""
 
 
 def network_predictions(
