@@ -18,9 +18,10 @@ from experiments.settings import Settings as Settings  # the experiments import 
 from experiments.settings import Variant as Variant
 from experiments.sourcehash import source_fingerprint
 from vprsnn_export.config import Config
-from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset, load_dataset, scoring_truth
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
+from vprsnn_export.errors import DataError
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
 from vprsnn_export.network.dynamics import FloatNetwork
@@ -34,12 +35,46 @@ from vprsnn_export.version import __version__
 CACHED_BY = ("experiments.common",)
 
 
-def load(settings: Settings, selection: str, cfg: Config) -> Dataset:
-    """``selection`` is "subset" (the 100-place subset) or "consecutive" (a run of places)."""
+def load(settings: Settings, selection: str, cfg: Config, places: str | None = None) -> Dataset:
+    """``selection`` is "subset" (the 100-place subset) or "consecutive" (a run of places: ``places``, by default
+    the settings'); the data set is checked to be scored by index (:func:`check_index_scored`), as every
+    experiment scores it."""
     traversals = [settings.reference, settings.query]
     if selection == "subset" and settings.subset:
-        return load_dataset(settings.data, traversals, cfg.preprocess, subset=settings.subset)
-    return load_dataset(settings.data, traversals, cfg.preprocess, places=settings.consecutive)
+        data = load_dataset(settings.data, traversals, cfg.preprocess, subset=settings.subset)
+    else:
+        data = load_dataset(settings.data, traversals, cfg.preprocess, places=places or settings.consecutive)
+    check_index_scored(data, settings.reference, settings.query)
+    return data
+
+
+def check_index_scored(data: Dataset, reference: str, query: str) -> None:
+    """The experiments score query frame ``j`` as reference place ``j`` (``data.place_ids`` shared by both
+    traversals). That is the data set's own scoring when it has no ground-truth file (a manifest, the
+    synthetic route, index-aligned folders) or when its file matches each selected query to exactly its
+    own index:
+
+    .. math:: \\mathrm{GT}[r, q] = [r = q] \\quad \\forall q \\in \\text{place ids}, \\forall r
+
+    Otherwise DataError naming the file (evaluate, simulate and verify score against it), and naming the
+    folder when the traversals are not index-aligned and no file says how they match
+    (:func:`vprsnn_export.data.dataset.scoring_truth`): never an index score on data that is not index-aligned."""
+    truth = scoring_truth(data, [reference], query)
+    if truth is None:
+        return
+    ids = data.place_ids
+    expected = np.zeros((truth.matrix.shape[0], len(ids)), dtype=bool)
+    expected[ids, np.arange(len(ids))] = True
+    found = truth.matrix[:, ids]
+    if not np.array_equal(found, expected):
+        first = int(np.flatnonzero((found != expected).any(axis=0))[0])
+        matches = np.flatnonzero(found[:, first]).tolist()
+        raise DataError(
+            f"its query frame {int(ids[first])} matches reference frame(s) {matches}, but experiments score query "
+            f"frame j as reference place j: evaluate, simulate and verify score against this file (or give a place "
+            "manifest that puts each query under its reference's place id)",
+            truth.source,
+        )
 
 
 def provenance(settings: Settings, started: float) -> dict:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.config import Config, preset
-from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.dataset import Dataset
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.readout.scoring import (
@@ -45,6 +45,7 @@ from vprsnn_export.stats import mean_std
 from .common import (
     Settings,
     TimedCheckpoint,
+    load,
     pct,
     provenance,
     rescoped_checkpoint,
@@ -95,9 +96,7 @@ def route_config(settings: Settings, seed: int, module_size: int) -> Config:
 
 
 def route_data(settings: Settings, cfg: Config) -> Dataset:
-    return load_dataset(
-        settings.data, [settings.reference, settings.query], cfg.preprocess, places=route_settings(settings).consecutive
-    )
+    return load(settings, "consecutive", cfg, places=route_settings(settings).consecutive)
 
 
 def route_network(settings: Settings, seed: int, module_size: int) -> tuple[Config, Dataset, TimedCheckpoint]:

@@ -5,10 +5,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.stats import mean_std
 
-from .common import Settings, provenance, trained_checkpoint
+from .common import Settings, load, provenance, trained_checkpoint
 from .plots import line_plot
 from .query import evaluate_query
 
@@ -33,9 +32,7 @@ def run(settings: Settings) -> dict:
         windows = []
         for start in starts:
             cfg = settings.config(seed)
-            data = load_dataset(
-                settings.data, [settings.reference, settings.query], cfg.preprocess, places=f"{start}:{n}"
-            )
+            data = load(settings, "consecutive", cfg, places=f"{start}:{n}")
             ckpt = trained_checkpoint(settings, data, cfg, f"window{start}-{n}")
             result = evaluate_query(settings, ckpt, data, cfg, baselines=True)
             row = next(r for r in result.rows if r["strategy"] == "wprob")

@@ -10,6 +10,7 @@ from typing import Any
 
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.config import Config, preset
+from vprsnn_export.data.folders import is_folder_dataset
 from vprsnn_export.errors import DataError
 
 #: The Nordland data folder as this repository's checkout keeps it, relative to the repository root: the
@@ -75,7 +76,8 @@ def results_dir() -> Path:
 
 def data_settings(given: str | None) -> dict[str, str | None]:
     """The ``data`` and ``subset`` of :class:`Settings` for ``experiment --data``: a data folder gives its
-    :data:`MANIFEST` and its :data:`SUBSET` (when present); a place manifest (or ``synthetic:N``) gives itself
+    :data:`MANIFEST` and its :data:`SUBSET` (when present), a folder of traversal subfolders without one gives
+    itself (its ground truth checked by :func:`experiments.common.load`); a place manifest (or ``synthetic:N``) gives itself
     and no subset. None: $VPRSNN_DATA, else :data:`NORDLAND`. DataError (one line) when nothing is there."""
     if given is not None and not given.strip():
         raise DataError("--data: an empty path")
@@ -83,6 +85,8 @@ def data_settings(given: str | None) -> dict[str, str | None]:
     if chosen is not None and chosen.startswith("synthetic:"):
         return {"data": chosen, "subset": None}
     path = Path(chosen) if chosen is not None else NORDLAND
+    if path.is_dir() and not (path / MANIFEST).is_file() and is_folder_dataset(path):
+        return {"data": str(path), "subset": None}  # one traversal per subfolder (docs/data.md)
     if path.is_dir():
         subset = path / SUBSET
         return {"data": str(path / MANIFEST), "subset": str(subset) if subset.is_file() else None}

@@ -158,3 +158,42 @@ def test_update_docs_misuse_is_one_line(monkeypatch, tmp_path, capsys, argv, mes
 )
 def test_the_page_names_the_command_that_regenerates_it(results, command):
     assert regenerating_command(results) == (command or results["command"])
+
+
+def _traversal_folders(root, n_reference: int, n_query: int, shift: int = 0):
+    """summer/ and winter/ of the synthetic route (winter frame j shows place j + shift) in a folder data set."""
+    import cv2
+
+    from vprsnn_export.data.synthetic import synthetic_route
+
+    route = synthetic_route(n_reference + shift, ("summer", "winter"))
+    for name, images in (("summer", route["summer"][:n_reference]), ("winter", route["winter"][shift:][:n_query])):
+        (root / name).mkdir(parents=True)
+        for index, image in enumerate(images):
+            cv2.imwrite(str(root / name / f"{index:03d}.png"), image)
+
+
+def test_experiments_never_score_by_index_what_the_data_matches_otherwise(tmp_path, capsys):
+    """Issue 31: a folder data set (one traversal per subfolder) is scored by index only where that is its own
+    scoring; a ground truth matching queries to other places, or traversals of different lengths without one,
+    are refused with one line naming the file or folder, before any training."""
+    argv = ["experiment", "assignment", "--quick", "--seeds", "1", "--quiet", "--set", "train.epochs=1"]
+    aligned = tmp_path / "aligned"
+    _traversal_folders(aligned, 24, 24)
+    assert data_settings(str(aligned)) == {"data": str(aligned), "subset": None}
+    assert main([*argv, "--data", str(aligned), "--out", str(tmp_path / "a")]) == 0, capsys.readouterr().err
+    shifted = tmp_path / "shifted"
+    _traversal_folders(shifted, 24, 24, shift=3)
+    pairs = "".join(f"{q},{(q + 3) % 24}\n" for q in range(24))  # winter j is summer place j + 3
+    (shifted / "summer_winter_GT.csv").write_text("query,reference\n" + pairs, encoding="utf-8")
+    unequal = tmp_path / "unequal"
+    _traversal_folders(unequal, 30, 24)
+    for folder, message in (
+        (shifted, "summer_winter_GT.csv: its query frame 0 matches reference frame(s) [3], but experiments score"),
+        (unequal, "the traversals hold different numbers of frames (summer 30, winter 24)"),
+    ):
+        capsys.readouterr()
+        assert main([*argv, "--data", str(folder), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err and str(folder) in err, err
+    assert not (tmp_path / "out").exists()
