@@ -4,7 +4,8 @@ Robots record their cameras as bags. They are read with the ``rosbags`` library 
 install), in the bag's time order, one frame per message of one topic:
 
 * ``sensor_msgs/msg/Image`` with encoding ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of
-  ``step`` bytes, padding dropped); colour becomes grey with OpenCV's weights;
+  ``step`` bytes, padding dropped); colour becomes grey with OpenCV's weights; the message's size is
+  checked against the memory limit before it is deserialised (:func:`raw_image_need`);
 * ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its size
   checked against the memory limit first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
 
@@ -22,6 +23,7 @@ import cv2
 import numpy as np
 
 from ..errors import DataError
+from ..resources import MemoryNeed, check_memory
 from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -29,12 +31,19 @@ COMPRESSED = "sensor_msgs/msg/CompressedImage"
 ENCODINGS = {"mono8": None, "rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY}
 ENCODINGS |= {"rgba8": cv2.COLOR_RGBA2GRAY, "bgra8": cv2.COLOR_BGRA2GRAY}
 BAG_SUFFIX = ".bag"
+SMALLER = "a smaller image would"
 ROS2_METADATA = "metadata.yaml"
 
 
 def is_bag(path: Path) -> bool:
     """A ROS 1 bag file (``.bag``) or a ROS 2 bag folder (holding ``metadata.yaml``)."""
     return (path.is_file() and path.suffix.lower() == BAG_SUFFIX) or (path / ROS2_METADATA).is_file()
+
+
+def raw_image_need(n_bytes: int) -> MemoryNeed:
+    """Reading one raw ``sensor_msgs/Image`` message of ``n_bytes`` bytes: its data deserialised, then the
+    pixels converted (at most as large again): ``2 n_bytes`` bytes, known before anything is decoded."""
+    return MemoryNeed(((f"image message of {n_bytes} bytes, deserialised and converted", 2 * n_bytes),))
 
 
 def image_grey(msg, where: str) -> np.ndarray:
@@ -97,10 +106,15 @@ def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]
         for index in itertools.count():
             try:
                 connection, _, raw = next(messages)
-                msg = reader.deserialize(raw, connection.msgtype)
             except StopIteration:
                 break
-            except Exception as exc:  # a damaged or truncated bag, a message that does not deserialise
+            except Exception as exc:  # a damaged or truncated bag
+                raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
+            if connection.msgtype == IMAGE:
+                check_memory(raw_image_need(len(raw)), f"reading message {index} of {topic} in {path}", SMALLER)
+            try:
+                msg = reader.deserialize(raw, connection.msgtype)
+            except Exception as exc:  # a message that does not deserialise
                 raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
             where = f"{path}#{index}"
             yield (

@@ -123,6 +123,31 @@ def test_a_compressed_frame_is_checked_against_the_memory_limit_before_decoding(
     assert next(iter_frames(bag))[1].shape == (300, 400)
 
 
+def test_a_raw_frame_is_checked_against_the_memory_limit_before_decoding(tmp_path, monkeypatch):
+    """Issue 31: a raw sensor_msgs/Image message is bounded like a compressed one: its bytes (deserialised, then
+    converted: twice their size) against the memory limit before it is deserialised, one line naming the bag
+    and the topic."""
+    from rosbags.highlevel import AnyReader
+
+    from vprsnn_export.errors import InvalidValueError
+    from vprsnn_export.resources import set_memory_limit
+
+    bag = write_bag(tmp_path / "raw", {"/cam": [("rgb8", np.zeros((300, 400), np.uint8))]})
+    deserialised = []
+    monkeypatch.setattr(AnyReader, "deserialize", lambda self, raw, t: deserialised.append(t))
+    try:
+        set_memory_limit("200K")  # 300 rows of 1203 bytes: 352 KiB, 705 KiB with the grey copy
+        with pytest.raises(InvalidValueError) as caught:
+            list(iter_frames(bag))
+    finally:
+        set_memory_limit(None)
+    message = str(caught.value)
+    assert f"message 0 of /cam in {bag}" in message and "over the limit of 200.0 KiB" in message, message
+    assert "\n" not in message and deserialised == []  # refused before the message was deserialised
+    monkeypatch.undo()
+    assert next(iter_frames(bag))[1].shape == (300, 400)
+
+
 def test_an_encoding_not_read_is_one_error(tmp_path, greys):
     bag = write_bag(tmp_path / "depth", {"/depth": [("mono16", greys[0])]})
     with pytest.raises(DataError, match=r"#0: image encoding 'mono16' is not read \(only mono8, rgb8"):
