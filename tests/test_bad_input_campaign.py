@@ -48,3 +48,30 @@ def test_bad_input_campaign(tmp_path):
     assert [f"{c['id']}: {c['note']}" for c in bad if c["class"] == "other"] == []
     assert [f"{c['id']} ({c['class']}): {c['last_line']}" for c in legal if c["class"] != "ran"] == []
     assert done.returncode == (0 if all(c["class"] in ("clean", "ran") for c in cases) else 1)
+
+
+def test_a_case_refused_for_another_reason_or_a_wrong_output_is_a_finding(tmp_path):
+    """``Case.says`` and ``Case.check`` (issue 31): a clean refusal whose line lacks the expected reason, or a
+    legal run whose output fails its check, is "other"; otherwise the class stands."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bad_input_campaign", TOOL)
+    assert spec is not None and spec.loader is not None
+    tool = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(spec.name, tool)  # its dataclasses look their module up
+    spec.loader.exec_module(sys.modules[spec.name])
+    tool = sys.modules[spec.name]
+    says = tool.bad("x", "experiment", says="experiments score query frame j")
+    assert (
+        tool.expected(says, "clean", ["error: experiments score query frame j as ..."], tmp_path, tmp_path)[0]
+        == "clean"
+    )
+    klass, note = tool.expected(says, "clean", ["error: no such place manifest"], tmp_path, tmp_path)
+    assert klass == "other" and "refused for another reason" in note
+    checked = tool.legal("y", "evaluate", check="predictions-truth-offset-3")
+    assert tool.expected(checked, "ran", [], tmp_path, tmp_path) == ("other", "ran, but no p.jsonl was written")
+    rows = [{"query": q, "truth": [q + 3], "place_id": 4, "correct": q == 1} for q in range(3)]
+    (tmp_path / "p.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert tool.expected(checked, "ran", [], tmp_path, tmp_path) == ("ran", "")
+    (tmp_path / "p.jsonl").write_text(json.dumps({**rows[0], "truth": 0}) + "\n")  # the frame index: wrong
+    assert tool.expected(checked, "ran", [], tmp_path, tmp_path)[0] == "other"

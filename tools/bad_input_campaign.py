@@ -108,6 +108,8 @@ class Case:
     links: tuple[tuple[str, str], ...] = ()
     ok_rc: tuple[int, ...] = (0,)
     note: str = ""
+    says: str = ""  # a bad input: its error line must hold this (else "other": refused for another reason)
+    check: str = ""  # a legal extreme: the OUTPUT_CHECKS entry its output must pass (else "other")
 
     @property
     def command(self) -> str:
@@ -858,6 +860,20 @@ def count_events(frames: np.ndarray, window_us: int) -> np.ndarray:
     return events
 
 
+def write_experiment_folders(fx: Path, images: Path) -> None:
+    """Folder data sets of 24 frames per traversal (``experiment --quick`` reads places 0..23; the 12 images
+    repeated): ``exp_aligned`` (index-aligned, no ground truth), ``exp_shifted`` (a CSV ground truth matching
+    winter frame j to summer place j + 3) and ``exp_unequal`` (winter 21 frames, no ground truth)."""
+    for name, n_winter in (("exp_aligned", 24), ("exp_shifted", 24), ("exp_unequal", 21)):
+        for traversal, count in (("summer", 24), ("winter", n_winter)):
+            files = sorted((images / traversal).iterdir())
+            (fx / name / traversal).mkdir(parents=True)
+            for index in range(count):
+                shutil.copyfile(files[index % len(files)], fx / name / traversal / f"{index:03d}.png")
+    pairs = "".join(f"{q},{(q + 3) % 24}\n" for q in range(24))
+    (fx / "exp_shifted" / "summer_winter_GT.csv").write_text("query,reference\n" + pairs, encoding="utf-8")
+
+
 def write_stream_inputs(fx: Path, images: Path) -> None:
     """Bags, event recordings, a cut video and a 20000 x 20000 PNG for the stream cases (issue 31)."""
     cv2 = importlib.import_module("cv2")
@@ -866,6 +882,7 @@ def write_stream_inputs(fx: Path, images: Path) -> None:
     huge_png(fx / "frames_huge" / "f0.png", 20000)
     write_bag(fx / "bag_one", {"/camera": winter})
     write_bag(fx / "bag_two", {"/left": winter, "/right": winter})
+    write_bag(fx / "bag_big", {"/camera": [np.zeros((8000, 8000), np.uint8)]})  # 64 MB raw: 128 MB to read
     (fx / "damaged.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(64))
     counts = np.stack(winter) // 16  # 0..15 events per pixel and frame
     counts[:, 0, 0] = np.maximum(counts[:, 0, 0], 1)
@@ -1022,6 +1039,7 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     write_offset_routes(fx, only_images, len(names))
     write_resized_streams(fx, only_images)
     write_stream_inputs(fx, only_images)
+    write_experiment_folders(fx, only_images)
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -1880,6 +1898,15 @@ def stream_cases() -> list[Case]:
         bad("localize-stream-bag-two-topics", *frames, "{fx}/bag_two"),
         bad("localize-stream-bag-no-such-topic", *frames, "{fx}/bag_two", "--topic", "/depth"),
         bad("localize-stream-bag-damaged", *frames, "{fx}/damaged.bag"),
+        bad(
+            "localize-stream-bag-raw-over-memory-limit",
+            *frames,
+            "{fx}/bag_big",
+            "--memory-limit",
+            "100M",
+            says="reading message 0 of /camera in",
+            note="an 8000 x 8000 mono8 message: refused before it is deserialised, not after (as a wrong size)",
+        ),
         bad("localize-stream-topic-not-a-bag", *frames, "{fx}/nord/winter", "--topic", "/camera"),
         bad("localize-stream-events-no-window", *frames, "{fx}/events.npy"),
         bad("localize-stream-events-window-0", *frames, "{fx}/events.npy", "--event-window-us", "0"),
@@ -1923,8 +1950,55 @@ def ground_truth_cases() -> list[Case]:
         bad("localize-gt-unaligned", "localize", CK, "--calibrate", "winter", *unaligned[:2], "--quiet"),
         bad("verify-gt-unaligned", "verify", CK, "--bits", "8", *unaligned, "--report", "v"),
         bad("evaluate-gt-window-beside-file", *EVAL, "--data", "{fx}/gt_offset", "--match-window", "2"),
+        legal(
+            "evaluate-gt-predictions-truth",
+            *EVAL,
+            "--data",
+            "{fx}/gt_offset",
+            "--predictions",
+            "p.jsonl",
+            check="predictions-truth-offset-3",
+            note="the truth column holds the file's places (query j: [j + 3]), not the frame index",
+        ),
+        legal("experiment-data-folder-aligned", *EXPERIMENT, "--seeds", "1", "--data", "{fx}/exp_aligned"),
+        bad(
+            "experiment-data-gt-shifted",
+            *EXPERIMENT,
+            "--data",
+            "{fx}/exp_shifted",
+            says="experiments score query frame j as reference place j",
+        ),
+        bad(
+            "experiment-data-unequal",
+            *EXPERIMENT,
+            "--data",
+            "{fx}/exp_unequal",
+            says="the traversals hold different numbers of frames",
+        ),
+        bad("experiment-data-gt-offset", *EXPERIMENT, "--data", "{fx}/gt_offset", says="different numbers of frames"),
     ]
     return cases
+
+
+def predictions_truth_offset(cwd: Path, fx: Path, offset: int = 3) -> str | None:
+    """``p.jsonl`` of evaluate on ``gt_offset`` (winter frame j is summer place j + 3): every row's truth is
+    ``[j + 3]`` and ``correct`` says whether its place is in it; the problem found, else None."""
+    path = cwd / "p.jsonl"
+    if not path.is_file():
+        return "no p.jsonl was written"
+    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()]
+    wrong = [r for r in rows if r["truth"] != [r["query"] + offset] or r["correct"] != (r["place_id"] in r["truth"])]
+    return (
+        f"{len(wrong)} of {len(rows)} rows: truth is not the ground truth's place (first: {wrong[0]})"
+        if wrong
+        else None
+    )
+
+
+#: Checks of a legal extreme's output (``Case.check``): name -> (its folder, the fixtures) -> a problem or None.
+OUTPUT_CHECKS: dict[str, Callable[[Path, Path], str | None]] = {
+    "predictions-truth-offset-3": predictions_truth_offset,
+}
 
 
 def legal_cases() -> list[Case]:
@@ -1996,21 +2070,34 @@ def run_case(case: Case, run: Runner, work: Path, fx: Path, ro: Path) -> Outcome
     argv = [expand(arg, fx, ro) for arg in case.argv]
     raw = run(argv, cwd)
     lines = stderr_lines(raw.stderr)
+    klass, note = expected(case, classify(case, raw), lines, cwd, fx)
     return Outcome(
         id=case.id,
         command=case.command,
         line=shlex.join(["vprsnn-export", *case.argv]),
         legal=case.legal,
-        klass=classify(case, raw),
+        klass=klass,
         rc=raw.rc,
         first_line=lines[0] if lines else "",
         last_line=lines[-1] if lines else "",
         seconds=round(raw.seconds, 2),
         runner=run.name,
         fork_class=None,
-        note=case.note,
+        note=note,
         stderr=raw.stderr[-3000:],
     )
+
+
+def expected(case: Case, klass: str, lines: Sequence[str], cwd: Path, fx: Path) -> tuple[str, str]:
+    """The class and note once the case's own expectation is applied: a clean refusal whose line lacks
+    ``case.says``, or a legal run whose output fails ``case.check``, is "other" (the note says why)."""
+    if klass == "clean" and case.says and case.says not in lines[0]:
+        return "other", f"refused for another reason: expected {case.says!r} in the error"
+    if klass == "ran" and case.check:
+        problem = OUTPUT_CHECKS[case.check](cwd, fx)
+        if problem:
+            return "other", f"ran, but {problem}"
+    return klass, case.note
 
 
 def confirm(case: Case, first: Outcome, run: ExecRunner, work: Path, fx: Path, ro: Path) -> Outcome:
