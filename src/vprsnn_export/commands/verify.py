@@ -123,8 +123,6 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
     from ..runtime.verify import VerifyOptions, parse_tolerances
 
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
-    if args.reference_queries < 0:
-        raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
     return VerifyOptions(
         readout=sequence_options(args),
         bits=bits,
