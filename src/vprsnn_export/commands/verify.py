@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Config
-from ..data.dataset import MAX_PLACES, Dataset, load_dataset
+from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
 from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
@@ -133,17 +133,6 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
         targets=parse_targets(args.targets),
         tolerances=parse_tolerances(args.tolerance),
     )
-
-
-def selection(args: argparse.Namespace, ckpt) -> tuple[str, str | None, str | None]:
-    """(data source, subset, places): the options given here, else the checkpoint's own."""
-    subset, places = args.subset, args.places
-    if subset is None and places is None:
-        subset, places = ckpt.data.get("subset"), ckpt.data.get("places")
-    source = args.data or ckpt.data.get("source")
-    if not source:
-        raise InvalidValueError("the checkpoint names no data source: give --data")
-    return str(source), subset, places
 
 
 def load_for(
@@ -292,7 +281,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
     options = verify_options(args)
-    source, subset, places = selection(args, templates[0][1])
+    source, subset, places = data_selection(templates[0][1].data, args.data, args.subset, args.places)
     cache: dict = {}
     networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
@@ -308,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_of(args, options, templates[0][1].config, source, subset, places)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
-        src, sub, plc = selection(args, ckpt)
+        src, sub, plc = data_selection(ckpt.data, args.data, args.subset, args.places)
         dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
         if index == 0 and options.readout.warning(dataset.place_ids):
             print(

@@ -232,6 +232,22 @@ def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str
     return int(shape[0]), int(shape[1])
 
 
+def data_selection(
+    record: Mapping[str, object],
+    source: str | Path | None = None,
+    subset: str | Path | None = None,
+    places: str | None = None,
+) -> tuple[str, str | None, str | None]:
+    """(data source, subset, places): those given here, else those of a checkpoint's or model's ``data`` record
+    (its subset and places only when neither is given); DataError when neither names a source."""
+    if subset is None and places is None:
+        subset, places = _optional_str(record.get("subset")), _optional_str(record.get("places"))
+    chosen = source if source is not None else _optional_str(record.get("source"))
+    if chosen is None:
+        raise DataError("no data source: give --data (the checkpoint records none)")
+    return str(chosen), _optional_str(subset), places
+
+
 def load_selection(
     data: Mapping[str, object],
     traversals: Sequence[str],
@@ -242,17 +258,9 @@ def load_selection(
     places: str | None = None,
     progress: bool = False,
 ) -> Dataset:
-    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here.
-
-    ``source``/``subset``/``places`` override the record; without a subset or places, the
-    record's own selection is used.
-    """
-    if subset is None and places is None:
-        subset = _optional_str(data.get("subset"))
-        places = _optional_str(data.get("places"))
-    chosen = source if source is not None else _optional_str(data.get("source"))
-    if chosen is None:
-        raise DataError("no data source: give --data (the checkpoint records none)")
+    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here
+    (:func:`data_selection`)."""
+    chosen, subset, places = data_selection(data, source, subset, places)
     return load_dataset(chosen, traversals, cfg, subset=subset, places=places, progress=progress)
 
 
