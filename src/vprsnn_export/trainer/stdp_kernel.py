@@ -391,7 +391,11 @@ def stdp_windows_kernel(
     return _stdp_windows(limits, seeds, sizes, blocks, steps, weights, theta, *args)
 
 
-def kernel_scalars(cfg: Config) -> tuple[Any, ...]:
+#: The kernels' scalar parameters (:func:`kernel_scalars`).
+Scalars = tuple[np.float32, bool, np.float32, np.float32, np.float32, np.float32, np.float32, bool]
+
+
+def kernel_scalars(cfg: Config) -> Scalars:
     """The kernels' scalar parameters: beta, wta, pre_keep = 1 - 1/tau_pre, post_keep = 1 - 1/tau_post, A+, A-,
     w_max (float32) and weight_norm."""
     stdp = cfg.stdp
