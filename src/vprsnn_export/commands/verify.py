@@ -34,6 +34,7 @@ from ._common import (
     add_sequence_options,
     format_table,
     integer,
+    non_empty,
     parse_int_list,
     print_json,
     scored_tolerance,
@@ -69,6 +70,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
+        type=non_empty,
         metavar="KEY=VALUE,...",
         help="override tolerances, e.g. r_at_100p=0.01,accuracy=0.02,auc_pr=0.02 (fractions; 'off' disables); "
         "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations, query_slack "
@@ -88,6 +90,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     checks.add_argument(
         "--targets",
+        type=non_empty,
         default=ALL_TARGETS,
         help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
@@ -274,9 +277,6 @@ def run(args: argparse.Namespace) -> int:
         )
     if not 0 <= args.reference_queries <= MAX_PLACES:
         raise InvalidValueError(f"--reference-queries expects 0 to {MAX_PLACES}, got {args.reference_queries}")
-    for option, value in (("--tolerance", args.tolerance), ("--targets", args.targets)):
-        if value is not None and not value.strip():
-            raise InvalidValueError(f"{option}: empty value")
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
