@@ -341,10 +341,10 @@ def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
     .. math:: E_j = \\sum_{i=\\max(0,\\, j-S+1)}^{\\min(n-1,\\, j+L)} e_i
 
     ``lag`` L = 0 is the causal sum over the S most recent rows (rows before
-    the start or after the end of the stream are left out).
+    the start or after the end of the stream are left out). S >= 1 and L >= 0 as
+    the velocity searches have checked them.
     """
     e = np.asarray(scores, dtype=np.float64)
-    span, lag = _count("velocity span", span, 1), _count("velocity lag", lag, 0)
     padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
     return np.lib.stride_tricks.sliding_window_view(padded, span + lag, axis=0).sum(axis=-1)
 
@@ -358,9 +358,10 @@ def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     to the same shifts (over 10 frames, 0.95, 1.0 and 1.05 place per frame all
     do): they tie exactly, and the centre of the tied run is the estimate,
     where the first of them would be biased towards the start of the grid.
+    ``candidates`` as :func:`smooth_velocity` has checked them.
     """
     e = np.asarray(totals, dtype=np.float64)
-    cands = _candidates(candidates)
+    cands = np.asarray(candidates, dtype=np.float64)
     best = e == e.max(axis=1, keepdims=True)
     return (best * cands[None, :]).sum(axis=1) / best.sum(axis=1)
 
