@@ -338,8 +338,9 @@ def _build(cls: type, data: Any, where: str) -> Any:
     try:
         return dacite.from_dict(cls, data, _READ)
     except dacite.WrongTypeError as exc:
-        wanted = "a mapping" if is_dataclass(exc.field_type) else _EXPECTED[exc.field_type]
-        raise InvalidValueError(f"{where}.{exc.field_path}: expected {wanted}, got {exc.value!r}") from None
+        wanted = _EXPECTED.get(exc.field_type, "a mapping")  # not a setting's type: a section's
+        got = type(exc.value).__name__ if wanted == "a mapping" else repr(exc.value)
+        raise InvalidValueError(f"{where}.{exc.field_path}: expected {wanted}, got {got}") from None
     except dacite.UnexpectedDataError as exc:  # raised without its section: the section holding the keys
         section = next((f".{name}" for name, v in data.items() if isinstance(v, dict) and exc.keys <= v.keys()), "")
         raise InvalidValueError(f"{where}{section}: unknown keys {sorted(exc.keys)}") from None
