@@ -179,8 +179,6 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
     set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
     a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
     match, or the folder when its traversals are not index-aligned and no file says how they match."""
-    if not isinstance(dataset, Dataset):
-        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
     folder = Path(dataset.source)
     if (
         parse_synthetic(dataset.source) is not None
