@@ -7,10 +7,13 @@ the paper's text (Sections III-IV), not its scripts (field notes §1).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
+
+import dacite
 
 from .data.preprocess import CHANNELS
 from .errors import InvalidValueError
@@ -306,46 +309,41 @@ def check_range(key: str, value: Any) -> None:
         raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
 
 
-def _build(cls: type, data: dict[str, Any], where: str) -> Any:
+#: What a setting of each type must be, in the words of the error that names it.
+_EXPECTED = {int: "an integer", float: "a number", bool: "true/false", str: "a name (text)"}
+
+
+def _integer(value: Any) -> Any:
+    """An integral float as an int (2.0 -> 2); a bool or a fractional or non-finite float is refused."""
+    if isinstance(value, bool) or (isinstance(value, float) and not value.is_integer()):
+        raise dacite.WrongTypeError(field_type=int, value=value)
+    return int(value) if isinstance(value, float) else value
+
+
+def _number(value: Any) -> Any:
+    """An int, a float or numeric text as a float; a bool, other text or any other value is refused."""
+    if isinstance(value, int | float | str) and not isinstance(value, bool):
+        with contextlib.suppress(ValueError):
+            return float(value)
+    raise dacite.WrongTypeError(field_type=float, value=value)
+
+
+_READ = dacite.Config(strict=True, type_hooks={int: _integer, float: _number})
+
+
+def _build(cls: type, data: Any, where: str) -> Any:
+    """``cls`` read by dacite (missing keys take the defaults); one InvalidValueError naming the key and the problem."""
     if not isinstance(data, dict):
         raise InvalidValueError(f"{where}: expected a mapping, got {type(data).__name__}")
-    known = {f.name: f for f in fields(cls)}
-    unknown = set(data) - set(known)
-    if unknown:
-        raise InvalidValueError(f"{where}: unknown keys {sorted(unknown)}")
-    kwargs: dict[str, Any] = {}
-    for name, value in data.items():
-        default = getattr(cls(), name) if name in known else None
-        if is_dataclass(default):
-            kwargs[name] = _build(type(default), value, f"{where}.{name}")
-        else:
-            kwargs[name] = _coerce(value, type(default), f"{where}.{name}")
-    return cls(**kwargs)
-
-
-def _coerce(value: Any, kind: type, where: str) -> Any:
-    if kind is str:
-        if not isinstance(value, str):
-            raise InvalidValueError(f"{where}: expected a name (text), got {value!r}")
-        return value
-    if kind is bool:
-        if isinstance(value, bool):
-            return value
-        raise InvalidValueError(f"{where}: expected true/false, got {value!r}")
-    if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise InvalidValueError(f"{where}: expected an integer, got {value!r}")
-        if not float(value).is_integer():
-            raise InvalidValueError(f"{where}: expected an integer, got {value!r}")
-        return int(value)
-    if kind is float:
-        if isinstance(value, bool) or not isinstance(value, int | float | str):
-            raise InvalidValueError(f"{where}: expected a number, got {value!r}")
-        try:
-            return float(value)
-        except (TypeError, ValueError):
-            raise InvalidValueError(f"{where}: expected a number, got {value!r}") from None
-    return value
+    try:
+        return dacite.from_dict(cls, data, _READ)
+    except dacite.WrongTypeError as exc:
+        wanted = _EXPECTED.get(exc.field_type, "a mapping")  # not a setting's type: a section's
+        got = type(exc.value).__name__ if wanted == "a mapping" else repr(exc.value)
+        raise InvalidValueError(f"{where}.{exc.field_path}: expected {wanted}, got {got}") from None
+    except dacite.UnexpectedDataError as exc:  # raised without its section: the section holding the keys
+        section = next((f".{name}" for name, v in data.items() if isinstance(v, dict) and exc.keys <= v.keys()), "")
+        raise InvalidValueError(f"{where}{section}: unknown keys {sorted(exc.keys)}") from None
 
 
 #: Named starting points for the config (``--preset``): the paper's constants, and the

@@ -88,3 +88,28 @@ def test_the_early_section_is_written_only_when_it_is_used():
     early = plain.replace(**{"early.margin": True, "early.spikes": 40})
     assert early.to_dict()["early"] == {"margin": True, "spikes": 40}
     assert Config.from_dict(early.to_dict()) == early
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ([1], "config: expected a mapping, got list"),
+        ({"colour": 1}, "config: unknown keys ['colour']"),
+        ({"encoder": {"timestep": 1}}, "config.encoder: unknown keys ['timestep']"),
+        ({"encoder": 5}, "config.encoder: expected a mapping, got int"),
+        ({"encoder": {"timesteps": True}}, "config.encoder.timesteps: expected an integer, got True"),
+        ({"encoder": {"timesteps": 2.5}}, "config.encoder.timesteps: expected an integer, got 2.5"),
+        ({"encoder": {"rate_scale": "fast"}}, "config.encoder.rate_scale: expected a number, got 'fast'"),
+        ({"network": {"wta": 1}}, "config.network.wta: expected true/false, got 1"),
+    ],
+)
+def test_a_file_s_config_is_refused_naming_the_key_and_the_problem(data, message):
+    with pytest.raises(InvalidValueError) as caught:
+        Config.from_dict(data)
+    assert str(caught.value) == message
+
+
+def test_a_file_s_config_reads_integral_floats_and_numeric_text():
+    cfg = Config.from_dict({"encoder": {"timesteps": 150.0, "rate_scale": "0.5"}, "seed": 7})
+    assert (cfg.encoder.timesteps, cfg.encoder.rate_scale, cfg.seed) == (150, 0.5, 7)
+    assert type(cfg.encoder.timesteps) is int and cfg.network == Config().network

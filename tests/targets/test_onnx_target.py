@@ -23,7 +23,14 @@ from vprsnn_export.readout.assignment import weighted_matrix
 from vprsnn_export.readout.strategies import strategy_scores
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_session import OnnxBackend, read_onnx, run_onnx, run_onnx_outputs
-from vprsnn_export.targets.onnx_target import IR_VERSION, OPSET, build_onnx, readout_matrix_nodes, write_onnx
+from vprsnn_export.targets.onnx_target import (
+    IR_VERSION,
+    OPSET,
+    build_onnx,
+    readout_calibration,
+    readout_matrix_nodes,
+    write_onnx,
+)
 
 NORDLAND = Path(__file__).resolve().parents[2].parent / "shared/data/nordland_64x32_summer_winter"
 
@@ -190,7 +197,7 @@ def run_readout_matrices(model: FixedPointModel) -> list[np.ndarray]:
     """The head's derived S^R, S'' and 1 / colsum(S^R), as onnxruntime computes them."""
     import onnxruntime as ort
 
-    nodes, inits = readout_matrix_nodes(model)
+    nodes, inits = readout_matrix_nodes(model, readout_calibration(model)[0])
     n, places = model.calibration.shape
     graph = onnx.helper.make_graph(
         nodes,

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Config
-from ..data.dataset import MAX_PLACES, Dataset, load_dataset
+from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
 from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
@@ -34,6 +34,7 @@ from ._common import (
     add_sequence_options,
     format_table,
     integer,
+    non_empty,
     parse_int_list,
     print_json,
     scored_tolerance,
@@ -69,6 +70,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     checks = parser.add_argument_group("checks")
     checks.add_argument(
         "--tolerance",
+        type=non_empty,
         metavar="KEY=VALUE,...",
         help="override tolerances, e.g. r_at_100p=0.01,accuracy=0.02,auc_pr=0.02 (fractions; 'off' disables); "
         "keys: accuracy, r_at_100p, auc_pr, p_at_100r, winner_agreement, top1_agreement, saturations, query_slack "
@@ -88,6 +90,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     checks.add_argument(
         "--targets",
+        type=non_empty,
         default=ALL_TARGETS,
         help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
@@ -123,8 +126,6 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
     from ..runtime.verify import VerifyOptions, parse_tolerances
 
     bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
-    if args.reference_queries < 0:
-        raise InvalidValueError(f"--reference-queries must be >= 0, got {args.reference_queries}")
     return VerifyOptions(
         readout=sequence_options(args),
         bits=bits,
@@ -135,17 +136,6 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
         targets=parse_targets(args.targets),
         tolerances=parse_tolerances(args.tolerance),
     )
-
-
-def selection(args: argparse.Namespace, ckpt) -> tuple[str, str | None, str | None]:
-    """(data source, subset, places): the options given here, else the checkpoint's own."""
-    subset, places = args.subset, args.places
-    if subset is None and places is None:
-        subset, places = ckpt.data.get("subset"), ckpt.data.get("places")
-    source = args.data or ckpt.data.get("source")
-    if not source:
-        raise InvalidValueError("the checkpoint names no data source: give --data")
-    return str(source), subset, places
 
 
 def load_for(
@@ -287,14 +277,11 @@ def run(args: argparse.Namespace) -> int:
         )
     if not 0 <= args.reference_queries <= MAX_PLACES:
         raise InvalidValueError(f"--reference-queries expects 0 to {MAX_PLACES}, got {args.reference_queries}")
-    for option, value in (("--tolerance", args.tolerance), ("--targets", args.targets)):
-        if value is not None and not value.strip():
-            raise InvalidValueError(f"{option}: empty value")
     device = resolve_device(args.device)
     out = Path(args.report)
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
     options = verify_options(args)
-    source, subset, places = selection(args, templates[0][1])
+    source, subset, places = data_selection(templates[0][1].data, args.data, args.subset, args.places)
     cache: dict = {}
     networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
@@ -310,7 +297,7 @@ def run(args: argparse.Namespace) -> int:
     settings = settings_of(args, options, templates[0][1].config, source, subset, places)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
-        src, sub, plc = selection(args, ckpt)
+        src, sub, plc = data_selection(ckpt.data, args.data, args.subset, args.places)
         dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
         if index == 0 and options.readout.warning(dataset.place_ids):
             print(

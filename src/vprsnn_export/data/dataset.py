@@ -10,6 +10,10 @@ same place id in two traversals is the same place (the ground truth).
 ``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of
 traversal folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
 START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
+
+Over 400 lines because it is one concept, the data set as the commands see it: the three sources
+(manifest, traversal folders, synthetic route) share one selection (subset file, ``--places`` or ids)
+and one CSV reader, whose checks are the edge where manifest and subset files enter.
 """
 
 from __future__ import annotations
@@ -175,8 +179,6 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
     set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
     a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
     match, or the folder when its traversals are not index-aligned and no file says how they match."""
-    if not isinstance(dataset, Dataset):
-        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
     folder = Path(dataset.source)
     if (
         parse_synthetic(dataset.source) is not None
@@ -228,6 +230,22 @@ def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str
     return int(shape[0]), int(shape[1])
 
 
+def data_selection(
+    record: Mapping[str, object],
+    source: str | Path | None = None,
+    subset: str | Path | None = None,
+    places: str | None = None,
+) -> tuple[str, str | None, str | None]:
+    """(data source, subset, places): those given here, else those of a checkpoint's or model's ``data`` record
+    (its subset and places only when neither is given); DataError when neither names a source."""
+    if subset is None and places is None:
+        subset, places = _optional_str(record.get("subset")), _optional_str(record.get("places"))
+    chosen = source if source is not None else _optional_str(record.get("source"))
+    if chosen is None:
+        raise DataError("no data source: give --data (the checkpoint records none)")
+    return str(chosen), _optional_str(subset), places
+
+
 def load_selection(
     data: Mapping[str, object],
     traversals: Sequence[str],
@@ -238,17 +256,9 @@ def load_selection(
     places: str | None = None,
     progress: bool = False,
 ) -> Dataset:
-    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here.
-
-    ``source``/``subset``/``places`` override the record; without a subset or places, the
-    record's own selection is used.
-    """
-    if subset is None and places is None:
-        subset = _optional_str(data.get("subset"))
-        places = _optional_str(data.get("places"))
-    chosen = source if source is not None else _optional_str(data.get("source"))
-    if chosen is None:
-        raise DataError("no data source: give --data (the checkpoint records none)")
+    """The places a checkpoint or model was made from (its ``data`` record), or the selection given here
+    (:func:`data_selection`)."""
+    chosen, subset, places = data_selection(data, source, subset, places)
     return load_dataset(chosen, traversals, cfg, subset=subset, places=places, progress=progress)
 
 
@@ -342,17 +352,7 @@ def read_manifest(data: str | Path) -> Manifest:
         hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
         raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
     raw = path.read_bytes()
-    columns, records = _read_csv(raw, path, "place manifest")
-    if PLACE_ID not in columns:
-        raise DataError(
-            f"the place manifest has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
-        )
-    rows: dict[int, tuple[int, dict[str, str]]] = {}
-    for line, record in records:
-        place = _place_id(record.get(PLACE_ID), line, path)
-        if place in rows:
-            raise DataError(f"duplicate place_id {place} on lines {rows[place][0]} and {line}", path)
-        rows[place] = (line, record)
+    columns, rows = _read_csv(raw, path, "place manifest")
     if not rows:
         raise DataError("the place manifest lists no places", path)
     return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
@@ -363,22 +363,10 @@ def read_subset(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not is_readable_file(path):
         raise DataError("no such subset file (a CSV with a place_id column)", path)
-    columns, records = _read_csv(path.read_bytes(), path, "subset file")
-    if PLACE_ID not in columns:
-        raise DataError(
-            f"the subset file has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
-        )
-    ids: list[int] = []
-    lines: dict[int, int] = {}
-    for line, record in records:
-        place = _place_id(record.get(PLACE_ID), line, path)
-        if place in lines:
-            raise DataError(f"duplicate place_id {place} on lines {lines[place]} and {line}", path)
-        lines[place] = line
-        ids.append(place)
-    if not ids:
+    _, rows = _read_csv(path.read_bytes(), path, "subset file")
+    if not rows:
         raise DataError("empty selection: the subset file lists no places", path)
-    return np.asarray(ids, dtype=np.int64)
+    return np.fromiter(rows, dtype=np.int64, count=len(rows))  # file order
 
 
 def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
@@ -392,8 +380,9 @@ def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
     return names
 
 
-def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[tuple[int, dict[str, str]]]]:
-    """Header and ``(line number, row)`` pairs of a UTF-8 CSV, names and cells stripped of spaces."""
+def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[int, tuple[int, dict[str, str]]]]:
+    """Header and rows by place id, in file order (place_id -> (line number, row)) of a UTF-8 CSV with a
+    ``place_id`` column, names and cells stripped of spaces; DataError on a defect or a repeated place id."""
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -407,14 +396,22 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], list[
         duplicated = sorted({name for name in columns if columns.count(name) > 1})
         if duplicated:
             raise DataError(f"the {kind} repeats column(s) {', '.join(duplicated)}", path)
-        records = []
+        if PLACE_ID not in columns:
+            raise DataError(
+                f"the {kind} has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
+            )
+        rows: dict[int, tuple[int, dict[str, str]]] = {}
         for cells in reader:
             if not any(cell.strip() for cell in cells):
                 continue
-            records.append((reader.line_num, {name: cell.strip() for name, cell in zip(columns, cells, strict=False)}))
+            record = {name: cell.strip() for name, cell in zip(columns, cells, strict=False)}
+            place = _place_id(record.get(PLACE_ID), reader.line_num, path)
+            if place in rows:
+                raise DataError(f"duplicate place_id {place} on lines {rows[place][0]} and {reader.line_num}", path)
+            rows[place] = (reader.line_num, record)
     except csv.Error as exc:
         raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
-    return columns, records
+    return columns, rows
 
 
 def _place_id(value: str | None, line: int, path: Path) -> int:

@@ -16,6 +16,10 @@ evaluated with linear interpolation between the two neighbouring places (no
 rounding). Windows are built from the stream order and ``frame_positions``
 only -- never from ground-truth labels (unlike the paper's code, field notes
 Sec. 1, which cuts windows where the true labels stop being consecutive).
+
+Over 400 lines because it is one concept: the shifted window and the velocity searches that score it
+(:func:`window_scores`, :func:`track_velocity`, :func:`smooth_velocity`) share its chunking and its
+argument checks, and each public function carries its equation in its docstring.
 """
 
 from __future__ import annotations
@@ -75,13 +79,19 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
     return v
 
 
+def _count(name: str, value: int, low: int) -> int:
+    """``value`` as an int when it is an integer (not a bool) >= ``low``; InvalidValueError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise InvalidValueError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
 def _check_args(k: int, rule: str, eps: float) -> int:
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise InvalidValueError(f"window size k must be an integer >= 1, got {k!r}")
+    k = _count("window size k", k, 1)
     RULES.get(rule)  # InvalidValueError naming the registered rules
     if not (np.isfinite(eps) and eps > 0):
         raise InvalidValueError(f"eps must be a finite value > 0, got {eps}")
-    return int(k)
+    return k
 
 
 def _window(k: int, n_queries: int) -> int:
@@ -151,15 +161,6 @@ def _shift_rows(
     return shifted, valid
 
 
-def _combine(shifted: np.ndarray, valid: np.ndarray, rule: str, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Combine the window with the registered ``rule`` (:data:`RULES`).
-
-    Also returns the window score max_l A_j(l) of the un-normalised aggregate,
-    which the velocity search maximises.
-    """
-    return RULES.get(rule).combine(shifted, valid, eps)
-
-
 def aggregate(
     prob: np.ndarray,
     k: int,
@@ -205,7 +206,8 @@ def _aggregate_scored(
     frame_positions: np.ndarray | None,
     eps: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`aggregate` plus each window's score max_l A_j(l) (see :func:`_combine`)."""
+    """:func:`aggregate` plus each window's score max_l A_j(l) of the un-normalised aggregate (the registered rule's
+    ``combine``, :data:`RULES`), which the velocity search maximises."""
     p = _prob2d(prob)
     k = _check_args(k, rule, eps)
     n_queries, n_places = p.shape
@@ -220,7 +222,7 @@ def _aggregate_scored(
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
         shifted, valid = shift_window(p, queries, k, v, t)
-        out[queries], score[queries] = _combine(shifted, valid, rule, eps)
+        out[queries], score[queries] = RULES.get(rule).combine(shifted, valid, eps)
     return out, score
 
 
@@ -264,7 +266,7 @@ def window_scores(
     for start in range(0, rows_query.size, chunk):
         rows = slice(start, start + chunk)
         shifted, valid = _shift_rows(p, rows_query[rows], k, rows_velocity[rows], t, nearest)
-        scores[rows] = _combine(shifted, valid, rule, eps)[1]
+        scores[rows] = RULES.get(rule).combine(shifted, valid, eps)[1]
     return scores.reshape(n_queries, cands.size)
 
 
@@ -320,31 +322,17 @@ def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
     alone. ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
     """
     p = _prob2d(prob)
-    if isinstance(memory, bool) or not isinstance(memory, (int, np.integer)) or memory < 0:
-        raise InvalidValueError(f"background memory must be an integer >= 0, got {memory!r}")
-    lag = _check_lag(lag)
+    memory, lag = _count("background memory", memory, 0), _count("velocity lag", lag, 0)
     if memory == 0:
         return p.copy()
     cumulative = np.concatenate([np.zeros((1, p.shape[1])), np.cumsum(p, axis=0)])
     j = np.arange(p.shape[0])
-    first = np.maximum(0, j - int(memory) + 1)
+    first = np.maximum(0, j - memory + 1)
     last = np.minimum(p.shape[0] - 1, j + lag)
     background = (cumulative[last + 1] - cumulative[first]) / (last + 1 - first)[:, None]
     ratio = np.divide(p, background, out=np.zeros_like(p), where=background > 0)
     total = ratio.sum(axis=1, keepdims=True)
     return np.divide(ratio, total, out=np.zeros_like(ratio), where=total > 0)
-
-
-def _check_lag(lag: int) -> int:
-    if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 0:
-        raise InvalidValueError(f"velocity lag must be an integer >= 0, got {lag!r}")
-    return int(lag)
-
-
-def _check_span(span: int) -> int:
-    if isinstance(span, bool) or not isinstance(span, (int, np.integer)) or span < 1:
-        raise InvalidValueError(f"velocity span must be an integer >= 1, got {span!r}")
-    return int(span)
 
 
 def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
@@ -353,10 +341,10 @@ def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
     .. math:: E_j = \\sum_{i=\\max(0,\\, j-S+1)}^{\\min(n-1,\\, j+L)} e_i
 
     ``lag`` L = 0 is the causal sum over the S most recent rows (rows before
-    the start or after the end of the stream are left out).
+    the start or after the end of the stream are left out). S >= 1 and L >= 0 as
+    the velocity searches have checked them.
     """
     e = np.asarray(scores, dtype=np.float64)
-    span, lag = _check_span(span), _check_lag(lag)
     padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
     return np.lib.stride_tricks.sliding_window_view(padded, span + lag, axis=0).sum(axis=-1)
 
@@ -370,9 +358,10 @@ def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     to the same shifts (over 10 frames, 0.95, 1.0 and 1.05 place per frame all
     do): they tie exactly, and the centre of the tied run is the estimate,
     where the first of them would be biased towards the start of the grid.
+    ``candidates`` as :func:`smooth_velocity` has checked them.
     """
     e = np.asarray(totals, dtype=np.float64)
-    cands = _candidates(candidates)
+    cands = np.asarray(candidates, dtype=np.float64)
     best = e == e.max(axis=1, keepdims=True)
     return (best * cands[None, :]).sum(axis=1) / best.sum(axis=1)
 
@@ -418,7 +407,7 @@ def track_velocity(
     stream order, ``frame_positions`` and the frames' distributions only (no
     ground truth).
     """
-    span = _check_span(span)
+    span = _count("velocity span", span, 1)
     k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
     scores = window_scores(
@@ -470,9 +459,9 @@ def smooth_velocity(
     traversal. ``lag=0`` is causal. Uses the stream order, ``frame_positions``
     and the frames' distributions only (no ground truth).
     """
-    span = _check_span(span)
+    span = _count("velocity span", span, 1)
     k = _check_args(k, rule, eps)
-    lag = _check_lag(2 * k - 1 if lag is None else lag)
+    lag = _count("velocity lag", 2 * k - 1 if lag is None else lag, 0)
     cands = _candidates(candidates)
     contrast = stream_contrast(prob, memory, lag)
     scores = window_scores(

@@ -155,11 +155,6 @@ def populations(source: Source) -> list[dict[str, Any]]:
     return rows
 
 
-def module_count_of(source: Source) -> int:
-    """M: the modules of the source (1 for a single network)."""
-    return module_count(len(source.reference_place_ids), source.config.train.module_size)
-
-
 def readout_rule(source: Source) -> dict[str, Any]:
     """The hard WTA as a machine-readable rule over the lif node's WTA-off spikes (stored as JSON)."""
     if not source.config.network.wta:
@@ -220,7 +215,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta": "on" if cfg.network.wta else "off",
         "wta_rule": wta_rule(source),
         "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
-        "modules": module_count_of(source),
+        "modules": module_count(len(source.reference_place_ids), cfg.train.module_size),
         "wta_group": readout_group(source),
         "populations": json.dumps(populations(source), sort_keys=True),
         "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),

@@ -43,7 +43,8 @@ Weight storage (about ``bits`` bits per synapse; :mod:`targets.packing`):
 """
 
 # The docstring above is every exported graph's doc_string (build_onnx): a change to it changes the
-# files written. The runner on onnxruntime is in onnx_session.py.
+# files written. The runner on onnxruntime is in onnx_session.py. Over 400 lines because it is one
+# concept, the graph: one line per ONNX node and initializer, in the order that keeps exports byte-identical.
 
 from __future__ import annotations
 
@@ -66,7 +67,6 @@ OPSET = 21
 DOMAIN = "vprsnn-export"
 INPUT = "spikes"
 INPUT_DENOTATION = ("DATA_TIME", "DATA_BATCH", "DATA_FEATURE")  # ONNX dimension denotations of [T, batch, inputs]
-OUTPUTS = ("counts", "saturations", "wprob", "raster")
 NATIVE_SUB_BYTE = {4: TensorProto.UINT4}  # widths stored in an ONNX sub-byte type that onnxruntime casts (opset 21)
 
 
@@ -319,15 +319,15 @@ def readout_calibration(model: FixedPointModel) -> tuple[np.ndarray, np.ndarray 
     return weighted, ~silent
 
 
-def readout_matrix_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
     """``s_r``, ``s_double_prime`` and ``inv_colsum`` (float64) from the integer counts S^R (eq. 9-10).
 
     omega_i = #{l : S^R_il > 0};  S'_il = S^R_il / omega_i where omega_i > gamma places, else S^R_il
     S''_il  = S'_il (S^R_il / sum_m S^R_im)  (a silent row is 0);  inv_colsum_l = 1 / sum_i S^R_il, 0 where 0
     Each is one correctly rounded float64 operation on exact integers, as in weighted_matrix.
+    ``matrix``: the S^R the readout uses (:func:`readout_calibration`).
     """
     n_places = model.calibration.shape[1]
-    matrix, _ = readout_calibration(model)
     if np.array_equal(matrix, np.round(matrix)):  # counts (a single network, lambda 0 or 1): stored exactly as integers
         nodes, inits = calibration_nodes(np.round(matrix).astype(np.int64))
     else:
@@ -369,12 +369,12 @@ def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Tens
     P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
     """
     n_places = model.calibration.shape[1]
-    nodes, inits = readout_matrix_nodes(model)
+    matrix, keep = readout_calibration(model)
+    nodes, inits = readout_matrix_nodes(model, matrix)
     inits += [
         const("uniform", np.float64(1.0 / n_places)),
         const("i_zero", np.int64(0)),
     ]
-    _, keep = readout_calibration(model)
     head_counts = "counts"
     if keep is not None:  # an ensemble: the silenced neurons' counts do not reach the readout
         inits.append(const("readout_keep", keep.astype(np.int64)))

@@ -8,6 +8,10 @@ kernels' own machine-independent order (:func:`vprsnn_export.network.kernel_sums
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
 encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
+
+Over 400 lines because it is one concept: the training window and its fused normalisation pass keep
+every float32 operation in the torch loop's order (so checkpoints stay bit for bit the same), and each
+compiled kernel has its checked entry point (the kernel guard tests call them with bad arrays).
 """
 
 from __future__ import annotations
@@ -387,6 +391,19 @@ def stdp_windows_kernel(
     return _stdp_windows(limits, seeds, sizes, blocks, steps, weights, theta, *args)
 
 
+#: The kernels' scalar parameters (:func:`kernel_scalars`).
+Scalars = tuple[np.float32, bool, np.float32, np.float32, np.float32, np.float32, np.float32, bool]
+
+
+def kernel_scalars(cfg: Config) -> Scalars:
+    """The kernels' scalar parameters: beta, wta, pre_keep = 1 - 1/tau_pre, post_keep = 1 - 1/tau_post, A+, A-,
+    w_max (float32) and weight_norm."""
+    stdp = cfg.stdp
+    keeps = (np.float32(1.0 - 1.0 / stdp.tau_pre), np.float32(1.0 - 1.0 / stdp.tau_post))
+    rates = (np.float32(stdp.a_plus), np.float32(stdp.a_minus), np.float32(stdp.w_max))
+    return (np.float32(cfg.network.beta), bool(cfg.network.wta), *keeps, *rates, bool(stdp.weight_norm))
+
+
 def stdp_window(
     weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
 ) -> tuple[torch.Tensor, torch.Tensor] | None:
@@ -409,14 +426,7 @@ def stdp_window(
         as_spike_array(spikes),
         updated.numpy(),
         np.ascontiguousarray(theta.detach().numpy()),
-        np.float32(cfg.network.beta),
-        bool(cfg.network.wta),
-        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
-        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
-        np.float32(cfg.stdp.a_plus),
-        np.float32(cfg.stdp.a_minus),
-        np.float32(cfg.stdp.w_max),
-        bool(cfg.stdp.weight_norm),
+        *kernel_scalars(cfg),
         block,
     )
     return updated, torch.from_numpy(fired)
@@ -447,16 +457,7 @@ def stdp_windows(
     blocks = np.zeros(n_modules, dtype=np.int64)
     for size in sorted({int(s) for s in sizes if s > 0}):
         blocks[np.asarray(sizes) == size] = kernel_block(size, n_inputs, n_neurons)
-    args = (
-        np.float32(cfg.network.beta),
-        bool(cfg.network.wta),
-        np.float32(1.0 - 1.0 / cfg.stdp.tau_pre),
-        np.float32(1.0 - 1.0 / cfg.stdp.tau_post),
-        np.float32(cfg.stdp.a_plus),
-        np.float32(cfg.stdp.a_minus),
-        np.float32(cfg.stdp.w_max),
-        bool(cfg.stdp.weight_norm),
-    )
+    args = kernel_scalars(cfg)
     timesteps = int(cfg.encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
