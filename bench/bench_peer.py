@@ -12,7 +12,7 @@ best place is its own (k = 1, exact match). Rows:
   input through its own ProcessImage: gamma, resize, 15-pixel patch normalisation; a feature layer of 2 x inputs
   and one output neuron per place; 4 epochs of its STDP with spike forcing), trained layer by layer with its own
   ``train_model`` and queried through its inference class ``VPRTempo`` (one pass of its two weight matrices). Its
-  modules read image files through torchvision only; here the images reach it as tensors (torchvision's PyPI
+  modules use torchvision only in their file loading; here the images reach it as tensors (torchvision's PyPI
   wheels need the CUDA build of torch: where it does not import, a stand-in that raises if called satisfies the
   imports). Missing package: the row says how to install it and the other rows still run.
 * ``ours T=...``: the default network trained on the subset (``train_and_calibrate``), queried at its window with
