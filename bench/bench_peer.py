@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import statistics
 import sys
 import time
@@ -53,6 +54,7 @@ import torch
 from vprsnn_export.config import Config, EarlyConfig, wta_group
 from vprsnn_export.data.dataset import Dataset, load_dataset, read_manifest
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.errors import VprError
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import read_container, write_container
 from vprsnn_export.network.cost import query_cost
@@ -203,7 +205,9 @@ def load_state(path: Path, key: dict) -> tuple[dict[str, torch.Tensor] | None, f
         return None, 0.0
     meta, arrays = read_container(path, "VPRTempo state")
     if {k: meta.get(k) for k in key} != key:
-        raise SystemExit(f"bench_peer: {path} holds VPRTempo trained with other settings (remove it to retrain)")
+        raise SystemExit(
+            f"bench_peer: --peer-state {path} holds VPRTempo trained with other settings (remove it to retrain)"
+        )
     return {name: torch.from_numpy(value) for name, value in arrays.items()}, float(meta["train_s"])
 
 
@@ -377,9 +381,13 @@ def main() -> None:
     )
     args = parser.parse_args()
     subset = args.subset or args.data / "subset_100_places.csv"
-    for path in (args.data / "places.csv", subset):
+    for flag, path in (("--data", args.data / "places.csv"), ("--subset", subset)):
         if not path.is_file():
-            raise SystemExit(f"bench_peer: no such file {path} (--data / --subset)")
+            parser.error(f"{flag}: no such file {path}")
+    if args.repeats < 1 or (args.epochs is not None and args.epochs < 1):
+        parser.error("--repeats and --epochs expect integers >= 1")
+    if args.peer_dims is not None and not re.fullmatch(r"[1-9][0-9]*,[1-9][0-9]*", args.peer_dims):
+        parser.error(f"--peer-dims expects H,W (two positive integers), got {args.peer_dims!r}")
     set_threads(1)
     cfg = Config().replace(seed=args.seed)
     dataset = load_dataset(args.data, [args.reference, args.query], cfg.preprocess, subset=subset)
@@ -402,4 +410,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except VprError as exc:  # a data set or state file that does not read: one line, exit 2
+        print(f"bench_peer: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
