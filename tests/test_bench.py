@@ -3,14 +3,17 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.export.model import save_fixed_point
 
 BENCH_DIR = Path(__file__).resolve().parents[1] / "bench"
@@ -46,3 +49,58 @@ def test_bench_onnx_prints_its_table_and_onnxruntime_agrees_with_the_simulator(m
     onnx = rows["onnxruntime"]
     assert onnx[1:5] == ["8", "1", "4", "20"]  # bits, threads, queries, T of the model written above
     assert float(onnx[5]) > 0 and onnx[-1] == "yes"
+
+
+def image_folder(folder: Path, n: int) -> Path:
+    """A place manifest of the synthetic route's summer and winter images (PNG files: VPRTempo reads pixels)."""
+    route = synthetic_route(n, ("summer", "winter"))
+    for name in ("summer", "winter"):
+        (folder / name).mkdir(parents=True)
+        for index, image in enumerate(route[name]):
+            cv2.imwrite(str(folder / name / f"{index}.png"), image)
+    rows = "".join(f"{i},summer/{i}.png,winter/{i}.png\n" for i in range(n))
+    (folder / "places.csv").write_text("place_id,summer,winter\n" + rows, encoding="utf-8")
+    (folder / "subset.csv").write_text("place_id\n" + "".join(f"{i}\n" for i in range(n)), encoding="utf-8")
+    return folder
+
+
+@pytest.mark.skipif(
+    importlib.util.find_spec("vprtempo") is None,
+    reason="VPRTempo is not installed (the peers extra, see pyproject.toml): bench_peer.py leaves its row out",
+)
+def test_bench_peer_puts_vprtempo_beside_our_network(tmp_path):
+    """bench_peer end to end on 10 synthetic places (VPRTempo at 28 x 28, one epoch): a row per method, the
+    ratio lines, the bench's own checks (one query at a time and batched decide alike; the early rule run on
+    prefixes gives the library's counts) and a second run that reads VPRTempo's trained state back."""
+    data = image_folder(tmp_path / "data", 10)
+    state = tmp_path / "vprtempo.npz"
+    options = ["--data", str(data), "--subset", str(data / "subset.csv"), "--repeats", "1", "--epochs", "1"]
+    options += ["--peer-dims", "28,28", "--peer-state", str(state)]
+
+    def run() -> dict[str, list[str]]:
+        done = subprocess.run(
+            [sys.executable, str(BENCH_DIR / "bench_peer.py"), *options],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env={**os.environ, "OMP_NUM_THREADS": "1"},
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        lines = done.stdout.splitlines()
+        header = next(line for line in lines if line.startswith("method"))
+        assert header.split()[1:3] == ["train", "s"] and header.endswith("events/query")
+        table = lines[lines.index(header) + 1 :]
+        rows = {line[:28].strip(): line[28:].split() for line in table if "/ vprtempo" not in line}
+        assert sum("/ vprtempo:" in line for line in table) == 4  # ours / VPRTempo, per row of ours
+        return rows
+
+    rows = run()
+    assert set(rows) == {"vprtempo", "ours T=300", "ours margin", "ours spikes 25", "ours T=150 (rate x2)", "cosine"}
+    for name, cells in rows.items():
+        assert float(cells[1]) > 0 and float(cells[2]) > 0, name  # ms per query, one at a time and batched
+        assert 0 <= float(cells[3]) <= 100, name
+        assert (cells[4] == "-") == (name == "vprtempo"), name
+    assert float(rows["ours spikes 25"][4].replace(",", "")) < float(rows["ours T=300"][4].replace(",", ""))
+    assert state.is_file()
+    again = run()  # VPRTempo read back: its training seconds and accuracy as written
+    assert again["vprtempo"][0] == rows["vprtempo"][0] and again["vprtempo"][3] == rows["vprtempo"][3]
