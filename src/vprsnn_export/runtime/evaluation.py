@@ -21,20 +21,11 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
 from vprsnn_export.network.runs import SpikeRun
-from vprsnn_export.readout.baseline import (
-    cosine_similarities,
-    sad_distances,
-    sad_distribution,
-)
+from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
 from vprsnn_export.readout.early import early_run, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
-from vprsnn_export.readout.scoring import (
-    Readout,
-    baseline_rows,
-    nearest_neighbour_rows,
-    region_accuracies,
-)
+from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows, region_accuracies
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY
 from vprsnn_export.targets.intsim import step_agreement
@@ -65,12 +56,11 @@ def spike_statistics(run: SpikeRun) -> SpikeStatistics:
     if run.candidates_per_step is None:
         raise InvalidValueError("this backend does not report candidates per step: evaluate needs them")
     candidates = run.candidates_per_step.numpy()
-    counts = run.counts.numpy()
     return SpikeStatistics(
         mean_candidates_per_step=float(candidates.mean()),
         multi_candidate_step_fraction=float((candidates > 1).mean()),
         quiet_step_fraction=float((candidates == 0).mean()),
-        mean_spikes_per_query=float(np.asarray(counts).sum(axis=1).mean()),
+        mean_spikes_per_query=float(run.counts.numpy().sum(axis=1).mean()),
     )
 
 
