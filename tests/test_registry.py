@@ -32,6 +32,7 @@ from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strat
 from vprsnn_export.registry import Registry
 from vprsnn_export.runtime.backends import BACKENDS, BackendKind, choose_backend
 from vprsnn_export.runtime.conformance import cross_implementation, parse_targets, read_back, target_path, write_targets
+from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
 from vprsnn_export.runtime.localize import Localizer
@@ -234,13 +235,18 @@ def test_a_toy_channel_sets_the_inputs(toy_channel_entry):
     np.testing.assert_allclose(out[:, :28] + out[:, 28:56], 1.0, atol=1e-6)  # row 0: the image, then its negative
 
 
-def open_toy(network, path, device, threads):
-    return IntegerNetwork(network, device)
+TOY_OPENED: list[bool] = []  # the progress flag of each toy backend opened
+
+
+def open_toy(network, path, device, threads, progress):
+    TOY_OPENED.append(progress)
+    return IntegerNetwork(network, device, progress=progress)
 
 
 def test_a_toy_backend_is_one_registry_line_and_selectable(tmp_path, capsys):
     """Issue 33: a new backend is one function and one BACKENDS.register line; localize (the library and
-    --backend) finds it through the registry and decides as the integer simulator it wraps."""
+    --backend) and evaluate/simulate's library (``backend=``) find it through the registry and decide as the
+    integer simulator it wraps."""
     BACKENDS.register(BackendKind("toy", FixedPointModel, open_toy, "a toy", needs=None))
     try:
         path = tmp_path / "net.npz"
@@ -256,6 +262,15 @@ def test_a_toy_backend_is_one_registry_line_and_selectable(tmp_path, capsys):
         assert (toy.backend, plain.backend) == ("toy", "integer")
         decided = [(d.place_id, d.confidence) for d in toy.run_batch(frames)]
         assert decided == [(d.place_id, d.confidence) for d in plain.run_batch(frames)]
+        data = load_dataset("synthetic:8", ["winter"], model.config.preprocess)
+        query = (data.traversal("winter"), data.place_ids, "winter", SequenceOptions(ks=(1, 3)))
+        opened = len(TOY_OPENED)
+        simulated = evaluate_fixed_point(model, *query, backend="toy", progress=True)
+        assert TOY_OPENED[opened:] == [True]  # opened once, through the registry, with evaluate's progress flag
+        assert simulated.rows == evaluate_fixed_point(model, *query).rows
+        np.testing.assert_array_equal(simulated.query_counts, evaluate_fixed_point(model, *query).query_counts)
+        with pytest.raises(InvalidValueError, match="--backend toy needs a fixed-point model"):
+            evaluate_float(load_checkpoint(path), *query, backend="toy")
         capsys.readouterr()
         assert main(["localize", "--help"]) == 0
         assert "toy: a toy" in " ".join(capsys.readouterr().out.split())  # --backend's choices and help

@@ -1,10 +1,11 @@
 """The backends' registry: the implementations that run a network's spike trains.
 
 A :class:`BackendKind` says which network it runs (a float checkpoint or a fixed-point model), which
-exported file it needs, if any, and how it is opened: ``open(network, path, device, threads)`` gives a
+exported file it needs, if any, and how it is opened: ``open(network, path, device, threads, progress)`` gives a
 :class:`~vprsnn_export.network.runs.Backend` (``run(spikes) -> SpikeRun``). ``localize --backend`` lists
-:data:`BACKENDS`, :func:`choose_backend` resolves ``auto`` and refuses a mismatch, and the conformance
-checks run their baseline on the project's own simulator of a network through it. Adding one is a
+:data:`BACKENDS`, :func:`choose_backend` resolves ``auto`` (the float network for a checkpoint, the integer
+simulator for a fixed-point model) and refuses a mismatch; evaluate, simulate, localize and the conformance
+baseline all get their counts through it. Adding one is a
 function and one ``BACKENDS.register`` line (docs/architecture.md).
 """
 
@@ -26,8 +27,9 @@ if TYPE_CHECKING:  # the registry is read by --help, which imports no torch: the
     from vprsnn_export.network.runs import Backend, SpikeRun
 
 Network = Checkpoint | FixedPointModel
-#: open(network, exported file or None, device, threads) -> a backend running that network
-OpenFunction = Callable[[Network, "Path | None", Any, "int | None"], "Backend"]
+#: open(network, exported file or None, device, threads, progress) -> a backend running that network
+#: (``progress``: a bar on stderr over a long run, where the backend draws one)
+OpenFunction = Callable[[Network, "Path | None", Any, "int | None", bool], "Backend"]
 
 
 @dataclass(frozen=True)
@@ -74,21 +76,23 @@ def check_graph(model: FixedPointModel, path: str | Path) -> None:
         )
 
 
-def _float(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+def _float(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.network.dynamics import FloatNetwork
 
     assert isinstance(network, Checkpoint)
-    return FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
+    opened = FloatNetwork.from_arrays(network.weights, network.thresholds, network.config, device)
+    opened.progress = progress
+    return opened
 
 
-def _integer(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+def _integer(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.targets.intsim import IntegerNetwork
 
     assert isinstance(network, FixedPointModel)
-    return IntegerNetwork(network, device)
+    return IntegerNetwork(network, device, progress=progress)
 
 
-def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None) -> Backend:
+def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.targets.onnx_session import session
 
     assert isinstance(network, FixedPointModel) and path is not None
@@ -124,10 +128,13 @@ def open_backend(
     path: str | Path | None = None,
     device: torch.device | None = None,
     threads: int | None = None,
+    *,
+    progress: bool = False,
 ) -> tuple[str, Backend]:
-    """(the kind's name, the backend) of :func:`choose_backend`, opened on ``device`` (default CPU)."""
+    """(the kind's name, the backend) of :func:`choose_backend`, opened on ``device`` (default CPU), with a
+    progress bar over long runs when ``progress``."""
     import torch
 
     kind = choose_backend(network, name, path)
-    opened = kind.open(network, None if path is None else Path(path), device or torch.device("cpu"), threads)
+    opened = kind.open(network, None if path is None else Path(path), device or torch.device("cpu"), threads, progress)
     return kind.name, opened

@@ -1,4 +1,5 @@
-"""Evaluate a float checkpoint or a fixed-point model on a query traversal: run it, hand the counts to its
+"""Evaluate a float checkpoint or a fixed-point model on a query traversal: encode the queries, run them on
+the network's backend from the registry (:mod:`vprsnn_export.runtime.backends`), hand the counts to its
 :class:`~vprsnn_export.readout.scoring.Readout` (every strategy at k=1, the sequence strategy at each k > 1)
 and add the no-learning baselines and spike statistics."""
 
@@ -6,41 +7,35 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
 
 from vprsnn_export.arguments import check_place_ids, require_type
 from vprsnn_export.cluster import Cluster
-from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
-from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
-from vprsnn_export.readout.baseline import (
-    cosine_similarities,
-    sad_distances,
-    sad_distribution,
-)
+from vprsnn_export.network.dynamics import check_run_memory
+from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
 from vprsnn_export.readout.early import early_run, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
-from vprsnn_export.readout.scoring import (
-    Readout,
-    baseline_rows,
-    nearest_neighbour_rows,
-    region_accuracies,
-)
+from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows, region_accuracies
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY
-from vprsnn_export.targets.intsim import IntegerNetwork, step_agreement
+from vprsnn_export.targets.intsim import step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
+from .backends import Network, choose_backend, open_backend
 from .deployment import CALIBRATIONS
+
+NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
 
 
 @dataclass(frozen=True)
@@ -56,14 +51,16 @@ class SpikeStatistics:
         return asdict(self)
 
 
-def spike_statistics(candidates_per_step: np.ndarray, counts: np.ndarray) -> SpikeStatistics:
-    """Statistics of one run: candidates per step (N, T) and spike counts (N, neurons)."""
-    candidates = np.asarray(candidates_per_step)
+def spike_statistics(run: SpikeRun) -> SpikeStatistics:
+    """Statistics of one run: its candidates per step (N, T) and spike counts (N, neurons)."""
+    if run.candidates_per_step is None:
+        raise InvalidValueError("this backend does not report candidates per step: evaluate needs them")
+    candidates = run.candidates_per_step.numpy()
     return SpikeStatistics(
         mean_candidates_per_step=float(candidates.mean()),
         multi_candidate_step_fraction=float((candidates > 1).mean()),
         quiet_step_fraction=float((candidates == 0).mean()),
-        mean_spikes_per_query=float(np.asarray(counts).sum(axis=1).mean()),
+        mean_spikes_per_query=float(run.counts.numpy().sum(axis=1).mean()),
     )
 
 
@@ -112,10 +109,12 @@ def evaluate_float(
     reference_images: Mapping[str, np.ndarray] | None = None,
     cluster: Cluster | None = None,
     progress: bool = False,
+    backend: str = "auto",
 ) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
-    ``cluster``: the modules' spike counts are computed in tasks there (CPU workers) and gathered
+    The counts come from ``backend`` of :data:`~vprsnn_export.runtime.backends.BACKENDS` (``auto``: the float
+    network). ``cluster``: the float network's modules run in tasks there (CPU workers) and are gathered
     for the whole-route readout; the same counts bit for bit (:mod:`vprsnn_export.trainer.sharded`).
 
     With ``reference_images`` (the checkpoint's reference traversals, same place order)
@@ -126,42 +125,20 @@ def evaluate_float(
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)
-    check_run_memory(
-        ckpt.config,
-        "evaluation",
-        presentations=len(check_place_ids(query_place_ids, "query_place_ids")),
-        n_neurons=ckpt.weights.shape[1],
-        places=len(ckpt.reference_place_ids),
-        rasters=0 if _isolated(ckpt.config, state_isolation) else 1,
-    )
-    device = torch.device("cpu") if device is None else device
+    network = _prepared(ckpt, query_place_ids, state_isolation)
     cost = None
-    if cluster is not None and not is_off(ckpt.config.early):
-        raise InvalidValueError("config.early (the early decision) runs on this machine: not with --cluster")
     if cluster is None:
-        network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
-        network.progress = progress
-        spikes = query_spikes(query_images, query_place_ids, traversal, ckpt.config)
-        run = network.run(spikes, state_isolation=state_isolation)
-        isolated = _isolated(ckpt.config, state_isolation)
-        early = early_run(network.run, spikes, ckpt.calibration, ckpt.config, isolated=isolated)  # None: rule off
-        if early is not None:
-            run = replace(run, counts=torch.from_numpy(early.counts))
-        steps = None if early is None else early.steps
-        cost = query_cost(
-            spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query_images, steps=steps
+        run, cost, _ = _run_queries(
+            network, query_images, query_place_ids, traversal, backend, device=device, progress=progress
         )
+    elif not is_off(ckpt.config.early):
+        raise InvalidValueError("config.early (the early decision) runs on this machine: not with --cluster")
+    elif choose_backend(ckpt, backend).name != "float":
+        raise InvalidValueError(f"--cluster runs the float network, not the backend {backend}")
     else:
+        images = {traversal: query_images}
         run = float_runs_on_cluster(
-            ckpt.weights,
-            ckpt.thresholds,
-            ckpt.config,
-            {traversal: query_images},
-            query_place_ids,
-            "query",
-            cluster,
-            state_isolation=state_isolation,
-            progress=progress,
+            ckpt.weights, ckpt.thresholds, network.config, images, query_place_ids, "query", cluster, progress=progress
         )[traversal]
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
@@ -174,11 +151,9 @@ def evaluate_float(
         typed += baseline_rows(distribution, reference_ids, query_place_ids, options)
         similarities = cosine_similarities(reference, query_images)
         typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options)
-    candidates = run.candidates_per_step
-    assert candidates is not None  # the float network always reports them
     return Evaluation(
         rows=[row.to_dict() for row in typed],
-        spike_stats=spike_statistics(candidates.numpy(), counts),
+        spike_stats=spike_statistics(run),
         query_counts=counts,
         modules=None
         if layout is None
@@ -186,13 +161,8 @@ def evaluate_float(
             scores[SEQUENCE_STRATEGY], reference_ids, query_place_ids, layout.regions, options.tolerance
         ),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
-        cost=None if cost is None else cost.summary(),
+        cost=cost,
     )
-
-
-def _isolated(cfg: Config, state_isolation: bool | None) -> bool:
-    """Whether a run keeps state isolation (the config's setting unless ``state_isolation`` overrides it)."""
-    return cfg.network.state_isolation if state_isolation is None else bool(state_isolation)
 
 
 def evaluate_fixed_point(
@@ -206,30 +176,22 @@ def evaluate_fixed_point(
     state_isolation: bool | None = None,
     float_checkpoint: Checkpoint | None = None,
     progress: bool = False,
+    backend: str = "auto",
 ) -> Evaluation:
-    """The integer simulator on one query traversal, read out with both calibrations (deployed and float S^R).
+    """A fixed-point model on one query traversal, read out with both calibrations (deployed and float S^R).
 
-    With ``float_checkpoint`` the float network runs on the same spike trains and the
+    The counts come from ``backend`` of :data:`~vprsnn_export.runtime.backends.BACKENDS` (``auto``: the
+    integer simulator). With ``float_checkpoint`` the float network runs on the same spike trains and the
     per-step agreement of the two rasters is added as ``winner_agreement``.
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, SequenceOptions)
-    check_run_memory(
-        model.config,
-        "evaluation",
-        presentations=len(check_place_ids(query_place_ids, "query_place_ids")),
-        n_neurons=model.weight_mantissa.shape[1],
-        places=len(model.reference_place_ids),
-        rasters=(2 if float_checkpoint is not None else 0) + (0 if _isolated(model.config, state_isolation) else 1),
-    )
-    device = torch.device("cpu") if device is None else device
-    spikes = query_spikes(query_images, query_place_ids, traversal, model.config)
+    network = _prepared(model, query_place_ids, state_isolation, rasters=0 if float_checkpoint is None else 2)
     compare = float_checkpoint is not None
-    integer = IntegerNetwork(model, device, progress=progress)
-    run = integer.run(spikes, record=compare, state_isolation=state_isolation)
-    isolated = _isolated(model.config, state_isolation)
-    early = early_run(integer.run, spikes, model.calibration, model.config, isolated=isolated)  # None: rule off
-    counts = run.counts.numpy() if early is None else early.counts
+    run, cost, spikes = _run_queries(
+        network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
+    )
+    counts = run.counts.numpy()
     rows = []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
         readout = Readout.of(calibration, model.config, options)
@@ -237,27 +199,60 @@ def evaluate_fixed_point(
             rows.append({"calibration": name, **row.to_dict()})
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
-        network = FloatNetwork.from_arrays(float_checkpoint.weights, float_checkpoint.thresholds, model.config, device)
-        network.progress = progress
-        float_run = network.run(spikes, record=True, state_isolation=state_isolation)
+        float_network = replace(float_checkpoint, config=network.config)
+        float_run = open_backend(float_network, "float", device=device, progress=progress)[1].run(spikes, record=True)
         assert float_run.raster is not None
         agreement = step_agreement(float_run.raster, run.raster)
-    assert run.candidates_per_step is not None
     return Evaluation(
         rows=rows,
-        spike_stats=spike_statistics(run.candidates_per_step.numpy(), counts),
+        spike_stats=spike_statistics(run),
         query_counts=counts,
         saturations=run.saturations,
         max_current=run.max_current,
         winner_agreement=agreement,
-        cost=query_cost(
-            spikes,
-            model.weight_mantissa.shape[1],
-            places=len(model.reference_place_ids),
-            images=query_images,
-            steps=None if early is None else early.steps,
-        ).summary(),
+        cost=cost,
     )
+
+
+def _prepared(network: NetworkT, place_ids: np.ndarray, state_isolation: bool | None, rasters: int = 0) -> NetworkT:
+    """The network with ``state_isolation`` (None: its config's own) in its config, as its backend runs it;
+    InvalidValueError when the run (``rasters`` recorded, one more without state isolation) would not fit."""
+    if state_isolation is not None:
+        network = replace(network, config=network.config.replace(**{"network.state_isolation": bool(state_isolation)}))
+    check_run_memory(
+        network.config,
+        "evaluation",
+        presentations=len(check_place_ids(place_ids, "query_place_ids")),
+        n_neurons=network.calibration.shape[0],
+        places=len(network.reference_place_ids),
+        rasters=rasters + (0 if network.config.network.state_isolation else 1),
+    )
+    return network
+
+
+def _run_queries(
+    network: Network,
+    images: np.ndarray,
+    place_ids: np.ndarray,
+    traversal: str,
+    backend: str,
+    *,
+    device: torch.device | None,
+    progress: bool,
+    record: bool = False,
+) -> tuple[SpikeRun, CostSummary, torch.Tensor]:
+    """Encode the queries and run them on the registry's ``backend`` for this network: (the run, with
+    ``config.early``'s counts when that rule is on, its cost per query, the spike trains)."""
+    spikes = query_spikes(images, place_ids, traversal, network.config)
+    runner = open_backend(network, backend, device=device, progress=progress)[1]
+    run = runner.run(spikes, record=record)
+    early = early_run(runner.run, spikes, network.calibration, network.config)  # None: the rule is off
+    if early is not None:
+        run = replace(run, counts=torch.from_numpy(early.counts))
+    steps = None if early is None else early.steps
+    places = len(network.reference_place_ids)
+    cost = query_cost(spikes, int(run.counts.shape[1]), places=places, images=images, steps=steps)
+    return run, cost.summary(), spikes
 
 
 def calibrate_and_evaluate(
