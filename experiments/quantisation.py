@@ -7,7 +7,7 @@ from pathlib import Path
 
 from vprsnn_export.device import resolve_device
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
 from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows
@@ -34,9 +34,8 @@ def run(settings: Settings) -> dict:
         reference = {settings.reference: data.traversal(settings.reference)}
         for scaling, per_neuron in SCALINGS.items():
             for bits in BITS:
-                model = deploy(
-                    ckpt, "experiment", bits, per_neuron=per_neuron, reference_images=reference, device=device
-                )
+                scheme = QuantiseOptions(per_neuron=per_neuron)
+                model = deploy(ckpt, "experiment", bits, scheme, reference_images=reference, device=device)
                 result = evaluate_fixed_point(model, query, data.place_ids, settings.query, options, device=device)
                 rows += [
                     dict(

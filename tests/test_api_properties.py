@@ -103,7 +103,10 @@ def calls(f: Fixtures) -> dict[str, tuple[Any, dict[str, Any]]]:
             vx.quantize_checkpoint,
             dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, per_neuron=True, scale_method="max"),
         ),
-        "deploy": (vx.deploy, dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, calibration="float")),
+        "deploy": (
+            vx.deploy,
+            dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, options=vx.QuantiseOptions(calibration="float")),
+        ),
         "decide": (vx.decide, dict(scores=scores, strategy="wprob")),
         "strategy_scores": (vx.strategy_scores, dict(sr=sr, sq=counts, strategy="weighted", gamma=0.5)),
         "aggregate": (vx.aggregate, dict(prob=scores / scores.sum(1, keepdims=True), k=2, velocity=1.0)),
@@ -134,7 +137,7 @@ def arguments() -> list[tuple[str, str]]:
         "module_layout": ("cfg", "n_places"),
         "select_places": ("dataset", "place_ids"),
         "quantize_checkpoint": ("ckpt", "ckpt_sha256", "bits", "per_neuron", "scale_method"),
-        "deploy": ("ckpt", "ckpt_sha256", "bits"),
+        "deploy": ("ckpt", "ckpt_sha256", "bits", "options"),
         "decide": ("scores", "strategy"),
         "strategy_scores": ("sr", "sq", "strategy"),
         "aggregate": ("prob", "k", "velocity"),
@@ -273,7 +276,7 @@ def test_a_checkpoint_is_written_only_if_it_reads_back_equal(fx, traversals, sou
 
 def test_deploy_refuses_a_label_no_reader_accepts(fx):
     with pytest.raises(vx.InvalidValueError, match="source_sha256"):
-        vx.deploy(fx.ckpt, "my net", 4, calibration="float")
+        vx.deploy(fx.ckpt, "my net", 4, vx.QuantiseOptions(calibration="float"))
 
 
 def test_tiny_weights_are_refused_at_quantisation_not_at_reading(fx):

@@ -1402,6 +1402,7 @@ def quantize_cases() -> list[Case]:
     cases += [
         bad("quantize-scale-x", *QUANT, "--scale", "x"),
         bad("quantize-fold-per-tensor", *QUANT, "--fold-thresholds", "--per-tensor"),
+        bad("quantize-non-leaky-reuse-float", *QUANT, "--non-leaky", "--reuse-float-calibration"),
         bad("quantize-places-other", *QUANT, "--places", "0:5"),
     ]
     return cases
@@ -1487,6 +1488,9 @@ def verify_cases() -> list[Case]:
         bad("verify-query-unknown", "verify", CK, "--query", "autumn", "--report", "v"),
         bad("verify-model-not-checkpoint", "verify", M8, "--query", "winter", "--report", "v"),
         bad("verify-scale-x", *VERIFY, "--scale", "x"),
+        bad("verify-fold-per-tensor", *VERIFY, "--fold-thresholds", "--per-tensor"),
+        bad("verify-non-leaky-reuse-float", *VERIFY, "--non-leaky", "--reuse-float-calibration"),
+        bad("verify-per-tensor-and-per-neuron", *VERIFY, "--per-tensor", "--per-neuron"),
     ]
     return cases
 
@@ -1820,6 +1824,7 @@ LEGAL_LINES: dict[str, str] = {
     "quantize-all-options": f"quantize {CK} --bits 8 --out q --per-tensor --scale mse --json",
     "quantize-fold": f"quantize {CK} --bits 8 --out q --fold-thresholds",
     "quantize-reuse-float": f"quantize {CK} --bits 8 --out q --reuse-float-calibration",
+    "quantize-non-leaky": f"quantize {CK} --bits 8 --out q --non-leaky",
     "quantize-out-existing-folder": f"quantize {CK} --bits 8 --out .",
     "quantize-out-unicode": f"quantize {CK} --bits 2 --out 'módèls 模型'",
     "quantize-force": f"quantize {CK} --bits 8 --out models --force",
@@ -1839,6 +1844,8 @@ LEGAL_LINES: dict[str, str] = {
     "verify-same-checkpoint-twice": f"verify {CK} {CK} --bits 8 --query winter --report v",
     "verify-quick-options": f"verify {CK} --bits 8 --query winter --report v --k 1 --reference-queries 0 --targets none --per-tensor --scale mse --json",
     "verify-reuse-float": f"verify {CK} --bits 8 --query winter --report v --reuse-float-calibration",
+    "verify-fold": f"verify {CK} --bits 8 --query winter --report v --fold-thresholds --scale mse",
+    "verify-non-leaky": f"verify {CK} --bits 8 --query winter --report v --non-leaky",
     "verify-places": f"verify {CK} --bits 8 --query winter --report v --places 0:5",
     "verify-report-unicode": f"verify {CK} --bits 2 --query winter --report 'rëport 报告'",
     "report-in-place": "report rep",

@@ -7,10 +7,11 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
     readout = vx.SequenceOptions(ks=(1, 3))                                 # k, rule, velocity (gamma: the config's)
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
-    model = vx.deploy(ckpt, sha, bits=4, reference_images=...)              # quantise + calibrate on integers
+    quantise = vx.QuantiseOptions(per_neuron=True, non_leaky=False)         # scales, folding, calibration, leak
+    model = vx.deploy(ckpt, sha, 4, quantise, reference_images=...)         # quantise + calibrate on integers
     vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
-    run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout))
+    run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout, quantise=quantise))
     robot = vx.Localizer(model, options=vx.SequenceOptions(ks=(5,)), threshold=theta)  # one frame at a time
     decision = robot.push(grey_frame)                                         # place, confidence, accepted
 
@@ -43,7 +44,7 @@ from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
 from .resources import memory_limit, set_memory_limit
 from .runtime.conformance import compare_backends, cross_implementation
-from .runtime.deployment import deploy, recalibrate
+from .runtime.deployment import QuantiseOptions, deploy, recalibrate
 from .runtime.evaluation import Evaluation, evaluate_fixed_point, evaluate_float
 from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
 from .runtime.localize import Localizer, OperatingPoint, operating_point
@@ -93,6 +94,7 @@ __all__ = [
     "OnnxBackend",
     "OperatingPoint",
     "Predictions",
+    "QuantiseOptions",
     "Readout",
     "ReferenceStepper",
     "SequenceOptions",

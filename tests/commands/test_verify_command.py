@@ -2,11 +2,13 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.commands.verify import EXIT_UNDECIDED, conclusion
 from vprsnn_export.errors import EXIT_BAD_INPUT, EXIT_CHECK_FAILED
+from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.runtime.results import VerifyReport
 
 TINY = ["--timesteps", "40", "--epochs", "2", "--neurons", "48"]
@@ -190,3 +192,34 @@ def test_seeds_train_independent_networks(checkpoint, tmp_path, monkeypatch):
     assert (report / "checkpoints" / "seed1.npz").is_file() and (report / "checkpoints" / "seed2.npz").is_file()
     assert not (tmp_path / "cache").exists()  # the experiments' cache is the lab's: verify trains its own
     assert "±" in (report / "report.md").read_text()
+
+
+@pytest.mark.parametrize("flag", ["--fold-thresholds", "--non-leaky"])
+def test_verify_checks_a_folded_or_non_leaky_deployment(checkpoint, tmp_path, flag):
+    """Issue 33: verify takes quantize's flags; the deployment it checks is the one quantize writes with the flag,
+    every implementation agrees exactly on it, and the report names the options."""
+    code = verify(checkpoint, tmp_path, "--bits", "4", "--tolerance", LENIENT, flag)
+    assert code in (0, EXIT_CHECK_FAILED)  # a check may fail against float; the deployment was verified
+    data = json.loads((tmp_path / "report.json").read_text())
+    given = flag[2:].replace("-", "_")
+    options = {key: data["settings"][key] for key in ("fold_thresholds", "non_leaky", "per_neuron", "calibration")}
+    assert options == {"fold_thresholds": False, "non_leaky": False, "per_neuron": True, "calibration": "deployed"} | {
+        given: True
+    }
+    (result,) = data["runs"][0]["bits"]
+    assert result["cross_implementation"]["passed"] and result["quantisation"]["calibration"].startswith("deployed")
+    model = load_fixed_point(next((tmp_path / "exports").glob("*/4bit/model.npz")))
+    quantized = tmp_path / "q"
+    assert main(["quantize", str(checkpoint), "--bits", "4", flag, "--out", str(quantized), "--quiet"]) == 0
+    written = load_fixed_point(next(quantized.glob("model_4bit_*.npz")))
+    assert np.array_equal(model.threshold, written.threshold) and model.decay_dv == written.decay_dv
+    if given == "non_leaky":
+        assert model.decay_dv == 0 and model.config.network.beta == 1.0
+    else:
+        assert result["quantisation"]["threshold_folding"] and len(set(model.threshold.tolist())) == 1
+    assert f'"{given}": true' in (tmp_path / "report.md").read_text()
+
+
+def test_verify_refuses_a_non_leaky_deployment_with_the_float_calibration(checkpoint, tmp_path, capsys):
+    assert verify(checkpoint, tmp_path, "--non-leaky", "--reuse-float-calibration") == EXIT_BAD_INPUT
+    assert "non_leaky (--non-leaky) needs the deployed calibration" in capsys.readouterr().err

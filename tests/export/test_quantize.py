@@ -230,7 +230,7 @@ def test_command_errors_are_clear(tmp_path, capsys):
     assert main(["quantize", str(source), "--bits", "8,1", "--out", str(tmp_path / "m")]) == 2
     assert "unsupported weight bit width 1" in capsys.readouterr().err
     assert main(["quantize", str(source), "--fold-thresholds", "--per-tensor", "--out", str(tmp_path / "m")]) == 2
-    assert "--fold-thresholds needs per-neuron scales" in capsys.readouterr().err
+    assert "(--fold-thresholds) needs per-neuron scales" in capsys.readouterr().err
     assert (
         main(
             [

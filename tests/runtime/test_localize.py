@@ -13,7 +13,7 @@ from vprsnn_export.readout.aggregation import aggregate, track_velocity
 from vprsnn_export.readout.scoring import Readout, ensemble_layout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import decide
-from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
 from vprsnn_export.runtime.localize import (
     Localizer,
     PrecisionRecallCurve,
@@ -115,7 +115,7 @@ def test_backend_mismatches_are_one_clear_error(networks, tmp_path):
         Localizer(ckpt, backend="integer")
     with pytest.raises(InvalidValueError, match="--onnx"):
         Localizer(model, backend="onnx")
-    other = deploy(ckpt, "1" * 64, 4, calibration="float")
+    other = deploy(ckpt, "1" * 64, 4, QuantiseOptions(calibration="float"))
     graph = write_onnx(other, tmp_path / "other.onnx")
     with pytest.raises(ModelFileError, match="not exported from the given model"):
         Localizer(model, backend="onnx", onnx_path=graph)

@@ -360,13 +360,14 @@ def test_default_network_float_consumers_differ_with_the_leak_and_are_exact_with
     crossings (raster entries differ after the rule) and decisions fall below the stated 95 % (the gate
     fails the file); --non-leaky: 0 / 0 and 100 % in every consumer (the gate passes)."""
     from vprsnn_export.runtime.consumer_gate import consumer_gate
-    from vprsnn_export.runtime.deployment import deploy
+    from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
     from vprsnn_export.targets.nir_consumers import run_consumer
 
     ckpt, dataset, spikes = default_network
     images = {"summer": dataset.traversal("summer")}
     for non_leaky in (False, True):
-        model = deploy(ckpt, "0" * 64, 2, fold_thresholds=True, reference_images=images, non_leaky=non_leaky)
+        options = QuantiseOptions(fold_thresholds=True, non_leaky=non_leaky)
+        model = deploy(ckpt, "0" * 64, 2, options, reference_images=images)
         path = write_nir(model, tmp_path / f"m{non_leaky}.nir")
         graph = nir.read(path)
         off_net, on_net = network_raster(model, spikes, wta=False), network_raster(model, spikes, wta=True)

@@ -8,17 +8,21 @@ import math
 import sys
 from collections.abc import Sequence
 from dataclasses import fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..data.dataset import Dataset, load_selection, scoring_truth
 from ..errors import InvalidValueError
+from ..export.quantize import SCALE_METHODS
 from ..io.fileio import parse_json
 from ..readout.metrics import Tolerance
 from ..readout.rules import RULES
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
+
+if TYPE_CHECKING:
+    from ..runtime.deployment import QuantiseOptions
 
 
 def integer(text: str) -> int:
@@ -60,6 +64,49 @@ def add_query_options(parser: argparse.ArgumentParser) -> None:
 
 
 PER_TENSOR_HELP = "one weight scale per module, shared by its neurons (a single network: one for all its neurons)"
+#: The help of each quantisation flag: quantize and verify add them with :func:`add_quantise_options`.
+QUANTISE_HELP = {
+    "--per-tensor": PER_TENSOR_HELP,
+    "--per-neuron": "one weight scale per neuron (the default)",
+    "--scale": "weight scale: max (max-abs, no weight clips) or mse (minimum squared error; large weights may clip)",
+    "--fold-thresholds": "choose per-neuron scales so that all neurons share one integer threshold "
+    "(not with --per-tensor)",
+    "--reuse-float-calibration": "keep the float network's S^R instead of recalibrating on the integer simulator "
+    "(no reference images needed)",
+    "--non-leaky": "deploy without the leak (beta = 1, decay_dv = 0: V <- V + a): every float NIR consumer then "
+    "computes the model exactly; recalibrated on the integer simulator (docs/targets.md section 1.4 gives its cost)",
+}
+
+
+def add_quantise_options(parser: argparse.ArgumentParser) -> None:
+    """The quantisation flags of quantize and verify, one per :class:`~vprsnn_export.runtime.deployment.QuantiseOptions`
+    field (--per-tensor/--per-neuron, --scale, --fold-thresholds, --reuse-float-calibration, --non-leaky);
+    :func:`quantise_options` builds and validates them."""
+    group = parser.add_argument_group("quantisation")
+    scales = group.add_mutually_exclusive_group()
+    for flag in ("--per-tensor", "--per-neuron"):
+        scales.add_argument(flag, action="store_true", help=QUANTISE_HELP[flag])
+    group.add_argument(
+        "--scale",
+        choices=SCALE_METHODS,
+        default=SCALE_METHODS[0],
+        help=QUANTISE_HELP["--scale"] + " (default: %(default)s)",
+    )
+    for flag in ("--fold-thresholds", "--reuse-float-calibration", "--non-leaky"):
+        group.add_argument(flag, action="store_true", help=QUANTISE_HELP[flag])
+
+
+def quantise_options(args: argparse.Namespace) -> QuantiseOptions:
+    """The QuantiseOptions of the flags :func:`add_quantise_options` added (validated once, when built)."""
+    from ..runtime.deployment import QuantiseOptions
+
+    return QuantiseOptions(
+        per_neuron=not args.per_tensor,
+        scale_method=args.scale,
+        fold_thresholds=args.fold_thresholds,
+        calibration="float" if args.reuse_float_calibration else "deployed",
+        non_leaky=args.non_leaky,
+    )
 
 
 def add_threads_option(parser: argparse.ArgumentParser) -> None:

@@ -188,6 +188,7 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
 
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
+    from ..runtime.deployment import QuantiseOptions
     from ..runtime.report import write_report
     from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
@@ -217,15 +218,16 @@ def run(args: argparse.Namespace) -> int:
     )
     ckpt_path = save_checkpoint(out / "float.npz", ckpt)
     say(f"1/4 trained {cfg.train.epochs} epochs -> {ckpt_path}")
-    options = VerifyOptions(readout=SequenceOptions(ks=DEMO_KS), bits=DEMO_BITS)
+    quantise = QuantiseOptions()  # per-neuron max-abs scales, deployed calibration: quantize's defaults
+    options = VerifyOptions(readout=SequenceOptions(ks=DEMO_KS), bits=DEMO_BITS, quantise=quantise)
     say(
         "each bit width gets a verdict (docs/verify.md): holds (every paired interval inside its tolerance), "
         "undecided (an interval straddles its tolerance: too few queries to tell), fails (one lies beyond it: "
         "exit code 1)"
     )
     say(
-        f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits (per-neuron, deployed calibration) and exporting "
-        "NIR, Loihi-style and ONNX; every file is read back and run"
+        f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits ({'per-neuron' if quantise.per_neuron else 'per-tensor'}"
+        f", {quantise.calibration} calibration) and exporting NIR, Loihi-style and ONNX; every file is read back and run"
     )
     result = verify_checkpoint(
         ckpt,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,14 +14,18 @@ from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
 from ..io.fileio import check_output
 from ._common import (
-    PER_TENSOR_HELP,
     add_data_options,
+    add_quantise_options,
     add_runtime_options,
     format_table,
     parse_int_list,
     print_json,
+    quantise_options,
     query_data,
 )
+
+if TYPE_CHECKING:
+    from ..runtime.deployment import QuantiseOptions
 
 DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 TABLE_COLUMNS = (
@@ -42,41 +47,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
     )
-    scales = parser.add_mutually_exclusive_group()
-    scales.add_argument("--per-tensor", action="store_true", help=PER_TENSOR_HELP)
-    scales.add_argument("--per-neuron", action="store_true", help="one weight scale per neuron (the default)")
-    parser.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice: max-abs or minimum MSE")
-    parser.add_argument(
-        "--fold-thresholds",
-        action="store_true",
-        help="choose per-neuron scales so that all neurons share one integer threshold (not with --per-tensor)",
-    )
-    parser.add_argument(
-        "--reuse-float-calibration",
-        action="store_true",
-        help="keep the float network's S^R instead of recalibrating on the integer simulator (needs no data)",
-    )
-    parser.add_argument(
-        "--non-leaky",
-        action="store_true",
-        help="deploy without the leak (beta = 1, decay_dv = 0: V <- V + a): every float NIR consumer then computes "
-        "the model exactly; recalibrated on the integer simulator (docs/targets.md section 1.4 gives its cost)",
-    )
     parser.add_argument("--out", required=True, help="folder for the model files")
     parser.add_argument("--force", action="store_true", help="replace model files that exist in --out")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    add_quantise_options(parser)
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
 
 
-def model_filename(
-    bits: int, per_neuron: bool, scale_method: str, fold_thresholds: bool, non_leaky: bool = False
-) -> str:
+def model_filename(bits: int, options: QuantiseOptions) -> str:
     """e.g. model_8bit_per-neuron_max.npz, model_4bit_per-neuron_mse_folded.npz, model_8bit_per-neuron_max_non-leaky.npz."""
-    scheme = "per-neuron" if per_neuron else "per-tensor"
-    suffix = ("_folded" if fold_thresholds else "") + ("_non-leaky" if non_leaky else "")
-    return f"model_{bits}bit_{scheme}_{scale_method}{suffix}.npz"
+    scheme = "per-neuron" if options.per_neuron else "per-tensor"
+    suffix = ("_folded" if options.fold_thresholds else "") + ("_non-leaky" if options.non_leaky else "")
+    return f"model_{bits}bit_{scheme}_{options.scale_method}{suffix}.npz"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,43 +68,25 @@ def run(args: argparse.Namespace) -> int:
     from ..runtime.deployment import deploy
 
     bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
-    per_neuron = not args.per_tensor
-    if args.non_leaky and args.reuse_float_calibration:
-        raise InvalidValueError("--non-leaky needs the deployed calibration (drop --reuse-float-calibration)")
-    if args.fold_thresholds and not per_neuron:
-        raise InvalidValueError("--fold-thresholds needs per-neuron scales (drop --per-tensor)")
+    options = quantise_options(args)
     ckpt = load_checkpoint(args.checkpoint)
     digest = checkpoint_sha256(args.checkpoint)
     device = resolve_device(args.device)
     reference_images = None
-    if not args.reuse_float_calibration:
+    if options.calibration == "deployed":
         dataset = query_data(args, ckpt.data, ckpt.config.preprocess, list(ckpt.reference_traversals))
         if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
             raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
-    for bits in bit_widths:  # every output is checked before any quantisation runs
-        check_output(
-            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky),
-            overwrite=args.force,
-        )
+    paths = [Path(args.out) / model_filename(bits, options) for bits in bit_widths]
+    for path in paths:  # every output is checked before any quantisation runs
+        check_output(path, overwrite=args.force)
     rows = []
-    for bits in bit_widths:
+    for bits, file in zip(bit_widths, paths, strict=True):
         model = deploy(
-            ckpt,
-            digest,
-            bits,
-            per_neuron=per_neuron,
-            scale_method=args.scale,
-            fold_thresholds=args.fold_thresholds,
-            calibration="float" if args.reuse_float_calibration else "deployed",
-            reference_images=reference_images,
-            device=device,
-            non_leaky=args.non_leaky,
-            progress=not args.quiet,
+            ckpt, digest, bits, options, reference_images=reference_images, device=device, progress=not args.quiet
         )
-        path = save_fixed_point(
-            Path(args.out) / model_filename(bits, per_neuron, args.scale, args.fold_thresholds, args.non_leaky), model
-        )
+        path = save_fixed_point(file, model)
         report = model.quantisation.to_dict()
         rows.append(
             {

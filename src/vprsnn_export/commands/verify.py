@@ -28,8 +28,8 @@ from ..readout.metrics import MatchTruth
 from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
-    PER_TENSOR_HELP,
     add_data_options,
+    add_quantise_options,
     add_runtime_options,
     add_sequence_options,
     format_table,
@@ -37,6 +37,7 @@ from ._common import (
     non_empty,
     parse_int_list,
     print_json,
+    quantise_options,
     scored_tolerance,
     sequence_options,
 )
@@ -94,18 +95,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=ALL_TARGETS,
         help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
-    quant = parser.add_argument_group("quantisation")
-    quant.add_argument(
-        "--per-tensor",
-        action="store_true",
-        help=PER_TENSOR_HELP + " (default: one per neuron)",
-    )
-    quant.add_argument("--scale", choices=("max", "mse"), default="max", help="scale choice (default: %(default)s)")
-    quant.add_argument(
-        "--reuse-float-calibration",
-        action="store_true",
-        help="read the quantised networks out with the float S^R instead of re-measuring it",
-    )
+    add_quantise_options(parser)
     parser.add_argument(
         "--seeds", type=integer, help="train N networks (seeds 1..N) with CKPT's config and data; mean ± std"
     )
@@ -129,9 +119,7 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
     return VerifyOptions(
         readout=sequence_options(args),
         bits=bits,
-        per_neuron=not args.per_tensor,
-        scale_method=args.scale,
-        calibration="float" if args.reuse_float_calibration else "deployed",
+        quantise=quantise_options(args),
         reference_queries=args.reference_queries,
         targets=parse_targets(args.targets),
         tolerances=parse_tolerances(args.tolerance),
@@ -320,7 +308,7 @@ def run(args: argparse.Namespace) -> int:
                 dataset.place_ids,
                 args.query,
                 network_options,
-                reference_images=None if options.calibration == "float" else reference_images,
+                reference_images=None if options.quantise.calibration == "float" else reference_images,
                 export_dir=out / "exports" / folder_name(label, index),
                 device=device,
                 progress=progress,

@@ -10,19 +10,58 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import require_type
+from vprsnn_export.arguments import require_bool, require_choice, require_type
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import SCALE_METHODS, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.trainer.calibrate import calibrate
 
 CALIBRATIONS = ("deployed", "float")
+
+
+@dataclass(frozen=True)
+class QuantiseOptions:
+    """How a float checkpoint is quantised and calibrated: the one options object of `quantize`, :func:`deploy`,
+    `verify` and the demo (the bit width is not here: each job deploys one model per width it is given).
+
+    ``per_neuron``: one weight scale per neuron, else one per module (``--per-tensor``); ``scale_method``: "max"
+    (max-abs, no weight clips) or "mse" (minimum squared error, ``--scale``); ``fold_thresholds``: per-neuron
+    scales chosen so that every neuron shares one integer threshold; ``calibration``: "deployed" (S^R re-measured
+    on the integer simulator) or "float" (the float S^R kept, ``--reuse-float-calibration``); ``non_leaky``: the
+    trained weights and thresholds deployed without the leak (network.beta = 1, decay_dv = 0: V <- V + a), the mode
+    every float NIR consumer computes exactly (docs/targets.md section 1.4). Validated once, when built.
+    """
+
+    per_neuron: bool = True
+    scale_method: str = "max"
+    fold_thresholds: bool = False
+    calibration: str = "deployed"
+    non_leaky: bool = False
+
+    def __post_init__(self) -> None:
+        require_bool("per_neuron", self.per_neuron)
+        require_choice("scale_method (--scale)", self.scale_method, SCALE_METHODS)
+        require_bool("fold_thresholds", self.fold_thresholds)
+        require_choice("calibration", self.calibration, CALIBRATIONS)
+        require_bool("non_leaky", self.non_leaky)
+        if self.fold_thresholds and not self.per_neuron:
+            raise InvalidValueError(
+                "fold_thresholds (--fold-thresholds) needs per-neuron scales: per_neuron=True (drop --per-tensor)"
+            )
+        if self.non_leaky and self.calibration != "deployed":
+            raise InvalidValueError(
+                "non_leaky (--non-leaky) needs the deployed calibration: calibration='deployed' (drop "
+                "--reuse-float-calibration); the float S^R was measured with the leak"
+            )
+        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
+            object.__setattr__(self, name, bool(getattr(self, name)))
 
 
 def recalibrate(
@@ -61,42 +100,38 @@ def deploy(
     ckpt: Checkpoint,
     ckpt_sha256: str,
     bits: int,
+    options: QuantiseOptions = QuantiseOptions(),
     *,
-    per_neuron: bool = True,
-    scale_method: str = "max",
-    fold_thresholds: bool = False,
-    calibration: str = "deployed",
     reference_images: Mapping[str, np.ndarray] | None = None,
     device: torch.device | None = None,
-    non_leaky: bool = False,
     progress: bool = False,
 ) -> FixedPointModel:
-    """Quantise ``ckpt`` to ``bits`` and calibrate it: the model that `quantize` writes and `verify` checks.
+    """Quantise ``ckpt`` to ``bits`` as ``options`` say and calibrate it: the model that `quantize` writes and
+    `verify` checks.
 
-    ``calibration="deployed"`` re-measures S^R on the integer simulator (needs the
-    checkpoint's reference images); ``"float"`` keeps the float network's S^R.
-    ``non_leaky`` deploys the trained weights and thresholds without the leak (network.beta = 1,
-    decay_dv = 0: V <- V + a), the mode every float NIR consumer computes exactly
-    (docs/targets.md section 1.4); it needs the deployed calibration, since S^R changes with the dynamics.
+    The deployed calibration (the default) re-measures S^R on the integer simulator and needs the checkpoint's
+    reference images; a non-leaky deployment quantises the checkpoint with network.beta = 1 (decay_dv = 0).
     """
     require_type("ckpt", ckpt, Checkpoint)
+    require_type("options", options, QuantiseOptions)
     require_type("reference_images", reference_images, (Mapping, type(None)))
-    if not isinstance(calibration, str) or calibration not in CALIBRATIONS:
-        raise InvalidValueError(f"calibration must be one of {', '.join(CALIBRATIONS)}, got {calibration!r}")
-    if non_leaky and calibration != "deployed":
-        raise InvalidValueError("a non-leaky deployment needs the deployed calibration (the float S^R has a leak)")
-    if non_leaky:
-        ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
-    if calibration == "deployed" and reference_images is None:
+    if options.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
+    if options.non_leaky:
+        ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
     model = quantize_checkpoint(
-        ckpt, ckpt_sha256, bits, per_neuron=per_neuron, scale_method=scale_method, fold_thresholds=fold_thresholds
+        ckpt,
+        ckpt_sha256,
+        bits,
+        per_neuron=options.per_neuron,
+        scale_method=options.scale_method,
+        fold_thresholds=options.fold_thresholds,
     )
     return recalibrate(
         model,
         dict(reference_images or {}),
         ckpt.reference_place_ids,
-        reuse_float_calibration=calibration == "float",
+        reuse_float_calibration=options.calibration == "float",
         device=device,
         progress=progress,
     )

@@ -171,6 +171,20 @@ def test_combining_reports_of_other_data_or_bits_needs_consent(report):
     assert combined.settings_differ == ("bits",)
 
 
+def test_combining_a_folded_or_non_leaky_report_needs_consent_and_an_older_report_is_neither(report):
+    """Issue 33: verify --fold-thresholds / --non-leaky measure another deployment; a report written before these
+    settings existed (no key) was neither, so it pools with a new default one."""
+    older = json.loads(json.dumps(report.to_dict()))
+    for key in ("fold_thresholds", "non_leaky"):
+        assert report.settings[key] is False
+        older["settings"].pop(key)
+        other = json.loads(json.dumps(report.to_dict()))
+        other["settings"][key] = True
+        with pytest.raises(ReportError, match=f"differ in {key}"):
+            combine_reports([report, VerifyReport.from_dict(other)])
+    assert combine_reports([report, VerifyReport.from_dict(older)]).settings_differ == ()
+
+
 # ---------------------------------------------------------------- issue 32: the report's columns, data and plots
 
 

@@ -17,7 +17,7 @@ from vprsnn_export.io.fileio import read_container, sha256_file
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
-from ..deployment import deploy
+from ..deployment import QuantiseOptions, deploy
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,7 @@ def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]
             f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
             "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
         )
-    return deploy(source.checkpoint, source.sha256, check_bits(bits), calibration="float")
+    return deploy(source.checkpoint, source.sha256, check_bits(bits), QuantiseOptions(calibration="float"))
 
 
 def consumer_statements(

@@ -37,7 +37,12 @@ def load_report(path: str | Path) -> VerifyReport:
 
 #: Settings that make two verification runs measure different things: pooling them into one
 #: mean ± std needs the user's explicit consent (``allow_mixed``).
-POOLING_KEYS = ("query", "data", "subset", "places", "bits", "readout", "per_neuron", "scale_method", "calibration")
+POOLING_KEYS = (
+    *("query", "data", "subset", "places", "bits", "readout"),
+    *("per_neuron", "scale_method", "fold_thresholds", "calibration", "non_leaky"),
+)
+#: What a setting absent from an older report stands for (verify could not fold thresholds or drop the leak).
+OLDER_DEFAULTS = {"fold_thresholds": False, "non_leaky": False}
 
 
 def _as_json(value: Any) -> str:
@@ -65,7 +70,8 @@ def combine_reports(
             key
             for report in reports[1:]
             for key in set(settings) | set(report.settings)
-            if _as_json(report.settings.get(key)) != _as_json(settings.get(key))
+            if _as_json(report.settings.get(key, OLDER_DEFAULTS.get(key)))
+            != _as_json(settings.get(key, OLDER_DEFAULTS.get(key)))
         }
     )
     incompatible = [key for key in differ if key in POOLING_KEYS]

@@ -31,7 +31,7 @@ from vprsnn_export.targets.registry import TARGETS
 
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
-from ..deployment import CALIBRATIONS, deploy
+from ..deployment import QuantiseOptions, deploy
 from ..results import BitsResult, FloatResult, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
@@ -53,19 +53,18 @@ class VerifyOptions:
 
     readout: SequenceOptions
     bits: tuple[int, ...] = DEFAULT_BITS
-    per_neuron: bool = True
-    scale_method: str = "max"
-    calibration: str = "deployed"  # "deployed": S^R re-measured on the integer simulator; "float": reused
+    quantise: QuantiseOptions = QuantiseOptions()  # how each width is quantised and calibrated
     reference_queries: int = 3  # presentations run on the slow reference stepper
     targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
     statistics: VerifyConfig = field(default_factory=VerifyConfig)  # the paired verdict's settings
 
     def to_dict(self, config: Config) -> dict[str, Any]:
-        """The settings of a report; its readout with the gamma of ``config`` (the networks' config)."""
+        """The settings of a report: the quantisation options beside the bit widths (per_neuron, scale_method,
+        fold_thresholds, calibration, non_leaky), the readout with the gamma of ``config`` (the networks' config)."""
         data = dataclasses.asdict(self)
-        data["readout"] = {"gamma": config.assignment.gamma, **dataclasses.asdict(self.readout)}
-        return data
+        readout = {"gamma": config.assignment.gamma, **data.pop("readout")}
+        return {"readout": readout, "bits": data.pop("bits"), **data.pop("quantise"), **data}
 
 
 #: Most raster entries (queries x steps x neurons, one byte each) a recorded run may hold: the
@@ -107,11 +106,10 @@ def verify_checkpoint(
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, VerifyOptions)
+    require_type("options.quantise", options.quantise, QuantiseOptions)
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
-    if options.calibration not in CALIBRATIONS:
-        raise InvalidValueError(f"calibration must be deployed or float, got {options.calibration!r}")
-    if options.calibration == "deployed" and reference_images is None:
+    if options.quantise.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
     readout = options.readout
     query_place_ids = np.asarray(query_place_ids, dtype=np.int64)
@@ -149,9 +147,7 @@ def verify_checkpoint(
                 ckpt,
                 ckpt_sha256,
                 bits,
-                per_neuron=options.per_neuron,
-                scale_method=options.scale_method,
-                calibration=options.calibration,
+                options.quantise,
                 reference_images=reference_images,
                 device=device,
                 progress=progress,
@@ -261,7 +257,7 @@ def verify_checkpoint(
             metrics=tuple(float_rows),
             total_spikes=int(float_counts.sum()),
             pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
-            weights=weight_histograms(ckpt.weights, options.per_neuron),
+            weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
             cost=query_cost(spikes, ckpt.weights.shape[1], places=len(ref_ids), images=query_images).summary(),
         ),
         bits=tuple(results),
