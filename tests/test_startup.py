@@ -58,7 +58,9 @@ def test_the_guard_takes_sigint_from_python_only_and_gives_it_back():
 @pytest.mark.parametrize(("argv0", "guarded"), [("vprsnn-export", True), ("my_program.py", False)])
 def test_importing_the_package_guards_the_command_only(argv0, guarded):
     probe = (
-        f"import signal, sys; sys.argv[0] = {argv0!r}; import vprsnn_export; "
+        # SIGINT as an interactive shell leaves it (a background job inherits it ignored, which the guard respects)
+        "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        f"sys.argv[0] = {argv0!r}; import vprsnn_export; "
         "from vprsnn_export.startup import interrupted_while_loading as guard; "
         "print(signal.getsignal(signal.SIGINT) is guard)"
     )
