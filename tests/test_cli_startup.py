@@ -1,4 +1,4 @@
-"""`--help`, `--version` and every command's `--help` import no torch (nor numba, onnx, nir, matplotlib): the
+"""`--help`, `--version` and every command's `--help` import no torch (nor numba, onnx, nir, matplotlib, OpenCV): the
 start-up bench/bench_cli.py times. The library loads when a command runs."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from vprsnn_export.cli import build_parser, command_names, summary
 
-HEAVY = ("torch", "numba", "onnx", "nir", "matplotlib")
+HEAVY = ("torch", "numba", "onnx", "nir", "matplotlib", "cv2")
 PROBE = """
 import sys
 HEAVY = {heavy!r}

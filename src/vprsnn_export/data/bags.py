@@ -19,7 +19,6 @@ import itertools
 from collections.abc import Iterator
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from ..errors import DataError
@@ -28,8 +27,9 @@ from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
-ENCODINGS = {"mono8": None, "rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY}
-ENCODINGS |= {"rgba8": cv2.COLOR_RGBA2GRAY, "bgra8": cv2.COLOR_BGRA2GRAY}
+#: ROS encoding -> the OpenCV conversion to grey (by name: OpenCV loads only when a frame is converted)
+ENCODINGS = {"mono8": None, "rgb8": "COLOR_RGB2GRAY", "bgr8": "COLOR_BGR2GRAY"}
+ENCODINGS |= {"rgba8": "COLOR_RGBA2GRAY", "bgra8": "COLOR_BGRA2GRAY"}
 BAG_SUFFIX = ".bag"
 SMALLER = "a smaller image would"
 ROS2_METADATA = "metadata.yaml"
@@ -60,7 +60,11 @@ def image_grey(msg, where: str) -> np.ndarray:
         )
     pixels = data.reshape(height, step)[:, : width * channels].reshape(height, width, channels)
     code = ENCODINGS[encoding]
-    return pixels[:, :, 0].copy() if code is None else cv2.cvtColor(np.ascontiguousarray(pixels), code)
+    if code is None:
+        return pixels[:, :, 0].copy()
+    import cv2
+
+    return cv2.cvtColor(np.ascontiguousarray(pixels), getattr(cv2, code))
 
 
 def compressed_grey(msg, where: str) -> np.ndarray:

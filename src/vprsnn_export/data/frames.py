@@ -30,7 +30,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
-import cv2
 import numpy as np
 
 from ..errors import DataError
@@ -68,6 +67,8 @@ def to_grey(frame: np.ndarray) -> np.ndarray:
     if array.dtype != np.uint8 or array.ndim not in (2, 3):
         raise DataError(f"expected a uint8 image (H, W) or (H, W, 3), got shape {array.shape} dtype {array.dtype}")
     if array.ndim == 3:
+        import cv2
+
         return cv2.cvtColor(array, cv2.COLOR_BGR2GRAY if array.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
     return array
 
@@ -76,6 +77,8 @@ def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:
     """Frames of a video file in order, as ``("name#index", grey)``; DataError when OpenCV cannot open it, and after
     the last frame when the video ended more than one frame short of the count its container declares (a cut
     or damaged file: the frames before are decided, the run still ends with the error, quoting the decoder)."""
+    import cv2  # here, not at import: OpenCV takes 50-70 ms to load, and `--help` reads no video
+
     path = Path(path)
     with captured_stderr() as noise:
         capture = cv2.VideoCapture(str(path))

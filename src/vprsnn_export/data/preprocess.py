@@ -39,7 +39,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Protocol
 
-import cv2
 import numpy as np
 
 from ..errors import DataError, InvalidValueError
@@ -114,6 +113,8 @@ def check_decodable(data: bytes, where: object) -> None:
 
 def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
     """``cv2.imdecode(data, IMREAD_GRAYSCALE)`` with the decoder's stderr lines captured; None if undecodable."""
+    import cv2  # here, not at import: OpenCV takes 70 ms to load, and `--help` never decodes
+
     with captured_stderr() as noise:
         try:
             image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
@@ -160,6 +161,8 @@ def read_grey_image(path: Path, context: str = "") -> np.ndarray:
 
 def resize_image(grey: np.ndarray, size: int) -> np.ndarray:
     """``R = resize(I, size x size)`` with ``cv2.INTER_AREA``; uint8 in, uint8 out."""
+    import cv2
+
     if grey.ndim != 2 or grey.dtype != np.uint8:
         raise DataError(f"expected a 2-D uint8 greyscale image, got shape {grey.shape} dtype {grey.dtype}")
     return cv2.resize(grey, (size, size), interpolation=cv2.INTER_AREA)
@@ -194,6 +197,8 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
     ``D = G_c * R - G_s * R``; ``ON = max(D, 0)``, ``OFF = max(-D, 0)``, side by side in each row,
     scaled by the image's largest ON or OFF value (a flat image gives zeros).
     """
+    import cv2
+
     images = resized.astype(np.float32)
     centre = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_centre, borderType=cv2.BORDER_REFLECT) for i in images])
     surround = np.stack([cv2.GaussianBlur(i, (0, 0), sigma_surround, borderType=cv2.BORDER_REFLECT) for i in images])
