@@ -36,6 +36,8 @@ from .errors import InvalidValueError
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
 #: Seconds between two looks of the watchdog at the processes of a local Ray cluster (:func:`watch_cluster`).
 WATCH_INTERVAL_S = 0.5
+#: Rounds of killing once the command has ended: each also takes the children the survivors started meanwhile.
+KILL_ROUNDS = 4
 #: Seconds to wait for a ray:// head to accept a connection before giving up (Ray Client alone retries for 35 s).
 CONNECT_TIMEOUT_S = 5.0
 
@@ -278,7 +280,8 @@ def watch_cluster(parent: int, parent_start: str) -> None:
     Every WATCH_INTERVAL_S it notes the processes that appeared below ``parent`` since it started (Ray's
     GCS, raylet, agents and workers); when its standard input closes and ``parent`` has ended (whatever
     ended it, SIGKILL included: Ray's agents outlive their raylet), it kills those still running, each
-    checked by its start time (a pid the system gave to another process is left alone). A parent that
+    checked by its start time (a pid the system gave to another process is left alone), and then, for
+    KILL_ROUNDS rounds, the processes those started meanwhile. A parent that
     closes the pipe itself (after ``ray.shutdown``) leaves everything as it is.
     """
     me = os.getpid()
@@ -291,13 +294,17 @@ def watch_cluster(parent: int, parent_start: str) -> None:
         ready, _, _ = select.select([0], [], [], WATCH_INTERVAL_S)
         if ready and not os.read(0, 4096):
             break
-    table = process_table()
-    if table.get(parent, (0, ""))[1] == parent_start:
+    if process_table().get(parent, (0, ""))[1] == parent_start:
         return  # the command shut its cluster down and goes on
-    for pid, start in seen.items():
-        if table.get(pid, (0, ""))[1] == start:
-            with contextlib.suppress(OSError):
-                os.kill(pid, signal.SIGKILL)
+    for _ in range(KILL_ROUNDS):  # a Ray process that outlived the command may still start workers: their turn next
+        table = process_table()
+        for pid in list(seen):
+            seen.update(descendants(pid, table))
+        for pid, start in seen.items():
+            if table.get(pid, (0, ""))[1] == start:
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
+        time.sleep(WATCH_INTERVAL_S)
 
 
 def start_watchdog() -> subprocess.Popen | None:
