@@ -274,10 +274,11 @@ def descendants(root: int, table: dict[int, tuple[int, str]]) -> dict[int, str]:
     return found
 
 
-def watch_cluster(parent: int, parent_start: str) -> None:
+def watch_cluster(parent: int, parent_start: str, before: set[int]) -> None:
     """The watchdog of a local Ray cluster (a process of its own, :func:`start_watchdog`).
 
-    Every WATCH_INTERVAL_S it notes the processes that appeared below ``parent`` since it started (Ray's
+    Every WATCH_INTERVAL_S it notes the processes below ``parent`` other than ``before`` (those it had when it
+    started this watchdog: a watchdog slow to load must not count Ray's first processes among them; Ray's
     GCS, raylet, agents and workers); when its standard input closes and ``parent`` has ended (whatever
     ended it, SIGKILL included: Ray's agents outlive their raylet), it kills those still running, each
     checked by its start time (a pid the system gave to another process is left alone), and then, for
@@ -285,7 +286,6 @@ def watch_cluster(parent: int, parent_start: str) -> None:
     closes the pipe itself (after ``ray.shutdown``) leaves everything as it is.
     """
     me = os.getpid()
-    before = set(descendants(parent, process_table()))
     seen: dict[int, str] = {}
     while True:
         table = process_table()
@@ -310,12 +310,16 @@ def watch_cluster(parent: int, parent_start: str) -> None:
 def start_watchdog() -> subprocess.Popen | None:
     """A :func:`watch_cluster` process for this one, in a session of its own (None where /proc is absent)."""
     me = os.getpid()
-    started = process_table().get(me) if os.path.isdir("/proc") else None
-    if started is None:
+    table = process_table() if os.path.isdir("/proc") else {}
+    if me not in table:
         return None
-    code = "import sys; from vprsnn_export.cluster import watch_cluster; watch_cluster(int(sys.argv[1]), sys.argv[2])"
+    before = ",".join(str(pid) for pid in descendants(me, table))
+    code = (
+        "import sys; from vprsnn_export.cluster import watch_cluster; "
+        "watch_cluster(int(sys.argv[1]), sys.argv[2], {int(p) for p in sys.argv[3].split(',') if p})"
+    )
     return subprocess.Popen(
-        [sys.executable, "-c", code, str(me), started[1]],
+        [sys.executable, "-c", code, str(me), table[me][1], before],
         stdin=subprocess.PIPE,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
