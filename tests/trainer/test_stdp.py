@@ -1,3 +1,4 @@
+import numpy as np
 import torch
 
 from vprsnn_export.config import HomeostasisConfig, STDPConfig
@@ -51,3 +52,14 @@ def test_homeostasis_direction_and_bounds():
     assert torch.allclose(new[0], torch.tensor(1.05))
     off = homeostasis_update(theta, rates, HomeostasisConfig(enabled=False))
     assert torch.equal(off, theta)
+
+
+def test_the_default_homeostasis_moves_thresholds_where_the_papers_text_rate_leaves_them(train_network):
+    """eta is per batch: the default (1) spreads the trained thresholds; the text's 0.001 once per batch (the
+    paper preset's) leaves every one within 0.002 of theta_init, the inert homeostasis of research log §12."""
+    default, _ = train_network()
+    text_rate, _ = train_network(**{"homeostasis.eta": 0.001})
+    theta_init = default.config.network.theta_init
+    assert default.config.homeostasis.eta == 1.0
+    assert np.ptp(default.thresholds) > 0.05
+    assert np.abs(text_rate.thresholds - theta_init).max() < 0.002
