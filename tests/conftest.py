@@ -25,6 +25,7 @@ from hypothesis import settings
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
+from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -220,6 +221,29 @@ def tiny_model() -> FixedPointModel:
         quantisation={"per_neuron": True},
         source_sha256="0" * 64,
     )
+
+
+def _image_route(folder: Path, n: int = 12) -> Path:
+    """The synthetic route's summer and winter images as PNG files under ``folder`` (read as pixels, as a peer's
+    loader or a frame folder reads them), with ``places.csv`` and a ``subset.csv`` of every place; returns ``folder``."""
+    import cv2  # only the tests that write image files need OpenCV
+
+    route = synthetic_route(n, ("summer", "winter"))
+    for name in ("summer", "winter"):
+        (folder / name).mkdir(parents=True)
+        for index, image in enumerate(route[name]):
+            cv2.imwrite(str(folder / name / f"{index}.png"), image)
+    rows = "".join(f"{i},summer/{i}.png,winter/{i}.png\n" for i in range(n))
+    (folder / "places.csv").write_text("place_id,summer,winter\n" + rows, encoding="utf-8")
+    (folder / "subset.csv").write_text("place_id\n" + "".join(f"{i}\n" for i in range(n)), encoding="utf-8")
+    return folder
+
+
+@pytest.fixture
+def image_route():
+    """The factory ``image_route(folder, n=12) -> folder``: the synthetic route written as PNG files with its
+    place manifest (``places.csv``) and a subset file (``subset.csv``)."""
+    return _image_route
 
 
 @pytest.fixture

@@ -9,11 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
-from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.export.model import save_fixed_point
 
 BENCH_DIR = Path(__file__).resolve().parents[1] / "bench"
@@ -51,28 +49,15 @@ def test_bench_onnx_prints_its_table_and_onnxruntime_agrees_with_the_simulator(m
     assert float(onnx[5]) > 0 and onnx[-1] == "yes"
 
 
-def image_folder(folder: Path, n: int) -> Path:
-    """A place manifest of the synthetic route's summer and winter images (PNG files: VPRTempo reads pixels)."""
-    route = synthetic_route(n, ("summer", "winter"))
-    for name in ("summer", "winter"):
-        (folder / name).mkdir(parents=True)
-        for index, image in enumerate(route[name]):
-            cv2.imwrite(str(folder / name / f"{index}.png"), image)
-    rows = "".join(f"{i},summer/{i}.png,winter/{i}.png\n" for i in range(n))
-    (folder / "places.csv").write_text("place_id,summer,winter\n" + rows, encoding="utf-8")
-    (folder / "subset.csv").write_text("place_id\n" + "".join(f"{i}\n" for i in range(n)), encoding="utf-8")
-    return folder
-
-
 @pytest.mark.skipif(
     importlib.util.find_spec("vprtempo") is None,
     reason="VPRTempo is not installed (the peers extra, see pyproject.toml): bench_peer.py leaves its row out",
 )
-def test_bench_peer_puts_vprtempo_beside_our_network(tmp_path):
+def test_bench_peer_puts_vprtempo_beside_our_network(tmp_path, image_route):
     """bench_peer end to end on 10 synthetic places (VPRTempo at 28 x 28, one epoch): a row per method, the
     ratio lines, the bench's own checks (one query at a time and batched decide alike; the early rule run on
     prefixes gives the library's counts) and a second run that reads VPRTempo's trained state back."""
-    data = image_folder(tmp_path / "data", 10)
+    data = image_route(tmp_path / "data", 10)
     state = tmp_path / "vprtempo.npz"
     options = ["--data", str(data), "--subset", str(data / "subset.csv"), "--repeats", "1", "--epochs", "1"]
     options += ["--peer-dims", "28,28", "--peer-state", str(state)]

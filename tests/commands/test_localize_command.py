@@ -181,21 +181,8 @@ def test_real_frames_from_a_folder_and_a_video(tmp_path, capsys):
 # ------------------------------------------------------ outputs never overwrite inputs; tampered points (issue 31)
 
 
-def manifest_route(folder: Path, n: int = 12) -> Path:
-    """A place manifest of the synthetic route's summer and winter images, with a subset file."""
-    route = synthetic_route(n, ("summer", "winter"))
-    for name in ("summer", "winter"):
-        (folder / name).mkdir(parents=True)
-        for index, image in enumerate(route[name]):
-            cv2.imwrite(str(folder / name / f"{index}.png"), image)
-    rows = "".join(f"{i},summer/{i}.png,winter/{i}.png\n" for i in range(n))
-    (folder / "places.csv").write_text("place_id,summer,winter\n" + rows, encoding="utf-8")
-    (folder / "subset.csv").write_text("place_id\n" + "".join(f"{i}\n" for i in range(n)), encoding="utf-8")
-    return folder / "places.csv"
-
-
-def test_calibration_and_predictions_refuse_to_overwrite_an_input(tmp_path, capsys):
-    places = manifest_route(tmp_path / "data")
+def test_calibration_and_predictions_refuse_to_overwrite_an_input(tmp_path, capsys, image_route):
+    places = image_route(tmp_path / "data") / "places.csv"
     subset = places.with_name("subset.csv")
     net, fixed, _ = trained_models(tmp_path, str(places), None)
     before = {path: path.read_bytes() for path in (places, subset, net, fixed)}
