@@ -42,7 +42,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
-from .intsim_kernel import integer_run
+from .intsim_kernel import KernelWeights, integer_run, kernel_weights
 
 QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) current tensor
 FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
@@ -79,7 +79,7 @@ class PreparedModel:
     shift: int
     wta: bool
     group: int  # neurons per WTA group: one module of an ensemble (network.n_neurons)
-    mantissas: np.ndarray  # (inputs, neurons) the unshifted q_ij, for the compiled CPU kernel
+    mantissas: KernelWeights  # (inputs, neurons) the unshifted q_ij as the compiled CPU kernel reads them
 
 
 def check_arrays(model: FixedPointModel) -> None:
@@ -119,7 +119,7 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
         shift=model.voltage_shift,
         wta=model.config.network.wta,
         group=wta_group(model.config, model.n_neurons),
-        mantissas=model.weight_mantissa,
+        mantissas=kernel_weights(model.weight_mantissa),
     )
 
 

@@ -18,6 +18,7 @@ and its reference stepper. The neurons run in tiles of whole WTA groups, on thre
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -168,9 +169,34 @@ def integer_kernel(
     )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class KernelWeights:
+    """Weight mantissas checked once and stored as the kernel reads them (a model's run reuses them every call).
+
+    ``weights``: q_ij (inputs, neurons), C-contiguous, in the narrowest unsigned dtype that holds max q (uint8 up
+    to 8 bits: a quarter of float32's memory traffic); ``bound`` = max_j sum_i q_ij, the largest unshifted current.
+    """
+
+    weights: np.ndarray
+    bound: int
+
+
+def kernel_weights(mantissas: np.ndarray) -> KernelWeights:
+    """The mantissas as :class:`KernelWeights`; InvalidValueError when not 2-D or negative (the kernel relies on V >= 0)."""
+    q = np.asarray(mantissas)
+    if q.ndim != 2:
+        raise InvalidValueError(f"mantissas: expected (inputs, neurons), got shape {q.shape}")
+    if q.size and int(q.min()) < 0:
+        raise InvalidValueError("mantissas: integer weights must be non-negative (the kernel relies on V >= 0)")
+    top = int(q.max()) if q.size else 0
+    bound = int(q.astype(np.int64).sum(axis=0).max()) if q.size else 0
+    storage = np.uint8 if top < (1 << 8) else np.uint16 if top < (1 << 16) else np.int64
+    return KernelWeights(np.ascontiguousarray(q, dtype=storage), bound)
+
+
 def integer_run(
     spikes: torch.Tensor | np.ndarray,
-    mantissas: np.ndarray,
+    mantissas: np.ndarray | KernelWeights,
     threshold: np.ndarray,
     multipliers: np.ndarray | None,
     *,
@@ -188,28 +214,23 @@ def integer_run(
     ``group``: neurons per WTA group (:mod:`vprsnn_export.network.modules`); ``None``: one group.
     ``threads`` and the tiles of neurons as in :func:`float_run`.
 
-    ``mantissas`` are the unshifted weights q_ij (inputs, neurons), non-negative; the kernel sums
-    them in the narrowest dtype that holds them (uint8 for up to 8 bits: a quarter of the memory
-    traffic of float32) and shifts each current by ``shift``: (sum q) << s == sum (q << s).
+    ``mantissas`` are the unshifted weights q_ij (inputs, neurons), non-negative, or the
+    :class:`KernelWeights` made of them once (:func:`kernel_weights`); the kernel sums them in the narrowest
+    dtype that holds them and shifts each current by ``shift``: (sum q) << s == sum (q << s).
     ``threshold`` is theta_j << shift, ``multipliers`` the m_j (``None`` when all equal: the WTA
     then compares a_j), ``keep`` = 4096 - dv, ``limit`` the largest voltage. ``max_current`` is
     reported unshifted, as the simulator does.
     """
     array = as_spike_array(spikes)
-    q = np.asarray(mantissas)
-    if q.ndim != 2 or array.shape[2] != q.shape[0]:
-        raise InvalidValueError(f"mantissas: spikes {array.shape} do not match weights {q.shape}")
-    if q.size and int(q.min()) < 0:
-        raise InvalidValueError("mantissas: integer weights must be non-negative (the kernel relies on V >= 0)")
-    top = int(q.max()) if q.size else 0
-    bound = int(q.astype(np.int64).sum(axis=0).max()) if q.size else 0
+    prepared = mantissas if isinstance(mantissas, KernelWeights) else kernel_weights(mantissas)
+    weights, bound = prepared.weights, prepared.bound
+    if array.shape[2] != weights.shape[0]:
+        raise InvalidValueError(f"mantissas: spikes {array.shape} do not match weights {weights.shape}")
     if (bound << shift) >= (1 << 62):
         raise InvalidValueError(f"shift: current sums up to {bound} << {shift} overflow 64-bit voltages")
-    storage = np.uint8 if top < (1 << 8) else np.uint16 if top < (1 << 16) else np.int64
     n, timesteps, _ = array.shape
-    n_neurons = q.shape[1]
+    n_neurons = weights.shape[1]
     size = check_group(n_neurons, group)
-    weights = np.ascontiguousarray(q, dtype=storage)
     thresholds = np.ascontiguousarray(threshold, dtype=np.int64)
     scores = np.ones(n_neurons, dtype=np.int64) if multipliers is None else np.ascontiguousarray(multipliers, np.int64)
     counts = np.zeros((n, n_neurons), dtype=np.int64)
