@@ -83,6 +83,11 @@ def test_window_scores_are_the_aggregate_peaks_of_every_candidate() -> None:
             np.testing.assert_array_equal(e[:, c], expected)
     # k = 1: every candidate scores the frame's own peak
     np.testing.assert_array_equal(window_scores(prob, 1, GRID), np.repeat(prob.max(axis=1)[:, None], GRID.size, 1))
+    # some windows only (a stream scores its newest): the very rows of the full table, in the order asked
+    for k in (1, 4):
+        full = window_scores(prob, k, GRID, "product", t)
+        some = np.array([19, 0, 7])
+        np.testing.assert_array_equal(window_scores(prob, k, GRID, "product", t, windows=some), full[some])
 
 
 def test_tracked_velocity_is_the_argmax_of_the_causal_moving_sum() -> None:
@@ -141,7 +146,7 @@ def test_every_pair_is_scored_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_no_ground_truth_in_signatures() -> None:
     allowed = {"prob", "k", "candidates", "span", "rule", "frame_positions", "eps", "length", "memory", "lag"}
-    allowed |= {"nearest", "scores", "totals"}
+    allowed |= {"nearest", "scores", "totals", "windows"}  # windows: stream indices, not places
     for fn in (window_scores, track_velocity, smooth_velocity, stream_contrast, lagged_sum, centre_of_best):
         params = set(inspect.signature(fn).parameters)
         assert params <= allowed, params

@@ -235,6 +235,7 @@ def window_scores(
     eps: float = 1e-6,
     *,
     nearest: bool = False,
+    windows: np.ndarray | None = None,
 ) -> np.ndarray:
     """How well each window fits each candidate velocity, shape ``(n_queries, n_candidates)``.
 
@@ -250,6 +251,8 @@ def window_scores(
     places instead of interpolated. Interpolating blurs a frame between two
     places, and the blurred window scores higher under the product rule
     (``log`` is concave), which biases the search towards non-integral shifts.
+    ``windows``: the stream indices of the windows to score (default all); the rows come back in that order,
+    each the same numbers as in the full table (a stream scores only its newest window).
     """
     cands = _candidates(candidates)
     p = _prob2d(prob)
@@ -257,17 +260,18 @@ def window_scores(
     n_queries, n_places = p.shape
     k = _window(k, n_queries)
     t = _positions(frame_positions, n_queries)
+    scored = np.arange(n_queries) if windows is None else np.asarray(windows, dtype=np.intp)
     if k == 1:
-        return np.repeat(p.max(axis=1)[:, None], cands.size, axis=1)
-    rows_query = np.repeat(np.arange(n_queries), cands.size)
-    rows_velocity = np.tile(cands, n_queries)
+        return np.repeat(p[scored].max(axis=1)[:, None], cands.size, axis=1)
+    rows_query = np.repeat(scored, cands.size)
+    rows_velocity = np.tile(cands, scored.size)
     scores = np.empty(rows_query.size)
     chunk = max(1, _MAX_ELEMENTS // (k * n_places))
     for start in range(0, rows_query.size, chunk):
         rows = slice(start, start + chunk)
         shifted, valid = _shift_rows(p, rows_query[rows], k, rows_velocity[rows], t, nearest)
         scores[rows] = RULES.get(rule).combine(shifted, valid, eps)[1]
-    return scores.reshape(n_queries, cands.size)
+    return scores.reshape(scored.size, cands.size)
 
 
 def _candidates(candidates: np.ndarray) -> np.ndarray:

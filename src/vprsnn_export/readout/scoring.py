@@ -367,6 +367,7 @@ def causal_velocity(
     ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
     previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
     """
-    newest = window_scores(contrast[-length:], length, candidates, rule)[-1]
+    recent = contrast[-length:]
+    newest = window_scores(recent, length, candidates, rule, windows=np.array([len(recent) - 1]))[0]
     total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
     return newest, float(candidates[int(np.argmax(total))])
