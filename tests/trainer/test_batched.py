@@ -67,3 +67,20 @@ def test_module_rows_follow_the_regions_in_every_traversal():
     rows = module_training_rows(5, 2, 2)
     assert [r.tolist() for r in rows] == [[0, 1, 5, 6], [2, 3, 7, 8], [4, 9]]
     assert len(rows) == len(module_regions(5, 2))
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_modules_learn_at_the_training_window_not_the_deployed_one(compiled):
+    """train.timesteps / train.rate_scale reach the compiled kernel and the torch loop alike (config.training_encoder)."""
+    learnt = preset("paper").replace(**SMALL, **{"train.module_size": 20})
+    split = learnt.replace(
+        **{"encoder.timesteps": 5, "encoder.rate_scale": 0.5, "train.timesteps": 20, "train.rate_scale": 0.25}
+    )
+    images, presentations = route(40, ("summer",))
+    rows = module_training_rows(40, 20, 1)
+    runs = [
+        train_modules(images, presentations, rows, cfg, device=CPU, progress=False, threads=1, compiled=compiled)
+        for cfg in (learnt, split, learnt.replace(**{"encoder.timesteps": 5}))
+    ]
+    assert torch.equal(runs[0].weights, runs[1].weights) and torch.equal(runs[0].thresholds, runs[1].thresholds)
+    assert not torch.equal(runs[0].weights, runs[2].weights)  # the window does matter to learning

@@ -63,3 +63,18 @@ def test_the_default_homeostasis_moves_thresholds_where_the_papers_text_rate_lea
     assert default.config.homeostasis.eta == 1.0
     assert np.ptp(default.thresholds) > 0.05
     assert np.abs(text_rate.thresholds - theta_init).max() < 0.002
+
+
+def test_a_network_learns_at_the_training_window_and_is_calibrated_at_the_encoders(train_network):
+    """train.timesteps / train.rate_scale set the window STDP learns with; calibration (and every query) uses the
+    encoder's: the weights equal those learnt with that encoder, the calibration differs, and a config that leaves
+    them at 0 writes no such keys (files from before they existed stay byte-identical)."""
+    long, _ = train_network(**{"encoder.timesteps": 40, "encoder.rate_scale": 0.25})
+    split, _ = train_network(
+        **{"encoder.timesteps": 10, "encoder.rate_scale": 0.5, "train.timesteps": 40, "train.rate_scale": 0.25}
+    )
+    assert np.array_equal(split.weights, long.weights) and np.array_equal(split.thresholds, long.thresholds)
+    assert split.calibration.sum() <= 10 * split.calibration.shape[1] < long.calibration.sum()
+    assert split.config.training_encoder == long.config.encoder
+    assert "timesteps" not in long.config.to_dict()["train"]
+    assert split.config.to_dict()["train"]["timesteps"] == 40

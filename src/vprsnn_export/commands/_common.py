@@ -215,7 +215,9 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         "--preset",
         choices=sorted(PRESETS),
         help="starting configuration: dog (the default: illumination-invariant DoG ON/OFF input channels, "
-        "docs/model.md) or paper (the paper's patch-normalised intensity input); the options below apply on top",
+        "docs/model.md), paper (the paper's patch-normalised intensity input) or lean (one neuron per place in "
+        "modules of 100, learnt at T=300 and run at T=80: a tenth of the default's synaptic events per query, "
+        "docs/results/cost.md); the options below apply on top",
     )
     base = Config()
     group.add_argument(
@@ -223,7 +225,10 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
     )
     group.add_argument("--epochs", type=integer, help=f"training epochs (default: the preset's, {base.train.epochs})")
     group.add_argument(
-        "--timesteps", type=integer, help=f"presentation window T (default: the preset's, {base.encoder.timesteps})"
+        "--timesteps",
+        type=integer,
+        help=f"presentation window T of calibration, queries and deployment, and of training unless train.timesteps "
+        f"is set (default: the preset's, {base.encoder.timesteps})",
     )
     group.add_argument(
         "--neurons", type=integer, help=f"excitatory neurons N_exc (default: the preset's, {base.network.n_neurons})"

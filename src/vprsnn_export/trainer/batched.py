@@ -71,7 +71,7 @@ def _kernel_batch(
     seeds = np.zeros(limits.shape[:2], dtype=np.int64)
     for m, rows in enumerate(batch_rows):
         if len(rows):
-            limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.encoder).numpy())
+            limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.training_encoder).numpy())
             seeds[m, : len(rows)] = generator_seeds(training_seeds(cfg, presentations, rows, epoch))
     return torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
 
@@ -81,7 +81,7 @@ def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cf
     theta = theta.clone()
     for size in sorted({int(s) for s in sizes if s > 0}):
         index = torch.from_numpy(np.flatnonzero(sizes == size)).to(theta.device)
-        rate = fired[index] / (size * cfg.encoder.timesteps)
+        rate = fired[index] / (size * cfg.training_encoder.timesteps)
         theta[index] = homeostasis_update(theta[index], rate, cfg.homeostasis)
     return theta
 
@@ -103,7 +103,7 @@ def _torch_batch(
         members = np.flatnonzero(sizes == size)
         spikes = torch.stack(
             [
-                encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.encoder)
+                encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.training_encoder)
                 for rows in (batch_rows[int(m)] for m in members)
             ]
         ).to(weights.device)
@@ -184,7 +184,7 @@ def check_training_memory(cfg: Config, n_modules: int, most_rows: int, threads: 
         n_modules=n_modules,
         n_inputs=cfg.network.n_inputs,
         n_neurons=cfg.network.n_neurons,
-        timesteps=cfg.encoder.timesteps,
+        timesteps=cfg.training_encoder.timesteps,
         batch=max(1, min(cfg.train.batch_size, most_rows)),
         threads=workers,
     )

@@ -458,7 +458,7 @@ def stdp_windows(
     for size in sorted({int(s) for s in sizes if s > 0}):
         blocks[np.asarray(sizes) == size] = kernel_block(size, n_inputs, n_neurons)
     args = kernel_scalars(cfg)
-    timesteps = int(cfg.encoder.timesteps)
+    timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
     def run(part: slice) -> np.ndarray:
