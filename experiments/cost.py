@@ -12,6 +12,10 @@ its query traversal, every point runs the float network and reads it out like ``
   with the rate unchanged (input spikes and events cut by T' / T); inference only: the same weights and
   thresholds, calibrated again at T';
 * ``cosine``: the template matcher on the same images (nnz(x_q) x places multiply-adds).
+
+Checkpoints of different configurations (neurons, windows; the seed aside) are kinds of network: each point's
+name is then prefixed with its kind ("24 x 100, T=60 r 0.5 (learnt at T=300 r 0.25): margin"), and the table and
+the plot show every kind's curve beside the one template point.
 """
 
 from __future__ import annotations
@@ -148,11 +152,24 @@ def template_point(ckpt: Checkpoint, data: Dataset, query: str, macs: float) -> 
     return {"point": "cosine", "template_macs": macs, "rows": [row.to_dict() for row in rows]}
 
 
+def kind_of(ckpt: Checkpoint) -> str:
+    """The network's kind: modules x neurons, its window and rate, and the window it learnt with where different."""
+    cfg = ckpt.config
+    modules = module_count(len(ckpt.reference_place_ids), cfg.train.module_size)
+    run, learnt = cfg.encoder, cfg.training_encoder
+    kind = f"{modules} x {cfg.network.n_neurons}, T={run.timesteps} r {run.rate_scale:g}"
+    if learnt != run:
+        kind += f" (learnt at T={learnt.timesteps} r {learnt.rate_scale:g})"
+    return kind
+
+
 def run(settings: Settings) -> dict:
     started = time.perf_counter()
     device = resolve_device(settings.device)
     per_network = []
+    kinds = []
     for label, ckpt, data in networks(settings):
+        kinds.append(kind_of(ckpt))
         network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
         network.progress = settings.progress
         points = early_points(ckpt, data, settings.query, network)
@@ -173,9 +190,14 @@ def run(settings: Settings) -> dict:
                 "places": len(data.place_ids),
                 "neurons": int(ckpt.weights.shape[1]),
                 "wta_scope": ckpt.config.network.wta_scope,
+                "kind": kinds[-1],
                 "points": points,
             }
         )
+    if len(set(kinds)) > 1:  # several kinds of network: every point named with its kind (one template point)
+        for net in per_network:
+            for p in net["points"]:
+                p["point"] = p["point"] if p["point"] == "cosine" else f"{net['kind']}: {p['point']}"
     return {
         "experiment": NAME,
         "networks": per_network,
@@ -185,11 +207,11 @@ def run(settings: Settings) -> dict:
 
 
 def summary(per_network: list[dict]) -> list[dict]:
-    """Per point: the mean cost over networks and the W+Prob rows' mean ± std (cosine: its own rows)."""
-    names = [p["point"] for p in per_network[0]["points"]]
+    """Per point: the mean cost over the networks that have it and the W+Prob rows' mean ± std (cosine: its own)."""
+    names = list(dict.fromkeys(p["point"] for net in per_network for p in net["points"]))
     out = []
     for name in names:
-        points = [next(p for p in net["points"] if p["point"] == name) for net in per_network]
+        points = [p for net in per_network for p in net["points"] if p["point"] == name]
         keep = [[r for r in p["rows"] if r["strategy"] in ("wprob", "cosine")] for p in points]
         rows = summarise_rows(keep, ("strategy", "k"))
         if name == "cosine":
@@ -206,7 +228,7 @@ def _metric(row_list: list[dict], k: int, metric: str) -> dict | None:
 
 
 def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
-    points = results["summary"]
+    points = sorted(results["summary"], key=lambda p: p["point"] == "cosine")  # the template last
     plot(points, out_dir / f"{stem}.png")
     head = (
         "| point | steps | input spikes | synaptic events (template: multiply-adds) | x template | "
@@ -232,7 +254,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         cells.append(f"{cost['energy_uj']:,.0f}, {cost['latency_ms']:.2f}" if "energy_uj" in cost else "-")
         lines.append("| " + " | ".join(cells) + " |")
     nets = ", ".join(
-        f"{n['network']} ({n['places']} places, {n['neurons']} neurons, WTA over the {n['wta_scope']})"
+        f"{n['network']} ({n['places']} places, {n['neurons']} neurons, WTA over the {n['wta_scope']}; {n['kind']})"
         for n in results["networks"]
     )
     return (
@@ -245,41 +267,55 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
     )
 
 
+def split_name(name: str) -> tuple[str, str]:
+    """(kind, point) of a point's name; the kind is "" for a single kind of network and for the template."""
+    kind, _, short = name.rpartition(": ")
+    return kind, short
+
+
 def marker_of(name: str) -> str:
     """The template a star, scaled windows circles, unscaled windows triangles, early rules squares."""
-    if name == "cosine":
+    short = split_name(name)[1]
+    if short == "cosine":
         return "*"
-    if name.startswith("T="):
-        return "^" if "rate" in name else "o"
+    if short.startswith("T="):
+        return "^" if "rate" in short else "o"
     return "s"
 
 
 def plot(points: list[dict], path: Path) -> Path:
-    """W+Prob accuracy at k = 1 and 5 versus synaptic events per query (log x), the template as a star."""
+    """W+Prob accuracy at k = 1 and 5 (one panel each) versus synaptic events per query (log x): a colour per kind
+    of network, a marker per kind of point, the template as a star."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5))
-    for k, colour in zip((1, 5), ("tab:blue", "tab:orange"), strict=True):
+    kinds = list(dict.fromkeys(split_name(p["point"])[0] for p in points if p["point"] != "cosine"))
+    colours = {kind: plt.get_cmap("tab10")(i % 10) for i, kind in enumerate(kinds)}
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5), sharex=True)
+    for ax, k in zip(axes, (1, 5), strict=True):
         for p in points:
             value = _metric(p["rows"], k, "accuracy")
             if value is None:
                 continue
+            kind, short = split_name(p["point"])
             x, y = p["cost"]["synaptic_events"], 100 * value["mean"]
             marker = marker_of(p["point"])
+            colour = "black" if marker == "*" else colours[kind]
             ax.scatter(x, y, color=colour, marker=marker, s=120 if marker == "*" else 40)
-            ax.annotate(p["point"], (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        ax.scatter([], [], color=colour, label=f"k={k}")
+            ax.annotate(short, (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_xlabel("synaptic events per query (template: multiply-adds)")
+        ax.set_ylabel(f"W+Prob accuracy % at k={k}")
+        ax.set_title(f"Accuracy versus events per query, k={k}")
+        ax.grid(True, alpha=0.3)
+    ax = axes[-1]
+    for kind in kinds:
+        ax.scatter([], [], color=colours[kind], label=kind or "the network")
     ax.scatter([], [], color="grey", marker="o", label="window T (rate scaled: the input spikes kept)")
     ax.scatter([], [], color="grey", marker="^", label="window T (rate unchanged)")
     ax.scatter([], [], color="grey", marker="s", label="early decision")
-    ax.scatter([], [], color="grey", marker="*", s=120, label="template (cosine; x: multiply-adds)")
-    ax.set_xscale("log")
-    ax.set_xlabel("synaptic events per query (template: multiply-adds)")
-    ax.set_ylabel("W+Prob accuracy %")
-    ax.set_title("Accuracy versus events per query")
+    ax.scatter([], [], color="black", marker="*", s=120, label="template (cosine; x: multiply-adds)")
     outside_legend(ax)
-    ax.grid(True, alpha=0.3)
     return save_figure(fig, path)
