@@ -1,9 +1,10 @@
 """Per-frame latency and memory of `localize` (runtime.localize.Localizer) for one module and an ensemble.
 
     OMP_NUM_THREADS=1 python bench/bench_localize.py [--frames 30] [--modules 24] [--module-size 100]
-                                                   [--backends float,integer,onnx] [--k 1,5]
+                                                   [--backends float,integer,onnx] [--k 1,5] [--preset NAME,...]
 
-SYNTHETIC networks and frames (no training, no data set): the default configuration
+SYNTHETIC networks and frames (no training, no data set): each preset's configuration (the default: dog; lean
+runs 100 neurons per module at T = 80: one row per preset, side by side in one run)
 (``network.n_neurons`` neurons per module, DoG inputs, T = ``encoder.timesteps``) with random
 weights in [0, w_max], thresholds 2.0 and random calibration counts, as (a) one module of
 --module-size places and (b) an ensemble of --modules modules (--modules x --module-size places,
@@ -26,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.config import Config
+from vprsnn_export.config import PRESETS, preset
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -46,8 +47,8 @@ def memory_mib(field: str) -> float:
     return float("nan")
 
 
-def random_checkpoint(modules: int, module_size: int, seed: int = 0) -> Checkpoint:
-    cfg = Config().replace(**{"train.module_size": module_size if modules > 1 else 0})
+def random_checkpoint(modules: int, module_size: int, name: str = "dog", seed: int = 0) -> Checkpoint:
+    cfg = preset(name).replace(**{"train.module_size": module_size if modules > 1 else 0})
     rng = np.random.default_rng(seed)
     n_places = modules * module_size
     neurons = modules * cfg.network.n_neurons
@@ -80,25 +81,32 @@ def main() -> None:
     parser.add_argument("--module-size", type=int, default=100)
     parser.add_argument("--backends", default="float,integer,onnx")
     parser.add_argument("--k", default="1,5")
+    parser.add_argument("--preset", default="dog", help=f"presets to time, comma-separated ({', '.join(PRESETS)})")
     args = parser.parse_args()
+    presets = args.preset.split(",")
+    if not set(presets) <= set(PRESETS):
+        parser.error(f"--preset: choose from {', '.join(PRESETS)}")
     set_threads(1)
     backends = args.backends.split(",")
     ks = [int(k) for k in args.k.split(",")]
     rng = np.random.default_rng(1)
     frames = rng.integers(0, 256, (args.frames, 32, 64), dtype=np.uint8)
-    print(f"load average {os.getloadavg()[0]:.1f}; {args.frames} synthetic frames, first {args.warmup} dropped")
+    print(
+        f"load average {os.getloadavg()[0]:.1f}; {args.frames} synthetic frames, first {args.warmup} dropped; "
+        f"one module of {args.module_size} places and {args.modules} x {args.module_size} places"
+    )
     header = (
-        f"{'network':<26} {'backend':<8} {'k':>2} {'median ms':>10} {'p95 ms':>8} {'wall ms':>8} "
+        f"{'network':<34} {'backend':<8} {'k':>2} {'median ms':>10} {'p95 ms':>8} {'wall ms':>8} "
         f"{'RSS MiB':>8} {'peak MiB':>9}"
     )
     print(header)
     print("-" * len(header))
     with tempfile.TemporaryDirectory() as tmp:
-        for modules in (1, args.modules):
-            ckpt = random_checkpoint(modules, args.module_size)
+        for name, modules in ((name, modules) for name in presets for modules in (1, args.modules)):
+            ckpt = random_checkpoint(modules, args.module_size, name)
             model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
-            graph = write_onnx(model, Path(tmp) / f"m{modules}.onnx") if "onnx" in backends else None
-            label = f"{modules} x {ckpt.config.network.n_neurons} n, {modules * args.module_size} places"
+            graph = write_onnx(model, Path(tmp) / f"{name}{modules}.onnx") if "onnx" in backends else None
+            label = f"{name}: {modules} x {ckpt.config.network.n_neurons} n, T={ckpt.config.encoder.timesteps}"
             for backend in backends:
                 for k in ks:
                     grid = None if k == 1 else tuple(np.round(np.arange(0.5, 1.51, 0.1), 2))
@@ -109,7 +117,7 @@ def main() -> None:
                     rss = memory_mib("VmRSS")
                     median, p95, wall = bench(localizer, frames, args.warmup)
                     print(
-                        f"{label:<26} {backend:<8} {k:>2} {median:>10.1f} {p95:>8.1f} {wall:>8.1f} "
+                        f"{label:<34} {backend:<8} {k:>2} {median:>10.1f} {p95:>8.1f} {wall:>8.1f} "
                         f"{rss:>8.0f} {memory_mib('VmHWM'):>9.0f}"
                     )
 

@@ -2,7 +2,7 @@
 
     OMP_NUM_THREADS=1 python bench/bench_peer.py [--data D] [--subset CSV] [--reference summer] [--query winter]
                                                [--seed 0] [--repeats 5] [--epochs N]
-                                               [--peer-dims H,W] [--peer-state FILE]
+                                               [--peer-dims H,W] [--peer-state FILE] [--preset dog,lean]
 
 One run, one torch thread, the same places for every method: trained on the --reference images of the --subset
 places (default: the Nordland 100-place subset), queried with their --query images; a query is correct when its
@@ -15,7 +15,7 @@ best place is its own (k = 1, exact match). Rows:
   modules use torchvision only in their file loading; here the images reach it as tensors (torchvision's PyPI
   wheels need the CUDA build of torch: where it does not import, a stand-in that raises if called satisfies the
   imports). Missing package: the row says how to install it and the other rows still run.
-* ``ours T=...``: the default network trained on the subset (``train_and_calibrate``), queried at its window with
+* ``ours T=...``: the default network (``ours (lean) ...``: each other --preset's) trained on the subset (``train_and_calibrate``), queried at its window with
   the float kernel: encoding, the network, the W+Prob readout (``Readout.wprob`` one query at a time,
   ``Readout.scores`` batched).
 * ``ours margin`` / ``ours spikes K``: the early decision (``config.early``, readout/early.py), run until the rule
@@ -23,7 +23,7 @@ best place is its own (k = 1, exact match). Rows:
   the prefix exact) until the rule fires within it; every rerun is timed. The counts are checked against the
   library's decision on the whole window.
 * ``ours T=T' (rate x)``: a shorter window with the rate scaled by T / T' (the input spikes kept), calibrated again
-  at T' (docs/results/cost.md).
+  at T' (docs/results/cost.md); only for a network whose window is longer than T'.
 * ``cosine``: the template matcher (cosine nearest neighbour on our preprocessed images).
 
 Latency: "1 query" is the median over --repeats of the mean time per query when the queries come one at a time;
@@ -51,7 +51,7 @@ import cv2
 import numpy as np
 import torch
 
-from vprsnn_export.config import Config, EarlyConfig, wta_group
+from vprsnn_export.config import PRESETS, Config, EarlyConfig, preset, wta_group
 from vprsnn_export.data.dataset import Dataset, load_dataset, read_manifest
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.errors import VprError
@@ -275,12 +275,14 @@ def our_rows(ckpt: Checkpoint, train_s: float, dataset: Dataset, args: argparse.
     cfg = ckpt.config
     timesteps, rate = cfg.encoder.timesteps, cfg.encoder.rate_scale
     short = cfg.replace(**{"encoder.timesteps": SHORT_WINDOW, "encoder.rate_scale": rate * timesteps / SHORT_WINDOW})
+    ours = "ours" if args.preset_name == "dog" else f"ours ({args.preset_name})"
     variants: list[tuple[str, Config, EarlyConfig | None]] = [
-        (f"ours T={timesteps}", cfg, None),
-        ("ours margin", cfg, EarlyConfig(margin=True)),
-        (f"ours spikes {EARLY_SPIKES}", cfg, EarlyConfig(spikes=EARLY_SPIKES)),
-        (f"ours T={SHORT_WINDOW} (rate x{timesteps / SHORT_WINDOW:g})", short, None),
+        (f"{ours} T={timesteps}", cfg, None),
+        (f"{ours} margin", cfg, EarlyConfig(margin=True)),
+        (f"{ours} spikes {EARLY_SPIKES}", cfg, EarlyConfig(spikes=EARLY_SPIKES)),
     ]
+    if SHORT_WINDOW < timesteps:
+        variants.append((f"{ours} T={SHORT_WINDOW} (rate x{timesteps / SHORT_WINDOW:g})", short, None))
     rows = []
     neurons = int(ckpt.weights.shape[1])
     for name, run_cfg, rule in variants:
@@ -379,6 +381,7 @@ def main() -> None:
         help="VPRTempo's trained weights: read when the file exists (trained with the same settings, its training "
         "seconds printed again), else trained and written there",
     )
+    parser.add_argument("--preset", default="dog", help=f"our networks, comma-separated ({', '.join(PRESETS)})")
     args = parser.parse_args()
     subset = args.subset or args.data / "subset_100_places.csv"
     for flag, path in (("--data", args.data / "places.csv"), ("--subset", subset)):
@@ -388,19 +391,24 @@ def main() -> None:
         parser.error("--repeats and --epochs expect integers >= 1")
     if args.peer_dims is not None and not re.fullmatch(r"[1-9][0-9]*,[1-9][0-9]*", args.peer_dims):
         parser.error(f"--peer-dims expects H,W (two positive integers), got {args.peer_dims!r}")
+    presets = args.preset.split(",")
+    if not set(presets) <= set(PRESETS):
+        parser.error(f"--preset: choose from {', '.join(PRESETS)}")
     set_threads(1)
-    cfg = Config().replace(seed=args.seed)
-    dataset = load_dataset(args.data, [args.reference, args.query], cfg.preprocess, subset=subset)
-    started = time.perf_counter()
-    ckpt = train_and_calibrate(dataset, [args.reference], cfg, progress=False, threads=1)
-    train_s = time.perf_counter() - started
     rows = []
     peer = import_vprtempo()
-    if peer is None:
-        print(f"vprtempo: not installed, its row is left out ({INSTALL})")
-    else:
-        rows.append(vprtempo_row(peer, args.data, dataset.place_ids, args))
-    rows += our_rows(ckpt, train_s, dataset, args)
+    for name in presets:
+        cfg = preset(name).replace(seed=args.seed)
+        dataset = load_dataset(args.data, [args.reference, args.query], cfg.preprocess, subset=subset)
+        started = time.perf_counter()
+        ckpt = train_and_calibrate(dataset, [args.reference], cfg, progress=False, threads=1)
+        train_s = time.perf_counter() - started
+        if not rows:
+            if peer is None:
+                print(f"vprtempo: not installed, its row is left out ({INSTALL})")
+            else:
+                rows.append(vprtempo_row(peer, args.data, dataset.place_ids, args))
+        rows += our_rows(ckpt, train_s, dataset, Namespace(**vars(args), preset_name=name))
     rows.append(cosine_row(ckpt, dataset, args))
     print(
         f"data: {args.data} ({len(dataset.place_ids)} places of {subset.name}), {args.reference} -> {args.query}; "

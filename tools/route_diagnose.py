@@ -53,7 +53,9 @@ def thresholds(theta: np.ndarray, spec: str) -> np.ndarray:
     raise SystemExit(f"--theta {spec}: give trained, same, offset:X, scale:X or const:X")
 
 
-def counts(ckpt, cfg, theta, ref, qry, ids, query, cache: Path, key: str) -> tuple[np.ndarray, np.ndarray, float]:
+def counts(
+    ckpt, cfg, theta, ref, qry, ids, query, cache: Path, key: str, keep_calibration: bool = False
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Calibration S^R (neurons, places) and query counts (queries, neurons), cached; seconds spent."""
     path = cache / f"{key}.npz"
     if path.exists():
@@ -61,7 +63,7 @@ def counts(ckpt, cfg, theta, ref, qry, ids, query, cache: Path, key: str) -> tup
         return z["sr"], z["sq"], float(z["seconds"])
     t0 = time.perf_counter()
     net = vx.FloatNetwork.from_arrays(ckpt.weights, theta, cfg, torch.device("cpu"))
-    if cfg.encoder == ckpt.config.encoder and np.array_equal(theta, ckpt.thresholds):
+    if keep_calibration or (cfg.encoder == ckpt.config.encoder and np.array_equal(theta, ckpt.thresholds)):
         sr = ckpt.calibration  # the checkpoint's own S^R: nothing at calibration changed
     else:
         sr = net.counts(calibration_spikes(ref, ids, ckpt.reference_traversals[0], cfg)).numpy().astype(np.int64).T
@@ -101,6 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--cache", default=".scratch/diag")
     parser.add_argument("--json")
+    parser.add_argument(
+        "--keep-calibration",
+        action="store_true",
+        help="keep the checkpoint's S^R (its window); change only the queries",
+    )
     args = parser.parse_args(argv)
     vx.set_threads(args.threads)
     ckpt = vx.load_checkpoint(args.checkpoint)
@@ -121,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     cache.mkdir(parents=True, exist_ok=True)
     tag = hashlib.sha256(Path(args.checkpoint).read_bytes()).hexdigest()[:12]
     key = f"{tag}_T{cfg.encoder.timesteps}_r{cfg.encoder.rate_scale:g}_th{args.theta.replace(':', '')}"
-    sr, sq, seconds = counts(ckpt, cfg, theta, ref, qry, ids, args.query, cache, key)
+    key += "_keepcal" if args.keep_calibration else ""
+    sr, sq, seconds = counts(ckpt, cfg, theta, ref, qry, ids, args.query, cache, key, args.keep_calibration)
     readout = Readout.of(sr, cfg, SequenceOptions(ks=KS))
     size = cfg.train.module_size or len(ids)
     truth = np.arange(len(ids))
