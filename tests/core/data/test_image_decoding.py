@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import subprocess
 import sys
 from pathlib import Path
@@ -49,7 +50,7 @@ def test_a_folder_name_that_is_not_utf8_decodes(tmp_path: Path) -> None:
         ("half.jpg", JPEG[: len(JPEG) // 2], "unreadable or corrupt image"),
         ("half_with_end.jpg", JPEG[: len(JPEG) // 2] + b"\xff\xd9", "truncated or corrupt image"),
         ("garbage.png", b"\x89PNG\r\n\x1a\n this is not an image", "unreadable or corrupt image"),
-        ("garbage.jpg", os.urandom(64), "unreadable or corrupt image"),
+        ("garbage.jpg", random.Random(0).randbytes(64), "unreadable or corrupt image"),
         ("empty.png", b"", "empty image file"),
     ],
 )
