@@ -30,7 +30,6 @@ and the clip is skipped; otherwise every clip is counted.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -174,10 +173,6 @@ def simulate(
 ) -> SpikeRun:
     """Run the fixed-point model on spike trains (N, T, inputs) uint8."""
     return IntegerNetwork(model, device).run(spikes, record=record, state_isolation=state_isolation)
-
-
-def counts_runner(model: FixedPointModel, device: torch.device | None = None) -> Callable[[torch.Tensor], torch.Tensor]:
-    return IntegerNetwork(model, device).counts
 
 
 def check_spikes(spikes: torch.Tensor, n_inputs: int) -> None:

@@ -245,28 +245,12 @@ def integer_run(
         rows, start, stop = parts[k]
 
         def run() -> None:
+            current_store = np.zeros(timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64)
             saturations, peak = integer_kernel(
-                array[rows],
-                weights,
-                int(shift),
-                thresholds,
-                scores,
-                multipliers is not None,
-                int(keep),
-                int(limit),
-                bool(wta),
-                size,
-                bool(isolation),
-                bool(record),
-                np.zeros(timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64),
-                start,
-                stop,
-                tile,
-                counts[rows],
-                candidates[k],
-                raster[rows] if record else raster,
-                final[rows],
-            )
+                array[rows], weights, int(shift), thresholds, scores, multipliers is not None, int(keep), int(limit),
+                bool(wta), size, bool(isolation), bool(record), current_store, start, stop, tile,
+                counts[rows], candidates[k], raster[rows] if record else raster, final[rows],
+            )  # fmt: skip
             extremes[k] = (int(saturations), int(peak))
 
         return run

@@ -40,7 +40,6 @@ OTHER_ARRAYS = (
     "float_calibration",
     "reference_place_ids",
 )
-ARRAY_NAMES = (WEIGHTS_NAME, *OTHER_ARRAYS)
 WEIGHT_LAYOUT = "(target, source) = (neurons, inputs)"
 
 
@@ -61,13 +60,6 @@ def lava_weights(model: FixedPointModel) -> tuple[np.ndarray, int, int]:
 def mantissas_from_lava(weights: np.ndarray, weight_exp: int) -> np.ndarray:
     """Inverse of :func:`lava_weights`: q_ij = w_ji >> -weight_exp (exact: the low bits are zero)."""
     return (weights.astype(np.int32) >> -weight_exp).T.copy()
-
-
-def weights_storage(model: FixedPointModel) -> dict[str, Any]:
-    """The header object documenting the packed mantissas (layout, packing, how to get Lava's weights)."""
-    storage = describe_packing(model.bits, (model.n_neurons, model.n_inputs), WEIGHT_LAYOUT)
-    storage["holds"] = f"weight mantissas q_ji; Lava's Dense.weights = q << {LAVA_WEIGHT_BITS - model.bits}"
-    return storage
 
 
 def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> LoihiDescription:
@@ -147,7 +139,8 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
                 "lava": "lava.proc.dense.process.Dense",
                 "weights": WEIGHTS_NAME,
                 "layout": WEIGHT_LAYOUT,
-                "weights_storage": weights_storage(model),
+                "weights_storage": describe_packing(model.bits, (n, n_in), WEIGHT_LAYOUT)
+                | {"holds": f"weight mantissas q_ji; Lava's Dense.weights = q << {LAVA_WEIGHT_BITS - model.bits}"},
                 "num_weight_bits": num_weight_bits,
                 "weight_exp": weight_exp,
                 "sign_mode": "EXCITATORY",

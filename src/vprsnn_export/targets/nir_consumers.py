@@ -14,13 +14,12 @@ The integer network's leak is V <- trunc(V (4096 - dv) / 4096) + a (rounding tow
 which no float LIF computes: the float voltage drifts from the integer one by up to
 1 / (1 - beta) mantissa units, and a crossing moves whenever a voltage sits that close to the
 threshold. With dv = 0 (beta = 1, an IF node) the update is v <- v + a on integers, which
-float32 computes exactly while |v| < 2**24 (:func:`float_exactness`).
+float32 computes exactly while |v| < 2**24 (metadata ``float_consumers``).
 """
 
 from __future__ import annotations
 
 import importlib.util
-import json
 from collections.abc import Callable
 from typing import Any
 
@@ -99,14 +98,8 @@ def spyx_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
 
 #: Matrix columns: name -> (runner, what it is). The last ones raise ConsumerUnavailable with the cause.
 MATRIX_CONSUMERS: dict[str, tuple[Callable[[Any, torch.Tensor], torch.Tensor], str]] = {
-    "nir-spec-f32": (
-        lambda g, s: spec_lif_raster(g, s, torch.float32),
-        "NIR's LIF from the spec, float32, file dt",
-    ),
-    "nir-spec-f64": (
-        lambda g, s: spec_lif_raster(g, s, torch.float64),
-        "NIR's LIF from the spec, float64, file dt",
-    ),
+    "nir-spec-f32": (lambda g, s: spec_lif_raster(g, s, torch.float32), "NIR's LIF from the spec, float32, file dt"),
+    "nir-spec-f64": (lambda g, s: spec_lif_raster(g, s, torch.float64), "NIR's LIF from the spec, float64, file dt"),
     "eulerlif": (CONSUMERS["nirtorch"], "the project's EulerLIF through nirtorch.nir_to_torch (float32 buffers)"),
     "snntorch": (CONSUMERS["snntorch"], "snntorch.import_nir.import_from_nir"),
     "norse": (CONSUMERS["norse"], "Norse from_nir with the file's consumer_settings (dt 1e-4, gain threshold)"),
@@ -135,21 +128,3 @@ def run_consumer(consumer: str, graph, spikes: torch.Tensor) -> torch.Tensor:
     if not available(consumer):
         raise ConsumerUnavailable(f"{PACKAGES[consumer.removesuffix('-default')]} is not installed")
     return MATRIX_CONSUMERS[consumer][0](graph, spikes)
-
-
-def float_exactness(graph) -> dict[str, Any]:
-    """The file's statement of what a float NIR consumer computes (metadata ``float_consumers``, JSON)."""
-    return json.loads(str(graph.metadata.get("float_consumers", "{}")))
-
-
-__all__ = [
-    "GATE_CONSUMERS",
-    "MATRIX_CONSUMERS",
-    "NORSE_DEFAULT_DT",
-    "ConsumerUnavailable",
-    "available",
-    "float_exactness",
-    "norse_default_raster",
-    "run_consumer",
-    "spec_lif_raster",
-]

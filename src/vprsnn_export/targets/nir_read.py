@@ -35,11 +35,7 @@ def load_graph(path: str | Path):
 
 
 def read_nir(path: str | Path) -> Source:
-    """Rebuild the exported network: a Checkpoint (float) or a FixedPointModel (fixed point).
-
-    Weights and thresholds come from the graph's nodes; the rest (config, decay, scales,
-    calibration) from its metadata. Any missing or inconsistent piece is a ModelFileError.
-    """
+    """Rebuild the exported network: a Checkpoint (float) or a FixedPointModel (fixed point) (module docstring)."""
     path = Path(path)
     graph = load_graph(path)
     try:
@@ -71,13 +67,10 @@ def graph_to_source(graph, path: Path) -> Source:
     header = parse_json(str(meta["header_json"]), "header_json")
     weight = np.asarray(linear.weight).T
     thresholds = np.asarray(lif.v_threshold)
-    if str(meta["kind"]) == "fixed-point":
-        model = fixed_point_from_graph(header, meta, weight, thresholds, path)
-        check_dynamics(lif, effective_beta(model), float(meta["dt"]), path)
-        return model
-    ckpt = checkpoint_from_graph(header, meta, weight, thresholds, path)
-    check_dynamics(lif, effective_beta(ckpt), float(meta["dt"]), path)
-    return ckpt
+    rebuild = fixed_point_from_graph if str(meta["kind"]) == "fixed-point" else checkpoint_from_graph
+    source = rebuild(header, meta, weight, thresholds, path)
+    check_dynamics(lif, effective_beta(source), float(meta["dt"]), path)
+    return source
 
 
 def check_dynamics(lif, beta: float, dt: float, path: Path) -> None:

@@ -8,7 +8,11 @@ file's ``consumer_settings``, :func:`consumer_graph`); :data:`CONSUMERS` names t
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import io
+import logging
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -67,15 +71,16 @@ def generic_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECON
     return step_module(module, spikes)
 
 
-def step_module(module, spikes: torch.Tensor) -> torch.Tensor:
-    """Feed (N, T, inputs) one step at a time to a stateful torch module returning (z, state)."""
-    n, timesteps, _ = spikes.shape
+def step_module(module, spikes: torch.Tensor, read: Callable[..., torch.Tensor] = lambda z, _: z) -> torch.Tensor:
+    """Feed (N, T, inputs) one step at a time to a stateful torch module returning (z, state); the raster
+    (N, T, neurons) bool of ``read(z, state)`` (default: z)."""
+    _, timesteps, _ = spikes.shape
     state = None
     outputs = []
     with torch.no_grad():
         for t in range(timesteps):
             z, state = module(spikes[:, t].to(torch.float32), state)
-            outputs.append(z.detach().to(torch.bool))
+            outputs.append(read(z, state).detach().to(torch.bool))
     return torch.stack(outputs, dim=1)
 
 
@@ -85,9 +90,6 @@ def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
     snnTorch's importer asserts one threshold for all neurons; it raises for files with
     per-neuron thresholds (quantise with threshold folding to get a single threshold).
     """
-    import contextlib
-    import copy
-
     from snntorch.import_nir import import_from_nir
 
     with contextlib.redirect_stdout(io.StringIO()):
@@ -104,8 +106,6 @@ def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
     norse (LIF):   v_threshold'_j = g_j v_threshold_j,  g_j = dt * (1 / tau_j)   (all float32, Norse's order)
     spikingjelly:  v_threshold'_j = nextafter(float32(v_threshold_j), +inf)
     """
-    import copy
-
     import nir
 
     adjusted = copy.deepcopy(graph)
@@ -130,8 +130,6 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     executor returns the output of the last node it runs, which is ``wta`` when that node is
     present, so the spikes are read from the executor's cache of the ``lif`` node instead.
     """
-    import logging
-
     try:
         import norse.torch as norse_torch
     except ImportError:
@@ -141,13 +139,7 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
         module = norse_torch.from_nir(graph if plain else consumer_graph(graph, "norse", dt), dt=dt)
     finally:
         logging.getLogger().disabled = False
-    state = None
-    outputs = []
-    with torch.no_grad():
-        for t in range(spikes.shape[1]):
-            _, state = module(spikes[:, t].to(torch.float32), state)
-            outputs.append(state.cache["lif"].detach().to(torch.bool))
-    return torch.stack(outputs, dim=1)
+    return step_module(module, spikes, lambda _, state: state.cache["lif"])
 
 
 def spikingjelly_consumer_raster(
@@ -174,7 +166,7 @@ def spikingjelly_consumer_raster(
 
 CONSUMERS = {
     "nirtorch": generic_consumer_raster,
-    "snntorch": lambda graph, spikes: snntorch_consumer_raster(graph, spikes),
+    "snntorch": snntorch_consumer_raster,
     "norse": norse_consumer_raster,
     "norse-plain": lambda graph, spikes: norse_consumer_raster(graph, spikes, plain=True),
     "spikingjelly": spikingjelly_consumer_raster,

@@ -45,7 +45,6 @@ EXACT_DECISION_TOLERANCE = 1.0
 #: measured matrix on the default network (2-bit folded, 98 %) with room for another route's queries;
 #: an ensemble at 2 bits measured 84-95 % and fails it (docs/targets.md section 1.4).
 LEAKY_DECISION_TOLERANCE = 0.95
-FLOAT32_EXACT_INTEGERS = 2**24
 
 
 def integer_semantics(source: Checkpoint | FixedPointModel) -> dict[str, Any]:
@@ -103,13 +102,3 @@ def float_consumers(source: Checkpoint | FixedPointModel) -> dict[str, Any]:
         cause = "the consumer sums the currents in another order (float32 rounding) than the float network"
         mode = "float"
     return {"mode": mode, "exact": False, "cause": cause, "decision_tolerance": LEAKY_DECISION_TOLERANCE}
-
-
-__all__ = [
-    "EXACT_DECISION_TOLERANCE",
-    "FLOAT32_EXACT_INTEGERS",
-    "LEAKY_DECISION_TOLERANCE",
-    "WTA_INHIBITION",
-    "float_consumers",
-    "integer_semantics",
-]

@@ -302,21 +302,13 @@ def build_graph(
     return nir.NIRGraph(nodes=nodes, edges=list(EDGES if wta_node else PLAIN_EDGES), metadata=metadata)
 
 
-def write_nir(
-    source: Source,
-    path: str | Path,
-    *,
-    source_sha256: str | None = None,
-    wta_inhibition: float = WTA_INHIBITION,
-    wta_node: bool = False,
-    dt: float = DT_SECONDS,
-) -> Path:
-    """Build the graph, serialise it with ``nir.write`` into memory, write it atomically."""
+def write_nir(source: Source, path: str | Path, **options: Any) -> Path:
+    """Build the graph (``options``: :func:`build_graph`'s), serialise it with ``nir.write`` into memory, write it
+    atomically."""
     import nir
 
-    graph = build_graph(source, source_sha256=source_sha256, wta_inhibition=wta_inhibition, wta_node=wta_node, dt=dt)
     buffer = io.BytesIO()
-    nir.write(buffer, graph)
+    nir.write(buffer, build_graph(source, **options))
     return atomic_write_bytes(path, buffer.getvalue())
 
 

@@ -43,12 +43,13 @@ Weight storage (about ``bits`` bits per synapse; :mod:`targets.packing`):
 """
 
 # The docstring above is every exported graph's doc_string (build_onnx): a change to it changes the
-# files written. The runner on onnxruntime is in onnx_session.py. Over 400 lines because it is one
-# concept, the graph: one line per ONNX node and initializer, in the order that keeps exports byte-identical.
+# files written. The runner on onnxruntime is in onnx_session.py. One concept, the graph: one line per
+# ONNX node and initializer (:class:`Nodes`), in the order that keeps exports byte-identical.
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 import onnx
@@ -68,16 +69,39 @@ DOMAIN = "vprsnn-export"
 INPUT = "spikes"
 INPUT_DENOTATION = ("DATA_TIME", "DATA_BATCH", "DATA_FEATURE")  # ONNX dimension denotations of [T, batch, inputs]
 NATIVE_SUB_BYTE = {4: TensorProto.UINT4}  # widths stored in an ONNX sub-byte type that onnxruntime casts (opset 21)
-
-
 WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
-
-
-def const(name: str, value: np.ndarray | np.generic) -> TensorProto:
-    return numpy_helper.from_array(np.asarray(value), name=name)
-
-
 INT32_MAX = (1 << 31) - 1  # MatMulInteger accumulates in int32: max_j sum_i q_ij must not exceed this
+INT64, DOUBLE, BOOL = TensorProto.INT64, TensorProto.DOUBLE, TensorProto.BOOL
+
+
+class Nodes(NamedTuple):
+    """Nodes and initializers of (a part of) a graph, kept in the order they are added (the files' byte order)."""
+
+    nodes: list[onnx.NodeProto]
+    inits: list[TensorProto]
+
+    def const(self, name: str, value: np.ndarray | np.floating | int | np.integer | list[int]) -> None:
+        """An initializer: an array or a float as it is, an integer an int64 scalar, a list an int64 vector."""
+        array = value if isinstance(value, np.ndarray | np.floating) else np.asarray(value, dtype=np.int64)
+        self.inits.append(numpy_helper.from_array(np.asarray(array), name=name))
+
+    def op(self, op_type: str, inputs: list[str], output: str, **attributes: Any) -> None:
+        self.nodes.append(helper.make_node(op_type, inputs, [output], **attributes))
+
+    def nonzero_or_one(self, value: str, positive: str, safe: str) -> None:
+        """``positive`` = value > 0 and ``safe`` = Where(positive, value, 1): a divisor that is never 0."""
+        self.op("Greater", [value, "f_zero"], positive)
+        self.op("Where", [positive, value, "f_one"], safe)
+
+    def extend(self, part: Nodes) -> Nodes:
+        self.nodes.extend(part.nodes)
+        self.inits.extend(part.inits)
+        return self
+
+
+def zeros(dtype: type) -> TensorProto:
+    """The one-element zero a ConstantOfShape node fills with."""
+    return numpy_helper.from_array(np.zeros(1, dtype=dtype))
 
 
 def check_exportable(model: FixedPointModel) -> None:
@@ -98,32 +122,25 @@ def check_exportable(model: FixedPointModel) -> None:
         )
 
 
-def neuron_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def neuron_nodes(model: FixedPointModel) -> Nodes:
     """The per-neuron int64 vectors the step reads from the outer graph, stored narrow and widened once.
 
     vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. n - 1 (Range),
     the index of a neuron within its WTA group (config.wta_group: the ensemble, or one module's n neurons)
     """
-    inits = [
-        const("threshold_stored", smallest_unsigned(model.threshold)),
-        const("vth_scale", np.int64(1 << model.voltage_shift)),
-    ]
-    nodes = [
-        helper.make_node("Cast", ["threshold_stored"], ["threshold_wide"], to=TensorProto.INT64),
-        helper.make_node("Mul", ["threshold_wide", "vth_scale"], ["vth"]),
-    ]
+    g = Nodes([], [])
+    g.const("threshold_stored", smallest_unsigned(model.threshold))
+    g.const("vth_scale", 1 << model.voltage_shift)
+    g.op("Cast", ["threshold_stored"], "threshold_wide", to=INT64)
+    g.op("Mul", ["threshold_wide", "vth_scale"], "vth")
     if model.config.network.wta:
-        inits += [
-            const("multiplier_stored", smallest_unsigned(model.scale_multiplier)),
-            const("index_start", np.int64(0)),
-            const("index_limit", np.int64(wta_group(model.config, model.n_neurons))),
-            const("index_step", np.int64(1)),
-        ]
-        nodes += [
-            helper.make_node("Cast", ["multiplier_stored"], ["multiplier"], to=TensorProto.INT64),
-            helper.make_node("Range", ["index_start", "index_limit", "index_step"], ["neuron_index"]),
-        ]
-    return nodes, inits
+        g.const("multiplier_stored", smallest_unsigned(model.scale_multiplier))
+        g.const("index_start", 0)
+        g.const("index_limit", wta_group(model.config, model.n_neurons))
+        g.const("index_step", 1)
+        g.op("Cast", ["multiplier_stored"], "multiplier", to=INT64)
+        g.op("Range", ["index_start", "index_limit", "index_step"], "neuron_index")
+    return g
 
 
 def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
@@ -132,70 +149,51 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     ``vth``, ``multiplier`` and ``neuron_index`` come from the outer graph (:func:`neuron_nodes`).
     """
     n = model.n_neurons
-    shift = 1 << model.voltage_shift
-    limit = model.voltage_limit
-    keep = (1 << DECAY_BITS) - model.decay_dv
-    inits = [
-        const("keep", np.int64(keep)),
-        const("unity", np.int64(1 << DECAY_BITS)),
-        const("shift", np.int64(shift)),
-        const("vmin", np.int64(-limit)),
-        const("vmax", np.int64(limit)),
-        const("zero", np.int64(0)),
-        const("axis1", np.array([1], dtype=np.int64)),
-    ]
-    nodes = [
-        helper.make_node("Cast", ["a_t"], ["a"], to=TensorProto.INT64),
-        helper.make_node("Mul", ["v_in", "keep"], ["v_keep"]),
-        helper.make_node("Div", ["v_keep", "unity"], ["v_decayed"]),
-        helper.make_node("Mul", ["a", "shift"], ["a_shifted"]),
-        helper.make_node("Add", ["v_decayed", "a_shifted"], ["v_raw"]),
-        helper.make_node("Clip", ["v_raw", "vmin", "vmax"], ["v_clip"]),
-        helper.make_node("Equal", ["v_raw", "v_clip"], ["unclipped"]),
-        helper.make_node("Not", ["unclipped"], ["clipped"]),
-        helper.make_node("Cast", ["clipped"], ["clipped_i"], to=TensorProto.INT64),
-        helper.make_node("ReduceSum", ["clipped_i", "axis1"], ["clips"], keepdims=0),
-        helper.make_node("Add", ["sat_in", "clips"], ["sat_out"]),
-        helper.make_node("Greater", ["v_clip", "vth"], ["cand"]),
-        helper.make_node("Where", ["cand", "zero", "v_clip"], ["v_out"]),
-    ]
+    g = Nodes([], [])
+    g.const("keep", (1 << DECAY_BITS) - model.decay_dv)
+    g.const("unity", 1 << DECAY_BITS)
+    g.const("shift", 1 << model.voltage_shift)
+    g.const("vmin", -model.voltage_limit)
+    g.const("vmax", model.voltage_limit)
+    g.const("zero", 0)
+    g.const("axis1", [1])
+    g.op("Cast", ["a_t"], "a", to=INT64)
+    g.op("Mul", ["v_in", "keep"], "v_keep")
+    g.op("Div", ["v_keep", "unity"], "v_decayed")
+    g.op("Mul", ["a", "shift"], "a_shifted")
+    g.op("Add", ["v_decayed", "a_shifted"], "v_raw")
+    g.op("Clip", ["v_raw", "vmin", "vmax"], "v_clip")
+    g.op("Equal", ["v_raw", "v_clip"], "unclipped")
+    g.op("Not", ["unclipped"], "clipped")
+    g.op("Cast", ["clipped"], "clipped_i", to=INT64)
+    g.op("ReduceSum", ["clipped_i", "axis1"], "clips", keepdims=0)
+    g.op("Add", ["sat_in", "clips"], "sat_out")
+    g.op("Greater", ["v_clip", "vth"], "cand")
+    g.op("Where", ["cand", "zero", "v_clip"], "v_out")
     if model.config.network.wta:
         group = wta_group(model.config, n)
-        inits += [
-            const("minus_one", np.int64(-1)),
-            const("group_shape", np.array([0, n // group, group], dtype=np.int64)),  # (batch, M, n)
-            const("flat_state", np.array([0, n], dtype=np.int64)),
-        ]
-        nodes += [
-            helper.make_node("Mul", ["a", "multiplier"], ["score"]),
-            helper.make_node("Where", ["cand", "score", "minus_one"], ["masked"]),
-            helper.make_node("Reshape", ["masked", "group_shape"], ["grouped"]),
-            helper.make_node("ArgMax", ["grouped"], ["winner"], axis=2, keepdims=1, select_last_index=0),
-            helper.make_node("Equal", ["neuron_index", "winner"], ["is_winner_grouped"]),
-            helper.make_node("Reshape", ["is_winner_grouped", "flat_state"], ["is_winner"]),
-            helper.make_node("And", ["is_winner", "cand"], ["fired"]),
-        ]
+        g.const("minus_one", -1)
+        g.const("group_shape", [0, n // group, group])  # (batch, M, n)
+        g.const("flat_state", [0, n])
+        g.op("Mul", ["a", "multiplier"], "score")
+        g.op("Where", ["cand", "score", "minus_one"], "masked")
+        g.op("Reshape", ["masked", "group_shape"], "grouped")
+        g.op("ArgMax", ["grouped"], "winner", axis=2, keepdims=1, select_last_index=0)
+        g.op("Equal", ["neuron_index", "winner"], "is_winner_grouped")
+        g.op("Reshape", ["is_winner_grouped", "flat_state"], "is_winner")
+        g.op("And", ["is_winner", "cand"], "fired")
     else:
-        nodes.append(helper.make_node("Identity", ["cand"], ["fired"]))
-    nodes += [
-        helper.make_node("Cast", ["fired"], ["fired_i"], to=TensorProto.INT64),
-        helper.make_node("Add", ["counts_in", "fired_i"], ["counts_out"]),
-    ]
-    outputs = [
-        helper.make_tensor_value_info("v_out", TensorProto.INT64, ["batch", n]),
-        helper.make_tensor_value_info("counts_out", TensorProto.INT64, ["batch", n]),
-        helper.make_tensor_value_info("sat_out", TensorProto.INT64, ["batch"]),
-    ]
+        g.op("Identity", ["cand"], "fired")
+    g.op("Cast", ["fired"], "fired_i", to=INT64)
+    g.op("Add", ["counts_in", "fired_i"], "counts_out")
+    state: dict[str, list[str | int]] = {"v": ["batch", n], "counts": ["batch", n], "sat": ["batch"]}  # int64
+    outputs = [helper.make_tensor_value_info(f"{name}_out", INT64, shape) for name, shape in state.items()]
     if with_raster:
-        nodes.append(helper.make_node("Identity", ["fired"], ["fired_out"]))
-        outputs.append(helper.make_tensor_value_info("fired_out", TensorProto.BOOL, ["batch", n]))
-    inputs = [
-        helper.make_tensor_value_info("v_in", TensorProto.INT64, ["batch", n]),
-        helper.make_tensor_value_info("counts_in", TensorProto.INT64, ["batch", n]),
-        helper.make_tensor_value_info("sat_in", TensorProto.INT64, ["batch"]),
-        helper.make_tensor_value_info("a_t", TensorProto.INT32, ["batch", n]),
-    ]
-    return helper.make_graph(nodes, "lif_wta_step", inputs, outputs, inits)
+        g.op("Identity", ["fired"], "fired_out")
+        outputs.append(helper.make_tensor_value_info("fired_out", BOOL, ["batch", n]))
+    inputs = [helper.make_tensor_value_info(f"{name}_in", INT64, shape) for name, shape in state.items()]
+    inputs.append(helper.make_tensor_value_info("a_t", TensorProto.INT32, ["batch", n]))
+    return helper.make_graph(g.nodes, "lif_wta_step", inputs, outputs, g.inits)
 
 
 def weight_storage(bits: int) -> str:
@@ -207,67 +205,59 @@ def weight_storage(bits: int) -> str:
     return f"{PACKING} of {bits}-bit values over [inputs, neurons], unpacked in the graph"
 
 
-def weight_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def weight_nodes(model: FixedPointModel) -> Nodes:
     """Nodes yielding ``weight_mantissa`` uint8 [inputs, neurons] from the stored initializer (module docstring)."""
     q, bits = model.weight_mantissa, model.bits
+    g = Nodes([], [])
     if bits == 8:
-        return [], [const("weight_mantissa", q.astype(np.uint8))]
+        g.const("weight_mantissa", q.astype(np.uint8))
+        return g
     packed = pack_bits(q, bits)
     if bits in NATIVE_SUB_BYTE:
-        stored = helper.make_tensor("weight_packed", NATIVE_SUB_BYTE[bits], list(q.shape), packed.tobytes(), raw=True)
-        return [helper.make_node("Cast", ["weight_packed"], ["weight_mantissa"], to=TensorProto.UINT8)], [stored]
-    count = q.size
-    inits = [
-        const("weight_packed", packed[:, None]),
-        const("bit_positions", np.arange(8, dtype=np.uint8)[None, :]),
-        const("bit_one", np.uint8(1)),
-        const("stream_flat", np.array([-1], dtype=np.int64)),
-        const("stream_start", np.array([0], dtype=np.int64)),
-        const("stream_end", np.array([count * bits], dtype=np.int64)),
-        const("digit_shape", np.array([count, bits], dtype=np.int64)),
-        const("place_values", (1 << np.arange(bits, dtype=np.uint8))[:, None].astype(np.uint8)),
-        const("weight_shape", np.array(q.shape, dtype=np.int64)),
-    ]
-    nodes = [
-        helper.make_node("BitShift", ["weight_packed", "bit_positions"], ["bit_shifted"], direction="RIGHT"),
-        helper.make_node("BitwiseAnd", ["bit_shifted", "bit_one"], ["bit_plane"]),
-        helper.make_node("Reshape", ["bit_plane", "stream_flat"], ["bit_stream"]),
-        helper.make_node("Slice", ["bit_stream", "stream_start", "stream_end"], ["value_bits"]),
-        helper.make_node("Reshape", ["value_bits", "digit_shape"], ["digits"]),
-        helper.make_node("MatMulInteger", ["digits", "place_values"], ["values_i32"]),
-        helper.make_node("Cast", ["values_i32"], ["values_u8"], to=TensorProto.UINT8),
-        helper.make_node("Reshape", ["values_u8", "weight_shape"], ["weight_mantissa"]),
-    ]
-    return nodes, inits
+        g.inits.append(
+            helper.make_tensor("weight_packed", NATIVE_SUB_BYTE[bits], list(q.shape), packed.tobytes(), raw=True)
+        )
+        g.op("Cast", ["weight_packed"], "weight_mantissa", to=TensorProto.UINT8)
+        return g
+    g.const("weight_packed", packed[:, None])
+    g.const("bit_positions", np.arange(8, dtype=np.uint8)[None, :])
+    g.const("bit_one", np.array(1, dtype=np.uint8))
+    g.const("stream_flat", [-1])
+    g.const("stream_start", [0])
+    g.const("stream_end", [q.size * bits])
+    g.const("digit_shape", [q.size, bits])
+    g.const("place_values", (1 << np.arange(bits, dtype=np.uint8))[:, None].astype(np.uint8))
+    g.const("weight_shape", list(q.shape))
+    g.op("BitShift", ["weight_packed", "bit_positions"], "bit_shifted", direction="RIGHT")
+    g.op("BitwiseAnd", ["bit_shifted", "bit_one"], "bit_plane")
+    g.op("Reshape", ["bit_plane", "stream_flat"], "bit_stream")
+    g.op("Slice", ["bit_stream", "stream_start", "stream_end"], "value_bits")
+    g.op("Reshape", ["value_bits", "digit_shape"], "digits")
+    g.op("MatMulInteger", ["digits", "place_values"], "values_i32")
+    g.op("Cast", ["values_i32"], "values_u8", to=TensorProto.UINT8)
+    g.op("Reshape", ["values_u8", "weight_shape"], "weight_mantissa")
+    return g
 
 
-def currents_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def currents_nodes(model: FixedPointModel) -> Nodes:
     """A[T, batch, neurons] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q); initial state zeros."""
-    unpack, inits = weight_nodes(model)
-    inits += [
-        const("flat_shape", np.array([-1, model.n_inputs], dtype=np.int64)),
-        const("neurons", np.array([model.n_neurons], dtype=np.int64)),
-        const("first_two", np.array([0], dtype=np.int64)),
-        const("two", np.array([2], dtype=np.int64)),
-        const("one", np.array([1], dtype=np.int64)),
-    ]
-    nodes = unpack + [
-        helper.make_node("Shape", [INPUT], ["spike_shape"]),
-        helper.make_node("Slice", ["spike_shape", "first_two", "two"], ["time_batch"]),
-        helper.make_node("Slice", ["spike_shape", "one", "two"], ["batch"]),
-        helper.make_node("Reshape", [INPUT, "flat_shape"], ["flat_spikes"]),
-        helper.make_node("MatMulInteger", ["flat_spikes", "weight_mantissa"], ["flat_currents"]),
-        helper.make_node("Concat", ["time_batch", "neurons"], ["current_shape"], axis=0),
-        helper.make_node("Reshape", ["flat_currents", "current_shape"], ["currents"]),
-        helper.make_node("Concat", ["batch", "neurons"], ["state_shape"], axis=0),
-        helper.make_node(
-            "ConstantOfShape", ["state_shape"], ["v0"], value=numpy_helper.from_array(np.zeros(1, dtype=np.int64))
-        ),
-        helper.make_node(
-            "ConstantOfShape", ["batch"], ["sat0"], value=numpy_helper.from_array(np.zeros(1, dtype=np.int64))
-        ),
-    ]
-    return nodes, inits
+    g = weight_nodes(model)
+    g.const("flat_shape", [-1, model.n_inputs])
+    g.const("neurons", [model.n_neurons])
+    g.const("first_two", [0])
+    g.const("two", [2])
+    g.const("one", [1])
+    g.op("Shape", [INPUT], "spike_shape")
+    g.op("Slice", ["spike_shape", "first_two", "two"], "time_batch")
+    g.op("Slice", ["spike_shape", "one", "two"], "batch")
+    g.op("Reshape", [INPUT, "flat_shape"], "flat_spikes")
+    g.op("MatMulInteger", ["flat_spikes", "weight_mantissa"], "flat_currents")
+    g.op("Concat", ["time_batch", "neurons"], "current_shape", axis=0)
+    g.op("Reshape", ["flat_currents", "current_shape"], "currents")
+    g.op("Concat", ["batch", "neurons"], "state_shape", axis=0)
+    g.op("ConstantOfShape", ["state_shape"], "v0", value=zeros(np.int64))
+    g.op("ConstantOfShape", ["batch"], "sat0", value=zeros(np.int64))
+    return g
 
 
 def smallest_unsigned(values: np.ndarray) -> np.ndarray:
@@ -275,7 +265,7 @@ def smallest_unsigned(values: np.ndarray) -> np.ndarray:
     return values.astype(np.min_scalar_type(int(values.max()) if values.size else 0))
 
 
-def calibration_nodes(counts: np.ndarray) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def calibration_nodes(counts: np.ndarray) -> Nodes:
     """``s_r`` float64 [neurons, places] from S^R stored in the fewer bytes of two exact forms.
 
     dense:  the counts in the narrowest unsigned type, Cast to float64
@@ -283,28 +273,25 @@ def calibration_nodes(counts: np.ndarray) -> tuple[list[onnx.NodeProto], list[Te
             type, ScatterND into zeros (S^R of a WTA network is mostly zeros: each place's T
             spikes go to a few neurons)
     """
+    g = Nodes([], [])
     dense = smallest_unsigned(counts)
     flat = counts.reshape(-1)
     where = np.flatnonzero(flat)
     values, positions = smallest_unsigned(flat[where]), smallest_unsigned(where)
     if dense.nbytes <= values.nbytes + positions.nbytes:
-        return [helper.make_node("Cast", ["s_r_counts"], ["s_r"], to=TensorProto.DOUBLE)], [const("s_r_counts", dense)]
-    inits = [
-        const("s_r_values", values),
-        const("s_r_positions", positions[:, None]),
-        const("s_r_size", np.array([flat.size], dtype=np.int64)),
-        const("s_r_shape", np.array(counts.shape, dtype=np.int64)),
-    ]
-    nodes = [
-        helper.make_node(
-            "ConstantOfShape", ["s_r_size"], ["s_r_zeros"], value=numpy_helper.from_array(np.zeros(1, dtype=np.float64))
-        ),
-        helper.make_node("Cast", ["s_r_values"], ["s_r_nonzero"], to=TensorProto.DOUBLE),
-        helper.make_node("Cast", ["s_r_positions"], ["s_r_index"], to=TensorProto.INT64),
-        helper.make_node("ScatterND", ["s_r_zeros", "s_r_index", "s_r_nonzero"], ["s_r_flat"]),
-        helper.make_node("Reshape", ["s_r_flat", "s_r_shape"], ["s_r"]),
-    ]
-    return nodes, inits
+        g.const("s_r_counts", dense)
+        g.op("Cast", ["s_r_counts"], "s_r", to=DOUBLE)
+        return g
+    g.const("s_r_values", values)
+    g.const("s_r_positions", positions[:, None])
+    g.const("s_r_size", [flat.size])
+    g.const("s_r_shape", list(counts.shape))
+    g.op("ConstantOfShape", ["s_r_size"], "s_r_zeros", value=zeros(np.float64))
+    g.op("Cast", ["s_r_values"], "s_r_nonzero", to=DOUBLE)
+    g.op("Cast", ["s_r_positions"], "s_r_index", to=INT64)
+    g.op("ScatterND", ["s_r_zeros", "s_r_index", "s_r_nonzero"], "s_r_flat")
+    g.op("Reshape", ["s_r_flat", "s_r_shape"], "s_r")
+    return g
 
 
 def readout_calibration(model: FixedPointModel) -> tuple[np.ndarray, np.ndarray | None]:
@@ -319,7 +306,7 @@ def readout_calibration(model: FixedPointModel) -> tuple[np.ndarray, np.ndarray 
     return weighted, ~silent
 
 
-def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> Nodes:
     """``s_r``, ``s_double_prime`` and ``inv_colsum`` (float64) from the integer counts S^R (eq. 9-10).
 
     omega_i = #{l : S^R_il > 0};  S'_il = S^R_il / omega_i where omega_i > gamma places, else S^R_il
@@ -327,40 +314,35 @@ def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> tuple[li
     Each is one correctly rounded float64 operation on exact integers, as in weighted_matrix.
     ``matrix``: the S^R the readout uses (:func:`readout_calibration`).
     """
-    n_places = model.calibration.shape[1]
     if np.array_equal(matrix, np.round(matrix)):  # counts (a single network, lambda 0 or 1): stored exactly as integers
-        nodes, inits = calibration_nodes(np.round(matrix).astype(np.int64))
+        g = calibration_nodes(np.round(matrix).astype(np.int64))
     else:
-        nodes, inits = [helper.make_node("Identity", ["s_r_weighted"], ["s_r"])], [const("s_r_weighted", matrix)]
-    inits += [
-        const("involvement", np.float64(float(model.config.assignment.gamma) * n_places)),
-        const("axis0_outer", np.array([0], dtype=np.int64)),
-        const("f_zero", np.float64(0.0)),
-        const("f_one", np.float64(1.0)),
-        const("axis1_outer", np.array([1], dtype=np.int64)),
-    ]
-    nodes += [
-        helper.make_node("Greater", ["s_r", "f_zero"], ["s_r_positive"]),
-        helper.make_node("Cast", ["s_r_positive"], ["s_r_involved"], to=TensorProto.DOUBLE),
-        helper.make_node("ReduceSum", ["s_r_involved", "axis1_outer"], ["omega"], keepdims=1),
-        helper.make_node("Greater", ["omega", "involvement"], ["penalised"]),
-        helper.make_node("Where", ["penalised", "omega", "f_one"], ["divisor"]),
-        helper.make_node("Div", ["s_r", "divisor"], ["s_prime"]),
-        helper.make_node("ReduceSum", ["s_r", "axis1_outer"], ["rowsum"], keepdims=1),
-        helper.make_node("Greater", ["rowsum", "f_zero"], ["row_active"]),
-        helper.make_node("Where", ["row_active", "rowsum", "f_one"], ["row_safe"]),
-        helper.make_node("Div", ["s_r", "row_safe"], ["row_share"]),
-        helper.make_node("Mul", ["s_prime", "row_share"], ["s_double_prime"]),
-        helper.make_node("ReduceSum", ["s_r", "axis0_outer"], ["colsum"], keepdims=1),
-        helper.make_node("Greater", ["colsum", "f_zero"], ["col_active"]),
-        helper.make_node("Where", ["col_active", "colsum", "f_one"], ["col_safe"]),
-        helper.make_node("Div", ["f_one", "col_safe"], ["col_inverse"]),
-        helper.make_node("Where", ["col_active", "col_inverse", "f_zero"], ["inv_colsum"]),
-    ]
-    return nodes, inits
+        g = Nodes([], [])
+        g.const("s_r_weighted", matrix)
+        g.op("Identity", ["s_r_weighted"], "s_r")
+    g.const("involvement", np.float64(float(model.config.assignment.gamma) * model.calibration.shape[1]))
+    g.const("axis0_outer", [0])
+    g.const("f_zero", np.float64(0.0))
+    g.const("f_one", np.float64(1.0))
+    g.const("axis1_outer", [1])
+    g.op("Greater", ["s_r", "f_zero"], "s_r_positive")
+    g.op("Cast", ["s_r_positive"], "s_r_involved", to=DOUBLE)
+    g.op("ReduceSum", ["s_r_involved", "axis1_outer"], "omega", keepdims=1)
+    g.op("Greater", ["omega", "involvement"], "penalised")
+    g.op("Where", ["penalised", "omega", "f_one"], "divisor")
+    g.op("Div", ["s_r", "divisor"], "s_prime")
+    g.op("ReduceSum", ["s_r", "axis1_outer"], "rowsum", keepdims=1)
+    g.nonzero_or_one("rowsum", "row_active", "row_safe")
+    g.op("Div", ["s_r", "row_safe"], "row_share")
+    g.op("Mul", ["s_prime", "row_share"], "s_double_prime")
+    g.op("ReduceSum", ["s_r", "axis0_outer"], "colsum", keepdims=1)
+    g.nonzero_or_one("colsum", "col_active", "col_safe")
+    g.op("Div", ["f_one", "col_safe"], "col_inverse")
+    g.op("Where", ["col_active", "col_inverse", "f_zero"], "inv_colsum")
+    return g
 
 
-def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[TensorProto]]:
+def wprob_nodes(model: FixedPointModel) -> Nodes:
     """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
 
     An ensemble's head reads out with its region regularisation (:func:`readout_calibration`).
@@ -368,88 +350,62 @@ def wprob_nodes(model: FixedPointModel) -> tuple[list[onnx.NodeProto], list[Tens
     scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
     P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
     """
-    n_places = model.calibration.shape[1]
     matrix, keep = readout_calibration(model)
-    nodes, inits = readout_matrix_nodes(model, matrix)
-    inits += [
-        const("uniform", np.float64(1.0 / n_places)),
-        const("i_zero", np.int64(0)),
-    ]
-    head_counts = "counts"
+    g = readout_matrix_nodes(model, matrix)
+    g.const("uniform", np.float64(1.0 / model.calibration.shape[1]))
+    g.const("i_zero", 0)
+    counts = "counts"
     if keep is not None:  # an ensemble: the silenced neurons' counts do not reach the readout
-        inits.append(const("readout_keep", keep.astype(np.int64)))
-        nodes.append(helper.make_node("Mul", ["counts", "readout_keep"], ["readout_counts"]))
-        head_counts = "readout_counts"
-    nodes += [
-        helper.make_node("Cast", [head_counts], ["sq"], to=TensorProto.DOUBLE),
-        helper.make_node("MatMul", ["sq", "s_double_prime"], ["raw"]),
-        helper.make_node("Greater", [head_counts, "i_zero"], ["active_b"]),
-        helper.make_node("Cast", ["active_b"], ["active"], to=TensorProto.DOUBLE),
-        helper.make_node("MatMul", ["active", "s_r"], ["covered"]),
-        helper.make_node("Mul", ["covered", "inv_colsum"], ["penalty"]),
-        helper.make_node("Mul", ["raw", "penalty"], ["scores"]),
-        helper.make_node("ReduceMin", ["scores", "axis1_outer"], ["lo"], keepdims=1),
-        helper.make_node("ReduceMax", ["scores", "axis1_outer"], ["hi"], keepdims=1),
-        helper.make_node("Sub", ["hi", "lo"], ["span"]),
-        helper.make_node("Greater", ["span", "f_zero"], ["spread"]),
-        helper.make_node("Where", ["spread", "span", "f_one"], ["span_safe"]),
-        helper.make_node("Sub", ["scores", "lo"], ["shifted"]),
-        helper.make_node("Div", ["shifted", "span_safe"], ["norm"]),
-        helper.make_node("ReduceSum", ["norm", "axis1_outer"], ["total"], keepdims=1),
-        helper.make_node("Greater", ["total", "f_zero"], ["positive"]),
-        helper.make_node("Where", ["positive", "total", "f_one"], ["total_safe"]),
-        helper.make_node("Div", ["norm", "total_safe"], ["dist"]),
-        helper.make_node("Where", ["spread", "dist", "uniform"], ["wprob"]),
-    ]
-    return nodes, inits
+        g.const("readout_keep", keep.astype(np.int64))
+        g.op("Mul", ["counts", "readout_keep"], "readout_counts")
+        counts = "readout_counts"
+    g.op("Cast", [counts], "sq", to=DOUBLE)
+    g.op("MatMul", ["sq", "s_double_prime"], "raw")
+    g.op("Greater", [counts, "i_zero"], "active_b")
+    g.op("Cast", ["active_b"], "active", to=DOUBLE)
+    g.op("MatMul", ["active", "s_r"], "covered")
+    g.op("Mul", ["covered", "inv_colsum"], "penalty")
+    g.op("Mul", ["raw", "penalty"], "scores")
+    g.op("ReduceMin", ["scores", "axis1_outer"], "lo", keepdims=1)
+    g.op("ReduceMax", ["scores", "axis1_outer"], "hi", keepdims=1)
+    g.op("Sub", ["hi", "lo"], "span")
+    g.nonzero_or_one("span", "spread", "span_safe")
+    g.op("Sub", ["scores", "lo"], "shifted")
+    g.op("Div", ["shifted", "span_safe"], "norm")
+    g.op("ReduceSum", ["norm", "axis1_outer"], "total", keepdims=1)
+    g.nonzero_or_one("total", "positive", "total_safe")
+    g.op("Div", ["norm", "total_safe"], "dist")
+    g.op("Where", ["spread", "dist", "uniform"], "wprob")
+    return g
 
 
 def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: bool = False) -> onnx.ModelProto:
     """The ONNX model of ``model``'s integer inference (see the module docstring)."""
     check_exportable(model)
     n, timesteps = model.n_neurons, model.config.encoder.timesteps
-    nodes, inits = currents_nodes(model)
-    per_neuron, per_neuron_inits = neuron_nodes(model)
-    nodes += per_neuron
-    inits += per_neuron_inits
+    g = currents_nodes(model).extend(neuron_nodes(model))
     scan_outputs = ["v_final", "counts", "saturations"] + (["raster"] if with_raster else [])
-    nodes.append(
-        helper.make_node(
-            "Scan",
-            ["v0", "v0", "sat0", "currents"],
-            scan_outputs,
-            body=step_body(model, with_raster),
-            num_scan_inputs=1,
-        )
+    scan = helper.make_node(
+        "Scan", ["v0", "v0", "sat0", "currents"], scan_outputs, body=step_body(model, with_raster), num_scan_inputs=1
     )
+    g.nodes.append(scan)
     outputs = [
-        helper.make_tensor_value_info("counts", TensorProto.INT64, ["batch", n]),
-        helper.make_tensor_value_info("saturations", TensorProto.INT64, ["batch"]),
+        helper.make_tensor_value_info("counts", INT64, ["batch", n]),
+        helper.make_tensor_value_info("saturations", INT64, ["batch"]),
     ]
     if with_wprob:
-        head, head_inits = wprob_nodes(model)
-        nodes += head
-        inits += head_inits
-        outputs.append(
-            helper.make_tensor_value_info("wprob", TensorProto.DOUBLE, ["batch", model.calibration.shape[1]])
-        )
+        g.extend(wprob_nodes(model))
+        outputs.append(helper.make_tensor_value_info("wprob", DOUBLE, ["batch", model.calibration.shape[1]]))
     if with_raster:
-        outputs.append(helper.make_tensor_value_info("raster", TensorProto.BOOL, [timesteps, "batch", n]))
-    graph = helper.make_graph(
-        nodes,
-        "vprsnn_integer_inference",
-        [
-            helper.make_tensor_value_info(
-                INPUT,
-                TensorProto.UINT8,
-                [timesteps, "batch", model.n_inputs],
-                doc_string=input_layout(model),
-                shape_denotation=list(INPUT_DENOTATION),
-            )
-        ],
-        outputs,
-        inits,
+        outputs.append(helper.make_tensor_value_info("raster", BOOL, [timesteps, "batch", n]))
+    spikes = helper.make_tensor_value_info(
+        INPUT,
+        TensorProto.UINT8,
+        [timesteps, "batch", model.n_inputs],
+        doc_string=input_layout(model),
+        shape_denotation=list(INPUT_DENOTATION),
     )
+    graph = helper.make_graph(g.nodes, "vprsnn_integer_inference", [spikes], outputs, g.inits)
     onnx_model = helper.make_model(
         graph,
         opset_imports=[helper.make_opsetid("", OPSET)],
@@ -476,14 +432,7 @@ def metadata_props(model: FixedPointModel, *, with_wprob: bool = True) -> dict[s
     """Key facts as ONNX metadata_props (strings): widths, scales, encoder, T, source hash, and what a user needs
     to decide without the project: reference place ids, input layout, encoder contract, decision rule (JSON)."""
     cfg = model.config
-    standalone = {
-        "vprsnn.reference_place_ids": as_json(model.reference_place_ids.astype(int).tolist()),
-        "vprsnn.input_layout": input_layout(model),
-        "vprsnn.encoder_contract": as_json(encoder_contract(cfg)),
-    }
-    if with_wprob:
-        standalone["vprsnn.decision"] = as_json(decision_rule("wprob"))
-    return {
+    props = {
         "vprsnn.format": "vprsnn-onnx/1",
         "vprsnn.bits": str(model.bits),
         "vprsnn.decay_dv": str(model.decay_dv),
@@ -498,8 +447,13 @@ def metadata_props(model: FixedPointModel, *, with_wprob: bool = True) -> dict[s
         "vprsnn.source_sha256": model.source_sha256,
         "vprsnn.gamma": repr(cfg.assignment.gamma),
         "vprsnn.weight_storage": weight_storage(model.bits),
-        **standalone,
+        "vprsnn.reference_place_ids": as_json(model.reference_place_ids.astype(int).tolist()),
+        "vprsnn.input_layout": input_layout(model),
+        "vprsnn.encoder_contract": as_json(encoder_contract(cfg)),
     }
+    if with_wprob:
+        props["vprsnn.decision"] = as_json(decision_rule("wprob"))
+    return props
 
 
 def write_onnx(model: FixedPointModel, path: str | Path, *, with_wprob: bool = True, with_raster: bool = False) -> Path:

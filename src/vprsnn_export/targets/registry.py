@@ -11,10 +11,11 @@ target is a writer/reader module in this folder and one ``TARGETS.register`` lin
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
@@ -76,6 +77,16 @@ def integer(network: Network, target: str) -> FixedPointModel:
 # command's --help) imports neither torch nor onnx.
 
 
+def lazy(dotted: str) -> Callable[..., Any]:
+    """``targets.<module>.<name>`` (``dotted`` = "module.name"), imported when the returned function is called."""
+    module, name = dotted.split(".")
+
+    def call(*args: Any) -> Any:
+        return getattr(importlib.import_module(f"vprsnn_export.targets.{module}"), name)(*args)
+
+    return call
+
+
 def _write_nir(network: Network, path: Path, options: WriteOptions) -> list[Path]:
     from vprsnn_export.targets.nir_target import write_nir
 
@@ -95,50 +106,14 @@ def _write_loihi(network: Network, path: Path, options: WriteOptions) -> list[Pa
     return list(write_loihi(integer(network, "loihi"), path, source_sha256=options.source_sha256).values())
 
 
-def _read_nir(path: Path) -> Network:
-    from vprsnn_export.targets.nir_read import read_nir
-
-    return read_nir(path)
-
-
-def _read_onnx(path: Path) -> Backend:
-    from vprsnn_export.targets.onnx_session import OnnxBackend
-
-    return OnnxBackend(path)
-
-
-def _read_loihi(path: Path) -> Network:
-    from vprsnn_export.targets.loihi_target import read_loihi_model
-
-    return read_loihi_model(path)
-
-
-def _nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
-    from vprsnn_export.targets.statements import nir_statement
-
-    return nir_statement(network, wta_node=options.wta_node, inhibition=options.inhibition)
-
-
-def _onnx_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
-    from vprsnn_export.targets.statements import onnx_statement
-
-    return onnx_statement(network)
-
-
-def _loihi_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str | None:
-    from vprsnn_export.targets.statements import loihi_statement
-
-    return loihi_statement(network, model)
-
-
 TARGETS: Registry[Target] = Registry("target")
-TARGETS.register(Target("nir", "NIR", "NIR read back", False, "model.nir", _write_nir, _read_nir, _nir_statement))
-TARGETS.register(
-    Target("onnx", "ONNX", "ONNX (onnxruntime)", True, "model.onnx", _write_onnx, _read_onnx, _onnx_statement)
-)
-TARGETS.register(
-    Target("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, _read_loihi, _loihi_statement, True)
-)
+for name, title, label, integer_only, filename, write, reader, reads_folder in (
+    ("nir", "NIR", "NIR read back", False, "model.nir", _write_nir, "nir_read.read_nir", False),
+    ("onnx", "ONNX", "ONNX (onnxruntime)", True, "model.onnx", _write_onnx, "onnx_session.OnnxBackend", False),
+    ("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, "loihi_target.read_loihi_model", True),
+):
+    statement = lazy(f"statements.{name}_statement")
+    TARGETS.register(Target(name, title, label, integer_only, filename, write, lazy(reader), statement, reads_folder))
 
 
 def target_labels() -> dict[str, str]:

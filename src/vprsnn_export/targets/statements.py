@@ -15,9 +15,10 @@ from vprsnn_export.network.modules import module_count
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
+from vprsnn_export.targets.registry import Network, WriteOptions
 
 
-def ensemble_sentence(network: Checkpoint | FixedPointModel) -> str:
+def ensemble_sentence(network: Network) -> str:
     """The sentence an ensemble adds to every statement ("" for a single network)."""
     group = network.config.network.n_neurons
     modules = module_count(len(network.reference_place_ids), network.config.train.module_size)
@@ -33,7 +34,7 @@ def ensemble_sentence(network: Checkpoint | FixedPointModel) -> str:
     )
 
 
-def float_consumer_note(network: Checkpoint | FixedPointModel) -> str:
+def float_consumer_note(network: Network) -> str:
     """The file's float_consumers statement in words: exact or not, why, and the tolerance export --check applies."""
     statement = float_consumers(network)
     verdict = (
@@ -50,8 +51,9 @@ def float_consumer_note(network: Checkpoint | FixedPointModel) -> str:
     )
 
 
-def nir_statement(network: Checkpoint | FixedPointModel, *, wta_node: bool, inhibition: float) -> str:
+def nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
     """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
+    wta_node, inhibition = options.wta_node, options.inhibition
     is_float = isinstance(network, Checkpoint)
     thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
     uniform = bool(np.all(thresholds == thresholds[0]))
@@ -96,7 +98,7 @@ def nir_statement(network: Checkpoint | FixedPointModel, *, wta_node: bool, inhi
     )
 
 
-def onnx_statement(network: Checkpoint | FixedPointModel) -> str:
+def onnx_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
     """ONNX: onnxruntime computes the integer network exactly."""
     return (
         "onnxruntime computes the integer network exactly: spike counts, raster and saturations identical to the "
@@ -106,7 +108,7 @@ def onnx_statement(network: Checkpoint | FixedPointModel) -> str:
     )
 
 
-def loihi_statement(network: Checkpoint | FixedPointModel, model: FixedPointModel | None) -> str | None:
+def loihi_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str | None:
     """Loihi-style description: what Lava's Dense + LIF compute, and the cores the network needs."""
     if model is None:
         return None
@@ -125,6 +127,3 @@ def loihi_statement(network: Checkpoint | FixedPointModel, model: FixedPointMode
         "input spike; export.json's cost gives the events and an energy and latency estimate from published "
         "per-operation figures (docs/targets.md, Cost per query)."
     )
-
-
-__all__ = ["ensemble_sentence", "loihi_statement", "nir_statement", "onnx_statement"]
