@@ -11,6 +11,7 @@ from typing import Any
 
 from vprsnn_export.readout.strategies import STRATEGIES
 
+from ..measurements import ConformanceResult
 from ..results import METRICS, BitsResult, RunSummary, VerifiedRun, VerifyReport
 from ..verify.checks import TOLERANCE_MEANING
 from .labels import (
@@ -18,7 +19,6 @@ from .labels import (
     PAIRED_COLUMNS,
     VERDICT_COLUMNS,
     data_label,
-    data_note,
     exact_counts,
     ms,
     network_label,
@@ -73,6 +73,15 @@ def table(columns: Mapping[str, Callable[[Any], str]], items: Iterable[Any], sta
     return Block("table", headers=list(columns), rows=rows, status=[status(i) for i in items] if status else ())
 
 
+#: The first columns of a table with a row per network, bit width and item (:func:`per_result`).
+WHERE: Columns = {"network": lambda i: i[0], "bits": lambda i: str(i[1].bits)}
+
+
+def per_result(report: VerifyReport, items: Callable[[BitsResult], Iterable[Any]]) -> list[tuple[str, BitsResult, Any]]:
+    """``(network label, result, item)`` of every network, bit width and item of ``items(result)``, in order."""
+    return [(label, result, item) for label, _, result in results(report) for item in items(result)]
+
+
 def figure(title: str, name: str, image: bytes, caption: str) -> Block:
     return Block("figure", title=title, name=name, image=image, text=caption)
 
@@ -121,12 +130,13 @@ def blocks_of(report: VerifyReport) -> list[Block]:
     ks = first.ks
     networks = f"mean ± std over {n_runs} independently trained networks" if n_runs > 1 else "one network"
     seconds = f" in {report.seconds:.0f} s" if report.seconds else ""
+    data = f" from {data_label(report.settings)}" if report.settings.get("data") else ""
     blocks = [
         Block("h1", "vprsnn-export verification report"),
         Block(
             "p",
             f"**Verdict: {report.verdict.upper()}** — {conclusion(report)}. Query traversal **{first.query}**, "
-            f"{first.n_queries} queries{data_note(report.settings)}; {networks}. Generated {report.created}{seconds}.",
+            f"{first.n_queries} queries{data}; {networks}. Generated {report.created}{seconds}.",
         ),
     ]
     if failures := failure_lines(report):
@@ -202,15 +212,14 @@ def verdict_blocks(report: VerifyReport) -> list[Block]:
 def paired_blocks(report: VerifyReport) -> list[Block]:
     """The paired table: per network and bit width every judged metric (and every readout's accuracy) with its
     flips, the difference, its interval and the verdict."""
-    checks = [(label, r, c) for label, _, r in results(report) for c in shown_paired(r.paired)]
+    checks = per_result(report, lambda r: shown_paired(r.paired))
     if not checks:
         return []
     stats = report.settings.get("statistics") or {}
     counts = "; ".join(
         f"{n}, {r.bits} bits: {verdict_counts(r.paired) or 'nothing judged'}" for n, _, r in results(report)
     )
-    columns = {"network": lambda i: i[0], "bits": lambda i: str(i[1].bits)}
-    columns |= {title: partial(lambda key, i: paired_cells(i[2])[key], key) for key, title in PAIRED_COLUMNS}
+    columns = WHERE | {title: partial(lambda key, i: paired_cells(i[2])[key], key) for key, title in PAIRED_COLUMNS}
     return [
         Block("h2", "Paired verdict"),
         Block(
@@ -249,7 +258,7 @@ def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     return blocks
 
 
-def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun] = ()) -> list[Block]:
+def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun]) -> list[Block]:
     columns = {
         "bits": lambda b: str(b.bits),
         "same winner %": lambda b: ms(b.winner_agreement, digits=2),
@@ -303,19 +312,16 @@ def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
 
 
 def cross_blocks(report: VerifyReport) -> list[Block]:
-    def implementations(result: BitsResult) -> str:
-        cross = result.cross_implementation
+    def implementations(cross: ConformanceResult) -> str:
         skipped = "; skipped: " + ", ".join(f"{k} ({v})" for k, v in cross.skipped.items()) if cross.skipped else ""
         return "; ".join(sorted({c.check.split(":")[0] for c in cross.comparisons})) + skipped
 
-    columns = {
-        "network": lambda i: i[0],
-        "bits": lambda i: str(i[2].bits),
-        "exact rows identical": lambda i: exact_counts([i[2].cross_implementation]),
-        "tolerance rows within": lambda i: tolerance_counts([i[2].cross_implementation]),
-        "tolerance rows: decisions that differ": lambda i: tolerance_differences(i[2].cross_implementation),
-        "verdict": lambda i: verdict(i[2].cross_implementation.passed),
-        "reference-stepper queries": lambda i: str(i[2].cross_implementation.reference_queries),
+    columns = WHERE | {
+        "exact rows identical": lambda i: exact_counts([i[2]]),
+        "tolerance rows within": lambda i: tolerance_counts([i[2]]),
+        "tolerance rows: decisions that differ": lambda i: tolerance_differences(i[2]),
+        "verdict": lambda i: verdict(i[2].passed),
+        "reference-stepper queries": lambda i: str(i[2].reference_queries),
         "implementations": lambda i: implementations(i[2]),
     }
     blocks = [
@@ -330,12 +336,12 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
             "stated decision agreement) are counted on their own, with their measured difference: never as "
             "exact.",
         ),
-        table(columns, results(report), lambda i: "pass" if i[2].cross_implementation.passed else "fail"),
+        table(
+            columns, per_result(report, lambda r: [r.cross_implementation]), lambda i: "pass" if i[2].passed else "fail"
+        ),
     ]
-    failures = [(n, r, c) for n, _, r in results(report) for c in r.cross_implementation.failures]
-    if failures:
-        columns = {"network": lambda f: f[0], "bits": lambda f: str(f[1].bits)}
-        columns |= {"check": lambda f: f[2].check, "detail": lambda f: f[2].detail}
+    if failures := per_result(report, lambda r: r.cross_implementation.failures):
+        columns = WHERE | {"check": lambda f: f[2].check, "detail": lambda f: f[2].detail}
         blocks += [Block("h3", "Differences found"), table(columns, failures, lambda _: "fail")]
     return blocks
 
@@ -404,19 +410,13 @@ def quantisation_blocks(run: VerifiedRun) -> list[Block]:
 
 
 def tolerance_blocks(report: VerifyReport) -> list[Block]:
-    def value(check: Any, number: float) -> str:
-        return str(number) if check.check == "saturations" else f"{100 * number:.2f}"
-
     def limit(check: Any) -> str:
         shown = f"{check.applied_limit:g}" if check.check == "saturations" else f"{100 * check.applied_limit:.2f}"
         return shown + (f" (1 query; set {100 * check.limit:.2f})" if check.applied_limit != check.limit else "")
 
-    checks = [(n, r, c) for n, _, r in results(report) for c in r.tolerance_checks]
-    columns = {
-        "network": lambda i: i[0],
-        "bits": lambda i: str(i[1].bits),
+    columns = WHERE | {
         "check": lambda i: i[2].what,
-        "value": lambda i: value(i[2], i[2].value),
+        "value": lambda i: str(i[2].value) if i[2].check == "saturations" else f"{100 * i[2].value:.2f}",
         "limit": lambda i: limit(i[2]),
         "verdict": lambda i: verdict(i[2].passed),
     }
@@ -429,7 +429,7 @@ def tolerance_blocks(report: VerifyReport) -> list[Block]:
             "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
             f"Keys — {meaning}.",
         ),
-        table(columns, checks, lambda i: "pass" if i[2].passed else "fail"),
+        table(columns, per_result(report, lambda r: r.tolerance_checks), lambda i: "pass" if i[2].passed else "fail"),
     ]
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -34,11 +35,6 @@ def data_label(data: Mapping[str, Any]) -> str:
         return "-"
     selection = data.get("subset") or (f"places {data['places']}" if data.get("places") else "all places")
     return f"{source} ({selection})"
-
-
-def data_note(settings: Mapping[str, Any]) -> str:
-    """ " from DATA (selection)" when the settings name the data."""
-    return f" from {data_label(settings)}" if settings.get("data") else ""
 
 
 def strategy_title(strategy: str) -> str:
@@ -105,10 +101,7 @@ def shown_paired(checks: Sequence[PairedCheck]) -> list[PairedCheck]:
 
 def verdict_counts(checks: Sequence[PairedCheck]) -> str:
     """ "2 hold, 1 undecided" over the judged checks."""
-    counts: dict[str, int] = {}
-    for check in checks:
-        if check.verdict is not None:
-            counts[check.verdict] = counts.get(check.verdict, 0) + 1
+    counts = Counter(check.verdict for check in checks if check.verdict is not None)
     names = {"holds": "hold", "fails": "fail"}
     return ", ".join(f"{n} {names.get(v, v)}" for v, n in sorted(counts.items(), key=lambda kv: _ORDER.index(kv[0])))
 
@@ -179,13 +172,11 @@ def verdict_cells(label: str, run: VerifiedRun, result: BitsResult) -> dict[str,
 
 def tolerance_differences(result: ConformanceResult) -> str:
     """Each tolerance row's measured difference: "snntorch: 1.9 % of 100 decisions differ (limit 5.0 %)"."""
-    cells = []
-    for row in result.tolerance_rows:
-        limit = 100 * (1 - (row.tolerance or 0.0))
-        if row.difference is None:
-            cells.append(f"{row.a}: not gated (refuses the file)")
-        else:
-            cells.append(
-                f"{row.a}: {100 * row.difference:.1f} % of {row.n_elements} decisions differ (limit {limit:.1f} %)"
-            )
+    cells = [
+        f"{row.a}: not gated (refuses the file)"
+        if row.difference is None
+        else f"{row.a}: {100 * row.difference:.1f} % of {row.n_elements} decisions differ "
+        f"(limit {100 * (1 - (row.tolerance or 0.0)):.1f} %)"
+        for row in result.tolerance_rows
+    ]
     return "; ".join(cells) or "-"

@@ -60,6 +60,14 @@ def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[tup
     )
 
 
+def pr_axes(ax: Any, title: str, **title_style: Any) -> None:
+    """Precision vs recall on [0, 1], titled, with a grid and a legend."""
+    ax.set(xlim=(0, 1.02), ylim=(0, 1.05), xlabel="recall", ylabel="precision")
+    ax.set_title(title, **title_style)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+
+
 def bars(ax: Any, x: np.ndarray, values: Sequence[tuple[float, float]], width: float, **style: Any) -> None:
     """Bars of (mean, std), with error bars only when a std is > 0 (one network has none)."""
     means, stds = (list(column) for column in zip(*values, strict=True)) if values else ([], [])
@@ -121,13 +129,7 @@ def plot_pr(run: VerifiedRun) -> bytes:
         for label, (recall, precision), index in merged(series):
             style = {"color": "black", "linewidth": 2} if index == 0 else {"color": cmap((index - 1) / n)}
             ax.step(recall, precision, where="post", label=label, **style)
-        ax.set_xlim(0, 1.02)
-        ax.set_ylim(0, 1.05)
-        ax.set_xlabel("recall")
-        ax.set_ylabel("precision")
-        ax.set_title(name.replace(SEQUENCE_STRATEGY, strategy_title(SEQUENCE_STRATEGY)))
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="lower left")
+        pr_axes(ax, name.replace(SEQUENCE_STRATEGY, strategy_title(SEQUENCE_STRATEGY)))
     return png(fig)
 
 
@@ -182,14 +184,8 @@ def plot_weights(run: VerifiedRun) -> bytes:
         levels = result.weight_levels
         top = levels.levels
         share = np.asarray(levels.counts, dtype=np.float64) / max(sum(levels.counts), 1)
-        ax.bar(
-            np.arange(top + 1) / top,
-            share,
-            width=0.85 / top,
-            color="tab:orange",
-            alpha=0.85,
-            label=f"{result.bits}-bit levels",
-        )
+        at = np.arange(top + 1) / top
+        ax.bar(at, share, width=0.85 / top, color="tab:orange", alpha=0.85, label=f"{result.bits}-bit levels")
         ax.plot(x, window_share(edges, counts, x, 1 / top), color="tab:blue", linewidth=1.2, label="float")
         ax.set_title(f"{result.bits}-bit: {100 * levels.zero_fraction:.1f} % of weights at 0", fontsize=9)
         ax.set_xlabel("weight / scale range")
@@ -213,10 +209,7 @@ def plot_spikes(report: VerifyReport) -> bytes:
         ("top-1 agreement W+Prob k=1", [b.top1_agreement["wprob"] for b in summary.bits]),
         ("mean count correlation", [b.count_correlation for b in summary.bits]),
     )
-    series = [
-        (label, (tuple(100 * (v.mean or 0.0) for v in values), tuple(100 * (v.std or 0.0) for v in values)))
-        for label, values in agreements
-    ]
+    series = [(label, tuple(zip(*map(percent, values), strict=True))) for label, values in agreements]
     if len(bits) == 1:
         shown = merged(series)
         x = np.arange(len(shown))
@@ -256,8 +249,5 @@ def plot_precision_recall(
     ax.axhline(target, color="tab:red", linestyle="--", linewidth=1, label="target precision")
     if chosen is not None:
         ax.plot([chosen[0]], [chosen[1]], "o", color="tab:red", label=f"operating point ({chosen[2]:.4g})")
-    ax.set(xlim=(0, 1.02), ylim=(0, 1.05), xlabel="recall", ylabel="precision")
-    ax.set_title(title, fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    pr_axes(ax, title, fontsize=10)
     return png(fig)

@@ -7,6 +7,7 @@ import html
 import json
 import re
 from collections.abc import Sequence
+from itertools import zip_longest
 from pathlib import Path
 
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text
@@ -102,20 +103,18 @@ def render_html(blocks: Sequence[Block], title: str = "vprsnn-export verificatio
             body.append(f"<{block.kind}>{html.escape(block.text)}</{block.kind}>")
         elif block.kind == "p":
             body.append(f"<p>{_html_inline(block.text)}</p>")
-        elif block.kind == "pre" and block.title:
-            body.append(
-                f"<details><summary>{html.escape(block.title)}</summary><pre>{html.escape(block.text)}</pre></details>"
-            )
         elif block.kind == "pre":
-            body.append(f"<pre>{html.escape(block.text)}</pre>")
+            pre = f"<pre>{html.escape(block.text)}</pre>"
+            body.append(
+                f"<details><summary>{html.escape(block.title)}</summary>{pre}</details>" if block.title else pre
+            )
         elif block.kind == "table":
             head = "".join(f"<th>{html.escape(str(h))}</th>" for h in block.headers)
-            rows = []
-            for index, row in enumerate(block.rows):
-                status = block.status[index] if index < len(block.status) else None
-                cls = f' class="{status}"' if status else ""
-                rows.append(f"<tr{cls}>" + "".join(_cell(c) for c in row) + "</tr>")
-            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table>")
+            rows = "".join(
+                (f'<tr class="{status}">' if status else "<tr>") + "".join(map(_cell, row)) + "</tr>"
+                for row, status in zip_longest(block.rows, block.status)
+            )
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
         elif block.kind == "figure":
             data = base64.b64encode(block.image).decode("ascii")
             body.append(
