@@ -360,16 +360,15 @@ def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
         "float k=1 %": lambda i: f"{100 * first[i].float_accuracy:.1f}",
         f"float k={k} %": lambda i: f"{100 * first[i].float_accuracy_k:.1f}",
     }
+    worst = []
     for r in run.bits:
         columns[f"{r.bits}-bit k={k} % (Δ)"] = partial(
             lambda r, i: f"{100 * r.modules[i].accuracy_k:.1f} ({signed_pct(r.modules[i].delta_k)})", r
         )
         columns[f"{r.bits}-bit same winner %"] = partial(lambda r, i: f"{100 * r.modules[i].winner_agreement:.1f}", r)
-    worst = []
-    for result in run.bits:
-        low = min(result.modules, key=lambda m: (m.delta_k, m.winner_agreement))
+        low = min(r.modules, key=lambda m: (m.delta_k, m.winner_agreement))
         worst.append(
-            f"{result.bits}-bit: module {low.module} (places {low.first_place}-{low.last_place}, "
+            f"{r.bits}-bit: module {low.module} (places {low.first_place}-{low.last_place}, "
             f"{signed_pct(low.delta_k)} pts at k={k}, {100 * low.winner_agreement:.1f} % same winner)"
         )
     which = f" (network {run.label or 1} of {n_runs})" if n_runs > 1 else ""

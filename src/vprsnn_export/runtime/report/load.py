@@ -6,7 +6,6 @@ import dataclasses
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.fileio import parse_json
@@ -45,11 +44,6 @@ POOLING_KEYS = (
 OLDER_DEFAULTS = {"fold_thresholds": False, "non_leaky": False}
 
 
-def _as_json(value: Any) -> str:
-    """A setting as JSON text, so a tuple and the list a JSON file gives back compare equal."""
-    return json.dumps(value, sort_keys=True, default=str)
-
-
 def combine_reports(
     reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
 ) -> VerifyReport:
@@ -63,17 +57,14 @@ def combine_reports(
         raise ReportError("no reports to combine")
     if len(reports) == 1:
         return dataclasses.replace(reports[0], summary=summarise_runs(reports[0].runs))
-    runs = [run for report in reports for run in report.runs]
-    settings = dict(reports[0].settings)
-    differ = sorted(
-        {
-            key
-            for report in reports[1:]
-            for key in set(settings) | set(report.settings)
-            if _as_json(report.settings.get(key, OLDER_DEFAULTS.get(key)))
-            != _as_json(settings.get(key, OLDER_DEFAULTS.get(key)))
-        }
-    )
+
+    def setting(report: VerifyReport, key: str) -> str:
+        """A setting as JSON text (a tuple equals the list a JSON file gives back); absent, its older default."""
+        return json.dumps(report.settings.get(key, OLDER_DEFAULTS.get(key)), sort_keys=True, default=str)
+
+    first, runs = reports[0], [run for report in reports for run in report.runs]
+    keys = {key for report in reports for key in report.settings}
+    differ = sorted({key for key in keys for report in reports[1:] if setting(report, key) != setting(first, key)})
     incompatible = [key for key in differ if key in POOLING_KEYS]
     if incompatible and not allow_mixed:
         raise ReportError(
@@ -81,7 +72,7 @@ def combine_reports(
             "measurements (--allow-mixed to pool them anyway)"
         )
     return dataclasses.replace(
-        build_report(runs, settings, command=None),
+        build_report(runs, dict(first.settings), command=None),
         seconds=sum(float(report.seconds or 0) for report in reports),
         combined_from=tuple(sources or ()),
         commands=tuple(report.command for report in reports),
