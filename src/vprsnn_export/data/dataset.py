@@ -20,13 +20,11 @@ from __future__ import annotations
 
 import csv
 import io
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..arguments import ascii_uint, check_place_ids
 from ..config import PreprocessConfig
@@ -36,7 +34,7 @@ from ..readout.metrics import MatchTruth
 from .folders import (
     FolderGroundTruth,
     check_every_query_matched,
-    decode_frames,
+    decode_images,
     folder_files,
     folder_fingerprint,
     ground_truths,
@@ -45,7 +43,7 @@ from .folders import (
 )
 from .frames import image_files
 from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT
-from .preprocess import normalise_resized, preprocess_images, read_grey_image, resize_image
+from .preprocess import preprocess_images, read_grey_image
 from .synthetic import (
     DEFAULT_PLACES,
     IMAGE_HEIGHT,
@@ -180,11 +178,7 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
     a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
     match, or the folder when its traversals are not index-aligned and no file says how they match."""
     folder = Path(dataset.source)
-    if (
-        parse_synthetic(dataset.source) is not None
-        or not is_folder_dataset(folder)
-        or (folder / MANIFEST_NAME).is_file()
-    ):
+    if parse_synthetic(dataset.source) is not None or not _is_folders(folder):
         return None
     truth = query_truth(folder, _check_traversals(references), query)
     if truth is None:
@@ -219,7 +213,7 @@ def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str
         if parse_synthetic(source) is not None:
             return IMAGE_HEIGHT, IMAGE_WIDTH
         folder = Path(source)
-        if is_folder_dataset(folder) and not (folder / MANIFEST_NAME).is_file():
+        if _is_folders(folder):
             first = image_files(folder / names[0])[0]
         else:
             manifest = read_manifest(source)
@@ -281,6 +275,11 @@ def _optional_str(value: object) -> str | None:
     return None if value is None else str(value)
 
 
+def _is_folders(path: Path) -> bool:
+    """A folder of traversal folders (:func:`~vprsnn_export.data.folders.is_folder_dataset`) without a manifest."""
+    return is_folder_dataset(path) and not (path / MANIFEST_NAME).is_file()
+
+
 def load_dataset(
     data: str | Path,
     traversals: Sequence[str],
@@ -297,7 +296,7 @@ def load_dataset(
     n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
     if n_synthetic is not None:
         return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
-    if is_folder_dataset(Path(data)) and not (Path(data) / MANIFEST_NAME).is_file():
+    if _is_folders(Path(data)):
         return _load_folder(Path(data), names, cfg, subset, places, progress)
     manifest = read_manifest(data)
     missing = [name for name in names if name not in manifest.columns]
@@ -309,17 +308,9 @@ def load_dataset(
     selected = _select(
         np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
     )
-    cells = {name: _image_paths(manifest, name, selected) for name in names}
-    images: dict[str, np.ndarray] = {}
-    with tqdm(
-        total=len(selected) * len(names), desc="decoding images", unit="img", file=sys.stderr, disable=not progress
-    ) as bar:
-        for name in names:
-            images[name] = _decode(cells[name], cfg, bar)
+    images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
-    return Dataset(
-        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
-    )
+    return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
 
 
 def _load_folder(
@@ -330,13 +321,12 @@ def _load_folder(
     n_frames = len(next(iter(files.values())))
     truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
     selected = _select(np.arange(n_frames, dtype=np.int64), subset, places, str(folder))
-    return Dataset(
-        source=str(folder.resolve()),
-        manifest_sha256=folder_fingerprint(files, truths),
-        place_ids=selected,
-        images=decode_frames(files, selected, cfg, progress),
-        ground_truth=tuple(truths),
-    )
+    cells = {
+        name: [(paths[i], f"frame {i} of traversal {name!r}") for i in selected.tolist()]
+        for name, paths in files.items()
+    }
+    images = decode_images(cells, cfg, progress)
+    return Dataset(str(folder.resolve()), folder_fingerprint(files, truths), selected, images, tuple(truths))
 
 
 def read_manifest(data: str | Path) -> Manifest:
@@ -464,15 +454,6 @@ def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tu
     return paths
 
 
-def _decode(paths: list[tuple[Path, str]], cfg: PreprocessConfig, bar: tqdm) -> np.ndarray:
-    size = cfg.image_size
-    resized = np.empty((len(paths), size, size), dtype=np.uint8)
-    for index, (path, context) in enumerate(paths):
-        resized[index] = resize_image(read_grey_image(path, context), size)
-        bar.update(1)
-    return normalise_resized(resized, cfg)
-
-
 def _load_synthetic(
     source: str,
     n_places: int,
@@ -490,9 +471,4 @@ def _load_synthetic(
     selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
     route = synthetic_route(n_places, names)
     images = {name: preprocess_images(route[name][selected], cfg) for name in names}
-    return Dataset(
-        source=source,
-        manifest_sha256=synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS),
-        place_ids=selected,
-        images=images,
-    )
+    return Dataset(source, synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS), selected, images)

@@ -34,12 +34,6 @@ def presentation_seed(seed: int, stream: str, traversal: str, place_id: int, epo
     return int.from_bytes(hashlib.sha256(key).digest()[:8], "little") & ((1 << 63) - 1)
 
 
-def presentation_seeds(
-    seed: int, stream: str, traversal: str, place_ids: Sequence[int] | np.ndarray, epoch: int = 0
-) -> list[int]:
-    return [presentation_seed(seed, stream, traversal, int(p), epoch) for p in place_ids]
-
-
 def pixel_array(images: np.ndarray | torch.Tensor, name: str = "images") -> np.ndarray:
     """The pixels as float32 when every one is a finite real number; InvalidValueError naming ``name`` otherwise
     (a NaN pixel would otherwise become a silent zero-rate input)."""
@@ -91,7 +85,7 @@ def encode_presentations(
     place_ids = check_place_ids(place_ids)
     if not isinstance(traversal, str):
         raise InvalidValueError(f"traversal must be a name (str), got {type(traversal).__name__}")
-    return encode(images, presentation_seeds(seed, stream, traversal, place_ids, epoch), cfg)
+    return encode(images, [presentation_seed(seed, stream, traversal, int(p), epoch) for p in place_ids], cfg)
 
 
 def query_spikes(images: np.ndarray, place_ids: np.ndarray, traversal: str, cfg: Config) -> torch.Tensor:

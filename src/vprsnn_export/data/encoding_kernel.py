@@ -87,13 +87,9 @@ def bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int, 
 
 
 def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> np.ndarray:
-    """Spikes (N, T, D) uint8 with s[n, t, i] = u[n, t, i] < p[n, i], u drawn as ``torch.rand`` draws them.
-
-    Bit for bit ``torch.rand((T, D), generator=torch.Generator().manual_seed(seeds[n])) < p[n]``
-    (about 13x faster): torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a
-    float32 uniform is u = m / 2^24 with m the low 24 bits of one 32-bit draw. So u < p iff
-    m < ceil(p 2^24), an integer comparison (p in [0, 1]; NaN never fires, as u < NaN is false).
-    """
+    """Spikes (N, T, D) uint8 with s[n, t, i] = u[n, t, i] < p[n, i], bit for bit
+    ``torch.rand((T, D), generator=torch.Generator().manual_seed(seeds[n])) < p[n]`` (about 13x faster, as
+    u < p iff m < ceil(p 2^24): module docstring; NaN never fires, as u < NaN is false)."""
     p = np.asarray(prob, dtype=np.float32)
     if p.ndim != 2 or len(seeds) != p.shape[0]:
         raise InvalidValueError(f"prob: expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")

@@ -17,6 +17,7 @@ Traversals loaded together share their place ids, so they must hold the same num
 
 from __future__ import annotations
 
+import itertools
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -45,10 +46,6 @@ class FolderGroundTruth:
 def is_folder_dataset(path: Path) -> bool:
     """A folder without a manifest whose subfolders hold images."""
     return path.is_dir() and any(child.is_dir() for child in path.iterdir())
-
-
-def traversal_names(folder: Path) -> list[str]:
-    return sorted(child.name for child in folder.iterdir() if child.is_dir())
 
 
 def check_every_query_matched(matrix: np.ndarray, queries: np.ndarray, path: Path) -> None:
@@ -80,11 +77,8 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
             folder,
         )
     counts = {name: len(image_files(folder / name)) for name in [query, *others]}
-    found = []
-    for reference in others:
-        truth = pair_ground_truth(folder, reference, query, counts[reference], counts[query])
-        if truth is not None:
-            found.append(truth)
+    pairs = (pair_ground_truth(folder, reference, query, counts[reference], counts[query]) for reference in others)
+    found = [truth for truth in pairs if truth is not None]
     if not found:
         unequal = [name for name in others if counts[name] != counts[query]]
         if unequal:
@@ -106,23 +100,17 @@ def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) ->
     """The ground truth of every ordered pair of loaded traversals that has a file
     (:func:`~vprsnn_export.data.groundtruth.ground_truth_files`), read strictly and checked."""
     found = []
-    for reference in names:
-        for query in names:
-            truth = (
-                None
-                if reference == query
-                else pair_ground_truth(folder, reference, query, counts[reference], counts[query])
-            )
-            if truth is not None:
-                matrix, path = truth
-                check_every_query_matched(matrix, np.arange(counts[query]), path)
-                found.append(FolderGroundTruth(path, reference, query))
+    for reference, query in itertools.permutations(names, 2):  # the names are distinct
+        truth = pair_ground_truth(folder, reference, query, counts[reference], counts[query])
+        if truth is not None:
+            check_every_query_matched(truth[0], np.arange(counts[query]), truth[1])
+            found.append(FolderGroundTruth(truth[1], reference, query))
     return found
 
 
 def folder_files(folder: Path, names: Sequence[str]) -> dict[str, list[Path]]:
     """Each traversal's frames in time order; DataError naming a missing traversal or unequal counts."""
-    available = traversal_names(folder)
+    available = sorted(child.name for child in folder.iterdir() if child.is_dir())
     missing = [name for name in names if name not in available]
     if missing:
         raise DataError(
@@ -149,19 +137,18 @@ def folder_fingerprint(files: dict[str, list[Path]], truths: list[FolderGroundTr
     return sha256_bytes(text.encode() + b"".join(t.path.read_bytes() for t in truths))
 
 
-def decode_frames(
-    files: dict[str, list[Path]], selected: np.ndarray, cfg: PreprocessConfig, progress: bool
+def decode_images(
+    cells: dict[str, list[tuple[Path, str]]], cfg: PreprocessConfig, progress: bool
 ) -> dict[str, np.ndarray]:
-    """The selected frames of each traversal, preprocessed (N, inputs) float32."""
+    """Each traversal's image files (with a context for errors) decoded and preprocessed, (N, inputs) float32."""
     size = cfg.image_size
     images = {}
-    with tqdm(
-        total=len(selected) * len(files), desc="decoding images", unit="img", file=sys.stderr, disable=not progress
-    ) as bar:
-        for name, paths in files.items():
-            resized = np.empty((len(selected), size, size), dtype=np.uint8)
-            for row, index in enumerate(selected.tolist()):
-                resized[row] = resize_image(read_grey_image(paths[index], f"frame {index} of traversal {name!r}"), size)
+    total = sum(len(paths) for paths in cells.values())
+    with tqdm(total=total, desc="decoding images", unit="img", file=sys.stderr, disable=not progress) as bar:
+        for name, paths in cells.items():
+            resized = np.empty((len(paths), size, size), dtype=np.uint8)
+            for row, (path, context) in enumerate(paths):
+                resized[row] = resize_image(read_grey_image(path, context), size)
                 bar.update(1)
             images[name] = normalise_resized(resized, cfg)
     return images

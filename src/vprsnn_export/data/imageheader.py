@@ -28,8 +28,8 @@ def _be(data: bytes, at: int, size: int) -> int:
     return int.from_bytes(data[at : at + size], "big")
 
 
-def _le(data: bytes, at: int, size: int) -> int:
-    return int.from_bytes(data[at : at + size], "little")
+def _le(data: bytes, at: int, size: int, signed: bool = False) -> int:
+    return int.from_bytes(data[at : at + size], "little", signed=signed)
 
 
 def _jpeg(data: bytes) -> tuple[int, int] | None:
@@ -69,9 +69,7 @@ def image_dimensions(data: bytes) -> tuple[int, int] | None:
     if data.startswith(b"\xff\xd8"):
         return _jpeg(data)
     if data.startswith(b"BM") and len(data) >= 26:
-        return abs(int.from_bytes(data[18:22], "little", signed=True)), abs(
-            int.from_bytes(data[22:26], "little", signed=True)
-        )
+        return abs(_le(data, 18, 4, signed=True)), abs(_le(data, 22, 4, signed=True))
     if data.startswith(b"RIFF") and data[8:12] == b"WEBP":
         return _webp(data)
     found = _PNM.match(data[:1024])

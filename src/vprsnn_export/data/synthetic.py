@@ -61,55 +61,11 @@ class Season:
     shift: int  # max |dx|, |dy| in pixels
 
 
-SEASONS: dict[str, Season] = {
-    "summer": Season(
-        code=0,
-        blob_spread=0.0,
-        snow=0.0,
-        gain=1.0,
-        offset=0.0,
-        gamma=1.0,
-        contrast=1.0,
-        foliage=0.0,
-        noise=0.0,
-        shift=0,
-    ),
-    "winter": Season(
-        code=1,
-        blob_spread=0.6,
-        snow=0.55,
-        gain=0.95,
-        offset=0.05,
-        gamma=0.8,
-        contrast=0.8,
-        foliage=0.06,
-        noise=0.05,
-        shift=2,
-    ),
-    "spring": Season(
-        code=2,
-        blob_spread=0.4,
-        snow=0.0,
-        gain=1.0,
-        offset=0.02,
-        gamma=0.9,
-        contrast=0.9,
-        foliage=0.06,
-        noise=0.04,
-        shift=2,
-    ),
-    "fall": Season(
-        code=3,
-        blob_spread=0.5,
-        snow=0.0,
-        gain=0.85,
-        offset=0.0,
-        gamma=1.2,
-        contrast=1.1,
-        foliage=0.08,
-        noise=0.045,
-        shift=2,
-    ),
+SEASONS: dict[str, Season] = {  # code, blob_spread, snow, gain, offset, gamma, contrast, foliage, noise, shift
+    "summer": Season(0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0),
+    "winter": Season(1, 0.6, 0.55, 0.95, 0.05, 0.8, 0.8, 0.06, 0.05, 2),
+    "spring": Season(2, 0.4, 0.0, 1.0, 0.02, 0.9, 0.9, 0.06, 0.04, 2),
+    "fall": Season(3, 0.5, 0.0, 0.85, 0.0, 1.2, 1.1, 0.08, 0.045, 2),
 }
 SYNTHETIC_TRAVERSALS = tuple(SEASONS)
 
@@ -215,13 +171,7 @@ def _render_base(width: int, seed: int) -> _Base:
         + _knots_2d(seed, _TERRAIN, (6, 8), width, 0.1)
         + _knots_2d(seed, _TEXTURE, (3, 3), width, 0.06)
     )
-    return _Base(
-        sky=sky,
-        terrain=terrain,
-        ground=ground,
-        blobs=_draw_blobs(width, seed),
-        structures=_draw_structures(width, seed),
-    )
+    return _Base(sky, terrain, ground, _draw_blobs(width, seed), _draw_structures(width, seed))
 
 
 def _draw_blobs(width: int, seed: int) -> tuple[tuple[float, float, float, float, float, int], ...]:
@@ -274,11 +224,7 @@ def _render_traversal(base: _Base, season: Season, n_places: int, seed: int) -> 
         chunk = int(cx // _CHUNK)
         if chunk not in multipliers:
             rng = _chunk_rng(seed, _SEASON_STREAM + season.code, chunk)
-            multipliers[chunk] = (
-                rng.normal(1.0, season.blob_spread, _BLOBS_PER_CHUNK)
-                if season.blob_spread
-                else np.ones(_BLOBS_PER_CHUNK)
-            )
+            multipliers[chunk] = rng.normal(1.0, season.blob_spread, _BLOBS_PER_CHUNK)  # spread 0: exactly 1
         x0, x1 = max(int(cx - 3 * sx), 0), min(int(cx + 3 * sx) + 1, width)
         if x0 >= x1:
             continue

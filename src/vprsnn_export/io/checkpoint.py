@@ -26,6 +26,8 @@ from .fileio import read_container, sha256_file, write_container
 
 FORMAT = "vprsnn-checkpoint"
 FORMAT_VERSION = 1
+#: The arrays of a checkpoint file, in the order written, with the dtype each is written as.
+ARRAYS = {"weights": np.float32, "thresholds": np.float32, "calibration": np.int64, "reference_place_ids": np.int64}
 
 
 @dataclass
@@ -71,13 +73,7 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     validate_checkpoint(ckpt, path)
     meta = checkpoint_header(ckpt)
     check_header(meta, path)  # the reader's own checks: nothing is written that load_checkpoint refuses
-    arrays: dict[str, np.ndarray] = {
-        "weights": ckpt.weights.astype(np.float32),
-        "thresholds": ckpt.thresholds.astype(np.float32),
-        "calibration": ckpt.calibration.astype(np.int64),
-        "reference_place_ids": ckpt.reference_place_ids.astype(np.int64),
-    }
-    return write_container(path, meta, arrays)
+    return write_container(path, meta, {name: getattr(ckpt, name).astype(dtype) for name, dtype in ARRAYS.items()})
 
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
@@ -85,19 +81,13 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     meta, arrays = read_container(path, "checkpoint")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
     config, traversals, data, history = check_header(meta, path)
-    missing = {"weights", "thresholds", "calibration", "reference_place_ids"} - set(arrays)
+    missing = set(ARRAYS) - set(arrays)
     if missing:
         raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
+    weights, thresholds, calibration, ids = (arrays[name] for name in ARRAYS)
+    version = str(meta.get("package_version", "unknown"))
     ckpt = Checkpoint(
-        config=config,
-        weights=arrays["weights"],
-        thresholds=arrays["thresholds"],
-        calibration=arrays["calibration"],
-        reference_place_ids=arrays["reference_place_ids"],
-        reference_traversals=list(traversals),
-        data=dict(data),
-        history=list(history),
-        version=str(meta.get("package_version", "unknown")),
+        config, weights, thresholds, calibration, ids, list(traversals), dict(data), list(history), version
     )
     validate_checkpoint(ckpt, path)
     return ckpt
@@ -178,14 +168,9 @@ def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> 
         raise ModelFileError(
             f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}", path
         )
-    net = ckpt.config.network
     n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side
-    expect = {
-        "weights": (net.n_inputs, n_neurons),
-        "thresholds": (n_neurons,),
-    }
-    for name, shape in expect.items():
+    for name, shape in (("weights", (ckpt.config.network.n_inputs, n_neurons)), ("thresholds", (n_neurons,))):
         array = getattr(ckpt, name)
         if array.shape != shape:
             raise ModelFileError(f"{name} has shape {array.shape}, expected {shape} from its config", path)

@@ -138,14 +138,6 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def _existing_ancestor(path: Path) -> Path:
-    """The nearest folder above ``path`` that exists."""
-    for candidate in path.absolute().parents:
-        if candidate.is_dir():
-            return candidate
-    return Path("/")
-
-
 @contextlib.contextmanager
 def output_lock(path: str | Path | None) -> Iterator[None]:
     """Hold an exclusive lock on the output ``path`` (a file or a folder) for the whole ``with`` block.
@@ -164,11 +156,14 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
         yield
         return
     target = Path(path)
-    lock_path = _existing_ancestor(target) / f".{target.name or 'output'}.lock"
+    folder = next((p for p in target.absolute().parents if p.is_dir()), Path("/"))  # the nearest existing one
+    lock_path = folder / f".{target.name or 'output'}.lock"
     fd = _acquire(lock_path, target)
     try:
-        if target.parent.is_dir():
-            _remove_leftovers(target)
+        if target.parent.is_dir():  # what a killed run left beside the output
+            for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
+                for leftover in target.parent.glob(pattern):
+                    _remove(leftover, leftover.is_dir() and not leftover.is_symlink())
         if target.is_dir() and not target.is_symlink():
             _remove_leftovers_inside(target, LEFTOVER_DEPTH)
         try:
@@ -199,13 +194,6 @@ def _acquire(lock_path: Path, target: Path) -> int:
             pass
         os.close(fd)  # the holder unlinked this file as we took it: take the new one
     raise OutputError("could not take the output lock (a run keeps replacing it)", target)
-
-
-def _remove_leftovers(target: Path) -> None:
-    """Temp files and staging folders of ``target`` left by a killed run (call with the lock held)."""
-    for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
-        for leftover in target.parent.glob(pattern):
-            _remove(leftover, leftover.is_dir() and not leftover.is_symlink())
 
 
 # what atomic_write, staging_folder and publish_folder name their temporaries (mkstemp's 8 random characters)
@@ -326,8 +314,7 @@ def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np
         raise InvalidValueError(f"array name {META_KEY!r} is reserved")
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
-    members: dict[str, Any] = {META_KEY: header, **arrays}
-    np.savez_compressed(buffer, **members)
+    np.savez_compressed(buffer, **{META_KEY: header, **arrays})
     return atomic_write_bytes(path, buffer.getvalue())
 
 
@@ -376,11 +363,8 @@ def read_container(path: str | Path, kind: str) -> tuple[dict[str, Any], dict[st
 
 
 def sha256_file(path: str | Path) -> str:
-    digest = hashlib.sha256()
     with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+        return hashlib.file_digest(handle, "sha256").hexdigest()
 
 
 def sha256_bytes(data: bytes) -> str:
