@@ -138,13 +138,10 @@ def parse_places(spec: str) -> tuple[int, int, int]:
     """
     parts = str(spec).strip().split(":")
     usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
-    if len(parts) not in (2, 3):
-        raise InvalidValueError(usage)
     numbers = [ascii_uint(part.strip()) for part in parts]
-    if None in numbers:
+    if len(parts) not in (2, 3) or None in numbers:
         raise InvalidValueError(usage)
-    values = [int(number or 0) for number in numbers]
-    start, count, stride = values[0], values[1], values[2] if len(values) == 3 else 1
+    start, count, stride = (int(number or 0) for number in [*numbers, 1][:3])  # STRIDE defaults to 1
     if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
         raise InvalidValueError(usage)
     return start, count, stride
@@ -156,8 +153,7 @@ def parse_synthetic(data: str) -> int | None:
         return DEFAULT_PLACES
     if not data.startswith(SYNTHETIC + ":"):
         return None
-    text = data[len(SYNTHETIC) + 1 :]
-    count = ascii_uint(text)
+    count = ascii_uint(data[len(SYNTHETIC) + 1 :])
     if count is None or not 1 <= count <= MAX_SYNTHETIC_PLACES:
         raise InvalidValueError(
             f"--data {data!r}: expected synthetic or synthetic:N with N from 1 to {MAX_SYNTHETIC_PLACES}"

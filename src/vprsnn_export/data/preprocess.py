@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, Protocol
 
 import numpy as np
 
@@ -46,8 +46,23 @@ from ..registry import Registry
 from ..resources import check_memory, decode_need
 from .imageheader import image_dimensions
 
-if TYPE_CHECKING:  # the config imports CHANNELS from here to check its channel
-    from ..config import PreprocessConfig
+
+class PreprocessSettings(Protocol):
+    """What preprocessing reads of the config (:class:`vprsnn_export.config.PreprocessConfig`): named here, not
+    imported, so that the config checks its channel against :data:`CHANNELS` with no import circle."""
+
+    @property
+    def image_size(self) -> int: ...
+    @property
+    def patch_size(self) -> int: ...
+    @property
+    def patch_norm(self) -> bool: ...
+    @property
+    def channels(self) -> str: ...
+    @property
+    def dog_sigma_centre(self) -> float: ...
+    @property
+    def dog_sigma_surround(self) -> float: ...
 
 
 DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time
@@ -188,7 +203,7 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
     return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
 
 
-def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """The paper's one channel: patch min-max normalisation, or without ``patch_norm`` (an ablation) the whole
     image scaled, ``R_hat = R / 255``; (N, S, S) float32."""
     if cfg.patch_norm:
@@ -196,7 +211,7 @@ def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     return resized.astype(np.float32) / np.float32(255.0)
 
 
-def dog_channels(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def dog_channels(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """DoG ON and OFF channels with the config's sigmas, (N, S, 2S) (:func:`dog_on_off`)."""
     return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
 
@@ -211,7 +226,7 @@ class Channel:
 
     name: str
     n_channels: int
-    normalise: Callable[[np.ndarray, PreprocessConfig], np.ndarray]
+    normalise: Callable[[np.ndarray, PreprocessSettings], np.ndarray]
     label: str
 
 
@@ -220,7 +235,7 @@ CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised")
 CHANNELS.register(Channel("dog_on_off", 2, dog_channels, "DoG ON/OFF"))
 
 
-def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
     if resized.ndim != 3 or resized.dtype != np.uint8:
         raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
@@ -230,7 +245,7 @@ def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 
-def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def preprocess_images(grey: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
     if grey.ndim != 3 or grey.dtype != np.uint8:
         raise DataError(f"expected (N, H, W) uint8 images, got shape {grey.shape} dtype {grey.dtype}")

@@ -314,7 +314,8 @@ def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np
         raise InvalidValueError(f"array name {META_KEY!r} is reserved")
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, **{META_KEY: header, **arrays})
+    members: dict[str, Any] = {META_KEY: header, **arrays}
+    np.savez_compressed(buffer, **members)
     return atomic_write_bytes(path, buffer.getvalue())
 
 
