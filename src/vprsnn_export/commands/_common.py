@@ -7,13 +7,15 @@ import json
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import fields
+from dataclasses import fields, replace
+from functools import reduce
 from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..data.dataset import Dataset, load_selection, scoring_truth
 from ..errors import InvalidValueError
+from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
 from ..io.fileio import parse_json
 from ..readout.metrics import Tolerance
@@ -63,10 +65,23 @@ def add_query_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-PER_TENSOR_HELP = "one weight scale per module, shared by its neurons (a single network: one for all its neurons)"
+DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
+
+
+def add_bits_option(parser: argparse.ArgumentParser) -> None:
+    """--bits of quantize and verify; :func:`bit_widths` reads it."""
+    help_text = f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
+    parser.add_argument("--bits", default=DEFAULT_BITS_TEXT, help=help_text)
+
+
+def bit_widths(args: argparse.Namespace) -> list[int]:
+    """The widths of --bits, in the order given; InvalidValueError naming --bits or an unsupported width."""
+    return [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
+
+
 #: The help of each quantisation flag: quantize and verify add them with :func:`add_quantise_options`.
 QUANTISE_HELP = {
-    "--per-tensor": PER_TENSOR_HELP,
+    "--per-tensor": "one weight scale per module, shared by its neurons (a single network: one for all its neurons)",
     "--per-neuron": "one weight scale per neuron (the default)",
     "--scale": "weight scale: max (max-abs, no weight clips) or mse (minimum squared error; large weights may clip)",
     "--fold-thresholds": "choose per-neuron scales so that all neurons share one integer threshold "
@@ -209,7 +224,34 @@ def sequence_options(args: argparse.Namespace) -> SequenceOptions:
     return SequenceOptions(**given_sequence_options(args))
 
 
+#: The config options of train: flag -> (config key, help; "{}" is the default config's value).
+CONFIG_OPTIONS = {
+    "--seed": ("seed", "seed for weights, shuffles and every spike (default: the preset's, {})"),
+    "--epochs": ("train.epochs", "training epochs (default: the preset's, {})"),
+    "--timesteps": (
+        "encoder.timesteps",
+        "presentation window T of calibration, queries and deployment, and of training unless train.timesteps "
+        "is set (default: the preset's, {})",
+    ),
+    "--neurons": ("network.n_neurons", "excitatory neurons N_exc (default: the preset's, {})"),
+    "--module-size": (
+        "train.module_size",
+        "places per module: one network per region of this many consecutive places, trained side by side "
+        "(0, the default: one network for all places)",
+    ),
+}
+#: The ablation switches of train: flag -> (config key, what it switches off).
+ABLATIONS = {
+    "--no-wta": ("network.wta", "hard winner-take-all"),
+    "--no-homeostasis": ("homeostasis.enabled", "homeostasis"),
+    "--no-patch-norm": ("preprocess.patch_norm", "image patch normalisation"),
+    "--no-weight-norm": ("stdp.weight_norm", "column L2 weight normalisation"),
+    "--no-state-isolation": ("network.state_isolation", "state reset between presentations"),
+}
+
+
 def add_config_options(parser: argparse.ArgumentParser) -> None:
+    """--preset, the :data:`CONFIG_OPTIONS`, --set and the :data:`ABLATIONS`, each stored under its config key."""
     group = parser.add_argument_group("configuration (defaults: the paper's text with DoG ON/OFF inputs)")
     group.add_argument(
         "--preset",
@@ -220,25 +262,10 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         "docs/results/cost.md); the options below apply on top",
     )
     base = Config()
-    group.add_argument(
-        "--seed", type=integer, help=f"seed for weights, shuffles and every spike (default: the preset's, {base.seed})"
-    )
-    group.add_argument("--epochs", type=integer, help=f"training epochs (default: the preset's, {base.train.epochs})")
-    group.add_argument(
-        "--timesteps",
-        type=integer,
-        help=f"presentation window T of calibration, queries and deployment, and of training unless train.timesteps "
-        f"is set (default: the preset's, {base.encoder.timesteps})",
-    )
-    group.add_argument(
-        "--neurons", type=integer, help=f"excitatory neurons N_exc (default: the preset's, {base.network.n_neurons})"
-    )
-    group.add_argument(
-        "--module-size",
-        type=integer,
-        help="places per module: one network per region of this many consecutive places, trained side by side "
-        "(0, the default: one network for all places)",
-    )
+    for flag, (key, text) in CONFIG_OPTIONS.items():
+        default = reduce(getattr, key.split("."), base)
+        metavar = flag[2:].upper().replace("-", "_")
+        group.add_argument(flag, dest=key, type=integer, metavar=metavar, help=text.format(default))
     group.add_argument(
         "--set",
         action="append",
@@ -246,45 +273,20 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="any config value by dotted name, e.g. --set stdp.a_plus=1e-3 (repeatable)",
     )
-    for flag, key, what in (
-        ("--no-wta", "network.wta", "hard winner-take-all"),
-        ("--no-homeostasis", "homeostasis.enabled", "homeostasis"),
-        ("--no-patch-norm", "preprocess.patch_norm", "image patch normalisation"),
-        ("--no-weight-norm", "stdp.weight_norm", "column L2 weight normalisation"),
-        ("--no-state-isolation", "network.state_isolation", "state reset between presentations"),
-    ):
+    for flag, (key, what) in ABLATIONS.items():
         group.add_argument(flag, dest=key, action="store_false", default=None, help=f"ablation: switch off {what}")
 
 
-def config_from_args(args: argparse.Namespace, base: Config | None = None) -> Config:
-    """The base config (defaults) with every override given on the command line applied."""
-    overrides: dict[str, Any] = {}
-    for name, key in (
-        ("seed", "seed"),
-        ("epochs", "train.epochs"),
-        ("timesteps", "encoder.timesteps"),
-        ("neurons", "network.n_neurons"),
-        ("module_size", "train.module_size"),
-    ):
-        value = getattr(args, name, None)
-        if value is not None:
-            overrides[key] = value
-    for key in (
-        "network.wta",
-        "homeostasis.enabled",
-        "preprocess.patch_norm",
-        "stdp.weight_norm",
-        "network.state_isolation",
-    ):
-        if getattr(args, key, None) is False:
-            overrides[key] = False
-    for item in getattr(args, "set", []):
+def config_from_args(args: argparse.Namespace) -> Config:
+    """The preset (or the defaults) with every override given on the command line applied."""
+    keys = [key for key, _ in (*CONFIG_OPTIONS.values(), *ABLATIONS.values())]
+    overrides = {key: getattr(args, key) for key in keys if getattr(args, key) is not None}
+    for item in args.set:
         key, sep, raw = item.partition("=")
         if not sep:
             raise InvalidValueError(f"--set expects KEY=VALUE, got {item!r}")
         overrides[key.strip()] = parse_value(raw.strip())
-    start = base if base is not None else (preset(args.preset) if getattr(args, "preset", None) else Config())
-    return start.replace(**overrides)
+    return (preset(args.preset) if args.preset else Config()).replace(**overrides)
 
 
 def parse_value(raw: str) -> Any:
@@ -318,9 +320,7 @@ def parse_names(raw: str, option: str) -> list[str]:
     return names
 
 
-def parse_velocity_grid(raw: str | None) -> tuple[float, ...] | None:
-    if raw is None:
-        return None
+def parse_velocity_grid(raw: str) -> tuple[float, ...]:
     try:
         lo, hi, step = (float(v) for v in raw.split(":"))
     except ValueError:
@@ -362,7 +362,7 @@ def format_table(rows: Sequence[dict], columns: Sequence[tuple[str, str]]) -> st
     return "\n".join(out)
 
 
-PERCENT_KEYS = {"accuracy", "p_at_100r", "r_at_100p", "auc_pr"}
+PERCENT_KEYS = {"accuracy", "p_at_100r", "r_at_100p", "auc_pr", "in_region"}
 RESULT_COLUMNS = (
     ("strategy", "strategy"),
     ("k", "k"),
@@ -387,6 +387,18 @@ def query_data(
         places=args.places,
         progress=not args.quiet,
     )
+
+
+def scored_options(
+    args: argparse.Namespace, options: SequenceOptions, dataset: Dataset, references: Sequence[str]
+) -> SequenceOptions:
+    """``options`` scored on --query as :func:`scored_tolerance` says; their warning (queries that are not
+    consecutive places) printed: what evaluate and simulate read out with."""
+    options = replace(options, tolerance=scored_tolerance(args.match_window, dataset, references, args.query))
+    warning = options.warning(dataset.place_ids)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
+    return options
 
 
 def scored_tolerance(match_window: int | None, dataset: Dataset, references: Sequence[str], query: str) -> Tolerance:

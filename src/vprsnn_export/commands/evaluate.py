@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 
 import numpy as np
 
@@ -21,7 +20,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_tolerance,
+    scored_options,
     sequence_options,
 )
 
@@ -32,17 +31,6 @@ MODULE_COLUMNS = (
     ("accuracy", "acc %"),
     ("in_region", "in region %"),
 )
-
-
-def module_cells(row: dict) -> dict:
-    """One per-module row as table cells (percentages as text)."""
-    return {
-        "module": row["module"],
-        "places": f"{row['first_place']}-{row['last_place']}",
-        "n_queries": row["n_queries"],
-        "accuracy": f"{100 * row['accuracy']:6.2f}",
-        "in_region": f"{100 * row['in_region']:6.2f}",
-    }
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -82,12 +70,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
     if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         raise InvalidValueError("--baseline needs the query places to be the checkpoint's reference places")
-    warning = options.warning(dataset.place_ids)
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
-    options = replace(
-        options, tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query)
-    )
+    options = scored_options(args, options, dataset, ckpt.reference_traversals)
     if args.predictions is not None:  # nor over a file of the data set (manifest, subset, ground truth)
         check_output(
             args.predictions, inputs=(args.checkpoint, *dataset_files(dataset, args.subset, ckpt.data.get("subset")))
@@ -121,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
         print(format_table(result.rows, RESULT_COLUMNS))
         if result.modules is not None:
             print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")
-            print(format_table([module_cells(m.to_dict()) for m in result.modules], MODULE_COLUMNS))
+            rows = [{**m.to_dict(), "places": f"{m.first_place}-{m.last_place}"} for m in result.modules]
+            print(format_table(rows, MODULE_COLUMNS))
         stats = result.spike_stats
         print(
             f"\nthreshold candidates per step: {stats.mean_candidates_per_step:.1f} on average; "

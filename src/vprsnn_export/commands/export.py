@@ -132,15 +132,8 @@ def print_budget(raw: str, as_json: bool) -> int:
     if as_json:
         print_json({"loihi_cores": rows})
     else:
-        print(
-            format_table(
-                [
-                    {key: f"{row[key]:,}" if isinstance(row[key], int) else row[key] for key, _ in BUDGET_COLUMNS}
-                    for row in rows
-                ],
-                BUDGET_COLUMNS,
-            )
-        )
+        cells = [{key: f"{value:,}" if isinstance(value, int) else value for key, value in row.items()} for row in rows]
+        print(format_table(cells, BUDGET_COLUMNS))
         for source in dict.fromkeys(budget.source for budget in budgets):
             print(f"  source: {source}")
     return 0

@@ -10,15 +10,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InvalidValueError
-from ..export.model import DEFAULT_BITS, check_bits, save_fixed_point
+from ..export.model import save_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
 from ..io.fileio import check_output
 from ._common import (
+    add_bits_option,
     add_data_options,
     add_quantise_options,
     add_runtime_options,
+    bit_widths,
     format_table,
-    parse_int_list,
     print_json,
     quantise_options,
     query_data,
@@ -27,7 +28,6 @@ from ._common import (
 if TYPE_CHECKING:
     from ..runtime.deployment import QuantiseOptions
 
-DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 TABLE_COLUMNS = (
     ("bits", "bits"),
     ("scheme", "scheme"),
@@ -44,9 +44,7 @@ TABLE_COLUMNS = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("quantize", help="quantise a float checkpoint into fixed-point models")
     parser.add_argument("checkpoint", help="checkpoint written by train")
-    parser.add_argument(
-        "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
-    )
+    add_bits_option(parser)
     parser.add_argument("--out", required=True, help="folder for the model files")
     parser.add_argument("--force", action="store_true", help="replace model files that exist in --out")
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -67,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.deployment import deploy
 
-    bit_widths = [check_bits(b) for b in parse_int_list(args.bits, "--bits")]
+    widths = bit_widths(args)
     options = quantise_options(args)
     ckpt = load_checkpoint(args.checkpoint)
     digest = checkpoint_sha256(args.checkpoint)
@@ -78,11 +76,11 @@ def run(args: argparse.Namespace) -> int:
         if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
             raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
-    paths = [Path(args.out) / model_filename(bits, options) for bits in bit_widths]
+    paths = [Path(args.out) / model_filename(bits, options) for bits in widths]
     for path in paths:  # every output is checked before any quantisation runs
         check_output(path, overwrite=args.force)
     rows = []
-    for bits, file in zip(bit_widths, paths, strict=True):
+    for bits, file in zip(widths, paths, strict=True):
         model = deploy(
             ckpt, digest, bits, options, reference_images=reference_images, device=device, progress=not args.quiet
         )

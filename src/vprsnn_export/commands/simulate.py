@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
@@ -16,7 +15,7 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_tolerance,
+    scored_options,
     sequence_options,
 )
 
@@ -48,12 +47,7 @@ def run(args: argparse.Namespace) -> int:
             )
     options = sequence_options(args)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query])
-    options = replace(
-        options, tolerance=scored_tolerance(args.match_window, dataset, model.reference_traversals, args.query)
-    )
-    warning = options.warning(dataset.place_ids)
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+    options = scored_options(args, options, dataset, model.reference_traversals)
     result = evaluate_fixed_point(
         model,
         dataset.traversal(args.query),

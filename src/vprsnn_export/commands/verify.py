@@ -19,23 +19,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Config
 from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
 from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
-from ..export.model import DEFAULT_BITS, check_bits
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from ..readout.metrics import MatchTruth
 from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
+    add_bits_option,
     add_data_options,
     add_quantise_options,
     add_runtime_options,
     add_sequence_options,
+    bit_widths,
     format_table,
     integer,
     non_empty,
-    parse_int_list,
     print_json,
     quantise_options,
     scored_tolerance,
@@ -47,7 +46,6 @@ if TYPE_CHECKING:
 
 #: `--strict`: the exit code of a run in which nothing fails but a paired check is undecided.
 EXIT_UNDECIDED = 3
-DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 ALL_TARGETS = ",".join(TARGETS)
 
 
@@ -62,9 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "fails; 2: bad input; 3: with --strict, nothing fails but a check is undecided.",
     )
     parser.add_argument("checkpoints", nargs="+", metavar="CKPT", help="float checkpoint(s) written by train")
-    parser.add_argument(
-        "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
-    )
+    add_bits_option(parser)
     parser.add_argument("--query", required=True, help="query traversal name")
     add_data_options(parser, data_required=False)
     add_sequence_options(parser, default_k="1,3,5", old_window_option="--gt-tolerance", json=False)
@@ -115,10 +111,9 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
     from ..runtime.conformance import parse_targets
     from ..runtime.verify import VerifyOptions, parse_tolerances
 
-    bits = tuple(dict.fromkeys(check_bits(b) for b in parse_int_list(args.bits, "--bits")))
     return VerifyOptions(
+        bits=tuple(dict.fromkeys(bit_widths(args))),  # first: a bad --bits is the error reported
         readout=sequence_options(args),
-        bits=bits,
         quantise=quantise_options(args),
         reference_queries=args.reference_queries,
         targets=parse_targets(args.targets),
@@ -178,31 +173,6 @@ def seed_networks(
         yield f"seed {seed}", ckpt, path
 
 
-def settings_of(
-    args: argparse.Namespace,
-    options: VerifyOptions,
-    config: Config,
-    source: str,
-    subset: str | None,
-    places: str | None,
-) -> dict:
-    return {
-        **options.to_dict(config),
-        "query": args.query,
-        "data": source,
-        "subset": subset,
-        "places": places,
-        "seeds": args.seeds,
-        "checkpoints": list(args.checkpoints),
-        "device": args.device,
-    }
-
-
-def command_line(args: argparse.Namespace) -> list[str]:
-    """The command as given (the CLI's argv, which ``cli.main`` records)."""
-    return ["vprsnn-export", *getattr(args, "argv", ["verify", *args.checkpoints])]
-
-
 def folder_name(label: str, index: int) -> str:
     """A file-system-safe folder for one network's exports: its label, else its position."""
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label).strip("._")
@@ -216,15 +186,20 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
     return [verdict_cells(*item) for item in results(report)]
 
 
-def paired_rows(report: VerifyReport) -> list[dict]:
-    """The paired table of every network and bit width: every judged check and every readout's accuracy."""
+def paired_rows(report: VerifyReport, as_json: bool = False) -> list[dict]:
+    """The paired table of every network and bit width: every judged check and every readout's accuracy
+    (``as_json``: every paired check, as its JSON object)."""
     from ..runtime.report.labels import paired_cells, shown_paired
 
     return [
-        {"network": run.label or str(index + 1), "bits": result.bits, **paired_cells(check)}
+        {
+            "network": run.label or str(index + 1),
+            "bits": result.bits,
+            **(check.to_dict() if as_json else paired_cells(check)),
+        }
         for index, run in enumerate(report.runs)
         for result in run.bits
-        for check in shown_paired(result.paired)
+        for check in (result.paired if as_json else shown_paired(result.paired))
     ]
 
 
@@ -282,7 +257,17 @@ def run(args: argparse.Namespace) -> int:
             (stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
             for i, (stem, ckpt, path) in enumerate(templates)
         ]
-    settings = settings_of(args, options, templates[0][1].config, source, subset, places)
+    settings = {
+        **options.to_dict(templates[0][1].config),
+        "query": args.query,
+        "data": source,
+        "subset": subset,
+        "places": places,
+        "seeds": args.seeds,
+        "checkpoints": list(args.checkpoints),
+        "device": args.device,
+    }
+    command = ["vprsnn-export", *getattr(args, "argv", ["verify", *args.checkpoints])]  # as given (cli.main's argv)
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = data_selection(ckpt.data, args.data, args.subset, args.places)
@@ -316,7 +301,7 @@ def run(args: argparse.Namespace) -> int:
                 checkpoint=str(path),
             )
         )
-        report = build_report(runs, settings, command=command_line(args), seconds=time.perf_counter() - started)
+        report = build_report(runs, settings, command=command, seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     line, code = conclusion(report, args.strict)
     if args.json:
@@ -327,12 +312,7 @@ def run(args: argparse.Namespace) -> int:
                 "exit_code": code,
                 "report": {k: str(v) for k, v in written.items()},
                 "summary": report.summary.to_dict(),
-                "paired": [
-                    {"network": run.label or str(i + 1), "bits": r.bits, **c.to_dict()}
-                    for i, run in enumerate(report.runs)
-                    for r in run.bits
-                    for c in r.paired
-                ],
+                "paired": paired_rows(report, as_json=True),
             }
         )
     else:
