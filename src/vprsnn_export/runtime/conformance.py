@@ -16,7 +16,7 @@ Used by `verify` (every bit width) and by `export --check` (the files it wrote).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,7 +33,7 @@ from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
-from vprsnn_export.targets.registry import TARGETS, WriteOptions, target_labels
+from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
 from .backends import open_backend
 from .results import Comparison, ConformanceResult
@@ -91,16 +91,10 @@ def distribution_comparison(
         return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
     n_decisions = int(np.count_nonzero(decide(a_arr, SEQUENCE_STRATEGY)[0] != decide(b_arr, SEQUENCE_STRATEGY)[0]))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
+    detail = f"{n_decisions} decisions differ; max |diff| {largest:.2e}"
+    passed = n_decisions == 0 and largest <= limit
     return Comparison(
-        check,
-        a_name,
-        b_name,
-        kind,
-        n_decisions == 0 and largest <= limit,
-        f"{n_decisions} decisions differ; max |diff| {largest:.2e}",
-        n_decisions,
-        max_abs_difference=largest,
-        family="distribution",
+        check, a_name, b_name, kind, passed, detail, n_decisions, max_abs_difference=largest, family="distribution"
     )
 
 
@@ -122,17 +116,16 @@ def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b:
         exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
         for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
     ]
-    scalars_a = [a.bits, a.scale_exponent, a.decay_dv, a.voltage_shift, a.voltage_bits]
-    scalars_b = [b.bits, b.scale_exponent, b.decay_dv, b.voltage_shift, b.voltage_bits]
+    scalars = [[m.bits, m.scale_exponent, m.decay_dv, m.voltage_shift, m.voltage_bits] for m in (a, b)]
     checks.append(
-        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars_a, b_name, scalars_b)
+        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1])
     )
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
-    checks.append(
-        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, 0 if same else 1, family="config")
-    )
-    return checks
+    return [
+        *checks,
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config"),
+    ]
 
 
 # ---------------------------------------------------------------------------- backends
@@ -150,7 +143,6 @@ def backend_of(source: Source, device: torch.device | None = None) -> Backend:
 def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
     """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration
     (an ensemble's with its region regularisation, as every evaluation reads it out)."""
-
     readout = Readout.of(source.calibration, source.config)
     return lambda counts: readout.scores(counts)[SEQUENCE_STRATEGY]
 
@@ -177,21 +169,14 @@ def read_back(target: str, path: Path, written: Source | None, device: torch.dev
 
     InvalidValueError for a target that is not registered."""
     entry = TARGETS.get(target)
-    label = entry.label
     rebuilt = entry.read(Path(path))
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
-        return Contender(target, label, rebuilt)
-    backend = backend_of(rebuilt, device)
+        return Contender(target, entry.label, rebuilt)
     runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(backend, f"{entry.title} model on the {runs_on}")
-    pair = isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel)
-    return Contender(
-        target,
-        label,
-        backend,
-        written=written if pair and isinstance(written, FixedPointModel) else None,
-        read_back=rebuilt if pair and isinstance(rebuilt, FixedPointModel) else None,
-    )
+    backend = _Renamed(backend_of(rebuilt, device), f"{entry.title} model on the {runs_on}")
+    if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
+        return Contender(target, entry.label, backend, written=written, read_back=rebuilt)
+    return Contender(target, entry.label, backend)
 
 
 @dataclass(frozen=True)
@@ -254,9 +239,7 @@ def write_targets(
     options = WriteOptions(source_sha256=model.source_sha256, conformance=True)
     files: dict[str, list[Path]] = {}
     skipped: dict[str, str] = {}
-    for entry in TARGETS.values():
-        if entry.name not in wanted:
-            continue
+    for entry in (entry for entry in TARGETS.values() if entry.name in wanted):
         try:
             files[entry.name] = entry.write(model, folder / entry.filename, options)
         except InvalidValueError as exc:
@@ -303,40 +286,3 @@ def cross_implementation(
         skipped=skipped,
         files={t: tuple(str(p) for p in paths) for t, paths in files.items()},
     )
-
-
-def conformance_rows(checks: Sequence[Comparison], labels: Mapping[str, str] | None = None) -> list[dict[str, str]]:
-    """Table rows {target, check, result, detail} of comparisons (the target is the label before ':')."""
-    names = {v: k for k, v in (labels or target_labels()).items()}
-    rows = []
-    for check in checks:
-        prefix, _, what = check.check.partition(": ")
-        rows.append(
-            {
-                "target": names.get(prefix, prefix),
-                "check": f"{what or prefix}: {check.a} vs {check.b}",
-                "result": "ok" if check.passed else "FAILED",
-                "detail": check.detail,
-            }
-        )
-    return rows
-
-
-__all__ = [
-    "RUN_FIELDS",
-    "WPROB_ROUNDING",
-    "Contender",
-    "backend_of",
-    "compare_backends",
-    "compare_models",
-    "compare_runs",
-    "conformance_rows",
-    "cross_implementation",
-    "distribution_comparison",
-    "exact_comparison",
-    "parse_targets",
-    "read_back",
-    "target_path",
-    "write_targets",
-    "wprob_readout",
-]

@@ -76,15 +76,13 @@ def consumer_gate(
     truth = raster.to(torch.bool)
     places = decided_places(network, truth.sum(dim=1).numpy())
     rows: list[Comparison] = []
-    for consumer in consumers:
-        if not available(consumer):
-            continue
-        kind = f"decision agreement >= {limit:.1%}"
+    kind = f"decision agreement >= {limit:.1%}"
+    for consumer in filter(available, consumers):
+        label = f"{GATE_LABEL}: {consumer} + readout rule"
         try:
             candidates = run_consumer(consumer, graph, spikes)
         except (AssertionError, ValueError, ConsumerUnavailable) as exc:  # snnTorch asserts, SpikingJelly raises
             detail = f"not gated: the consumer refuses the file ({type(exc).__name__}: {str(exc).splitlines()[0]})"
-            label = f"{GATE_LABEL}: {consumer} + readout rule"
             rows.append(Comparison(label, consumer, "network", kind, False, detail, tolerance=limit))
             continue
         ruled = apply_readout_rule(graph, spikes, candidates)
@@ -96,18 +94,10 @@ def consumer_gate(
             f"raster entries differ after the rule; file mode {statement['mode']}, "
             + ("stated exact" if statement["exact"] else f"not exact: {statement['cause']}")
         )
+        identical = bool(agree.all() and differing == 0)  # a tolerance row is never counted as exact
+        n_differences, n_elements = int((~agree).sum()), int(agree.size)
         rows.append(
-            Comparison(
-                f"{GATE_LABEL}: {consumer} + readout rule",
-                consumer,
-                "network",
-                kind,
-                bool(agree.all() and differing == 0),  # identical: a tolerance row is never counted as exact
-                detail,
-                n_differences=int((~agree).sum()),
-                n_elements=int(agree.size),
-                tolerance=limit,
-            )
+            Comparison(label, consumer, "network", kind, identical, detail, n_differences, n_elements, tolerance=limit)
         )
     return tuple(rows)
 
@@ -126,12 +116,3 @@ def with_consumer_gate(
         return result
     gate = consumer_gate(files[0], model, raster, spikes, tolerance=tolerance)
     return dataclasses.replace(result, comparisons=result.comparisons + gate)
-
-
-__all__ = [
-    "GATE_LABEL",
-    "check_tolerance",
-    "consumer_gate",
-    "decided_places",
-    "with_consumer_gate",
-]

@@ -418,15 +418,8 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
         if data.get("format") != OPERATING_POINT_FORMAT:
             raise ModelFileError(f"not an operating point (format {data.get('format')!r})", path)
         point = OperatingPoint.from_dict(data)
-    except (
-        OSError,
-        UnicodeDecodeError,
-        json.JSONDecodeError,
-        TypeError,
-        KeyError,
-        AttributeError,
-        ValueError,
-    ) as exc:  # ValueError: InvalidValueError of a JSON beyond its limits or of malformed options
+    # ValueError: InvalidValueError of a JSON beyond its limits or of malformed options
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, KeyError, AttributeError, ValueError) as exc:
         raise ModelFileError(f"corrupt operating point ({exc})", path) from None
     problem = operating_point_problem(point)
     if problem:

@@ -28,9 +28,7 @@ class ToleranceCheck(JsonDataclass):
     what: str
     value: float
     limit: float
-    applied_limit: float = field(
-        metadata=json_options(missing_from=lambda data: data["limit"])
-    )  # older files: the limit set
+    applied_limit: float = field(metadata=json_options(missing_from=lambda data: data["limit"]))  # older: the limit set
     passed: bool
 
 
@@ -280,23 +278,19 @@ class ConformanceResult(JsonDataclass):
         return sum(not c.passed for c in self.comparisons)
 
     @property
-    def exact(self) -> tuple[Comparison, ...]:
-        """The exact rows (any difference fails)."""
-        return tuple(c for c in self.comparisons if c.tolerance is None)
-
-    @property
     def tolerance_rows(self) -> tuple[Comparison, ...]:
         """The rows judged within a stated tolerance (the float NIR consumers' decisions)."""
         return tuple(c for c in self.comparisons if c.tolerance is not None)
 
     @property
     def n_exact(self) -> int:
-        return len(self.exact)
+        """The exact rows (any difference fails): every row but the tolerance rows."""
+        return self.n_checks - self.n_tolerance
 
     @property
     def n_identical(self) -> int:
         """Exact rows whose outputs are identical."""
-        return sum(c.equal for c in self.exact)
+        return sum(c.equal for c in self.comparisons if c.tolerance is None)
 
     @property
     def n_tolerance(self) -> int:

@@ -111,9 +111,8 @@ class VerifiedRun(JsonDataclass):
     export_dir: str | None = field(metadata=json_options(missing=None))
     float: FloatResult
     bits: tuple[BitsResult, ...]
-    checkpoint: str | None = field(
-        default=None, metadata=json_options(omit="none")
-    )  # the checkpoint file, when the caller names it
+    # the checkpoint file, when the caller names it
+    checkpoint: str | None = field(default=None, metadata=json_options(omit="none"))
     # queries of the step-level checks (None: all; runtime.verify.run.RASTER_BUDGET)
     recorded_queries: int | None = field(default=None, metadata=json_options(omit="none"))
 

@@ -20,17 +20,9 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
-from vprsnn_export.targets.registry import TARGETS
+from vprsnn_export.targets.registry import TARGETS, target_labels
 
-from ..conformance import (
-    Contender,
-    backend_of,
-    compare_backends,
-    conformance_rows,
-    read_back,
-    target_path,
-    wprob_readout,
-)
+from ..conformance import Contender, backend_of, compare_backends, read_back, target_path, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -67,11 +59,13 @@ class ExportChecks:
 
     @property
     def rows(self) -> list[CheckRow]:
-        exact = [
-            CheckRow(r["target"], r["check"], r["result"] == "ok", r["detail"])
-            for r in conformance_rows(self.comparisons)
-        ]
-        return exact + list(self.measurements)
+        """The exact checks (under their target, the label before ':'), then the measurements."""
+        names = {label: target for target, label in target_labels().items()}
+        rows = []
+        for c in self.comparisons:
+            prefix, _, what = c.check.partition(": ")
+            rows.append(CheckRow(names.get(prefix, prefix), f"{what or prefix}: {c.a} vs {c.b}", c.passed, c.detail))
+        return rows + list(self.measurements)
 
     def to_dict(self) -> dict[str, Any]:
         return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
@@ -113,43 +107,30 @@ def nir_consumer_rows(
 ) -> list[CheckRow]:
     """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
     graph = load_graph(path)
+
+    def row(check: str, detail: str) -> CheckRow:
+        return CheckRow("nir", f"{consumer_name} {check}", None, detail)
+
     try:
         consumer = CONSUMERS[consumer_name](graph, spikes)
-    except (
-        AssertionError,
-        ValueError,
-    ) as exc:  # snnTorch asserts, SpikingJelly raises ValueError on what they cannot express
-        return [CheckRow("nir", f"{consumer_name} loads the file", None, f"refused: {exc}")]
+    # snnTorch asserts, SpikingJelly raises ValueError on what they cannot express
+    except (AssertionError, ValueError) as exc:
+        return [row("loads the file", f"refused: {exc}")]
     agreement = spike_agreement(raster, consumer)
     rows: list[CheckRow] = []
     if "wta" not in graph.nodes:
-        ruled = apply_readout_rule(graph, spikes, consumer)
-        differing = int((ruled != raster.to(torch.bool)).sum())
+        differing = int((apply_readout_rule(graph, spikes, consumer) != raster.to(torch.bool)).sum())
         rows.append(
-            CheckRow(
-                "nir",
-                f"{consumer_name} + readout rule (metadata) vs network",
-                None,
-                f"{differing} differing raster entries of {raster.numel()}",
-            )
+            row("+ readout rule (metadata) vs network", f"{differing} differing raster entries of {raster.numel()}")
         )
     places = decided_places(network, raster.sum(dim=1).numpy())
     consumer_places = decided_places(network, consumer.sum(dim=1).numpy())
     rate = consumer.sum().item() / max(1, consumer.shape[0] * consumer.shape[1])
+    measured = f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {rate:.1f} spikes/step"
     return [
         *rows,
-        CheckRow(
-            "nir",
-            f"{consumer_name} (no metadata) vs network",
-            None,
-            f"recall {agreement['recall']:.4f}, precision {agreement['precision']:.4f}, {rate:.1f} spikes/step",
-        ),
-        CheckRow(
-            "nir",
-            f"{consumer_name} top-1 place (W+Prob) == network's",
-            None,
-            f"{float(np.mean(places == consumer_places)):.3f}",
-        ),
+        row("(no metadata) vs network", measured),
+        row("top-1 place (W+Prob) == network's", f"{float(np.mean(places == consumer_places)):.3f}"),
     ]
 
 

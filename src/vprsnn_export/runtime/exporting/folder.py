@@ -160,14 +160,9 @@ def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
     ModelFileError for an absolute path, a ``..`` part, or a path (symbolic links followed) outside ``folder``."""
     if listed.is_absolute() or listed.drive:
         raise ModelFileError(f"{MANIFEST_NAME} lists the absolute path {listed}: files must lie in its folder", folder)
-    base = Path(recorded_folder)
-    if (
-        recorded_folder
-        and not base.is_absolute()
-        and base.parts
-        and base.parts[0] not in (".", "..")
-        and (listed.parts[: len(base.parts)] == base.parts)
-    ):
+    base = Path(recorded_folder)  # pathlib drops "." parts: a relative base starts with a name or ".."
+    earlier = base.parts and base.parts[0] != ".." and not base.is_absolute()
+    if earlier and listed.parts[: len(base.parts)] == base.parts:
         listed = listed.relative_to(base)  # an earlier version's path, relative to the working directory
     if ".." in listed.parts or not listed.parts:
         raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which leaves its folder", folder)

@@ -6,8 +6,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
@@ -43,32 +41,19 @@ class ExportSource:
     @property
     def network(self) -> Checkpoint | FixedPointModel:
         """What NIR exports and what the project's own simulator runs."""
-        return self.checkpoint if self.checkpoint is not None else self._fixed()
-
-    @property
-    def is_float(self) -> bool:
-        return self.checkpoint is not None
+        network = self.checkpoint if self.checkpoint is not None else self.fixed_point
+        assert network is not None  # __post_init__
+        return network
 
     @property
     def kind(self) -> str:
-        return "float checkpoint" if self.is_float else "fixed-point model"
-
-    @property
-    def thresholds(self) -> np.ndarray:
-        """The thresholds as stored (float for a checkpoint, integer mantissas for a fixed-point model)."""
-        return self.checkpoint.thresholds if self.checkpoint is not None else self._fixed().threshold
-
-    def _fixed(self) -> FixedPointModel:
-        if self.fixed_point is None:
-            raise InvalidValueError("not a fixed-point model")
-        return self.fixed_point
+        return "float checkpoint" if self.checkpoint is not None else "fixed-point model"
 
 
 def load_source(path: str | Path) -> ExportSource:
     """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
     path = Path(path)
-    meta, _ = read_container(path, "model")
-    kind = meta.get("format")
+    kind = read_container(path, "model")[0].get("format")
     if kind == CHECKPOINT_FORMAT:
         return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))
     if kind == FIXED_FORMAT:
@@ -107,13 +92,12 @@ def consumer_statements(
 ) -> dict[str, str]:
     """What each consumer of each written file computes, in one sentence or three (each target's ``statement``)."""
     options = WriteOptions(source.sha256, inhibition, wta_node)
-    notes: dict[str, str] = {}
-    for entry in TARGETS.values():
-        if entry.name in targets and (model is not None or not entry.integer_only):
-            note = entry.statement(source.network, model, options)
-            if note is not None:
-                notes[entry.name] = note
-    return notes
+    notes = {
+        entry.name: entry.statement(source.network, model, options)
+        for entry in TARGETS.values()
+        if entry.name in targets and (model is not None or not entry.integer_only)
+    }
+    return {name: note for name, note in notes.items() if note is not None}
 
 
 def export_all(

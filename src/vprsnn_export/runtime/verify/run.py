@@ -32,7 +32,7 @@ from vprsnn_export.targets.registry import TARGETS
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import QuantiseOptions, deploy
-from ..results import BitsResult, FloatResult, VerifiedRun
+from ..results import BitsResult, FloatResult, ModuleRow, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
     curves,
@@ -109,15 +109,17 @@ def verify_checkpoint(
     require_type("options.quantise", options.quantise, QuantiseOptions)
     device = torch.device("cpu") if device is None else device
     bits_list = [check_bits(b) for b in options.bits]
-    if options.quantise.calibration == "deployed" and reference_images is None:
+    quantise = options.quantise
+    if quantise.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
     readout = options.readout
     query_place_ids = np.asarray(query_place_ids, dtype=np.int64)
     spikes = query_spikes(query_images, query_place_ids, query_traversal, ckpt.config)
     recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
+    recorded_spikes = spikes[:recorded]
     float_network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     float_network.progress = progress  # a bar over the query chunks of each network run below
-    float_run = float_network.run(spikes[:recorded], record=True)
+    float_run = float_network.run(recorded_spikes, record=True)
     float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
@@ -130,27 +132,15 @@ def verify_checkpoint(
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
     results: list[BitsResult] = []
-    stages = tqdm(
-        total=len(bits_list) * 4,
-        desc=f"verify {label or ''}".strip(),
-        unit="stage",
-        file=sys.stderr,
-        disable=not progress,
-        leave=False,
-    )
+    desc = f"verify {label or ''}".strip()
+    stages = tqdm(total=len(bits_list) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not progress, leave=False)
     try:
         for bits in bits_list:
             clock = time.perf_counter()
             seconds: dict[str, float] = {}
             stages.set_postfix(bits=bits, stage="quantise")
             model = deploy(
-                ckpt,
-                ckpt_sha256,
-                bits,
-                options.quantise,
-                reference_images=reference_images,
-                device=device,
-                progress=progress,
+                ckpt, ckpt_sha256, bits, quantise, reference_images=reference_images, device=device, progress=progress
             )
             folder = root / f"{bits}bit"
             model_path = save_fixed_point(folder / "model.npz", model)
@@ -158,7 +148,7 @@ def verify_checkpoint(
             stages.update(1)
             stages.set_postfix(bits=bits, stage="simulate")
             int_network = IntegerNetwork(model, device, progress=progress)
-            int_run = int_network.run(spikes[:recorded], record=True)
+            int_run = int_network.run(recorded_spikes, record=True)
             int_all = int_run if recorded == spikes.shape[0] else int_network.run(spikes)
             int_counts = int_all.counts.numpy()
             seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
@@ -166,14 +156,14 @@ def verify_checkpoint(
             stages.set_postfix(bits=bits, stage="targets")
             cross = cross_implementation(
                 model,
-                spikes[:recorded],
+                recorded_spikes,
                 int_run,
                 folder=folder,
                 targets=options.targets,
                 reference_queries=options.reference_queries,
                 device=device,
             ).with_files("model", [str(model_path)])
-            cross = with_consumer_gate(cross, model, int_run.raster, spikes[:recorded])
+            cross = with_consumer_gate(cross, model, int_run.raster, recorded_spikes)
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
@@ -183,42 +173,21 @@ def verify_checkpoint(
             rows = metric_deltas(float_rows, int_rows)
             if float_run.raster is None or int_run.raster is None:
                 raise InvalidValueError("verify needs the recorded rasters of both networks")
-            spike = spike_level(
-                float_run.raster,
-                int_run.raster,
-                float_counts,
-                int_counts,
-                int_all.saturations,
-                model.quantisation.calibration_saturations,
-            )
+            rasters = (float_run.raster, int_run.raster)
+            calibration_saturations = model.quantisation.calibration_saturations
+            spike = spike_level(*rasters, float_counts, int_counts, int_all.saturations, calibration_saturations)
             decision = decision_level(
                 float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
             )
-            checks = tolerance_checks(
-                rows,
-                spike,
-                decision,
-                options.tolerances,
-                readout.ks,
-                sequences=sequences,
-            )
+            checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
             decisions = readout_decisions(scores, agg, ref_ids, query_place_ids, readout.tolerance)
             table = paired_checks(float_decisions, decisions, rows, limits, options.statistics)
-            modules = (
-                module_rows(
-                    regions,
-                    ckpt.config.network.n_neurons,
-                    ref_ids,
-                    query_place_ids,
-                    float_agg,
-                    agg,
-                    float_run.raster,
-                    int_run.raster,
-                    readout.tolerance,
+            modules: tuple[ModuleRow, ...] = ()
+            if len(regions) > 1:
+                group = ckpt.config.network.n_neurons  # neurons per module
+                modules = module_rows(
+                    regions, group, ref_ids, query_place_ids, float_agg, agg, *rasters, readout.tolerance
                 )
-                if len(regions) > 1
-                else ()
-            )
             seconds["readout"] = time.perf_counter() - clock
             results.append(
                 BitsResult(
@@ -257,7 +226,7 @@ def verify_checkpoint(
             metrics=tuple(float_rows),
             total_spikes=int(float_counts.sum()),
             pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
-            weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
+            weights=weight_histograms(ckpt.weights, quantise.per_neuron),
             cost=query_cost(spikes, ckpt.weights.shape[1], places=len(ref_ids), images=query_images).summary(),
         ),
         bits=tuple(results),
