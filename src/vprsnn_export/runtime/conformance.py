@@ -35,7 +35,7 @@ from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
 from vprsnn_export.targets.reference_stepper import ReferenceStepper
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
-from .backends import open_backend
+from .backends import Network, open_backend
 from .results import Comparison, ConformanceResult
 
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
@@ -122,25 +122,22 @@ def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b:
     )
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
-    return [
-        *checks,
-        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config"),
-    ]
+    checks.append(
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config")
+    )
+    return checks
 
 
 # ---------------------------------------------------------------------------- backends
 
 
-Source = Checkpoint | FixedPointModel
-
-
-def backend_of(source: Source, device: torch.device | None = None) -> Backend:
+def backend_of(source: Network, device: torch.device | None = None) -> Backend:
     """The project's own simulator of a network (the registered backend ``auto`` picks: the float network or
     the integer simulator)."""
     return open_backend(source, device=device)[1]
 
 
-def wprob_readout(source: Source) -> Callable[[np.ndarray], np.ndarray]:
+def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
     """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration
     (an ensemble's with its region regularisation, as every evaluation reads it out)."""
     readout = Readout.of(source.calibration, source.config)
@@ -164,7 +161,7 @@ class Contender:
     read_back: FixedPointModel | None = None
 
 
-def read_back(target: str, path: Path, written: Source | None, device: torch.device | None = None) -> Contender:
+def read_back(target: str, path: Path, written: Network | None, device: torch.device | None = None) -> Contender:
     """The contender of one exported file: read it back and run it (onnxruntime runs the graph itself).
 
     InvalidValueError for a target that is not registered."""
@@ -213,12 +210,9 @@ def compare_backends(
         n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
         if n == 0:
             continue
-        # the first n rows of the baseline's run; saturations are a total, so the head needs a run of its own
-        base = (
-            full
-            if n == spikes.shape[0]
-            else dataclasses.replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
-        )
+        base = full
+        if n < spikes.shape[0]:  # the first n rows of the baseline's run; saturations are a total: a run of its own
+            base = dataclasses.replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
             base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))

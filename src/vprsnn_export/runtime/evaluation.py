@@ -265,7 +265,6 @@ def calibrate_and_evaluate(
     options: SequenceOptions,
 ) -> list[MetricRow]:
     """Calibrate any network (``network.counts(spikes)``, ``network.cfg``) and read out the queries."""
-
     calibration = calibrate(network.counts, reference_images, reference_place_ids, network.cfg)
     counts = network.counts(query_spikes(query_images, query_place_ids, query_traversal, network.cfg)).numpy()
     return Readout.of(calibration, network.cfg, options).rows(counts, reference_place_ids, query_place_ids)

@@ -129,7 +129,8 @@ def predictions(
         decided.append(Decided(strategy, k, np.asarray(ids.filled(-1), dtype=np.int64), confidence, correct))
     if query_place_ids is None:
         return Predictions(truth=None, decided=tuple(decided))
-    return Predictions(true_places(query_place_ids, options.tolerance), tuple(decided), _source(options.tolerance))
+    source = options.tolerance.source if isinstance(options.tolerance, MatchTruth) else ""
+    return Predictions(true_places(query_place_ids, options.tolerance), tuple(decided), source)
 
 
 def true_places(query_place_ids: np.ndarray, tolerance: Tolerance) -> tuple[np.ndarray, ...]:
@@ -141,10 +142,6 @@ def true_places(query_place_ids: np.ndarray, tolerance: Tolerance) -> tuple[np.n
         return tuple(ids[:, None])
     queries, places = np.nonzero(tolerance.matrix[:, ids].T)  # row-major: queries ascending, places within each
     return tuple(np.split(places.astype(np.int64), np.cumsum(np.bincount(queries, minlength=len(ids)))[:-1]))
-
-
-def _source(tolerance: Tolerance) -> str:
-    return tolerance.source if isinstance(tolerance, MatchTruth) else ""
 
 
 def network_predictions(

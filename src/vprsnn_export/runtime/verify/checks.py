@@ -48,11 +48,7 @@ TOLERANCE_MEANING = {
     "saturations": "voltage saturation events on the queries, at most",
     "query_slack": "metric drops of at most this many queries' worth (n / Q) pass whatever the limit",
 }
-MINIMUM_KEYS = ("winner_agreement", "top1_agreement")
 OFF = ("off", "none", "")
-
-
-# ---------------------------------------------------------------------------- the tolerance settings
 
 
 def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
@@ -79,9 +75,6 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
             raise InvalidValueError(f"--tolerance {key}: expected a finite number >= 0, got {raw!r}")
         tolerances[key] = value
     return tolerances
-
-
-# ---------------------------------------------------------------------------- spike level
 
 
 def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.ndarray:
@@ -131,9 +124,6 @@ def spike_level(
     )
 
 
-# ---------------------------------------------------------------------------- decision level
-
-
 def tv_distance(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Total variation distance 1/2 sum_l |p(l) - q(l)| per row, in [0, 1]."""
     return 0.5 * np.abs(np.asarray(p, dtype=np.float64) - np.asarray(q, dtype=np.float64)).sum(axis=1)
@@ -164,9 +154,6 @@ def decision_level(
     )
 
 
-# ---------------------------------------------------------------------------- modules of an ensemble
-
-
 def module_rows(
     regions: np.ndarray,
     group: int,
@@ -189,11 +176,8 @@ def module_rows(
         name: [region_accuracies(agg[k], reference_place_ids, query_place_ids, regions, tolerance) for k in (1, top)]
         for name, agg in (("float", float_aggregated), ("int", int_aggregated))
     }
-    by_region = accuracy["float"][0]
-    a = torch.as_tensor(float_raster)
-    b = torch.as_tensor(int_raster)
-    n, timesteps, _ = a.shape
-    a, b = a.reshape(n, timesteps, n_modules, group), b.reshape(n, timesteps, n_modules, group)
+    n, timesteps, _ = float_raster.shape
+    a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
     spikes_float = a.sum(dim=(0, 1, 3)).numpy()
     spikes = b.sum(dim=(0, 1, 3)).numpy()
@@ -212,11 +196,8 @@ def module_rows(
             spikes_float=int(spikes_float[m]),
             spikes=int(spikes[m]),
         )
-        for m, region in enumerate(by_region)
+        for m, region in enumerate(accuracy["float"][0])
     )
-
-
-# ---------------------------------------------------------------------------- metric level
 
 
 def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) -> tuple[MetricRow, ...]:
@@ -254,7 +235,15 @@ def curves(
     return out
 
 
-# ---------------------------------------------------------------------------- tolerances
+def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:
+    """The readouts (strategy, k) each metric tolerance judges, in this order: accuracy and P@100R of every
+    strategy at k=1, R@100P of W+Prob at every ``judged`` k, AUC-PR of W+Prob at the largest."""
+    return {
+        "accuracy": [(s, 1) for s in STRATEGIES],
+        "p_at_100r": [(s, 1) for s in STRATEGIES],
+        "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
+        "auc_pr": [(SEQUENCE_STRATEGY, max(judged))],
+    }
 
 
 def tolerance_checks(
@@ -278,46 +267,29 @@ def tolerance_checks(
     "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
     """
     judged = sorted(k for k in set(ks) if k == 1 or sequences)
-    top = max(judged)
     checks: list[ToleranceCheck] = []
     n_queries = rows[0].n_queries if rows else 1
     slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
-
-    def drop(name: str, strategy: str, k: int, metric: str) -> None:
-        row = find_row(rows, strategy, k)
-        limit = tolerances[name]
-        if row is None or row.delta is None or limit is None:
-            raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {name} tolerance")
-        value = 0.0 - row.delta.get(metric)
-        applied = max(limit, slack)
-        what = f"{metric} drop, {strategy} k={k}"
-        checks.append(ToleranceCheck(name, what, value, limit, applied, bool(value <= applied + 1e-12)))
-
-    def bound(name: str, what: str, value: float, at_least: bool) -> None:
-        limit = tolerances[name]
-        if limit is None:
-            return
-        passed = value >= limit if at_least else value <= limit
-        checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
-
-    if tolerances.get("accuracy") is not None:
-        for strategy in STRATEGIES:
-            drop("accuracy", strategy, 1, "accuracy")
-    if tolerances.get("p_at_100r") is not None:
-        for strategy in STRATEGIES:
-            drop("p_at_100r", strategy, 1, "p_at_100r")
-    if tolerances.get("r_at_100p") is not None:
-        for k in judged:
-            drop("r_at_100p", SEQUENCE_STRATEGY, k, "r_at_100p")
-    if tolerances.get("auc_pr") is not None:
-        drop("auc_pr", SEQUENCE_STRATEGY, top, "auc_pr")
-    bound("winner_agreement", "steps with the float winner", spike.winner_agreement, True)
-    bound("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True)
-    bound("saturations", "saturation events on the queries", spike.saturations, False)
+    for metric, readouts in metric_readouts(judged).items():
+        if (limit := tolerances.get(metric)) is None:
+            continue
+        for strategy, k in readouts:
+            row = find_row(rows, strategy, k)
+            if row is None or row.delta is None:
+                raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {metric} tolerance")
+            value, applied = 0.0 - row.delta.get(metric), max(limit, slack)
+            what = f"{metric} drop, {strategy} k={k}"
+            checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))
+    bounds = (
+        ("winner_agreement", "steps with the float winner", spike.winner_agreement, True),
+        ("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True),
+        ("saturations", "saturation events on the queries", spike.saturations, False),
+    )
+    for name, what, value, at_least in bounds:
+        if (limit := tolerances[name]) is not None:
+            passed = value >= limit if at_least else value <= limit
+            checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
     return checks
-
-
-# ---------------------------------------------------------------------------- weights
 
 
 def weight_histograms(float_weights: np.ndarray, per_neuron: bool, bins: int = 64) -> WeightHistogram:

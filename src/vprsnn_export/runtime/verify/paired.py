@@ -18,6 +18,7 @@ from vprsnn_export.readout.scoring import scored_decisions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 
 from ..results import MetricRow, PairedCheck, ToleranceCheck, find_row
+from .checks import metric_readouts
 
 #: The metrics of the paired table (P@100R equals accuracy: it is added only when its tolerance is on).
 TABLE_METRICS = ("accuracy", "r_at_100p", "auc_pr")
@@ -56,15 +57,9 @@ def judged_limits(
     """
     judged = sorted(k for k in set(ks) | {1} if k == 1 or sequences)
     slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
-    where = {
-        "accuracy": [(s, 1) for s in STRATEGIES],
-        "p_at_100r": [(s, 1) for s in STRATEGIES],
-        "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
-        "auc_pr": [(SEQUENCE_STRATEGY, judged[-1])],
-    }
     return {
         (metric, strategy, k): max(float(limit), slack)
-        for metric, readouts in where.items()
+        for metric, readouts in metric_readouts(judged).items()
         if (limit := tolerances.get(metric)) is not None
         for strategy, k in readouts
     }
@@ -106,6 +101,8 @@ def paired_checks(
             limit = limits.get((metric, strategy, k))
             note = None if limit is None else paired.degenerate(metric, row.float_values.get(metric))
             verdict = None if limit is None else paired.NOT_JUDGED if note else paired.verdict(low, high, limit)
+            block = "paired bootstrap" if k == 1 else f"paired block bootstrap (blocks of {k})"
+            undecided = verdict == paired.UNDECIDED and limit is not None
             out.append(
                 PairedCheck(
                     strategy=strategy,
@@ -118,15 +115,11 @@ def paired_checks(
                     difference=estimate,
                     low=low,
                     high=high,
-                    method="exact McNemar"
-                    if exact
-                    else ("paired bootstrap" if k == 1 else f"paired block bootstrap (blocks of {k})"),
+                    method="exact McNemar" if exact else block,
                     p_value=paired.mcnemar_exact(b, c) if exact else None,
                     limit=limit,
                     verdict=verdict,
-                    queries_to_decide=paired.queries_to_decide(estimate, low, high, limit, n)
-                    if verdict == paired.UNDECIDED and limit is not None
-                    else None,
+                    queries_to_decide=paired.queries_to_decide(estimate, low, high, limit, n) if undecided else None,
                     note=note,
                 )
             )

@@ -79,9 +79,6 @@ def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int
     return int(min(n_queries, max(1, budget // max(1, timesteps * n_neurons))))
 
 
-# ---------------------------------------------------------------------------- orchestration
-
-
 def verify_checkpoint(
     ckpt: Checkpoint,
     ckpt_sha256: str,
