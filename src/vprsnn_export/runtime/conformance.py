@@ -54,9 +54,6 @@ def parse_targets(raw: str, option: str = "--targets", *, allow_none: bool = Tru
     return TARGETS.parse_list(raw, option, allow_none=allow_none)
 
 
-# ---------------------------------------------------------------------------- comparisons
-
-
 def as_array(value: Any) -> np.ndarray:
     """A tensor, array or number as a numpy array."""
     if isinstance(value, torch.Tensor):
@@ -126,9 +123,6 @@ def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b:
         Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config")
     )
     return checks
-
-
-# ---------------------------------------------------------------------------- backends
 
 
 def backend_of(source: Network, device: torch.device | None = None) -> Backend:

@@ -84,8 +84,7 @@ def recalibrate(
         return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
     if not np.array_equal(np.asarray(place_ids), model.reference_place_ids):
         raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
-    missing = [name for name in model.reference_traversals if name not in reference_images]
-    if missing:
+    if missing := [name for name in model.reference_traversals if name not in reference_images]:
         raise InvalidValueError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
     network = IntegerNetwork(model, device=device, progress=progress)
     images = {name: reference_images[name] for name in model.reference_traversals}

@@ -421,8 +421,7 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
     # ValueError: InvalidValueError of a JSON beyond its limits or of malformed options
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, TypeError, KeyError, AttributeError, ValueError) as exc:
         raise ModelFileError(f"corrupt operating point ({exc})", path) from None
-    problem = operating_point_problem(point)
-    if problem:
+    if problem := operating_point_problem(point):
         raise ModelFileError(f"tampered or corrupt operating point: {problem}", path)
     if model_sha256 is not None and point.model_sha256 != model_sha256:
         raise ModelFileError("this operating point was calibrated on another model file (sha256 differs)", path)

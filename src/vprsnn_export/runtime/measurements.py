@@ -17,8 +17,6 @@ from typing import Any, ClassVar
 
 from vprsnn_export.io.serial import JsonDataclass, json_options
 
-# ---------------------------------------------------------------------------- metric level (readout.metrics)
-
 
 @dataclass(frozen=True)
 class ToleranceCheck(JsonDataclass):
@@ -72,9 +70,6 @@ def worst_verdict(verdicts: Iterable[str]) -> str:
     return next((v for v in VERDICTS if v in found), "holds")
 
 
-# ---------------------------------------------------------------------------- spike and decision level
-
-
 @dataclass(frozen=True)
 class SpikeLevel(JsonDataclass):
     """Float vs quantised spikes on the same input: winner agreement, count correlation, totals, saturations."""
@@ -106,9 +101,6 @@ class DecisionLevel(JsonDataclass):
     aggregated_agreement: Mapping[int, float]  # k -> agreement of the k-frame aggregated W+Prob decisions
 
 
-# ---------------------------------------------------------------------------- curves and histograms
-
-
 @dataclass(frozen=True)
 class PrCurve(JsonDataclass):
     """The exact precision-recall operating points of one score matrix."""
@@ -133,9 +125,6 @@ class LevelHistogram(JsonDataclass):
     levels: int
     counts: tuple[int, ...]
     zero_fraction: float
-
-
-# ---------------------------------------------------------------------------- modules of an ensemble
 
 
 @dataclass(frozen=True)
@@ -165,9 +154,6 @@ class ModuleRow(JsonDataclass):
     def delta_k(self) -> float:
         """Accuracy at the largest k, quantised minus float."""
         return self.accuracy_k - self.float_accuracy_k
-
-
-# ---------------------------------------------------------------------------- cross-implementation
 
 
 @dataclass(frozen=True)

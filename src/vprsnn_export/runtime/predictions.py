@@ -37,6 +37,7 @@ from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 
 FORMATS = (".csv", ".jsonl")
+#: The columns of a row (:meth:`Predictions.rows`), in this order.
 FIELDS = ("query", "truth", "strategy", "k", "place_id", "confidence", "correct", "note")
 
 
@@ -71,25 +72,15 @@ class Predictions:
 
     def rows(self) -> list[dict[str, Any]]:
         """Long format: one row per (query, strategy, k), queries in stream order."""
+        no_place = f"the ground truth ({self.source}) names no reference place for this query"
         out = []
         for q in range(self.n_queries):
             for entry in self.decided:
                 place = int(entry.place_id[q])
                 truth = None if self.truth is None else [int(r) for r in self.truth[q]]
-                out.append(
-                    {
-                        "query": q,
-                        "truth": truth,
-                        "strategy": entry.strategy,
-                        "k": entry.k,
-                        "place_id": None if place < 0 else place,
-                        "confidence": float(entry.confidence[q]),
-                        "correct": None if entry.correct is None else bool(entry.correct[q]),
-                        "note": f"the ground truth ({self.source}) names no reference place for this query"
-                        if truth == []
-                        else "",
-                    }
-                )
+                correct = None if entry.correct is None else bool(entry.correct[q])
+                decided = (entry.strategy, entry.k, None if place < 0 else place, float(entry.confidence[q]), correct)
+                out.append(dict(zip(FIELDS, (q, truth, *decided, no_place if truth == [] else ""), strict=True)))
         return out
 
     def to_csv(self) -> str:

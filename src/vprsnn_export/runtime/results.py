@@ -45,9 +45,6 @@ class ReportError(VprError):
     """A missing or malformed report.json."""
 
 
-# ---------------------------------------------------------------------------- one network
-
-
 @dataclass(frozen=True)
 class BitsResult(JsonDataclass):
     """Every check of one network at one weight bit width."""
@@ -133,9 +130,6 @@ class VerifiedRun(JsonDataclass):
     @property
     def ks(self) -> list[int]:
         return sorted({row.k for row in self.float.metrics})
-
-
-# ---------------------------------------------------------------------------- over networks
 
 
 @dataclass(frozen=True)
@@ -234,8 +228,7 @@ class VerifyReport(JsonDataclass):
             raise ReportError(f"malformed verify report ({describe(exc)})", source) from None
         if any(not run.bits for run in report.runs):
             raise ReportError("a run of the report holds no bit widths", source)
-        problem = _non_finite(data) or _out_of_range(report)
-        if problem:
+        if problem := _non_finite(data) or _out_of_range(report):
             raise ReportError(problem, source)
         if data.get("passed") is not report.passed:
             raise ReportError(

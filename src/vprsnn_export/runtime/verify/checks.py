@@ -9,22 +9,20 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.metrics import Tolerance, pr_curve
+from vprsnn_export.readout.metrics import MetricRow, Tolerance, find_row, pr_curve
 from vprsnn_export.readout.scoring import region_accuracies, scored_decisions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 from vprsnn_export.targets.intsim import step_agreement
 
-from ..results import (
+from ..measurements import (
     DecisionLevel,
     LevelHistogram,
-    MetricRow,
     ModuleRow,
     PrCurve,
     SpikeLevel,
     ToleranceCheck,
     WeightHistogram,
-    find_row,
 )
 
 #: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).

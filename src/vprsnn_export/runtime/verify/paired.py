@@ -76,22 +76,15 @@ def paired_checks(
     and the verdict against ``limits`` (:func:`judged_limits`); ``rows`` are the deployed rows with their
     float values (:func:`.checks.metric_deltas`)."""
     out = []
-    for (strategy, k), (f_correct, f_confidence) in float_decisions.items():
-        d_correct, d_confidence = decisions[(strategy, k)]
+    for (strategy, k), floats in float_decisions.items():
+        deployed = decisions[(strategy, k)]  # (correct, confidence) per query, like floats
         row = find_row(rows, strategy, k)
         if row is None or row.delta is None or row.float_values is None:
             continue
         boot = paired.paired_bootstrap(
-            f_correct,
-            f_confidence,
-            d_correct,
-            d_confidence,
-            block=k,
-            resamples=settings.resamples,
-            level=settings.confidence,
-            seed=settings.seed,
+            *floats, *deployed, block=k, resamples=settings.resamples, level=settings.confidence, seed=settings.seed
         )
-        b, c = paired.flips(f_correct, d_correct)
+        b, c = paired.flips(floats[0], deployed[0])
         n = row.n_queries
         metrics = [*TABLE_METRICS, *(["p_at_100r"] if ("p_at_100r", strategy, k) in limits else [])]
         for metric in metrics:

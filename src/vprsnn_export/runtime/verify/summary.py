@@ -10,21 +10,13 @@ from typing import Any
 
 import torch
 
+from vprsnn_export.readout.metrics import METRICS, MetricRow
 from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.stats import mean_std
 from vprsnn_export.version import __version__
 
-from ..results import (
-    METRICS,
-    VERDICTS,
-    BitsResult,
-    BitsSummary,
-    MetricRow,
-    RunSummary,
-    SummaryRow,
-    VerifiedRun,
-    VerifyReport,
-)
+from ..measurements import VERDICTS
+from ..results import BitsResult, BitsSummary, RunSummary, SummaryRow, VerifiedRun, VerifyReport
 
 
 def summary_rows(rows_per_run: Sequence[Sequence[MetricRow]], with_delta: bool) -> tuple[SummaryRow, ...]:
