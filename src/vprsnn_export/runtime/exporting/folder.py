@@ -179,13 +179,10 @@ def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
 def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
     """OutputError unless ``out`` is new, an empty folder, or (``overwrite``) an earlier export's folder."""
     check_output_folder(out)
-    if not out.exists():
-        return
     if (out / MANIFEST_NAME).is_file():
         if not overwrite:
             raise OutputError(f"holds an earlier export ({MANIFEST_NAME}): --force to replace it", out)
-        return
-    if any(out.iterdir()):
+    elif out.exists() and any(out.iterdir()):
         raise OutputError(f"is a folder with other files and no {MANIFEST_NAME}: give a new or empty folder", out)
 
 

@@ -3,14 +3,10 @@
 For one float checkpoint and each weight bit width, the network is deployed
 (:func:`runtime.deployment.deploy`: quantised and calibrated), every
 integer implementation runs on the very spike tensor the float network sees
-(:func:`runtime.inference.query_spikes`), and four families of checks compare them:
+(:func:`vprsnn_export.data.encoding.query_spikes`), and four families of checks compare them:
 
-* **cross-implementation** (exact; :mod:`runtime.conformance`): the integer simulator, the ONNX graph on
-  onnxruntime, the NIR and Loihi-style files read back, and the slow reference
-  stepper (first few queries) must produce identical rasters, counts, candidate
-  counts, final voltages and saturation counts. Integer outputs are compared bit for
-  bit; the ONNX W+Prob head (float64 arithmetic in another summation order) must give
-  identical decisions and differ by at most ``WPROB_ROUNDING`` (reported).
+* **cross-implementation** (exact; :mod:`runtime.conformance`): the integer simulator, the ONNX graph, the
+  NIR and Loihi-style files read back and the reference stepper must give identical outputs.
 * **spike level**: per-step agreement of the float and integer rasters (the WTA winner),
   the per-query Pearson correlation of the two spike-count vectors, total spikes,
   saturation events.

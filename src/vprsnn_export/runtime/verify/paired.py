@@ -95,7 +95,6 @@ def paired_checks(
             note = None if limit is None else paired.degenerate(metric, row.float_values.get(metric))
             verdict = None if limit is None else paired.NOT_JUDGED if note else paired.verdict(low, high, limit)
             block = "paired bootstrap" if k == 1 else f"paired block bootstrap (blocks of {k})"
-            undecided = verdict == paired.UNDECIDED and limit is not None
             out.append(
                 PairedCheck(
                     strategy=strategy,
@@ -112,7 +111,9 @@ def paired_checks(
                     p_value=paired.mcnemar_exact(b, c) if exact else None,
                     limit=limit,
                     verdict=verdict,
-                    queries_to_decide=paired.queries_to_decide(estimate, low, high, limit, n) if undecided else None,
+                    queries_to_decide=paired.queries_to_decide(estimate, low, high, limit, n)
+                    if verdict == paired.UNDECIDED and limit is not None
+                    else None,
                     note=note,
                 )
             )
