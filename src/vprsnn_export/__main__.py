@@ -1,6 +1,6 @@
 """The ``vprsnn-export`` command's entry point (also ``python -m vprsnn_export``).
 
-A Ctrl-C while torch, numba and the rest load (a few seconds on a busy machine) exits with
+A Ctrl-C while the command loads (a few seconds on a busy machine) exits with
 code 130 and one line, like one during the command itself: the guard of
 :mod:`vprsnn_export.startup` (installed by the package's ``__init__``, and here for any other
 way in) stands until the command line and the command's module are imported, then Python's own
@@ -18,7 +18,7 @@ install_guard()
 
 from .cli import import_command, main  # noqa: E402  (imported under the guard above)
 
-import_command(sys.argv[1:])  # the command's module, torch and numba load under the guard too
+import_command(sys.argv[1:])  # the command's module loads under the guard too (torch later, in main)
 
 end_guard()
 

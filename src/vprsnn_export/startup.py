@@ -3,8 +3,9 @@
 Started as ``vprsnn-export`` or ``python -m vprsnn_export``, the package's ``__init__`` installs
 :func:`interrupted_while_loading` as the SIGINT handler before it imports anything else (an import
 of the library in another program changes no handler); ``__main__`` keeps it while the command
-line, the command's module, torch and numba load, then :func:`end_guard` hands SIGINT back to
-Python and :func:`vprsnn_export.cli.main` turns an interrupt into the same line after cleaning up.
+line and the command's module load, then :func:`end_guard` hands SIGINT back to Python and
+:func:`vprsnn_export.cli.main` turns an interrupt into the same line after cleaning up (torch and
+numba load there, lazily: see :func:`vprsnn_export.cli.import_command`).
 A SIGINT that was ignored when the process started (a job started in the background) stays ignored.
 Only the interpreter's own start, before the package's first line runs, is outside the guard;
 this module imports nothing that ``signal`` does not (no typing, no threading) to come in sooner.
