@@ -11,7 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from vprsnn_export.startup import end_guard, install_guard, interrupted_while_loading, started_as_command
+from vprsnn_export.startup import (
+    InterruptsHeld,
+    end_guard,
+    install_guard,
+    interrupted_while_loading,
+    started_as_command,
+)
 
 
 @pytest.mark.parametrize(
@@ -51,6 +57,24 @@ def test_the_guard_takes_sigint_from_python_only_and_gives_it_back():
         install_guard()
         end_guard()
         assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def test_an_interrupt_held_while_torch_loads_arrives_when_the_block_ends():
+    """set_threads imports torch inside InterruptsHeld: a Ctrl-C there (raised inside torch's C++ start-up it would
+    abort the process) is noted and raised as KeyboardInterrupt at the block's end, which main turns into one line."""
+    before = signal.getsignal(signal.SIGINT)
+    finished = False
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        with pytest.raises(KeyboardInterrupt):
+            with InterruptsHeld():
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)  # a delivered SIGINT would have raised by now
+                finished = True
+        assert finished
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # given back
     finally:
         signal.signal(signal.SIGINT, before)
 

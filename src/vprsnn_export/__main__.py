@@ -28,10 +28,14 @@ EXIT_WRITE_ERROR = 1
 
 
 def run() -> None:
-    """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly."""
+    """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly.
+
+    Once ``main()`` has returned, SIGINT is ignored: a Ctrl-C during the interpreter's exit (torch's and
+    numba's clean-up run Python callbacks) would print a traceback or kill the process by the signal."""
     try:
         code = main()
         sys.stdout.flush()
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the run is over: a late Ctrl-C cannot break the exit
     except KeyboardInterrupt:  # between the guard's end and main's own handler
         print("error: interrupted", file=sys.stderr)
         code = EXIT_INTERRUPTED

@@ -9,6 +9,8 @@ numba load there, lazily: see :func:`vprsnn_export.cli.import_command`).
 A SIGINT that was ignored when the process started (a job started in the background) stays ignored.
 Only the interpreter's own start, before the package's first line runs, is outside the guard;
 this module imports nothing that ``signal`` does not (no typing, no threading) to come in sooner.
+torch loads later, when a command sets its threads: :class:`InterruptsHeld` keeps a Ctrl-C out of its
+C++ start-up, and the command's handler turns it into the same line once torch is in.
 """
 
 from __future__ import annotations
@@ -56,6 +58,35 @@ def install_guard() -> None:
             signal.signal(signal.SIGINT, interrupted_while_loading)
         except ValueError:  # not the main thread: its program owns the signals
             pass
+
+
+class InterruptsHeld:
+    """``with InterruptsHeld():`` a SIGINT inside the block is only noted, and handed to the handler it replaced
+    (Python's: KeyboardInterrupt) when the block ends.
+
+    For torch's import after the guard: an exception raised inside its C++ start-up (a Python callback
+    under pybind11) aborts the process with a C++ message instead of exiting 130 with one line; noted, it
+    is raised after the import, where the command's own handler catches it. A plain class, not contextlib:
+    this module comes in before anything else. Outside the main thread, or with SIGINT ignored, a no-op.
+    """
+
+    def __enter__(self) -> None:
+        self.noted = False
+        self.previous = signal.getsignal(signal.SIGINT)
+        if callable(self.previous):
+            try:
+                signal.signal(signal.SIGINT, self._note)
+            except ValueError:  # not the main thread: its program owns the signals
+                self.previous = None
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.noted = True
+
+    def __exit__(self, *exc: object) -> None:
+        if callable(self.previous):
+            signal.signal(signal.SIGINT, self.previous)
+            if self.noted:
+                self.previous(signal.SIGINT, None)
 
 
 def end_guard() -> None:

@@ -11,6 +11,7 @@ import os
 
 from .arguments import ascii_uint
 from .errors import InvalidValueError
+from .startup import InterruptsHeld
 
 DEFAULT_THREADS = 1
 
@@ -26,7 +27,8 @@ def set_threads(threads: int | None = None) -> int:
     count = default_threads() if threads is None else threads
     if isinstance(count, bool) or not isinstance(count, int) or count < 1 or count > 1024:
         raise InvalidValueError(f"--threads: expected an integer from 1 to 1024, got {threads!r}")
-    import torch  # here, not at module top: the CLI imports this module before it can catch an interrupt
+    with InterruptsHeld():  # a Ctrl-C inside torch's C++ start-up would abort: it arrives after the import
+        import torch  # here, not at module top: the CLI imports this module before it can catch an interrupt
 
     torch.set_num_threads(count)
     return count
