@@ -7,6 +7,7 @@ way in) stands until the command line and the command's module are imported, the
 handler is back and :func:`vprsnn_export.cli.main` turns the interrupt into the same line.
 """
 
+import atexit
 import errno
 import os
 import signal
@@ -18,7 +19,7 @@ install_guard()
 
 from .cli import import_command, main  # noqa: E402  (imported under the guard above)
 
-import_command(sys.argv[1:])  # the command's module loads under the guard too (torch later, in main)
+import_command(sys.argv[1:])  # the command's module loads under the guard too (torch: set_threads)
 
 end_guard()
 
@@ -30,12 +31,14 @@ EXIT_WRITE_ERROR = 1
 def run() -> None:
     """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly.
 
-    Once ``main()`` has returned, SIGINT is ignored: a Ctrl-C during the interpreter's exit (torch's and
-    numba's clean-up run Python callbacks) would print a traceback or kill the process by the signal."""
+    Once ``main()`` has returned, SIGINT is ignored from the interpreter's exit on (the first exit handler):
+    a Ctrl-C during torch's and numba's clean-up would print a traceback or kill the process by the signal.
+    Not before: a program that calls ``run()`` and catches its SystemExit keeps its own handler (its children
+    would inherit an ignored SIGINT)."""
     try:
         code = main()
         sys.stdout.flush()
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the run is over: a late Ctrl-C cannot break the exit
+        atexit.register(_ignore_interrupts)  # the run is over: a late Ctrl-C cannot break the process's exit
     except KeyboardInterrupt:  # between the guard's end and main's own handler
         print("error: interrupted", file=sys.stderr)
         code = EXIT_INTERRUPTED
@@ -49,6 +52,10 @@ def run() -> None:
         print(f"error: cannot write the standard output ({exc.strerror})", file=sys.stderr)
         code = EXIT_WRITE_ERROR
     sys.exit(code)
+
+
+def _ignore_interrupts() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _silence_stdout() -> None:

@@ -102,10 +102,10 @@ def chosen_command(argv: Sequence[str]) -> str | None:
 
 def import_command(argv: Sequence[str]) -> None:
     """Import the module of the command ``argv`` names: ``__main__`` calls this under its interrupt guard, so a
-    Ctrl-C while it loads exits cleanly. torch and numba load later, inside :func:`main` (torch in
-    :func:`~vprsnn_export.threads.set_threads`), where an interrupt is caught as KeyboardInterrupt; one that lands
-    inside torch's C++ start-up (a pybind11 callback) can abort the process instead (seen once in 2,887 cases of
-    tools/bad_input_campaign.py)."""
+    Ctrl-C while it loads exits cleanly. torch and numba load later, inside :func:`main`, where an interrupt is
+    caught as KeyboardInterrupt; torch in :func:`~vprsnn_export.threads.set_threads`, with SIGINT held until its
+    import ends (:class:`~vprsnn_export.startup.InterruptsHeld`: raised inside its C++ start-up, a pybind11 callback,
+    it would abort the process)."""
     name = chosen_command(argv)
     if name in command_names():
         importlib.import_module(f"{commands.__name__}.{name}")
