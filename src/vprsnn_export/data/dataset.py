@@ -306,7 +306,9 @@ def load_dataset(
     )
     images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
-    return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
+    return Dataset(
+        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
+    )
 
 
 def _load_folder(
@@ -322,7 +324,14 @@ def _load_folder(
         for name, paths in files.items()
     }
     images = decode_images(cells, cfg, progress)
-    return Dataset(str(folder.resolve()), folder_fingerprint(files, truths), selected, images, tuple(truths))
+    fingerprint = folder_fingerprint(files, truths)
+    return Dataset(
+        source=str(folder.resolve()),
+        manifest_sha256=fingerprint,
+        place_ids=selected,
+        images=images,
+        ground_truth=tuple(truths),
+    )
 
 
 def read_manifest(data: str | Path) -> Manifest:
@@ -467,4 +476,5 @@ def _load_synthetic(
     selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
     route = synthetic_route(n_places, names)
     images = {name: preprocess_images(route[name][selected], cfg) for name in names}
-    return Dataset(source, synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS), selected, images)
+    fingerprint = synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS)
+    return Dataset(source=source, manifest_sha256=fingerprint, place_ids=selected, images=images)
