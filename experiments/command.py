@@ -18,7 +18,7 @@ from typing import Any
 import experiments
 from experiments.settings import DATA_ENV, DOCS_RESULTS, NORDLAND, Settings, Variant, data_settings, results_dir
 from vprsnn_export.cluster import CLUSTER_HELP, parse_cluster
-from vprsnn_export.commands._common import integer, parse_int_list, parse_value
+from vprsnn_export.commands._common import integer, parse_int_list, parse_names, parse_value
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.fileio import atomic_write_text
 
@@ -63,6 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="number of independently trained networks (seeds 1..N; default: "
         f"{len(Settings().seeds)}; with --quick {len(Settings.quick_settings().seeds)})",
     )
+    parser.add_argument("--reference", help="the reference traversal (default: summer)")
+    parser.add_argument("--query", help="the query traversal (default: winter)")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override")
     parser.add_argument(
@@ -133,6 +135,9 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
     extra: dict[str, Any] = {"overrides": overrides, "grid": tuple(parse_grid_entry(item) for item in args.grid)}
     if args.data is not None or not args.quick:
         extra.update(data_settings(args.data))
+    for name in ("reference", "query"):
+        if getattr(args, name) is not None:
+            extra[name] = parse_names(getattr(args, name), f"--{name}")[0]
     if args.module_sizes is not None:
         if args.name != "route":
             raise InvalidValueError(f"--module-sizes applies only to experiment route, not {args.name!r}")
@@ -180,7 +185,8 @@ def run(args: argparse.Namespace) -> int:
     results["command"] = command
     results["output"] = args.out
     out = Path(args.out)
-    stem = f"{args.name}_quick" if args.quick else args.name
+    name = module.stem(settings) if hasattr(module, "stem") else args.name  # a page per data set, where it says so
+    stem = f"{name}_quick" if args.quick else name
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / f"{stem}.json", json.dumps(results, indent=1, default=float))
     body = module.render(results, out, stem)

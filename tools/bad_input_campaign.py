@@ -1322,6 +1322,20 @@ def train_cases() -> list[Case]:
         "one-unknown": "summer,autumn",
     }
     cases += numeric("train", TRAIN, "--reference", values=references)
+    # train --adapt-from (issue 34): the ranges, an incomplete or impossible adaptation
+    adapt = (*TRAIN, "--adapt-from", "winter", "--adapt", "gain")
+    cases += numeric("train-adapt", adapt, "--adapt-places", values={**PLACES_BAD, "ranges": "0:5,7:3"}, ok={"ranges"})
+    cases += [
+        legal("train-adapt", *adapt),
+        legal("train-adapt-truth", *adapt, "--adapt-pairing", "truth"),
+        bad("train-adapt-without-mechanism", *TRAIN, "--adapt-from", "winter"),
+        bad("train-adapt-without-traversal", *TRAIN, "--adapt", "gain"),
+        bad("train-adapt-from-reference", *TRAIN, "--adapt-from", "summer", "--adapt", "gain"),
+        bad("train-adapt-from-unknown", *TRAIN, "--adapt-from", "autumn", "--adapt", "gain"),
+        bad("train-adapt-unknown-mechanism", *TRAIN, "--adapt-from", "winter", "--adapt", "whiten"),
+        bad("train-adapt-places-alone", *TRAIN, "--adapt-places", "0:5"),
+        bad("train-adapt-one-place", *adapt, "--adapt-places", "0:1"),
+    ]
     # --cluster (issue 31): a port out of range, a head nothing answers on (refused at once, not after 35 s)
     clusters = {
         "port-99999": "ray://127.0.0.1:99999",

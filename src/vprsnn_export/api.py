@@ -4,6 +4,7 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
 
     data = vx.load_dataset("synthetic:24", ["summer", "winter"], vx.Config().preprocess)
     ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
+    cfg = vx.adapt_config(data, ["summer"], "winter", cfg).config           # a per-input gain from a 2nd traversal
     cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
     readout = vx.SequenceOptions(ks=(1, 3))                                 # k, rule, velocity (gamma: the config's)
     vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
@@ -61,6 +62,7 @@ from .targets.onnx_target import write_onnx
 from .targets.reference_stepper import ReferenceStepper
 from .targets.registry import TARGETS, Target
 from .threads import set_threads
+from .trainer.adaptation import MECHANISMS, Adaptation, adapt_config
 from .trainer.batched import train_modules
 from .trainer.calibrate import calibrate
 from .trainer.pipeline import train_and_calibrate
@@ -70,9 +72,11 @@ from .version import __version__
 
 __all__ = [
     "CHANNELS",
+    "MECHANISMS",
     "STRATEGIES",
     "TARGETS",
     "VELOCITY_ESTIMATES",
+    "Adaptation",
     "Backend",
     "Channel",
     "Checkpoint",
@@ -107,6 +111,7 @@ __all__ = [
     "VerifyReport",
     "VprError",
     "__version__",
+    "adapt_config",
     "aggregate",
     "apply_readout_rule",
     "build_report",

@@ -21,10 +21,17 @@ from .errors import InvalidValueError
 
 @dataclass(frozen=True)
 class EncoderConfig:
-    """Bernoulli rate code: s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), t = 0..timesteps-1."""
+    """Bernoulli rate code: s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)), t = 0..timesteps-1.
+
+    ``input_gain`` (empty: none, the default) is the per-input gain g learnt from a second, unlabelled traversal
+    (``train --adapt-from``, :mod:`vprsnn_export.trainer.adaptation`): the encoder then reads
+    p_i = g_i x_i / max_j g_j x_j (0 for an image with no input left) instead of x_i. It is part of the model:
+    learnt, not chosen, so it is written into the checkpoint and every exported file with the rest of this section.
+    """
 
     rate_scale: float = 0.25
     timesteps: int = 300
+    input_gain: tuple[float, ...] = ()
 
 
 WTA_SCOPES = ("ensemble", "module")
@@ -147,7 +154,7 @@ class EarlyConfig:
 #: before they existed (and files that do not use them) stay byte-identical; a missing section reads as its defaults.
 OPTIONAL_SECTIONS = ("early",)
 #: Keys written only when they differ from their defaults, for the same reason (section -> keys).
-OPTIONAL_KEYS = {"train": ("timesteps", "rate_scale")}
+OPTIONAL_KEYS = {"train": ("timesteps", "rate_scale"), "encoder": ("input_gain",)}
 
 
 @dataclass(frozen=True)
@@ -210,6 +217,12 @@ class Config:
             raise InvalidValueError(
                 f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "
                 f"image_size**2 = {inputs} (preprocess.channels = {self.preprocess.channels!r})"
+            )
+        gain = self.encoder.input_gain
+        if gain and (len(gain) != inputs or not all(math.isfinite(g) and g >= 0 for g in gain) or not any(gain)):
+            raise InvalidValueError(
+                f"config.encoder.input_gain: expected {inputs} finite non-negative gains, not all 0, got {len(gain)} "
+                "values" + ("" if len(gain) != inputs else " with a negative, non-finite or all-zero gain")
             )
         if self.network.wta_scope not in WTA_SCOPES:
             raise InvalidValueError(
@@ -334,7 +347,7 @@ def check_range(key: str, value: Any) -> None:
 
 
 #: What a setting of each type must be, in the words of the error that names it.
-_EXPECTED = {int: "an integer", float: "a number", bool: "true/false", str: "a name (text)"}
+_EXPECTED = {int: "an integer", float: "a number", bool: "true/false", str: "a name (text)", tuple: "a list of numbers"}
 
 
 def _integer(value: Any) -> Any:
@@ -352,7 +365,14 @@ def _number(value: Any) -> Any:
     raise dacite.WrongTypeError(field_type=float, value=value)
 
 
-_READ = dacite.Config(strict=True, type_hooks={int: _integer, float: _number})
+def _numbers(value: Any) -> Any:
+    """A list or tuple of numbers as a tuple of floats (``encoder.input_gain``); anything else is refused."""
+    if not isinstance(value, list | tuple):
+        raise dacite.WrongTypeError(field_type=tuple, value=value)
+    return tuple(_number(v) for v in value)
+
+
+_READ = dacite.Config(strict=True, type_hooks={int: _integer, float: _number, tuple[float, ...]: _numbers})
 
 
 def _build(cls: type, data: Any, where: str) -> Any:

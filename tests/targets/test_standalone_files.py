@@ -27,7 +27,12 @@ def outsider_spikes(contract: dict, pixels: np.ndarray, place_ids: np.ndarray, t
     """Spikes (N, T, inputs) uint8 of preprocessed images (N, inputs) by the file's encoder contract."""
     steps, inputs = contract["timesteps"], contract["preprocess"]["inputs"]
     template = re.search(r"key = '([^']*)'", contract["generator_seed"]).group(1)
-    p = np.clip(np.float32(contract["rate_scale"]) * pixels.astype(np.float32), np.float32(0), np.float32(1))
+    pixels = pixels.astype(np.float32)
+    if "input_gain" in contract:  # a network adapted to a second traversal: x -> g x / max(g x) first
+        gained = pixels * np.asarray(contract["input_gain"], dtype=np.float32)
+        top = gained.max(axis=1, keepdims=True)
+        pixels = np.divide(gained, top, out=np.zeros_like(gained), where=top > 0)
+    p = np.clip(np.float32(contract["rate_scale"]) * pixels, np.float32(0), np.float32(1))
     limits = np.ceil(p.astype(np.float64) * 2.0**24)
     out = np.empty((len(place_ids), steps, inputs), dtype=np.uint8)
     for n, place_id in enumerate(place_ids):  # one generator per presentation, as the contract states
@@ -178,6 +183,28 @@ def test_an_ensembles_onnx_file_alone_makes_the_projects_decisions(tmp_path):
     expected_places, expected_confidence = project_decisions(model, data)
     assert (places >= FIRST_ID).sum() > ROUTE_PLACES // 2 and np.array_equal(places, expected_places)
     np.testing.assert_allclose(confidence, expected_confidence, rtol=1e-12, atol=1e-15)
+
+
+def test_an_adapted_networks_files_alone_make_the_projects_decisions(tmp_path):
+    """A network with a per-input gain learnt from the query traversal's frames (train --adapt-from): the gain is
+    in both files' encoder contract, and the outsider applies it as the contract says."""
+    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.targets.nir_target import write_nir
+    from vprsnn_export.targets.onnx_target import write_onnx
+
+    rng = np.random.default_rng(3)
+    ckpt, data = train_unseen(**{"encoder.input_gain": rng.uniform(0.2, 2.0, 1568).tolist()})
+    model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+    expected_places, expected_confidence = project_decisions(model, data)
+    for outsider, path in (
+        (outsider_onnx, write_onnx(model, tmp_path / "m.onnx")),
+        (outsider_nir, write_nir(model, tmp_path / "m.nir")),
+    ):
+        places, confidence = outsider(str(path), data.traversal(QUERY), data.place_ids, QUERY)
+        assert np.array_equal(places, expected_places)
+        np.testing.assert_allclose(confidence, expected_confidence, rtol=1e-12, atol=1e-15)
+    plain, _ = train_unseen()  # the gain changes the spikes, so a file without it would not decide alike
+    assert not np.array_equal(plain.weights, ckpt.weights)
 
 
 def test_the_nir_file_alone_makes_the_projects_decisions(exported):

@@ -114,4 +114,6 @@ def run(args: argparse.Namespace) -> int:
         )
         if result.cost is not None:
             print(result.cost.line(), file=sys.stderr)
+        if ckpt.data.get("adaptation"):
+            print(f"the network's input is adapted: {ckpt.data['adaptation']}", file=sys.stderr)
     return 0

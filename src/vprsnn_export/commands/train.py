@@ -10,6 +10,7 @@ from pathlib import Path
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..config import Config
 from ..data.dataset import dataset_files, load_dataset, selection_record
+from ..errors import InvalidValueError
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output
 from ._common import add_config_options, add_data_options, add_runtime_options, config_from_args, parse_names
@@ -22,6 +23,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", required=True, help="checkpoint file to write (.npz)")
     parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     add_config_options(parser)
+    adapt = parser.add_argument_group("adaptation from a second, unlabelled traversal (docs/model.md)")
+    adapt.add_argument(
+        "--adapt-from",
+        metavar="TRAVERSAL",
+        help="a second traversal of the route to learn an adaptation from (never used as a reference nor to "
+        "calibrate); needs --adapt, since no mechanism lifted recognition on every fold tried "
+        "(docs/research/route-recognition.md section 8)",
+    )
+    adapt.add_argument(
+        "--adapt",
+        choices=ADAPTATIONS,
+        help="what to learn from it: gain (a per-input gain, encoder.input_gain; it lifted cosine on every quarter "
+        "of the Nordland dev route and on no half of the LENS example route)",
+    )
+    adapt.add_argument(
+        "--adapt-places",
+        metavar="RANGES",
+        help="the places whose frames of that traversal it may learn from, START:COUNT ranges joined by commas "
+        "(default: every selected place)",
+    )
+    adapt.add_argument(
+        "--adapt-pairing",
+        choices=("sequence", "truth"),
+        default="sequence",
+        help="how its frames are paired with reference places: sequence (matching 10 frames along the diagonal, "
+        "no labels) or truth (by place id, for frame-aligned data) (default: %(default)s)",
+    )
     add_runtime_options(parser)
     parser.add_argument(
         "--cluster",
@@ -31,21 +59,44 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run, output_kind="file")
 
 
+ADAPTATIONS = ("gain",)  # trainer.adaptation.MECHANISMS, named here so that --help loads no torch (tested)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
+    from ..trainer.adaptation import adapt_config, parse_place_ranges
     from ..trainer.pipeline import train_and_calibrate
 
     inputs = (args.data, args.subset, Path(args.data) / "places.csv")
     check_output(args.out, overwrite=args.force, inputs=inputs)  # before minutes of training, not after
     cfg = config_from_args(args)
     references = parse_names(args.reference, "--reference")
+    if (args.adapt is None) != (args.adapt_from is None) or (args.adapt_places and not args.adapt_from):
+        raise InvalidValueError(
+            "--adapt-from TRAVERSAL and --adapt MECHANISM go together (no mechanism is a default: none lifted "
+            "recognition on every fold tried, docs/research/route-recognition.md section 8); --adapt-places needs both"
+        )
+    adapt_places = None if args.adapt_places is None else parse_place_ranges(args.adapt_places)
     device = resolve_device(args.device)
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
+    traversals = references + ([args.adapt_from] if args.adapt_from and args.adapt_from not in references else [])
     dataset = load_dataset(
-        args.data, references, cfg.preprocess, subset=args.subset, places=args.places, progress=not args.quiet
+        args.data, traversals, cfg.preprocess, subset=args.subset, places=args.places, progress=not args.quiet
     )
     check_output(args.out, overwrite=args.force, inputs=dataset_files(dataset, args.subset))  # nor a GT file
     started = time.perf_counter()
+    record = None
+    if args.adapt_from:
+        adaptation = adapt_config(
+            dataset,
+            references,
+            args.adapt_from,
+            cfg,
+            mechanism=args.adapt,
+            places=adapt_places,
+            pairing=args.adapt_pairing,
+        )
+        cfg, record = adaptation.config, adaptation.summary
     ckpt = train_and_calibrate(
         dataset,
         references,
@@ -55,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         selection=selection_record(args.subset, args.places),
         threads=args.threads,
         cluster=cluster,
+        adaptation=record,
     )
     path = save_checkpoint(args.out, ckpt)
     warning = capacity_warning(len(dataset.place_ids), cfg)  # after the run: an error stays the only stderr line
@@ -65,7 +117,15 @@ def run(args: argparse.Namespace) -> int:
         f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
         f"in {time.perf_counter() - started:.1f} s on {where} ({args.threads} thread(s)); wrote {path}"
     )
+    print(adaptation_line(record))
     return 0
+
+
+def adaptation_line(summary: str | None) -> str:
+    """One line on what the network adapted to (or that no second traversal was named)."""
+    if summary is None:
+        return "adaptation: none (no second traversal named; --adapt-from TRAVERSAL --adapt gain learns one)"
+    return f"adaptation: {summary}"
 
 
 def capacity_warning(n_places: int, cfg: Config) -> str | None:

@@ -50,9 +50,25 @@ def pixel_array(images: np.ndarray | torch.Tensor, name: str = "images") -> np.n
         return np.asarray(array, dtype=np.float32)
 
 
+def adapted_inputs(pixels: np.ndarray, gain: Sequence[float]) -> np.ndarray:
+    """The encoder's input after the learnt per-input gain g (``encoder.input_gain``), float32 (N, D):
+
+        x'_i = g_i x_i / max_j g_j x_j      (0 for an image whose gained inputs are all 0)
+
+    so every image keeps a largest input of 1, as the preprocessing gives it; no gain: x unchanged.
+    """
+    if not len(gain):
+        return pixels
+    if pixels.ndim != 2 or pixels.shape[1] != len(gain):
+        raise InvalidValueError(f"images: expected (N, {len(gain)}) inputs for the encoder's gain, got {pixels.shape}")
+    gained = pixels * np.asarray(gain, dtype=np.float32)
+    top = gained.max(axis=1, keepdims=True) if gained.size else gained
+    return np.divide(gained, top, out=np.zeros_like(gained), where=top > 0)
+
+
 def firing_probabilities(images: np.ndarray | torch.Tensor, cfg: EncoderConfig) -> torch.Tensor:
-    """p_i = clip(rate_scale * pixel_i, 0, 1), shape (N, D), float32."""
-    pixels = torch.as_tensor(pixel_array(images))
+    """p_i = clip(rate_scale * x'_i, 0, 1), shape (N, D), float32 (x': :func:`adapted_inputs`)."""
+    pixels = torch.as_tensor(adapted_inputs(pixel_array(images), cfg.input_gain))
     return torch.clamp(cfg.rate_scale * pixels, 0.0, 1.0).nan_to_num(nan=0.0)
 
 

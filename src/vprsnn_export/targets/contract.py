@@ -5,6 +5,7 @@ of place id ``place_id`` in the traversal named ``traversal``, bit for bit
 :func:`vprsnn_export.data.encoding.query_spikes`:
 
     p_i     = clip(rate_scale x_i, 0, 1)                                              (float32)
+              (with a learnt ``input_gain`` g: x_i -> g_i x_i / max_j g_j x_j first, 0 when that max is 0)
     g       = int.from_bytes(sha256("vprsnn/v1|<seed>|query|<traversal>|<place_id>|0")[:8], "little") mod 2**63
     w_k     = the k-th 32-bit word of MT19937 after init_genrand(g mod 2**32)        (k = t inputs + i)
     s[t, i] = (w_k mod 2**24) < ceil(p_i 2**24)
@@ -43,7 +44,13 @@ def encoder_contract(cfg: Config) -> dict[str, Any]:
         "rate_scale": enc.rate_scale,
         "timesteps": enc.timesteps,
         "seed": cfg.seed,
-        "probability": "p_i = clip(rate_scale * x_i, 0, 1) in float32",
+        "probability": "p_i = clip(rate_scale * x_i, 0, 1) in float32"
+        + (
+            "; first x_i -> g_i x_i / max_j g_j x_j (float32; 0 when that max is 0) with g = input_gain"
+            if enc.input_gain
+            else ""
+        ),
+        **({"input_gain": list(enc.input_gain)} if enc.input_gain else {}),
         "generator_seed": "g = int.from_bytes(hashlib.sha256(key.encode('utf-8')).digest()[:8], 'little') "
         f"& (2**63 - 1), key = 'vprsnn/v1|{cfg.seed}|{STREAM_QUERY}|<traversal>|<place_id>|0' "
         "(the query traversal's name and the query's place id, a decimal integer)",

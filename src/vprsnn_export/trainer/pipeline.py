@@ -31,6 +31,7 @@ def train_and_calibrate(
     selection: dict | None = None,
     threads: int | None = None,
     cluster: Cluster | None = None,
+    adaptation: str | None = None,
 ) -> Checkpoint:
     """Train on every image of the reference traversals, calibrate S^R, return the checkpoint (CPU by default).
 
@@ -39,6 +40,7 @@ def train_and_calibrate(
     reference place to the whole ensemble (the hard WTA within config.wta_group). ``threads``: CPU
     threads for training and calibration (default: torch's thread count). ``cluster``: one task
     per module on that cluster (:mod:`.sharded`), the same checkpoint bit for bit; CPU workers.
+    ``adaptation``: what :func:`.adaptation.adapt_config` learnt into ``cfg``, in one line (kept in ``data``).
     """
     require_type("dataset", dataset, Dataset)
     require_type("cfg", cfg, Config)
@@ -83,6 +85,11 @@ def train_and_calibrate(
         calibration=calibration,
         reference_place_ids=np.asarray(dataset.place_ids, dtype=np.int64),
         reference_traversals=list(references),
-        data={"source": dataset.source, "manifest_sha256": dataset.manifest_sha256, **(selection or {})},
+        data={
+            "source": dataset.source,
+            "manifest_sha256": dataset.manifest_sha256,
+            **(selection or {}),
+            **({"adaptation": adaptation} if adaptation else {}),
+        },
         history=trained.history,
     )

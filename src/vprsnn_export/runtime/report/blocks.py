@@ -432,6 +432,15 @@ def tolerance_blocks(report: VerifyReport) -> list[Block]:
     ]
 
 
+def summarised(config: dict) -> dict:
+    """A config for reading: a learnt ``encoder.input_gain`` as its size and range, not 1568 numbers."""
+    gain = config.get("encoder", {}).get("input_gain") if isinstance(config.get("encoder"), dict) else None
+    if not gain:
+        return config
+    text = f"{len(gain)} learnt gains from {min(gain):.3g} to {max(gain):.3g} (mean {sum(gain) / len(gain):.3g})"
+    return {**config, "encoder": {**config["encoder"], "input_gain": text}}
+
+
 def provenance_blocks(report: VerifyReport) -> list[Block]:
     columns = {
         "network": lambda i: network_label(report.runs[i], i),
@@ -442,13 +451,15 @@ def provenance_blocks(report: VerifyReport) -> list[Block]:
         "queries": lambda i: str(report.runs[i].n_queries),
         "exports": lambda i: str(report.runs[i].export_dir or "-"),
     }
+    if any(run.checkpoint_data.get("adaptation") for run in report.runs):  # train --adapt-from
+        columns["adaptation"] = lambda i: report.runs[i].checkpoint_data.get("adaptation") or "none"
     if report.command:
         text = " ".join(map(one_line, report.command))
     else:
         text = "\n".join(" ".join(map(one_line, c)) for c in report.commands or () if c) or "-"
 
     def dump(title: str, data: Mapping) -> Block:
-        return Block("pre", json.dumps(dict(data), indent=2, sort_keys=True), title=title)
+        return Block("pre", json.dumps(summarised(dict(data)), indent=2, sort_keys=True), title=title)
 
     return [
         Block("h2", "Networks"),
