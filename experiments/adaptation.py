@@ -21,8 +21,15 @@ import numpy as np
 from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.data.encoding import adapted_inputs
-from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_similarities
-from vprsnn_export.readout.scoring import Readout, nearest_neighbour_rows
+from vprsnn_export.readout.baseline import (
+    cosine_similarities,
+    diagonal_sums,
+    nearest_neighbour,
+    sad_distances,
+    sad_similarities,
+)
+from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.readout.scoring import Readout, scored_decisions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.adaptation import adapt_config, place_ranges
@@ -59,34 +66,59 @@ def route_config(settings: Settings, seed: int) -> Config:
     return preset("dog").replace(**{**settings.overrides, "seed": seed, "train.module_size": size})
 
 
-def rows_of(rows: list, matcher: str) -> dict[str, Any]:
-    """{k: {accuracy, r_at_100p}} of the W+Prob (SNN) or nearest-neighbour rows."""
+#: Per k, one query's decision: (correct, confidence) arrays of the fold's queries.
+Decisions = dict[int, tuple[np.ndarray, np.ndarray]]
+
+
+def snn_decisions(ckpt, counts: np.ndarray, ids: np.ndarray, test: np.ndarray, options: SequenceOptions) -> Decisions:
+    """W+Prob at every k (product rule, velocity 1) of the fold's queries against every reference place."""
+    sequences = Readout.of(ckpt.calibration, ckpt.config, options).scored(counts[test], ids, ids[test])[2]
+    return {k: scored_decisions(sequences[k], "wprob", ids, ids[test], 0) for k in KS}
+
+
+def nn_decisions(similarities: np.ndarray, ids: np.ndarray, test: np.ndarray) -> Decisions:
+    """Nearest neighbour on k frames summed along the diagonal, margin confidence (``nearest_neighbour_rows``)."""
     out = {}
-    for row in rows:
-        r = row.to_dict()
-        if r["strategy"] in ("wprob", "cosine", "sad") and r["k"] in KS:
-            out[str(r["k"])] = {"accuracy": r["accuracy"], "r_at_100p": r["r_at_100p"]}
-    return {"matcher": matcher, "scores": out}
+    for k in KS:
+        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k))
+        out[k] = (is_correct(predicted_place_ids(predicted, ids), ids[test], 0), confidence)
+    return out
 
 
-def snn_rows(ckpt, counts: np.ndarray, ids: np.ndarray, test: np.ndarray, options: SequenceOptions) -> list:
-    return Readout.of(ckpt.calibration, ckpt.config, options).scored(counts[test], ids, ids[test])[0]
-
-
-def template_rows(data: Dataset, settings: Settings, gain, test: np.ndarray, options: SequenceOptions) -> list[dict]:
+def template_decisions(data: Dataset, settings: Settings, gain, test: np.ndarray) -> dict[str, Decisions]:
     """Cosine and SAD on the plain input, cosine on the adapted one, the fold's queries against every place."""
-    ids = data.place_ids
+    ids = np.asarray(data.place_ids)
     reference, query = data.traversal(settings.reference), data.traversal(settings.query)[test]
     adapted = cosine_similarities(adapted_inputs(reference, gain), adapted_inputs(query, gain))
+    return {
+        "cosine, adapted": nn_decisions(adapted, ids, test),
+        "cosine": nn_decisions(cosine_similarities(reference, query), ids, test),
+        "SAD": nn_decisions(sad_similarities(sad_distances(reference, query)), ids, test),
+    }
+
+
+def metrics_of(decisions: Decisions) -> dict[str, dict[str, float]]:
+    """{k: {accuracy, r_at_100p}} of per-query decisions."""
+    out = {}
+    for k, (correct, confidence) in decisions.items():
+        m = pr_metrics(correct, confidence)
+        out[str(k)] = {"accuracy": m["accuracy"], "r_at_100p": m["r_at_100p"]}
+    return out
+
+
+def pooled(per_fold: list[dict[str, Decisions]]) -> list[dict[str, Any]]:
+    """Every fold's decisions together: the whole route, each query decided by the network of its own fold."""
     return [
-        rows_of(nearest_neighbour_rows(adapted, "cosine", ids, ids[test], options), "cosine, adapted"),
-        rows_of(
-            nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids[test], options), "cosine"
-        ),
-        rows_of(
-            nearest_neighbour_rows(sad_similarities(sad_distances(reference, query)), "sad", ids, ids[test], options),
-            "SAD",
-        ),
+        {
+            "matcher": matcher,
+            "scores": metrics_of(
+                {
+                    k: tuple(np.concatenate([fold[matcher][k][i] for fold in per_fold]) for i in (0, 1))  # type: ignore[misc]
+                    for k in KS
+                }
+            ),
+        }
+        for matcher in MATCHERS
     ]
 
 
@@ -99,7 +131,10 @@ def run(settings: Settings) -> dict:
     ids = np.asarray(data.place_ids)
     folds = np.array_split(np.arange(len(ids)), fold_count(len(ids)))
     results: list[dict[str, Any]] = []
+    whole: list[dict[str, Any]] = []
+    gains: dict[str, list[float]] = {}  # per fold: the pairing and the gain depend on the images only, not the seed
     for seed in settings.seeds:
+        per_fold: list[dict[str, Decisions]] = []
         cfg = route_config(settings, seed)
         plain = timed_checkpoint(settings, data, cfg, "adaptation-plain")
         plain_counts = timed_query_counts(settings, data, cfg, "adaptation-plain", plain.checkpoint).counts
@@ -110,13 +145,16 @@ def run(settings: Settings) -> dict:
             clock = time.perf_counter()
             adaptation = adapt_config(data, [settings.reference], settings.query, cfg, places=ids[learn])
             learn_seconds = time.perf_counter() - clock
+            gains.setdefault(str(f), [round(g, 4) for g in adaptation.config.encoder.input_gain])
             adapted = timed_checkpoint(settings, data, adaptation.config, f"adaptation-fold{f}")
             counts = timed_query_counts(settings, data, adaptation.config, f"adaptation-fold{f}", adapted.checkpoint)
-            rows = [
-                rows_of(snn_rows(adapted.checkpoint, counts.counts, ids, test, options), "SNN, adapted"),
-                rows_of(snn_rows(plain.checkpoint, plain_counts, ids, test, options), "SNN"),
-                *template_rows(data, settings, adaptation.config.encoder.input_gain, test, options),
-            ]
+            decided = {
+                "SNN, adapted": snn_decisions(adapted.checkpoint, counts.counts, ids, test, options),
+                "SNN": snn_decisions(plain.checkpoint, plain_counts, ids, test, options),
+                **template_decisions(data, settings, adaptation.config.encoder.input_gain, test),
+            }
+            per_fold.append(decided)
+            rows = [{"matcher": m, "scores": metrics_of(decided[m])} for m in MATCHERS]
             results.append(
                 {
                     "seed": seed,
@@ -130,6 +168,7 @@ def run(settings: Settings) -> dict:
                     "rows": rows,
                 }
             )
+        whole.append({"seed": seed, "rows": pooled(per_fold)})
     return {
         "experiment": NAME,
         "data": settings.data,
@@ -140,14 +179,16 @@ def run(settings: Settings) -> dict:
         "mechanism": MECHANISM,
         "ks": list(KS),
         "results": results,
-        "summary": summarise(results),
+        "whole_route": whole,
+        "image_size": base.preprocess.image_size,
+        "gains": gains,
+        "summary": summarise(results) + summarise([dict(w, fold="all", places="all") for w in whole]),
         "provenance": provenance(settings, started),
     }
 
 
 def summarise(results: list[dict]) -> list[dict]:
-    """Per fold, matcher and k: accuracy and R@100P, mean ± std over seeds; and whether the adapted SNN is at or
-    above cosine on the plain input (the issue's rule) and above the plain SNN."""
+    """Per fold (or ``"all"``: the folds pooled), matcher and k: accuracy and R@100P, mean ± std over seeds."""
     out = []
     for fold in sorted({r["fold"] for r in results}):
         mine = [r for r in results if r["fold"] == fold]
@@ -167,7 +208,7 @@ def summarise(results: list[dict]) -> list[dict]:
     return out
 
 
-def cell(summary: list[dict], fold: int, matcher: str, k: int) -> dict:
+def cell(summary: list[dict], fold: int | str, matcher: str, k: int) -> dict:
     return next(s for s in summary if s["fold"] == fold and s["matcher"] == matcher and s["k"] == k)
 
 
@@ -240,4 +281,31 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         f"{max(r['plain_train_seconds'] for r in results['results']):.0f} s (cached networks keep the seconds of the "
         "run that trained them).",
     ]
+    if results.get("gains"):
+        gain_plot(out_dir / f"{stem}.png", results["gains"], results["image_size"])
+        lines += [
+            "",
+            f"![the learnt gain of each fold]({stem}.png)",
+            "",
+            "The gain of each fold as an image: each row of the resized image holds its ON inputs, then its OFF inputs.",
+        ]
     return "\n".join(lines) + "\n"
+
+
+def gain_plot(path: Path, gains: dict[str, list[float]], size: int) -> Path:
+    """One panel per fold: g_i laid out as the input image (ON | OFF side by side in each row)."""
+    import matplotlib.pyplot as plt
+
+    from .plots import save_figure
+
+    maps = {fold: np.asarray(g).reshape(size, -1) for fold, g in gains.items()}
+    top = max(float(m.max()) for m in maps.values())
+    fig, axes = plt.subplots(1, len(maps), figsize=(3.2 * len(maps), 2.2), squeeze=False)
+    for ax, (fold, image) in zip(axes[0], maps.items(), strict=True):
+        shown = ax.imshow(image, cmap="viridis", vmin=0, vmax=top)
+        ax.set_title(f"fold {fold}: gain, ON | OFF", fontsize=9)
+        ax.axvline(image.shape[1] / 2 - 0.5, color="white", linewidth=0.8)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.colorbar(shown, ax=axes[0].tolist(), shrink=0.8, label="g_i")
+    return save_figure(fig, path)

@@ -44,3 +44,14 @@ def test_the_page_names_its_data_set(results, tmp_path):
     assert adaptation.stem(Settings()) == "adaptation"
     lens = Settings(**data_settings("../shared/data/lens_example_davis128"))
     assert adaptation.stem(lens) == "adaptation_lens_example_davis128"
+
+
+def test_the_whole_route_pools_the_folds_decisions(results):
+    """At k=1 a query's decision does not depend on its fold's other queries: the pooled accuracy is the mean of
+    the two equal folds'."""
+    for whole in results["whole_route"]:
+        folds = [r for r in results["results"] if r["seed"] == whole["seed"]]
+        for i, row in enumerate(whole["rows"]):
+            per_fold = [f["rows"][i]["scores"]["1"]["accuracy"] for f in folds]
+            assert row["scores"]["1"]["accuracy"] == pytest.approx(sum(per_fold) / 2)
+    assert {s["fold"] for s in results["summary"]} == {0, 1, "all"}

@@ -110,7 +110,8 @@ def adapt_config(
     """Learn ``mechanism`` from the reference images and the frames of ``traversal`` at ``places`` (default: every
     place of the data set), paired by sequence matching or, with ``pairing="truth"``, by place id.
 
-    ``traversal`` must not be a reference (a traversal used for adaptation is never a reference nor calibrates).
+    With several reference traversals, a place's reference image is their mean. ``traversal`` must not be a
+    reference (a traversal used for adaptation is never a reference nor calibrates).
     """
     learner = MECHANISMS.get(mechanism)
     if traversal in references:
