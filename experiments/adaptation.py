@@ -35,6 +35,7 @@ from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.adaptation import adapt_config, place_ranges
 
 from .common import Settings, check_index_scored, provenance, timed_checkpoint, timed_query_counts
+from .plots import save_figure
 
 NAME = "adaptation"
 DESCRIPTION = (
@@ -242,6 +243,19 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
             )
     lines += [
         "",
+        "**The whole route**: every fold's queries together, each decided by the network (and the gain) of its own "
+        "fold, so no query is seen by the learning that decides it:",
+        "",
+        "| matcher | k=1 | k=5 | k=10 |",
+        "|---|---|---|---|",
+    ]
+    for matcher in MATCHERS:
+        cells = [cell(summary, "all", matcher, k) for k in KS]
+        lines.append(
+            f"| {matcher} | " + " | ".join(f"{pct(c['accuracy'])} / {pct(c['r_at_100p'])}" for c in cells) + " |"
+        )
+    lines += [
+        "",
         "Change of accuracy in points, mean over seeds (adapted SNN minus the matcher), per fold, k = 1 / 5 / 10:",
         "",
     ]
@@ -275,7 +289,7 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
         "",
         f"The adapted SNN is at or above cosine on the plain input at every k on every fold: **{'yes' if every else 'no'}**.",
         "",
-        f"Seconds: learning the gain {min(learn):.1f}-{max(learn):.1f} s per fold; training an adapted ensemble "
+        f"Seconds: learning the gain {min(learn):.2f}-{max(learn):.2f} s per fold; training an adapted ensemble "
         f"{min(seconds):.0f}-{max(seconds):.0f} s, the plain one "
         f"{min(r['plain_train_seconds'] for r in results['results']):.0f}-"
         f"{max(r['plain_train_seconds'] for r in results['results']):.0f} s (cached networks keep the seconds of the "
@@ -295,8 +309,6 @@ def render(results: dict, out_dir: Path, stem: str = NAME) -> str:
 def gain_plot(path: Path, gains: dict[str, list[float]], size: int) -> Path:
     """One panel per fold: g_i laid out as the input image (ON | OFF side by side in each row)."""
     import matplotlib.pyplot as plt
-
-    from .plots import save_figure
 
     maps = {fold: np.asarray(g).reshape(size, -1) for fold, g in gains.items()}
     top = max(float(m.max()) for m in maps.values())
