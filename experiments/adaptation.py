@@ -21,15 +21,9 @@ import numpy as np
 from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.data.encoding import adapted_inputs
-from vprsnn_export.readout.baseline import (
-    cosine_similarities,
-    diagonal_sums,
-    nearest_neighbour,
-    sad_distances,
-    sad_similarities,
-)
-from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
-from vprsnn_export.readout.scoring import Readout, scored_decisions
+from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_similarities
+from vprsnn_export.readout.metrics import pr_metrics
+from vprsnn_export.readout.scoring import Readout, nearest_neighbour_decisions, scored_decisions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.adaptation import adapt_config, place_ranges
@@ -77,24 +71,22 @@ def snn_decisions(ckpt, counts: np.ndarray, ids: np.ndarray, test: np.ndarray, o
     return {k: scored_decisions(sequences[k], "wprob", ids, ids[test], 0) for k in KS}
 
 
-def nn_decisions(similarities: np.ndarray, ids: np.ndarray, test: np.ndarray) -> Decisions:
-    """Nearest neighbour on k frames summed along the diagonal, margin confidence (``nearest_neighbour_rows``)."""
-    out = {}
-    for k in KS:
-        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k))
-        out[k] = (is_correct(predicted_place_ids(predicted, ids), ids[test], 0), confidence)
-    return out
-
-
-def template_decisions(data: Dataset, settings: Settings, gain, test: np.ndarray) -> dict[str, Decisions]:
-    """Cosine and SAD on the plain input, cosine on the adapted one, the fold's queries against every place."""
+def template_decisions(
+    data: Dataset, settings: Settings, gain, test: np.ndarray, options: SequenceOptions
+) -> dict[str, Decisions]:
+    """Cosine and SAD on the plain input, cosine on the adapted one, the fold's queries against every place (nearest
+    neighbour on k frames summed along the diagonal, margin confidence: ``nearest_neighbour_decisions``)."""
     ids = np.asarray(data.place_ids)
+
+    def nn_decisions(similarities: np.ndarray) -> Decisions:
+        return nearest_neighbour_decisions(similarities, ids, ids[test], options)
+
     reference, query = data.traversal(settings.reference), data.traversal(settings.query)[test]
     adapted = cosine_similarities(adapted_inputs(reference, gain), adapted_inputs(query, gain))
     return {
-        "cosine, adapted": nn_decisions(adapted, ids, test),
-        "cosine": nn_decisions(cosine_similarities(reference, query), ids, test),
-        "SAD": nn_decisions(sad_similarities(sad_distances(reference, query)), ids, test),
+        "cosine, adapted": nn_decisions(adapted),
+        "cosine": nn_decisions(cosine_similarities(reference, query)),
+        "SAD": nn_decisions(sad_similarities(sad_distances(reference, query))),
     }
 
 
@@ -152,7 +144,7 @@ def run(settings: Settings) -> dict:
             decided = {
                 "SNN, adapted": snn_decisions(adapted.checkpoint, counts.counts, ids, test, options),
                 "SNN": snn_decisions(plain.checkpoint, plain_counts, ids, test, options),
-                **template_decisions(data, settings, adaptation.config.encoder.input_gain, test),
+                **template_decisions(data, settings, adaptation.config.encoder.input_gain, test, options),
             }
             per_fold.append(decided)
             rows = [{"matcher": m, "scores": metrics_of(decided[m])} for m in MATCHERS]

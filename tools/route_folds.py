@@ -42,6 +42,7 @@ from vprsnn_export.readout.baseline import (
     sad_similarities,
 )
 from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
+from vprsnn_export.trainer.adaptation import input_gain, sequence_pairs
 
 KS = (1, 5, 10)
 
@@ -62,25 +63,6 @@ def score(
     return out
 
 
-def sequence_pairs(reference: np.ndarray, frames: np.ndarray, segments: list[np.ndarray], k: int) -> np.ndarray:
-    """The reference place matched to each query frame without labels: argmax_l of cosine summed over the k most
-    recent frames along the diagonal (velocity 1), each contiguous segment of the stream on its own."""
-    out = np.empty(len(frames), dtype=np.int64)
-    start = 0
-    for seg in segments:
-        sims = cosine_similarities(reference, frames[start : start + len(seg)])
-        out[start : start + len(seg)] = np.argmax(diagonal_sums(np.clip(sims, 0, None), k), axis=1)
-        start += len(seg)
-    return out
-
-
-def gain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """g_i = sqrt(Var_between,i / (Var_within,i + mean_j Var_within,j)) from pairs (a_p, b_p)."""
-    within = np.mean((a - b) ** 2, axis=0) / 4
-    between = np.var((a + b) / 2, axis=0)
-    return np.sqrt(between / (within + within.mean()))
-
-
 def whitener(a: np.ndarray, b: np.ndarray, lam: float) -> np.ndarray:
     """(Sigma_within + lam mean eig I)^(-1/2), Sigma_within = mean_p d_p d_p^T, d_p = (a_p - b_p) / sqrt(2)."""
     d = (a - b) / np.sqrt(2)
@@ -97,14 +79,14 @@ def adapters(lams: tuple[float, ...]) -> dict[str, Adapter]:
     """Each candidate: (reference, queries, pair references a, pair frames b) -> adapted (reference, queries)."""
 
     def by_gain(ref, qry, a, b):
-        g = gain(a, b)
+        g = input_gain(a, b)
         return ref * g, qry * g
 
     def by_centre(ref, qry, a, b):
         return ref - ref.mean(axis=0), qry - b.mean(axis=0)
 
     def by_both(ref, qry, a, b):
-        g = gain(a, b)
+        g = input_gain(a, b)
         return (ref - ref.mean(axis=0)) * g, (qry - b.mean(axis=0)) * g
 
     out: dict[str, Adapter] = {"gain": by_gain, "centre": by_centre, "gain+centre": by_both}
@@ -146,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.true_pairs:
             pairs = np.concatenate(learn)
         else:
-            pairs = sequence_pairs(ref, frames, learn, args.pair_k)
+            pairs = sequence_pairs(ref, frames, np.concatenate(learn), args.pair_k)
         pair_ok = float(np.mean(pairs == np.concatenate(learn)))
         a, b = ref[pairs], frames
         results = {

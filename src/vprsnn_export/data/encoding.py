@@ -62,7 +62,7 @@ def adapted_inputs(pixels: np.ndarray, gain: Sequence[float]) -> np.ndarray:
     if pixels.ndim != 2 or pixels.shape[1] != len(gain):
         raise InvalidValueError(f"images: expected (N, {len(gain)}) inputs for the encoder's gain, got {pixels.shape}")
     gained = pixels * np.asarray(gain, dtype=np.float32)
-    top = gained.max(axis=1, keepdims=True) if gained.size else gained
+    top = gained.max(axis=1, keepdims=True)
     return np.divide(gained, top, out=np.zeros_like(gained), where=top > 0)
 
 

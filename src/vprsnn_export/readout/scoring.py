@@ -103,13 +103,27 @@ def nearest_neighbour_rows(
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    rows = []
+    decisions = nearest_neighbour_decisions(
+        similarities, reference_place_ids, query_place_ids, options, frame_positions
+    )
+    return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
+
+
+def nearest_neighbour_decisions(
+    similarities: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    options: SequenceOptions,
+    frame_positions: np.ndarray | None = None,
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
+    out = {}
     for k in sorted(set(options.ks)):
         summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
         predicted, confidence = nearest_neighbour(summed)
         correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
-        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
-    return rows
+        out[k] = (correct, confidence)
+    return out
 
 
 def region_accuracies(
