@@ -47,8 +47,10 @@ import atexit
 import contextlib
 import importlib
 import importlib.util
+import io
 import json
 import os
+import pickle
 import re
 import shlex
 import shutil
@@ -701,6 +703,44 @@ def _objects(items: Sequence[Any]) -> np.ndarray:
     return array
 
 
+class _Reduced:
+    """An object whose pickle is exactly ``reduced``: (callable, args[, state])."""
+
+    def __init__(self, *reduced: Any) -> None:
+        self.reduced = reduced
+
+    def __reduce__(self) -> Any:
+        return self.reduced
+
+
+def _object_npy(body: bytes, shape: tuple[int, ...]) -> bytes:
+    """A .npy file of an object array whose pickle is ``body`` (a header numpy writes, then the opcodes)."""
+    handle = io.BytesIO()
+    np.lib.format.write_array_header_1_0(handle, {"descr": "|O", "fortran_order": False, "shape": shape})
+    return handle.getvalue() + body
+
+
+def crafted_ground_truths(n: int) -> dict[str, bytes]:
+    """Pickles built only from numpy's own array-rebuilding globals (issue 45): through numpy's loader they read
+    raw bytes as object pointers (SIGSEGV), allocate a billion elements over 8 bytes, or nest 200,000 deep."""
+    rebuild = np._core.multiarray._reconstruct
+
+    def forged(shape: tuple[int, ...], dtype: Any, data: Any) -> _Reduced:
+        return _Reduced(rebuild, (np.ndarray, (0,), b"b"), (1, shape, dtype, False, data))
+
+    def file_of(first: Any) -> bytes:
+        return _object_npy(pickle.dumps(_objects([first, *[[q] for q in range(1, n)]]), protocol=3), (n,))
+
+    flagged = _Reduced(np.dtype, ("i8", False, True), (3, "<", None, None, None, -1, -1, 1))
+    return {
+        "forged-object-bytes": file_of(forged((2,), np.dtype(object), b"\x41" * 16)),
+        "forged-dtype-flags": file_of(forged((2,), flagged, b"\x41" * 16)),
+        "huge-over-8-bytes": file_of(forged((10**9,), np.dtype("i8"), b"\x01" * 8)),
+        "long-string": file_of("x" * 20_000_000),
+        "deep-nesting": _object_npy(b"\x80\x03" + b"]" * 200_000 + b"a" * 199_999 + b".", (n,)),
+    }
+
+
 def ground_truth_variants(n: int) -> dict[str, tuple[str, Any]]:
     """Defective ground truths of an n-frame (summer, winter) pair: name -> (file name, array or CSV text)."""
     eye = np.eye(n, dtype=np.int64)
@@ -734,6 +774,7 @@ def ground_truth_variants(n: int) -> dict[str, tuple[str, Any]]:
         "csv-float": (csv, pairs.replace("1,1\n", "1,1.0\n")),
         "csv-columns": (csv, pairs.replace("query,reference", "q,r")),
         "disagree": ("both", (eye, pairs.replace("1,1\n", "1,2\n"))),
+        **{name: (npy, content) for name, content in crafted_ground_truths(n).items()},
     }
 
 

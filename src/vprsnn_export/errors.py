@@ -6,6 +6,13 @@ from pathlib import Path
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1
+MAX_MESSAGE = 2000  # characters of one error message; a file's content never makes a longer line
+
+
+def brief(value: object, width: int = 40) -> str:
+    """``repr(value)`` cut to ``width`` characters (a long container by its type alone), for quoting a file's content."""
+    text = repr(value) if not isinstance(value, list | tuple | dict) or len(value) < 64 else f"<{type(value).__name__}>"
+    return text if len(text) <= width else f"{text[: width - 3]}..."
 
 
 class VprError(Exception):
@@ -18,7 +25,10 @@ class VprError(Exception):
 
     def __init__(self, message: str, path: str | Path | None = None) -> None:
         self.path = None if path is None else Path(path)
-        super().__init__(f"{path}: {message}" if path is not None else message)
+        text = f"{path}: {message}" if path is not None else message
+        text = " ".join(text.splitlines()) if "\n" in text else text
+        cut = f"... ({len(text) - MAX_MESSAGE} characters cut)"
+        super().__init__(text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - len(cut)] + cut)
 
 
 class DataError(VprError):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Iterable
+from collections.abc import Sequence
 from numbers import Integral
 from pathlib import Path
 
@@ -29,6 +29,7 @@ import numpy as np
 
 from ..arguments import ascii_uint
 from ..errors import DataError
+from ..errors import brief as clip
 from ..io.npyload import load_npy
 
 GT_SUFFIXES = ("_GT.npy", "_GT.csv")
@@ -96,19 +97,21 @@ def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int)
 
 def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
     """Indices ``0..high-1`` from an int, a list/tuple of ints or an integer array (never bool or float)."""
-    items: Iterable[object]
+    items: Sequence[object]
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in "iu" and not (value.dtype.hasobject or value.size == 0):
             raise DataError(f"{what} is an array of {value.dtype}, expected integer indices", path)
-        items = value.reshape(-1).tolist()
+        items = list(value.reshape(-1))
     elif isinstance(value, list | tuple):
         items = value
     else:
         items = [value]
+    if len(items) > high:
+        raise DataError(f"{what} names {len(items)} references, more than the {high} of the traversal", path)
     indices = []
     for item in items:
         if isinstance(item, bool | np.bool_) or not isinstance(item, Integral):
-            raise DataError(f"{what} holds {item!r} ({type(item).__name__}), expected integer indices", path)
+            raise DataError(f"{what} holds {clip(item)} ({type(item).__name__}), expected integer indices", path)
         if not 0 <= int(item) < high:
             raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
         indices.append(int(item))
@@ -117,7 +120,7 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
 
 def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
     if isinstance(value, bool | np.bool_) or not isinstance(value, Integral) or not 0 <= int(value) < n_query:
-        raise DataError(f"row {row}: query index {value!r} is not an integer in 0..{n_query - 1}", path)
+        raise DataError(f"row {row}: query index {clip(value)} is not an integer in 0..{n_query - 1}", path)
     return int(value)
 
 

@@ -141,3 +141,112 @@ def test_a_csv_named_query_first_is_swapped_and_files_that_disagree_are_refused(
     np.save(tmp_path / "summer_winter_GT.npy", np.eye(3))
     (tmp_path / "winter_summer_GT.csv").unlink()
     assert pair_ground_truth(tmp_path, "summer", "winter", 3, 3)[0].sum() == 3
+
+
+# Crafted pickles built only from numpy's own array-rebuilding globals (issue 45): through numpy's trusting
+# loader they read raw bytes as object pointers (SIGSEGV), loop without bound or nest past the recursion limit.
+RECONSTRUCT = np._core.multiarray._reconstruct
+
+
+class Pickled:
+    """An object whose pickle is exactly ``(callable, args, state)``."""
+
+    def __init__(self, call, args, state=None) -> None:
+        self.reduced = (call, args) if state is None else (call, args, state)
+
+    def __reduce__(self):
+        return self.reduced
+
+
+def forged_array(shape, dtype, data, fortran=False) -> Pickled:
+    return Pickled(RECONSTRUCT, (np.ndarray, (0,), b"b"), (1, shape, dtype, fortran, data))
+
+
+def forged_dtype(code: str, state: tuple) -> Pickled:
+    return Pickled(np.dtype, (code, False, True), state)
+
+
+def write_npy(path: Path, value: object, shape: tuple = (2,)) -> Path:
+    """A .npy file with an object header and ``value``'s pickle as its body."""
+    with open(path, "wb") as handle:
+        np.lib.format.write_array_header_1_0(handle, {"descr": "|O", "fortran_order": False, "shape": shape})
+        pickle.dump(value, handle, protocol=3)
+    return path
+
+
+CRAFTED = {
+    # raw bytes where an object array's elements belong: numpy reads them as pointers
+    "object-over-bytes": (forged_array((2,), np.dtype(object), b"\x41" * 16), "not its list of elements"),
+    # an int64 dtype whose state sets the refcount flag: its bytes are decref'd as objects
+    "forged-dtype-flags": (
+        forged_array((2,), forged_dtype("i8", (3, "<", None, None, None, -1, -1, 1)), b"\x41" * 16),
+        "forged state",
+    ),
+    "forged-dtype-fields": (
+        forged_array((2,), forged_dtype("V8", (3, "|", None, ("a",), {"a": (np.dtype(object), 0)}, 8, 1, 63)), b""),
+        "not a plain number",
+    ),
+    # a billion-element reference list over an 8-byte buffer
+    "huge-over-small-buffer": (
+        [forged_array((10**9,), np.dtype("i8"), b"\x01" * 8), [0]],
+        "buffer of another length",
+    ),
+    "object-scalar-of-bytes": (forged_array((2,), np.dtype(object), [b"\x41" * 8, [0]]), None),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CRAFTED))
+def test_a_pickle_built_from_numpys_own_globals_is_refused_or_read_safely(tmp_path, name):
+    crafted, refusal = CRAFTED[name]
+    path = write_npy(tmp_path / "ground_truth_new.npy", object_array([crafted, [0]]))
+    with pytest.raises(DataError, match=str(path)) as caught:
+        read_ground_truth(path, 2, 2)
+    if refusal is not None:
+        assert refusal in str(caught.value)
+    assert len(str(caught.value)) < 400
+
+
+def test_the_forged_pickles_are_live_through_numpys_own_loader(tmp_path):
+    """The refusals above guard a real crash: numpy's loader dies on the first (checked in a child process)."""
+    import subprocess
+    import sys
+
+    path = write_npy(tmp_path / "gt.npy", CRAFTED["forged-dtype-flags"][0])
+    code = f"import numpy as np; a = np.load({str(path)!r}, allow_pickle=True); del a; print('survived')"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0 or "survived" not in result.stdout or result.stderr
+
+
+def test_deep_nesting_long_strings_and_cycles_are_one_short_error(tmp_path):
+    cyclic: list = [0]
+    cyclic.append(cyclic)
+    for name, value in {"string": "x" * 20_000_000, "cyclic": cyclic}.items():
+        path = write_npy(tmp_path / f"{name}.npy", object_array([value, [1]]))
+        with pytest.raises(DataError, match=str(path)) as caught:
+            read_ground_truth(path, 2, 2)
+        assert len(str(caught.value)) < 400, name
+    depth = 200_000  # lists nested 200,000 deep: pickle cannot write them, so the opcodes are written by hand
+    path = tmp_path / "deep.npy"
+    with open(path, "wb") as handle:
+        np.lib.format.write_array_header_1_0(handle, {"descr": "|O", "fortran_order": False, "shape": (2,)})
+        handle.write(b"\x80\x03" + b"]" * depth + b"a" * (depth - 1) + b".")
+    with pytest.raises(DataError, match="nested more than"):
+        read_ground_truth(path, 2, 2)
+
+
+def test_a_numeric_header_the_file_cannot_hold_is_refused_before_reading(tmp_path):
+    path = tmp_path / "summer_winter_GT.npy"
+    with open(path, "wb") as handle:
+        np.lib.format.write_array_header_1_0(handle, {"descr": "<i8", "fortran_order": False, "shape": (10**6, 10**6)})
+        handle.write(b"\x00" * 8)
+    with pytest.raises(DataError, match="declares shape"):
+        load_npy(path)
+
+
+def test_numpy_scalars_and_fortran_arrays_in_a_shipped_file_still_read(tmp_path):
+    rows = np.empty((2, 2), dtype=object)
+    rows[:, 0] = [np.int64(1), np.int32(0)]
+    rows[:, 1] = [np.asfortranarray(np.array([[0], [2]])), np.array([1], dtype=">i4")]
+    np.save(tmp_path / "rows.npy", rows, allow_pickle=True)
+    truth = read_ground_truth(tmp_path / "rows.npy", 3, 2)
+    assert [np.flatnonzero(truth[:, q]).tolist() for q in range(2)] == [[1], [0, 2]]
