@@ -37,6 +37,7 @@ EVENT_SUFFIXES = frozenset({".npy", ".npz", ".txt"})
 FIELDS = ("x", "y", "t", "p")
 MAX_COUNT = 255  # counts saturate at the top of uint8
 LIMIT = 2**62  # |t| in microseconds and x, y in pixels: beyond it a value is not a time or a pixel (int64 headroom)
+MAX_FRAMES = 10_000_000  # frames of one recording: 2.8 hours at 1 ms windows; more is a wrong window or a bad clock
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,14 @@ def window_bounds(t: np.ndarray, window: EventWindow) -> Iterator[tuple[int, int
         start = stop
 
 
+def frame_count(t: np.ndarray, window: EventWindow) -> int:
+    """How many frames the windows make: ``ceil(n / N)`` by count, ``floor((t_last - t_0) / W) + 1`` by time."""
+    if window.count is not None:
+        return -(-t.size // window.count)
+    assert window.window_us is not None
+    return (int(t[-1]) - int(t[0])) // window.window_us + 1
+
+
 def bin_frames(events: Events, window: EventWindow, shape: tuple[int, int]) -> Iterator[np.ndarray]:
     """The uint8 count frames ``F_i`` (module docstring) of ``shape`` (height, width), one at a time."""
     height, width = shape
@@ -183,6 +192,13 @@ def event_frames(
         raise DataError(
             f"events reach pixel (x={extent[1] - 1}, y={extent[0] - 1}), outside the model's "
             f"{shape[1]}x{shape[0]} frames: a recording of another sensor size is refused",
+            path,
+        )
+    count = frame_count(events.t, window)
+    if count > MAX_FRAMES:
+        raise DataError(
+            f"binning makes {count} frames (events over {int(events.t[-1]) - int(events.t[0])} us), more than "
+            f"{MAX_FRAMES}: a wider --event-window-us or --event-count, or a recording without a clock jump, would do",
             path,
         )
     frames = bin_frames(events, window, shape)

@@ -113,3 +113,13 @@ def test_a_gap_in_time_gives_empty_frames(tmp_path):
     (tmp_path / "gap.txt").write_text("0 1 1 1\n0.5 1 1 1\n")
     binned = [grey for _, grey in iter_frames(tmp_path / "gap.txt", events=EventWindow(window_us=100_000))]
     assert [int(f.sum()) for f in binned] == [1, 0, 0, 0, 0, 1]
+
+
+def test_a_clock_jump_is_refused_before_binning_by_its_frame_count(tmp_path):
+    """Issue 45: the last event 10^15 us after the others, binned at 1 us, would make 10^15 frames."""
+    events = np.zeros(3, FIELDS)
+    events["t"] = [0, 1, 10**15]
+    np.save(tmp_path / "jump.npy", events)
+    with pytest.raises(DataError, match="1000000000000001 frames"):
+        next(iter_frames(tmp_path / "jump.npy", events=EventWindow(window_us=1)))
+    assert len(list(iter_frames(tmp_path / "jump.npy", events=EventWindow(count=1)))) == 3
