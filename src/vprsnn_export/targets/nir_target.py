@@ -347,6 +347,17 @@ def consumer_settings(dt: float) -> dict[str, Any]:
     }
 
 
+def sparse_currents(inputs: torch.Tensor, matrix: torch.Tensor) -> torch.Tensor:
+    """``I = s W^T`` for input spike rows ``s`` (rows, inputs) and ``matrix = W^T`` (inputs, neurons), summing only
+    the rows of ``matrix`` whose input spikes: ``I_r = sum_{i : s_ri != 0} s_ri W^T_i`` (one embedding bag)."""
+    rows, columns = inputs.nonzero(as_tuple=True)
+    offsets = torch.zeros(inputs.shape[0], dtype=torch.int64)
+    offsets[1:] = torch.bincount(rows, minlength=inputs.shape[0]).cumsum(0)[:-1]
+    values = inputs[rows, columns].to(matrix.dtype)
+    weights = None if bool((values == 1).all()) else values
+    return torch.nn.functional.embedding_bag(columns, matrix, offsets, mode="sum", per_sample_weights=weights)
+
+
 def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
     """The network's exact raster from any consumer's WTA-off spikes, by the rule in the graph's metadata.
 
@@ -372,16 +383,30 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
     if group < 1 or weight.shape[0] % group:
         raise InvalidValueError(f"the readout rule's group_size {group} does not divide {weight.shape[0]} neurons")
     flat = spikes.reshape(-1, spikes.shape[-1])
-    if str(meta["kind"]) == "fixed-point":
-        currents = flat.to(torch.float64) @ torch.as_tensor(weight.T, dtype=torch.float64)  # exact below 2**53
-        multipliers = torch.as_tensor(np.asarray(meta["wta_score_multiplier"]), dtype=torch.float64)
-        score = currents.round().to(torch.int64) * multipliers.to(torch.int64)
-        masked = torch.where(candidates.reshape(score.shape), score, torch.iinfo(torch.int64).min)
-    else:
-        score_f = flat.to(torch.float32) @ torch.as_tensor(np.ascontiguousarray(weight.T), dtype=torch.float32)
-        masked = torch.where(candidates.reshape(score_f.shape), score_f, -torch.inf)
-    grouped = masked.reshape(masked.shape[0], -1, group)
-    winner = grouped.argmax(dim=2, keepdim=True)  # per group; torch's first maximum: the lowest index
-    raster = torch.zeros(grouped.shape, dtype=torch.bool).scatter_(2, winner, True)
-    raster &= candidates.reshape(grouped.shape).to(torch.bool).any(dim=2, keepdim=True)
+    grouped = candidates.reshape(flat.shape[0], -1, group).to(torch.bool)
+    # A group with one candidate spikes it, one with none is silent: scores are needed only where two or more
+    # compete, so only those steps' currents are computed (input spikes are sparse, contests rare).
+    contested = grouped.view(torch.uint8).sum(dim=2, dtype=torch.int32) >= 2
+    steps = contested.any(dim=1).nonzero().flatten()
+    winner = grouped.to(torch.uint8).argmax(dim=2)  # the only candidate where there is one
+    if steps.numel():
+        fixed = str(meta["kind"]) == "fixed-point"
+        dtype = torch.float64 if fixed else torch.float32  # float64 sums of integer weights are exact below 2**53
+        matrix = torch.as_tensor(np.ascontiguousarray(weight.T), dtype=dtype)
+        multipliers = torch.as_tensor(np.asarray(meta["wta_score_multiplier"]), dtype=torch.float64) if fixed else None
+        for chunk in steps.split(4096):
+            inputs = flat[chunk]
+            if fixed:  # exact in any order: the sparse product touches only the few inputs that spike
+                currents = sparse_currents(inputs, matrix)
+            else:  # float32: the dense product's own summation order, as the float network computes it
+                currents = inputs.to(dtype) @ matrix
+            if multipliers is not None:
+                score = currents.round().to(torch.int64) * multipliers.to(torch.int64)
+                masked = torch.where(grouped[chunk].reshape(score.shape), score, torch.iinfo(torch.int64).min)
+            else:
+                masked = torch.where(grouped[chunk].reshape(currents.shape), currents, -torch.inf)
+            best = masked.reshape(chunk.numel(), -1, group).argmax(dim=2)  # torch's first maximum: the lowest index
+            winner[chunk] = torch.where(contested[chunk], best, winner[chunk])
+    raster = torch.zeros(grouped.shape, dtype=torch.bool).scatter_(2, winner.unsqueeze(2), True)
+    raster &= grouped.any(dim=2, keepdim=True)
     return raster.reshape(candidates.shape)
