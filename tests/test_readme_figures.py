@@ -1,9 +1,10 @@
-"""Every figure the README quotes from docs/results equals the JSON its page is rendered from.
+"""Every figure the README and docs/results/summary.md quote from docs/results equals the JSON its page is
+rendered from.
 
-Each case formats the figures from the committed JSON the way the README writes them (percent
-with one decimal, mean ± std over seeds, as the pages do) into the README's own words, and asserts
-that sentence is in the README: a regenerated JSON whose numbers moved fails here until the README
-is updated with it.
+Each case formats the figures from the committed JSON the way the text writes them (percent with one decimal,
+mean ± std over seeds, as the pages do) into the text's own words, and asserts that sentence is in the README
+(``README_CASES``) or in the long form of the results (``CASES``, docs/results/summary.md): a regenerated JSON
+whose numbers moved fails here until the text is updated with it.
 """
 
 from __future__ import annotations
@@ -22,6 +23,10 @@ RESULTS = ROOT / "docs" / "results"
 
 def readme() -> str:
     return " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+
+
+def summary_page() -> str:
+    return " ".join((RESULTS / "summary.md").read_text(encoding="utf-8").split())
 
 
 def results(stem: str) -> dict:
@@ -137,13 +142,37 @@ def adaptation() -> str:
         )
 
     return (
-        f"the ensemble reaches {whole('SNN, adapted')} % at k = 1 / 5 / 10 against the plain ensemble's "
-        f"{whole('SNN')} % and cosine's {whole('cosine')} %"
+        f"it lifts the SNN from {whole('SNN')} % to {whole('SNN, adapted')} % at k = 1 / 5 / 10, but cosine on the "
+        f"same adapted input gets {whole('cosine, adapted')} %, above it at every k"
     )
 
 
+def route_table() -> str:
+    """The README's dev-route rows: the default ensemble (route.json), lean and cosine (cost.json)."""
+    data = results("route")
+    size, ks = data["main_module_size"], data["ks"]
+    default = [row(data["summary"], "wprob", k, readout=data["default_readout"], module_size=size) for k in ks]
+    cells = [pct(r["accuracy"]) for r in default] + [pct(default[ks.index(5)]["r_at_100p"])]
+    cost = {point["point"]: point for point in results("cost")["summary"]}
+    lean = next(p for name, p in cost.items() if name.startswith("24 x 100") and name.endswith(": T=80"))
+    cosine = cost["cosine"]
+
+    def cost_cells(point: dict, with_std: bool) -> list[str]:
+        rows = {r["k"]: r for r in point["rows"]}
+        values = [rows[k]["accuracy"] for k in ks] + [rows[5]["r_at_100p"]]
+        return [pct(v) if with_std else mean(v) for v in values]
+
+    return (
+        "| SNN, default (24 modules x 400 neurons, 3 seeds) | " + " | ".join(cells) + " |"
+        " | | SNN, `--preset lean` (24 x 100, 3 seeds) | " + " | ".join(cost_cells(lean, True)) + " | "
+        f"{lean['cost']['synaptic_events'] / 1e6:.2f} M |"
+        " | | cosine nearest neighbour on the same DoG input | " + " | ".join(cost_cells(cosine, False)) + " | "
+        f"{cosine['cost']['synaptic_events'] / 1e6:.2f} M multiply-adds |"
+    )
+
+
+README_CASES: dict[str, Callable[[], str]] = {"adaptation": adaptation, "route": route_table}
 CASES: dict[str, Callable[[], str]] = {
-    "adaptation": adaptation,
     "assignment": assignment,
     "route": route,
     "timing": timing,
@@ -151,13 +180,24 @@ CASES: dict[str, Callable[[], str]] = {
 }
 
 
-@pytest.mark.parametrize("stem", sorted(CASES))
+@pytest.mark.parametrize("stem", sorted(README_CASES))
 def test_readme_quotes_its_json(stem):
     text = readme()
-    for sentence in CASES[stem]().split(" | "):
+    for sentence in README_CASES[stem]().split(" | | "):
         assert sentence in text, f"README.md does not quote docs/results/{stem}.json as: {sentence!r}"
 
 
-def test_readme_cites_the_pages_it_quotes():
-    text = readme()
-    assert all(f"experiment {stem}" in text for stem in CASES)
+@pytest.mark.parametrize("stem", sorted(CASES))
+def test_the_results_summary_quotes_its_json(stem):
+    text = summary_page()
+    for sentence in CASES[stem]().split(" | "):
+        assert sentence in text, f"docs/results/summary.md does not quote docs/results/{stem}.json as: {sentence!r}"
+
+
+def test_the_texts_cite_the_pages_they_quote():
+    assert all(f"experiment {stem}" in readme() for stem in README_CASES)
+    assert all(f"experiment {stem}" in summary_page() for stem in CASES)
+
+
+def test_the_readme_is_read_in_five_minutes():
+    assert len((ROOT / "README.md").read_text(encoding="utf-8").splitlines()) < 120

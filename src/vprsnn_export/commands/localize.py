@@ -240,14 +240,21 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     chosen = curve.index_for(point.precision_target)
     best = int(np.argmax(curve.precision)) if len(curve.threshold) else None
     print(curve_table(curve, best if chosen is None else chosen, chosen))
+    print(other_targets(curve))
     if point.threshold is None:
+        reach = (
+            f"the best reached is {100 * curve.precision[best]:.1f} % (threshold {float(curve.threshold[best]):.10g}, "
+            f"{int(curve.accepted[best])} frames accepted)"
+            if best is not None
+            else "no query has a decision"
+        )
         raise InvalidValueError(
             f"no confidence threshold reaches precision {point.precision_target:g} on the {point.n_queries} "
-            f"'{args.calibrate}' queries: an operating point that accepts nothing is not written ({point_path}); "
-            "give a lower --precision or more calibration queries"
+            f"'{args.calibrate}' queries ({reach}): an operating point that accepts nothing is not written "
+            f"({point_path}); give a lower --precision or more calibration queries"
         )
     save_operating_point(point, point_path)
-    threshold = f"{point.threshold:.6f}"
+    threshold = f"{point.threshold:.10g}"
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
         f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
@@ -260,14 +267,44 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     return 0
 
 
+def distinct_digits(values: list[float], least: int = 6) -> int:
+    """The fewest significant digits (at least ``least``, at most 17) that print distinct values distinctly."""
+    for digits in range(least, 17):
+        if len({f"{v:.{digits}g}" for v in values}) == len(set(values)):
+            return digits
+    return 17
+
+
+#: Precision targets whose recall ``--calibrate`` prints beside the one asked for, so the choice is not a guess.
+OTHER_TARGETS = (1.0, 0.99, 0.95, 0.9, 0.8, 0.5)
+
+
+def other_targets(curve) -> str:
+    """Each of :data:`OTHER_TARGETS` with the recall and the frames it accepts on the calibration queries."""
+    cells = []
+    for target in OTHER_TARGETS:
+        index = curve.index_for(target)
+        cells.append(
+            f"{target:g}: unreached"
+            if index is None
+            else f"{target:g}: recall {100 * curve.recall[index]:.1f} % ({int(curve.accepted[index])} of {curve.n_queries})"
+        )
+    return "precision target -> recall (frames accepted): " + "; ".join(cells)
+
+
 def curve_table(curve, around: int | None, chosen: int | None) -> str:
     """A few points of the calibration curve around point ``around``, the chosen one marked."""
     if around is None:
         return f"precision/recall curve: no decision with a place on the {curve.n_queries} queries"
-    lines = [f"{'threshold':>10}  {'precision':>9}  {'recall':>7}  {'accepted':>8}"]
+    rows = curve.rows(around)
+    digits = distinct_digits([threshold for threshold, *_ in rows])
+    width = max(10, digits + 3)
+    lines = [f"{'threshold':>{width}}  {'precision':>9}  {'recall':>7}  {'accepted':>8}"]
     first = max(around - 3, 0)
-    for index, (threshold, precision, recall, accepted) in enumerate(curve.rows(around), start=first):
+    for index, (threshold, precision, recall, accepted) in enumerate(rows, start=first):
         mark = "  <- operating point" if index == chosen else ""
-        lines.append(f"{threshold:10.6f}  {100 * precision:8.1f}%  {100 * recall:6.1f}%  {accepted:8d}{mark}")
+        lines.append(
+            f"{threshold:{width}.{digits}g}  {100 * precision:8.1f}%  {100 * recall:6.1f}%  {accepted:8d}{mark}"
+        )
     which = "the chosen one" if chosen is not None else "the highest precision"
     return f"precision/recall curve (a few points around {which}):\n" + "\n".join(lines)
