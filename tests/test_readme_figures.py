@@ -171,7 +171,27 @@ def route_table() -> str:
     )
 
 
-README_CASES: dict[str, Callable[[], str]] = {"adaptation": adaptation, "route": route_table}
+def quantisation_dev_route() -> str:
+    """The README's verdict table: W+Prob k=1 accuracy and R@100P at k=5 and k=10 of each width, with verdicts."""
+    data = results("quantisation_dev_route")
+
+    def cell(check: dict) -> str:
+        text = f"{100 * check['difference']:+.1f} [{100 * check['low']:+.1f}, {100 * check['high']:+.1f}] {check['verdict']}"
+        return text + (f" (~{check['queries_to_decide']} queries)" if check["verdict"] == "undecided" else "")
+
+    rows = []
+    for width in data["bits"]:
+        checks = {(c["strategy"], c["k"], c["metric"]): c for c in width["paired"]}
+        cells = [checks["wprob", 1, "accuracy"], checks["wprob", 5, "r_at_100p"], checks["wprob", 10, "r_at_100p"]]
+        rows.append(f"| {width['bits']} | {width['verdict']} | " + " | ".join(map(cell, cells)) + " |")
+    return f"seed 1, {data['n_queries']} queries; | | " + " | | ".join(rows)
+
+
+README_CASES: dict[str, Callable[[], str]] = {
+    "adaptation": adaptation,
+    "route": route_table,
+    "quantisation_dev_route": quantisation_dev_route,
+}
 CASES: dict[str, Callable[[], str]] = {
     "assignment": assignment,
     "route": route,
@@ -195,7 +215,7 @@ def test_the_results_summary_quotes_its_json(stem):
 
 
 def test_the_texts_cite_the_pages_they_quote():
-    assert all(f"experiment {stem}" in readme() for stem in README_CASES)
+    assert all(f"experiment {stem}" in readme() or f"results/{stem}.json" in readme() for stem in README_CASES)
     assert all(f"experiment {stem}" in summary_page() for stem in CASES)
 
 

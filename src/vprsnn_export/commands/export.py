@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import textwrap
 from pathlib import Path
 
 from ..arguments import ascii_uint
@@ -30,6 +31,23 @@ from ..targets.registry import TARGETS
 from ._common import add_data_options, add_runtime_options, format_table, integer, print_json
 
 CHECK_COLUMNS = (("target", "target"), ("check", "check"), ("result", "result"), ("detail", "detail"))
+LINE_WIDTH = 120  # the console output's lines; the full texts are in export.json (and --json)
+DETAIL_WIDTH = 42  # a longer detail is cut in the table and printed whole under it, wrapped
+
+
+def cut_cells(rows: list[dict], key: str, width: int) -> tuple[list[dict], list[tuple[int, str]]]:
+    """``rows`` with every ``key`` cell longer than ``width`` cut to a note mark ``[n]``, and the notes (n, text)."""
+    notes: list[tuple[int, str]] = []
+    cut = []
+    for row in rows:
+        text = str(row.get(key, ""))
+        if len(text) > width:
+            notes.append((len(notes) + 1, text))
+            text = f"{text[: width - 8].rstrip()}... [{len(notes)}]"
+        cut.append({**row, key: text})
+    return cut, notes
+
+
 BUDGET_COLUMNS = (
     ("chip", "chip"),
     ("bits", "bits"),
@@ -197,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
         for target, files in result.files.items():
             print(f"{target}: {', '.join(str(f.path) for f in files)}")
             if target in result.consumers:
-                print(f"  {result.consumers[target]}")
+                print(textwrap.fill(result.consumers[target], LINE_WIDTH, initial_indent="  ", subsequent_indent="  "))
         for estimate in (result.cost or {}).get("estimates", []):
             print(
                 f"\nper query on {label}: {estimate['synaptic_events']:,.0f} synaptic events, {estimate['steps']:.0f} "
@@ -205,7 +223,10 @@ def run(args: argparse.Namespace) -> int:
             )
         if result.checks is not None:
             print(f"\nchecks on {label}:")
-            print(format_table([row.to_dict() for row in result.checks.rows], CHECK_COLUMNS))
+            rows, notes = cut_cells([row.to_dict() for row in result.checks.rows], "detail", DETAIL_WIDTH)
+            print(format_table(rows, CHECK_COLUMNS))
+            for number, note in notes:
+                print(textwrap.fill(note, LINE_WIDTH, initial_indent=f"  [{number}] ", subsequent_indent="      "))
         if not args.quiet:
             print(f"\nwrote {out / MANIFEST_NAME}", file=sys.stderr)
     return 0 if result.passed else 1
