@@ -36,3 +36,11 @@ def test_the_documented_demo_output_is_todays(tmp_path, capsys, monkeypatch):
     assert main(["demo", "--out", "demo", "--threads", "2", "--quiet"]) == 0
     printed = capsys.readouterr().out.rstrip("\n").splitlines()
     assert masked(printed) == masked(documented())
+
+
+def test_the_readme_shows_the_documented_conclusion():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"## What the demo shows.*?```\n(.*?)```", text, re.S)
+    assert block, "README has no demo block"
+    shown = block.group(1).rstrip("\n").splitlines()
+    assert shown == documented()[: len(shown)] and shown[0].startswith("Conclusion: ")
