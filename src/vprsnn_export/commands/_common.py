@@ -162,6 +162,18 @@ SEQUENCE_HELP = {
     "velocity_lag": "smooth: next windows also summed, i.e. frames each decision waits for (default 2k-1)",
     "tolerance": "a prediction within +-N places of the truth is correct",
 }
+#: The help a causal stream (localize) shows instead: one k, the causal estimates only (the fixed-lag one and its
+#: --velocity-lag wait for later frames, so a stream does not offer them).
+STREAM_HELP = {
+    **SEQUENCE_HELP,
+    "ks": "the sequence length of every decision (one k; the sequence strategy aggregated for k > 1)",
+    "velocity_estimate": "with --velocity-search: "
+    + "; ".join(f"{name}: {VELOCITY_ESTIMATES.get(name).description}" for name in causal_estimates()),
+    "velocity_span": "track: recent windows whose scores are summed",
+    "velocity_length": "track: frames per scored trajectory (default 3k, 2k)",
+    "velocity_memory": "track: recent frames whose mean is divided out (0: none)",
+    "velocity_lag": argparse.SUPPRESS,
+}
 
 
 def add_sequence_options(
@@ -185,13 +197,14 @@ def add_sequence_options(
         shown = ",".join(map(str, default)) if isinstance(default, tuple) else default
         kind: dict[str, Any] = {"type": integer, "metavar": "N"}
         if item.name in ("ks", "velocity_candidates"):
-            kind = {"metavar": "LIST" if item.name == "ks" else "LO:HI:STEP"}
+            kind = {"metavar": ("N" if stream else "LIST") if item.name == "ks" else "LO:HI:STEP"}
         elif item.name == "velocity":
             kind = {"type": float}
         elif item.name in ("rule", "velocity_estimate"):
             kind = {"choices": RULES.names() if item.name == "rule" else estimates}
         note = "" if shown is None else f" (default {shown})"
-        group.add_argument(flag, help=SEQUENCE_HELP[item.name] + note, **kind)
+        text = (STREAM_HELP if stream else SEQUENCE_HELP)[item.name]
+        group.add_argument(flag, help=text if text == argparse.SUPPRESS else text + note, **kind)
     if old_window_option:
         group.add_argument(old_window_option, dest="renamed_window", help=argparse.SUPPRESS)
     parser.set_defaults(old_window_option=old_window_option, default_k=default_k, stream=stream)
