@@ -337,3 +337,33 @@ def test_the_leftovers_of_the_api_campaign_are_refused_or_exact(fx):
         with pytest.raises(vx.InvalidValueError, match="device"):
             vx.FloatNetwork.from_arrays(fx.ckpt.weights, fx.ckpt.thresholds, fx.cfg, device)
     assert vx.FloatNetwork.from_arrays(fx.ckpt.weights, fx.ckpt.thresholds, fx.cfg, "cpu").weights.device.type == "cpu"
+
+
+def test_the_regressions_since_the_guards_moved_are_refused_at_the_edge(fx, tmp_path):
+    """Issue 45: degenerate arguments that held five days ago, each refused in one project error naming it."""
+    with pytest.raises(vx.InvalidValueError, match="no query"):
+        vx.aggregate(np.zeros((0, 5)), 3, 1.0)
+    with pytest.raises(vx.InvalidValueError, match="more than once"):
+        vx.select_places(fx.data, [fx.places[0], fx.places[0]])
+    for dt in (0, 0.0, -1e-4, float("nan"), 10**30, True):
+        with pytest.raises(vx.InvalidValueError, match="dt"):
+            vx.write_nir(fx.model, tmp_path / "m.nir", dt=dt)
+    with pytest.raises(vx.InvalidValueError, match="empty name between dots"):
+        vx.Config().replace(**{"train..epochs": 2})
+    with pytest.raises(vx.InvalidValueError, match="is a section"):
+        vx.Config().replace(**{"early": {"spikes": 5}})
+    with pytest.raises(vx.InvalidValueError, match="at k = 1"):
+        vx.SequenceOptions(ks=(1,), velocity_candidates=(0.5, 1.0))
+    for network in (None, "net.npz", [1], float("nan")):
+        with pytest.raises(vx.InvalidValueError, match="network must be"):
+            vx.Localizer(network)
+    for threshold in (float("nan"), "0.5", [0.5], 1.5, -0.1):
+        with pytest.raises(vx.InvalidValueError, match="threshold"):
+            vx.Localizer(fx.ckpt, threshold=threshold)
+    robot = vx.Localizer(fx.ckpt, threshold=0.5)
+    for frame in (np.zeros((0, 0), np.uint8), np.zeros((4, 4, 3), np.uint8), None):
+        with pytest.raises(vx.InvalidValueError, match="frame must be"):
+            robot.push(frame)
+    for source in (5, None, b"frames", ""):
+        with pytest.raises(vx.InvalidValueError, match="source must be a path"):
+            vx.iter_frames(source)

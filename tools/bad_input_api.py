@@ -64,7 +64,19 @@ def calls(folder: Path) -> dict:
     vx.save_fixed_point(folder / "model.npz", model)
     sr = ckpt.calibration
     scores = np.random.default_rng(0).random((3, 6))
+    frames = folder / "frames"
+    frames.mkdir(exist_ok=True)
+    import cv2
+
+    for index in range(2):
+        cv2.imwrite(
+            str(frames / f"{index}.png"), (winter[index].reshape(-1)[: 28 * 28].reshape(28, 28) * 255).astype(np.uint8)
+        )
     return {
+        "Localizer": (vx.Localizer, dict(network=ckpt, threshold=0.5, options=readout)),
+        "Localizer.push": (vx.Localizer(ckpt, threshold=0.5).push, dict(grey=np.zeros((32, 64), np.uint8))),
+        "iter_frames": (lambda source: list(vx.iter_frames(source)), dict(source=frames)),
+        "write_nir": (vx.write_nir, dict(source=model, path=folder / "m.nir", dt=1e-4)),
         "evaluate_float": (vx.evaluate_float, dict(ckpt=ckpt, query_images=winter, query_place_ids=places,
                                                    traversal="winter", options=readout)),
         "evaluate_fixed_point": (vx.evaluate_fixed_point, dict(model=model, query_images=winter,
@@ -129,6 +141,10 @@ LEGAL = {
     ("save_fixed_point", "path", "str"): "'x' is a file name (written and read back)",
     ("save_checkpoint", "path", "str"): "'x' is a file name (written and read back)",
     ("load_checkpoint", "path", "str"): "reads the 'x' that save_checkpoint wrote",
+    ("Localizer", "threshold", "none"): "None: accept no decision",
+    ("Localizer", "options", "none"): "None: the config's readout options",
+    ("write_nir", "path", "str"): "'x' is a file name",
+    ("write_nir", "dt", "float"): "a 1.5 s time step",
 }  # fmt: skip
 READERS = {"save_fixed_point": vx.load_fixed_point, "save_checkpoint": vx.load_checkpoint}
 

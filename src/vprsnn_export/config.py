@@ -270,14 +270,20 @@ class Config:
         """Copy with overrides given as dotted names: ``cfg.replace(**{"encoder.timesteps": 150})``."""
         data = dataclasses.asdict(self)
         for name, value in dotted.items():
-            section, _, key = name.rpartition(".")
+            *sections, key = name.split(".")
+            if not all((*sections, key)):
+                raise InvalidValueError(f"config key {name[:80]!r}: an empty name between dots")
             target = data
-            for part in filter(None, section.split(".")):
+            for part in sections:
                 if part not in target or not isinstance(target[part], dict):
-                    raise InvalidValueError(f"unknown config section {name!r}")
+                    raise InvalidValueError(f"unknown config section {name[:80]!r}")
                 target = target[part]
             if key not in target:
-                raise InvalidValueError(f"unknown config key {name!r}")
+                raise InvalidValueError(f"unknown config key {name[:80]!r}")
+            if isinstance(target[key], dict):
+                raise InvalidValueError(
+                    f"config key {name!r} is a section: set its keys one by one ({name}.{next(iter(target[key]), 'KEY')}=...)"
+                )
             target[key] = value
         return Config.from_dict(data)
 

@@ -259,6 +259,9 @@ def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Da
     wanted = check_place_ids(place_ids)
     if wanted.size == 0:
         raise InvalidValueError("place_ids must name at least one place")
+    unique, counts = np.unique(wanted, return_counts=True)
+    if (counts > 1).any():
+        raise InvalidValueError(f"place_ids names place {int(unique[counts > 1][0])} more than once")
     position = {int(pid): row for row, pid in enumerate(dataset.place_ids)}
     missing = [int(pid) for pid in wanted if int(pid) not in position]
     if missing:

@@ -32,7 +32,7 @@ from typing import TextIO
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, InvalidValueError
 from .bags import bag_frames, is_bag
 from .events import EVENT_SUFFIXES, EventWindow, event_frames
 from .preprocess import captured_stderr, decoder_said, read_grey_image
@@ -137,6 +137,10 @@ def iter_frames(
 ) -> Iterator[tuple[str, np.ndarray]]:
     """The frames of ``source``: a folder of images, a video file, ``-`` (paths on ``stdin``), a ROS bag (its image
     topic, or ``topic``) or an event recording (binned by ``events``; ``shape``: the sensor's (height, width))."""
+    if not isinstance(source, str | Path) or not str(source):
+        raise InvalidValueError(
+            f"source must be a path (str or Path) or '-', got {type(source).__name__} {source!r:.40}"
+        )
     path = Path(source)
     if topic is not None and not is_bag(path):
         raise DataError("--topic is for a ROS bag (a .bag file or a ROS 2 bag folder)", path)

@@ -193,8 +193,10 @@ def aggregate(
     with a stable softmax. A sum-rule window that is 0 everywhere returns the
     uniform distribution. ``k == 1`` returns ``prob`` unchanged (an exact
     float64 copy). Never takes ground truth: windows come from stream order
-    and ``frame_positions`` only.
+    and ``frame_positions`` only. An empty stream (no query) is an InvalidValueError: there is nothing to aggregate.
     """
+    if _prob2d(prob).shape[0] == 0:
+        raise InvalidValueError("prob holds no query (shape (0, places)): there is nothing to aggregate")
     return _aggregate_scored(prob, k, velocity, rule, frame_positions, eps)[0]
 
 

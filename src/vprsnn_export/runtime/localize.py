@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import real_number
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.data.preprocess import normalise_resized, resize_image
@@ -152,6 +153,15 @@ class Localizer:
         device: torch.device | None = None,
         threads: int | None = None,
     ) -> None:
+        if not isinstance(network, Checkpoint | FixedPointModel):
+            raise InvalidValueError(
+                f"network must be a Checkpoint (vx.load_checkpoint) or a FixedPointModel (vx.load_fixed_point), "
+                f"got {type(network).__name__}"
+            )
+        if threshold is not None and not 0.0 <= real_number("threshold", threshold) <= 1.0:
+            raise InvalidValueError(f"threshold must be a confidence in [0, 1] or None, got {threshold!r:.40}")
+        if options is not None and not isinstance(options, SequenceOptions):
+            raise InvalidValueError(f"options must be a SequenceOptions, got {type(options).__name__}")
         self.network = network
         self.readout = Readout.of(network.calibration, network.config, options)
         self.options = self.readout.options
@@ -174,6 +184,13 @@ class Localizer:
         return normalise_resized(self._resized(np.asarray(grey))[None], self.config.preprocess)
 
     def _resized(self, grey: np.ndarray) -> np.ndarray:
+        if not isinstance(grey, np.ndarray) or grey.ndim != 2 or grey.size == 0 or grey.dtype.kind not in "uif":
+            raise InvalidValueError(
+                "a frame must be a non-empty 2-D greyscale array (height, width) of numbers, got "
+                + (f"shape {grey.shape} {grey.dtype}" if isinstance(grey, np.ndarray) else type(grey).__name__)
+            )
+        if grey.dtype.kind == "f" and not np.isfinite(grey).all():
+            raise InvalidValueError("a frame holds NaN or infinite values")
         return resize_image(grey, self.config.preprocess.image_size)
 
     def spikes(self, images: np.ndarray, first_frame: int) -> torch.Tensor:
@@ -188,7 +205,7 @@ class Localizer:
     def push(self, grey: np.ndarray, name: str = "") -> Decision:
         """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
         began = time.perf_counter()
-        resized = self._resized(np.asarray(grey))
+        resized = self._resized(grey if isinstance(grey, np.ndarray) else np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
         counts = self._counts(spikes)
         return self._decide(counts[0], name, began, no_place_reasons(np.ptp(resized)[None] == 0, spikes, counts)[0])

@@ -37,12 +37,14 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
+from vprsnn_export.arguments import real_number, require_path
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
@@ -278,6 +280,8 @@ def build_graph(
 
     if wta_inhibition < 0 or not np.isfinite(wta_inhibition):
         raise InvalidValueError(f"wta_inhibition must be a finite value >= 0, got {wta_inhibition}")
+    if not (math.isfinite(real_number("dt", dt)) and 0 < dt <= 1e6):
+        raise InvalidValueError(f"dt must be a time step in (0, 1e6] seconds, got {dt!r:.40}")
     if isinstance(source, FixedPointModel):
         validate(source, Path("<fixed-point model>"))
         weight = source.weight_mantissa.T.astype(np.float32)
@@ -307,6 +311,7 @@ def write_nir(source: Source, path: str | Path, **options: Any) -> Path:
     atomically."""
     import nir
 
+    path = require_path("path", path)
     buffer = io.BytesIO()
     nir.write(buffer, build_graph(source, **options))
     return atomic_write_bytes(path, buffer.getvalue())

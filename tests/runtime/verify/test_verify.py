@@ -89,7 +89,21 @@ def test_tolerances_default_override_and_off():
     assert tol["auc_pr"] is None and tol["query_slack"] == DEFAULT_TOLERANCES["query_slack"]
 
 
-@pytest.mark.parametrize("bad", ["nonsense=1", "accuracy", "accuracy=abc", "accuracy=-0.1", "r_at_100p=nan"])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "nonsense=1",
+        "accuracy",
+        "accuracy=abc",
+        "accuracy=-0.1",
+        "r_at_100p=nan",
+        "accuracy=5",  # a 500-point drop that can never fail
+        "top1_agreement=1.5",  # a minimum share that can never hold
+        "query_slack=0.5",  # half a query
+        "saturations=inf",
+        "accuracy=0.02,accuracy=0.03",  # given twice
+    ],
+)
 def test_bad_tolerances_are_option_errors(bad):
     with pytest.raises(InvalidValueError) as info:
         parse_tolerances(bad)

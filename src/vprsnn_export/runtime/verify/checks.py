@@ -49,9 +49,15 @@ TOLERANCE_MEANING = {
 OFF = ("off", "none", "")
 
 
+#: Tolerances counted in whole events or queries (the rest are fractions in [0, 1]).
+COUNTED = ("saturations", "query_slack")
+
+
 def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
-    """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else."""
+    """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else: an
+    unknown or repeated key, a fraction outside [0, 1], a count (:data:`COUNTED`) that is not a whole number."""
     tolerances = dict(DEFAULT_TOLERANCES if base is None else base)
+    seen: set[str] = set()
     for item in (text or "").split(","):
         if not item.strip():
             continue
@@ -60,17 +66,25 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
         if not sep or key not in DEFAULT_TOLERANCES:
             raise InvalidValueError(
                 f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
-                f"(VALUE a number or off), got {item!r}"
+                f"(VALUE a number or off), got {item[:80]!r}"
             )
+        if key in seen:
+            raise InvalidValueError(f"--tolerance {key}: given twice; give each key once")
+        seen.add(key)
         if raw in OFF:
             tolerances[key] = None
             continue
         try:
             value = float(raw)
         except ValueError:
-            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw!r}") from None
-        if not np.isfinite(value) or value < 0:
-            raise InvalidValueError(f"--tolerance {key}: expected a finite number >= 0, got {raw!r}")
+            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw[:40]!r}") from None
+        if key in COUNTED:
+            if not np.isfinite(value) or value < 0 or value != int(value):
+                raise InvalidValueError(f"--tolerance {key}: expected a whole number >= 0, got {raw[:40]!r}")
+        elif not 0.0 <= value <= 1.0:
+            raise InvalidValueError(
+                f"--tolerance {key}: expected a fraction in [0, 1] (0.02 = 2 points), got {raw[:40]!r}"
+            )
         tolerances[key] = value
     return tolerances
 
