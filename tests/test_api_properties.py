@@ -352,8 +352,6 @@ def test_the_regressions_since_the_guards_moved_are_refused_at_the_edge(fx, tmp_
         vx.Config().replace(**{"train..epochs": 2})
     with pytest.raises(vx.InvalidValueError, match="is a section"):
         vx.Config().replace(**{"early": {"spikes": 5}})
-    with pytest.raises(vx.InvalidValueError, match="at k = 1"):
-        vx.SequenceOptions(ks=(1,), velocity_candidates=(0.5, 1.0))
     for network in (None, "net.npz", [1], float("nan")):
         with pytest.raises(vx.InvalidValueError, match="network must be"):
             vx.Localizer(network)

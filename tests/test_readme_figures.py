@@ -173,7 +173,7 @@ def route_table() -> str:
 
 def quantisation_dev_route() -> str:
     """The README's verdict table: W+Prob k=1 accuracy and R@100P at k=5 and k=10 of each width, with verdicts."""
-    data = results("quantisation_dev_route")
+    data = results("runs/quantisation_dev_route")
 
     def cell(check: dict) -> str:
         text = f"{100 * check['difference']:+.1f} [{100 * check['low']:+.1f}, {100 * check['high']:+.1f}] {check['verdict']}"
@@ -190,7 +190,7 @@ def quantisation_dev_route() -> str:
 README_CASES: dict[str, Callable[[], str]] = {
     "adaptation": adaptation,
     "route": route_table,
-    "quantisation_dev_route": quantisation_dev_route,
+    "runs/quantisation_dev_route": quantisation_dev_route,
 }
 CASES: dict[str, Callable[[], str]] = {
     "assignment": assignment,

@@ -227,6 +227,11 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
         given["ks"] = parse_int_list(given["ks"], "--k", MAX_K)
     if "velocity_candidates" in given:
         given["velocity_candidates"] = parse_velocity_grid(given["velocity_candidates"])
+        if max(given.get("ks", (1,))) == 1:
+            raise InvalidValueError(
+                "--velocity-search estimates the velocity of k-frame sequences; at k = 1 there is none to "
+                "estimate: give a --k above 1 or leave --velocity-search out"
+            )
     if args.stream and "velocity_candidates" in given and "velocity_estimate" not in given:
         given["velocity_estimate"] = causal_estimates()[0]
     return given

@@ -129,12 +129,13 @@ def options_from(given: dict, stored: SequenceOptions | None, where: Path | None
 
 
 def onnx_file(raw: str | None) -> Path | None:
-    from ..runtime.exporting import read_export
+    from ..runtime.exporting.folder import read_export
+    from ..runtime.exporting.source import check_against_manifest
 
     if raw is None:
         return None
     path = Path(raw)
-    return read_export(path).written("onnx") if path.is_dir() else path
+    return read_export(path).written("onnx") if path.is_dir() else check_against_manifest(path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -104,11 +104,6 @@ class SequenceOptions:
                     f"{MAX_VELOCITY:g}, at least one, got {self.velocity_candidates!r}"
                 )
             object.__setattr__(self, "velocity_candidates", values)
-            if max(self.ks) == 1:
-                raise InvalidValueError(
-                    "velocity_candidates (--velocity-search) estimates the velocity of k-frame sequences; at k = 1 "
-                    "there is none to estimate: give a --k above 1 or leave --velocity-search out"
-                )
         _count("velocity_span", self.velocity_span, 1, MAX_SETTING)
         _count("velocity_length", self.velocity_length, 1, MAX_SETTING, optional=True)
         _count("velocity_memory", self.velocity_memory, 0, MAX_SETTING)

@@ -113,15 +113,35 @@ class VerifiedRun(JsonDataclass):
     # queries of the step-level checks (None: all; runtime.verify.run.RASTER_BUDGET)
     recorded_queries: int | None = field(default=None, metadata=json_options(omit="none"))
 
-    __json_extra__ = ("passed", "verdict")
+    __json_extra__ = ("passed", "verdict", "degenerate")
     __json_order__ = (
         *("label", "seed", "config", "checkpoint_sha256", "checkpoint_data", "query", "n_queries"),
-        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed", "verdict"),
+        *("query_place_ids", "reference_place_ids", "export_dir", "float", "bits", "passed", "verdict", "degenerate"),
     )
 
     @property
     def passed(self) -> bool:
         return all(r.passed for r in self.bits)
+
+    @property
+    def degenerate(self) -> str | None:
+        """Why the float network does not recognise places, or None when it does: R@100P = 0 at every k of W+Prob
+        (no decision is right at 100 % precision), or W+Prob accuracy at k=1 within two binomial standard errors of
+        chance, c + 2 sqrt(c (1 - c) / Q) with c = 1 / places. A width that "holds" against such a network keeps
+        nothing worth keeping."""
+        rows = [row for row in self.float.metrics if row.strategy == "wprob"]
+        if not rows:
+            return None
+        if all(row.r_at_100p == 0 for row in rows):
+            return "R@100P = 0 at every k (no decision is right at 100 % precision)"
+        places = len(self.reference_place_ids)
+        first = next((row for row in rows if row.k == 1), None)
+        if places and first is not None:
+            chance = 1.0 / places
+            margin = chance + 2 * (chance * (1 - chance) / max(self.n_queries, 1)) ** 0.5
+            if first.accuracy <= margin:
+                return f"W+Prob accuracy at k=1 is {100 * first.accuracy:.1f} %, within chance ({100 * chance:.2f} %)"
+        return None
 
     @property
     def verdict(self) -> str:

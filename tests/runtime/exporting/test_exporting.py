@@ -173,3 +173,28 @@ def test_a_loihi_header_naming_an_arrays_file_outside_its_folder_is_refused(mode
     head.write_text(json.dumps(header))
     with pytest.raises(ModelFileError, match="arrays file"):
         read_loihi(head)
+
+
+def test_a_file_run_from_a_deploy_folder_is_checked_against_export_json(model, tmp_path, capsys):
+    """Issue 45: a bit-flipped ONNX file given by its own path is refused before it runs, like its folder."""
+    import cv2
+    import numpy as np
+
+    from vprsnn_export.runtime.exporting.source import check_against_manifest
+
+    out = tmp_path / "deploy"
+    assert export(model, out) == 0
+    assert check_against_manifest(out / "model.onnx") == out / "model.onnx"
+    flipped = bytearray((out / "model.onnx").read_bytes())
+    flipped[len(flipped) // 2] ^= 0xFF
+    (out / "model.onnx").write_bytes(bytes(flipped))
+    with pytest.raises(ModelFileError, match="differs from what export wrote"):
+        check_against_manifest(out / "model.onnx")
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "0.png"), np.full((32, 64), 128, np.uint8))
+    assert main(["localize", str(model), "--frames", str(frames), "--onnx", str(out / "model.onnx")]) == 2
+    assert "differs from what export wrote" in capsys.readouterr().err
+    loose = tmp_path / "loose.onnx"  # no export.json beside it: nothing to check against
+    loose.write_bytes(bytes(flipped))
+    assert check_against_manifest(loose) == loose

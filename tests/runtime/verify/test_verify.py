@@ -509,3 +509,29 @@ def test_a_tolerance_row_is_counted_on_its_own_with_its_measured_difference():
     older = {**data["checks"][1], "equal": True}  # files written before: no tolerance key, equal meant "passed"
     del older["tolerance"], older["passed"]
     assert Comparison.from_dict(older).tolerance == 0.95 and Comparison.from_dict(older).passed
+
+
+def test_a_float_network_that_does_not_recognise_places_is_named_degenerate(verified):
+    """Issue 45: R@100P = 0 at every k, or accuracy at k=1 within chance, is said in the verdict line and table."""
+    import dataclasses
+
+    from vprsnn_export.commands.verify import conclusion
+    from vprsnn_export.runtime.report.labels import verdict_cells
+
+    def with_float(accuracy: float, r_at_100p: float):
+        rows = tuple(
+            dataclasses.replace(row, values=dataclasses.replace(row.values, accuracy=accuracy, r_at_100p=r_at_100p))
+            for row in verified.float.metrics
+        )
+        return dataclasses.replace(verified, float=dataclasses.replace(verified.float, metrics=rows))
+
+    assert with_float(0.9, 0.5).degenerate is None
+    assert "R@100P = 0 at every k" in with_float(0.9, 0.0).degenerate
+    chance = 1 / len(verified.reference_place_ids)
+    assert "within chance" in with_float(chance, 0.5).degenerate
+    run = with_float(0.9, 0.0)
+    report = build_report([run], {}, command=["verify"], seconds=1.0)
+    line, code = conclusion(report, strict=False)
+    assert "DEGENERATE float network" in line and code in (0, 1)
+    assert all(verdict_cells("tiny", run, result)["verdict"].endswith("(degenerate float)") for result in run.bits)
+    assert '"degenerate": "R@100P = 0' in json.dumps(run.to_dict())

@@ -26,9 +26,7 @@ from vprsnn_export.targets.loihi_budget import deployment_cost
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 
 from .checks import ExportChecks, check_exports
-from .source import ExportSource, consumer_statements, export_all
-
-MANIFEST_NAME = "export.json"
+from .source import MANIFEST_NAME, ExportSource, consumer_statements, export_all
 
 
 @dataclass(frozen=True)

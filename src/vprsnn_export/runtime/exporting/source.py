@@ -11,7 +11,7 @@ from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
-from vprsnn_export.io.fileio import read_container, sha256_file
+from vprsnn_export.io.fileio import parse_json, read_container, sha256_file
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
@@ -50,9 +50,36 @@ class ExportSource:
         return "float checkpoint" if self.checkpoint is not None else "fixed-point model"
 
 
+MANIFEST_NAME = "export.json"  # a deploy folder's manifest: every file's sha256, written last by export
+
+
+def check_against_manifest(path: str | Path) -> Path:
+    """``path``, after checking it against the export.json beside it when that lists it: a file run from a deploy
+    folder must be the one export wrote (its sha256). ModelFileError naming the file when it differs or the
+    manifest cannot be read; a file with no export.json beside it, or one it does not list, is returned as it is."""
+    path = Path(path)
+    manifest = path.parent / MANIFEST_NAME
+    if not manifest.is_file() or not path.is_file():
+        return path
+    try:
+        listed = [
+            entry
+            for entries in parse_json(manifest.read_bytes(), MANIFEST_NAME)["files"].values()
+            for entry in entries
+            if Path(str(entry["path"])).name == path.name
+        ]
+    except (OSError, UnicodeDecodeError, InvalidValueError, KeyError, TypeError, AttributeError, ValueError) as exc:
+        raise ModelFileError(f"corrupt {MANIFEST_NAME} beside the file ({str(exc)[:120]})", manifest) from None
+    if listed and sha256_file(path) not in {str(entry.get("sha256")) for entry in listed}:
+        raise ModelFileError(
+            f"differs from what export wrote ({MANIFEST_NAME}'s sha256): a changed or damaged file is not run", path
+        )
+    return path
+
+
 def load_source(path: str | Path) -> ExportSource:
     """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
-    path = Path(path)
+    path = check_against_manifest(path)
     kind = read_container(path, "model")[0].get("format")
     if kind == CHECKPOINT_FORMAT:
         return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))

@@ -110,7 +110,19 @@ def failure_lines(report: VerifyReport) -> list[str]:
 
 
 def conclusion(report: VerifyReport) -> str:
-    """What the verdict means, in one sentence."""
+    """What the verdict means, in one sentence, and the float networks that do not recognise places."""
+    degenerate = [
+        f"{run.label or index + 1}: {run.degenerate}" for index, run in enumerate(report.runs) if run.degenerate
+    ]
+    warning = (
+        f"; BUT the float network is degenerate ({'; '.join(degenerate)}): a width that holds keeps nothing worth keeping"
+        if degenerate
+        else ""
+    )
+    return _conclusion(report) + warning
+
+
+def _conclusion(report: VerifyReport) -> str:
     n_runs = len(report.runs)
     if report.verdict == "fails":
         return f"{n_runs - report.n_passed} of {n_runs} network(s) fail a check at some bit width"

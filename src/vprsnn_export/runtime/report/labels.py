@@ -159,7 +159,7 @@ def verdict_cells(label: str, run: VerifiedRun, result: BitsResult) -> dict[str,
     return {
         "network": label,
         "bits": str(result.bits),
-        "verdict": result.verdict,
+        "verdict": result.verdict + (" (degenerate float)" if run.degenerate else ""),
         "paired": verdict_counts(result.paired) or "-",
         "exact": exact_counts(cross),
         "tolerance": tolerance_counts(cross),
