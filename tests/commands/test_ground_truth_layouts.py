@@ -184,3 +184,36 @@ def test_no_output_replaces_the_ground_truth_it_was_scored_by(tmp_path, capsys):
     train = ["train", "--data", str(data), "--reference", "sunset1", *TINY, "--out", str(gt), "--force"]
     assert main(train) == 2 and "one of this command's input files" in capsys.readouterr().err
     assert gt.read_text(encoding="utf-8") == "query,reference\n" + pairs
+
+
+def test_an_unequal_lens_route_gets_baselines_truth_named_and_modules_by_its_ground_truth(tmp_path, capsys):
+    """Issue 45: on traversals of different lengths --baseline prints cosine and SAD, every result names the truth,
+    and the per-module rows count each query in the module of its true place (ground truth), not at j // P."""
+    data = tmp_path / "data"
+    reference, query = lens_layout(data)
+    ckpt_path = tmp_path / "net.npz"
+    ensemble = [*TINY, "--module-size", "10"]
+    assert main(["train", "--data", str(data), "--reference", reference, *ensemble, "--out", str(ckpt_path)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(ckpt_path), "--query", query, "--k", "1", "--baseline", "--json", "--quiet"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"sad", "cosine"} <= {row["strategy"] for row in result["results"]}
+    assert result["truth"] == f"ground truth: {data / 'sunset2_sunset1_GT.npy'}"
+    # query j is reference place j + 6: modules of 10 references hold queries 0-3, 4-13 and 14-19
+    assert [m["n_queries"] for m in result["modules"]] == [4, 10, 6]
+    assert sum(m["n_queries"] for m in result["modules"]) == N_QUERY
+    assert main(["evaluate", str(ckpt_path), "--query", query, "--k", "1", "--quiet"]) == 0
+    assert f"scored against the ground truth: {data / 'sunset2_sunset1_GT.npy'}" in capsys.readouterr().out
+
+
+def test_a_manifest_beside_a_ground_truth_file_is_refused_in_one_line(tmp_path, capsys):
+    data = tmp_path / "data"
+    reference, query = lens_layout(data)
+    rows = "".join(f"{p},{reference}/image_{p:04d}.png,{reference}/image_{p:04d}.png\n" for p in range(N_QUERY))
+    (data / "places.csv").write_text(f"place_id,{reference},{query}\n" + rows, encoding="utf-8")
+    ckpt_path = tmp_path / "net.npz"
+    assert main(["train", "--data", str(data), "--reference", reference, *TINY, "--out", str(ckpt_path)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(ckpt_path), "--query", query, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "is ambiguous" in err and "sunset2_sunset1_GT.npy" in err and len(err.strip().splitlines()) == 1

@@ -148,3 +148,26 @@ def test_module_accuracy_counts_each_region():
     assert rows[0].accuracy == pytest.approx(1 / 3) and rows[0].in_region == pytest.approx(1 / 3)
     assert rows[1].accuracy == pytest.approx(2 / 3) and rows[1].in_region == pytest.approx(2 / 3)
     assert rows[0].to_dict()["module"] == 0
+
+
+def test_module_accuracy_follows_the_ground_truth_that_scored_the_queries():
+    """Issue 45: with a ground truth a query belongs to the module of its first true reference, not to j // P."""
+    reference = np.arange(6)  # reference place ids 0..5, regions of 3
+    queries = np.arange(5)  # query ids 0..4 of another traversal
+    truth = np.zeros((6, 5), dtype=bool)  # GT[reference id, query id]
+    truth[[3, 4, 5, 0, 1], [0, 1, 2, 3, 4]] = True  # queries 0-2 are places 3-5, queries 3-4 are places 0-1
+    truth[2, 4] = True  # query 4 also matches place 2 (module 0 either way)
+    pred = np.array([3, 0, 5, 0, 2])  # right, wrong (module 0), right, right, right
+    correct = truth[pred, queries]
+    rows = module_accuracy(pred, correct, reference, queries, module_regions(6, 3), truth)
+    assert [r.n_queries for r in rows] == [2, 3] and sum(r.n_queries for r in rows) == len(queries)
+    assert rows[0].accuracy == 1.0 and rows[1].accuracy == pytest.approx(2 / 3)
+    assert rows[1].in_region == pytest.approx(2 / 3)  # query 1 was sent to module 0
+    by_index = module_accuracy(pred, correct, reference, queries, module_regions(6, 3))
+    assert [r.n_queries for r in by_index] == [3, 2]  # what the index rule said: the wrong modules
+    unmatched = truth.copy()
+    unmatched[:, 0] = False  # a query no reference matches is left out
+    assert (
+        sum(r.n_queries for r in module_accuracy(pred, correct, reference, queries, module_regions(6, 3), unmatched))
+        == 4
+    )

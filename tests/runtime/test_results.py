@@ -51,7 +51,16 @@ def _instances(value, found):
 #: Keys computed from the fields and written since report_v1 (issue 32): the paired verdicts and the
 #: exact / tolerance counts of the cross-implementation checks, a float consumer row's stated tolerance (read from
 #: its kind). Everything else is written back as read.
-ADDED_KEYS = {"verdict", "passed", "tolerance", "n_exact", "n_identical", "n_tolerance", "n_within_tolerance"}
+ADDED_KEYS = {
+    "verdict",
+    "passed",
+    "tolerance",
+    "n_exact",
+    "n_identical",
+    "n_tolerance",
+    "n_within_tolerance",
+    "degenerate",
+}
 
 
 def _without_added(written, old):

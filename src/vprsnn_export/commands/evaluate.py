@@ -5,13 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from ..cluster import CLUSTER_HELP, parse_cluster
-from ..data.dataset import dataset_files
+from ..data.dataset import dataset_files, load_selection, select_places
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
+from ..readout.metrics import truth_label
 from ..runtime.predictions import network_predictions
 from ._common import (
     RESULT_COLUMNS,
@@ -66,11 +65,15 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)
-    traversals = [args.query] + ([t for t in ckpt.reference_traversals if t != args.query] if args.baseline else [])
-    dataset = query_data(args, ckpt.data, ckpt.config.preprocess, traversals)
-    if args.baseline and not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
-        raise InvalidValueError("--baseline needs the query places to be the checkpoint's reference places")
+    dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query])
     options = scored_options(args, options, dataset, ckpt.reference_traversals)
+    reference_images = None
+    if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)
+        references = select_places(
+            load_selection(ckpt.data, ckpt.reference_traversals, ckpt.config.preprocess, source=args.data),
+            ckpt.reference_place_ids,
+        )
+        reference_images = {t: references.traversal(t) for t in ckpt.reference_traversals}
     if args.predictions is not None:  # nor over a file of the data set (manifest, subset, ground truth)
         check_output(
             args.predictions, inputs=(args.checkpoint, *dataset_files(dataset, args.subset, ckpt.data.get("subset")))
@@ -83,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         options,
         device=resolve_device(args.device),
         state_isolation=False if args.no_state_isolation else None,
-        reference_images={t: dataset.traversal(t) for t in ckpt.reference_traversals} if args.baseline else None,
+        reference_images=reference_images,
         cluster=cluster,
         progress=not args.quiet,
     )
@@ -96,12 +99,14 @@ def run(args: argparse.Namespace) -> int:
                 "config": ckpt.config.to_dict(),
                 "checkpoint": str(args.checkpoint),
                 "query": args.query,
+                "truth": truth_label(options.tolerance),
                 "threads": args.threads,
                 **result.to_dict(),
             }
         )
     else:
         print(format_table(result.rows, RESULT_COLUMNS))
+        print(f"scored against the {truth_label(options.tolerance)}")
         if result.modules is not None:
             print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")
             rows = [{**m.to_dict(), "places": f"{m.first_place}-{m.last_place}"} for m in result.modules]

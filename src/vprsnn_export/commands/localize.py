@@ -28,6 +28,7 @@ from ..data.events import EventWindow
 from ..data.frames import iter_frames
 from ..errors import DataError, InvalidValueError
 from ..io.fileio import check_output
+from ..readout.metrics import truth_label
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ._common import (
@@ -259,7 +260,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
         f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
-        f"recall {100 * point.recall:.1f} %"
+        f"recall {100 * point.recall:.1f} %; scored against the {truth_label(match_window)}"
     )
     chosen_point = (point.recall, point.precision, point.threshold)
     title = f"'{point.query}': {point.n_queries} queries, k={localizer.readout.k}"

@@ -8,6 +8,7 @@ import sys
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
+from ..readout.metrics import truth_label
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -66,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
                 "model": str(args.model),
                 "source_sha256": model.source_sha256,
                 "query": args.query,
+                "truth": truth_label(options.tolerance),
                 "bits": model.bits,
                 "threads": args.threads,
                 "quantisation": model.quantisation.to_dict(),
@@ -76,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(format_table(result.rows, (("calibration", "calibration"), *RESULT_COLUMNS)))
+        print(f"scored against the {truth_label(options.tolerance)}")
         stats = result.spike_stats
         print(
             f"\n{model.bits}-bit model; saturation events: {result.saturations}; threshold candidates per step: "

@@ -22,7 +22,7 @@ import numpy as np
 from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
 from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
-from ..readout.metrics import MatchTruth
+from ..readout.metrics import MatchTruth, truth_label
 from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
@@ -296,6 +296,7 @@ def run(args: argparse.Namespace) -> int:
         network_options = dataclasses.replace(options, readout=readout)
         if isinstance(readout.tolerance, MatchTruth):  # the report says what the queries were scored against
             settings["ground_truth"] = readout.tolerance.source
+        settings["truth"] = truth_label(readout.tolerance)
         runs.append(
             verify_checkpoint(
                 ckpt,
@@ -320,6 +321,7 @@ def run(args: argparse.Namespace) -> int:
             {
                 "passed": report.passed,
                 "verdict": report.verdict,
+                "truth": settings.get("truth"),
                 "exit_code": code,
                 "report": {k: str(v) for k, v in written.items()},
                 "summary": report.summary.to_dict(),
@@ -337,5 +339,6 @@ def run(args: argparse.Namespace) -> int:
             "flips: float right/deployed wrong and the reverse):"
         )
         print(format_table(paired_rows(report), (("network", "network"), ("bits", "bits"), *PAIRED_COLUMNS)))
-        print(f"\n{line}; report: {written['html']}")
+        print(f"\nscored against the {settings['truth']}" if "truth" in settings else "")
+        print(f"{line}; report: {written['html']}")
     return code

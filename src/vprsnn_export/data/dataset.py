@@ -42,7 +42,7 @@ from .folders import (
     query_truth,
 )
 from .frames import image_files
-from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT
+from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT, ground_truth_files
 from .preprocess import preprocess_images, read_grey_image
 from .synthetic import (
     DEFAULT_PLACES,
@@ -174,7 +174,18 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
     a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
     match, or the folder when its traversals are not index-aligned and no file says how they match."""
     folder = Path(dataset.source)
-    if parse_synthetic(dataset.source) is not None or not _is_folders(folder):
+    if parse_synthetic(dataset.source) is not None:
+        return None
+    if not _is_folders(folder):
+        manifest_folder = folder if folder.is_dir() else folder.parent
+        beside = [path for reference in references for path, _ in ground_truth_files(manifest_folder, reference, query)]
+        if beside:  # docs/data.md: a manifest aligns places by index; a ground truth beside it would say otherwise
+            raise DataError(
+                f"this data set is read by its manifest ({MANIFEST_NAME}: places aligned by index), but "
+                f"{beside[0].name} beside it says which references match each query: which one scores the queries "
+                "is ambiguous; move one of the two aside",
+                manifest_folder,
+            )
         return None
     truth = query_truth(folder, _check_traversals(references), query)
     if truth is None:

@@ -37,6 +37,12 @@ Tolerance = int | MatchTruth
 """How a prediction is judged: within +-N place ids of the query's (index-aligned data), or by a ground truth."""
 
 
+def truth_label(tolerance: Tolerance) -> str:
+    """How a run's decisions were judged, in the words every result states: ``ground truth: FILE`` or
+    ``match window: N`` (index-aligned place ids, N places either side; 0: the query's own place)."""
+    return f"ground truth: {tolerance.source}" if isinstance(tolerance, MatchTruth) else f"match window: {tolerance}"
+
+
 def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.MaskedArray:
     """Map predicted place indices to place ids; no-matches (index -1) are masked.
 

@@ -222,6 +222,7 @@ def module_accuracy(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     regions: np.ndarray,
+    truth: np.ndarray | None = None,
 ) -> list[ModuleAccuracy]:
     """Per module m, over the queries whose true place lies in region m (a query of no reference place is left out):
 
@@ -229,15 +230,24 @@ def module_accuracy(
               \\mathrm{in}_m = \\frac{\\#\\{q : \\hat l_q \\in R_m\\}}{\\#\\{q\\}}
 
     ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the
-    booleans of ``metrics.is_correct``. Computed with one ``bincount`` per quantity.
+    booleans of ``metrics.is_correct``. A query's true place is the reference of its own place id, or, with a
+    ground truth ``truth[reference id, query id]`` (:class:`~vprsnn_export.readout.metrics.MatchTruth`'s matrix),
+    the first reference (in the model's order) that the ground truth matches it with: the same truth that scored
+    it. Computed with one ``bincount`` per quantity.
     """
     regions_ = np.asarray(regions, dtype=np.int64)
     reference = np.asarray(reference_place_ids, dtype=np.int64)
     queries = np.asarray(query_place_ids, dtype=np.int64)
-    order = np.argsort(reference, kind="stable")
-    position = np.clip(np.searchsorted(reference[order], queries), 0, max(len(reference) - 1, 0))
-    known = reference[order][position] == queries
-    true_index = order[position]
+    if truth is None:
+        order = np.argsort(reference, kind="stable")
+        position = np.clip(np.searchsorted(reference[order], queries), 0, max(len(reference) - 1, 0))
+        known = reference[order][position] == queries
+        true_index = order[position]
+    else:
+        rows = np.flatnonzero((reference >= 0) & (reference < truth.shape[0]))  # references the truth names
+        matches = truth[np.ix_(reference[rows], queries)]  # (references in the truth, queries)
+        known = matches.any(axis=0)
+        true_index = rows[matches.argmax(axis=0)] if rows.size else np.zeros(len(queries), np.int64)
     n_modules = len(regions_)
     true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
     pred = np.asarray(pred_index, dtype=np.int64)

@@ -137,7 +137,8 @@ def region_accuracies(
     ``distribution`` (Q, places) on its region's queries (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
     predicted, _ = decide(distribution, SEQUENCE_STRATEGY)
     correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
-    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions)
+    truth = tolerance.matrix if isinstance(tolerance, MatchTruth) else None  # the truth that scored them
+    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions, truth)
 
 
 def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: Tolerance) -> None:
