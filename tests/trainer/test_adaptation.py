@@ -162,3 +162,37 @@ def test_localize_feeds_every_backend_the_adapted_input(tmp_path):
     inputs = np.concatenate([integer.preprocess(g) for g in grey])
     plain = replace(ckpt, config=replace(cfg, encoder=replace(cfg.encoder, input_gain=())))
     assert not np.array_equal(Localizer(ckpt).counts(inputs, 0), Localizer(plain).counts(inputs, 0))
+
+
+def test_truth_pairing_follows_a_folder_ground_truth_not_the_index(tmp_path, capsys):
+    """Issue 45: winter frame j is summer place (j + 3) mod 12 by the folder's ground-truth file; --adapt-pairing
+    truth pairs by that file (and says so), never by the frame index."""
+    import cv2
+
+    from vprsnn_export.data.synthetic import synthetic_route
+
+    n = 12
+    route = synthetic_route(n, ("summer", "winter"))
+    data = tmp_path / "data"
+    for name, frames in (("summer", route["summer"]), ("winter", np.roll(route["winter"], -3, axis=0))):
+        (data / name).mkdir(parents=True)
+        for index, image in enumerate(frames):
+            cv2.imwrite(str(data / name / f"{index:03d}.png"), image)
+    truth = np.zeros((n, n), dtype=np.int64)  # GT[reference, query]: frame j of winter is place (j + 3) mod 12
+    truth[(np.arange(n) + 3) % n, np.arange(n)] = 1
+    (data / "summer_winter_GT.csv").write_text(
+        "query,reference\n" + "".join(f"{q},{(q + 3) % n}\n" for q in range(n)), encoding="utf-8"
+    )
+    out = tmp_path / "net.npz"
+    argv = ["train", "--data", str(data), "--reference", "summer", "--adapt-from", "winter", "--adapt", "gain"]
+    tiny = ["--timesteps", "20", "--epochs", "1", "--neurons", "8", "--quiet"]
+    assert main([*argv, "--adapt-pairing", "truth", *tiny, "--out", str(out)]) == 0
+    record = load_checkpoint(out).data["adaptation"]
+    assert "paired by ground truth summer_winter_GT.csv" in record and "0 % at their own place id" in record
+    frame = data / "winter" / "003.png"
+    before = frame.read_bytes()
+    for over in (frame, data / "winter" / "net.npz"):  # --out over an adaptation frame, or into its folder
+        capsys.readouterr()
+        assert main([*argv, *tiny, "--force", "--out", str(over)]) == 2
+        assert "never replaces a frame" in capsys.readouterr().err
+    assert frame.read_bytes() == before

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..config import Config
-from ..data.dataset import dataset_files, load_dataset, selection_record
+from ..data.dataset import dataset_files, load_dataset, scoring_truth, selection_record
 from ..errors import InvalidValueError
 from ..io.checkpoint import save_checkpoint
 from ..io.fileio import check_output
@@ -62,6 +62,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 ADAPTATIONS = ("gain",)  # trainer.adaptation.MECHANISMS, named here so that --help loads no torch (tested)
 
 
+def check_not_a_frame(out: Path, data: Path, traversals: list[str]) -> None:
+    """InvalidValueError when ``--out`` would replace an image of the data set: an image file name, or a path
+    inside one of the traversal folders read (reference or adaptation frames)."""
+    from ..data.frames import IMAGE_SUFFIXES
+
+    folders = [data / name for name in traversals if (data / name).is_dir()]
+    inside = [f for f in folders if out.resolve().is_relative_to(f.resolve())]
+    if out.suffix.lower() in IMAGE_SUFFIXES or inside:
+        where = f"inside the traversal folder {inside[0]}" if inside else "an image file name"
+        raise InvalidValueError(f"--out {out}: {where}; a checkpoint never replaces a frame of the data set")
+
+
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..trainer.adaptation import adapt_config, parse_place_ranges
@@ -80,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     traversals = references + ([args.adapt_from] if args.adapt_from and args.adapt_from not in references else [])
+    check_not_a_frame(Path(args.out), Path(args.data), traversals)
     dataset = load_dataset(
         args.data, traversals, cfg.preprocess, subset=args.subset, places=args.places, progress=not args.quiet
     )
@@ -95,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
             mechanism=args.adapt,
             places=adapt_places,
             pairing=args.adapt_pairing,
+            truth=scoring_truth(dataset, references, args.adapt_from) if args.adapt_pairing == "truth" else None,
         )
         cfg, record = adaptation.config, adaptation.summary
     ckpt = train_and_calibrate(

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -29,6 +30,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, parse_places
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout.baseline import cosine_similarities, diagonal_sums
+from vprsnn_export.readout.metrics import MatchTruth
 from vprsnn_export.registry import Registry
 
 #: Frames summed along the diagonal when pairing without labels (research log §8: k = 10 pairs 86-94 % right).
@@ -106,12 +108,15 @@ def adapt_config(
     mechanism: str = "gain",
     places: np.ndarray | None = None,
     pairing: str = "sequence",
+    truth: MatchTruth | None = None,
 ) -> Adaptation:
     """Learn ``mechanism`` from the reference images and the frames of ``traversal`` at ``places`` (default: every
     place of the data set), paired by sequence matching or, with ``pairing="truth"``, by place id.
 
     With several reference traversals, a place's reference image is their mean. ``traversal`` must not be a
-    reference (a traversal used for adaptation is never a reference nor calibrates).
+    reference (a traversal used for adaptation is never a reference nor calibrates). ``truth``: the data set's
+    ground truth of (reference, ``traversal``) (:func:`~vprsnn_export.data.dataset.scoring_truth`); with
+    ``pairing="truth"`` a frame pairs with its first true reference place by it, not by its index.
     """
     learner = MECHANISMS.get(mechanism)
     if traversal in references:
@@ -133,7 +138,7 @@ def adapt_config(
     reference = np.mean([dataset.traversal(name) for name in references], axis=0)
     frames = dataset.traversal(traversal)[rows]
     if pairing == "truth":
-        paired = rows
+        paired = rows if truth is None else truth_pairs(truth, ids, ids[rows])
     else:
         paired = sequence_pairs(reference, frames, ids[rows], PAIRING_FRAMES)
     adapted = learner.learn(reference[paired], frames, cfg)
@@ -142,10 +147,33 @@ def adapt_config(
         "traversal": traversal,
         "frames": int(len(rows)),
         "places": place_ranges(ids[rows]),
-        "pairing": "ground truth (place ids)" if pairing == "truth" else f"sequence matching, k = {PAIRING_FRAMES}",
+        "pairing": (
+            f"sequence matching, k = {PAIRING_FRAMES}"
+            if pairing == "sequence"
+            else "place ids (index-aligned)"
+            if truth is None
+            else f"ground truth {Path(truth.source).name}"
+        ),
         "pairs_at_own_place": round(float(np.mean(paired == rows)), 4),
     }
     return Adaptation(adapted, record)
+
+
+def truth_pairs(truth: MatchTruth, ids: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:
+    """Each frame's first true reference: ``pair(f) = min {l : GT[ids_l, f]}`` (a row of ``ids``); InvalidValueError
+    naming the file when the ground truth names no reference place of the selection for a frame."""
+    n_reference, n_frames = truth.matrix.shape
+    if frame_ids.size and frame_ids.max() >= n_frames:
+        raise InvalidValueError(f"--adapt-pairing truth: frame {int(frame_ids.max())} is outside {truth.source}")
+    matches = np.zeros((len(ids), len(frame_ids)), dtype=bool)
+    inside = ids < n_reference
+    matches[inside] = truth.matrix[np.ix_(ids[inside], frame_ids)]
+    lost = ~matches.any(axis=0)
+    if lost.any():
+        raise InvalidValueError(
+            f"--adapt-pairing truth: {truth.source} names no selected reference place for frame {int(frame_ids[lost][0])}"
+        )
+    return matches.argmax(axis=0)
 
 
 def place_ranges(ids: np.ndarray) -> str:
