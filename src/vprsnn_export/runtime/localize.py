@@ -53,6 +53,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
+from vprsnn_export.readout.early import early_run
 from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -134,6 +135,13 @@ class OperatingPoint:
         return cls(**{**fields, "options": SequenceOptions.from_dict(fields["options"])})
 
 
+def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, config: Config) -> np.ndarray:
+    """The spike counts a frame is decided on: the whole presentation's, or with ``config.early`` on, the counts
+    up to the step the early rule stops at (:func:`~vprsnn_export.readout.early.early_run`), as in evaluate."""
+    early = early_run(runner.run, spikes, calibration, config, isolated=True)
+    return runner.run(spikes).counts.cpu().numpy() if early is None else np.asarray(early.counts)
+
+
 class Localizer:
     """A trained or deployed network answering one frame at a time (``push``), causally.
 
@@ -169,7 +177,7 @@ class Localizer:
         self.config: Config = network.config
         isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
         self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
-        self._counts = lambda spikes: runner.run(spikes).counts.cpu().numpy()
+        self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
         self.readout.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
