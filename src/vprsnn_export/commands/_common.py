@@ -9,11 +9,13 @@ import sys
 from collections.abc import Sequence
 from dataclasses import fields, replace
 from functools import reduce
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..data.dataset import Dataset, load_selection, scoring_truth
+from ..data.groundtruth import ground_truth_files
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
@@ -392,10 +394,33 @@ RESULT_COLUMNS = (
 )
 
 
+def refuse_window_beside_truth(
+    match_window: int | None, source: str | None, references: Sequence[str], query: str
+) -> None:
+    """--match-window on a folder whose ground-truth file says how (reference, query) match: refused before any
+    image is decoded (the same refusal :func:`scored_tolerance` makes once the data is loaded)."""
+    folder = Path(source) if source else None
+    if not match_window or folder is None or not folder.is_dir():
+        return
+    found = [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]
+    if found:
+        raise InvalidValueError(
+            f"--match-window {match_window}: {found[0]} says which reference frames match each query; "
+            "--match-window is for index-aligned data without a ground-truth file"
+        )
+
+
 def query_data(
-    args: argparse.Namespace, record: dict[str, Any], preprocess: PreprocessConfig, traversals: list[str]
+    args: argparse.Namespace,
+    record: dict[str, Any],
+    preprocess: PreprocessConfig,
+    traversals: list[str],
+    references: Sequence[str] = (),
 ) -> Dataset:
-    """The data set named by --data/--subset/--places, else the one a checkpoint or model records."""
+    """The data set named by --data/--subset/--places, else the one a checkpoint or model records; with
+    ``references``, --match-window beside a ground-truth file of (reference, ``traversals[0]``) is refused first."""
+    source = args.data if args.data is not None else record.get("source")
+    refuse_window_beside_truth(getattr(args, "match_window", None), source, references, traversals[0])
     return load_selection(
         record,
         traversals,

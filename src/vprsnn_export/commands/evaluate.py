@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)
-    dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query])
+    dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query], ckpt.reference_traversals)
     options = scored_options(args, options, dataset, ckpt.reference_traversals)
     reference_images = None
     if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)

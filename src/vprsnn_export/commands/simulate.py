@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
     options = sequence_options(args)
-    dataset = query_data(args, model.data, model.config.preprocess, [args.query])
+    dataset = query_data(args, model.data, model.config.preprocess, [args.query], model.reference_traversals)
     options = scored_options(args, options, dataset, model.reference_traversals)
     result = evaluate_fixed_point(
         model,

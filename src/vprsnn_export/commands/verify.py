@@ -37,6 +37,7 @@ from ._common import (
     non_empty,
     print_json,
     quantise_options,
+    refuse_window_beside_truth,
     scored_tolerance,
     sequence_options,
 )
@@ -256,6 +257,7 @@ def run(args: argparse.Namespace) -> int:
     templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
     options = verify_options(args)
     source, subset, places = data_selection(templates[0][1].data, args.data, args.subset, args.places)
+    refuse_window_beside_truth(args.match_window, source, templates[0][1].reference_traversals, args.query)
     cache: dict = {}
     networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
