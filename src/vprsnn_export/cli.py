@@ -166,6 +166,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except VprError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except PermissionError as exc:  # a file or folder the user may not read or write, wherever it is met
+        where = exc.filename if exc.filename is not None else "a file"
+        print(f"error: {where}: permission denied ({exc.strerror or exc})", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130

@@ -94,3 +94,16 @@ def test_any_option_value_runs_or_is_one_line(checkpoint, capsys, option, value)
     assert code in (0, 2), err
     if code == 2:
         assert err.startswith("error: ") and err.count("\n") == 1, err
+
+
+def test_a_permission_denied_anywhere_is_one_line_and_exit_2(monkeypatch, capsys, tmp_path):
+    """Issue 45: a folder or file the user may not read (root reads everything, so the refusal is simulated)."""
+    import vprsnn_export.commands.evaluate as evaluate
+
+    def denied(path):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(evaluate, "load_checkpoint", denied)
+    assert main(["evaluate", str(tmp_path / "net.npz"), "--query", "winter"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {tmp_path / 'net.npz'}: permission denied (Permission denied)"]

@@ -372,3 +372,28 @@ def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
         out = run_onnx_outputs(path, spikes)
         assert np.array_equal(out.counts, expected.counts.numpy()), bits
         assert int(out.saturations.sum()) == expected.saturations
+
+
+def test_reader_refuses_an_edited_graph_without_its_outputs_or_with_foreign_operators(tmp_path):
+    """Issue 45: an exported graph whose counts output was removed (a KeyError once), or that gained an operator
+    the writer never uses, is a ModelFileError naming the file before onnxruntime runs it."""
+    import re
+
+    from vprsnn_export.targets import onnx_target
+    from vprsnn_export.targets.onnx_session import WRITER_OPS
+
+    written = set(re.findall(r'\.op\(\s*"([A-Za-z]+)"', Path(onnx_target.__file__).read_text()))
+    assert WRITER_OPS == written | {"Scan"}  # the allowlist is the writer's own set of operators
+    path = write_onnx(make_model(np.random.default_rng(7)), tmp_path / "m.onnx")
+    edited = onnx.load(str(path))
+    kept = [o for o in edited.graph.output if o.name != "counts"]
+    del edited.graph.output[:]
+    edited.graph.output.extend(kept)
+    onnx.save(edited, str(tmp_path / "no_counts.onnx"))
+    with pytest.raises(ModelFileError, match="no output counts"):
+        run_onnx(tmp_path / "no_counts.onnx", random_spikes(0, 1, 5, 16))
+    grown = onnx.load(str(path))
+    grown.graph.node.append(onnx.helper.make_node("Abs", ["spikes"], ["spikes_abs"]))  # valid, but not the writer's
+    onnx.save(grown, str(tmp_path / "grown.onnx"))
+    with pytest.raises(ModelFileError, match=r"operators export never writes \(Abs\)"):
+        read_onnx(tmp_path / "grown.onnx")

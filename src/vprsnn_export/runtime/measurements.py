@@ -15,6 +15,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+import numpy as np
+
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass, json_options
 
 
@@ -107,6 +110,14 @@ class PrCurve(JsonDataclass):
 
     precision: tuple[float, ...]
     recall: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        values = np.asarray([*self.precision, *self.recall], dtype=np.float64)
+        if len(self.precision) != len(self.recall) or not np.all((values >= 0) & (values <= 1)):
+            raise InvalidValueError(
+                f"a PR curve needs as many precision as recall values, each in [0, 1] (got {len(self.precision)} "
+                f"and {len(self.recall)})"
+            )
 
 
 @dataclass(frozen=True)

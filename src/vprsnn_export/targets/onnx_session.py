@@ -41,7 +41,49 @@ def read_onnx(path: str | Path) -> onnx.ModelProto:
     props = {p.key: p.value for p in loaded.metadata_props}
     if props.get("vprsnn.format") != "vprsnn-onnx/1":
         raise ModelFileError("not an ONNX graph written by vprsnn-export (metadata vprsnn.format missing)", path)
+    check_interface(loaded, path)
     return loaded
+
+
+#: The operators the project's ONNX writer uses (targets/onnx_target.py); a graph with any other is not one of its
+#: files (an edited or foreign graph could loop or allocate without bound).
+WRITER_OPS = frozenset(
+    "Add And ArgMax BitShift BitwiseAnd Cast Clip Concat ConstantOfShape Div Equal Greater Identity MatMul "
+    "MatMulInteger Mul Not Range "
+    "ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
+)
+REQUIRED_OUTPUTS = ("counts", "saturations")
+
+
+def graph_ops(graph) -> set[str]:
+    """Every operator of ``graph`` and of the subgraphs of its nodes (a Scan's body), iteratively."""
+    found: set[str] = set()
+    pending = [graph]
+    while pending:
+        for node in pending.pop().node:
+            found.add(node.op_type)
+            pending.extend(a.g for a in node.attribute if a.HasField("g"))
+            pending.extend(g for a in node.attribute for g in a.graphs)
+    return found
+
+
+def check_interface(loaded, path: Path) -> None:
+    """ModelFileError unless the graph has the writer's interface: one input ``spikes`` [T, batch, inputs] with T
+    and inputs fixed, the outputs counts and saturations, and only :data:`WRITER_OPS`."""
+    inputs = list(loaded.graph.input)
+    dims = (
+        [d.dim_value if d.HasField("dim_value") else None for d in inputs[0].type.tensor_type.shape.dim]
+        if inputs
+        else []
+    )
+    if len(inputs) != 1 or inputs[0].name != INPUT or len(dims) != 3 or not (dims[0] and dims[2]):
+        raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
+    missing = [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]
+    if missing:
+        raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
+    foreign = sorted(graph_ops(loaded.graph) - WRITER_OPS)
+    if foreign:
+        raise ModelFileError(f"the graph uses operators export never writes ({', '.join(foreign[:5])})", path)
 
 
 def session(path: str | Path, threads: int | None = None):
