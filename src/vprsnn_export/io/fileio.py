@@ -158,7 +158,13 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     target = Path(path)
     folder = next((p for p in target.absolute().parents if p.is_dir()), Path("/"))  # the nearest existing one
     lock_path = folder / f".{target.name or 'output'}.lock"
+    keyed = _keyed_lock(target)  # the same file whichever of the output's folders exist yet
     fd = _acquire(lock_path, target)
+    try:
+        keyed_fd = _acquire_keyed(keyed, target)
+    except BaseException:
+        os.close(fd)
+        raise
     try:
         if target.parent.is_dir():  # what a killed run left beside the output
             for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
@@ -172,7 +178,30 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
             with contextlib.suppress(OSError):
                 os.unlink(lock_path)
     finally:
+        os.close(keyed_fd)
         os.close(fd)
+
+
+def _keyed_lock(target: Path) -> Path:
+    """A lock file named by the output's absolute path, in a per-user folder of the temp directory: the folder
+    beside the output may not exist yet when one run starts and exist when the next does, so the lock beside it
+    alone could differ between two runs writing the same output."""
+    key = hashlib.sha256(os.path.abspath(target).encode("utf-8", "surrogateescape")).hexdigest()[:32]
+    return Path(tempfile.gettempdir()) / f"vprsnn-export-locks-{os.getuid()}" / f"{key}.lock"
+
+
+def _acquire_keyed(lock_path: Path, target: Path) -> int:
+    """An fd holding the flock of the keyed lock (never unlinked: taking it needs no retry)."""
+    lock_path.parent.mkdir(mode=0o700, exist_ok=True)
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise OutputError(
+            "another vprsnn-export run is writing it now: wait for it or give another output", target
+        ) from None
+    return fd
 
 
 def _acquire(lock_path: Path, target: Path) -> int:

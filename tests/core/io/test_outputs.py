@@ -194,3 +194,21 @@ def test_the_next_run_removes_what_a_killed_run_left_in_its_output_folder(tmp_pa
     assert main([*argv, "--threads", "1"]) in (0, 1), capsys.readouterr().err  # verify: 1 when a check fails
     assert not any(path.exists() for path in leftovers)
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or ".staging-" in p.name]
+
+
+def test_the_lock_holds_when_the_outputs_folder_appears_during_the_first_run(tmp_path):
+    """Issue 45: run A locks new/dir/s.npz before new/dir exists, then creates it; run B, started after, must not
+    get the lock (the lock beside the output would be another file for it)."""
+    import subprocess
+    import sys
+
+    from vprsnn_export.io.fileio import output_lock
+
+    target = tmp_path / "new" / "dir" / "s.npz"
+    probe = f"from vprsnn_export.io.fileio import output_lock\nwith output_lock({str(target)!r}): print('got it')"
+    with output_lock(target):
+        target.parent.mkdir(parents=True)
+        second = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+        assert "got it" not in second.stdout and "another vprsnn-export run is writing it now" in second.stderr
+    again = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert "got it" in again.stdout
