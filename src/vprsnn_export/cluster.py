@@ -189,12 +189,13 @@ def connect(cluster: Cluster) -> None:
     ray = _ray()
     try:
         if cluster.is_local:
-            ray.init(
-                num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
-                include_dashboard=False,
-                log_to_driver=False,
-                configure_logging=False,
-            )
+            with stderr_kept_back(drop=RAY_NOTICES):  # Ray's token notice: nothing above a later one-line error
+                ray.init(
+                    num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
+                    include_dashboard=False,
+                    log_to_driver=False,
+                    configure_logging=False,
+                )
         else:
             if cluster.address.startswith("ray://"):
                 reachable(cluster.address)
@@ -219,10 +220,15 @@ def reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
         ) from None
 
 
+#: Lines Ray prints on every start that say nothing about this run (its token-authentication notice).
+RAY_NOTICES = ("Token authentication is enabled for this Ray cluster",)
+
+
 @contextlib.contextmanager
-def stderr_kept_back() -> Iterator[None]:
+def stderr_kept_back(drop: tuple[str, ...] = ()) -> Iterator[None]:
     """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
-    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
+    what it caught is written to stderr after a block that succeeds (less the lines starting with one of
+    ``drop``), dropped after one that raises."""
     sys.stderr.flush()
     saved = os.dup(2)
     with tempfile.TemporaryFile() as caught:
@@ -234,7 +240,11 @@ def stderr_kept_back() -> Iterator[None]:
             os.dup2(saved, 2)
             os.close(saved)
         caught.seek(0)
-        text = caught.read()
+        text = b"".join(
+            line
+            for line in caught.read().splitlines(keepends=True)
+            if not line.decode(errors="replace").startswith(drop)
+        )
         if text:
             sys.stderr.buffer.write(text)
             sys.stderr.flush()
