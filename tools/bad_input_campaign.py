@@ -1081,6 +1081,34 @@ def build_fixtures(fx: Path, run: Runner, nordland: Path | None) -> None:
     write_resized_streams(fx, only_images)
     write_stream_inputs(fx, only_images)
     write_experiment_folders(fx, only_images)
+    write_issue45_fixtures(fx, only_images, len(names))
+
+
+def write_issue45_fixtures(fx: Path, images: Path, n: int) -> None:
+    """Issue 45's files: a manifest folder with a ground-truth file beside it, a deploy folder whose ONNX file
+    was bit-flipped after export, a report whose PR curves are ragged, an event recording with a clock jump."""
+    shutil.copytree(fx / "nord", fx / "nord_gt")
+    np.save(fx / "nord_gt" / "summer_winter_GT.npy", np.roll(np.eye(n, dtype=np.int64), 3, axis=0))
+    if (fx / "deploy").is_dir():
+        shutil.copytree(fx / "deploy", fx / "deploy_flipped")
+        onnx_file = fx / "deploy_flipped" / "model.onnx"
+        flipped = bytearray(onnx_file.read_bytes())
+        flipped[len(flipped) // 2] ^= 0xFF
+        onnx_file.write_bytes(bytes(flipped))
+    report = fx / "rep" / "report.json"
+    if report.is_file():
+        data = json.loads(report.read_text())
+        for width in data["runs"][0]["bits"]:
+            for curve in width["pr_curves"].values():
+                curve["precision"] = curve["precision"][:-1]
+        (fx / "rep_ragged").mkdir()
+        (fx / "rep_ragged" / "report.json").write_text(json.dumps(data))
+    events = np.zeros(3, [("x", "<u2"), ("y", "<u2"), ("t", "<i8"), ("p", "i1")])
+    events["t"] = [0, 1, 10**15]
+    np.save(fx / "events_jump.npy", events)
+    frames = fx / "adapt_data"
+    for traversal in ("summer", "winter"):
+        shutil.copytree(images / traversal, frames / traversal)
 
 
 # ---------------------------------------------------------------------------------------------- cases
@@ -2063,6 +2091,33 @@ OUTPUT_CHECKS: dict[str, Callable[[Path, Path], str | None]] = {
 }
 
 
+def issue45_cases() -> list[Case]:
+    """Issue 45: the regressions since the guards moved to the edges, and the silent wrong answers it found."""
+    adapt = ("train", "--data", "{fx}/adapt_data", "--reference", "summer", "--adapt-from", "winter", "--adapt", "gain")
+    return [
+        bad("verify-tolerance-500-points", *VERIFY, "--tolerance", "accuracy=5", says="fraction in [0, 1]"),
+        bad("verify-tolerance-share-above-1", *VERIFY, "--tolerance", "top1_agreement=1.5", says="fraction"),
+        bad("verify-tolerance-half-query", *VERIFY, "--tolerance", "query_slack=0.5", says="whole number"),
+        bad("verify-tolerance-twice", *VERIFY, "--tolerance", "accuracy=0.02,accuracy=0.03", says="given twice"),
+        bad("train-set-empty-segment", *TRAIN, "--set", "train..epochs=2", says="empty name between dots"),
+        bad("train-set-section-as-json", *TRAIN, "--set", 'early={"spikes": 5}', says="is a section"),
+        bad("evaluate-velocity-search-k1", *EVAL, "--velocity-search", "0.5:1.5:0.5", says="at k = 1"),
+        bad("evaluate-manifest-beside-gt", *EVAL, "--data", "{fx}/nord_gt", says="is ambiguous"),
+        bad(
+            "localize-onnx-bit-flipped",
+            "localize", M8, "--frames", "{fx}/nord_frames/winter", "--onnx", "{fx}/deploy_flipped/model.onnx",
+            says="differs from what export wrote",
+        ),
+        bad("report-ragged-curves", "report", "{fx}/rep_ragged", "--out", "r", says="PR curve"),
+        bad(
+            "localize-events-clock-jump",
+            "localize", M8, "--frames", "{fx}/events_jump.npy", "--event-window-us", "1", says="frames",
+        ),
+        bad("train-adapt-out-over-a-frame", *adapt, *TINY, "--force", "--out", "{fx}/adapt_data/winter/x.npz",
+            says="never replaces a frame"),
+    ]  # fmt: skip
+
+
 def legal_cases() -> list[Case]:
     return [legal(f"legal-{name}", *sh(text), **LEGAL_SETUP.get(name, {})) for name, text in LEGAL_LINES.items()]
 
@@ -2090,6 +2145,7 @@ def all_cases() -> list[Case]:
         operating_point_cases,
         stream_cases,
         output_cases,
+        issue45_cases,
         legal_cases,
     )
     cases = [case for group in groups for case in group()]

@@ -127,5 +127,10 @@ def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]
             )
         if index == 0:
             raise DataError(f"the topic {topic} holds no message", path)
+        listed = sum(int(c.msgcount) for c in connections)
+        if listed and index != listed:  # a damaged chunk can end the stream early without an error of its own
+            raise DataError(
+                f"the bag's index lists {listed} messages of {topic}, {index} could be read: a damaged chunk", path
+            )
     finally:
         reader.close()
