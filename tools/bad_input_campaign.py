@@ -2095,25 +2095,23 @@ def issue45_cases() -> list[Case]:
     """Issue 45: the regressions since the guards moved to the edges, and the silent wrong answers it found."""
     adapt = ("train", "--data", "{fx}/adapt_data", "--reference", "summer", "--adapt-from", "winter", "--adapt", "gain")
     return [
-        bad("verify-tolerance-500-points", *VERIFY, "--tolerance", "accuracy=5", says="fraction in [0, 1]"),
-        bad("verify-tolerance-share-above-1", *VERIFY, "--tolerance", "top1_agreement=1.5", says="fraction"),
-        bad("verify-tolerance-half-query", *VERIFY, "--tolerance", "query_slack=0.5", says="whole number"),
-        bad("verify-tolerance-twice", *VERIFY, "--tolerance", "accuracy=0.02,accuracy=0.03", says="given twice"),
-        bad("train-set-empty-segment", *TRAIN, "--set", "train..epochs=2", says="empty name between dots"),
-        bad("train-set-section-as-json", *TRAIN, "--set", 'early={"spikes": 5}', says="is a section"),
-        bad("evaluate-velocity-search-k1", *EVAL, "--velocity-search", "0.5:1.5:0.5", says="at k = 1"),
-        bad("evaluate-manifest-beside-gt", *EVAL, "--data", "{fx}/nord_gt", says="is ambiguous"),
-        bad(
-            "localize-onnx-bit-flipped",
+        bad("i45-verify-tolerance-500-points", *VERIFY, "--tolerance", "accuracy=5", says="fraction in [0, 1]"),
+        bad("i45-verify-tolerance-share-above-1", *VERIFY, "--tolerance", "top1_agreement=1.5", says="fraction"),
+        bad("i45-verify-tolerance-half-query", *VERIFY, "--tolerance", "query_slack=0.5", says="whole number"),
+        bad("i45-verify-tolerance-twice", *VERIFY, "--tolerance", "accuracy=0.02,accuracy=0.03", says="given twice"),
+        bad("i45-train-set-empty-segment", *TRAIN, "--set", "train..epochs=2", says="empty name between dots"),
+        bad("i45-train-set-section-as-json", *TRAIN, "--set", 'early={"spikes": 5}', says="is a section"),
+        bad("i45-evaluate-velocity-search-k1", *EVAL, "--velocity-search", "0.5:1.5:0.5", says="at k = 1"),
+        bad("i45-evaluate-manifest-beside-gt", *EVAL, "--data", "{fx}/nord_gt", says="is ambiguous"),
+        bad("i45-localize-onnx-bit-flipped",
             "localize", M8, "--frames", "{fx}/nord_frames/winter", "--onnx", "{fx}/deploy_flipped/model.onnx",
             says="differs from what export wrote",
         ),
-        bad("report-ragged-curves", "report", "{fx}/rep_ragged", "--out", "r", says="PR curve"),
-        bad(
-            "localize-events-clock-jump",
+        bad("i45-report-ragged-curves", "report", "{fx}/rep_ragged", "--out", "r", says="PR curve"),
+        bad("i45-localize-events-clock-jump",
             "localize", M8, "--frames", "{fx}/events_jump.npy", "--event-window-us", "1", says="frames",
         ),
-        bad("train-adapt-out-over-a-frame", *adapt, *TINY, "--force", "--out", "{fx}/adapt_data/winter/x.npz",
+        bad("i45-train-adapt-out-over-a-frame", *adapt, *TINY, "--force", "--out", "{fx}/adapt_data/winter/x.npz",
             says="never replaces a frame"),
     ]  # fmt: skip
 
