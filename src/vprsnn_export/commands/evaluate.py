@@ -92,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.predictions is not None:
         written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)
-        print(f"wrote per-query predictions to {written}", file=sys.stderr)
+        print(
+            f"wrote per-query predictions to {written} (scored against the {truth_label(options.tolerance)})",
+            file=sys.stderr,
+        )
     if args.json:
         print_json(
             {
