@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..arguments import ascii_uint
-from ..errors import DataError
-from ..errors import brief as clip
+from ..errors import DataError, brief
 from ..io.npyload import load_npy
 
 GT_SUFFIXES = ("_GT.npy", "_GT.csv")
@@ -111,7 +110,7 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
     indices = []
     for item in items:
         if isinstance(item, bool | np.bool_) or not isinstance(item, Integral):
-            raise DataError(f"{what} holds {clip(item)} ({type(item).__name__}), expected integer indices", path)
+            raise DataError(f"{what} holds {brief(item)} ({type(item).__name__}), expected integer indices", path)
         if not 0 <= int(item) < high:
             raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
         indices.append(int(item))
@@ -120,7 +119,7 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
 
 def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
     if isinstance(value, bool | np.bool_) or not isinstance(value, Integral) or not 0 <= int(value) < n_query:
-        raise DataError(f"row {row}: query index {clip(value)} is not an integer in 0..{n_query - 1}", path)
+        raise DataError(f"row {row}: query index {brief(value)} is not an integer in 0..{n_query - 1}", path)
     return int(value)
 
 

@@ -31,8 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError
-from ..errors import brief as _clip
+from ..errors import DataError, brief
 
 MAX_NPY_BYTES = 1 << 30  # a ground-truth file larger than this is not one
 MAX_DEPTH = 8  # array -> row -> list -> index is 4; anything deeper is not a ground truth
@@ -54,7 +53,7 @@ class _DtypeRecipe:
     def dtype(self) -> np.dtype:
         """The plain dtype named by the code, if the pickled state is exactly the one numpy writes for it."""
         if not isinstance(self.code, str) or self.code not in PLAIN_CODES:
-            raise ValueError(f"dtype code {_clip(self.code)} is not a plain number or object type")
+            raise ValueError(f"dtype code {brief(self.code)} is not a plain number or object type")
         base = np.dtype(self.code)
         order = self.state[1] if isinstance(self.state, tuple) and len(self.state) == 8 else None
         if order not in ("<", ">", "|", "="):
@@ -83,7 +82,7 @@ class _ArrayRecipe:
             raise ValueError("an array without its state")
         _, shape, recipe, fortran, data = state
         if not isinstance(shape, tuple) or not all(type(n) is int and n >= 0 for n in shape) or len(shape) > 32:
-            raise ValueError(f"an array shape {_clip(shape)} that is not a tuple of sizes")
+            raise ValueError(f"an array shape {brief(shape)} that is not a tuple of sizes")
         if not isinstance(recipe, _DtypeRecipe) or type(fortran) is not bool:
             raise ValueError("an array state that numpy does not write")
         return shape, recipe.dtype(), fortran, data
@@ -134,13 +133,13 @@ def _numeric_array(shape: tuple[int, ...], dtype: np.dtype, fortran: bool, data:
 
 
 def _rebuild(root: object) -> object:
-    """``root`` with every :class:`_ArrayRecipe` replaced by its array, walked iteratively (each object once).
+    """``root`` with every :class:`_ArrayRecipe` replaced by its array, walked iteratively (each object once; the
+    root keeps every node alive, so no ``id`` is reused during the walk).
 
     An object array's elements are its list form; containers are rebuilt with their elements replaced.
     """
     done: dict[int, object] = {}
     stack: list[tuple[object, int, bool]] = [(root, 0, False)]
-    keep: list[object] = []  # holds every visited object, so no id() is reused during the walk
     while stack:
         node, depth, children_done = stack.pop()
         if id(node) in done:
@@ -150,7 +149,6 @@ def _rebuild(root: object) -> object:
         if isinstance(node, _ArrayRecipe):
             shape, dtype, fortran, data = node.parts()
             if dtype.kind != "O":
-                keep.append(node)
                 done[id(node)] = _numeric_array(shape, dtype, fortran, data)
                 continue
             if not isinstance(data, list) or len(data) != math.prod(shape):
@@ -164,7 +162,6 @@ def _rebuild(root: object) -> object:
             done[id(node)] = node
             continue
         if not children_done:
-            keep.append(node)
             stack.append((node, depth, True))
             stack.extend((child, depth + 1, False) for child in children if id(child) not in done)
             continue
@@ -215,7 +212,7 @@ def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
         body = len(raw) - stream.tell()
         if math.prod(shape) * dtype.itemsize != body:
             raise DataError(
-                f"the {what}'s header declares shape {_clip(shape, 60)} of {dtype} "
+                f"the {what}'s header declares shape {brief(shape, 60)} of {dtype} "
                 f"({math.prod(shape) * dtype.itemsize} bytes), the file holds {body}: truncated or corrupt",
                 path,
             )
