@@ -23,3 +23,24 @@ def test_a_localizer_decides_on_the_early_rules_counts(trained):
     network = vx.FloatNetwork.from_arrays(early.weights, early.thresholds, early.config, "cpu")
     expected = early_run(network.run, spikes, early.calibration, early.config, isolated=True)
     np.testing.assert_array_equal(counts, expected.counts)
+
+
+def test_evaluate_with_the_early_rule_runs_each_query_once(trained, monkeypatch):
+    """Issue 42: with config.early on, evaluate ran every query twice (a whole run, then the rule's chunks)."""
+    from vprsnn_export.network.dynamics import FloatNetwork
+    from vprsnn_export.runtime.evaluation import evaluate_float
+
+    ckpt, data = trained
+    early = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"early.spikes": 3}))
+    presented: list[int] = []
+    original = FloatNetwork.run
+
+    def counted(self, spikes, **kwargs):
+        presented.append(int(spikes.shape[0]))
+        return original(self, spikes, **kwargs)
+
+    monkeypatch.setattr(FloatNetwork, "run", counted)
+    result = evaluate_float(early, data.traversal("winter"), data.place_ids, "winter", vx.SequenceOptions())
+    assert sum(presented) == len(data.place_ids)  # once each, in the rule's chunks
+    assert result.query_counts.sum(axis=1).max() <= 3
+    assert result.spike_stats.mean_candidates_per_step > 0  # the whole presentations' statistics are kept

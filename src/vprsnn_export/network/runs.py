@@ -86,6 +86,11 @@ def run_in_chunks(
         for start in range(0, n, chunk):
             runs.append(run(spikes[start : start + chunk]))
             bar.update(min(chunk, n - start))
+    return joined_runs(runs)
+
+
+def joined_runs(runs: list[SpikeRun]) -> SpikeRun:
+    """The runs of consecutive chunks of presentations as one run (saturations summed, max_current the largest)."""
     return SpikeRun(
         counts=torch.cat([r.counts for r in runs]),
         candidates_per_step=_joined([r.candidates_per_step for r in runs]),

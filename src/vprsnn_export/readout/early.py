@@ -24,6 +24,7 @@ same counts (state isolation: a step never depends on later ones).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -157,6 +158,35 @@ def vote_matrix(calibration: np.ndarray, cfg: Config) -> np.ndarray:
     if cfg.train.module_size > 0:
         sr = regularised_calibration(sr, module_layout(cfg, sr.shape[1]))[0]
     return standard_assignment(sr)
+
+
+def early_queries(
+    run: Callable[..., SpikeRun],
+    spikes: torch.Tensor,
+    calibration: np.ndarray,
+    cfg: Config,
+    chunk: int = 64,
+    *,
+    keep_raster: bool = False,
+) -> tuple[list[SpikeRun], EarlyDecision]:
+    """``config.early`` in one pass: each chunk of queries run once with its raster (``run(part, record=True)``)
+    and decided on it (:func:`early_decision`); the chunk runs come back beside the decision (their rasters only
+    with ``keep_raster``: a route's rasters are never held at once otherwise), so a caller that also needs the
+    whole presentations (candidates, saturations) runs nothing twice. The rule must be on."""
+    if not cfg.network.state_isolation:
+        raise InvalidValueError("config.early needs state isolation (each query run on its own from V = 0)")
+    votes = vote_matrix(calibration, cfg)
+    group = wta_group(cfg, votes.shape[0])
+    runs: list[SpikeRun] = []
+
+    def raster(start: int, stop: int) -> np.ndarray:
+        part = run(spikes[start:stop], record=True)
+        if part.raster is None:
+            raise InvalidValueError("the early decision needs the backend's raster (record=True)")
+        runs.append(part if keep_raster else dataclasses.replace(part, raster=None))
+        return part.raster.numpy()
+
+    return runs, early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early, chunk)
 
 
 def early_run(

@@ -20,9 +20,9 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
-from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.network.runs import SpikeRun, joined_runs
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
-from vprsnn_export.readout.early import early_run, is_off
+from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
 from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows, region_accuracies
@@ -245,11 +245,12 @@ def _run_queries(
     ``config.early``'s counts when that rule is on, its cost per query, the spike trains)."""
     spikes = query_spikes(images, place_ids, traversal, network.config)
     runner = open_backend(network, backend, device=device, progress=progress)[1]
-    run = runner.run(spikes, record=record)
-    early = early_run(runner.run, spikes, network.calibration, network.config)  # None: the rule is off
-    if early is not None:
-        run = replace(run, counts=torch.from_numpy(early.counts))
-    steps = None if early is None else early.steps
+    steps = None
+    if is_off(network.config.early):
+        run = runner.run(spikes, record=record)
+    else:  # each chunk run once: the rule's counts, and the whole presentations' candidates and saturations
+        parts, early = early_queries(runner.run, spikes, network.calibration, network.config, keep_raster=record)
+        run, steps = replace(joined_runs(parts), counts=torch.from_numpy(early.counts)), early.steps
     places = len(network.reference_place_ids)
     cost = query_cost(spikes, int(run.counts.shape[1]), places=places, images=images, steps=steps)
     return run, cost.summary(), spikes
