@@ -404,10 +404,15 @@ def refuse_window_beside_truth(
         return
     found = [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]
     if found:
-        raise InvalidValueError(
-            f"--match-window {match_window}: {found[0]} says which reference frames match each query; "
-            "--match-window is for index-aligned data without a ground-truth file"
-        )
+        raise window_beside_truth(match_window, found[0])
+
+
+def window_beside_truth(match_window: int, truth_file: str | Path) -> InvalidValueError:
+    """The one refusal of --match-window on data that a ground-truth file scores."""
+    return InvalidValueError(
+        f"--match-window {match_window}: {truth_file} says which reference frames match each query; "
+        "--match-window is for index-aligned data without a ground-truth file"
+    )
 
 
 def query_data(
@@ -452,8 +457,5 @@ def scored_tolerance(match_window: int | None, dataset: Dataset, references: Seq
     if truth is None:
         return match_window or 0
     if match_window:
-        raise InvalidValueError(
-            f"--match-window {match_window}: {truth.source} says which reference frames match each query; "
-            "--match-window is for index-aligned data without a ground-truth file"
-        )
+        raise window_beside_truth(match_window, truth.source)
     return truth

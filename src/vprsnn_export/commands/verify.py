@@ -208,11 +208,8 @@ def conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
     """The last line and the exit code: FAILS (1), UNDECIDED (0, or 3 with --strict) or HOLDS (0), with the float
     networks that do not recognise places named (the exit code is the verdict's)."""
     line, code = _conclusion(report, strict)
-    degenerate = [
-        f"{run.label or index + 1}: {run.degenerate}" for index, run in enumerate(report.runs) if run.degenerate
-    ]
-    if degenerate:
-        line += f"; DEGENERATE float network ({'; '.join(degenerate)}): a width that holds keeps nothing worth keeping"
+    if report.degenerate:
+        line += f"; DEGENERATE float network ({report.degenerate}): a width that holds keeps nothing worth keeping"
     return line, code
 
 

@@ -168,12 +168,14 @@ def early_queries(
     chunk: int = 64,
     *,
     keep_raster: bool = False,
+    isolated: bool | None = None,
 ) -> tuple[list[SpikeRun], EarlyDecision]:
     """``config.early`` in one pass: each chunk of queries run once with its raster (``run(part, record=True)``)
     and decided on it (:func:`early_decision`); the chunk runs come back beside the decision (their rasters only
     with ``keep_raster``: a route's rasters are never held at once otherwise), so a caller that also needs the
-    whole presentations (candidates, saturations) runs nothing twice. The rule must be on."""
-    if not cfg.network.state_isolation:
+    whole presentations (candidates, saturations) runs nothing twice. The rule must be on. ``isolated``: whether
+    the run keeps state isolation (None: the config's); the rule needs it."""
+    if not (cfg.network.state_isolation if isolated is None else isolated):
         raise InvalidValueError("config.early needs state isolation (each query run on its own from V = 0)")
     votes = vote_matrix(calibration, cfg)
     group = wta_group(cfg, votes.shape[0])
@@ -198,20 +200,8 @@ def early_run(
     *,
     isolated: bool | None = None,
 ) -> EarlyDecision | None:
-    """``config.early``'s decision for the queries ``spikes`` on a backend (``run(part, record=True)``), chunk by
-    chunk (the rasters of a whole route need not fit in memory); None when the rule is off. ``isolated``: whether
-    the run keeps state isolation (None: the config's); the rule needs it."""
+    """``config.early``'s decision for the queries ``spikes`` on a backend (:func:`early_queries`, chunk by chunk:
+    the rasters of a whole route need not fit in memory); None when the rule is off."""
     if is_off(cfg.early):
         return None
-    if not (cfg.network.state_isolation if isolated is None else isolated):
-        raise InvalidValueError("config.early needs state isolation (each query run on its own from V = 0)")
-    votes = vote_matrix(calibration, cfg)
-    group = wta_group(cfg, votes.shape[0])
-
-    def raster(start: int, stop: int) -> np.ndarray:
-        recorded = run(spikes[start:stop], record=True).raster
-        if recorded is None:
-            raise InvalidValueError("the early decision needs the backend's raster (record=True)")
-        return recorded.numpy()
-
-    return early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early, chunk)
+    return early_queries(run, spikes, calibration, cfg, chunk, isolated=isolated)[1]

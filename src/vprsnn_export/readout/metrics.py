@@ -37,6 +37,23 @@ Tolerance = int | MatchTruth
 """How a prediction is judged: within +-N place ids of the query's (index-aligned data), or by a ground truth."""
 
 
+def first_true_reference(
+    truth: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each query, the index (into ``reference_place_ids``) of the first reference the ground truth
+    ``truth[reference id, query id]`` matches it with, and whether there is one:
+
+    .. math:: \\hat r_q = \\min \\{l : \\mathrm{GT}[\\mathrm{ref}_l, q]\\}
+
+    (0 where there is none; reference ids outside the matrix match nothing)."""
+    reference = np.asarray(reference_place_ids, dtype=np.int64)
+    queries = np.asarray(query_place_ids, dtype=np.int64)
+    matches = np.zeros((len(reference), len(queries)), dtype=bool)
+    inside = (reference >= 0) & (reference < truth.shape[0])
+    matches[inside] = truth[np.ix_(reference[inside], queries)]
+    return np.asarray(matches.argmax(axis=0)), np.asarray(matches.any(axis=0))
+
+
 def truth_label(tolerance: Tolerance) -> str:
     """How a run's decisions were judged, in the words every result states: ``ground truth: FILE`` or
     ``match window: N`` (index-aligned place ids, N places either side; 0: the query's own place)."""

@@ -36,6 +36,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.modules import module_regions, region_mask
 
 from .assignment import _counts
+from .metrics import first_true_reference
 
 
 @dataclass(frozen=True)
@@ -244,10 +245,7 @@ def module_accuracy(
         known = reference[order][position] == queries
         true_index = order[position]
     else:
-        rows = np.flatnonzero((reference >= 0) & (reference < truth.shape[0]))  # references the truth names
-        matches = truth[np.ix_(reference[rows], queries)]  # (references in the truth, queries)
-        known = matches.any(axis=0)
-        true_index = rows[matches.argmax(axis=0)] if rows.size else np.zeros(len(queries), np.int64)
+        true_index, known = first_true_reference(truth, reference, queries)
     n_modules = len(regions_)
     true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
     pred = np.asarray(pred_index, dtype=np.int64)

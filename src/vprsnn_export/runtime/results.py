@@ -231,6 +231,12 @@ class VerifyReport(JsonDataclass):
         return worst_verdict(r.verdict for r in self.runs)
 
     @property
+    def degenerate(self) -> str | None:
+        """The networks whose float network does not recognise places, with why ("net: reason; ..."), or None."""
+        named = [f"{run.label or i + 1}: {run.degenerate}" for i, run in enumerate(self.runs) if run.degenerate]
+        return "; ".join(named) or None
+
+    @property
     def n_passed(self) -> int:
         return sum(r.passed for r in self.runs)
 

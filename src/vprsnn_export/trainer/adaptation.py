@@ -30,7 +30,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, parse_places
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout.baseline import cosine_similarities, diagonal_sums
-from vprsnn_export.readout.metrics import MatchTruth
+from vprsnn_export.readout.metrics import MatchTruth, first_true_reference
 from vprsnn_export.registry import Registry
 
 #: Frames summed along the diagonal when pairing without labels (research log §8: k = 10 pairs 86-94 % right).
@@ -162,18 +162,14 @@ def adapt_config(
 def truth_pairs(truth: MatchTruth, ids: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:
     """Each frame's first true reference: ``pair(f) = min {l : GT[ids_l, f]}`` (a row of ``ids``); InvalidValueError
     naming the file when the ground truth names no reference place of the selection for a frame."""
-    n_reference, n_frames = truth.matrix.shape
-    if frame_ids.size and frame_ids.max() >= n_frames:
+    if frame_ids.size and frame_ids.max() >= truth.matrix.shape[1]:
         raise InvalidValueError(f"--adapt-pairing truth: frame {int(frame_ids.max())} is outside {truth.source}")
-    matches = np.zeros((len(ids), len(frame_ids)), dtype=bool)
-    inside = ids < n_reference
-    matches[inside] = truth.matrix[np.ix_(ids[inside], frame_ids)]
-    lost = ~matches.any(axis=0)
-    if lost.any():
+    paired, known = first_true_reference(truth.matrix, ids, frame_ids)
+    if not known.all():
         raise InvalidValueError(
-            f"--adapt-pairing truth: {truth.source} names no selected reference place for frame {int(frame_ids[lost][0])}"
+            f"--adapt-pairing truth: {truth.source} names no selected reference place for frame {int(frame_ids[~known][0])}"
         )
-    return matches.argmax(axis=0)
+    return paired
 
 
 def place_ranges(ids: np.ndarray) -> str:

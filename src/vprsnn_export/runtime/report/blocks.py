@@ -111,12 +111,9 @@ def failure_lines(report: VerifyReport) -> list[str]:
 
 def conclusion(report: VerifyReport) -> str:
     """What the verdict means, in one sentence, and the float networks that do not recognise places."""
-    degenerate = [
-        f"{run.label or index + 1}: {run.degenerate}" for index, run in enumerate(report.runs) if run.degenerate
-    ]
     warning = (
-        f"; BUT the float network is degenerate ({'; '.join(degenerate)}): a width that holds keeps nothing worth keeping"
-        if degenerate
+        f"; BUT the float network is degenerate ({report.degenerate}): a width that holds keeps nothing worth keeping"
+        if report.degenerate
         else ""
     )
     return _conclusion(report) + warning
