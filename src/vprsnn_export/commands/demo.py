@@ -32,6 +32,7 @@ from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..network.modules import module_count
+from ..readout.metrics import truth_label
 from ..readout.sequence import SequenceOptions
 from ..runtime.results import BitsResult, VerifiedRun, VerifyReport
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
@@ -260,6 +261,7 @@ def run(args: argparse.Namespace) -> int:
         "checkpoints": [str(ckpt_path)],
         "device": args.device,
         "demo_profile": {"preset": DEMO_PRESET, **profile},
+        "truth": truth_label(options.readout.tolerance),
     }
     command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (
         ["--quick"] if args.quick else []
@@ -273,6 +275,7 @@ def run(args: argparse.Namespace) -> int:
     print("\n".join(f"  {verdict:<9}  {meaning}" for verdict, meaning in MEANINGS))
     print(f"\nfloat network, {dataset.n_places} places ({profile_text(cfg, dataset.n_places, profile)}):")
     print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
+    print(f"scored against the {settings['truth']} (the synthetic route's places are index-aligned)")
     print("\nquantised and deployed vs float, on the same input spikes:")
     print(format_table(demo_table_rows(result), SUMMARY_COLUMNS))
     print(
