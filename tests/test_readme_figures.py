@@ -168,6 +168,12 @@ def route_table() -> str:
         f"{lean['cost']['synaptic_events'] / 1e6:.2f} M |"
         " | | cosine nearest neighbour on the same DoG input | " + " | ".join(cost_cells(cosine, False)) + " | "
         f"{cosine['cost']['synaptic_events'] / 1e6:.2f} M multiply-adds |"
+        " | | SAD nearest neighbour on the same DoG input | "
+        + " | ".join(
+            mean(row(data["baselines"]["sad_nn"], "sad", k)[m])
+            for k, m in (*((k, "accuracy") for k in ks), (5, "r_at_100p"))
+        )
+        + " | "
     )
 
 
