@@ -16,6 +16,7 @@ Ray is optional (``pip install "vprsnn-export[cluster]"``) and imported only whe
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import select
@@ -189,13 +190,13 @@ def connect(cluster: Cluster) -> None:
     ray = _ray()
     try:
         if cluster.is_local:
-            with stderr_kept_back(drop=RAY_NOTICES):  # Ray's token notice: nothing above a later one-line error
-                ray.init(
-                    num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
-                    include_dashboard=False,
-                    log_to_driver=False,
-                    configure_logging=False,
-                )
+            keep_ray_notices_back()  # nothing above a later one-line error
+            ray.init(
+                num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),
+                include_dashboard=False,
+                log_to_driver=False,
+                configure_logging=False,
+            )
         else:
             if cluster.address.startswith("ray://"):
                 reachable(cluster.address)
@@ -220,15 +221,29 @@ def reachable(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
         ) from None
 
 
-#: Lines Ray prints on every start that say nothing about this run (its token-authentication notice).
+#: Lines Ray logs on every start that say nothing about this run (its token-authentication notice).
 RAY_NOTICES = ("Token authentication is enabled for this Ray cluster",)
+RAY_NOTICE_LOGGER = "ray._private.authentication.authentication_token_setup"
+
+
+class _NoNotice(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(RAY_NOTICES)
+
+
+def keep_ray_notices_back() -> None:
+    """Drop :data:`RAY_NOTICES` from Ray's logger (once): Python's last-resort handler would print them on stderr.
+    File descriptor 2 is left as it is: the agents a local cluster starts inherit it (redirecting it around
+    ``ray.init`` left them running after a SIGKILL, tests/commands/test_cluster_hardening.py)."""
+    notices = logging.getLogger(RAY_NOTICE_LOGGER)
+    if not any(isinstance(f, _NoNotice) for f in notices.filters):
+        notices.addFilter(_NoNotice())
 
 
 @contextlib.contextmanager
-def stderr_kept_back(drop: tuple[str, ...] = ()) -> Iterator[None]:
+def stderr_kept_back() -> Iterator[None]:
     """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
-    what it caught is written to stderr after a block that succeeds (less the lines starting with one of
-    ``drop``), dropped after one that raises."""
+    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
     sys.stderr.flush()
     saved = os.dup(2)
     with tempfile.TemporaryFile() as caught:
@@ -240,11 +255,7 @@ def stderr_kept_back(drop: tuple[str, ...] = ()) -> Iterator[None]:
             os.dup2(saved, 2)
             os.close(saved)
         caught.seek(0)
-        text = b"".join(
-            line
-            for line in caught.read().splitlines(keepends=True)
-            if not line.decode(errors="replace").startswith(drop)
-        )
+        text = caught.read()
         if text:
             sys.stderr.buffer.write(text)
             sys.stderr.flush()
