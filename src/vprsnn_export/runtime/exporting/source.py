@@ -53,10 +53,11 @@ class ExportSource:
 MANIFEST_NAME = "export.json"  # a deploy folder's manifest: every file's sha256, written last by export
 
 
-def check_against_manifest(path: str | Path) -> Path:
+def check_against_manifest(path: str | Path, digest: str | None = None) -> Path:
     """``path``, after checking it against the export.json beside it when that lists it: a file run from a deploy
     folder must be the one export wrote (its sha256). ModelFileError naming the file when it differs or the
-    manifest cannot be read; a file with no export.json beside it, or one it does not list, is returned as it is."""
+    manifest cannot be read; a file with no export.json beside it, or one it does not list, is returned as it is.
+    ``digest``: the file's sha256 when the caller has it already (it is read once)."""
     path = Path(path)
     manifest = path.parent / MANIFEST_NAME
     if not manifest.is_file() or not path.is_file():
@@ -70,7 +71,7 @@ def check_against_manifest(path: str | Path) -> Path:
         ]
     except (OSError, UnicodeDecodeError, InvalidValueError, KeyError, TypeError, AttributeError, ValueError) as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} beside the file ({str(exc)[:120]})", manifest) from None
-    if listed and sha256_file(path) not in {str(entry.get("sha256")) for entry in listed}:
+    if listed and (digest or sha256_file(path)) not in {str(entry.get("sha256")) for entry in listed}:
         raise ModelFileError(
             f"differs from what export wrote ({MANIFEST_NAME}'s sha256): a changed or damaged file is not run", path
         )
@@ -79,12 +80,14 @@ def check_against_manifest(path: str | Path) -> Path:
 
 def load_source(path: str | Path) -> ExportSource:
     """A checkpoint or a fixed-point model, chosen by the container's ``format`` field."""
-    path = check_against_manifest(path)
+    path = Path(path)
+    digest = sha256_file(path) if path.is_file() else ""  # a missing file: read_container names it below
+    check_against_manifest(path, digest)  # before the file is read: a damaged one is refused for what it is
     kind = read_container(path, "model")[0].get("format")
     if kind == CHECKPOINT_FORMAT:
-        return ExportSource(path, sha256_file(path), checkpoint=load_checkpoint(path))
+        return ExportSource(path, digest, checkpoint=load_checkpoint(path))
     if kind == FIXED_FORMAT:
-        return ExportSource(path, sha256_file(path), fixed_point=load_fixed_point(path))
+        return ExportSource(path, digest, fixed_point=load_fixed_point(path))
     raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
 
 
