@@ -103,18 +103,17 @@ def _scalar(recipe: object, data: object) -> object:
     return np.frombuffer(data, dtype=dtype)[0]
 
 
+#: (module, name) of the only globals a pickled array may name (numpy 1.x and 2.x spellings) -> its stand-in.
 _GLOBALS: dict[tuple[str, str], object] = {
     **{(module, "_reconstruct"): _ArrayRecipe for module in _MULTIARRAY},
     **{(module, "scalar"): _scalar for module in _MULTIARRAY},
     ("numpy", "ndarray"): _NDARRAY,
     ("numpy", "dtype"): _DtypeRecipe,
 }
-#: (module, name) of the only globals a pickled array may name (numpy 1.x and 2.x spellings).
-ALLOWED_GLOBALS = frozenset(_GLOBALS)
 
 
 class _ArrayUnpickler(pickle.Unpickler):
-    """An unpickler that resolves only :data:`ALLOWED_GLOBALS`, to recording stand-ins, and refuses persistent ids."""
+    """An unpickler that resolves only :data:`_GLOBALS`, to recording stand-ins, and refuses persistent ids."""
 
     def find_class(self, module: str, name: str) -> Any:
         if (module, name) not in _GLOBALS:
@@ -195,7 +194,7 @@ def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
 
     DataError naming the file for anything that is not one readable ``.npy`` array (an ``.npz`` archive,
     a truncated file, a header whose shape the file cannot hold, a pickle naming any global outside
-    :data:`ALLOWED_GLOBALS`, a forged dtype state, an object array given as raw bytes, nesting deeper
+    :data:`_GLOBALS`, a forged dtype state, an object array given as raw bytes, nesting deeper
     than :data:`MAX_DEPTH`).
     """
     path = Path(path)
