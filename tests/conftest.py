@@ -36,6 +36,13 @@ settings.register_profile("vprsnn", deadline=None)
 settings.load_profile("vprsnn")
 
 
+@pytest.fixture(autouse=True)
+def own_results_folder(tmp_path, monkeypatch):
+    """``experiment``'s default output ($VPRSNN_RESULTS) per test: never the user's ~/.cache, and never a folder
+    that two tests on two workers lock at once."""
+    monkeypatch.setenv("VPRSNN_RESULTS", str(tmp_path / "results"))
+
+
 @pytest.fixture
 def one_thread():
     """Small tensors: one intra-op thread avoids oversubscribing the shared cores."""

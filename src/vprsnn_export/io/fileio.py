@@ -161,7 +161,8 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     keyed = _keyed_lock(target)  # the same file whichever of the output's folders exist yet
     fd = _acquire(lock_path, target)
     try:
-        keyed_fd = _acquire_keyed(keyed, target)
+        keyed.parent.mkdir(mode=0o700, exist_ok=True)
+        keyed_fd = _acquire(keyed, target)
     except BaseException:
         os.close(fd)
         raise
@@ -175,8 +176,9 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
         try:
             yield
         finally:
-            with contextlib.suppress(OSError):
-                os.unlink(lock_path)
+            for held in (keyed, lock_path):
+                with contextlib.suppress(OSError):
+                    os.unlink(held)
     finally:
         os.close(keyed_fd)
         os.close(fd)
@@ -188,20 +190,6 @@ def _keyed_lock(target: Path) -> Path:
     alone could differ between two runs writing the same output."""
     key = hashlib.sha256(os.path.abspath(target).encode("utf-8", "surrogateescape")).hexdigest()[:32]
     return Path(tempfile.gettempdir()) / f"vprsnn-export-locks-{os.getuid()}" / f"{key}.lock"
-
-
-def _acquire_keyed(lock_path: Path, target: Path) -> int:
-    """An fd holding the flock of the keyed lock (never unlinked: taking it needs no retry)."""
-    lock_path.parent.mkdir(mode=0o700, exist_ok=True)
-    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o600)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise OutputError(
-            "another vprsnn-export run is writing it now: wait for it or give another output", target
-        ) from None
-    return fd
 
 
 def _acquire(lock_path: Path, target: Path) -> int:
