@@ -37,10 +37,16 @@ settings.load_profile("vprsnn")
 
 
 @pytest.fixture(autouse=True)
-def own_results_folder(tmp_path, monkeypatch):
+def own_results_folder(monkeypatch):
     """``experiment``'s default output ($VPRSNN_RESULTS) per test: never the user's ~/.cache, and never a folder
-    that two tests on two workers lock at once."""
-    monkeypatch.setenv("VPRSNN_RESULTS", str(tmp_path / "results"))
+    that two tests on two workers lock at once. A short path: --help prints it whole on one line."""
+    import shutil
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="vr")
+    monkeypatch.setenv("VPRSNN_RESULTS", f"{folder}/results")
+    yield
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.fixture
