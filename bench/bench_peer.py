@@ -54,6 +54,7 @@ import torch
 from vprsnn_export.config import PRESETS, Config, EarlyConfig, preset, wta_group
 from vprsnn_export.data.dataset import Dataset, load_dataset, read_manifest
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.errors import VprError
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import read_container, write_container
@@ -332,7 +333,7 @@ def cosine_row(ckpt: Checkpoint, dataset: Dataset, args: argparse.Namespace) -> 
 
     single, batched, _ = latencies(decide, len(ids), args.repeats)
     rows = nearest_neighbour_rows(
-        cosine_similarities(reference, images), "cosine", ckpt.reference_place_ids, ids, SequenceOptions()
+        cosine_similarities(reference, images), "cosine", ckpt.reference_place_ids, ids, SequenceOptions(), EXACT
     )
     accuracy = 100 * next(r.accuracy for r in rows if r.k == 1)
     spikes = query_spikes(images, ids, args.query, ckpt.config)

@@ -21,9 +21,10 @@ import numpy as np
 from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset, load_dataset
 from vprsnn_export.data.encoding import adapted_inputs
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_similarities
 from vprsnn_export.readout.metrics import pr_metrics
-from vprsnn_export.readout.scoring import Readout, nearest_neighbour_decisions, scored_decisions
+from vprsnn_export.readout.scoring import Readout, nearest_neighbour_decisions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.stats import mean_std
 from vprsnn_export.trainer.adaptation import adapt_config, place_ranges
@@ -67,8 +68,8 @@ Decisions = dict[int, tuple[np.ndarray, np.ndarray]]
 
 def snn_decisions(ckpt, counts: np.ndarray, ids: np.ndarray, test: np.ndarray, options: SequenceOptions) -> Decisions:
     """W+Prob at every k (product rule, velocity 1) of the fold's queries against every reference place."""
-    sequences = Readout.of(ckpt.calibration, ckpt.config, options).scored(counts[test], ids, ids[test])[2]
-    return {k: scored_decisions(sequences[k], "wprob", ids, ids[test], 0) for k in KS}
+    scored = Readout.of(ckpt.calibration, ckpt.config, options).score(counts[test], ids, ids[test], EXACT)
+    return {k: scored.column("wprob", k).decisions for k in KS}
 
 
 def template_decisions(
@@ -79,7 +80,7 @@ def template_decisions(
     ids = np.asarray(data.place_ids)
 
     def nn_decisions(similarities: np.ndarray) -> Decisions:
-        return nearest_neighbour_decisions(similarities, ids, ids[test], options)
+        return nearest_neighbour_decisions(similarities, ids, ids[test], options, EXACT)
 
     reference, query = data.traversal(settings.reference), data.traversal(settings.query)[test]
     adapted = cosine_similarities(adapted_inputs(reference, gain), adapted_inputs(query, gain))

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.readout.baseline import cosine_similarities
 from vprsnn_export.readout.rules import RULES as AGGREGATION_RULES
 from vprsnn_export.readout.scoring import Readout, nearest_neighbour_rows
@@ -55,7 +56,9 @@ def run(settings: Settings) -> dict:
         options = SequenceOptions(ks=KS)
         rows += [
             dict(r.to_dict(), rule=COSINE_RULE, seed=seed)
-            for r in nearest_neighbour_rows(similarities, "cosine", ckpt.reference_place_ids, data.place_ids, options)
+            for r in nearest_neighbour_rows(
+                similarities, "cosine", ckpt.reference_place_ids, data.place_ids, options, EXACT
+            )
         ]
         per_seed.append(rows)
         distributions = envelope.network_distributions(settings, cfg, data, ckpt)

@@ -29,6 +29,7 @@ import torch
 from vprsnn_export.config import Config, EarlyConfig, wta_group
 from vprsnn_export.data.dataset import Dataset, load_selection
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.device import resolve_device
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
@@ -147,7 +148,7 @@ def template_point(ckpt: Checkpoint, data: Dataset, query: str, macs: float) -> 
     reference = np.mean([data.traversal(name) for name in ckpt.reference_traversals], axis=0)
     options = SequenceOptions(ks=tuple(k for k in KS if k <= len(data.place_ids)))
     rows = nearest_neighbour_rows(
-        cosine_similarities(reference, images), "cosine", ckpt.reference_place_ids, data.place_ids, options
+        cosine_similarities(reference, images), "cosine", ckpt.reference_place_ids, data.place_ids, options, EXACT
     )
     return {"point": "cosine", "template_macs": macs, "rows": [row.to_dict() for row in rows]}
 

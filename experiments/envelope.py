@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.device import resolve_device
 from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, smooth_velocity, track_velocity
 from vprsnn_export.readout.baseline import sad_distances, sad_distribution
@@ -102,9 +103,9 @@ def envelope_rows(
             }
             for source, (v, agg) in per_source.items():
                 truth = query_place_ids[order]
-                metrics = decision_metrics(agg, "wprob", reference_place_ids, truth, 0)
+                metrics = decision_metrics(agg, "wprob", reference_place_ids, truth, EXACT)
                 skip = min(WARMUP, len(order) // 2)
-                settled = decision_metrics(agg[skip:], "wprob", reference_place_ids, truth[skip:], 0)
+                settled = decision_metrics(agg[skip:], "wprob", reference_place_ids, truth[skip:], EXACT)
                 rows.append(
                     {
                         "condition": name,

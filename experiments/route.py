@@ -28,6 +28,7 @@ import numpy as np
 
 from vprsnn_export.config import Config, preset
 from vprsnn_export.data.dataset import Dataset
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution, sad_similarities
 from vprsnn_export.readout.regions import hyperactive_neurons, module_layout
 from vprsnn_export.readout.scoring import (
@@ -36,7 +37,6 @@ from vprsnn_export.readout.scoring import (
     decision_metrics,
     metric_row,
     nearest_neighbour_rows,
-    region_accuracies,
 )
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES
@@ -126,11 +126,11 @@ def baselines(settings: Settings) -> dict[str, list[dict]]:
         opts = SequenceOptions(ks=KS, **options())
         distances = sad_distances(reference, query)
         distribution = sad_distribution(distances)
-        out[channels] = [r.to_dict() for r in baseline_rows(distribution, ids, ids, opts)]
+        out[channels] = [r.to_dict() for r in baseline_rows(distribution, ids, ids, opts, EXACT)]
         if channels == "dog_on_off":
-            cosine = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts)
+            cosine = nearest_neighbour_rows(cosine_similarities(reference, query), "cosine", ids, ids, opts, EXACT)
             out["cosine"] = [r.to_dict() for r in cosine]
-            sad = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts)
+            sad = nearest_neighbour_rows(sad_similarities(distances), "sad", ids, ids, opts, EXACT)
             out["sad_nn"] = [r.to_dict() for r in sad]
     return out
 
@@ -145,9 +145,10 @@ def readout(
     ids = data.place_ids
     tracemalloc.start()
     started = time.perf_counter()
-    rows, scores, _ = Readout(
-        ckpt.calibration, cfg.assignment.gamma, SequenceOptions(ks=KS, **options()), layout
-    ).scored(counts, ids, ids)
+    scored = Readout(ckpt.calibration, cfg.assignment.gamma, SequenceOptions(ks=KS, **options()), layout).score(
+        counts, ids, ids, EXACT
+    )
+    rows, scores = scored.rows, scored.scores
     seconds = time.perf_counter() - started
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
@@ -155,8 +156,8 @@ def readout(
         searched = SequenceOptions(ks=KS, **options(True))
         for k in KS[1:]:
             dist = searched.aggregate(scores["wprob"], k)
-            rows.append(metric_row("wprob-est", k, decision_metrics(dist, "wprob", ids, ids, 0)))
-    return [dict(r.to_dict(), readout=name) for r in rows], (layout, scores["wprob"]), seconds, peak
+            rows.append(metric_row("wprob-est", k, decision_metrics(dist, "wprob", ids, ids, EXACT)))
+    return [dict(r.to_dict(), readout=name) for r in rows], (layout, scored), seconds, peak
 
 
 def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[str, Any]:
@@ -173,7 +174,7 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
             scope_cfg, scope_ckpt = rescoped_checkpoint(settings, data, timed.checkpoint, scope, key)
             scoped[scope] = (scope_ckpt, timed_query_counts(settings, data, scope_cfg, key, scope_ckpt).counts)
         ckpt, scope_counts = scoped[scope]
-        some, (layout, wprob), seconds, peak = readout(
+        some, (layout, scored), seconds, peak = readout(
             ckpt, scope_counts, data, ckpt.config, name, lam, rho, name == DEFAULT_READOUT
         )
         rows += some
@@ -186,9 +187,7 @@ def evaluate_network(settings: Settings, module_size: int, seed: int) -> dict[st
                 "silenced": int(hyperactive_neurons(ckpt.calibration, layout).sum()),
                 "readout_seconds": round(seconds, 2),
                 "readout_peak_mib": round(peak, 1),
-                "modules": [
-                    m.to_dict() for m in region_accuracies(wprob, data.place_ids, data.place_ids, layout.regions)
-                ],
+                "modules": [m.to_dict() for m in scored.regions(layout.regions)],
             }
         )
     ckpt = timed.checkpoint

@@ -29,7 +29,7 @@ from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.results import worst_verdict
 from vprsnn_export.runtime.verify.checks import DEFAULT_TOLERANCES, metric_deltas
-from vprsnn_export.runtime.verify.paired import PAIRED_TOLERANCES, judged_limits, paired_checks, readout_decisions
+from vprsnn_export.runtime.verify.paired import PAIRED_TOLERANCES, judged_limits, paired_checks
 
 
 def main() -> None:
@@ -61,8 +61,8 @@ def main() -> None:
 
     def readout_of(seed: int):
         counts = network.run(query_spikes(images, ids, args.query, cfg.replace(seed=seed))).counts.numpy()
-        rows, scores, agg = scorer.scored(counts, ckpt.reference_place_ids, ids)
-        return rows, readout_decisions(scores, agg, ckpt.reference_place_ids, ids, readout.tolerance)
+        scored = scorer.score(counts, ckpt.reference_place_ids, ids)
+        return scored.rows, scored.decisions()
 
     base = readout_of(cfg.seed)
     n_seeds = last - first + 1

@@ -26,7 +26,9 @@ SHARED = ROOT.parent / "shared" / "data"
 NORDLAND = SHARED / "nordland_64x32_summer_winter" / "places.csv"
 LENS = SHARED / "lens_example_davis128"
 #: JSON keys whose values are measured times or hosts (they change from run to run).
-VOLATILE = re.compile(r"(seconds|_s$|^wall|elapsed|time|created|duration|host|latency|version|commit|python|platform)", re.I)
+VOLATILE = re.compile(
+    r"(seconds|_s$|^wall|elapsed|time|created|duration|host|latency|version|commit|python|platform)", re.I
+)
 T = ["--threads", "2", "--quiet"]
 DEV = ["--data", str(NORDLAND), "--places", "0:300"]
 
@@ -37,32 +39,127 @@ def routes() -> dict[str, list[list[str]]]:
     return {
         "lens": [
             ["train", *lens, "--reference", "example-reference", "--epochs", "4", "--seed", "1", "--out", "lens.npz"],
-            ["evaluate", "lens.npz", *lens, "--query", "example-query", "--k", "1,3", "--baseline",
-             "--predictions", "lens-predictions.csv"],
-            ["evaluate", "lens.npz", *lens, "--query", "example-query", "--k", "1,3", "--json",
-             "--predictions", "lens-predictions.jsonl"],
-            ["localize", "lens.npz", *lens, "--calibrate", "example-query", "--k", "3", "--precision", "0.3",
-             "--operating-point", "lens-op.json"],
+            [
+                "evaluate",
+                "lens.npz",
+                *lens,
+                "--query",
+                "example-query",
+                "--k",
+                "1,3",
+                "--baseline",
+                "--predictions",
+                "lens-predictions.csv",
+            ],
+            [
+                "evaluate",
+                "lens.npz",
+                *lens,
+                "--query",
+                "example-query",
+                "--k",
+                "1,3",
+                "--json",
+                "--predictions",
+                "lens-predictions.jsonl",
+            ],
+            [
+                "localize",
+                "lens.npz",
+                *lens,
+                "--calibrate",
+                "example-query",
+                "--k",
+                "3",
+                "--precision",
+                "0.3",
+                "--operating-point",
+                "lens-op.json",
+            ],
             ["localize", "lens.npz", "--frames", str(LENS / "example-query"), "--k", "3"],
             ["quantize", "lens.npz", "--bits", "4", "--out", "lens-models"],
-            ["simulate", "lens-models/model_4bit_per-neuron_max.npz", *lens, "--query", "example-query",
-             "--k", "1,3", "--json"],
-            ["verify", "lens.npz", *lens, "--query", "example-query", "--bits", "8,4", "--k", "1,3",
-             "--targets", "none", "--report", "lens-verify"],
+            [
+                "simulate",
+                "lens-models/model_4bit_per-neuron_max.npz",
+                *lens,
+                "--query",
+                "example-query",
+                "--k",
+                "1,3",
+                "--json",
+            ],
+            [
+                "verify",
+                "lens.npz",
+                *lens,
+                "--query",
+                "example-query",
+                "--bits",
+                "8,4",
+                "--k",
+                "1,3",
+                "--targets",
+                "none",
+                "--report",
+                "lens-verify",
+            ],
         ],
         "dev": [
-            ["train", *DEV, "--reference", "summer", "--preset", "lean", "--set", "train.epochs=4", "--seed", "1",
-             "--out", "dev.npz"],
-            ["evaluate", "dev.npz", *DEV, "--query", "winter", "--k", "1,5", "--baseline",
-             "--predictions", "dev-predictions.csv"],
+            [
+                "train",
+                *DEV,
+                "--reference",
+                "summer",
+                "--preset",
+                "lean",
+                "--set",
+                "train.epochs=4",
+                "--seed",
+                "1",
+                "--out",
+                "dev.npz",
+            ],
+            [
+                "evaluate",
+                "dev.npz",
+                *DEV,
+                "--query",
+                "winter",
+                "--k",
+                "1,5",
+                "--baseline",
+                "--predictions",
+                "dev-predictions.csv",
+            ],
             ["evaluate", "dev.npz", *DEV, "--query", "winter", "--k", "1,5", "--json"],
             ["quantize", "dev.npz", "--bits", "8,4", "--out", "dev-models"],
             ["simulate", "dev-models/model_4bit_per-neuron_max.npz", *DEV, "--query", "winter", "--k", "1,5"],
             ["verify", "dev.npz", *DEV, "--query", "winter", "--bits", "8,4", "--k", "1,5", "--report", "dev-verify"],
-            ["export", "dev-models/model_4bit_per-neuron_max.npz", "--to", "nir,loihi,onnx", "--out", "dev-deploy",
-             "--check", *DEV, "--query", "winter"],
-            ["localize", "dev.npz", *DEV, "--calibrate", "winter", "--k", "5", "--precision", "0.9",
-             "--operating-point", "dev-op.json"],
+            [
+                "export",
+                "dev-models/model_4bit_per-neuron_max.npz",
+                "--to",
+                "nir,loihi,onnx",
+                "--out",
+                "dev-deploy",
+                "--check",
+                *DEV,
+                "--query",
+                "winter",
+            ],
+            [
+                "localize",
+                "dev.npz",
+                *DEV,
+                "--calibrate",
+                "winter",
+                "--k",
+                "5",
+                "--precision",
+                "0.9",
+                "--operating-point",
+                "dev-op.json",
+            ],
         ],
         "demo": [["demo", "--out", "demo"]],
     }
@@ -118,13 +215,15 @@ def run_route(commands: list[list[str]], work: Path) -> list[dict]:
             except SystemExit as exit_:
                 code = exit_.code
         written = sorted(p for p in work.rglob("*") if p.is_file() and before.get(p) != p.stat().st_mtime_ns)
-        out.append({
-            "command": " ".join(command).replace(str(SHARED), "SHARED"),
-            "exit": code,
-            "stdout": masked_text(stdout.getvalue(), work),
-            "stderr": masked_text(stderr.getvalue(), work),
-            "files": {str(p.relative_to(work)): file_digest(p, work) for p in written},
-        })
+        out.append(
+            {
+                "command": " ".join(command).replace(str(SHARED), "SHARED"),
+                "exit": code,
+                "stdout": masked_text(stdout.getvalue(), work),
+                "stderr": masked_text(stderr.getvalue(), work),
+                "files": {str(p.relative_to(work)): file_digest(p, work) for p in written},
+            }
+        )
         print(f"{code} {' '.join(command)[:100]}", file=sys.stderr)
     return out
 

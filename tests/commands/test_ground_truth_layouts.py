@@ -8,7 +8,6 @@ synthetic route (no third-party images)."""
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -18,8 +17,8 @@ import pytest
 from vprsnn_export.cli import main
 from vprsnn_export.data.dataset import load_dataset, scoring_truth
 from vprsnn_export.data.synthetic import synthetic_route
+from vprsnn_export.data.truth import GroundTruth
 from vprsnn_export.io.checkpoint import load_checkpoint
-from vprsnn_export.readout.metrics import MatchTruth, is_correct
 from vprsnn_export.readout.scoring import readout_rows
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.evaluation import evaluate_float
@@ -82,9 +81,9 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
     ckpt = load_checkpoint(ckpt_path)
     dataset = load_dataset(data, [query], ckpt.config.preprocess)
     truth = scoring_truth(dataset, [reference], query)
-    assert isinstance(truth, MatchTruth) and truth.matrix.shape == (N_REFERENCE, N_QUERY)
-    options = SequenceOptions(ks=(1, 3), tolerance=truth)
-    result = evaluate_float(ckpt, dataset.traversal(query), dataset.place_ids, query, options)
+    assert isinstance(truth, GroundTruth) and truth.matrix.shape == (N_REFERENCE, N_QUERY)
+    options = SequenceOptions(ks=(1, 3))
+    result = evaluate_float(ckpt, dataset.traversal(query), dataset.place_ids, query, options, truth=truth)
     assert dicts(result.rows) == rows  # the command scored against the file
     # a hand-made GT-exact manifest: query j under the reference's place id j + OFFSET, exact match
     manifest_rows = readout_rows(
@@ -92,7 +91,7 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
         result.query_counts,
         ckpt.reference_place_ids,
         dataset.place_ids + OFFSET,
-        replace(options, tolerance=0),
+        options,
         ckpt.config,
     )
     assert dicts(manifest_rows) == rows
@@ -101,7 +100,7 @@ def test_a_layout_as_shipped_scores_like_a_gt_exact_manifest(tmp_path, capsys, l
         result.query_counts,
         ckpt.reference_place_ids,
         dataset.place_ids,
-        replace(options, tolerance=0),
+        options,
         ckpt.config,
     )
     assert max(r["accuracy"] for r in rows) > 0 and dicts(by_index) != rows  # the index score was the wrong one
@@ -161,9 +160,10 @@ def test_different_lengths_without_ground_truth_are_refused_by_every_command(tmp
 
 
 def test_a_query_may_match_several_references():
-    truth = MatchTruth(np.array([[1, 0], [1, 1], [0, 1]], dtype=bool), "gt")
+    truth = GroundTruth(np.array([[1, 0], [1, 1], [0, 1]], dtype=bool), "gt")
     predicted = np.ma.MaskedArray([1, 0, 2, 1], mask=[False, False, False, True])
-    assert is_correct(predicted, np.array([0, 1, 1, 1]), truth).tolist() == [True, False, True, False]
+    assert truth.correct(predicted, np.array([0, 1, 1, 1])).tolist() == [True, False, True, False]
+    assert [t.tolist() for t in truth.true_places(np.array([0, 1]))] == [[0, 1], [1, 2]]
 
 
 def test_no_output_replaces_the_ground_truth_it_was_scored_by(tmp_path, capsys):

@@ -96,6 +96,7 @@ def test_nearest_neighbour_margin_confidence_ties_and_flat_rows() -> None:
 
 
 def test_cosine_baseline_rows_in_an_evaluation_equal_the_direct_computation() -> None:
+    from vprsnn_export.data.truth import EXACT
     from vprsnn_export.readout.baseline import cosine_similarities, nearest_neighbour
     from vprsnn_export.readout.metrics import is_correct, pr_metrics, predicted_place_ids
     from vprsnn_export.readout.scoring import nearest_neighbour_rows
@@ -105,7 +106,7 @@ def test_cosine_baseline_rows_in_an_evaluation_equal_the_direct_computation() ->
     ref = rng.random((12, 20))
     qry = ref + 3.0 * rng.random((12, 20))
     ids = np.arange(100, 112)
-    rows = nearest_neighbour_rows(cosine_similarities(ref, qry), "cosine", ids, ids, SequenceOptions())
+    rows = nearest_neighbour_rows(cosine_similarities(ref, qry), "cosine", ids, ids, SequenceOptions(), EXACT)
     pred, conf = nearest_neighbour(cosine_similarities(ref, qry))
     direct = pr_metrics(is_correct(predicted_place_ids(pred, ids), ids, 0), conf)
     assert [r.to_dict() for r in rows] == [{"strategy": "cosine", "k": 1, **direct}]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from vprsnn_export.config import Config
+from vprsnn_export.data.truth import EXACT, GroundTruth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.assignment import standard_scores
@@ -143,7 +144,7 @@ def test_module_accuracy_counts_each_region():
     queries = np.array([10, 11, 12, 13, 14, 15, 99])  # 99 is no reference place: left out
     pred = np.array([0, 4, -1, 3, 1, 5, 2])
     correct = np.array([True, False, False, True, False, True, False])
-    rows = module_accuracy(pred, correct, reference, queries, module_regions(6, 3))
+    rows = module_accuracy(pred, correct, reference, module_regions(6, 3), *EXACT.first_true(reference, queries))
     assert [(r.first_place, r.last_place, r.n_queries) for r in rows] == [(10, 12, 3), (13, 15, 3)]
     assert rows[0].accuracy == pytest.approx(1 / 3) and rows[0].in_region == pytest.approx(1 / 3)
     assert rows[1].accuracy == pytest.approx(2 / 3) and rows[1].in_region == pytest.approx(2 / 3)
@@ -159,15 +160,21 @@ def test_module_accuracy_follows_the_ground_truth_that_scored_the_queries():
     truth[2, 4] = True  # query 4 also matches place 2 (module 0 either way)
     pred = np.array([3, 0, 5, 0, 2])  # right, wrong (module 0), right, right, right
     correct = truth[pred, queries]
-    rows = module_accuracy(pred, correct, reference, queries, module_regions(6, 3), truth)
+    regions = module_regions(6, 3)
+    rows = module_accuracy(pred, correct, reference, regions, *GroundTruth(truth).first_true(reference, queries))
     assert [r.n_queries for r in rows] == [2, 3] and sum(r.n_queries for r in rows) == len(queries)
     assert rows[0].accuracy == 1.0 and rows[1].accuracy == pytest.approx(2 / 3)
     assert rows[1].in_region == pytest.approx(2 / 3)  # query 1 was sent to module 0
-    by_index = module_accuracy(pred, correct, reference, queries, module_regions(6, 3))
+    by_index = module_accuracy(pred, correct, reference, regions, *EXACT.first_true(reference, queries))
     assert [r.n_queries for r in by_index] == [3, 2]  # what the index rule said: the wrong modules
     unmatched = truth.copy()
     unmatched[:, 0] = False  # a query no reference matches is left out
     assert (
-        sum(r.n_queries for r in module_accuracy(pred, correct, reference, queries, module_regions(6, 3), unmatched))
+        sum(
+            r.n_queries
+            for r in module_accuracy(
+                pred, correct, reference, regions, *GroundTruth(unmatched).first_true(reference, queries)
+            )
+        )
         == 4
     )

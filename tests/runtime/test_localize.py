@@ -92,14 +92,15 @@ def test_precision_threshold_is_the_lowest_that_keeps_precision():
 def test_operating_point_reaches_its_precision_and_round_trips(networks, tmp_path):
     ckpt, _, _, data, _ = networks
     localizer = Localizer(ckpt, options=SequenceOptions(ks=(3,)))
-    point, decisions = operating_point(
+    point, decisions, returned = operating_point(
         localizer, data.traversal("winter"), data.place_ids, precision=1.0, model_sha256="ab" * 32, query="winter"
     )
     assert point.threshold is not None and point.precision == 1.0 and 0 < point.recall <= 1
     accepted = [d for d in decisions if point.accepts(d.confidence, d.place_id)]
     assert accepted and all(d.place_id == data.place_ids[d.frame] for d in accepted)
     assert len(accepted) == round(point.recall * 24)
-    curve = calibration_curve(decisions, data.place_ids)  # the curve it was chosen from
+    curve = calibration_curve(decisions, data.place_ids)  # the curve it was chosen from, returned beside it
+    np.testing.assert_array_equal(returned.threshold, curve.threshold)
     chosen = curve.index_for(1.0)
     assert chosen is not None and curve.threshold[chosen] == point.threshold and curve.recall[chosen] == point.recall
     assert curve.accepted[chosen] == len(accepted)

@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from vprsnn_export.cli import main
+from vprsnn_export.data.truth import EXACT, GroundTruth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import save_checkpoint
-from vprsnn_export.readout.metrics import MatchTruth
+from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.evaluation import evaluate_float
 from vprsnn_export.runtime.predictions import network_predictions, predictions
@@ -33,6 +34,7 @@ def test_each_column_reproduces_its_metric_row(trained, tmp_path):
     lines = [json.loads(line) for line in found.write(tmp_path / "p.jsonl").read_text().splitlines()]
     assert len(rows) == len(lines) == 24 * 4
     assert lines[0] == {**found.rows()[0]} and rows[0]["strategy"] == "standard" and rows[0]["query"] == "0"
+    assert predictions(result.scored).rows() == found.rows()  # the evaluation's own columns, decided once
     unlabelled = network_predictions(ckpt, result.query_counts, None, options)
     assert unlabelled.truth is None and unlabelled.rows()[0]["correct"] is None
     with pytest.raises(InvalidValueError, match=".csv or .jsonl"):
@@ -61,9 +63,10 @@ def test_the_truth_column_holds_the_ground_truths_places_not_the_frame_index(tmp
     matrix = np.zeros((6, 3), dtype=bool)
     matrix[[4, 5], 0] = True  # query 0 matches references 4 and 5
     matrix[1, 1] = True
-    options = SequenceOptions(ks=(1,), tolerance=MatchTruth(matrix, "gt.npy"))
     scores = {name: np.eye(6)[[5, 2, 3]] for name in ("standard", "weighted", "wprob")}
-    found = predictions(scores, np.arange(6), np.arange(3), options)
+    found = predictions(
+        Scored.of(scores, {1: scores["wprob"]}, np.arange(6), np.arange(3), GroundTruth(matrix, "gt.npy"))
+    )
     assert [t.tolist() for t in found.truth] == [[4, 5], [1], []]
     rows = [r for r in found.rows() if r["strategy"] == "wprob"]
     assert [(r["truth"], r["place_id"], r["correct"]) for r in rows] == [
@@ -74,5 +77,5 @@ def test_the_truth_column_holds_the_ground_truths_places_not_the_frame_index(tmp
     assert [r["note"] for r in rows] == ["", "", "the ground truth (gt.npy) names no reference place for this query"]
     lines = list(csv.DictReader(found.write(tmp_path / "p.csv").open()))
     assert [line["truth"] for line in lines if line["strategy"] == "wprob"] == ["4 5", "1", ""]
-    aligned = predictions(scores, np.arange(6), np.array([5, 2, 0]), SequenceOptions(ks=(1,), tolerance=0))
+    aligned = predictions(Scored.of(scores, {1: scores["wprob"]}, np.arange(6), np.array([5, 2, 0]), EXACT))
     assert [r["truth"] for r in aligned.rows() if r["strategy"] == "wprob"] == [[5], [2], [0]]

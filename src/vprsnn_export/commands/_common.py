@@ -7,7 +7,7 @@ import json
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import fields, replace
+from dataclasses import fields
 from functools import reduce
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -16,11 +16,11 @@ from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
 from ..data.dataset import Dataset, load_selection, scoring_truth
 from ..data.groundtruth import ground_truth_files
+from ..data.truth import Truth, window
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
 from ..io.fileio import parse_json
-from ..readout.metrics import Tolerance
 from ..readout.rules import RULES
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
@@ -398,7 +398,7 @@ def refuse_window_beside_truth(
     match_window: int | None, source: str | None, references: Sequence[str], query: str
 ) -> None:
     """--match-window on a folder whose ground-truth file says how (reference, query) match: refused before any
-    image is decoded (the same refusal :func:`scored_tolerance` makes once the data is loaded)."""
+    image is decoded (the same refusal :func:`scored_truth` makes once the data is loaded)."""
     folder = Path(source) if source else None
     if not match_window or folder is None or not folder.is_dir():
         return
@@ -437,25 +437,20 @@ def query_data(
     )
 
 
-def scored_options(
-    args: argparse.Namespace, options: SequenceOptions, dataset: Dataset, references: Sequence[str]
-) -> SequenceOptions:
-    """``options`` scored on --query as :func:`scored_tolerance` says; their warning (queries that are not
-    consecutive places) printed: what evaluate and simulate read out with."""
-    options = replace(options, tolerance=scored_tolerance(args.match_window, dataset, references, args.query))
+def warn_sequences(options: SequenceOptions, dataset: Dataset) -> None:
+    """The options' warning on these queries (not consecutive places), printed: what evaluate and simulate say."""
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    return options
 
 
-def scored_tolerance(match_window: int | None, dataset: Dataset, references: Sequence[str], query: str) -> Tolerance:
+def scored_truth(match_window: int | None, dataset: Dataset, references: Sequence[str], query: str) -> Truth:
     """How ``query``'s decisions are judged: the data set's ground truth when it has one (then --match-window,
     which is for index-aligned data, is refused), else ``match_window`` places around the query's own id (None:
     not given, exact match)."""
     truth = scoring_truth(dataset, references, query)
     if truth is None:
-        return match_window or 0
+        return window(match_window)
     if match_window:
         raise window_beside_truth(match_window, truth.source)
     return truth

@@ -28,11 +28,11 @@ from shlex import quote
 from ..config import Config, preset
 from ..data.dataset import load_dataset
 from ..data.preprocess import CHANNELS
+from ..data.truth import window
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..network.modules import module_count
-from ..readout.metrics import truth_label
 from ..readout.sequence import SequenceOptions
 from ..runtime.results import BitsResult, VerifiedRun, VerifyReport
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
@@ -261,7 +261,7 @@ def run(args: argparse.Namespace) -> int:
         "checkpoints": [str(ckpt_path)],
         "device": args.device,
         "demo_profile": {"preset": DEMO_PRESET, **profile},
-        "truth": truth_label(options.readout.tolerance),
+        "truth": window(options.readout.tolerance).label,
     }
     command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (
         ["--quick"] if args.quick else []

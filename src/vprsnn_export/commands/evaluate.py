@@ -10,8 +10,7 @@ from ..data.dataset import dataset_files, load_selection, select_places
 from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
-from ..readout.metrics import truth_label
-from ..runtime.predictions import network_predictions
+from ..runtime.predictions import predictions
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -19,8 +18,9 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_options,
+    scored_truth,
     sequence_options,
+    warn_sequences,
 )
 
 MODULE_COLUMNS = (
@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query], ckpt.reference_traversals)
-    options = scored_options(args, options, dataset, ckpt.reference_traversals)
+    truth = scored_truth(args.match_window, dataset, ckpt.reference_traversals, args.query)
+    warn_sequences(options, dataset)
     reference_images = None
     if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)
         references = select_places(
@@ -89,11 +90,13 @@ def run(args: argparse.Namespace) -> int:
         reference_images=reference_images,
         cluster=cluster,
         progress=not args.quiet,
+        truth=truth,
     )
     if args.predictions is not None:
-        written = network_predictions(ckpt, result.query_counts, dataset.place_ids, options).write(args.predictions)
+        assert result.scored is not None
+        written = predictions(result.scored).write(args.predictions)
         print(
-            f"wrote per-query predictions to {written} (scored against the {truth_label(options.tolerance)})",
+            f"wrote per-query predictions to {written} (scored against the {truth.label})",
             file=sys.stderr,
         )
     if args.json:
@@ -102,14 +105,14 @@ def run(args: argparse.Namespace) -> int:
                 "config": ckpt.config.to_dict(),
                 "checkpoint": str(args.checkpoint),
                 "query": args.query,
-                "truth": truth_label(options.tolerance),
+                "truth": truth.label,
                 "threads": args.threads,
                 **result.to_dict(),
             }
         )
     else:
         print(format_table(result.rows, RESULT_COLUMNS))
-        print(f"scored against the {truth_label(options.tolerance)}")
+        print(f"scored against the {truth.label}")
         if result.modules is not None:
             print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")
             rows = [{**m.to_dict(), "places": f"{m.first_place}-{m.last_place}"} for m in result.modules]

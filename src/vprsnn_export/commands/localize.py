@@ -28,7 +28,6 @@ from ..data.events import EventWindow
 from ..data.frames import iter_frames
 from ..errors import DataError, InvalidValueError
 from ..io.fileio import check_output
-from ..readout.metrics import truth_label
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ._common import (
@@ -37,7 +36,7 @@ from ._common import (
     add_sequence_options,
     given_sequence_options,
     query_data,
-    scored_tolerance,
+    scored_truth,
     sequence_options,
 )
 
@@ -206,7 +205,6 @@ def sized_frames(
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
     from ..runtime.localize import (
         Localizer,
-        calibration_curve,
         curve_paths,
         operating_point,
         save_curve,
@@ -228,17 +226,16 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
-    match_window = scored_tolerance(args.match_window, dataset, network.reference_traversals, args.calibrate)
-    point, decisions = operating_point(
+    truth = scored_truth(args.match_window, dataset, network.reference_traversals, args.calibrate)
+    point, _, curve = operating_point(
         localizer,
         dataset.traversal(args.calibrate),
         dataset.place_ids,
         precision=1.0 if args.precision is None else args.precision,
-        match_window=match_window,
+        truth=truth,
         model_sha256=source.sha256,
         query=args.calibrate,
     )
-    curve = calibration_curve(decisions, dataset.place_ids, match_window)
     chosen = curve.index_for(point.precision_target)
     best = int(np.argmax(curve.precision)) if len(curve.threshold) else None
     print(curve_table(curve, best if chosen is None else chosen, chosen))
@@ -260,7 +257,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
         f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
-        f"recall {100 * point.recall:.1f} %; scored against the {truth_label(match_window)}"
+        f"recall {100 * point.recall:.1f} %; scored against the {truth.label}"
     )
     chosen_point = (point.recall, point.precision, point.threshold)
     title = f"'{point.query}': {point.n_queries} queries, k={localizer.readout.k}"

@@ -8,7 +8,6 @@ import sys
 from ..errors import InvalidValueError
 from ..export.model import load_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
-from ..readout.metrics import truth_label
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -16,8 +15,9 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_options,
+    scored_truth,
     sequence_options,
+    warn_sequences,
 )
 
 
@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
             )
     options = sequence_options(args)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query], model.reference_traversals)
-    options = scored_options(args, options, dataset, model.reference_traversals)
+    truth = scored_truth(args.match_window, dataset, model.reference_traversals, args.query)
+    warn_sequences(options, dataset)
     result = evaluate_fixed_point(
         model,
         dataset.traversal(args.query),
@@ -59,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         state_isolation=False if args.no_state_isolation else None,
         float_checkpoint=float_checkpoint,
         progress=not args.quiet,
+        truth=truth,
     )
     if args.json:
         print_json(
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
                 "model": str(args.model),
                 "source_sha256": model.source_sha256,
                 "query": args.query,
-                "truth": truth_label(options.tolerance),
+                "truth": truth.label,
                 "bits": model.bits,
                 "threads": args.threads,
                 "quantisation": model.quantisation.to_dict(),
@@ -78,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         )
     else:
         print(format_table(result.rows, (("calibration", "calibration"), *RESULT_COLUMNS)))
-        print(f"scored against the {truth_label(options.tolerance)}")
+        print(f"scored against the {truth.label}")
         stats = result.spike_stats
         print(
             f"\n{model.bits}-bit model; saturation events: {result.saturations}; threshold candidates per step: "

@@ -22,7 +22,6 @@ import numpy as np
 from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
 from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
 from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
-from ..readout.metrics import MatchTruth, truth_label
 from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
@@ -38,7 +37,7 @@ from ._common import (
     print_json,
     quantise_options,
     refuse_window_beside_truth,
-    scored_tolerance,
+    scored_truth,
     sequence_options,
 )
 
@@ -288,14 +287,10 @@ def run(args: argparse.Namespace) -> int:
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
-        readout = dataclasses.replace(
-            options.readout,
-            tolerance=scored_tolerance(args.match_window, dataset, ckpt.reference_traversals, args.query),
-        )
-        network_options = dataclasses.replace(options, readout=readout)
-        if isinstance(readout.tolerance, MatchTruth):  # the report says what the queries were scored against
-            settings["ground_truth"] = readout.tolerance.source
-        settings["truth"] = truth_label(readout.tolerance)
+        truth = scored_truth(args.match_window, dataset, ckpt.reference_traversals, args.query)
+        if truth.source:  # the report says what the queries were scored against
+            settings["ground_truth"] = truth.source
+        settings["truth"] = truth.label
         runs.append(
             verify_checkpoint(
                 ckpt,
@@ -303,13 +298,14 @@ def run(args: argparse.Namespace) -> int:
                 dataset.traversal(args.query),
                 dataset.place_ids,
                 args.query,
-                network_options,
+                options,
                 reference_images=None if options.quantise.calibration == "float" else reference_images,
                 export_dir=out / "exports" / folder_name(label, index),
                 device=device,
                 progress=progress,
                 label=label,
                 checkpoint=str(path),
+                truth=truth,
             )
         )
         report = build_report(runs, settings, command=command, seconds=time.perf_counter() - started)

@@ -30,7 +30,6 @@ from ..arguments import ascii_uint, check_place_ids
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
-from ..readout.metrics import MatchTruth
 from .folders import (
     FolderGroundTruth,
     check_every_query_matched,
@@ -52,6 +51,7 @@ from .synthetic import (
     synthetic_fingerprint,
     synthetic_route,
 )
+from .truth import GroundTruth
 
 PLACE_ID = "place_id"
 MANIFEST_NAME = "places.csv"
@@ -167,7 +167,7 @@ def selection_record(subset: str | Path | None, places: str | None) -> dict[str,
     return {"subset": str(Path(subset).resolve()) if subset else None, "places": places}
 
 
-def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> MatchTruth | None:
+def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> GroundTruth | None:
     """How the queries of traversal ``query`` are scored against a network trained on ``references``: the
     data set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data
     set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
@@ -192,7 +192,7 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Ma
         return None
     matrix, path = truth
     check_every_query_matched(matrix, dataset.place_ids, path)
-    return MatchTruth(matrix, str(path))
+    return GroundTruth(matrix, str(path))
 
 
 def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:

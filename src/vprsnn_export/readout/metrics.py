@@ -23,43 +23,6 @@ from vprsnn_export.io.serial import JsonDataclass, json_options
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 
 
-@dataclass(frozen=True, eq=False)
-class MatchTruth:
-    """A data set's ground truth in place ids: ``matrix[r, q]`` is True when reference place id ``r`` is a
-    correct match of query place id ``q`` (a query may match several references). Given as the
-    ``tolerance`` of :func:`is_correct`, it replaces the index comparison; ``source`` names its file."""
-
-    matrix: np.ndarray  # bool (reference place ids, query place ids)
-    source: str = ""
-
-
-Tolerance = int | MatchTruth
-"""How a prediction is judged: within +-N place ids of the query's (index-aligned data), or by a ground truth."""
-
-
-def first_true_reference(
-    truth: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """For each query, the index (into ``reference_place_ids``) of the first reference the ground truth
-    ``truth[reference id, query id]`` matches it with, and whether there is one:
-
-    .. math:: \\hat r_q = \\min \\{l : \\mathrm{GT}[\\mathrm{ref}_l, q]\\}
-
-    (0 where there is none; reference ids outside the matrix match nothing)."""
-    reference = np.asarray(reference_place_ids, dtype=np.int64)
-    queries = np.asarray(query_place_ids, dtype=np.int64)
-    matches = np.zeros((len(reference), len(queries)), dtype=bool)
-    inside = (reference >= 0) & (reference < truth.shape[0])
-    matches[inside] = truth[np.ix_(reference[inside], queries)]
-    return np.asarray(matches.argmax(axis=0)), np.asarray(matches.any(axis=0))
-
-
-def truth_label(tolerance: Tolerance) -> str:
-    """How a run's decisions were judged, in the words every result states: ``ground truth: FILE`` or
-    ``match window: N`` (index-aligned place ids, N places either side; 0: the query's own place)."""
-    return f"ground truth: {tolerance.source}" if isinstance(tolerance, MatchTruth) else f"match window: {tolerance}"
-
-
 def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.MaskedArray:
     """Map predicted place indices to place ids; no-matches (index -1) are masked.
 
@@ -85,7 +48,7 @@ def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.
 def is_correct(
     pred_place_ids: np.ndarray | np.ma.MaskedArray,
     true_place_ids: np.ndarray,
-    tolerance: float | MatchTruth = 0,
+    tolerance: float = 0,
     *,
     matched: np.ndarray | None = None,
 ) -> np.ndarray:
@@ -93,15 +56,15 @@ def is_correct(
 
     .. math:: \\mathrm{correct}_q = \\mathrm{matched}_q \\wedge |\\mathrm{pred}_q - \\mathrm{true}_q| \\le \\mathrm{tolerance}
 
-    ``tolerance`` is in place-id units (0 = exact match), or a :class:`MatchTruth` (then
-    ``correct_q = matched_q and GT[pred_q, true_q]``). A no-match is never
+    ``tolerance`` is in place-id units (0 = exact match); a data set's ground truth judges through
+    :class:`vprsnn_export.data.truth.GroundTruth` instead. A no-match is never
     correct. Mark no-matches either by passing a masked array (see
     :func:`predicted_place_ids`; masked entries are no-matches) or with the
     boolean ``matched`` mask (False = no-match; the value of
     ``pred_place_ids`` there is ignored). Both may be given; they combine with
     AND. With neither, every prediction counts as a match.
     """
-    if not isinstance(tolerance, MatchTruth) and (tolerance < 0 or not np.isfinite(tolerance)):
+    if tolerance < 0 or not np.isfinite(tolerance):
         raise InvalidValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
     ok = np.ones(np.shape(pred_place_ids), dtype=bool)
     if isinstance(pred_place_ids, np.ma.MaskedArray):
@@ -119,24 +82,8 @@ def is_correct(
         if m.dtype != np.bool_ or m.shape != pred.shape:
             raise InvalidValueError("matched must be a boolean array with one entry per query")
         ok &= m
-    if isinstance(tolerance, MatchTruth):
-        return ok & truth_lookup(tolerance, pred, true)
     diff = np.abs(pred.astype(np.float64) - true.astype(np.float64))
     return ok & (diff <= tolerance)
-
-
-def truth_lookup(truth: MatchTruth, pred: np.ndarray, true: np.ndarray) -> np.ndarray:
-    """``matrix[pred_q, true_q]`` per query; a predicted id outside the matrix is wrong, a query id outside it an error.
-
-    .. math:: \\mathrm{correct}_q = \\mathrm{GT}[\\mathrm{pred}_q, \\mathrm{true}_q]
-    """
-    n_reference, n_query = truth.matrix.shape
-    true = true.astype(np.int64)
-    if true.size and (true.min() < 0 or true.max() >= n_query):
-        raise InvalidValueError(f"query place ids outside the ground truth's 0..{n_query - 1} ({truth.source})")
-    pred = pred.astype(np.int64)
-    inside = (pred >= 0) & (pred < n_reference)
-    return inside & truth.matrix[np.where(inside, pred, 0), true]
 
 
 def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -36,7 +36,6 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.modules import module_regions, region_mask
 
 from .assignment import _counts
-from .metrics import first_true_reference
 
 
 @dataclass(frozen=True)
@@ -221,31 +220,21 @@ def module_accuracy(
     pred_index: np.ndarray,
     correct: np.ndarray,
     reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
     regions: np.ndarray,
-    truth: np.ndarray | None = None,
+    true_index: np.ndarray,
+    known: np.ndarray,
 ) -> list[ModuleAccuracy]:
     """Per module m, over the queries whose true place lies in region m (a query of no reference place is left out):
 
     .. math:: \\mathrm{acc}_m = \\frac{\\#\\{q : \\mathrm{correct}_q\\}}{\\#\\{q\\}}, \\qquad
               \\mathrm{in}_m = \\frac{\\#\\{q : \\hat l_q \\in R_m\\}}{\\#\\{q\\}}
 
-    ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the
-    booleans of ``metrics.is_correct``. A query's true place is the reference of its own place id, or, with a
-    ground truth ``truth[reference id, query id]`` (:class:`~vprsnn_export.readout.metrics.MatchTruth`'s matrix),
-    the first reference (in the model's order) that the ground truth matches it with: the same truth that scored
-    it. Computed with one ``bincount`` per quantity.
+    ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the decisions'
+    correctness; ``true_index`` and ``known`` each query's true reference index and whether it has one, by the
+    truth that judged it (:meth:`vprsnn_export.data.truth.Truth.first_true`). One ``bincount`` per quantity.
     """
     regions_ = np.asarray(regions, dtype=np.int64)
     reference = np.asarray(reference_place_ids, dtype=np.int64)
-    queries = np.asarray(query_place_ids, dtype=np.int64)
-    if truth is None:
-        order = np.argsort(reference, kind="stable")
-        position = np.clip(np.searchsorted(reference[order], queries), 0, max(len(reference) - 1, 0))
-        known = reference[order][position] == queries
-        true_index = order[position]
-    else:
-        true_index, known = first_true_reference(truth, reference, queries)
     n_modules = len(regions_)
     true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
     pred = np.asarray(pred_index, dtype=np.int64)

@@ -4,7 +4,7 @@ A :class:`Readout` is built once per network from its calibration S^R, the confi
 settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.readout.sequence.SequenceOptions`.
 ``scores(counts)`` gives every registered strategy's k=1 scores of a batch, ``sequences`` the
 :data:`~vprsnn_export.readout.strategies.SEQUENCE_STRATEGY` distribution aggregated at every k,
-``rows``/``scored`` the metric rows, and ``push(counts)`` one causal decision per frame of a stream.
+``score`` every readout column decided once (a :class:`~.scored.Scored`), ``rows`` its metric rows, and ``push(counts)`` one causal decision per frame of a stream.
 """
 
 from __future__ import annotations
@@ -16,36 +16,18 @@ import numpy as np
 
 from vprsnn_export.arguments import real_number, require_type
 from vprsnn_export.config import Config
+from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import aggregate, stream_contrast, window_scores
 from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
-from .metrics import MatchTruth, MetricRow, Tolerance, is_correct, pr_metrics, predicted_place_ids
-from .regions import (
-    ModuleAccuracy,
-    ModuleLayout,
-    module_accuracy,
-    module_layout,
-    regularise,
-    regularised_calibration,
-)
+from .metrics import MetricRow, pr_metrics, predicted_place_ids
+from .regions import ModuleLayout, module_layout, regularise, regularised_calibration
+from .scored import Scored, decided_column
 from .sequence import SequenceOptions
-from .strategies import SEQUENCE_STRATEGY, STRATEGIES, all_scores, decide
+from .strategies import SEQUENCE_STRATEGY, all_scores, decide
 from .velocity import VELOCITY_ESTIMATES, causal_estimates
-
-
-def scored_decisions(
-    distribution: np.ndarray,
-    strategy: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    tolerance: Tolerance,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per query of one score matrix (Q, places): (correct, confidence) of the strategy's decision."""
-    predicted, confidence = decide(distribution, strategy)
-    ids = predicted_place_ids(np.asarray(predicted, dtype=np.int64), np.asarray(reference_place_ids))
-    return is_correct(ids, query_place_ids, tolerance), np.asarray(confidence, dtype=np.float64)
 
 
 def decision_metrics(
@@ -53,17 +35,11 @@ def decision_metrics(
     strategy: str,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
-    tolerance: Tolerance,
+    truth: Truth,
 ) -> dict:
-    """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places)."""
-    return pr_metrics(*scored_decisions(distribution, strategy, reference_place_ids, query_place_ids, tolerance))
-
-
-def columns(
-    scores: Mapping[str, np.ndarray], aggregates: Mapping[int, np.ndarray]
-) -> list[tuple[str, int, np.ndarray]]:
-    """(strategy, k, scores) of every readout row: each strategy at k=1, :data:`SEQUENCE_STRATEGY` at each k > 1."""
-    return [(s, 1, scores[s]) for s in STRATEGIES] + [(SEQUENCE_STRATEGY, k, a) for k, a in aggregates.items() if k > 1]
+    """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
+    column = decided_column(strategy, 1, distribution, reference_place_ids, query_place_ids, truth)
+    return pr_metrics(*column.decisions)
 
 
 def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
@@ -81,13 +57,14 @@ def baseline_rows(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     options: SequenceOptions,
+    truth: Truth,
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
     rows = []
     for k in sorted(set(options.ks)):
         dist = options.aggregate(distribution, k, frame_positions)
-        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, options.tolerance)
+        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)
         rows.append(metric_row("sad", k, metrics))
     return rows
 
@@ -98,13 +75,14 @@ def nearest_neighbour_rows(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     options: SequenceOptions,
+    truth: Truth,
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
     decisions = nearest_neighbour_decisions(
-        similarities, reference_place_ids, query_place_ids, options, frame_positions
+        similarities, reference_place_ids, query_place_ids, options, truth, frame_positions
     )
     return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
 
@@ -114,6 +92,7 @@ def nearest_neighbour_decisions(
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     options: SequenceOptions,
+    truth: Truth,
     frame_positions: np.ndarray | None = None,
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
@@ -121,54 +100,8 @@ def nearest_neighbour_decisions(
     for k in sorted(set(options.ks)):
         summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
         predicted, confidence = nearest_neighbour(summed)
-        correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, options.tolerance)
-        out[k] = (correct, confidence)
+        out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
     return out
-
-
-def region_accuracies(
-    distribution: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    regions: np.ndarray,
-    tolerance: Tolerance = 0,
-) -> list[ModuleAccuracy]:
-    """Per module: accuracy and in-region share of the whole-route :data:`SEQUENCE_STRATEGY` decisions of
-    ``distribution`` (Q, places) on its region's queries (:func:`vprsnn_export.readout.regions.module_accuracy`)."""
-    predicted, _ = decide(distribution, SEQUENCE_STRATEGY)
-    correct = is_correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids, tolerance)
-    truth = tolerance.matrix if isinstance(tolerance, MatchTruth) else None  # the truth that scored them
-    return module_accuracy(predicted, correct, reference_place_ids, query_place_ids, regions, truth)
-
-
-def check_places_overlap(reference_place_ids: np.ndarray, query_place_ids: np.ndarray, tolerance: Tolerance) -> None:
-    """InvalidValueError when no query place lies within ``tolerance`` of a reference place (or, with a
-    ground truth, no query matches a reference place): every decision would be wrong by construction
-    (the model was trained on other places)."""
-    reference = np.sort(np.asarray(reference_place_ids, dtype=np.int64))
-    queries = np.asarray(query_place_ids, dtype=np.int64)
-    if reference.size == 0 or queries.size == 0:
-        return
-    if isinstance(tolerance, MatchTruth):
-        n_reference, n_query = tolerance.matrix.shape
-        if queries.min() < 0 or queries.max() >= n_query:
-            raise InvalidValueError(f"query place ids outside the ground truth's 0..{n_query - 1} ({tolerance.source})")
-        inside = reference[reference < n_reference]
-        if not tolerance.matrix[np.ix_(inside, queries)].any():
-            raise InvalidValueError(
-                f"none of the {queries.size} queries matches one of the model's {reference.size} reference places "
-                f"by the ground truth {tolerance.source}: select the places it was trained on (--places / --subset)"
-            )
-        return
-    nearest = np.clip(np.searchsorted(reference, queries), 0, reference.size - 1)
-    below = reference[np.clip(nearest - 1, 0, reference.size - 1)]
-    gap = np.minimum(np.abs(reference[nearest] - queries), np.abs(below - queries))
-    if np.all(gap > tolerance):
-        raise InvalidValueError(
-            f"none of the {queries.size} query places ({queries.min()}..{queries.max()}) is among the model's "
-            f"{reference.size} reference places ({reference[0]}..{reference[-1]}): select the places it was "
-            "trained on (--places / --subset)"
-        )
 
 
 def check_readout_arrays(
@@ -238,30 +171,26 @@ class Readout:
         """A distribution aggregated at every k of the options, k = 1 (itself) included: {k: (Q, places)}."""
         return {k: self.options.aggregate(distribution, k, frame_positions) for k in sorted(set(self.options.ks) | {1})}
 
-    def scored(
+    def score(
         self,
         counts: np.ndarray,
         reference_place_ids: np.ndarray,
         query_place_ids: np.ndarray,
+        truth: Truth | None = None,
         frame_positions: np.ndarray | None = None,
-    ) -> tuple[list[MetricRow], dict[str, np.ndarray], dict[int, np.ndarray]]:
-        """The rows, the k=1 scores of every strategy and the sequence aggregates at every k, each computed once.
+    ) -> Scored:
+        """Every readout column of the queries, each decided once (:class:`~.scored.Scored`): every strategy at
+        k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1, judged by ``truth`` (None: the options' match window).
 
-        Rows: every strategy at k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1 (strategy, k, accuracy,
-        P@100R, R@100P, AUC-PR, number of queries). InvalidValueError when the arrays do not fit, a k exceeds the
-        queries or no query place is near a reference place.
+        InvalidValueError when the arrays do not fit, a k exceeds the queries or no query can match a reference.
         """
+        truth = window(self.options.tolerance) if truth is None else truth
         check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
         self.options.check_length(len(query_place_ids))
-        check_places_overlap(reference_place_ids, query_place_ids, self.options.tolerance)
+        truth.check_overlap(reference_place_ids, query_place_ids)
         scores = self.scores(counts)
         aggregates = self.sequences(scores[SEQUENCE_STRATEGY], frame_positions)
-        tolerance = self.options.tolerance
-        rows = [
-            metric_row(s, k, decision_metrics(m, s, reference_place_ids, query_place_ids, tolerance))
-            for s, k, m in columns(scores, aggregates)
-        ]
-        return rows, scores, aggregates
+        return Scored.of(scores, aggregates, reference_place_ids, query_place_ids, truth)
 
     def rows(
         self,
@@ -270,8 +199,8 @@ class Readout:
         query_place_ids: np.ndarray,
         frame_positions: np.ndarray | None = None,
     ) -> list[MetricRow]:
-        """The metric rows of :meth:`scored`."""
-        return self.scored(counts, reference_place_ids, query_place_ids, frame_positions)[0]
+        """The metric rows of :meth:`score` (by the options' match window)."""
+        return self.score(counts, reference_place_ids, query_place_ids, None, frame_positions).rows
 
     # ------------------------------------------------------------------------ stream
 

@@ -17,7 +17,6 @@ import numpy as np
 from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import DEFAULT_MEMORY, DEFAULT_SPAN, aggregate
-from .metrics import MatchTruth, Tolerance
 from .rules import DEFAULT_RULE, RULES
 from .velocity import DEFAULT_VELOCITY_ESTIMATE, VELOCITY_ESTIMATES
 
@@ -65,8 +64,8 @@ class SequenceOptions:
     ``velocity_estimate`` (:data:`~vprsnn_export.readout.velocity.VELOCITY_ESTIMATES`) with its settings
     ``velocity_span`` (windows summed), ``velocity_length`` (frames per scored trajectory; None: the
     estimator's), ``velocity_memory`` (frames of stream contrast; 0: none) and ``velocity_lag`` (frames each
-    "smooth" decision waits for; None: 2k - 1); ``tolerance``: a prediction within +-tolerance places of the
-    truth is correct. Gamma is not here: it is the config's ``assignment.gamma``.
+    "smooth" decision waits for; None: 2k - 1); ``tolerance``: on index-aligned data, a prediction within +-tolerance places of the
+    query's own is correct (the default :class:`~vprsnn_export.data.truth.MatchWindow`). Gamma is not here: it is the config's ``assignment.gamma``.
     """
 
     ks: tuple[int, ...] = (1,)
@@ -78,7 +77,7 @@ class SequenceOptions:
     velocity_length: int | None = None
     velocity_memory: int = DEFAULT_MEMORY
     velocity_lag: int | None = None
-    tolerance: Tolerance = 0  # or the data set's ground truth (a MatchTruth): the window is not used then
+    tolerance: int = 0  # the match window of index-aligned data (a ground-truth file judges by data.truth instead)
 
     def __post_init__(self) -> None:
         ks = tuple(self.ks) if isinstance(self.ks, (tuple, list)) else ()
@@ -108,8 +107,7 @@ class SequenceOptions:
         _count("velocity_length", self.velocity_length, 1, MAX_SETTING, optional=True)
         _count("velocity_memory", self.velocity_memory, 0, MAX_SETTING)
         _count("velocity_lag", self.velocity_lag, 0, MAX_SETTING, optional=True)
-        if not isinstance(self.tolerance, MatchTruth):
-            _count("tolerance", self.tolerance, 0, MAX_TOLERANCE)
+        _count("tolerance", self.tolerance, 0, MAX_TOLERANCE)
 
     def aggregate(self, distribution: np.ndarray, k: int, frame_positions: np.ndarray | None = None) -> np.ndarray:
         """A distribution (Q, places) aggregated over k frames at the given velocity or at one estimated from it.

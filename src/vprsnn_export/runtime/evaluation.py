@@ -15,6 +15,7 @@ import torch
 from vprsnn_export.arguments import check_place_ids, require_type
 from vprsnn_export.cluster import Cluster
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
@@ -25,9 +26,9 @@ from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, s
 from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
-from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows, region_accuracies
+from vprsnn_export.readout.scored import Scored
+from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY
 from vprsnn_export.targets.intsim import step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
@@ -81,6 +82,7 @@ class Evaluation:
     modules: list[ModuleAccuracy] | None = field(default=None)  # an ensemble: per module, W+Prob k=1
     silenced: int | None = None  # an ensemble: neurons silenced by the region regularisation
     cost: CostSummary | None = None  # events per query, SNN vs template (network.cost)
+    scored: Scored | None = field(default=None, repr=False)  # every readout column of the network's own S^R
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON of `evaluate --json` / `simulate --json` (without the spike counts).
@@ -110,6 +112,7 @@ def evaluate_float(
     cluster: Cluster | None = None,
     progress: bool = False,
     backend: str = "auto",
+    truth: Truth | None = None,
 ) -> Evaluation:
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
@@ -121,7 +124,8 @@ def evaluate_float(
     the no-learning baselines are added: SAD read out like W+Prob (strategy "sad") and the template
     ceiling, cosine nearest neighbour on the same images (strategy "cosine", margin confidence). An ensemble
     (``train.module_size`` > 0) is read out over the whole route with its hyperactive
-    neurons silenced (``assignment.hyperactive_share``), and per-module rows are added.
+    neurons silenced (``assignment.hyperactive_share``), and per-module rows are added. ``truth`` judges the
+    queries (None: the options' match window).
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)
@@ -143,25 +147,23 @@ def evaluate_float(
     counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
-    typed, scores, _ = readout.scored(counts, reference_ids, query_place_ids)
-    layout = readout.modules
+    truth = window(options.tolerance) if truth is None else truth
+    scored = readout.score(counts, reference_ids, query_place_ids, truth)
+    typed, layout = scored.rows, readout.modules
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
         distribution = sad_distribution(sad_distances(reference, query_images))
-        typed += baseline_rows(distribution, reference_ids, query_place_ids, options)
+        typed += baseline_rows(distribution, reference_ids, query_place_ids, options, truth)
         similarities = cosine_similarities(reference, query_images)
-        typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options)
+        typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, truth)
     return Evaluation(
         rows=[row.to_dict() for row in typed],
         spike_stats=spike_statistics(run),
         query_counts=counts,
-        modules=None
-        if layout is None
-        else region_accuracies(
-            scores[SEQUENCE_STRATEGY], reference_ids, query_place_ids, layout.regions, options.tolerance
-        ),
+        modules=None if layout is None else scored.regions(layout.regions),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
         cost=cost,
+        scored=scored,
     )
 
 
@@ -177,6 +179,7 @@ def evaluate_fixed_point(
     float_checkpoint: Checkpoint | None = None,
     progress: bool = False,
     backend: str = "auto",
+    truth: Truth | None = None,
 ) -> Evaluation:
     """A fixed-point model on one query traversal, read out with both calibrations (deployed and float S^R).
 
@@ -192,11 +195,14 @@ def evaluate_fixed_point(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
     )
     counts = run.counts.numpy()
-    rows = []
+    rows, sides = [], []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
-        readout = Readout.of(calibration, model.config, options)
-        for row in readout.rows(counts, model.reference_place_ids, query_place_ids):
-            rows.append({"calibration": name, **row.to_dict()})
+        sides.append(
+            Readout.of(calibration, model.config, options).score(
+                counts, model.reference_place_ids, query_place_ids, truth
+            )
+        )
+        rows += [{"calibration": name, **row.to_dict()} for row in sides[-1].rows]
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
         float_network = replace(float_checkpoint, config=network.config)
@@ -211,6 +217,7 @@ def evaluate_fixed_point(
         max_current=run.max_current,
         winner_agreement=agreement,
         cost=cost,
+        scored=sides[0],
     )
 
 

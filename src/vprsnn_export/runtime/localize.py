@@ -49,12 +49,12 @@ from vprsnn_export.arguments import real_number
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.data.preprocess import normalise_resized, resize_image
+from vprsnn_export.data.truth import EXACT, Truth
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.readout.early import early_run
-from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 
@@ -340,18 +340,18 @@ def operating_point(
     place_ids: np.ndarray,
     *,
     precision: float = 1.0,
-    match_window: Tolerance = 0,
+    truth: Truth = EXACT,
     model_sha256: str = "",
     query: str = "",
-) -> tuple[OperatingPoint, list[Decision]]:
+) -> tuple[OperatingPoint, list[Decision], PrecisionRecallCurve]:
     """Run the localiser over labelled preprocessed frames (N, inputs) in stream order (a query traversal)
-    and choose the threshold for ``precision``; a decision within ``match_window`` places is right (or, with
-    the data set's ground truth as ``match_window``, a reference it names). :func:`calibration_curve` gives the
-    curve it was chosen from."""
+    and choose the threshold for ``precision``; ``truth`` says which decisions are right (a match window, or the
+    data set's ground truth). Returns the point, the decisions and the curve it was chosen from
+    (:func:`calibration_curve`)."""
     if not 0 < precision <= 1:
         raise InvalidValueError(f"--precision must lie in (0, 1], got {precision}")
     decisions = localizer.run_inputs(inputs)
-    curve = calibration_curve(decisions, place_ids, match_window)
+    curve = calibration_curve(decisions, place_ids, truth)
     index = curve.index_for(precision)
     point = OperatingPoint(
         threshold=None if index is None else float(curve.threshold[index]),
@@ -363,20 +363,18 @@ def operating_point(
         model_sha256=model_sha256,
         backend=localizer.backend,
         query=query,
-        match_window=0 if isinstance(match_window, MatchTruth) else int(match_window),
-        ground_truth=match_window.source if isinstance(match_window, MatchTruth) else "",
+        match_window=truth.match_window,
+        ground_truth=truth.source,
     )
-    return point, decisions
+    return point, decisions, curve
 
 
-def calibration_curve(
-    decisions: list[Decision], place_ids: np.ndarray, match_window: Tolerance = 0
-) -> PrecisionRecallCurve:
+def calibration_curve(decisions: list[Decision], place_ids: np.ndarray, truth: Truth = EXACT) -> PrecisionRecallCurve:
     """The precision/recall curve of labelled decisions (:class:`PrecisionRecallCurve`); right as in
     :func:`operating_point`."""
     placed = np.asarray([d.place_id is not None for d in decisions], dtype=bool)
     predicted = np.ma.MaskedArray([d.place_id or 0 for d in decisions], mask=~placed, dtype=np.int64)
-    correct = is_correct(predicted, np.asarray(place_ids), match_window)
+    correct = truth.correct(predicted, np.asarray(place_ids))
     return PrecisionRecallCurve.of(np.asarray([d.confidence for d in decisions]), correct)  # no place: confidence 0
 
 

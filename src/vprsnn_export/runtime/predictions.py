@@ -5,10 +5,10 @@ For query ``q`` (in stream order), strategy ``s`` and sequence length ``k``:
 .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}^{(s, k)}_{ql}, \\quad c_q = \\text{confidence of } \\hat l_q,
           \\quad \\text{correct}_q = |\\mathrm{id}(\\hat l_q) - \\text{truth}_q| \\le \\text{match window}
 
-(with a data set's ground-truth file, ``correct_q = GT[id(l_q), q]``: ``readout.metrics.MatchTruth``), with the
-very scores the metric rows are computed from (``runtime.evaluation``: every strategy at k = 1, W+Prob
-aggregated at each k > 1), so the accuracy of a (strategy, k) column of :class:`Predictions` equals that row's
-accuracy.
+(with a data set's ground-truth file, ``correct_q = GT[id(l_q), q]``: ``data.truth.GroundTruth``): the columns
+of the readout's :class:`~vprsnn_export.readout.scored.Scored` the metric rows come from (every strategy at
+k = 1, W+Prob aggregated at each k > 1), so the accuracy of a (strategy, k) column of :class:`Predictions`
+equals that row's accuracy.
 
 The ``truth`` column holds the query's true place ids: its own place id on index-aligned data, and with a
 ground truth the reference place ids the file names for it (``{r : GT[r, q]}``, several or none: then empty,
@@ -20,21 +20,21 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from vprsnn_export.data.truth import Truth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_text
-from vprsnn_export.readout.metrics import MatchTruth, Tolerance, is_correct, predicted_place_ids
-from vprsnn_export.readout.scoring import Readout, columns
+from vprsnn_export.readout.scored import Scored
+from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY
 
 FORMATS = (".csv", ".jsonl")
 #: The columns of a row (:meth:`Predictions.rows`), in this order.
@@ -104,35 +104,16 @@ class Predictions:
         return atomic_write_text(path, self.to_csv() if suffix == ".csv" else self.to_jsonl())
 
 
-def predictions(
-    scores: Mapping[str, np.ndarray],
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray | None,
-    options: SequenceOptions,
-) -> Predictions:
-    """The decisions behind :meth:`vprsnn_export.readout.scoring.Readout.rows`, per query."""
-    aggregates = {k: options.aggregate(scores[SEQUENCE_STRATEGY], k) for k in sorted(set(options.ks))}
-    decided = []
-    for strategy, k, matrix in columns(scores, aggregates):
-        index, confidence = decide(matrix, strategy)
-        ids = predicted_place_ids(index, reference_place_ids)
-        correct = None if query_place_ids is None else is_correct(ids, query_place_ids, options.tolerance)
-        decided.append(Decided(strategy, k, np.asarray(ids.filled(-1), dtype=np.int64), confidence, correct))
-    if query_place_ids is None:
-        return Predictions(truth=None, decided=tuple(decided))
-    source = options.tolerance.source if isinstance(options.tolerance, MatchTruth) else ""
-    return Predictions(true_places(query_place_ids, options.tolerance), tuple(decided), source)
-
-
-def true_places(query_place_ids: np.ndarray, tolerance: Tolerance) -> tuple[np.ndarray, ...]:
-    """Each query's true place ids: ``{r : GT[r, q]}`` with a ground truth, else ``{q}`` (its own place id).
-
-    ``query_place_ids`` index the ground truth's columns (:func:`vprsnn_export.readout.metrics.truth_lookup`)."""
-    ids = np.asarray(query_place_ids, dtype=np.int64)
-    if not isinstance(tolerance, MatchTruth):
-        return tuple(ids[:, None])
-    queries, places = np.nonzero(tolerance.matrix[:, ids].T)  # row-major: queries ascending, places within each
-    return tuple(np.split(places.astype(np.int64), np.cumsum(np.bincount(queries, minlength=len(ids)))[:-1]))
+def predictions(scored: Scored) -> Predictions:
+    """Every column of a readout, per query (:meth:`vprsnn_export.readout.scoring.Readout.score`): nothing is
+    decided again, so a column's accuracy is its metric row's."""
+    decided = tuple(
+        Decided(c.strategy, c.k, np.asarray(c.place_id.filled(-1), dtype=np.int64), c.confidence, c.correct)
+        for c in scored.columns
+    )
+    if scored.query_place_ids is None or scored.truth is None:
+        return Predictions(truth=None, decided=decided)
+    return Predictions(scored.truth.true_places(scored.query_place_ids), decided, scored.truth.source)
 
 
 def network_predictions(
@@ -140,8 +121,14 @@ def network_predictions(
     query_counts: np.ndarray,
     query_place_ids: np.ndarray | None,
     options: SequenceOptions,
+    truth: Truth | None = None,
 ) -> Predictions:
     """Per-query decisions from an evaluation's spike counts (``Evaluation.query_counts``), read out with
-    the network's own calibration (an ensemble's with its region regularisation), like its metric rows."""
-    scores = Readout.of(network.calibration, network.config, options).scores(query_counts)
-    return predictions(scores, network.reference_place_ids, query_place_ids, options)
+    the network's own calibration (an ensemble's with its region regularisation), like its metric rows;
+    ``truth`` judges them (None: the options' match window; unlabelled queries, None ids: no truth)."""
+    readout = Readout.of(network.calibration, network.config, options)
+    if query_place_ids is not None:
+        return predictions(readout.score(query_counts, network.reference_place_ids, query_place_ids, truth))
+    scores = readout.scores(query_counts)
+    aggregates = readout.sequences(scores[SEQUENCE_STRATEGY])
+    return predictions(Scored.of(scores, aggregates, network.reference_place_ids, None, None))

@@ -28,9 +28,9 @@ import numpy as np
 
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, parse_places
+from vprsnn_export.data.truth import GroundTruth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout.baseline import cosine_similarities, diagonal_sums
-from vprsnn_export.readout.metrics import MatchTruth, first_true_reference
 from vprsnn_export.registry import Registry
 
 #: Frames summed along the diagonal when pairing without labels (research log §8: k = 10 pairs 86-94 % right).
@@ -108,7 +108,7 @@ def adapt_config(
     mechanism: str = "gain",
     places: np.ndarray | None = None,
     pairing: str = "sequence",
-    truth: MatchTruth | None = None,
+    truth: GroundTruth | None = None,
 ) -> Adaptation:
     """Learn ``mechanism`` from the reference images and the frames of ``traversal`` at ``places`` (default: every
     place of the data set), paired by sequence matching or, with ``pairing="truth"``, by place id.
@@ -159,12 +159,12 @@ def adapt_config(
     return Adaptation(adapted, record)
 
 
-def truth_pairs(truth: MatchTruth, ids: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:
+def truth_pairs(truth: GroundTruth, ids: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:
     """Each frame's first true reference: ``pair(f) = min {l : GT[ids_l, f]}`` (a row of ``ids``); InvalidValueError
     naming the file when the ground truth names no reference place of the selection for a frame."""
     if frame_ids.size and frame_ids.max() >= truth.matrix.shape[1]:
         raise InvalidValueError(f"--adapt-pairing truth: frame {int(frame_ids.max())} is outside {truth.source}")
-    paired, known = first_true_reference(truth.matrix, ids, frame_ids)
+    paired, known = truth.first_true(ids, frame_ids)
     if not known.all():
         raise InvalidValueError(
             f"--adapt-pairing truth: {truth.source} names no selected reference place for frame {int(frame_ids[~known][0])}"

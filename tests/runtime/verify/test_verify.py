@@ -11,11 +11,15 @@ from vprsnn_export.cli import main
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.data.truth import EXACT
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.readout.compare import top1_agreement, tv_distance
+from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.runtime.conformance import (
     Contender,
     cross_implementation,
@@ -42,8 +46,6 @@ from vprsnn_export.runtime.verify.checks import (
     module_rows,
     parse_tolerances,
     tolerance_checks,
-    top1_agreement,
-    tv_distance,
 )
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
@@ -144,13 +146,20 @@ def test_count_correlations():
     np.testing.assert_allclose(count_correlations(a, b), [1.0, 1.0, 0.0, -1.0])
 
 
+def scored(distribution: np.ndarray, ids: np.ndarray, aggregates: dict | None = None) -> Scored:
+    """Every strategy of a readout given one distribution (Q, places), judged by exact place ids."""
+    queries = ids[: len(distribution)]
+    return Scored.of({s: distribution for s in STRATEGIES}, aggregates or {1: distribution}, ids, queries, EXACT)
+
+
 def test_tv_distance_and_top1_agreement():
     p = np.array([[0.5, 0.5, 0.0], [1.0, 0.0, 0.0]])
     q = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]])
     np.testing.assert_allclose(tv_distance(p, q), [0.0, 1.0])
-    assert top1_agreement(p, q, "wprob") == 0.5
-    flat = np.full((2, 3), 1 / 3)
-    assert top1_agreement(flat, flat, "wprob") == 1.0  # both no-match: the same decision
+    ids = np.arange(3)
+    assert top1_agreement(scored(p, ids).column("wprob"), scored(q, ids).column("wprob")) == 0.5
+    flat = scored(np.full((2, 3), 1 / 3), ids).column("wprob")
+    assert top1_agreement(flat, flat) == 1.0  # both no-match: the same decision
 
 
 def _rows(float_values, quant_values, n=50):
@@ -427,7 +436,8 @@ def test_module_rows_score_each_region_on_its_own_queries():
     float_raster = torch.zeros((4, 2, 4), dtype=torch.bool)
     int_raster = float_raster.clone()
     int_raster[0, 1, 2] = True
-    rows = module_rows(regions, 2, ids, ids, {1: right, 3: right}, {1: wrong, 3: wrong}, float_raster, int_raster, 0)
+    floats, deployed = scored(right, ids, {1: right, 3: right}), scored(wrong, ids, {1: wrong, 3: wrong})
+    rows = module_rows(regions, 2, floats, deployed, float_raster, int_raster)
     assert [(r.first_place, r.last_place, r.n_queries) for r in rows] == [(10, 11, 2), (12, 13, 2)]
     assert [r.accuracy for r in rows] == [1.0, 0.5] and [r.float_accuracy_k for r in rows] == [1.0, 1.0]
     assert rows[1].delta_k == -0.5 and rows[0].winner_agreement == 1.0 and rows[1].winner_agreement == 7 / 8

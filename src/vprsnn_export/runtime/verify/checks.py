@@ -9,10 +9,10 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.readout.metrics import MetricRow, Tolerance, find_row, pr_curve
-from vprsnn_export.readout.scoring import region_accuracies, scored_decisions
-from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
+from vprsnn_export.readout.compare import sequence_agreement, sequence_distance, strategy_agreement
+from vprsnn_export.readout.metrics import MetricRow, find_row
+from vprsnn_export.readout.scored import Scored
+from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 from vprsnn_export.targets.intsim import step_agreement
 
 from ..measurements import (
@@ -136,46 +136,25 @@ def spike_level(
     )
 
 
-def tv_distance(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Total variation distance 1/2 sum_l |p(l) - q(l)| per row, in [0, 1]."""
-    return 0.5 * np.abs(np.asarray(p, dtype=np.float64) - np.asarray(q, dtype=np.float64)).sum(axis=1)
-
-
-def top1_agreement(scores_a: np.ndarray, scores_b: np.ndarray, strategy: str) -> float:
-    """Fraction of queries with the same decision (the same place, or both no-match)."""
-    return float(np.mean(decide(scores_a, strategy)[0] == decide(scores_b, strategy)[0]))
-
-
-def decision_level(
-    float_scores: Mapping[str, np.ndarray],
-    int_scores: Mapping[str, np.ndarray],
-    float_aggregated: Mapping[int, np.ndarray],
-    int_aggregated: Mapping[int, np.ndarray],
-) -> DecisionLevel:
-    """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k."""
-    tv = tv_distance(float_scores[SEQUENCE_STRATEGY], int_scores[SEQUENCE_STRATEGY])
+def decision_level(float_scored: Scored, scored: Scored, ks: Sequence[int]) -> DecisionLevel:
+    """Top-1 agreement per strategy at k=1, W+Prob total variation, aggregated agreement per k of ``ks``."""
+    tv = sequence_distance(float_scored, scored)
     return DecisionLevel(
-        top1_agreement={s: top1_agreement(float_scores[s], int_scores[s], s) for s in STRATEGIES},
+        top1_agreement=strategy_agreement(float_scored, scored),
         wprob_tv_mean=float(tv.mean()),
         wprob_tv_max=float(tv.max()),
         wprob_tv=tuple(round(float(v), 6) for v in tv),
-        aggregated_agreement={
-            int(k): top1_agreement(float_aggregated[k], int_aggregated[k], SEQUENCE_STRATEGY)
-            for k in sorted(float_aggregated)
-        },
+        aggregated_agreement={int(k): v for k, v in sequence_agreement(float_scored, scored, ks).items()},
     )
 
 
 def module_rows(
     regions: np.ndarray,
     group: int,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    float_aggregated: Mapping[int, np.ndarray],
-    int_aggregated: Mapping[int, np.ndarray],
+    float_scored: Scored,
+    scored: Scored,
     float_raster: torch.Tensor,
     int_raster: torch.Tensor,
-    tolerance: Tolerance,
 ) -> tuple[ModuleRow, ...]:
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
     and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
@@ -183,10 +162,9 @@ def module_rows(
     Vectorised over modules (one bincount per quantity in ``module_accuracy``, one raster reshape).
     """
     n_modules = len(regions)
-    top = max(float_aggregated)
+    top = max(float_scored.ks)
     accuracy = {
-        name: [region_accuracies(agg[k], reference_place_ids, query_place_ids, regions, tolerance) for k in (1, top)]
-        for name, agg in (("float", float_aggregated), ("int", int_aggregated))
+        name: [side.regions(regions, k) for k in (1, top)] for name, side in (("float", float_scored), ("int", scored))
     }
     n, timesteps, _ = float_raster.shape
     a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
@@ -218,32 +196,15 @@ def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) ->
     return tuple(row.with_float(reference[(row.strategy, row.k)]) for row in rows)
 
 
-def pr_points(
-    distribution: np.ndarray,
-    strategy: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    tolerance: Tolerance,
-) -> PrCurve:
-    """The exact PR operating points of one score matrix, for the report's plots."""
-    correct, confidence = scored_decisions(distribution, strategy, reference_place_ids, query_place_ids, tolerance)
-    precision, recall, _ = pr_curve(correct, confidence)
-    return PrCurve(tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall))
-
-
-def curves(
-    scores: Mapping[str, np.ndarray],
-    agg: Mapping[int, np.ndarray],
-    reference_ids: np.ndarray,
-    query_ids: np.ndarray,
-    options: SequenceOptions,
-) -> dict[str, PrCurve]:
-    """PR curves of W+Prob at k=1 and at the largest k."""
+def curves(scored: Scored, ks: Sequence[int]) -> dict[str, PrCurve]:
+    """PR curves of W+Prob at k=1 and at the largest k of ``ks``, for the report's plots."""
     name = SEQUENCE_STRATEGY
-    out = {f"{name} k=1": pr_points(scores[name], name, reference_ids, query_ids, options.tolerance)}
-    top = max(options.ks)
-    if top > 1:
-        out[f"{name} k={top}"] = pr_points(agg[top], name, reference_ids, query_ids, options.tolerance)
+    out = {}
+    for k in sorted({1, max(ks)}):
+        precision, recall = scored.column(name, k).curve()
+        out[f"{name} k={k}"] = PrCurve(
+            tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall)
+        )
     return out
 
 

@@ -13,9 +13,6 @@ import numpy as np
 
 from vprsnn_export.config import VerifyConfig
 from vprsnn_export.readout import paired
-from vprsnn_export.readout.metrics import Tolerance
-from vprsnn_export.readout.scoring import scored_decisions
-from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, STRATEGIES
 
 from ..results import MetricRow, PairedCheck, ToleranceCheck, find_row
 from .checks import metric_readouts
@@ -25,25 +22,8 @@ TABLE_METRICS = ("accuracy", "r_at_100p", "auc_pr")
 #: The tolerances the paired verdicts judge (the others, winner agreement, top-1 agreement, saturations, are
 #: bounds on one measured number and stay point checks).
 PAIRED_TOLERANCES = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
-#: One readout's per-query (correct, confidence).
+#: One readout's per-query (correct, confidence), per (strategy, k): :meth:`~vprsnn_export.readout.scored.Scored.decisions`.
 Decisions = dict[tuple[str, int], tuple[np.ndarray, np.ndarray]]
-
-
-def readout_decisions(
-    scores: Mapping[str, np.ndarray],
-    aggregates: Mapping[int, np.ndarray],
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    tolerance: Tolerance,
-) -> Decisions:
-    """Per readout (every strategy at k=1, W+Prob at every k > 1) the per-query correctness and confidence,
-    exactly as :func:`~vprsnn_export.readout.scoring.decision_metrics` scores them."""
-    matrices = {(s, 1): (s, scores[s]) for s in STRATEGIES}
-    matrices |= {(SEQUENCE_STRATEGY, k): (SEQUENCE_STRATEGY, aggregates[k]) for k in sorted(aggregates) if k > 1}
-    return {
-        key: scored_decisions(matrix, strategy, reference_place_ids, query_place_ids, tolerance)
-        for key, (strategy, matrix) in matrices.items()
-    }
 
 
 def judged_limits(

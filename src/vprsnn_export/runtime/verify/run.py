@@ -18,6 +18,7 @@ from tqdm import tqdm
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config, VerifyConfig
 from vprsnn_export.data.encoding import query_spikes
+from vprsnn_export.data.truth import Truth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from vprsnn_export.io.checkpoint import Checkpoint
@@ -44,7 +45,7 @@ from .checks import (
     tolerance_checks,
     weight_histograms,
 )
-from .paired import bits_passed, judged_limits, paired_checks, readout_decisions
+from .paired import bits_passed, judged_limits, paired_checks
 
 
 @dataclass(frozen=True)
@@ -93,13 +94,16 @@ def verify_checkpoint(
     progress: bool = False,
     label: str | None = None,
     checkpoint: str | None = None,
+    truth: Truth | None = None,
 ) -> VerifiedRun:
     """Quantise ``ckpt`` at every bit width and run every check: one verified run of the report.
 
     ``reference_images`` (the checkpoint's reference traversals, in its reference place
     order) are needed for the deployed calibration; ``export_dir`` receives each bit
     width's fixed-point model and exported files (a temporary folder when None).
-    ``checkpoint`` names the checkpoint's file in the result.
+    ``checkpoint`` names the checkpoint's file in the result; ``truth`` judges the queries (None: the readout
+    options' match window). Each side is read out once (a :class:`~vprsnn_export.readout.scored.Scored`) and
+    every check compares the two.
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, VerifyOptions)
@@ -120,12 +124,11 @@ def verify_checkpoint(
     float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
     ref_ids = ckpt.reference_place_ids
     regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
-    float_rows, float_scores, float_agg = Readout.of(ckpt.calibration, ckpt.config, readout).scored(
-        float_counts, ref_ids, query_place_ids
+    float_scored = Readout.of(ckpt.calibration, ckpt.config, readout).score(
+        float_counts, ref_ids, query_place_ids, truth
     )
     sequences = readout.warning(query_place_ids) is None
     limits = judged_limits(options.tolerances, readout.ks, len(query_place_ids), sequences=sequences)
-    float_decisions = readout_decisions(float_scores, float_agg, ref_ids, query_place_ids, readout.tolerance)
     temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
     root = Path(temporary.name if temporary is not None else str(export_dir))
     results: list[BitsResult] = []
@@ -164,27 +167,22 @@ def verify_checkpoint(
             seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
             stages.update(1)
             stages.set_postfix(bits=bits, stage="readout")
-            int_rows, scores, agg = Readout.of(model.calibration, model.config, readout).scored(
-                int_counts, ref_ids, query_place_ids
+            scored = Readout.of(model.calibration, model.config, readout).score(
+                int_counts, ref_ids, query_place_ids, float_scored.truth
             )
-            rows = metric_deltas(float_rows, int_rows)
+            rows = metric_deltas(float_scored.rows, scored.rows)
             if float_run.raster is None or int_run.raster is None:
                 raise InvalidValueError("verify needs the recorded rasters of both networks")
             rasters = (float_run.raster, int_run.raster)
             calibration_saturations = model.quantisation.calibration_saturations
             spike = spike_level(*rasters, float_counts, int_counts, int_all.saturations, calibration_saturations)
-            decision = decision_level(
-                float_scores, scores, {k: float_agg[k] for k in readout.ks}, {k: agg[k] for k in readout.ks}
-            )
+            decision = decision_level(float_scored, scored, readout.ks)
             checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
-            decisions = readout_decisions(scores, agg, ref_ids, query_place_ids, readout.tolerance)
-            table = paired_checks(float_decisions, decisions, rows, limits, options.statistics)
+            table = paired_checks(float_scored.decisions(), scored.decisions(), rows, limits, options.statistics)
             modules: tuple[ModuleRow, ...] = ()
             if len(regions) > 1:
                 group = ckpt.config.network.n_neurons  # neurons per module
-                modules = module_rows(
-                    regions, group, ref_ids, query_place_ids, float_agg, agg, *rasters, readout.tolerance
-                )
+                modules = module_rows(regions, group, float_scored, scored, *rasters)
             seconds["readout"] = time.perf_counter() - clock
             results.append(
                 BitsResult(
@@ -195,7 +193,7 @@ def verify_checkpoint(
                     decision_level=decision,
                     metrics=rows,
                     tolerance_checks=tuple(checks),
-                    pr_curves=curves(scores, agg, ref_ids, query_place_ids, readout),
+                    pr_curves=curves(scored, readout.ks),
                     weight_levels=level_histogram(model),
                     passed=bits_passed(cross.passed, checks, table),
                     seconds={k: round(v, 3) for k, v in seconds.items()},
@@ -220,9 +218,9 @@ def verify_checkpoint(
         reference_place_ids=tuple(int(p) for p in ref_ids),
         export_dir=None if temporary is not None else str(root),
         float=FloatResult(
-            metrics=tuple(float_rows),
+            metrics=tuple(float_scored.rows),
             total_spikes=int(float_counts.sum()),
-            pr_curves=curves(float_scores, float_agg, ref_ids, query_place_ids, readout),
+            pr_curves=curves(float_scored, readout.ks),
             weights=weight_histograms(ckpt.weights, quantise.per_neuron),
             cost=query_cost(spikes, ckpt.weights.shape[1], places=len(ref_ids), images=query_images).summary(),
         ),
