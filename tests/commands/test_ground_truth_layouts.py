@@ -217,3 +217,36 @@ def test_a_manifest_beside_a_ground_truth_file_is_refused_in_one_line(tmp_path, 
     assert main(["evaluate", str(ckpt_path), "--query", query, "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "is ambiguous" in err and "sunset2_sunset1_GT.npy" in err and len(err.strip().splitlines()) == 1
+
+
+def test_each_command_opens_the_ground_truth_file_once(tmp_path, capsys, monkeypatch):
+    """Issue 42: load, fingerprint and scoring ask one reader, so a command opens the file once (each command
+    is a process of its own: the memo is cleared before each). Two traversals of equal length with a file
+    beside them: loaded together, the file was read three times before (load, fingerprint, scoring)."""
+    from vprsnn_export.data import groundtruth
+
+    data = tmp_path / "data"
+    route = synthetic_route(N_REFERENCE, ("summer", "winter"))
+    write_traversal(data / "sunset1", route["summer"])
+    write_traversal(data / "sunset2", route["winter"])
+    gt = data / "sunset2_sunset1_GT.npy"
+    np.save(gt, np.eye(N_REFERENCE, dtype=np.int64))
+    ckpt = tmp_path / "net.npz"
+    opened: list[Path] = []
+    read_bytes = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda self: opened.append(self.resolve()) or read_bytes(self))
+    train = ["train", "--data", str(data), "--reference", "sunset1", *TINY, "--out", str(ckpt)]
+    commands = {
+        "train --adapt-from": [*train, "--adapt-from", "sunset2", "--adapt", "gain", "--adapt-pairing", "truth"],
+        "evaluate --baseline": ["evaluate", str(ckpt), "--query", "sunset2", "--k", "1,3", "--baseline", "--quiet"],
+        "verify": ["verify", str(ckpt), "--query", "sunset2", "--bits", "8", "--k", "1,3", "--targets", "none",
+                   "--report", str(tmp_path / "v"), "--quiet"],
+        "localize --calibrate": ["localize", str(ckpt), "--calibrate", "sunset2", "--k", "3", "--precision", "0.1",
+                                 "--quiet"],
+    }  # fmt: skip
+    for name, argv in commands.items():
+        groundtruth._READ.clear()
+        opened.clear()
+        assert main(argv) in (0, 2), f"{name}: {capsys.readouterr().err}"
+        assert opened.count(gt.resolve()) == 1, f"{name} opened the ground truth {opened.count(gt.resolve())} times"
+    capsys.readouterr()

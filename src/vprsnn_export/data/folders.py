@@ -30,7 +30,7 @@ from ..config import PreprocessConfig
 from ..errors import DataError
 from ..io.fileio import sha256_bytes
 from .frames import image_files
-from .groundtruth import pair_ground_truth
+from .groundtruth import ground_truth_digest, pair_ground_truth
 from .preprocess import normalise_resized, read_grey_image, resize_image
 
 
@@ -132,9 +132,9 @@ def folder_files(folder: Path, names: Sequence[str]) -> dict[str, list[Path]]:
 
 
 def folder_fingerprint(files: dict[str, list[Path]], truths: list[FolderGroundTruth]) -> str:
-    """sha256 over the traversal names, the frame file names in order and the ground-truth files' bytes."""
+    """sha256 over the traversal names, the frame file names in order and the ground-truth files' sha256."""
     text = "\n".join(f"{name}/{path.name}" for name, paths in files.items() for path in paths)
-    return sha256_bytes(text.encode() + b"".join(t.path.read_bytes() for t in truths))
+    return sha256_bytes(text.encode() + "".join(ground_truth_digest(t.path) for t in truths).encode())
 
 
 def decode_images(

@@ -29,7 +29,8 @@ import numpy as np
 
 from ..arguments import ascii_uint
 from ..errors import DataError, brief
-from ..io.npyload import load_npy
+from ..io.fileio import sha256_bytes
+from ..io.npyload import MAX_NPY_BYTES, parse_npy
 
 GT_SUFFIXES = ("_GT.npy", "_GT.csv")
 VPR_BENCH_GT = "ground_truth_new.npy"  # VPR-Bench: <dataset>/ref/, <dataset>/query/, ground_truth_new.npy
@@ -50,16 +51,68 @@ def ground_truth_files(folder: Path, reference: str, query: str) -> list[tuple[P
     return [(path, forward) for path, forward in found if path.is_file()]
 
 
+#: Each ground-truth file read in this process, by (path, size, mtime, inode): its bytes' sha256 and the
+#: matrices read from it. A command reads a file once (load, fingerprint and scoring all ask here); a file
+#: changed on disk is read again.
+_READ: dict[tuple, tuple[str, dict[tuple[int, int, bool], np.ndarray]]] = {}
+MAX_REMEMBERED = 8
+
+
+def file_key(path: Path) -> tuple:
+    try:
+        stat = path.stat()
+    except OSError as exc:
+        raise DataError(f"cannot read this ground truth ({exc.strerror or exc})", path) from None
+    return (str(path.resolve()), stat.st_size, stat.st_mtime_ns, stat.st_ino)
+
+
+def opened(path: Path) -> tuple[tuple, bytes | None]:
+    """The file's key and, when this process has not read it yet, its bytes (read once, size-checked)."""
+    key = file_key(path)
+    if key in _READ:
+        return key, None
+    if key[1] > MAX_NPY_BYTES:
+        raise DataError(f"the ground truth file is {key[1]} bytes, more than {MAX_NPY_BYTES}", path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"cannot read this ground truth ({exc.strerror or exc})", path) from None
+    if len(_READ) >= MAX_REMEMBERED:
+        _READ.pop(next(iter(_READ)))
+    _READ[key] = (sha256_bytes(raw), {})
+    return key, raw
+
+
+def ground_truth_digest(path: Path) -> str:
+    """sha256 of the file's bytes (read at most once per process and version of the file)."""
+    key, _ = opened(path)
+    return _READ[key][0]
+
+
 def read_ground_truth(path: Path, n_reference: int, n_query: int, reference_first: bool = True) -> np.ndarray:
-    """The file as a boolean matrix ``GT[reference, query]`` of shape (n_reference, n_query); DataError on any
-    defect. ``reference_first``: a CSV's file name puts the reference traversal first (its columns are then
-    query,reference of that naming; otherwise the two are swapped)."""
+    """The file as a boolean matrix ``GT[reference, query]`` of shape (n_reference, n_query), read-only; DataError
+    on any defect. ``reference_first``: a CSV's file name puts the reference traversal first (its columns are
+    then query,reference of that naming; otherwise the two are swapped). Read once per process and file version."""
+    key, raw = opened(path)
+    shape = (n_reference, n_query, reference_first or path.suffix.lower() != ".csv")  # a .npy reads either way
+    matrices = _READ[key][1]
+    if shape not in matrices:
+        if raw is None:
+            raw = path.read_bytes()  # the same version, read for another shape (a rare second pairing)
+        matrix = parse_ground_truth(raw, path, n_reference, n_query, reference_first)
+        matrix.setflags(write=False)
+        matrices[shape] = matrix
+    return matrices[shape]
+
+
+def parse_ground_truth(raw: bytes, path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
+    """:func:`read_ground_truth` of the file's bytes."""
     if path.suffix.lower() == ".csv":
-        return _csv_matrix(path, n_reference, n_query, reference_first)
-    raw = load_npy(path, "ground truth")
-    if raw.dtype.hasobject:
-        return _object_matrix(raw, path, n_reference, n_query)
-    return _numeric_matrix(raw, path, n_reference, n_query)
+        return _csv_matrix(raw, path, n_reference, n_query, reference_first)
+    array = parse_npy(raw, path, "ground truth")
+    if array.dtype.hasobject:
+        return _object_matrix(array, path, n_reference, n_query)
+    return _numeric_matrix(array, path, n_reference, n_query)
 
 
 def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
@@ -144,11 +197,11 @@ def _object_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) 
     return matrix
 
 
-def _csv_matrix(path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
+def _csv_matrix(raw: bytes, path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
     """Rows ``query,reference`` of ASCII decimal integers; with ``reference_first`` False the names are swapped."""
     rows_of, cols_of = (n_query, n_reference) if reference_first else (n_reference, n_query)
     try:
-        reader = csv.DictReader(io.StringIO(path.read_text(encoding="utf-8-sig"), newline=""))
+        reader = csv.DictReader(io.StringIO(raw.decode("utf-8-sig"), newline=""))
         if reader.fieldnames is None or not {"query", "reference"} <= {f.strip() for f in reader.fieldnames}:
             raise DataError(f"expected a CSV with columns query,reference, got {reader.fieldnames}", path)
         pairs = []

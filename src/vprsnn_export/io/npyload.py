@@ -205,6 +205,11 @@ def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
         raw = path.read_bytes()
     except OSError as exc:
         raise DataError(f"cannot read this {what} ({exc.strerror or exc})", path) from None
+    return parse_npy(raw, path, what)
+
+
+def parse_npy(raw: bytes, path: Path, what: str = "array") -> np.ndarray:
+    """:func:`load_npy` of a file's bytes already read (``path`` names it in errors)."""
     stream = io.BytesIO(raw)
     shape, fortran, dtype = _header(stream, what, path)
     if not dtype.hasobject:

@@ -545,3 +545,27 @@ def test_a_float_network_that_does_not_recognise_places_is_named_degenerate(veri
     assert "DEGENERATE float network" in line and code in (0, 1)
     assert all(verdict_cells("tiny", run, result)["verdict"].endswith("(degenerate float)") for result in run.bits)
     assert '"degenerate": "R@100P = 0' in json.dumps(run.to_dict())
+
+
+def test_each_readout_column_is_decided_once_per_network_and_width(tiny, tmp_path, monkeypatch):
+    """Issue 42: verify reads each side out once (a Scored) and compares them; W+Prob at k=1 is decided once for
+    float and once per width, and nothing under runtime/verify decides a column again."""
+    from vprsnn_export.readout import scored as scored_module
+    from vprsnn_export.readout import scoring
+
+    path, ckpt, data = tiny
+    calls: list[str] = []
+    decide = scored_module.decide
+    monkeypatch.setattr(
+        scored_module, "decide", lambda matrix, strategy: calls.append(strategy) or decide(matrix, strategy)
+    )
+    monkeypatch.setattr(scoring, "decide", lambda *_: pytest.fail("the batch readout decided outside Scored"))
+    options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 4), targets=(), reference_queries=1)
+    run = verify_checkpoint(
+        ckpt, checkpoint_sha256(path), data.traversal("winter"), data.place_ids, "winter", options,
+        reference_images={"summer": data.traversal("summer")}, export_dir=tmp_path,
+    )  # fmt: skip
+    networks = 1 + len(run.bits)  # float and each width
+    assert calls.count("standard") == calls.count("weighted") == networks
+    assert calls.count("wprob") == 2 * networks  # k=1 and k=3, once each
+    assert run.bits[0].decision_level.top1_agreement["wprob"] >= 0  # the comparison read the same columns
