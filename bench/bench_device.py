@@ -37,7 +37,7 @@ import torch
 
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import query_spikes
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import input_currents, run_network
 from vprsnn_export.network.dynamics_kernel import float_run
@@ -97,7 +97,7 @@ def main() -> None:
         n_queries = args.batch if modules == 1 else args.route_batch
         images = np.random.default_rng(7).random((n_queries, mcfg.network.n_inputs)).astype(np.float32)
         spikes = query_spikes(images, np.arange(n_queries), "winter", mcfg)
-        model = quantize_checkpoint(ckpt, "0" * 64, 8, True, "max")
+        model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
         w_cpu = torch.from_numpy(ckpt.weights)
         th_cpu = torch.from_numpy(ckpt.thresholds)
         w_dev, th_dev = w_cpu.to(device), th_cpu.to(device)

@@ -21,7 +21,7 @@ import torch
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import IntegerNetwork
@@ -72,7 +72,9 @@ def main() -> None:
     device = torch.device("cpu")
     float_net = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
     integer = {
-        scheme: IntegerNetwork(quantize_checkpoint(ckpt, digest, args.bits, scheme == "per-neuron", "max"), device)
+        scheme: IntegerNetwork(
+            quantize_checkpoint(ckpt, digest, args.bits, QuantiseOptions(per_neuron=scheme == "per-neuron")), device
+        )
         for scheme in ("per-tensor", "per-neuron")
     }
     print(

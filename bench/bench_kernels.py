@@ -29,7 +29,7 @@ from bench_intsim import untrained_checkpoint  # the sibling script (bench/ is o
 from vprsnn_export.config import Config, PreprocessConfig
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import encode, presentation_seed, query_spikes
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork, input_currents, run_network
 from vprsnn_export.network.dynamics_kernel import float_run
@@ -111,7 +111,7 @@ def main() -> None:
     n = len(place_ids)
     device = torch.device("cpu")
     float_net = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, device)
-    integer = IntegerNetwork(quantize_checkpoint(ckpt, digest, 8, True, "max"), device)
+    integer = IntegerNetwork(quantize_checkpoint(ckpt, digest, 8, QuantiseOptions()), device)
     run_integer_kernel = integer_kernel_runner(integer)
     weights, thresholds = float_net.weights, float_net.thresholds
     beta = cfg.network.beta

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.config import PRESETS, preset
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.localize import Localizer
@@ -104,7 +104,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, modules in ((name, modules) for name in presets for modules in (1, args.modules)):
             ckpt = random_checkpoint(modules, args.module_size, name)
-            model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+            model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
             graph = write_onnx(model, Path(tmp) / f"{name}{modules}.onnx") if "onnx" in backends else None
             label = f"{name}: {modules} x {ckpt.config.network.n_neurons} n, T={ckpt.config.encoder.timesteps}"
             for backend in backends:

@@ -22,7 +22,7 @@ import torch
 from vprsnn_export.commands._common import format_table
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import encode, query_spikes
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.runtime.exporting import load_source
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.onnx_session import run_session, session
@@ -109,7 +109,7 @@ def main() -> int:
     source = load_source(args.model)
     if source.checkpoint is not None:
         models = [
-            quantize_checkpoint(source.checkpoint, source.sha256, int(b), per_neuron=True, scale_method="max")
+            quantize_checkpoint(source.checkpoint, source.sha256, int(b), QuantiseOptions())
             for b in args.bits.split(",")
         ]
     else:

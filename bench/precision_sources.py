@@ -27,7 +27,7 @@ import torch
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import DECAY_BITS
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import IntegerNetwork
@@ -85,7 +85,7 @@ def main() -> None:
     exact, exact_cand, margin = run(currents, theta, lambda v: beta * v)
     out: dict[str, object] = {"float64_equals_float32": float((exact == reference).mean())}
     for bits in (int(b) for b in args.bits.split(",")):
-        model = quantize_checkpoint(ckpt, "0" * 64, bits, True, "max")
+        model = quantize_checkpoint(ckpt, "0" * 64, bits, QuantiseOptions())
         scale = np.ldexp(model.scale_multiplier.astype(np.float64), model.scale_exponent)
         keep = (1 << DECAY_BITS) - model.decay_dv
         unit = scale / 64  # the integer voltage's unit per neuron

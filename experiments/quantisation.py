@@ -6,8 +6,9 @@ import time
 from pathlib import Path
 
 from vprsnn_export.device import resolve_device
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
+from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 
 from .common import Settings, consecutive_networks, provenance, rows_table, summarise_rows

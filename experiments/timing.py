@@ -12,7 +12,7 @@ import torch
 
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.device import resolve_device
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork, input_currents, run_network
 from vprsnn_export.network.dynamics_kernel import QUERY_CHUNK
 from vprsnn_export.readout.aggregation import aggregate
@@ -69,7 +69,7 @@ def run(settings: Settings) -> dict:
         ckpt = trained_checkpoint(settings, data, cfg, "consecutive")
         spikes = query_spikes(data.traversal(settings.query), data.place_ids, settings.query, cfg)
         float_net = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, device)
-        model = quantize_checkpoint(ckpt, "timing", 8, True, "max")
+        model = quantize_checkpoint(ckpt, "timing", 8, QuantiseOptions())
         int_net = IntegerNetwork(model, device=device)
         with tempfile.TemporaryDirectory() as tmp:
             onnx_path = write_onnx(model, Path(tmp) / "model.onnx", with_wprob=False)

@@ -101,7 +101,7 @@ def calls(f: Fixtures) -> dict[str, tuple[Any, dict[str, Any]]]:
         "select_places": (vx.select_places, dict(dataset=f.data, place_ids=f.places[:2])),
         "quantize_checkpoint": (
             vx.quantize_checkpoint,
-            dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, per_neuron=True, scale_method="max"),
+            dict(ckpt=f.ckpt, ckpt_sha256="props", bits=4, options=vx.QuantiseOptions()),
         ),
         "deploy": (
             vx.deploy,
@@ -136,7 +136,7 @@ def arguments() -> list[tuple[str, str]]:
         "module_regions": ("n_places", "module_size"),
         "module_layout": ("cfg", "n_places"),
         "select_places": ("dataset", "place_ids"),
-        "quantize_checkpoint": ("ckpt", "ckpt_sha256", "bits", "per_neuron", "scale_method"),
+        "quantize_checkpoint": ("ckpt", "ckpt_sha256", "bits", "options"),
         "deploy": ("ckpt", "ckpt_sha256", "bits", "options"),
         "decide": ("scores", "strategy"),
         "strategy_scores": ("sr", "sq", "strategy"),
@@ -282,7 +282,7 @@ def test_deploy_refuses_a_label_no_reader_accepts(fx):
 def test_tiny_weights_are_refused_at_quantisation_not_at_reading(fx):
     ckpt = vx.Checkpoint(**{**fx.ckpt.__dict__, "weights": np.full_like(fx.ckpt.weights, 1e-31)})
     with pytest.raises(vx.InvalidValueError, match="scale_exponent"):
-        vx.quantize_checkpoint(ckpt, "tiny", 4, True, "max")
+        vx.quantize_checkpoint(ckpt, "tiny", 4, vx.QuantiseOptions())
 
 
 @settings(max_examples=30, deadline=None)

@@ -22,7 +22,7 @@ from vprsnn_export.data.preprocess import CHANNELS, Channel, normalise_resized
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point, save_fixed_point
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.readout.aggregation import aggregate
 from vprsnn_export.readout.assignment import share_decision
@@ -252,9 +252,7 @@ def test_a_toy_backend_is_one_registry_line_and_selectable(tmp_path, capsys):
         path = tmp_path / "net.npz"
         train = ["train", "--data", "synthetic:8", "--reference", "summer", "--out", str(path), "--quiet"]
         assert main([*train, "--timesteps", "20", "--epochs", "1", "--neurons", "16"]) == 0
-        model = quantize_checkpoint(
-            load_checkpoint(path), checkpoint_sha256(path), 4, per_neuron=True, scale_method="max"
-        )
+        model = quantize_checkpoint(load_checkpoint(path), checkpoint_sha256(path), 4, QuantiseOptions())
         assert choose_backend(model, "toy").name == "toy"
         frames = synthetic_route(8, ("winter",))["winter"]
         toy = Localizer(model, backend="toy", options=SequenceOptions(ks=(3,)))

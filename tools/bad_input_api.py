@@ -102,7 +102,7 @@ def calls(folder: Path) -> dict:
         "select_places": (vx.select_places, dict(dataset=data, place_ids=places[:2])),
         "set_threads": (vx.set_threads, dict(threads=1)),
         "quantize_checkpoint": (vx.quantize_checkpoint, dict(ckpt=ckpt, ckpt_sha256="probe", bits=4,
-                                                             per_neuron=True, scale_method="max")),
+                                                             options=vx.QuantiseOptions())),
         "deploy": (vx.deploy, dict(ckpt=ckpt, ckpt_sha256="probe", bits=4, options=vx.QuantiseOptions(),
                                    reference_images=ref)),
         "QuantiseOptions": (vx.QuantiseOptions, dict(per_neuron=True, scale_method="max", fold_thresholds=False,
@@ -133,7 +133,6 @@ LEGAL = {
     ("set_threads", "threads", "none"): "None: the default thread count",
     ("quantize_checkpoint", "ckpt_sha256", "str"): "any text labels the source",
     ("deploy", "ckpt_sha256", "str"): "any text labels the source",
-    ("quantize_checkpoint", "per_neuron", "bool"): "True is a valid choice",
     **{("QuantiseOptions", name, "bool"): "True is a valid choice" for name in
        ("per_neuron", "fold_thresholds", "non_leaky")},
     ("train_and_calibrate", "progress", "bool"): "True is a valid choice",

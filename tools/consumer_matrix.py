@@ -29,7 +29,7 @@ import torch
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.runtime.consumer_gate import decided_places
@@ -60,7 +60,7 @@ def sources_of(ckpt: Checkpoint) -> dict[str, Checkpoint | FixedPointModel]:
     for fold in (False, True):
         for bits in (8, 4, 2):
             sources[f"{bits}bit" + ("-folded" if fold else "")] = quantize_checkpoint(
-                ckpt, "0" * 64, bits, per_neuron=True, scale_method="max", fold_thresholds=fold
+                ckpt, "0" * 64, bits, QuantiseOptions(fold_thresholds=fold)
             )
     return sources
 

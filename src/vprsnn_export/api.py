@@ -30,7 +30,7 @@ from .data.frames import iter_frames
 from .data.preprocess import CHANNELS, Channel
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
-from .export.quantize import quantize_checkpoint
+from .export.quantize import QuantiseOptions, quantize_checkpoint
 from .io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
 from .network.dynamics import FloatNetwork
 from .network.modules import module_count, module_regions
@@ -45,7 +45,7 @@ from .readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from .readout.velocity import VELOCITY_ESTIMATES, VelocityEstimator
 from .resources import memory_limit, set_memory_limit
 from .runtime.conformance import compare_backends, cross_implementation
-from .runtime.deployment import QuantiseOptions, deploy, recalibrate
+from .runtime.deployment import deploy, recalibrate
 from .runtime.evaluation import Evaluation, evaluate_fixed_point, evaluate_float
 from .runtime.exporting import ExportResult, ExportSource, export_and_check, load_source, read_export
 from .runtime.localize import Localizer, OperatingPoint, operating_point

@@ -17,7 +17,7 @@ from vprsnn_export.export.model import (
     load_fixed_point,
     save_fixed_point,
 )
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import read_container, write_container
 
@@ -36,7 +36,7 @@ def small_model(bits: int = 4, per_neuron: bool = True, fold: bool = False):
         reference_traversals=["summer"],
         data={"source": "synthetic:10"},
     )
-    return quantize_checkpoint(ckpt, "ab" * 32, bits, per_neuron, "max", fold)
+    return quantize_checkpoint(ckpt, "ab" * 32, bits, QuantiseOptions(per_neuron=per_neuron, fold_thresholds=fold))
 
 
 def resave(path, tmp_path, *, meta=None, **arrays):

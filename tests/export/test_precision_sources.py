@@ -16,7 +16,7 @@ from vprsnn_export.config import preset
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import DECAY_BITS
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import simulate, step_agreement
 
@@ -47,7 +47,7 @@ def test_at_eight_bits_only_the_weight_mantissas_move_spikes(trained):
     thresholds, float beta) on >= 99 % of steps: threshold rounding, the 12-bit decay and
     truncation toward zero together move < 1 % of the steps the weight rounding moves."""
     ckpt, spikes, reference = trained
-    model = quantize_checkpoint(ckpt, "0" * 64, 8, True, "max")
+    model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
     scale = np.ldexp(model.scale_multiplier.astype(np.float64), model.scale_exponent)
     dequantised = model.weight_mantissa * scale
     integer = simulate(model, spikes, record=True).raster

@@ -14,6 +14,7 @@ from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import load_fixed_point
 from vprsnn_export.export.quantize import (
+    QuantiseOptions,
     column_sse,
     desired_scales,
     quantise_arrays,
@@ -160,7 +161,7 @@ def small_checkpoint(n_places: int = 6) -> tuple[Checkpoint, dict]:
 
 def test_quantize_checkpoint_then_recalibrate_on_the_integer_simulator():
     ckpt, reference = small_checkpoint()
-    model = quantize_checkpoint(ckpt, "cd" * 32, 8, True, "max")
+    model = quantize_checkpoint(ckpt, "cd" * 32, 8, QuantiseOptions())
     assert model.source_sha256 == "cd" * 32 and model.decay_dv == 205
     assert np.array_equal(model.calibration, ckpt.calibration)
     deployed = recalibrate(model, reference, ckpt.reference_place_ids)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
+from vprsnn_export.export.quantize import QuantiseOptions
+from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.targets.nir_target import write_nir
 
 

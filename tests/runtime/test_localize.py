@@ -9,11 +9,12 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import InvalidValueError, ModelFileError
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.readout.aggregation import aggregate, track_velocity
 from vprsnn_export.readout.scoring import Readout, ensemble_layout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import decide
-from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
+from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.localize import (
     Localizer,
     PrecisionRecallCurve,

@@ -28,6 +28,7 @@ import torch
 
 from vprsnn_export.config import Config, preset
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import simulate
@@ -256,9 +257,7 @@ def real_files(folder: Path) -> RealFiles:
     for bits in (8, 4, 2):
         for fold in (False, True):
             name = f"{bits}bit" + ("-folded" if fold else "")
-            sources[name] = quantize_checkpoint(
-                ckpt, "0" * 64, bits, per_neuron=True, scale_method="max", fold_thresholds=fold
-            )
+            sources[name] = quantize_checkpoint(ckpt, "0" * 64, bits, QuantiseOptions(fold_thresholds=fold))
     files = {name: (nir.read(write_nir(src, folder / f"{name}.nir")), src) for name, src in sources.items()}
     spikes = query_spikes(dataset.traversal("winter")[:100], dataset.place_ids[:100], "winter", cfg)
     rasters = {
@@ -360,7 +359,7 @@ def test_default_network_float_consumers_differ_with_the_leak_and_are_exact_with
     crossings (raster entries differ after the rule) and decisions fall below the stated 95 % (the gate
     fails the file); --non-leaky: 0 / 0 and 100 % in every consumer (the gate passes)."""
     from vprsnn_export.runtime.consumer_gate import consumer_gate
-    from vprsnn_export.runtime.deployment import QuantiseOptions, deploy
+    from vprsnn_export.runtime.deployment import deploy
     from vprsnn_export.targets.nir_consumers import run_consumer
 
     ckpt, dataset, spikes = default_network

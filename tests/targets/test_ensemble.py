@@ -22,7 +22,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel, load_fixed_point
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.readout.regions import hyperactive_neurons
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.strategies import strategy_scores
@@ -72,7 +72,7 @@ def queries(route) -> torch.Tensor:
 
 
 def quantised(route, bits: int, per_neuron: bool, fold: bool = False) -> FixedPointModel:
-    return quantize_checkpoint(route[0], "0" * 64, bits, per_neuron, "max", fold_thresholds=fold)
+    return quantize_checkpoint(route[0], "0" * 64, bits, QuantiseOptions(per_neuron=per_neuron, fold_thresholds=fold))
 
 
 def test_per_tensor_means_one_scale_per_module_and_the_report_has_every_module(route):

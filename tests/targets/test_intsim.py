@@ -14,7 +14,7 @@ from vprsnn_export.config import preset
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.targets.intsim import IntegerNetwork, matmul_dtype, prepare, run_prepared, simulate, step_agreement
 from vprsnn_export.targets.reference_stepper import reference_run, trunc_div
@@ -211,7 +211,7 @@ def test_eight_bit_per_neuron_model_reproduces_the_float_winners():
     )
     data = load_dataset("synthetic:16", ["summer", "winter"], cfg.preprocess)
     ckpt = train_and_calibrate(data, ["summer"], cfg, device=torch.device("cpu"), progress=False)
-    model = quantize_checkpoint(ckpt, "0" * 64, 8, True, "max")
+    model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
     spikes = query_spikes(data.traversal("winter"), data.place_ids, "winter", cfg)
     float_run = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu")).run(
         spikes, record=True
@@ -234,6 +234,6 @@ def test_fast_equals_reference_on_the_real_nordland_subset():
     spikes = query_spikes(data.traversal("winter")[:3], data.place_ids[:3], "winter", cfg)
     for bits in (8, 4, 2):
         for per_neuron in (False, True):
-            model = quantize_checkpoint(ckpt, "0" * 64, bits, per_neuron, "max")
+            model = quantize_checkpoint(ckpt, "0" * 64, bits, QuantiseOptions(per_neuron=per_neuron))
             fast, slow = assert_identical(model, spikes.numpy())
             assert fast.counts.sum() > 0

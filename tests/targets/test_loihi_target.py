@@ -16,6 +16,7 @@ import torch
 from vprsnn_export.config import preset
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.io.fileio import sha256_bytes
 from vprsnn_export.targets.intsim import simulate
 from vprsnn_export.targets.loihi_description import (
@@ -336,7 +337,7 @@ def real_model_and_queries(n: int) -> tuple[FixedPointModel, torch.Tensor]:
             progress=False,
             selection={"subset": str(subset), "places": None},
         )
-        model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+        model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
     return model, query_spikes(dataset.traversal("winter")[:n], dataset.place_ids[:n], "winter", cfg)
 
 

@@ -150,12 +150,12 @@ def project_decisions(model, data) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module", params=[8, 2])
 def exported(request, unseen_route, tmp_path_factory):
-    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
     from vprsnn_export.targets.nir_target import write_nir
     from vprsnn_export.targets.onnx_target import write_onnx
 
     ckpt, data = unseen_route
-    model = quantize_checkpoint(ckpt, "0" * 64, request.param, per_neuron=True, scale_method="max")
+    model = quantize_checkpoint(ckpt, "0" * 64, request.param, QuantiseOptions())
     folder = tmp_path_factory.mktemp(f"standalone{request.param}")
     return model, data, write_onnx(model, folder / "model.onnx"), write_nir(model, folder / "model.nir")
 
@@ -171,11 +171,11 @@ def test_the_onnx_file_alone_makes_the_projects_decisions(exported):
 
 def test_an_ensembles_onnx_file_alone_makes_the_projects_decisions(tmp_path):
     """Three modules (11, 11 and 9 places): the graph's head carries the region readout, the outsider code is the same."""
-    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
     from vprsnn_export.targets.onnx_target import write_onnx
 
     ckpt, data = train_unseen(**{"train.module_size": 11})
-    model = quantize_checkpoint(ckpt, "0" * 64, 4, per_neuron=True, scale_method="max")
+    model = quantize_checkpoint(ckpt, "0" * 64, 4, QuantiseOptions())
     assert model.n_neurons == 3 * 16
     places, confidence = outsider_onnx(
         str(write_onnx(model, tmp_path / "m.onnx")), data.traversal(QUERY), data.place_ids, QUERY
@@ -188,13 +188,13 @@ def test_an_ensembles_onnx_file_alone_makes_the_projects_decisions(tmp_path):
 def test_an_adapted_networks_files_alone_make_the_projects_decisions(tmp_path):
     """A network with a per-input gain learnt from the query traversal's frames (train --adapt-from): the gain is
     in both files' encoder contract, and the outsider applies it as the contract says."""
-    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
     from vprsnn_export.targets.nir_target import write_nir
     from vprsnn_export.targets.onnx_target import write_onnx
 
     rng = np.random.default_rng(3)
     ckpt, data = train_unseen(**{"encoder.input_gain": rng.uniform(0.2, 2.0, 1568).tolist()})
-    model = quantize_checkpoint(ckpt, "0" * 64, 8, per_neuron=True, scale_method="max")
+    model = quantize_checkpoint(ckpt, "0" * 64, 8, QuantiseOptions())
     expected_places, expected_confidence = project_decisions(model, data)
     for outsider, path in (
         (outsider_onnx, write_onnx(model, tmp_path / "m.onnx")),
@@ -269,7 +269,7 @@ def test_real_subset_files_alone_make_the_projects_decisions(tmp_path):
     """The default network (3 epochs to bound the test) on the real 100-place subset: ONNX and NIR files decide alone."""
     from vprsnn_export.config import Config
     from vprsnn_export.data.dataset import load_dataset
-    from vprsnn_export.export.quantize import quantize_checkpoint
+    from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
     from vprsnn_export.targets.nir_target import write_nir
     from vprsnn_export.targets.onnx_target import write_onnx
     from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -279,7 +279,7 @@ def test_real_subset_files_alone_make_the_projects_decisions(tmp_path):
     data = load_dataset(NORDLAND / "places.csv", ["summer", QUERY], cfg.preprocess, subset=subset)
     ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False, selection={"subset": str(subset), "places": None})
     for bits in (8, 2):
-        model = quantize_checkpoint(ckpt, "0" * 64, bits, per_neuron=True, scale_method="max")
+        model = quantize_checkpoint(ckpt, "0" * 64, bits, QuantiseOptions())
         expected, _ = project_decisions(model, data)
         for outsider, path in (
             (outsider_onnx, write_onnx(model, tmp_path / f"m{bits}.onnx")),

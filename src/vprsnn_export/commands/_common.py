@@ -26,7 +26,7 @@ from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
 
 if TYPE_CHECKING:
-    from ..runtime.deployment import QuantiseOptions
+    from ..export.quantize import QuantiseOptions
 
 
 def integer(text: str) -> int:
@@ -96,7 +96,7 @@ QUANTISE_HELP = {
 
 
 def add_quantise_options(parser: argparse.ArgumentParser) -> None:
-    """The quantisation flags of quantize and verify, one per :class:`~vprsnn_export.runtime.deployment.QuantiseOptions`
+    """The quantisation flags of quantize and verify, one per :class:`~vprsnn_export.export.quantize.QuantiseOptions`
     field (--per-tensor/--per-neuron, --scale, --fold-thresholds, --reuse-float-calibration, --non-leaky);
     :func:`quantise_options` builds and validates them."""
     group = parser.add_argument_group("quantisation")
@@ -115,7 +115,7 @@ def add_quantise_options(parser: argparse.ArgumentParser) -> None:
 
 def quantise_options(args: argparse.Namespace) -> QuantiseOptions:
     """The QuantiseOptions of the flags :func:`add_quantise_options` added (validated once, when built)."""
-    from ..runtime.deployment import QuantiseOptions
+    from ..export.quantize import QuantiseOptions
 
     return QuantiseOptions(
         per_neuron=not args.per_tensor,

@@ -199,7 +199,7 @@ def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
 
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
-    from ..runtime.deployment import QuantiseOptions
+    from ..export.quantize import QuantiseOptions
     from ..runtime.report import write_report
     from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate

@@ -26,7 +26,7 @@ from ._common import (
 )
 
 if TYPE_CHECKING:
-    from ..runtime.deployment import QuantiseOptions
+    from ..export.quantize import QuantiseOptions
 
 TABLE_COLUMNS = (
     ("bits", "bits"),

@@ -25,6 +25,7 @@ checkpoint; nothing is tuned by hand.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -277,31 +278,70 @@ def module_error_report(
     }
 
 
-def quantize_checkpoint(
-    ckpt: Checkpoint,
-    ckpt_sha256: str,
-    bits: int,
-    per_neuron: bool,
-    scale_method: str,
-    fold_thresholds: bool = False,
-) -> FixedPointModel:
-    """The fixed-point model of a float checkpoint, still carrying the float calibration.
+CALIBRATIONS = ("deployed", "float")
 
-    ``calibration`` is a copy of the float S^R until :func:`recalibrate` replaces it.
+
+@dataclass(frozen=True)
+class QuantiseOptions:
+    """How a float checkpoint is quantised and calibrated: the one options object of `quantize`, :func:`deploy`,
+    `verify` and the demo (the bit width is not here: each job deploys one model per width it is given).
+
+    ``per_neuron``: one weight scale per neuron, else one per module (``--per-tensor``); ``scale_method``: "max"
+    (max-abs, no weight clips) or "mse" (minimum squared error, ``--scale``); ``fold_thresholds``: per-neuron
+    scales chosen so that every neuron shares one integer threshold; ``calibration``: "deployed" (S^R re-measured
+    on the integer simulator) or "float" (the float S^R kept, ``--reuse-float-calibration``); ``non_leaky``: the
+    trained weights and thresholds deployed without the leak (network.beta = 1, decay_dv = 0: V <- V + a), the mode
+    every float NIR consumer computes exactly (docs/targets.md section 1.4). Validated once, when built.
+    """
+
+    per_neuron: bool = True
+    scale_method: str = "max"
+    fold_thresholds: bool = False
+    calibration: str = "deployed"
+    non_leaky: bool = False
+
+    def __post_init__(self) -> None:
+        require_bool("per_neuron", self.per_neuron)
+        require_choice("scale_method (--scale)", self.scale_method, SCALE_METHODS)
+        require_bool("fold_thresholds", self.fold_thresholds)
+        require_choice("calibration", self.calibration, CALIBRATIONS)
+        require_bool("non_leaky", self.non_leaky)
+        if self.fold_thresholds and not self.per_neuron:
+            raise InvalidValueError(
+                "fold_thresholds (--fold-thresholds) needs per-neuron scales: per_neuron=True (drop --per-tensor)"
+            )
+        if self.non_leaky and self.calibration != "deployed":
+            raise InvalidValueError(
+                "non_leaky (--non-leaky) needs the deployed calibration: calibration='deployed' (drop "
+                "--reuse-float-calibration); the float S^R was measured with the leak"
+            )
+        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
+            object.__setattr__(self, name, bool(getattr(self, name)))
+
+
+#: quantize's defaults: per-neuron max-abs scales, no folding, the deployed calibration, the leak kept.
+DEFAULT_QUANTISE = QuantiseOptions()
+
+
+def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: QuantiseOptions) -> FixedPointModel:
+    """The fixed-point model of a float checkpoint as ``options`` say (scales, folding, the leak), still carrying
+    the float calibration: ``calibration`` is a copy of the float S^R until
+    :func:`~vprsnn_export.runtime.deployment.recalibrate` replaces it. A non-leaky deployment quantises the
+    checkpoint with network.beta = 1 (decay_dv = 0).
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("ckpt_sha256", ckpt_sha256, str)
-    require_bool("per_neuron", per_neuron)
-    require_bool("fold_thresholds", fold_thresholds)
-    require_choice("scale_method", scale_method, SCALE_METHODS)
+    require_type("options", options, QuantiseOptions)
     check_bits(bits)
+    if options.non_leaky:
+        ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
     arrays = quantise_arrays(
         ckpt.weights,
         ckpt.thresholds,
         bits,
-        per_neuron=per_neuron,
-        scale_method=scale_method,
-        fold_thresholds=fold_thresholds,
+        per_neuron=options.per_neuron,
+        scale_method=options.scale_method,
+        fold_thresholds=options.fold_thresholds,
         group=ckpt.config.network.n_neurons,
     )
     report = QuantisationReport.from_dict(

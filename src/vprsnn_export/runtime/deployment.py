@@ -10,58 +10,17 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import require_bool, require_choice, require_type
+from vprsnn_export.arguments import require_type
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.export.quantize import SCALE_METHODS, quantize_checkpoint
+from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.trainer.calibrate import calibrate
-
-CALIBRATIONS = ("deployed", "float")
-
-
-@dataclass(frozen=True)
-class QuantiseOptions:
-    """How a float checkpoint is quantised and calibrated: the one options object of `quantize`, :func:`deploy`,
-    `verify` and the demo (the bit width is not here: each job deploys one model per width it is given).
-
-    ``per_neuron``: one weight scale per neuron, else one per module (``--per-tensor``); ``scale_method``: "max"
-    (max-abs, no weight clips) or "mse" (minimum squared error, ``--scale``); ``fold_thresholds``: per-neuron
-    scales chosen so that every neuron shares one integer threshold; ``calibration``: "deployed" (S^R re-measured
-    on the integer simulator) or "float" (the float S^R kept, ``--reuse-float-calibration``); ``non_leaky``: the
-    trained weights and thresholds deployed without the leak (network.beta = 1, decay_dv = 0: V <- V + a), the mode
-    every float NIR consumer computes exactly (docs/targets.md section 1.4). Validated once, when built.
-    """
-
-    per_neuron: bool = True
-    scale_method: str = "max"
-    fold_thresholds: bool = False
-    calibration: str = "deployed"
-    non_leaky: bool = False
-
-    def __post_init__(self) -> None:
-        require_bool("per_neuron", self.per_neuron)
-        require_choice("scale_method (--scale)", self.scale_method, SCALE_METHODS)
-        require_bool("fold_thresholds", self.fold_thresholds)
-        require_choice("calibration", self.calibration, CALIBRATIONS)
-        require_bool("non_leaky", self.non_leaky)
-        if self.fold_thresholds and not self.per_neuron:
-            raise InvalidValueError(
-                "fold_thresholds (--fold-thresholds) needs per-neuron scales: per_neuron=True (drop --per-tensor)"
-            )
-        if self.non_leaky and self.calibration != "deployed":
-            raise InvalidValueError(
-                "non_leaky (--non-leaky) needs the deployed calibration: calibration='deployed' (drop "
-                "--reuse-float-calibration); the float S^R was measured with the leak"
-            )
-        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
-            object.__setattr__(self, name, bool(getattr(self, name)))
 
 
 def recalibrate(
@@ -99,7 +58,7 @@ def deploy(
     ckpt: Checkpoint,
     ckpt_sha256: str,
     bits: int,
-    options: QuantiseOptions = QuantiseOptions(),
+    options: QuantiseOptions = DEFAULT_QUANTISE,
     *,
     reference_images: Mapping[str, np.ndarray] | None = None,
     device: torch.device | None = None,
@@ -116,16 +75,7 @@ def deploy(
     require_type("reference_images", reference_images, (Mapping, type(None)))
     if options.calibration == "deployed" and reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
-    if options.non_leaky:
-        ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
-    model = quantize_checkpoint(
-        ckpt,
-        ckpt_sha256,
-        bits,
-        per_neuron=options.per_neuron,
-        scale_method=options.scale_method,
-        fold_thresholds=options.fold_thresholds,
-    )
+    model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options)
     return recalibrate(
         model,
         dict(reference_images or {}),

@@ -18,6 +18,7 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
+from vprsnn_export.export.quantize import CALIBRATIONS
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
@@ -34,7 +35,6 @@ from vprsnn_export.trainer.calibrate import calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
 from .backends import Network, choose_backend, open_backend
-from .deployment import CALIBRATIONS
 
 NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
 

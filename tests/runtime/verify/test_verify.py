@@ -13,7 +13,7 @@ from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.data.truth import EXACT
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
-from vprsnn_export.export.quantize import quantize_checkpoint
+from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.readout.compare import top1_agreement, tv_distance
@@ -229,7 +229,7 @@ def test_query_slack_allows_one_query_of_a_short_route():
 @pytest.fixture(scope="module")
 def model_and_spikes(tiny):
     path, ckpt, data = tiny
-    model = quantize_checkpoint(ckpt, checkpoint_sha256(path), 4, per_neuron=True, scale_method="max")
+    model = quantize_checkpoint(ckpt, checkpoint_sha256(path), 4, QuantiseOptions())
     spikes = query_spikes(data.traversal("winter")[:6], data.place_ids[:6], "winter", ckpt.config)
     return model, spikes
 

@@ -9,13 +9,14 @@ from pathlib import Path
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
 from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
 from vprsnn_export.io.fileio import parse_json, read_container, sha256_file
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
-from ..deployment import QuantiseOptions, deploy
+from ..deployment import deploy
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.data.truth import Truth
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
+from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import query_cost
 from vprsnn_export.network.dynamics import FloatNetwork
@@ -32,7 +33,7 @@ from vprsnn_export.targets.registry import TARGETS
 
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
-from ..deployment import QuantiseOptions, deploy
+from ..deployment import deploy
 from ..results import BitsResult, FloatResult, ModuleRow, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
@@ -54,7 +55,7 @@ class VerifyOptions:
 
     readout: SequenceOptions
     bits: tuple[int, ...] = DEFAULT_BITS
-    quantise: QuantiseOptions = QuantiseOptions()  # how each width is quantised and calibrated
+    quantise: QuantiseOptions = DEFAULT_QUANTISE  # how each width is quantised and calibrated
     reference_queries: int = 3  # presentations run on the slow reference stepper
     targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
