@@ -38,7 +38,7 @@ from vprsnn_export.runtime.exporting.source import export_all, parse_export_targ
 from vprsnn_export.runtime.localize import Localizer
 from vprsnn_export.runtime.report import write_report
 from vprsnn_export.runtime.report.labels import row_label
-from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from vprsnn_export.runtime.verify import VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS, Network, Target, WriteOptions, integer
 
@@ -214,9 +214,9 @@ def test_a_toy_strategy_gives_readout_rows_and_report_titles(toy_strategy, toy_t
     ckpt = load_checkpoint(path)
     data = load_dataset("synthetic:8", ["summer", "winter"], ckpt.config.preprocess)
     options = VerifyOptions(readout=SequenceOptions(), bits=(4,), targets=("npz",), reference_queries=0)
-    query = (data.traversal("winter"), data.place_ids, "winter")
-    references = {"summer": data.traversal("summer")}
-    run = verify_checkpoint(ckpt, checkpoint_sha256(path), *query, options, reference_images=references)
+    query = data.query("winter", ["summer"])
+    network = VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")})
+    run = verify_checkpoint(network, query, options)
     assert "anyplace" in run.bits[0].decision_level.top1_agreement
     assert {c.check.split(":")[0] for c in run.bits[0].cross_implementation.comparisons} == {"npz read back"}
     write_report(build_report([run], {**options.to_dict(ckpt.config), "query": "winter"}), tmp_path / "report")

@@ -21,6 +21,7 @@ counts = {backend.name: backend.run(spikes[:3]).counts for backend in backends}
 print({name: int(c.sum()) for name, c in counts.items()})
 
 options = vx.VerifyOptions(readout, bits=(8,))
-run = vx.verify_checkpoint(ckpt, "quickstart", winter, places, "winter", options, reference_images=reference)
+query = data.query("winter", ["summer"])  # frames, place ids and the truth that judges them, built once
+run = vx.verify_checkpoint(vx.VerifiedNetwork(ckpt, "quickstart", reference), query, options)
 vx.write_report(vx.build_report([run], {"example": "quickstart"}), "report")
 print("verdict:", "PASS" if run.passed else "FAIL")

@@ -12,7 +12,8 @@ The chain of the command line, as library calls (docs/examples/quickstart.py run
     model = vx.deploy(ckpt, sha, 4, quantise, reference_images=...)         # quantise + calibrate on integers
     vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
     backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
-    run = vx.verify_checkpoint(ckpt, sha, images, place_ids, "winter", vx.VerifyOptions(readout, quantise=quantise))
+    query = data.query("winter", ["summer"])                                # frames, place ids, the truth judging them
+    run = vx.verify_checkpoint(vx.VerifiedNetwork(ckpt, sha, references), query, vx.VerifyOptions(readout, quantise=quantise))
     robot = vx.Localizer(model, options=vx.SequenceOptions(ks=(5,)), threshold=theta)  # one frame at a time
     decision = robot.push(grey_frame)                                         # place, confidence, accepted
 
@@ -28,6 +29,7 @@ from .data.dataset import Dataset, load_dataset, select_places
 from .data.encoding import calibration_spikes, query_spikes
 from .data.frames import iter_frames
 from .data.preprocess import CHANNELS, Channel
+from .data.truth import EXACT, GroundTruth, MatchWindow, Query, Truth
 from .errors import DataError, InvalidValueError, ModelFileError, VprError
 from .export.model import FixedPointModel, load_fixed_point, save_fixed_point
 from .export.quantize import QuantiseOptions, quantize_checkpoint
@@ -52,7 +54,7 @@ from .runtime.localize import Localizer, OperatingPoint, operating_point
 from .runtime.predictions import Predictions, network_predictions
 from .runtime.report import write_report
 from .runtime.results import ConformanceResult, VerifiedRun, VerifyReport
-from .runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from .runtime.verify import Runtime, VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
 from .targets.intsim import IntegerNetwork
 from .targets.loihi_target import read_loihi_model, write_loihi
 from .targets.nir_read import read_nir
@@ -85,6 +87,11 @@ __all__ = [
     "ConformanceResult",
     "DataError",
     "Dataset",
+    "EXACT",
+    "GroundTruth",
+    "MatchWindow",
+    "Query",
+    "Truth",
     "Evaluation",
     "ExportResult",
     "ExportSource",
@@ -108,6 +115,8 @@ __all__ = [
     "VelocityEstimator",
     "VerifiedRun",
     "VerifyOptions",
+    "VerifiedNetwork",
+    "Runtime",
     "VerifyReport",
     "VprError",
     "__version__",

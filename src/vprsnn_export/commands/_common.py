@@ -14,9 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, PreprocessConfig, preset
-from ..data.dataset import Dataset, load_selection, scoring_truth
+from ..data.dataset import Dataset, load_selection, window_beside_truth
 from ..data.groundtruth import ground_truth_files
-from ..data.truth import Truth, window
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
@@ -398,21 +397,13 @@ def refuse_window_beside_truth(
     match_window: int | None, source: str | None, references: Sequence[str], query: str
 ) -> None:
     """--match-window on a folder whose ground-truth file says how (reference, query) match: refused before any
-    image is decoded (the same refusal :func:`scored_truth` makes once the data is loaded)."""
+    image is decoded (the same refusal :meth:`~vprsnn_export.data.dataset.Dataset.query` makes once the data is loaded)."""
     folder = Path(source) if source else None
     if not match_window or folder is None or not folder.is_dir():
         return
     found = [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]
     if found:
         raise window_beside_truth(match_window, found[0])
-
-
-def window_beside_truth(match_window: int, truth_file: str | Path) -> InvalidValueError:
-    """The one refusal of --match-window on data that a ground-truth file scores."""
-    return InvalidValueError(
-        f"--match-window {match_window}: {truth_file} says which reference frames match each query; "
-        "--match-window is for index-aligned data without a ground-truth file"
-    )
 
 
 def query_data(
@@ -442,15 +433,3 @@ def warn_sequences(options: SequenceOptions, dataset: Dataset) -> None:
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-
-
-def scored_truth(match_window: int | None, dataset: Dataset, references: Sequence[str], query: str) -> Truth:
-    """How ``query``'s decisions are judged: the data set's ground truth when it has one (then --match-window,
-    which is for index-aligned data, is refused), else ``match_window`` places around the query's own id (None:
-    not given, exact match)."""
-    truth = scoring_truth(dataset, references, query)
-    if truth is None:
-        return window(match_window)
-    if match_window:
-        raise window_beside_truth(match_window, truth.source)
-    return truth

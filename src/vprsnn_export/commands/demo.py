@@ -28,7 +28,6 @@ from shlex import quote
 from ..config import Config, preset
 from ..data.dataset import load_dataset
 from ..data.preprocess import CHANNELS
-from ..data.truth import window
 from ..errors import EXIT_CHECK_FAILED
 from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
@@ -201,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..export.quantize import QuantiseOptions
     from ..runtime.report import write_report
-    from ..runtime.verify import VerifyOptions, build_report, verify_checkpoint
+    from ..runtime.verify import Runtime, VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
     out = Path(args.out)
@@ -236,20 +235,11 @@ def run(args: argparse.Namespace) -> int:
         f"2/4 quantising {', '.join(map(str, DEMO_BITS))} bits ({'per-neuron' if quantise.per_neuron else 'per-tensor'}"
         f", {quantise.calibration} calibration) and exporting NIR, Loihi-style and ONNX; every file is read back and run"
     )
-    result = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(ckpt_path),
-        dataset.traversal(DEMO_QUERY),
-        dataset.place_ids,
-        DEMO_QUERY,
-        options,
-        reference_images={DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)},
-        export_dir=out / "deploy",
-        device=device,
-        progress=progress,
-        label="demo",
-        checkpoint=str(ckpt_path),
+    network = VerifiedNetwork(
+        ckpt, checkpoint_sha256(ckpt_path), {DEMO_REFERENCE: dataset.traversal(DEMO_REFERENCE)}, "demo", str(ckpt_path)
     )
+    query = dataset.query(DEMO_QUERY, [DEMO_REFERENCE])
+    result = verify_checkpoint(network, query, options, Runtime(device, progress, out / "deploy"))
     say(f"3/4 verified against float on the same {result.n_queries} query presentations")
     settings = {
         **options.to_dict(cfg),
@@ -261,7 +251,7 @@ def run(args: argparse.Namespace) -> int:
         "checkpoints": [str(ckpt_path)],
         "device": args.device,
         "demo_profile": {"preset": DEMO_PRESET, **profile},
-        "truth": window(options.readout.tolerance).label,
+        "truth": query.truth.label,
     }
     command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (
         ["--quick"] if args.quick else []

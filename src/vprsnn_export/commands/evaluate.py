@@ -18,7 +18,6 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_truth,
     sequence_options,
     warn_sequences,
 )
@@ -66,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query], ckpt.reference_traversals)
-    truth = scored_truth(args.match_window, dataset, ckpt.reference_traversals, args.query)
+    truth = dataset.query(args.query, ckpt.reference_traversals, args.match_window).truth
     warn_sequences(options, dataset)
     reference_images = None
     if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)

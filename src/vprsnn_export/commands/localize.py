@@ -36,7 +36,6 @@ from ._common import (
     add_sequence_options,
     given_sequence_options,
     query_data,
-    scored_truth,
     sequence_options,
 )
 
@@ -226,7 +225,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
-    truth = scored_truth(args.match_window, dataset, network.reference_traversals, args.calibrate)
+    truth = dataset.query(args.calibrate, network.reference_traversals, args.match_window).truth
     point, _, curve = operating_point(
         localizer,
         dataset.traversal(args.calibrate),

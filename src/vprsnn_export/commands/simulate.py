@@ -15,7 +15,6 @@ from ._common import (
     format_table,
     print_json,
     query_data,
-    scored_truth,
     sequence_options,
     warn_sequences,
 )
@@ -48,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
             )
     options = sequence_options(args)
     dataset = query_data(args, model.data, model.config.preprocess, [args.query], model.reference_traversals)
-    truth = scored_truth(args.match_window, dataset, model.reference_traversals, args.query)
+    truth = dataset.query(args.query, model.reference_traversals, args.match_window).truth
     warn_sequences(options, dataset)
     result = evaluate_fixed_point(
         model,

@@ -10,18 +10,15 @@ outside), undecided (it straddles: more queries would decide it). Exit codes: 0 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from ..data.dataset import MAX_PLACES, Dataset, data_selection, load_dataset
-from ..errors import EXIT_CHECK_FAILED, DataError, InvalidValueError
-from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint, save_checkpoint
+from ..data.dataset import MAX_PLACES, data_selection
+from ..errors import EXIT_CHECK_FAILED, InvalidValueError
+from ..io.checkpoint import Checkpoint, checkpoint_sha256, load_checkpoint
 from ..runtime.results import VerifyReport
 from ..targets.registry import TARGETS
 from ._common import (
@@ -37,7 +34,6 @@ from ._common import (
     print_json,
     quantise_options,
     refuse_window_beside_truth,
-    scored_truth,
     sequence_options,
 )
 
@@ -121,58 +117,6 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
     )
 
 
-def load_for(
-    ckpt, query: str, source: str, subset: str | None, places: str | None, progress: bool, cache: dict
-) -> tuple[Dataset, dict[str, np.ndarray]]:
-    """The query data set and the reference images of the checkpoint's reference places (for calibration)."""
-    traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
-    key = (source, subset, places, tuple(traversals))
-    if key not in cache:
-        try:
-            cache[key] = load_dataset(
-                source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
-            )
-        except DataError:  # a folder whose query traversal has another length than the references': alone
-            cache[key] = load_dataset(
-                source, [query], ckpt.config.preprocess, subset=subset, places=places, progress=progress
-            )
-    dataset = cache[key]
-    if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
-        return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
-    # the queries are not the reference places: load the reference places on their own
-    reference = load_dataset(
-        source, ckpt.reference_traversals, ckpt.config.preprocess, subset=ckpt.reference_place_ids, progress=progress
-    )
-    return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
-
-
-def seed_networks(
-    template: Checkpoint,
-    n_seeds: int,
-    dataset: Dataset,
-    source: str,
-    subset: str | None,
-    places: str | None,
-    out: Path,
-    device_name: str,
-    progress: bool,
-) -> Iterator[tuple[str, Checkpoint, Path]]:
-    """Seeds 1..N trained with the template's config on its reference traversals, one at a time, each
-    written to DIR/checkpoints/seedN.npz (training is deterministic: the experiments' networks of that
-    config, data and seed are the same bytes)."""
-    from ..device import resolve_device
-    from ..trainer.pipeline import train_and_calibrate
-
-    for seed in range(1, n_seeds + 1):
-        cfg = template.config.replace(seed=seed)
-        ckpt = train_and_calibrate(
-            dataset, template.reference_traversals, cfg, device=resolve_device(device_name), progress=progress
-        )
-        ckpt = dataclasses.replace(ckpt, data={**ckpt.data, "source": source, "subset": subset, "places": places})
-        path = save_checkpoint(out / "checkpoints" / f"seed{seed}.npz", ckpt)
-        yield f"seed {seed}", ckpt, path
-
-
 def folder_name(label: str, index: int) -> str:
     """A file-system-safe folder for one network's exports: its label, else its position."""
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in label).strip("._")
@@ -238,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.report import write_report
     from ..runtime.report.labels import PAIRED_COLUMNS, VERDICT_COLUMNS
-    from ..runtime.verify import build_report, verify_checkpoint
+    from ..runtime.verify import Runtime, VerifiedNetwork, build_report, verify_checkpoint
+    from ..runtime.verify.networks import seed_networks, verify_data
 
     started = time.perf_counter()
     progress = not args.quiet
@@ -258,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
     networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
         template = templates[0][1]
-        dataset, _ = load_for(template, args.query, source, subset, places, progress, cache)  # training places
+        dataset, _ = verify_data(template, args.query, source, subset, places, progress, cache)  # training places
         networks = seed_networks(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
     else:
         labels = [stem for stem, _, _ in templates]
@@ -280,32 +225,30 @@ def run(args: argparse.Namespace) -> int:
     runs = []
     for index, (label, ckpt, path) in enumerate(networks):
         src, sub, plc = data_selection(ckpt.data, args.data, args.subset, args.places)
-        dataset, reference_images = load_for(ckpt, args.query, src, sub, plc, progress, cache)
+        dataset, reference_images = verify_data(ckpt, args.query, src, sub, plc, progress, cache)
         if index == 0 and options.readout.warning(dataset.place_ids):
             print(
                 "note: the queries are not consecutive places: k > 1 metrics are reported but not judged "
                 "(their windows mix unrelated places)",
                 file=sys.stderr,
             )
-        truth = scored_truth(args.match_window, dataset, ckpt.reference_traversals, args.query)
+        query = dataset.query(args.query, ckpt.reference_traversals, args.match_window)
+        truth = query.truth
         if truth.source:  # the report says what the queries were scored against
             settings["ground_truth"] = truth.source
         settings["truth"] = truth.label
         runs.append(
             verify_checkpoint(
-                ckpt,
-                checkpoint_sha256(path),
-                dataset.traversal(args.query),
-                dataset.place_ids,
-                args.query,
+                VerifiedNetwork(
+                    ckpt,
+                    checkpoint_sha256(path),
+                    None if options.quantise.calibration == "float" else reference_images,
+                    label,
+                    str(path),
+                ),
+                query,
                 options,
-                reference_images=None if options.quantise.calibration == "float" else reference_images,
-                export_dir=out / "exports" / folder_name(label, index),
-                device=device,
-                progress=progress,
-                label=label,
-                checkpoint=str(path),
-                truth=truth,
+                Runtime(device, progress, out / "exports" / folder_name(label, index)),
             )
         )
         report = build_report(runs, settings, command=command, seconds=time.perf_counter() - started)

@@ -51,7 +51,7 @@ from .synthetic import (
     synthetic_fingerprint,
     synthetic_route,
 )
-from .truth import GroundTruth
+from .truth import GroundTruth, Query, window
 
 PLACE_ID = "place_id"
 MANIFEST_NAME = "places.csv"
@@ -114,6 +114,23 @@ class Dataset:
                 f"traversal {name!r} is not loaded from {self.source}; available: {', '.join(self.images) or 'none'}"
             )
         return self.images[name]
+
+    def query(self, name: str, references: Sequence[str], match_window: int | None = None) -> Query:
+        """Traversal ``name`` as a query of a network trained on ``references``, with the truth that judges it,
+        built once: the data set's ground truth when it has one (then ``match_window``, which is for
+        index-aligned data, is refused), else ``match_window`` places around each query's own id (None: exact)."""
+        truth = scoring_truth(self, references, name)
+        if truth is not None and match_window:
+            raise window_beside_truth(match_window, truth.source)
+        return Query(name, self.traversal(name), self.place_ids, window(match_window) if truth is None else truth)
+
+
+def window_beside_truth(match_window: int, truth_file: str | Path) -> InvalidValueError:
+    """The one refusal of --match-window on data that a ground-truth file scores."""
+    return InvalidValueError(
+        f"--match-window {match_window}: {truth_file} says which reference frames match each query; "
+        "--match-window is for index-aligned data without a ground-truth file"
+    )
 
 
 @dataclass(frozen=True)

@@ -169,3 +169,17 @@ def window(places: int | None = 0) -> MatchWindow:
 
 #: The truth of index-aligned data judged by exact place ids (the default of every evaluation).
 EXACT = MatchWindow(0)
+
+
+@dataclass(frozen=True, eq=False)
+class Query:
+    """One query traversal as every evaluation takes it: its name, its preprocessed frames (N, inputs) in stream
+    order, their place ids and the truth that judges them (built once: :meth:`~vprsnn_export.data.dataset.Dataset.query`)."""
+
+    traversal: str
+    images: np.ndarray
+    place_ids: np.ndarray
+    truth: Truth = EXACT
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "place_ids", np.asarray(self.place_ids, dtype=np.int64))

@@ -9,6 +9,7 @@ import pytest
 
 from vprsnn_export.cli import main
 from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.truth import Query
 from vprsnn_export.errors import EXIT_BAD_INPUT
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -16,7 +17,7 @@ from vprsnn_export.runtime.report import combine_reports, load_report, write_rep
 from vprsnn_export.runtime.report.load import REPORT_JSON
 from vprsnn_export.runtime.report.render import REPORT_HTML, REPORT_MD
 from vprsnn_export.runtime.results import ReportError, VerifyReport
-from vprsnn_export.runtime.verify import VerifyOptions, build_report, verify_checkpoint
+from vprsnn_export.runtime.verify import VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
 
 
 @pytest.fixture(scope="module")
@@ -53,14 +54,9 @@ def report(tmp_path_factory):
         reference_queries=1,
     )
     run = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}, "seed 42"),
+        Query("winter", data.traversal("winter"), data.place_ids),
         options,
-        reference_images={"summer": data.traversal("summer")},
-        label="seed 42",
     )
     return build_report(
         [run], {**options.to_dict(ckpt.config), "query": "winter"}, command=["vprsnn-export", "verify", str(path)]

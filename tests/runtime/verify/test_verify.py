@@ -11,7 +11,7 @@ from vprsnn_export.cli import main
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.encoding import query_spikes
-from vprsnn_export.data.truth import EXACT
+from vprsnn_export.data.truth import EXACT, Query
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
 from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint, save_checkpoint
@@ -37,7 +37,14 @@ from vprsnn_export.runtime.results import (
     VerifiedRun,
     VerifyReport,
 )
-from vprsnn_export.runtime.verify import VerifyOptions, build_report, summarise_runs, verify_checkpoint
+from vprsnn_export.runtime.verify import (
+    Runtime,
+    VerifiedNetwork,
+    VerifyOptions,
+    build_report,
+    summarise_runs,
+    verify_checkpoint,
+)
 from vprsnn_export.runtime.verify import run as verify_module
 from vprsnn_export.runtime.verify.checks import (
     DEFAULT_TOLERANCES,
@@ -68,15 +75,10 @@ def verified(tiny, tmp_path_factory):
     path, ckpt, data = tiny
     options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 2), reference_queries=2)
     run = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}, "tiny"),
+        Query("winter", data.traversal("winter"), data.place_ids),
         options,
-        reference_images={"summer": data.traversal("summer")},
-        export_dir=tmp_path_factory.mktemp("exports"),
-        label="tiny",
+        Runtime(export_dir=tmp_path_factory.mktemp("exports")),
     )
     return run
 
@@ -366,13 +368,9 @@ def test_verify_is_deterministic_and_float_path_matches_evaluate(verified, tiny,
         reference_queries=0,
     )
     again = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}),
+        Query("winter", data.traversal("winter"), data.place_ids),
         options,
-        reference_images={"summer": data.traversal("summer")},
     )
     assert again.bits[0].metrics == verified.bits[0].metrics
     evaluated = evaluate_float(
@@ -399,13 +397,9 @@ def test_verify_scores_and_aggregates_each_network_once(tiny, monkeypatch):
         reference_queries=0,
     )
     verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}),
+        Query("winter", data.traversal("winter"), data.place_ids),
         options,
-        reference_images={"summer": data.traversal("summer")},
     )
     assert len(scored) == 3  # float, 8 and 4 bits
     assert aggregated == [3, 3, 3]  # k = 3 once per network (twice before: in decision_scores and score_rows)
@@ -462,14 +456,9 @@ def verify_ensemble(tmp_path, monkeypatch, budget):
     path = save_checkpoint(tmp_path / "ensemble.npz", ckpt)
     options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 2), targets=())
     run = verify_checkpoint(
-        ckpt,
-        checkpoint_sha256(path),
-        data.traversal("winter"),
-        data.place_ids,
-        "winter",
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}, "ensemble"),
+        Query("winter", data.traversal("winter"), data.place_ids),
         options,
-        reference_images={"summer": data.traversal("summer")},
-        label="ensemble",
     )
     recorded = 30 if budget is None else 7
     assert (run.recorded_queries, run.n_queries) == (recorded, 30)
@@ -562,9 +551,11 @@ def test_each_readout_column_is_decided_once_per_network_and_width(tiny, tmp_pat
     monkeypatch.setattr(scoring, "decide", lambda *_: pytest.fail("the batch readout decided outside Scored"))
     options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 4), targets=(), reference_queries=1)
     run = verify_checkpoint(
-        ckpt, checkpoint_sha256(path), data.traversal("winter"), data.place_ids, "winter", options,
-        reference_images={"summer": data.traversal("summer")}, export_dir=tmp_path,
-    )  # fmt: skip
+        VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}),
+        Query("winter", data.traversal("winter"), data.place_ids),
+        options,
+        Runtime(export_dir=tmp_path),
+    )
     networks = 1 + len(run.bits)  # float and each width
     assert calls.count("standard") == calls.count("weighted") == networks
     assert calls.count("wprob") == 2 * networks  # k=1 and k=3, once each

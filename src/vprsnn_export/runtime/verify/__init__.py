@@ -21,16 +21,19 @@ pass/fail per bit width. Every function below is pure apart from :func:`verify_c
 (which writes the exported files); results are the typed objects of :mod:`runtime.results`.
 
 The checks are :mod:`.checks`, the run over every bit width :mod:`.run`
-(:func:`verify_checkpoint`, :class:`VerifyOptions`), the mean ± std over runs and the
+(:func:`verify_checkpoint` of a :class:`VerifiedNetwork` on a :class:`~vprsnn_export.data.truth.Query`,
+:class:`VerifyOptions`, :class:`Runtime`), the networks and data of a command's run :mod:`.networks`, the mean ± std over runs and the
 report :mod:`.summary` (:func:`build_report`).
 """
 
 from .checks import DEFAULT_TOLERANCES, parse_tolerances
-from .run import VerifyOptions, verify_checkpoint
+from .run import Runtime, VerifiedNetwork, VerifyOptions, verify_checkpoint
 from .summary import build_report, summarise_runs
 
 __all__ = [
     "DEFAULT_TOLERANCES",
+    "Runtime",
+    "VerifiedNetwork",
     "VerifyOptions",
     "build_report",
     "parse_tolerances",

@@ -18,7 +18,7 @@ from tqdm import tqdm
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config, VerifyConfig
 from vprsnn_export.data.encoding import query_spikes
-from vprsnn_export.data.truth import Truth
+from vprsnn_export.data.truth import Query
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions
@@ -26,6 +26,8 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import query_cost
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
+from vprsnn_export.network.runs import SpikeRun
+from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import IntegerNetwork
@@ -34,7 +36,7 @@ from vprsnn_export.targets.registry import TARGETS
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import deploy
-from ..results import BitsResult, FloatResult, ModuleRow, VerifiedRun
+from ..results import BitsResult, FloatResult, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
     curves,
@@ -81,151 +83,184 @@ def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int
     return int(min(n_queries, max(1, budget // max(1, timesteps * n_neurons))))
 
 
-def verify_checkpoint(
-    ckpt: Checkpoint,
-    ckpt_sha256: str,
-    query_images: np.ndarray,
-    query_place_ids: np.ndarray,
-    query_traversal: str,
-    options: VerifyOptions,
-    *,
-    reference_images: Mapping[str, np.ndarray] | None = None,
-    export_dir: str | Path | None = None,
-    device: torch.device | None = None,
-    progress: bool = False,
-    label: str | None = None,
-    checkpoint: str | None = None,
-    truth: Truth | None = None,
-) -> VerifiedRun:
-    """Quantise ``ckpt`` at every bit width and run every check: one verified run of the report.
+@dataclass(frozen=True, eq=False)
+class VerifiedNetwork:
+    """The float network `verify` checks: its checkpoint, the sha256 of its file, the images of its reference
+    traversals in its reference place order (the deployed calibration needs them), its name in the report and
+    its file's path."""
 
-    ``reference_images`` (the checkpoint's reference traversals, in its reference place
-    order) are needed for the deployed calibration; ``export_dir`` receives each bit
-    width's fixed-point model and exported files (a temporary folder when None).
-    ``checkpoint`` names the checkpoint's file in the result; ``truth`` judges the queries (None: the readout
-    options' match window). Each side is read out once (a :class:`~vprsnn_export.readout.scored.Scored`) and
-    every check compares the two.
+    checkpoint: Checkpoint
+    sha256: str
+    reference_images: Mapping[str, np.ndarray] | None = None
+    label: str | None = None
+    path: str | None = None
+
+
+@dataclass(frozen=True)
+class Runtime:
+    """Where a verification runs: the torch device, a progress bar, the folder that keeps each width's files
+    (None: a temporary one)."""
+
+    device: torch.device = torch.device("cpu")
+    progress: bool = False
+    export_dir: str | Path | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class FloatSide:
+    """The float network on the queries: its spikes, the run of the first ``recorded`` (with the raster), every
+    query's counts and its readout, decided once."""
+
+    spikes: torch.Tensor
+    recorded: int
+    run: SpikeRun
+    counts: np.ndarray
+    scored: Scored
+
+
+def verify_checkpoint(
+    network: VerifiedNetwork, query: Query, options: VerifyOptions, runtime: Runtime = Runtime()
+) -> VerifiedRun:
+    """Quantise the network at every bit width and run every check: one verified run of the report.
+
+    Float and each width are read out once (a :class:`~vprsnn_export.readout.scored.Scored`); every check is a
+    comparison of two of them (:mod:`vprsnn_export.readout.compare`, :mod:`.paired`). Each width's model and
+    exported files go to ``runtime.export_dir``.
     """
-    require_type("ckpt", ckpt, Checkpoint)
+    require_type("network", network, VerifiedNetwork)
+    require_type("query", query, Query)
     require_type("options", options, VerifyOptions)
-    require_type("options.quantise", options.quantise, QuantiseOptions)
-    device = torch.device("cpu") if device is None else device
-    bits_list = [check_bits(b) for b in options.bits]
-    quantise = options.quantise
-    if quantise.calibration == "deployed" and reference_images is None:
+    require_type("runtime", runtime, Runtime)
+    ckpt, bits_list = network.checkpoint, [check_bits(b) for b in options.bits]
+    if options.quantise.calibration == "deployed" and network.reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
-    readout = options.readout
-    query_place_ids = np.asarray(query_place_ids, dtype=np.int64)
-    spikes = query_spikes(query_images, query_place_ids, query_traversal, ckpt.config)
-    recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
-    recorded_spikes = spikes[:recorded]
-    float_network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, device)
-    float_network.progress = progress  # a bar over the query chunks of each network run below
-    float_run = float_network.run(recorded_spikes, record=True)
-    float_counts = (float_run if recorded == spikes.shape[0] else float_network.run(spikes)).counts.numpy()
-    ref_ids = ckpt.reference_place_ids
-    regions = module_regions(len(ref_ids), ckpt.config.train.module_size)
-    float_scored = Readout.of(ckpt.calibration, ckpt.config, readout).score(
-        float_counts, ref_ids, query_place_ids, truth
+    floats = float_side(ckpt, query, options.readout, runtime)
+    temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if runtime.export_dir is None else None
+    root = Path(temporary.name if temporary is not None else str(runtime.export_dir))
+    desc = f"verify {network.label or ''}".strip()
+    stages = tqdm(
+        total=len(bits_list) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not runtime.progress, leave=False
     )
-    sequences = readout.warning(query_place_ids) is None
-    limits = judged_limits(options.tolerances, readout.ks, len(query_place_ids), sequences=sequences)
-    temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else None
-    root = Path(temporary.name if temporary is not None else str(export_dir))
-    results: list[BitsResult] = []
-    desc = f"verify {label or ''}".strip()
-    stages = tqdm(total=len(bits_list) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not progress, leave=False)
     try:
-        for bits in bits_list:
-            clock = time.perf_counter()
-            seconds: dict[str, float] = {}
-            stages.set_postfix(bits=bits, stage="quantise")
-            model = deploy(
-                ckpt, ckpt_sha256, bits, quantise, reference_images=reference_images, device=device, progress=progress
-            )
-            folder = root / f"{bits}bit"
-            model_path = save_fixed_point(folder / "model.npz", model)
-            seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
-            stages.update(1)
-            stages.set_postfix(bits=bits, stage="simulate")
-            int_network = IntegerNetwork(model, device, progress=progress)
-            int_run = int_network.run(recorded_spikes, record=True)
-            int_all = int_run if recorded == spikes.shape[0] else int_network.run(spikes)
-            int_counts = int_all.counts.numpy()
-            seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
-            stages.update(1)
-            stages.set_postfix(bits=bits, stage="targets")
-            cross = cross_implementation(
-                model,
-                recorded_spikes,
-                int_run,
-                folder=folder,
-                targets=options.targets,
-                reference_queries=options.reference_queries,
-                device=device,
-            ).with_files("model", [str(model_path)])
-            cross = with_consumer_gate(cross, model, int_run.raster, recorded_spikes)
-            seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
-            stages.update(1)
-            stages.set_postfix(bits=bits, stage="readout")
-            scored = Readout.of(model.calibration, model.config, readout).score(
-                int_counts, ref_ids, query_place_ids, float_scored.truth
-            )
-            rows = metric_deltas(float_scored.rows, scored.rows)
-            if float_run.raster is None or int_run.raster is None:
-                raise InvalidValueError("verify needs the recorded rasters of both networks")
-            rasters = (float_run.raster, int_run.raster)
-            calibration_saturations = model.quantisation.calibration_saturations
-            spike = spike_level(*rasters, float_counts, int_counts, int_all.saturations, calibration_saturations)
-            decision = decision_level(float_scored, scored, readout.ks)
-            checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
-            table = paired_checks(float_scored.decisions(), scored.decisions(), rows, limits, options.statistics)
-            modules: tuple[ModuleRow, ...] = ()
-            if len(regions) > 1:
-                group = ckpt.config.network.n_neurons  # neurons per module
-                modules = module_rows(regions, group, float_scored, scored, *rasters)
-            seconds["readout"] = time.perf_counter() - clock
-            results.append(
-                BitsResult(
-                    bits=bits,
-                    quantisation=model.quantisation,
-                    cross_implementation=cross,
-                    spike_level=spike,
-                    decision_level=decision,
-                    metrics=rows,
-                    tolerance_checks=tuple(checks),
-                    pr_curves=curves(scored, readout.ks),
-                    weight_levels=level_histogram(model),
-                    passed=bits_passed(cross.passed, checks, table),
-                    seconds={k: round(v, 3) for k, v in seconds.items()},
-                    modules=modules,
-                    paired=table,
-                )
-            )
-            stages.update(1)
+        results = tuple(
+            verify_width(bits, network, query, options, floats, root / f"{bits}bit", runtime, stages)
+            for bits in bits_list
+        )
     finally:
         stages.close()
         if temporary is not None:
             temporary.cleanup()
     return VerifiedRun(
-        label=label,
+        label=network.label,
         seed=ckpt.config.seed,
         config=ckpt.config.to_dict(),
-        checkpoint_sha256=ckpt_sha256,
+        checkpoint_sha256=network.sha256,
         checkpoint_data=dict(ckpt.data),
-        query=query_traversal,
-        n_queries=int(len(query_place_ids)),
-        query_place_ids=tuple(int(p) for p in query_place_ids),
-        reference_place_ids=tuple(int(p) for p in ref_ids),
+        query=query.traversal,
+        n_queries=int(len(query.place_ids)),
+        query_place_ids=tuple(int(p) for p in query.place_ids),
+        reference_place_ids=tuple(int(p) for p in ckpt.reference_place_ids),
         export_dir=None if temporary is not None else str(root),
-        float=FloatResult(
-            metrics=tuple(float_scored.rows),
-            total_spikes=int(float_counts.sum()),
-            pr_curves=curves(float_scored, readout.ks),
-            weights=weight_histograms(ckpt.weights, quantise.per_neuron),
-            cost=query_cost(spikes, ckpt.weights.shape[1], places=len(ref_ids), images=query_images).summary(),
-        ),
-        bits=tuple(results),
-        checkpoint=checkpoint,
-        recorded_queries=recorded,
+        float=float_result(ckpt, query, floats, options),
+        bits=results,
+        checkpoint=network.path,
+        recorded_queries=floats.recorded,
+    )
+
+
+def float_side(ckpt: Checkpoint, query: Query, readout: SequenceOptions, runtime: Runtime) -> FloatSide:
+    """The float network run on the queries' spikes (the first queries the raster budget holds recorded) and read
+    out once."""
+    spikes = query_spikes(query.images, query.place_ids, query.traversal, ckpt.config)
+    recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
+    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, runtime.device)
+    network.progress = runtime.progress  # a bar over the query chunks of each network run below
+    run = network.run(spikes[:recorded], record=True)
+    counts = (run if recorded == spikes.shape[0] else network.run(spikes)).counts.numpy()
+    scored = Readout.of(ckpt.calibration, ckpt.config, readout).score(
+        counts, ckpt.reference_place_ids, query.place_ids, query.truth
+    )
+    return FloatSide(spikes, recorded, run, counts, scored)
+
+
+def float_result(ckpt: Checkpoint, query: Query, floats: FloatSide, options: VerifyOptions) -> FloatResult:
+    """The report's float column: its rows, spikes, PR curves, weight histogram and cost per query."""
+    places = len(ckpt.reference_place_ids)
+    return FloatResult(
+        metrics=tuple(floats.scored.rows),
+        total_spikes=int(floats.counts.sum()),
+        pr_curves=curves(floats.scored, options.readout.ks),
+        weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
+        cost=query_cost(floats.spikes, ckpt.weights.shape[1], places=places, images=query.images).summary(),
+    )
+
+
+def verify_width(
+    bits: int,
+    network: VerifiedNetwork,
+    query: Query,
+    options: VerifyOptions,
+    floats: FloatSide,
+    folder: Path,
+    runtime: Runtime,
+    stages: tqdm,
+) -> BitsResult:
+    """One bit width: deploy, run the integer simulator, read back and run every exported file, read out once,
+    compare with float (``stages`` advances by one per stage)."""
+    ckpt, device, progress, readout = network.checkpoint, runtime.device, runtime.progress, options.readout
+    clock, seconds = time.perf_counter(), {}
+    stages.set_postfix(bits=bits, stage="quantise")
+    model = deploy(ckpt, network.sha256, bits, options.quantise, reference_images=network.reference_images,
+                   device=device, progress=progress)  # fmt: skip
+    model_path = save_fixed_point(folder / "model.npz", model)
+    seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
+    stages.update(1)
+    stages.set_postfix(bits=bits, stage="simulate")
+    recorded_spikes = floats.spikes[: floats.recorded]
+    int_network = IntegerNetwork(model, device, progress=progress)
+    int_run = int_network.run(recorded_spikes, record=True)
+    int_all = int_run if floats.recorded == floats.spikes.shape[0] else int_network.run(floats.spikes)
+    int_counts = int_all.counts.numpy()
+    seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
+    stages.update(1)
+    stages.set_postfix(bits=bits, stage="targets")
+    cross = cross_implementation(model, recorded_spikes, int_run, folder=folder, targets=options.targets,
+                                 reference_queries=options.reference_queries, device=device)  # fmt: skip
+    cross = with_consumer_gate(cross.with_files("model", [str(model_path)]), model, int_run.raster, recorded_spikes)
+    seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
+    stages.update(1)
+    stages.set_postfix(bits=bits, stage="readout")
+    scored = Readout.of(model.calibration, model.config, readout).score(
+        int_counts, ckpt.reference_place_ids, query.place_ids, floats.scored.truth
+    )
+    rows = metric_deltas(floats.scored.rows, scored.rows)
+    if floats.run.raster is None or int_run.raster is None:
+        raise InvalidValueError("verify needs the recorded rasters of both networks")
+    rasters = (floats.run.raster, int_run.raster)
+    saturations = model.quantisation.calibration_saturations
+    spike = spike_level(*rasters, floats.counts, int_counts, int_all.saturations, saturations)
+    decision = decision_level(floats.scored, scored, readout.ks)
+    sequences = readout.warning(query.place_ids) is None
+    checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
+    limits = judged_limits(options.tolerances, readout.ks, len(query.place_ids), sequences=sequences)
+    table = paired_checks(floats.scored.decisions(), scored.decisions(), rows, limits, options.statistics)
+    regions = module_regions(len(ckpt.reference_place_ids), ckpt.config.train.module_size)
+    group = ckpt.config.network.n_neurons  # neurons per module
+    modules = module_rows(regions, group, floats.scored, scored, *rasters) if len(regions) > 1 else ()
+    seconds["readout"] = time.perf_counter() - clock
+    stages.update(1)
+    return BitsResult(
+        bits=bits,
+        quantisation=model.quantisation,
+        cross_implementation=cross,
+        spike_level=spike,
+        decision_level=decision,
+        metrics=rows,
+        tolerance_checks=tuple(checks),
+        pr_curves=curves(scored, readout.ks),
+        weight_levels=level_histogram(model),
+        passed=bits_passed(cross.passed, checks, table),
+        seconds={k: round(v, 3) for k, v in seconds.items()},
+        modules=modules,
+        paired=table,
     )
