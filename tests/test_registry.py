@@ -17,7 +17,7 @@ import torch
 from vprsnn_export.cli import main
 from vprsnn_export.config import Config, PreprocessConfig
 from vprsnn_export.data.dataset import load_dataset
-from vprsnn_export.data.encoding import encode
+from vprsnn_export.data.encoding import encode, query_spikes
 from vprsnn_export.data.preprocess import CHANNELS, Channel, normalise_resized
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.errors import EXIT_BAD_INPUT, InvalidValueError
@@ -284,3 +284,28 @@ def test_the_walkthrough_registers_what_these_tests_register():
     source = "".join(Path(__file__).read_text(encoding="utf-8").split())
     for line in lines:
         assert "".join(line.split()) in source, line
+
+
+def test_an_exact_backend_is_checked_by_conformance_through_its_tag(tmp_path, tiny_checkpoint):
+    """Issue 42: conformance asks the registry for every exact-integer backend; a new one tagged EXACT is compared
+    with the baseline in every cross-implementation check, with no change to verify or export --check."""
+    from vprsnn_export.runtime.backends import EXACT, tagged
+
+    assert [k.name for k in tagged(EXACT)] == ["integer", "reference", "onnx"]
+    model = quantize_checkpoint(load_checkpoint(tiny_checkpoint), "0" * 64, 4, QuantiseOptions())
+    data = load_dataset("synthetic:8", ["winter"], model.config.preprocess)
+    spikes = query_spikes(data.traversal("winter"), data.place_ids, "winter", model.config)
+
+    def checks() -> list[str]:
+        result = cross_implementation(model, spikes, folder=tmp_path, targets=(), reference_queries=1)
+        assert result.passed
+        return [c.check for c in result.comparisons]
+
+    before = checks()
+    assert before and all(c.startswith("reference stepper:") for c in before)
+    BACKENDS.register(BackendKind("toy-exact", FixedPointModel, open_toy, "a toy", tags=frozenset({EXACT})))
+    try:
+        added = checks()[len(before) :]
+    finally:
+        BACKENDS.unregister("toy-exact")
+    assert added and all(c.startswith("integer simulator:") for c in added)  # the toy wraps the simulator

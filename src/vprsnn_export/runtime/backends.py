@@ -42,6 +42,7 @@ class BackendKind:
     open: OpenFunction
     description: str
     needs: str | None = None
+    tags: frozenset[str] = frozenset()  # what it is: FLOAT, EXACT (the model's integers, bit for bit), SLOW, FILE
 
 
 @dataclass(frozen=True)
@@ -100,10 +101,48 @@ def _onnx(network: Network, path: Path | None, device: torch.device, threads: in
     return SessionBackend(session(path, threads))
 
 
+def _reference(
+    network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool
+) -> Backend:
+    from vprsnn_export.targets.reference_stepper import ReferenceStepper
+
+    assert isinstance(network, FixedPointModel)
+    return ReferenceStepper(network)
+
+
+#: The tags of a backend kind: the float network; an exact implementation of the fixed-point model (its
+#: integers bit for bit: the conformance checks compare every such backend with the baseline); the baseline
+#: the others are compared with; one too slow for more than a few presentations; one that runs an exported file.
+FLOAT, EXACT, BASELINE, SLOW, FILE = "float", "exact integer", "baseline", "slow", "file"
+
 BACKENDS: Registry[BackendKind] = Registry("--backend")
-BACKENDS.register(BackendKind("float", Checkpoint, _float, "the float network (a checkpoint)"))
-BACKENDS.register(BackendKind("integer", FixedPointModel, _integer, "the integer simulator (a fixed-point model)"))
-BACKENDS.register(BackendKind("onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx"))
+for kind in (
+    BackendKind("float", Checkpoint, _float, "the float network (a checkpoint)", tags=frozenset({FLOAT})),
+    BackendKind(
+        "integer",
+        FixedPointModel,
+        _integer,
+        "the integer simulator (a fixed-point model)",
+        tags=frozenset({EXACT, BASELINE}),
+    ),
+    BackendKind(
+        "reference",
+        FixedPointModel,
+        _reference,
+        "the reference stepper: the slow oracle, one step at a time",
+        tags=frozenset({EXACT, SLOW}),
+    ),  # fmt: skip
+    BackendKind(
+        "onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx", frozenset({EXACT, FILE})
+    ),
+):
+    BACKENDS.register(kind)
+
+
+def tagged(*tags: str) -> tuple[BackendKind, ...]:
+    """The registered kinds carrying every one of ``tags``, in registration order."""
+    return tuple(kind for kind in BACKENDS.values() if set(tags) <= kind.tags)
+
 
 _NETWORKS = {Checkpoint: "a float checkpoint", FixedPointModel: "a fixed-point model (vprsnn-export quantize)"}
 
@@ -112,7 +151,7 @@ def choose_backend(network: Network, name: str = "auto", path: str | Path | None
     """The kind named (``auto``: the first registered one that runs this network and needs a file exactly when
     one is given); InvalidValueError when it does not run this network or lacks its file."""
     if name == "auto":
-        fits = [kind for kind in BACKENDS.values() if (kind.needs is None) == (path is None)]
+        fits = [kind for kind in BACKENDS.values() if (kind.needs is None) == (path is None) and SLOW not in kind.tags]
         name = next((k for k in fits if isinstance(network, k.runs)), fits[0] if fits else BACKENDS.values()[0]).name
     kind = BACKENDS.get(name)
     if not isinstance(network, kind.runs):

@@ -30,12 +30,10 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.runs import Backend, SpikeRun
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
-from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.onnx_target import WPROB_ROUNDING
-from vprsnn_export.targets.reference_stepper import ReferenceStepper
 from vprsnn_export.targets.registry import TARGETS, WriteOptions
 
-from .backends import Network, open_backend
+from .backends import BASELINE, EXACT, SLOW, Network, open_backend, tagged
 from .results import Comparison, ConformanceResult
 
 #: The SpikeRun fields compared exactly, and the name each has in the check's label.
@@ -240,6 +238,19 @@ def target_path(target: str, paths: Sequence[Path]) -> Path:
     return TARGETS.get(target).reader_path(paths)
 
 
+def exact_contenders(model: FixedPointModel, slow_queries: int, device: torch.device | None) -> list[Contender]:
+    """Every registered exact-integer backend that runs the model alone (no exported file) and is not the
+    baseline; a slow one on the first ``slow_queries`` presentations only (none when 0)."""
+    contenders = []
+    for kind in tagged(EXACT):
+        if BASELINE in kind.tags or kind.needs is not None or (SLOW in kind.tags and not slow_queries):
+            continue
+        backend = open_backend(model, kind.name, device=device)[1]
+        limit = slow_queries if SLOW in kind.tags else None
+        contenders.append(Contender(kind.name, getattr(backend, "name", kind.name), backend, n_queries=limit))
+    return contenders
+
+
 def cross_implementation(
     model: FixedPointModel,
     spikes: torch.Tensor,
@@ -253,21 +264,18 @@ def cross_implementation(
 ) -> ConformanceResult:
     """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
 
-    The baseline is the integer simulator (``int_run``: its recorded run of ``spikes``,
-    when already made); the reference stepper runs the first ``reference_queries``
-    presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
+    The baseline is the registry's exact baseline, the integer simulator (``int_run``: its recorded run of
+    ``spikes``, when already made); every other exact backend runs beside it, a slow one (the reference stepper)
+    on the first ``reference_queries`` presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
     ``targets``: names of registered targets (None: all of them).
     """
     files, skipped = write_targets(model, Path(folder), TARGETS.names() if targets is None else targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
-    contenders: list[Contender] = []
-    if n_ref:
-        contenders.append(Contender("reference", "reference stepper", ReferenceStepper(model), n_queries=n_ref))
+    contenders = [*exact_contenders(model, n_ref, device)]
     contenders += [read_back(t, target_path(t, paths), model, device) for t, paths in files.items()]
     contenders += list(extra)
-    checks = compare_backends(
-        IntegerNetwork(model, device), contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model)
-    )
+    baseline = open_backend(model, tagged(EXACT, BASELINE)[0].name, device=device)[1]
+    checks = compare_backends(baseline, contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model))
     return ConformanceResult(
         comparisons=tuple(checks),
         reference_queries=n_ref,

@@ -33,10 +33,9 @@ from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavaila
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.nir_target import apply_readout_rule
+from vprsnn_export.targets.registry import TARGETS
 
 from .results import Comparison, ConformanceResult
-
-GATE_LABEL = "NIR read back"  # the conformance label of the nir target: the rows land under "nir"
 
 
 def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
@@ -60,12 +59,14 @@ def consumer_gate(
     *,
     tolerance: float | None = None,
     consumers: Sequence[str] = GATE_CONSUMERS,
+    label: str = TARGETS.get("nir").label,
 ) -> tuple[Comparison, ...]:
     """One comparison per installed consumer: decisions of consumer + readout rule vs the network's.
 
     ``raster`` is the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting.
     A consumer that refuses the file (one threshold only, ...) gives a passing row saying so;
-    a graph with the recurrent ``wta`` node (no readout rule to apply) is not gated.
+    a graph with the recurrent ``wta`` node (no readout rule to apply) is not gated. ``label``: the label of the
+    file's target (its rows land under that target).
     """
     graph = load_graph(path)
     if "wta" in graph.nodes:
@@ -78,12 +79,12 @@ def consumer_gate(
     rows: list[Comparison] = []
     kind = f"decision agreement >= {limit:.1%}"
     for consumer in filter(available, consumers):
-        label = f"{GATE_LABEL}: {consumer} + readout rule"
+        check = f"{label}: {consumer} + readout rule"
         try:
             candidates = run_consumer(consumer, graph, spikes)
         except (AssertionError, ValueError, ConsumerUnavailable) as exc:  # snnTorch asserts, SpikingJelly raises
             detail = f"not gated: the consumer refuses the file ({type(exc).__name__}: {str(exc).splitlines()[0]})"
-            rows.append(Comparison(label, consumer, "network", kind, False, detail, tolerance=limit))
+            rows.append(Comparison(check, consumer, "network", kind, False, detail, tolerance=limit))
             continue
         ruled = apply_readout_rule(graph, spikes, candidates)
         agree = decided_places(network, ruled.sum(dim=1).numpy()) == places
@@ -97,7 +98,7 @@ def consumer_gate(
         identical = bool(agree.all() and differing == 0)  # a tolerance row is never counted as exact
         n_differences, n_elements = int((~agree).sum()), int(agree.size)
         rows.append(
-            Comparison(label, consumer, "network", kind, identical, detail, n_differences, n_elements, tolerance=limit)
+            Comparison(check, consumer, "network", kind, identical, detail, n_differences, n_elements, tolerance=limit)
         )
     return tuple(rows)
 
@@ -110,9 +111,13 @@ def with_consumer_gate(
     *,
     tolerance: float | None = None,
 ) -> ConformanceResult:
-    """``result`` (a verification's cross-implementation checks) plus the gate on its NIR file, when it has one."""
-    files = result.files.get("nir", ())
-    if not files or raster is None:
-        return result
-    gate = consumer_gate(files[0], model, raster, spikes, tolerance=tolerance)
+    """``result`` (a verification's cross-implementation checks) plus the gate on each written file that the field's
+    float consumers read (:attr:`~vprsnn_export.targets.registry.Target.float_consumers`: NIR)."""
+    gated = [(TARGETS.get(name), files[0]) for name, files in result.files.items() if name in TARGETS and files]
+    gate = tuple(
+        row
+        for entry, path in gated
+        if entry.float_consumers and raster is not None
+        for row in consumer_gate(path, model, raster, spikes, tolerance=tolerance, label=entry.label)
+    )
     return dataclasses.replace(result, comparisons=result.comparisons + gate)

@@ -49,6 +49,8 @@ class Target:
     ``integer_only``: it takes a fixed-point model only (a float checkpoint is quantised first).
     ``label`` names its checks, ``title`` the read-back network's backend; ``statement`` says what
     its consumers compute (export.json). ``reads_folder``: the reader takes the folder of the files.
+    ``float_consumers``: the field's float simulators run its file too (the consumer gate and the consumers'
+    measurements apply to it: NIR).
     """
 
     name: str
@@ -60,6 +62,7 @@ class Target:
     read: Callable[[Path], Network | Backend]
     statement: Callable[[Network, FixedPointModel | None, WriteOptions], str | None]
     reads_folder: bool = False
+    float_consumers: bool = False
 
     def reader_path(self, files: Sequence[Path]) -> Path:
         """What the reader takes: the (first) file written, or their folder."""
@@ -113,7 +116,10 @@ for name, title, label, integer_only, filename, write, reader, reads_folder in (
     ("loihi", "Loihi", "Loihi read back", True, "loihi", _write_loihi, "loihi_target.read_loihi_model", True),
 ):
     statement = lazy(f"statements.{name}_statement")
-    TARGETS.register(Target(name, title, label, integer_only, filename, write, lazy(reader), statement, reads_folder))
+    consumers = name == "nir"  # snnTorch, SpikingJelly, nirtorch... read NIR (targets/nir_consumers.py)
+    TARGETS.register(
+        Target(name, title, label, integer_only, filename, write, lazy(reader), statement, reads_folder, consumers)
+    )
 
 
 def target_labels() -> dict[str, str]:

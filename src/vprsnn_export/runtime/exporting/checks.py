@@ -103,13 +103,18 @@ def check_presentations(
 
 
 def nir_consumer_rows(
-    path: Path, network: Checkpoint | FixedPointModel, raster: torch.Tensor, spikes: torch.Tensor, consumer_name: str
+    path: Path,
+    network: Checkpoint | FixedPointModel,
+    raster: torch.Tensor,
+    spikes: torch.Tensor,
+    consumer_name: str,
+    target: str,
 ) -> list[CheckRow]:
-    """How far a metadata-blind NIR consumer is from the network (measured, not checked)."""
+    """How far a metadata-blind consumer of a NIR file (target ``target``) is from the network (measured, not checked)."""
     graph = load_graph(path)
 
     def row(check: str, detail: str) -> CheckRow:
-        return CheckRow("nir", f"{consumer_name} {check}", None, detail)
+        return CheckRow(target, f"{consumer_name} {check}", None, detail)
 
     try:
         consumer = CONSUMERS[consumer_name](graph, spikes)
@@ -149,19 +154,22 @@ def check_exports(
     """Read every written file back and run it against the project's simulator of what it was written from."""
     comparisons: list[Comparison] = []
     measurements: list[CheckRow] = []
-    integer = [t for t in TARGETS if t in written and TARGETS.get(t).integer_only]
-    stages = ["nir"] * ("nir" in written) + ["integer"] * bool(integer and model is not None)
+    entries = [TARGETS.get(t) for t in TARGETS if t in written]
+    integer = [entry.name for entry in entries if entry.integer_only]
+    stages = [entry for entry in entries if not entry.integer_only] + ["integer"] * bool(integer and model is not None)
     for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
-        if stage == "nir":
+        if not isinstance(stage, str):  # a target written from the source itself, float or fixed point
             network = source.network
             baseline = backend_of(network, device)
             base_run = baseline.run(spikes, record=True)
-            path = target_path("nir", written["nir"])
-            contender = read_back("nir", path, network, device)
+            path = target_path(stage.name, written[stage.name])
+            contender = read_back(stage.name, path, network, device)
             comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
-            if base_run.raster is not None:
-                measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer)
-                comparisons += consumer_gate(path, network, base_run.raster, spikes, tolerance=nir_tolerance)
+            if base_run.raster is not None and stage.float_consumers:
+                measurements += nir_consumer_rows(path, network, base_run.raster, spikes, nir_consumer, stage.name)
+                comparisons += consumer_gate(
+                    path, network, base_run.raster, spikes, tolerance=nir_tolerance, label=stage.label
+                )
         elif model is not None:
             contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
             comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
