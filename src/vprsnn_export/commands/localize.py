@@ -255,11 +255,11 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     threshold = f"{point.threshold:.10g}"
     print(
         f"operating point for precision {point.precision_target:g} on {point.n_queries} '{args.calibrate}' queries "
-        f"({localizer.backend}, k={localizer.readout.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
+        f"({localizer.backend}, k={localizer.stream.k}): threshold {threshold}; precision {100 * point.precision:.1f} %, "
         f"recall {100 * point.recall:.1f} %; scored against the {truth.label}"
     )
     chosen_point = (point.recall, point.precision, point.threshold)
-    title = f"'{point.query}': {point.n_queries} queries, k={localizer.readout.k}"
+    title = f"'{point.query}': {point.n_queries} queries, k={localizer.stream.k}"
     plot = plot_precision_recall(curve.recall, curve.precision, point.precision_target, chosen_point, title)
     print(f"wrote {point_path}, " + " and ".join(map(str, save_curve(curve, point, point_path, plot))))
     return 0

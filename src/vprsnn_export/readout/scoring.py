@@ -4,12 +4,11 @@ A :class:`Readout` is built once per network from its calibration S^R, the confi
 settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.readout.sequence.SequenceOptions`.
 ``scores(counts)`` gives every registered strategy's k=1 scores of a batch, ``sequences`` the
 :data:`~vprsnn_export.readout.strategies.SEQUENCE_STRATEGY` distribution aggregated at every k,
-``score`` every readout column decided once (a :class:`~.scored.Scored`), ``rows`` its metric rows, and ``push(counts)`` one causal decision per frame of a stream.
+``score`` every readout column decided once (a :class:`~.scored.Scored`), ``rows`` its metric rows, and ``stream()`` a causal stream, one decision per frame.
 """
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Mapping
 
 import numpy as np
@@ -19,15 +18,14 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import aggregate, stream_contrast, window_scores
 from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
 from .regions import ModuleLayout, module_layout, regularise, regularised_calibration
 from .scored import Scored, decided_column
 from .sequence import SequenceOptions
-from .strategies import SEQUENCE_STRATEGY, all_scores, decide
-from .velocity import VELOCITY_ESTIMATES, causal_estimates
+from .strategies import SEQUENCE_STRATEGY, all_scores
+from .stream import ReadoutStream
 
 
 def decision_metrics(
@@ -129,8 +127,9 @@ def check_readout_arrays(
 class Readout:
     """One network's readout: S^R, gamma, its module layout and the sequence options.
 
-    ``scores(counts)`` (a batch, Q x neurons) and ``push(counts)`` (one frame of a stream) give the same
-    W+Prob distributions up to the order of the float sums; ``push`` keeps the recent frames.
+    ``score(counts, ...)`` reads a batch out (Q x neurons), every column decided once; ``stream()`` gives a
+    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob
+    distributions up to the order of the float sums). The readout itself keeps no stream state.
     """
 
     def __init__(
@@ -145,8 +144,7 @@ class Readout:
         self.calibration = calibration
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
-        self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None
-        self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
+        self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None  # S'' etc.
 
     @classmethod
     def of(cls, calibration: np.ndarray, config: Config, options: SequenceOptions | None = None) -> Readout:
@@ -229,59 +227,9 @@ class Readout:
         penalty = np.where(column_sum > 0, sr[rows].sum(axis=0) / safe, 0.0)
         return wprob_distribution(((sq[rows] @ weighting[rows]) * penalty)[None])[0]
 
-    @property
-    def k(self) -> int:
-        """The frames a stream aggregates per decision (the one k of the options)."""
-        if len(self.options.ks) != 1:
-            raise InvalidValueError(f"a stream decides at one k (--k), got {', '.join(map(str, self.options.ks))}")
-        return self.options.ks[0]
-
-    def _tracking(self) -> tuple[int, int, int] | None:
-        """(trajectory length, span, memory) of the causal velocity tracker, None at a given velocity."""
-        options, k = self.options, self.k
-        if options.velocity_candidates is None or k == 1:
-            return None
-        stream = VELOCITY_ESTIMATES.get(options.velocity_estimate).stream
-        if stream is None:
-            raise InvalidValueError(
-                f"--velocity-estimate {options.velocity_estimate} waits for later frames; a stream decides "
-                f"causally: choose {' or '.join(causal_estimates())}"
-            )
-        return stream(k, options)
-
-    def reset(self) -> None:
-        """Forget the stream: the next frame pushed is frame 0."""
-        self._stream = None
-
-    def push(self, counts: np.ndarray) -> tuple[int, float, float]:
-        """One frame's causal decision from its spike counts (neurons,): (place index or -1, confidence, velocity).
-
-        .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
-                  \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l)
-
-        at the given velocity, or ``v_j`` tracked causally: :func:`causal_velocity` over the stream contrast
-        of the ``memory`` recent frames, with the trajectory length, span and memory of the estimate's causal form
-        (``VelocityEstimator.stream``: "track" 2k, span, memory; "window" k, 1, 0).
-        """
-        options, k = self.options, self.k
-        tracking = self._tracking()
-        length, span, memory = tracking if tracking is not None else (1, 1, 0)
-        if self._stream is None:  # the recent W+Prob rows, stream-contrast rows and window scores
-            self._stream = (deque(maxlen=max(k, length, memory)), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
-        recent, contrast, scores = self._stream
-        row = self.wprob(counts)
-        recent.append(row)
-        velocity = options.velocity
-        if tracking is not None:
-            contrast.append(stream_contrast(np.asarray(recent)[-max(memory, 1) :], memory)[-1])
-            candidates = np.asarray(options.velocity_candidates)
-            newest, velocity = causal_velocity(np.asarray(contrast), scores, length, candidates, options.rule)
-            if span > 1:
-                scores.append(newest)
-        window = np.asarray(recent)[-k:]
-        final = aggregate(window, k, velocity, options.rule)[-1:] if k > 1 else row[None]
-        index, confidence = decide(final, SEQUENCE_STRATEGY)
-        return int(index[0]), float(confidence[0]), float(velocity)
+    def stream(self) -> ReadoutStream:
+        """A causal stream over this readout (the localiser's): one decision per frame pushed."""
+        return ReadoutStream(self.wprob, self.options)
 
 
 def readout_rows(
@@ -298,20 +246,3 @@ def readout_rows(
     return Readout.of(calibration, config, options).rows(
         query_counts, reference_place_ids, query_place_ids, frame_positions
     )
-
-
-def causal_velocity(
-    contrast: np.ndarray, scores: deque, length: int, candidates: np.ndarray, rule: str
-) -> tuple[np.ndarray, float]:
-    """The newest window's scores e_j(v) and the tracked velocity.
-
-    .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } T \\text{ frames of } Q, \\quad
-              v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
-
-    ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
-    previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
-    """
-    recent = contrast[-length:]
-    newest = window_scores(recent, length, candidates, rule, windows=np.array([len(recent) - 1]))[0]
-    total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
-    return newest, float(candidates[int(np.argmax(total))])

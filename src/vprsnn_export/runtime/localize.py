@@ -178,14 +178,15 @@ class Localizer:
         isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
         self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
-        self.readout.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
+        self.stream = self.readout.stream()
+        self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
 
     def reset(self) -> None:
         """Forget the stream: the next frame is frame 0."""
         self.frame = 0
-        self.readout.reset()
+        self.stream.reset()
 
     def preprocess(self, grey: np.ndarray) -> np.ndarray:
         """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
@@ -256,7 +257,7 @@ class Localizer:
     def _decide(self, counts: np.ndarray, name: str, began: float, reason: str | None = None) -> Decision:
         """The readout's causal decision on one frame's counts; none (place None, not accepted) with ``reason``
         for a frame that carries no place (the frame still enters the readout's window, as in a batch)."""
-        index, conf, velocity = self.readout.push(counts)
+        index, conf, velocity = self.stream.push(counts)
         place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
         decision = Decision(
             frame=self.frame,

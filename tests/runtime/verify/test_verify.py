@@ -540,7 +540,7 @@ def test_each_readout_column_is_decided_once_per_network_and_width(tiny, tmp_pat
     """Issue 42: verify reads each side out once (a Scored) and compares them; W+Prob at k=1 is decided once for
     float and once per width, and nothing under runtime/verify decides a column again."""
     from vprsnn_export.readout import scored as scored_module
-    from vprsnn_export.readout import scoring
+    from vprsnn_export.readout import stream
 
     path, ckpt, data = tiny
     calls: list[str] = []
@@ -548,7 +548,7 @@ def test_each_readout_column_is_decided_once_per_network_and_width(tiny, tmp_pat
     monkeypatch.setattr(
         scored_module, "decide", lambda matrix, strategy: calls.append(strategy) or decide(matrix, strategy)
     )
-    monkeypatch.setattr(scoring, "decide", lambda *_: pytest.fail("the batch readout decided outside Scored"))
+    monkeypatch.setattr(stream, "decide", lambda *_: pytest.fail("verify decided through a stream"))
     options = VerifyOptions(readout=SequenceOptions(ks=(1, 3)), bits=(8, 4), targets=(), reference_queries=1)
     run = verify_checkpoint(
         VerifiedNetwork(ckpt, checkpoint_sha256(path), {"summer": data.traversal("summer")}),
