@@ -9,7 +9,9 @@ kernel's out-of-memory kill. The prediction counts the arrays that grow with the
                                                     r = encoder.rate_scale bounds the firing probability)
     weights           4 D K x copies              (float32; K = all neurons of the ensemble)
     counts, S^R       8 N K + 8 K P               (int64 counts and the calibration matrix, P places)
-    scores            8 N P x 4                   (float64 score matrices of the readout)
+    scores            8 R P x 4                   (float64 score matrices of the readout, R of its rows at once:
+                                                    a block, :data:`~vprsnn_export.readout.scoring.READOUT_BLOCK`,
+                                                    or all N; none in calibration, which reads nothing out)
     raster            N T K                       (bool, per recorded run; state isolation off records one)
     STDP scratch      8 D n x threads              (float32 P^T and D of one module per thread)
     decoded image     4 W H                        (an image of W x H pixels read from its header before
@@ -131,18 +133,22 @@ def run_need(
     chunk: int,
     rate_scale: float = 1.0,
     rasters: int = 0,
+    readout_rows: int | None = None,
 ) -> MemoryNeed:
     """Presenting ``presentations`` spike trains to a network of ``n_neurons`` and reading out ``places`` places.
 
-    ``rasters``: output rasters kept whole (a recorded run; state isolation off records one internally).
+    ``rasters``: output rasters kept whole (a recorded run; state isolation off records one internally);
+    ``readout_rows``: the queries read out at once (None: all; 0: no readout, as in calibration).
     """
+    rows = presentations if readout_rows is None else min(readout_rows, presentations)
     terms = [
         (f"input spikes {presentations} x {timesteps} x {n_inputs}", presentations * timesteps * n_inputs),
         ("spike lists", int(4 * min(presentations, chunk) * timesteps * n_inputs * min(1.0, rate_scale))),
         (f"weights {n_inputs} x {n_neurons} (2 copies)", 4 * n_inputs * n_neurons * 2),
         (f"counts and S^R ({n_neurons} neurons)", 8 * n_neurons * (presentations + places)),
-        (f"scores {presentations} x {places}", 8 * presentations * places * 4),
     ]
+    if rows:
+        terms.append((f"scores {rows} x {places}", 8 * rows * places * 4))
     if rasters:
         terms.append(
             (f"raster {presentations} x {timesteps} x {n_neurons}", rasters * presentations * timesteps * n_neurons)

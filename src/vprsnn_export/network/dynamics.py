@@ -35,7 +35,9 @@ from .dynamics_kernel import QUERY_CHUNK, float_run
 from .runs import SpikeRun, run_in_chunks
 
 
-def config_run_need(cfg: Config, *, presentations: int, n_neurons: int, places: int, rasters: int = 0) -> MemoryNeed:
+def config_run_need(
+    cfg: Config, *, presentations: int, n_neurons: int, places: int, rasters: int = 0, readout_rows: int | None = None
+) -> MemoryNeed:
     """:func:`~vprsnn_export.resources.run_need` with the sizes of ``cfg`` (T, D, rate scale) and the chunk of runs."""
     return run_need(
         presentations=presentations,
@@ -46,14 +48,24 @@ def config_run_need(cfg: Config, *, presentations: int, n_neurons: int, places: 
         chunk=QUERY_CHUNK,
         rate_scale=cfg.encoder.rate_scale,
         rasters=rasters,
+        readout_rows=readout_rows,
     )
 
 
 def check_run_memory(
-    cfg: Config, what: str, *, presentations: int, n_neurons: int, places: int, rasters: int = 0
+    cfg: Config,
+    what: str,
+    *,
+    presentations: int,
+    n_neurons: int,
+    places: int,
+    rasters: int = 0,
+    readout_rows: int | None = None,
 ) -> None:
     """InvalidValueError (one line) when such a run would not fit in the memory limit (:mod:`~vprsnn_export.resources`)."""
-    need = config_run_need(cfg, presentations=presentations, n_neurons=n_neurons, places=places, rasters=rasters)
+    need = config_run_need(
+        cfg, presentations=presentations, n_neurons=n_neurons, places=places, rasters=rasters, readout_rows=readout_rows
+    )
     check_memory(need, what, LOWER_RUN)
 
 

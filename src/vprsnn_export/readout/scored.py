@@ -58,7 +58,20 @@ def decided_column(
 
     .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\quad \\mathrm{correct}_q = \\mathrm{truth}(\\mathrm{id}(\\hat l_q), q)
     """
-    index, confidence = decide(distribution, strategy)
+    return judged_column(strategy, k, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
+
+
+def judged_column(
+    strategy: str,
+    k: int,
+    index: np.ndarray,
+    confidence: np.ndarray,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray | None,
+    truth: Truth | None,
+) -> Column:
+    """The column of decisions already made (predicted index per query, -1: no match; confidence), judged by
+    ``truth``: each query's place id, correctness and the metric row of them all."""
     index = np.asarray(index, dtype=np.int64)
     ids = predicted_place_ids(index, np.asarray(reference_place_ids))
     confidence = np.asarray(confidence, dtype=np.float64)
@@ -83,8 +96,8 @@ class Scored:
     """A query traversal read out by one network: its columns, the k=1 scores and the aggregates they came from."""
 
     columns: tuple[Column, ...]
-    scores: Mapping[str, np.ndarray]  # every strategy's k=1 scores (Q, places)
-    aggregates: Mapping[int, np.ndarray]  # the sequence strategy aggregated at every k (k=1 included)
+    scores: Mapping[str, np.ndarray]  # every strategy's k=1 scores (Q, places); {} when read out in blocks
+    aggregates: Mapping[int, np.ndarray]  # the sequence strategy aggregated at every k (k=1 included); {} likewise
     reference_place_ids: np.ndarray
     query_place_ids: np.ndarray | None
     truth: Truth | None
@@ -112,7 +125,8 @@ class Scored:
 
     @property
     def ks(self) -> tuple[int, ...]:
-        return tuple(sorted(self.aggregates))
+        """The sequence lengths read out (1 included)."""
+        return tuple(sorted({1} | {c.k for c in self.columns}))
 
     def column(self, strategy: str, k: int = 1) -> Column:
         """The column of ``strategy`` at ``k`` (KeyError when it was not read out)."""

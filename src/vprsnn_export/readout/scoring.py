@@ -22,10 +22,14 @@ from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
 from .regions import ModuleLayout, module_layout, regularise, regularised_calibration
-from .scored import Scored, decided_column
+from .scored import Scored, decided_column, judged_column, readout_columns
 from .sequence import SequenceOptions
-from .strategies import SEQUENCE_STRATEGY, all_scores
+from .strategies import SEQUENCE_STRATEGY, all_scores, decide
 from .stream import ReadoutStream
+
+#: Queries read out at once by :meth:`Readout.score_in_blocks` (its default), and the multiple every block starts
+#: on: BLAS computes rows in groups (4 here); rows aligned alike give the whole matrix's numbers bit for bit.
+READOUT_BLOCK, BLOCK_ALIGN = 1024, 64
 
 
 def decision_metrics(
@@ -169,6 +173,17 @@ class Readout:
         """A distribution aggregated at every k of the options, k = 1 (itself) included: {k: (Q, places)}."""
         return {k: self.options.aggregate(distribution, k, frame_positions) for k in sorted(set(self.options.ks) | {1})}
 
+    def judge(
+        self, counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, truth: Truth | None
+    ) -> Truth:
+        """The truth the queries are judged by (None: the options' match window), once the arrays are checked:
+        InvalidValueError when they do not fit, a k exceeds the queries or no query can match a reference."""
+        truth = window(self.options.tolerance) if truth is None else truth
+        check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
+        self.options.check_length(len(query_place_ids))
+        truth.check_overlap(reference_place_ids, query_place_ids)
+        return truth
+
     def score(
         self,
         counts: np.ndarray,
@@ -182,13 +197,48 @@ class Readout:
 
         InvalidValueError when the arrays do not fit, a k exceeds the queries or no query can match a reference.
         """
-        truth = window(self.options.tolerance) if truth is None else truth
-        check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
-        self.options.check_length(len(query_place_ids))
-        truth.check_overlap(reference_place_ids, query_place_ids)
+        truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
         scores = self.scores(counts)
         aggregates = self.sequences(scores[SEQUENCE_STRATEGY], frame_positions)
         return Scored.of(scores, aggregates, reference_place_ids, query_place_ids, truth)
+
+    def score_in_blocks(
+        self,
+        counts: np.ndarray,
+        reference_place_ids: np.ndarray,
+        query_place_ids: np.ndarray,
+        truth: Truth | None = None,
+        frame_positions: np.ndarray | None = None,
+        block: int = READOUT_BLOCK,
+    ) -> Scored:
+        """:meth:`score` computed ``block`` queries at a time: no (queries x places) matrix is held, only each
+        block's (block + k - 1 frames of history) and the decisions. Every column equals :meth:`score`'s bit for
+        bit: the rows of a block start on a multiple of :data:`BLOCK_ALIGN` (BLAS computes a row of the scores as
+        it does in the whole matrix) and the k-frame windows reach back k - 1 frames, no further.
+
+        .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}) \\text{ needs rows } j-k+1..j \\text{ only}
+
+        InvalidValueError as :meth:`score`, or with a velocity estimated from the stream (its windows reach
+        ahead: read it out whole).
+        """
+        truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
+        if self.options.velocity_candidates is not None:
+            raise InvalidValueError("a velocity estimated from the stream looks ahead: read the queries out whole")
+        n, history = len(query_place_ids), max(self.options.ks) - 1
+        block = max(BLOCK_ALIGN, block // BLOCK_ALIGN * BLOCK_ALIGN)
+        decided: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]]] = {}
+        for start in range(0, n, block):
+            low, stop = max(0, start - history) // BLOCK_ALIGN * BLOCK_ALIGN, min(n, start + block)
+            positions = None if frame_positions is None else np.asarray(frame_positions)[low:stop]
+            scores = self.scores(counts[low:stop])
+            aggregates = self.sequences(scores[SEQUENCE_STRATEGY], positions)
+            for strategy, k, matrix in readout_columns(scores, aggregates):
+                decided.setdefault((strategy, k), []).append(decide(matrix[start - low :], strategy))
+        columns = []
+        for (strategy, k), parts in decided.items():
+            index, confidence = (np.concatenate(part) for part in zip(*parts, strict=True))
+            columns.append(judged_column(strategy, k, index, confidence, reference_place_ids, query_place_ids, truth))
+        return Scored(tuple(columns), {}, {}, np.asarray(reference_place_ids), query_place_ids, truth)
 
     def rows(
         self,

@@ -28,7 +28,7 @@ from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
 from vprsnn_export.readout.scored import Scored
-from vprsnn_export.readout.scoring import Readout, baseline_rows, nearest_neighbour_rows
+from vprsnn_export.readout.scoring import BLOCK_ALIGN, READOUT_BLOCK, Readout, baseline_rows, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
@@ -129,7 +129,7 @@ def evaluate_float(
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)
-    network = _prepared(ckpt, query_place_ids, state_isolation)
+    network = _prepared(ckpt, query_place_ids, state_isolation, options)
     cost = None
     if cluster is None:
         run, cost, _ = _run_queries(
@@ -148,7 +148,7 @@ def evaluate_float(
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
     truth = window(options.tolerance) if truth is None else truth
-    scored = readout.score(counts, reference_ids, query_place_ids, truth)
+    scored = read_out(readout, counts, reference_ids, query_place_ids, truth)
     typed, layout = scored.rows, readout.modules
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
@@ -189,7 +189,7 @@ def evaluate_fixed_point(
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, SequenceOptions)
-    network = _prepared(model, query_place_ids, state_isolation, rasters=0 if float_checkpoint is None else 2)
+    network = _prepared(model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2)
     compare = float_checkpoint is not None
     run, cost, spikes = _run_queries(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
@@ -197,11 +197,8 @@ def evaluate_fixed_point(
     counts = run.counts.numpy()
     rows, sides = [], []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
-        sides.append(
-            Readout.of(calibration, model.config, options).score(
-                counts, model.reference_place_ids, query_place_ids, truth
-            )
-        )
+        readout = Readout.of(calibration, model.config, options)
+        sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth))
         rows += [{"calibration": name, **row.to_dict()} for row in sides[-1].rows]
     agreement = None
     if float_checkpoint is not None and run.raster is not None:
@@ -221,9 +218,24 @@ def evaluate_fixed_point(
     )
 
 
-def _prepared(network: NetworkT, place_ids: np.ndarray, state_isolation: bool | None, rasters: int = 0) -> NetworkT:
+def read_out(
+    readout: Readout, counts: np.ndarray, reference_ids: np.ndarray, query_ids: np.ndarray, truth: Truth | None
+) -> Scored:
+    """The queries read out: in blocks of :data:`~vprsnn_export.readout.scoring.READOUT_BLOCK` queries when there
+    are more (the same columns bit for bit, without a (queries x places) matrix), else whole; a velocity searched
+    over the stream looks ahead, so it is read out whole."""
+    if len(query_ids) > READOUT_BLOCK and readout.options.velocity_candidates is None:
+        return readout.score_in_blocks(counts, reference_ids, query_ids, truth)
+    return readout.score(counts, reference_ids, query_ids, truth)
+
+
+def _prepared(
+    network: NetworkT, place_ids: np.ndarray, state_isolation: bool | None, options: SequenceOptions, rasters: int = 0
+) -> NetworkT:
     """The network with ``state_isolation`` (None: its config's own) in its config, as its backend runs it;
-    InvalidValueError when the run (``rasters`` recorded, one more without state isolation) would not fit."""
+    InvalidValueError when the run (``rasters`` recorded, one more without state isolation; the readout a block
+    and its history at a time, :func:`read_out`) would not fit."""
+    rows = None if options.velocity_candidates is not None else READOUT_BLOCK + BLOCK_ALIGN + max(options.ks)
     if state_isolation is not None:
         network = replace(network, config=network.config.replace(**{"network.state_isolation": bool(state_isolation)}))
     check_run_memory(
@@ -233,6 +245,7 @@ def _prepared(network: NetworkT, place_ids: np.ndarray, state_isolation: bool | 
         n_neurons=network.calibration.shape[0],
         places=len(network.reference_place_ids),
         rasters=rasters + (0 if network.config.network.state_isolation else 1),
+        readout_rows=rows,
     )
     return network
 

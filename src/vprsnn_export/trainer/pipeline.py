@@ -56,7 +56,12 @@ def train_and_calibrate(
     check_training_memory(cfg, len(rows), max(len(r) for r in rows), threads)
     n_places = len(dataset.place_ids)
     check_run_memory(
-        cfg, "calibration", presentations=n_places, n_neurons=len(rows) * cfg.network.n_neurons, places=n_places
+        cfg,
+        "calibration",
+        presentations=n_places,
+        n_neurons=len(rows) * cfg.network.n_neurons,
+        places=n_places,
+        readout_rows=0,  # calibration sums counts per place: no score matrix
     )
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
