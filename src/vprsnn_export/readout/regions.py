@@ -168,7 +168,12 @@ def silence(sr: np.ndarray, sq: np.ndarray, silent: np.ndarray) -> tuple[np.ndar
     return sr_, sq_
 
 
-def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
+def regularise(
+    sr: np.ndarray,
+    sq: np.ndarray,
+    layout: ModuleLayout | None,
+    calibrated: tuple[np.ndarray, np.ndarray | None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
     (both unchanged when ``layout`` is None).
 
@@ -176,17 +181,25 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
               o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}, \\quad
               \\tilde S_{il} = S^R_{il} \\,(1 \\text{ if } l \\in R(i) \\text{ else } \\lambda)
 
-    Only S^R (reference data) decides; the queries are not looked at.
+    Only S^R (reference data) decides; the queries are not looked at. ``calibrated``: the query-independent half
+    already computed (:func:`calibrated_half`), as a readout reading several blocks of queries passes it.
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
-    sr_, sq_ = _counts("sr", sr), _counts("sq", sq).copy()
+    calibrated = calibrated_half(sr, layout) if calibrated is None else calibrated
+    sr_, sq_ = calibrated[0], _counts("sq", sq).copy()
     if sq_.shape[1] != sr_.shape[0]:
         raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
-    if layout is None:
-        return sr_, sq_
-    weighted, silent = regularised_calibration(sr_, layout)
+    weighted, silent = calibrated
+    if silent is None:
+        return weighted, sq_
     sq_[:, silent] = 0.0
     return weighted, sq_
+
+
+def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """S^R as float64, or S~ and the silenced neurons of ``layout`` (:func:`regularised_calibration`; None: none)."""
+    sr_ = _counts("sr", sr)
+    return (sr_, None) if layout is None else regularised_calibration(sr_, layout)
 
 
 def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.ndarray, np.ndarray]:

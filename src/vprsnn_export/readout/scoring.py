@@ -21,7 +21,7 @@ from vprsnn_export.errors import InvalidValueError
 from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
-from .regions import ModuleLayout, module_layout, regularise, regularised_calibration
+from .regions import ModuleLayout, calibrated_half, module_layout, regularise, regularised_calibration
 from .scored import Scored, decided_column, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
@@ -149,6 +149,7 @@ class Readout:
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
         self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None  # S'' etc.
+        self._calibrated: tuple[np.ndarray, np.ndarray | None] | None = None  # S~ and the silenced neurons
 
     @classmethod
     def of(cls, calibration: np.ndarray, config: Config, options: SequenceOptions | None = None) -> Readout:
@@ -166,7 +167,9 @@ class Readout:
         An ensemble's hyperactive neurons are silenced first (``readout.regions.regularise``: decided from S^R
         alone); the weighted scores are computed once and W+Prob derived from them (``all_scores``).
         """
-        sr, sq = regularise(self.calibration, counts, self.modules)
+        if self._calibrated is None:  # the query-independent half, once per readout
+            self._calibrated = calibrated_half(self.calibration, self.modules)
+        sr, sq = regularise(self.calibration, counts, self.modules, self._calibrated)
         return all_scores(sr, sq, self.gamma)
 
     def sequences(self, distribution: np.ndarray, frame_positions: np.ndarray | None = None) -> dict[int, np.ndarray]:
