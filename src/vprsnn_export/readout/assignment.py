@@ -24,7 +24,9 @@ neurons and places (matrix products and fancy indexing only).
 
 from __future__ import annotations
 
-from typing import Final
+import weakref
+from collections.abc import Callable
+from typing import Any, Final
 
 import numpy as np
 
@@ -33,6 +35,21 @@ from vprsnn_export.errors import InvalidValueError
 
 #: Predicted place index that means "no match" (the query is rejected).
 NO_MATCH: Final[int] = -1
+
+#: The last query-independent result of each function, by the S^R array it was computed from (that very object,
+#: alive: a weak reference) and its other arguments: a readout reading its queries in blocks computes it once.
+_LAST: dict[str, tuple[weakref.ref, tuple, Any]] = {}
+
+
+def once_per_calibration(name: str, sr: np.ndarray, key: tuple, compute: Callable[[], Any]) -> Any:
+    """``compute()``, or what it gave for this very ``sr`` object and ``key`` last time (S^R is never changed in
+    place by the project: a new calibration is a new array)."""
+    last = _LAST.get(name)
+    if last is not None and last[0]() is sr and last[1] == key:
+        return last[2]
+    value = compute()
+    _LAST[name] = (weakref.ref(sr), key, value)
+    return value
 
 
 def _counts(name: str, a: np.ndarray) -> np.ndarray:
@@ -100,15 +117,22 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     scores = np.zeros((sq_.shape[0], sr_.shape[1]), dtype=np.float64)
     if sr_.size == 0:
         return scores
-    voters = np.flatnonzero(sr_.sum(axis=1) > 0)
+    voters, places, starts = once_per_calibration("voters", sr_, (), lambda: standard_voters(sr_))
     if voters.size == 0:
         return scores
-    best = np.argmax(sr_[voters], axis=1)
+    scores[:, places] = np.add.reduceat(sq_[:, voters], starts, axis=1)
+    return scores
+
+
+def standard_voters(sr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The neurons that vote (fired in calibration), ordered by their best place, with each place they vote for
+    and where its voters start: :math:`l^*_i = \\arg\\max_l S^R_{il}` (ties to the lowest index)."""
+    voters = np.flatnonzero(sr.sum(axis=1) > 0)
+    best = np.argmax(sr[voters], axis=1)
     order = np.argsort(best, kind="stable")
     voters, best = voters[order], best[order]
     places, starts = np.unique(best, return_index=True)
-    scores[:, places] = np.add.reduceat(sq_[:, voters], starts, axis=1)
-    return scores
+    return voters, places, starts
 
 
 def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray:
@@ -167,7 +191,8 @@ def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
     with no spike at all scores 0 everywhere.
     """
     sr_, sq_ = _pair(sr, sq)
-    return (sq_ @ weighted_matrix(sr_, gamma)) * missing_spikes_penalty(sr_, sq_)
+    weighting = once_per_calibration("weighted", sr_, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
+    return (sq_ @ weighting) * missing_spikes_penalty(sr_, sq_)
 
 
 def wprob_distribution(scores: np.ndarray) -> np.ndarray:
