@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import sys
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,6 +63,11 @@ class VerifyOptions:
     targets: tuple[str, ...] = field(default_factory=TARGETS.names)  # every registered target
     tolerances: dict[str, float | None] = field(default_factory=lambda: dict(DEFAULT_TOLERANCES))
     statistics: VerifyConfig = field(default_factory=VerifyConfig)  # the paired verdict's settings
+
+    def __post_init__(self) -> None:
+        require_type("readout", self.readout, SequenceOptions)
+        require_type("quantise", self.quantise, QuantiseOptions)
+        object.__setattr__(self, "bits", tuple(check_bits(b) for b in self.bits))
 
     def to_dict(self, config: Config) -> dict[str, Any]:
         """The settings of a report: the quantisation options beside the bit widths (per_neuron, scale_method,
@@ -131,25 +137,49 @@ def verify_checkpoint(
     require_type("query", query, Query)
     require_type("options", options, VerifyOptions)
     require_type("runtime", runtime, Runtime)
-    ckpt, bits_list = network.checkpoint, [check_bits(b) for b in options.bits]
     if options.quantise.calibration == "deployed" and network.reference_images is None:
         raise InvalidValueError("the deployed calibration needs the reference images")
-    floats = float_side(ckpt, query, options.readout, runtime)
-    temporary = tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if runtime.export_dir is None else None
-    root = Path(temporary.name if temporary is not None else str(runtime.export_dir))
-    desc = f"verify {network.label or ''}".strip()
-    stages = tqdm(
-        total=len(bits_list) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not runtime.progress, leave=False
-    )
-    try:
+    floats = float_side(network.checkpoint, query, options.readout, runtime)
+    with export_folder(runtime.export_dir) as root, stage_bar(network, options, runtime) as stages:
         results = tuple(
             verify_width(bits, network, query, options, floats, root / f"{bits}bit", runtime, stages)
-            for bits in bits_list
+            for bits in options.bits
         )
+    return verified_run(network, query, options, floats, results, runtime.export_dir)
+
+
+@contextlib.contextmanager
+def export_folder(export_dir: str | Path | None) -> Iterator[Path]:
+    """The folder each width's files go to: ``export_dir``, or a temporary one removed afterwards."""
+    if export_dir is not None:
+        yield Path(export_dir)
+        return
+    with tempfile.TemporaryDirectory(prefix="vprsnn-verify-") as folder:
+        yield Path(folder)
+
+
+@contextlib.contextmanager
+def stage_bar(network: VerifiedNetwork, options: VerifyOptions, runtime: Runtime) -> Iterator[tqdm]:
+    """A progress bar over the four stages of each width (on stderr, when ``runtime.progress``)."""
+    desc = f"verify {network.label or ''}".strip()
+    bar = tqdm(total=len(options.bits) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not runtime.progress,
+               leave=False)  # fmt: skip
+    try:
+        yield bar
     finally:
-        stages.close()
-        if temporary is not None:
-            temporary.cleanup()
+        bar.close()
+
+
+def verified_run(
+    network: VerifiedNetwork,
+    query: Query,
+    options: VerifyOptions,
+    floats: FloatSide,
+    results: tuple[BitsResult, ...],
+    export_dir: str | Path | None,
+) -> VerifiedRun:
+    """The report's record of one network verified at every width."""
+    ckpt = network.checkpoint
     return VerifiedRun(
         label=network.label,
         seed=ckpt.config.seed,
@@ -160,7 +190,7 @@ def verify_checkpoint(
         n_queries=int(len(query.place_ids)),
         query_place_ids=tuple(int(p) for p in query.place_ids),
         reference_place_ids=tuple(int(p) for p in ckpt.reference_place_ids),
-        export_dir=None if temporary is not None else str(root),
+        export_dir=None if export_dir is None else str(export_dir),
         float=float_result(ckpt, query, floats, options),
         bits=results,
         checkpoint=network.path,
