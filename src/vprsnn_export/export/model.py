@@ -190,9 +190,6 @@ class FixedPointModel:
         """The float weights the mantissas stand for: q_ij m_j 2**e."""
         return self.weight_mantissa * (self.scale_multiplier * 2.0**self.scale_exponent)[None, :]
 
-    def float_thresholds(self) -> np.ndarray:
-        return self.threshold * self.scale_multiplier * 2.0**self.scale_exponent
-
     def wta_description(self) -> str:
         """The header's WTA rule in words (per module for an ensemble)."""
         if not self.config.network.wta:

@@ -18,8 +18,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from vprsnn_export.errors import InvalidValueError
-
 
 @dataclass(frozen=True)
 class SpikeRun:
@@ -36,20 +34,6 @@ class SpikeRun:
     saturations: int = 0  # voltage clips to the largest representable voltage (integer backends)
     max_current: int = 0  # largest unshifted integer current a_j[t] seen (integer backends)
     wprob: np.ndarray | None = None  # (N, places) W+Prob distribution, from backends that compute the readout
-
-    @property
-    def mean_candidates(self) -> float:
-        """Mean |C[t]| over presentations and steps."""
-        if self.candidates_per_step is None:
-            raise InvalidValueError("this backend does not report candidates per step")
-        return float(self.candidates_per_step.float().mean())
-
-    @property
-    def multi_candidate_fraction(self) -> float:
-        """Fraction of steps where more than one neuron crossed its threshold."""
-        if self.candidates_per_step is None:
-            raise InvalidValueError("this backend does not report candidates per step")
-        return float((self.candidates_per_step > 1).float().mean())
 
     def head(self, n: int) -> SpikeRun:
         """The first n presentations (saturations and max_current are totals: kept as they are)."""

@@ -54,6 +54,12 @@ def recalibrate(
     return dataclasses.replace(model, calibration=calibration, quantisation=report)
 
 
+def check_reference_images(options: QuantiseOptions, reference_images: Mapping[str, np.ndarray] | None) -> None:
+    """InvalidValueError when the deployed calibration (re-measured on the integer simulator) has no reference images."""
+    if options.calibration == "deployed" and reference_images is None:
+        raise InvalidValueError("the deployed calibration needs the reference images")
+
+
 def deploy(
     ckpt: Checkpoint,
     ckpt_sha256: str,
@@ -73,8 +79,7 @@ def deploy(
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, QuantiseOptions)
     require_type("reference_images", reference_images, (Mapping, type(None)))
-    if options.calibration == "deployed" and reference_images is None:
-        raise InvalidValueError("the deployed calibration needs the reference images")
+    check_reference_images(options, reference_images)
     model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options)
     return recalibrate(
         model,

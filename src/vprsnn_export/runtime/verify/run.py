@@ -36,7 +36,7 @@ from vprsnn_export.targets.registry import TARGETS
 
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
-from ..deployment import deploy
+from ..deployment import check_reference_images, deploy
 from ..results import BitsResult, FloatResult, VerifiedRun
 from .checks import (
     DEFAULT_TOLERANCES,
@@ -137,8 +137,7 @@ def verify_checkpoint(
     require_type("query", query, Query)
     require_type("options", options, VerifyOptions)
     require_type("runtime", runtime, Runtime)
-    if options.quantise.calibration == "deployed" and network.reference_images is None:
-        raise InvalidValueError("the deployed calibration needs the reference images")
+    check_reference_images(options.quantise, network.reference_images)  # before the float side runs
     floats = float_side(network.checkpoint, query, options.readout, runtime)
     with export_folder(runtime.export_dir) as root, stage_bar(network, options, runtime) as stages:
         results = tuple(
