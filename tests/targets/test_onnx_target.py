@@ -17,6 +17,7 @@ from vprsnn_export.cli import main
 from vprsnn_export.config import preset
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel, save_fixed_point
+from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint, save_checkpoint
 from vprsnn_export.network.runs import Backend
 from vprsnn_export.readout.assignment import weighted_matrix
@@ -366,7 +367,7 @@ def test_real_nordland_onnx_identical_at_8_4_2_bits(tmp_path):
     )
     spikes = query_spikes(dataset.traversal("winter"), dataset.place_ids, "winter", cfg)
     for bits in (8, 4, 2):
-        model = quantize_checkpoint(ckpt, "0" * 64, bits, per_neuron=True, scale_method="max")
+        model = quantize_checkpoint(ckpt, "0" * 64, bits, QuantiseOptions())
         path = write_onnx(model, tmp_path / f"m{bits}.onnx")
         expected = simulate(model, spikes)
         out = run_onnx_outputs(path, spikes)
