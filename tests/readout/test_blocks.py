@@ -82,3 +82,26 @@ def test_a_velocity_searched_over_the_stream_is_read_out_whole():
     readout = Readout(sr, 0.5, SequenceOptions(ks=(1, 3), velocity_candidates=(0.5, 1.0)))
     with pytest.raises(InvalidValueError, match="read the queries out whole"):
         readout.score_in_blocks(counts, ids, ids)
+
+
+def test_the_new_types_refuse_bad_values_when_built():
+    """Guards at the edges (issue 42's types): one clear InvalidValueError naming what is wrong."""
+    from vprsnn_export.data.truth import Query
+    from vprsnn_export.runtime.verify import Runtime, VerifiedNetwork
+
+    with pytest.raises(InvalidValueError, match="match window"):
+        MatchWindow(-1)
+    with pytest.raises(InvalidValueError, match="2-D boolean"):
+        GroundTruth(np.ones((3, 2)), "gt.npy")
+    with pytest.raises(InvalidValueError, match="one row per place id"):
+        Query("winter", np.zeros((3, 4)), np.arange(2))
+    with pytest.raises(InvalidValueError, match="truth must be a Truth"):
+        Query("winter", np.zeros((2, 4)), np.arange(2), truth=1)  # type: ignore[arg-type]
+    with pytest.raises(InvalidValueError, match="checkpoint must be a Checkpoint"):
+        VerifiedNetwork("net.npz", "sha")  # type: ignore[arg-type]
+    with pytest.raises(InvalidValueError, match="device must be a device"):
+        Runtime(device="cpu")  # type: ignore[arg-type]
+    sr, counts = route_counts(80, 80)
+    ids = np.arange(80)
+    with pytest.raises(InvalidValueError, match="block must be an integer"):
+        Readout(sr, 0.5).score_in_blocks(counts, ids, ids, block="64")  # type: ignore[arg-type]

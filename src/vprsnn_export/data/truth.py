@@ -18,7 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vprsnn_export.arguments import check_place_ids, require_integer, require_type
 from vprsnn_export.errors import InvalidValueError
+
+MAX_WINDOW = 1_000_000  # places either side: beyond any route
 
 
 class Truth:
@@ -78,6 +81,9 @@ class MatchWindow(Truth):
 
     places: int = 0
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "places", require_integer("match window", self.places, 0, MAX_WINDOW))
+
     @property
     def label(self) -> str:
         return f"match window: {self.places}"
@@ -122,6 +128,13 @@ class GroundTruth(Truth):
 
     matrix: np.ndarray  # bool (reference place ids, query place ids)
     source: str = ""
+
+    def __post_init__(self) -> None:
+        matrix = np.asarray(self.matrix)
+        if matrix.ndim != 2 or matrix.dtype != np.bool_:
+            raise InvalidValueError(f"a ground truth is a 2-D boolean matrix, got {matrix.dtype} {matrix.shape}")
+        require_type("source", self.source, str)
+        object.__setattr__(self, "matrix", matrix)
 
     @property
     def label(self) -> str:
@@ -182,4 +195,11 @@ class Query:
     truth: Truth = EXACT
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "place_ids", np.asarray(self.place_ids, dtype=np.int64))
+        require_type("traversal", self.traversal, str)
+        require_type("truth", self.truth, Truth)
+        ids = check_place_ids(self.place_ids, "place_ids")
+        if np.ndim(self.images) != 2 or len(self.images) != len(ids):
+            raise InvalidValueError(
+                f"images must be (queries, inputs) with one row per place id ({len(ids)}), got {np.shape(self.images)}"
+            )
+        object.__setattr__(self, "place_ids", ids)

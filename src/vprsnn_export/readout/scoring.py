@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from vprsnn_export.arguments import real_number, require_type
+from vprsnn_export.arguments import real_number, require_integer, require_type
 from vprsnn_export.config import Config
 from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
@@ -182,6 +182,7 @@ class Readout:
         """The truth the queries are judged by (None: the options' match window), once the arrays are checked:
         InvalidValueError when they do not fit, a k exceeds the queries or no query can match a reference."""
         truth = window(self.options.tolerance) if truth is None else truth
+        require_type("truth", truth, Truth)
         check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
         self.options.check_length(len(query_place_ids))
         truth.check_overlap(reference_place_ids, query_place_ids)
@@ -225,6 +226,7 @@ class Readout:
         ahead: read it out whole).
         """
         truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
+        block = require_integer("block", block, 1, 1 << 30)
         if self.options.velocity_candidates is not None:
             raise InvalidValueError("a velocity estimated from the stream looks ahead: read the queries out whole")
         n, history = len(query_place_ids), max(self.options.ks) - 1

@@ -101,6 +101,11 @@ class VerifiedNetwork:
     label: str | None = None
     path: str | None = None
 
+    def __post_init__(self) -> None:
+        require_type("checkpoint", self.checkpoint, Checkpoint)
+        require_type("sha256", self.sha256, str)
+        require_type("reference_images", self.reference_images, (Mapping, type(None)))
+
 
 @dataclass(frozen=True)
 class Runtime:
@@ -110,6 +115,11 @@ class Runtime:
     device: torch.device = torch.device("cpu")
     progress: bool = False
     export_dir: str | Path | None = None
+
+    def __post_init__(self) -> None:
+        require_type("device", self.device, torch.device)
+        require_type("progress", self.progress, bool)
+        require_type("export_dir", self.export_dir, (str, Path, type(None)))
 
 
 @dataclass(frozen=True, eq=False)
