@@ -185,11 +185,10 @@ def regularise(
     already computed (:func:`calibrated_half`), as a readout reading several blocks of queries passes it.
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
-    calibrated = calibrated_half(sr, layout) if calibrated is None else calibrated
-    sr_, sq_ = calibrated[0], _counts("sq", sq).copy()
-    if sq_.shape[1] != sr_.shape[0]:
-        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
-    weighted, silent = calibrated
+    weighted, silent = calibrated_half(sr, layout) if calibrated is None else calibrated
+    sq_ = _counts("sq", sq).copy()
+    if sq_.shape[1] != weighted.shape[0]:
+        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {weighted.shape[0]} neurons")
     if silent is None:
         return weighted, sq_
     sq_[:, silent] = 0.0

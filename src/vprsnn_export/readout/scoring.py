@@ -21,7 +21,7 @@ from vprsnn_export.errors import InvalidValueError
 from .assignment import weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
-from .regions import ModuleLayout, calibrated_half, module_layout, regularise, regularised_calibration
+from .regions import ModuleLayout, calibrated_half, module_layout, regularise
 from .scored import Scored, decided_column, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
@@ -148,7 +148,7 @@ class Readout:
         self.calibration = calibration
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
-        self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None] | None = None  # S'' etc.
+        self._prepared: tuple[np.ndarray, np.ndarray] | None = None  # the stream's S'' and S^R column sums
         self._calibrated: tuple[np.ndarray, np.ndarray | None] | None = None  # S~ and the silenced neurons
 
     @classmethod
@@ -167,10 +167,15 @@ class Readout:
         An ensemble's hyperactive neurons are silenced first (``readout.regions.regularise``: decided from S^R
         alone); the weighted scores are computed once and W+Prob derived from them (``all_scores``).
         """
-        if self._calibrated is None:  # the query-independent half, once per readout
-            self._calibrated = calibrated_half(self.calibration, self.modules)
-        sr, sq = regularise(self.calibration, counts, self.modules, self._calibrated)
+        sr, sq = regularise(self.calibration, counts, self.modules, self.calibrated())
         return all_scores(sr, sq, self.gamma)
+
+    def calibrated(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """S~ (S^R as float64 for a single network) and the silenced neurons (None: none), computed once: the
+        query-independent half of every batch, block and frame read out (:func:`~.regions.calibrated_half`)."""
+        if self._calibrated is None:
+            self._calibrated = calibrated_half(self.calibration, self.modules)
+        return self._calibrated
 
     def sequences(self, distribution: np.ndarray, frame_positions: np.ndarray | None = None) -> dict[int, np.ndarray]:
         """A distribution aggregated at every k of the options, k = 1 (itself) included: {k: (Q, places)}."""
@@ -267,12 +272,10 @@ class Readout:
         :meth:`scores`' W+Prob (equal up to the order of the float sums), at the cost of the few neurons that
         fired rather than all of them; the query-independent half (S'' of eq. 9-11) is computed once.
         """
+        sr, silent = self.calibrated()
         if self._prepared is None:
-            sr, silent = np.asarray(self.calibration, dtype=np.float64), None
-            if self.modules is not None:
-                sr, silent = regularised_calibration(self.calibration, self.modules)
-            self._prepared = (sr, weighted_matrix(sr, self.gamma), sr.sum(axis=0), silent)
-        sr, weighting, column_sum, silent = self._prepared
+            self._prepared = (weighted_matrix(sr, self.gamma), sr.sum(axis=0))
+        weighting, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
         active = sq > 0
         if silent is not None:
