@@ -14,7 +14,7 @@ from vprsnn_export.data.dataset import load_dataset
 from vprsnn_export.data.synthetic import synthetic_route
 from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.runtime.localize import NO_PLACE, Localizer, no_place_reasons
+from vprsnn_export.runtime.localize import NO_PLACE, Localizer, input_spikes, no_place_reasons
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 TINY = {"encoder.timesteps": 40, "train.epochs": 2, "network.n_neurons": 16}
@@ -64,8 +64,9 @@ def test_silent_input_and_silent_network_are_named():
     spikes = torch.zeros((3, 5, 4), dtype=torch.uint8)
     spikes[1:, 0, 0] = 1
     counts = np.array([[0, 0], [0, 0], [0, 2]])
-    assert no_place_reasons(np.zeros(3, bool), spikes, counts) == [NO_PLACE[1], NO_PLACE[2], None]
-    assert no_place_reasons(np.array([True, False, False]), spikes, counts)[0] == NO_PLACE[0]
+    assert input_spikes(spikes).tolist() == [0, 1, 1]
+    assert no_place_reasons(np.zeros(3, bool), input_spikes(spikes), counts) == [NO_PLACE[1], NO_PLACE[2], None]
+    assert no_place_reasons(np.array([True, False, False]), input_spikes(spikes), counts)[0] == NO_PLACE[0]
 
 
 def test_the_command_writes_no_decision_for_a_flat_frame(network, tmp_path, capsys):

@@ -93,9 +93,41 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="where the operating point is stored (default: MODEL's name + .operating-point.json)",
     )
+    add_search_options(parser)
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
     parser.set_defaults(handler=run, file_output=calibration_output)
+
+
+def add_search_options(parser: argparse.ArgumentParser) -> None:
+    """--search-window and --patience: track within a window of places (localize --frames, evaluate)."""
+    search = parser.add_argument_group("search window (docs/localize.md)")
+    search.add_argument(
+        "--search-window",
+        type=positive_int,
+        metavar="PLACES",
+        help="run only the modules whose places lie within PLACES places around the last accepted place (one WTA "
+        "over them); the first frame, and the frame after --patience frames without an accepted decision, run the "
+        "whole route (an ensemble on the float network or the integer simulator)",
+    )
+    search.add_argument(
+        "--patience",
+        type=positive_int,
+        metavar="N",
+        help="with --search-window: frames in a row without an accepted decision before the whole route runs "
+        "again (default 3)",
+    )
+
+
+def search_window(args: argparse.Namespace):
+    """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
+    from ..runtime.localize import SearchWindow
+
+    if args.search_window is None:
+        if args.patience is not None:
+            raise InvalidValueError("--patience is for --search-window")
+        return None
+    return SearchWindow(args.search_window, 3 if args.patience is None else args.patience)
 
 
 def positive_int(text: str) -> int:
@@ -151,6 +183,8 @@ def run(args: argparse.Namespace) -> int:
     if args.calibrate:
         if args.topic is not None or args.event_window_us is not None or args.event_count is not None:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
+        if args.search_window is not None or args.patience is not None:
+            raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
         return calibrate(args, source, point_path, onnx, device)
     if args.threshold is not None and not math.isfinite(args.threshold):
         raise InvalidValueError(f"--threshold expects a finite confidence, got {args.threshold}")
@@ -169,7 +203,8 @@ def run(args: argparse.Namespace) -> int:
     elif stored is not None and not args.quiet:
         print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
     backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
-    localizer = Localizer(source.network, options=options, threshold=threshold, **backend)
+    search = search_window(args)
+    localizer = Localizer(source.network, options=options, threshold=threshold, search=search, **backend)
     assert frames is not None
     for decision in localizer.run(sized_frames(frames, expected)):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")

@@ -262,7 +262,7 @@ class Readout:
 
     # ------------------------------------------------------------------------ stream
 
-    def wprob(self, counts: np.ndarray) -> np.ndarray:
+    def wprob(self, counts: np.ndarray, places: slice | None = None) -> np.ndarray:
         """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.
 
         .. math:: \\mathrm{Score}_l = \\Big(\\sum_{i \\in A} S^Q_i S''_{il}\\Big)
@@ -270,7 +270,9 @@ class Readout:
                   A = \\{i : S^Q_i > 0, \\text{not silent}\\}, \\quad P = \\text{wprob\\_distribution}(\\mathrm{Score})
 
         :meth:`scores`' W+Prob (equal up to the order of the float sums), at the cost of the few neurons that
-        fired rather than all of them; the query-independent half (S'' of eq. 9-11) is computed once.
+        fired rather than all of them; the query-independent half (S'' of eq. 9-11) is computed once. ``places``:
+        the distribution over those places alone (a search window, 0 elsewhere; uniform when flat there), at the
+        cost of the window.
         """
         sr, silent = self.calibrated()
         if self._prepared is None:
@@ -281,9 +283,15 @@ class Readout:
         if silent is not None:
             active &= ~silent
         rows = np.flatnonzero(active)
-        safe = np.where(column_sum > 0, column_sum, 1.0)
-        penalty = np.where(column_sum > 0, sr[rows].sum(axis=0) / safe, 0.0)
-        return wprob_distribution(((sq[rows] @ weighting[rows]) * penalty)[None])[0]
+        cols = slice(None) if places is None else places
+        total = column_sum[cols]
+        penalty = np.where(total > 0, sr[rows, cols].sum(axis=0) / np.where(total > 0, total, 1.0), 0.0)
+        distribution = wprob_distribution(((sq[rows] @ weighting[rows, cols]) * penalty)[None])[0]
+        if places is None or np.ptp(distribution) == 0:  # a flat window is no evidence: the uniform row, no match
+            return distribution if places is None else np.full(len(column_sum), 1.0 / len(column_sum))
+        row = np.zeros(len(column_sum))
+        row[places] = distribution
+        return row
 
     def stream(self) -> ReadoutStream:
         """A causal stream over this readout (the localiser's): one decision per frame pushed."""

@@ -24,7 +24,7 @@ class ReadoutStream:
     ``wprob`` turns one frame's counts into its W+Prob row (:meth:`~.scoring.Readout.wprob`), ``options`` say
     how the rows are aggregated."""
 
-    def __init__(self, wprob: Callable[[np.ndarray], np.ndarray], options: SequenceOptions) -> None:
+    def __init__(self, wprob: Callable[[np.ndarray, slice | None], np.ndarray], options: SequenceOptions) -> None:
         self.wprob, self.options = wprob, options
         self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
 
@@ -52,8 +52,9 @@ class ReadoutStream:
         """Forget the stream: the next frame pushed is frame 0."""
         self._stream = None
 
-    def push(self, counts: np.ndarray) -> tuple[int, float, float]:
-        """One frame's causal decision from its spike counts (neurons,): (place index or -1, confidence, velocity).
+    def push(self, counts: np.ndarray, places: slice | None = None) -> tuple[int, float, float]:
+        """One frame's causal decision from its spike counts (neurons,): (place index or -1, confidence, velocity);
+        ``places``: the frame's W+Prob row over those places alone (a search window).
 
         .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
                   \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l)
@@ -68,7 +69,7 @@ class ReadoutStream:
         if self._stream is None:  # the recent W+Prob rows, stream-contrast rows and window scores
             self._stream = (deque(maxlen=max(k, length, memory)), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
         recent, contrast, scores = self._stream
-        row = self.wprob(counts)
+        row = self.wprob(counts, places)
         recent.append(row)
         velocity = options.velocity
         if tracking is not None:

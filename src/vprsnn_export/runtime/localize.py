@@ -37,7 +37,8 @@ import dataclasses
 import json
 import math
 import time
-from collections.abc import Iterable, Iterator
+from collections import OrderedDict
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -61,6 +62,7 @@ from vprsnn_export.readout.sequence import SequenceOptions
 from .backends import open_backend
 
 STREAM = "localize"
+PARTS_KEPT = 16  # the search window's networks kept open (the most recent windows' modules)
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
 CURVE_FORMAT = "vprsnn-precision-recall/1"
@@ -80,27 +82,36 @@ class Decision:
     velocity: float
     latency_ms: float
     reason: str | None = None
+    events: int | None = None  # with a search window: synaptic events of the frame (input spikes x neurons run)
+    search: str | None = None  # with a search window: "window", or "global" (the whole route ran)
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON line of the decision (``reason`` only on a frame without a decision)."""
-        data = asdict(self)
-        if self.reason is None:
-            del data["reason"]
-        return data
+        """The JSON line of the decision (``reason`` only on a frame without a decision, ``events`` and ``search``
+        only with a search window)."""
+        return {key: value for key, value in asdict(self).items() if value is not None or key not in OPTIONAL}
+
+
+#: The fields of a decision's JSON line that are left out when None.
+OPTIONAL = ("reason", "events", "search")
 
 
 #: Why a frame carries no place, in the order they are checked (:func:`no_place_reasons`).
 NO_PLACE = ("no contrast", "no input spike", "no output spike")
 
 
-def no_place_reasons(flat: np.ndarray, spikes: torch.Tensor, counts: np.ndarray) -> list[str | None]:
+def input_spikes(spikes: torch.Tensor) -> np.ndarray:
+    """Per presentation, its input spikes ``sum_{t,i} s_{ti}`` (N,) int64."""
+    return spikes.reshape(len(spikes), -1).cpu().numpy().sum(axis=1, dtype=np.int64)
+
+
+def no_place_reasons(flat: np.ndarray, inputs: np.ndarray, counts: np.ndarray) -> list[str | None]:
     """Per frame, why it carries no place (None: it does): ``flat``, its resized image is uniform (a 1x1 or
     flat grey frame, ``max R = min R``: what the input channels then show is their own border, not the
-    scene), its spike train holds no spike (``sum_{t,i} s_{ti} = 0``) or the network answered with none
+    scene), its spike train holds no spike (``inputs``: :func:`input_spikes` = 0) or the network answered with none
     (``sum_n c_n = 0``). Such a frame is no evidence of any place, so it gets no decision, whatever the
     recent frames say."""
     n = len(counts)
-    silent_input = spikes.reshape(n, -1).sum(dim=1).cpu().numpy() == 0
+    silent_input = np.asarray(inputs) == 0
     silent_output = np.asarray(counts).reshape(n, -1).sum(axis=1) == 0
     reason = np.select([np.asarray(flat, dtype=bool), silent_input, silent_output], list(NO_PLACE), default="")
     return [str(r) or None for r in reason]
@@ -142,6 +153,68 @@ def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, con
     return runner.run(spikes).counts.cpu().numpy() if early is None else np.asarray(early.counts)
 
 
+@dataclass(frozen=True)
+class SearchWindow:
+    """Localise within ``places`` reference places around the last confident place: only the modules whose
+    places lie in the window run (one WTA over them) and the frame is decided among their places; after
+    ``patience`` frames in a row without an accepted decision the next frame runs the whole route (a global
+    re-localisation), as does the first.
+
+    .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\\\ c_j + v_j & \\text{otherwise}
+              \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -
+              \\lfloor w / 2 \\rfloor, 0), L - w), \\quad \\text{run} = \\{m : \\text{region}_m \\cap W_j \\ne
+              \\emptyset\\}
+    """
+
+    places: int
+    patience: int = 3
+
+    def __post_init__(self) -> None:
+        for name, value in (("search window", self.places), ("patience", self.patience)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise InvalidValueError(f"{name} must be a whole number of frames or places >= 1, got {value!r:.40}")
+
+    def follow(
+        self, centre: float | None, misses: int, place: int | None, accepted: bool, velocity: float
+    ) -> tuple[float | None, int]:
+        """The next frame's (centre, misses) after a frame decided at place index ``place`` (None: no place):
+        ``centre`` None, a global frame, puts the window at its place (None: global again), and when it was not
+        accepted one more miss looks at the whole route again; a window frame moves it to an accepted place, else
+        ``velocity`` places on, and after ``patience`` misses in a row the next frame is global (centre None)."""
+        if centre is None:
+            return (None if place is None else float(place)), 0 if accepted else self.patience - 1
+        if accepted and place is not None:
+            return float(place), 0
+        return (None if misses + 1 >= self.patience else centre + velocity), misses + 1
+
+    def modules(self, centre: float, regions: np.ndarray) -> tuple[int, int]:
+        """[first, last) modules whose regions meet the window around ``centre`` (a reference place index)."""
+        n_places = int(regions[-1, 1])
+        start = min(max(int(round(centre)) - self.places // 2, 0), max(n_places - self.places, 0))
+        stop = min(start + self.places, n_places)
+        first = int(np.searchsorted(regions[:, 1], start, side="right"))
+        return first, int(np.searchsorted(regions[:, 0], stop - 1, side="right"))
+
+
+def network_part(network: Checkpoint | FixedPointModel, neurons: slice) -> Checkpoint | FixedPointModel:
+    """The network of some consecutive modules' neurons alone (their weights, thresholds and S^R rows)."""
+    if isinstance(network, Checkpoint):
+        return dataclasses.replace(
+            network,
+            weights=network.weights[:, neurons],
+            thresholds=network.thresholds[neurons],
+            calibration=network.calibration[neurons],
+        )
+    return dataclasses.replace(
+        network,
+        weight_mantissa=network.weight_mantissa[:, neurons],
+        scale_multiplier=network.scale_multiplier[neurons],
+        threshold=network.threshold[neurons],
+        calibration=network.calibration[neurons],
+        float_calibration=network.float_calibration[neurons],
+    )
+
+
 class Localizer:
     """A trained or deployed network answering one frame at a time (``push``), causally.
 
@@ -160,6 +233,7 @@ class Localizer:
         onnx_path: str | Path | None = None,
         device: torch.device | None = None,
         threads: int | None = None,
+        search: SearchWindow | None = None,
     ) -> None:
         if not isinstance(network, Checkpoint | FixedPointModel):
             raise InvalidValueError(
@@ -178,15 +252,62 @@ class Localizer:
         isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
         self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
+        self.search, self._parts = search, OrderedDict[tuple[int, int], Callable[[torch.Tensor], np.ndarray]]()
+        if search is not None:
+            self._check_search(search)
+            self._open_part = lambda part: open_backend(part, self.backend, None, device, threads)[1]
+        self._isolated = isolated
         self.stream = self.readout.stream()
         self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
 
+    def _check_search(self, search: SearchWindow) -> None:
+        if not isinstance(search, SearchWindow):
+            raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
+        if self.backend not in ("float", "integer"):
+            raise InvalidValueError(
+                f"--search-window runs the float network or the integer simulator, not {self.backend} "
+                "(an exported file holds the whole route)"
+            )
+        if self.readout.modules is None or len(self.readout.modules.regions) < 2:
+            raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
+        self._regions = self.readout.modules.regions
+        if self.threshold is None:
+            raise InvalidValueError(
+                "--search-window needs an operating point: it tracks the last accepted place "
+                "(run `localize MODEL --calibrate QUERY` first)"
+            )
+
     def reset(self) -> None:
-        """Forget the stream: the next frame is frame 0."""
+        """Forget the stream: the next frame is frame 0 (and global, with a search window)."""
         self.frame = 0
         self.stream.reset()
+        self.centre: float | None = None  # the search window's centre, a reference place index (None: global)
+        self.misses = 0  # frames in a row without an accepted decision
+
+    def _frame_counts(self, spikes: torch.Tensor, inputs: int) -> tuple[np.ndarray, slice | None, int, str | None]:
+        """One frame's counts over every neuron, the places it is decided among (None: all), its synaptic events
+        (``inputs`` spikes in) and its search (None: no search window): the whole network, or the window's modules
+        alone."""
+        if self.search is None:
+            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), None
+        if self.centre is None:
+            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), "global"
+        regions, group = self._regions, self.config.network.n_neurons
+        first, last = self.search.modules(self.centre, regions)
+        if (first, last) not in self._parts:
+            if len(self._parts) >= PARTS_KEPT:
+                self._parts.popitem(last=False)
+            neurons = slice(first * group, last * group)
+            part = network_part(self._isolated, neurons)
+            runner = self._open_part(part)
+            self._parts[first, last] = lambda s: frame_counts(runner, s, part.calibration, part.config)
+        self._parts.move_to_end((first, last))
+        counts = np.zeros((len(spikes), self.network.calibration.shape[0]), dtype=np.int64)
+        counts[:, first * group : last * group] = self._parts[first, last](spikes)
+        places = slice(int(regions[first, 0]), int(regions[last - 1, 1]))
+        return counts, places, inputs * (last - first) * group, "window"
 
     def preprocess(self, grey: np.ndarray) -> np.ndarray:
         """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
@@ -216,8 +337,10 @@ class Localizer:
         began = time.perf_counter()
         resized = self._resized(grey if isinstance(grey, np.ndarray) else np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
-        counts = self._counts(spikes)
-        return self._decide(counts[0], name, began, no_place_reasons(np.ptp(resized)[None] == 0, spikes, counts)[0])
+        inputs = input_spikes(spikes)
+        counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))
+        reason = no_place_reasons(np.ptp(resized)[None] == 0, inputs, counts)[0]
+        return self._decide(counts[0], name, began, reason, places, events, search)
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
@@ -242,11 +365,13 @@ class Localizer:
         frame, whether its resized image was uniform (:func:`no_place_reasons`; None: none was).
         """
         self.reset()
-        began = time.perf_counter()
         inputs = np.asarray(inputs, dtype=np.float32)
+        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
+            return self._track_inputs(inputs, names, flat)
+        began = time.perf_counter()
         spikes = self.spikes(inputs, 0)
         counts = self._counts(spikes)
-        reasons = no_place_reasons(np.zeros(len(inputs), bool) if flat is None else flat, spikes, counts)
+        reasons = no_place_reasons(np.zeros(len(inputs), bool) if flat is None else flat, input_spikes(spikes), counts)
         share = (time.perf_counter() - began) / max(len(counts), 1)
         labels = names if names is not None else [str(i) for i in range(len(counts))]
         return [
@@ -254,20 +379,50 @@ class Localizer:
             for row, name, reason in zip(counts, labels, reasons, strict=True)
         ]
 
-    def _decide(self, counts: np.ndarray, name: str, began: float, reason: str | None = None) -> Decision:
+    def _track_inputs(self, inputs: np.ndarray, names: list[str] | None, flat: np.ndarray | None) -> list[Decision]:
+        """:meth:`run_inputs` with a search window: the frames' spikes drawn at once, run and decided in order."""
+        spikes = self.spikes(inputs, 0)
+        flat = np.zeros(len(inputs), bool) if flat is None else flat
+        totals = input_spikes(spikes)
+        decisions = []
+        for j in range(len(inputs)):
+            began = time.perf_counter()
+            counts, places, events, search = self._frame_counts(spikes[j : j + 1], int(totals[j]))
+            reason = no_place_reasons(flat[j : j + 1], totals[j : j + 1], counts)[0]
+            name = names[j] if names is not None else str(j)
+            decisions.append(self._decide(counts[0], name, began, reason, places, events, search))
+        return decisions
+
+    def _decide(
+        self,
+        counts: np.ndarray,
+        name: str,
+        began: float,
+        reason: str | None = None,
+        places: slice | None = None,
+        events: int | None = None,
+        search: str | None = None,
+    ) -> Decision:
         """The readout's causal decision on one frame's counts; none (place None, not accepted) with ``reason``
-        for a frame that carries no place (the frame still enters the readout's window, as in a batch)."""
-        index, conf, velocity = self.stream.push(counts)
+        for a frame that carries no place (the frame still enters the readout's window, as in a batch). With a
+        search window the decision moves it (:class:`SearchWindow`)."""
+        index, conf, velocity = self.stream.push(counts, places)
         place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
+        accepted = self.threshold is not None and place is not None and conf >= self.threshold
+        if self.search is not None:
+            found = index if place is not None else None
+            self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
         decision = Decision(
             frame=self.frame,
             name=name,
             place_id=place,
             confidence=0.0 if place is None else conf,
-            accepted=self.threshold is not None and place is not None and conf >= self.threshold,
+            accepted=accepted,
             velocity=float(velocity),
             latency_ms=1000 * (time.perf_counter() - began),
             reason=reason,
+            events=None if search is None else events,
+            search=search,
         )
         self.frame += 1
         return decision
@@ -373,10 +528,14 @@ def operating_point(
 def calibration_curve(decisions: list[Decision], place_ids: np.ndarray, truth: Truth = EXACT) -> PrecisionRecallCurve:
     """The precision/recall curve of labelled decisions (:class:`PrecisionRecallCurve`); right as in
     :func:`operating_point`."""
-    placed = np.asarray([d.place_id is not None for d in decisions], dtype=bool)
-    predicted = np.ma.MaskedArray([d.place_id or 0 for d in decisions], mask=~placed, dtype=np.int64)
-    correct = truth.correct(predicted, np.asarray(place_ids))
+    correct = truth.correct(predicted_places(decisions), np.asarray(place_ids))
     return PrecisionRecallCurve.of(np.asarray([d.confidence for d in decisions]), correct)  # no place: confidence 0
+
+
+def predicted_places(decisions: list[Decision]) -> np.ma.MaskedArray:
+    """The decisions' place ids, masked where a frame has none."""
+    placed = np.asarray([d.place_id is not None for d in decisions], dtype=bool)
+    return np.ma.MaskedArray([d.place_id or 0 for d in decisions], mask=~placed, dtype=np.int64)
 
 
 def _is_real(value: object) -> bool:
@@ -450,3 +609,84 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
     if model_sha256 is not None and point.model_sha256 != model_sha256:
         raise ModelFileError("this operating point was calibrated on another model file (sha256 differs)", path)
     return point
+
+
+@dataclass(frozen=True)
+class TrackingRow:
+    """One protocol's figures on a labelled traversal at one k (:func:`tracking_rows`): the localiser over the
+    whole route every frame ("global") or within a search window ("window W"); percentages, events per frame
+    (input spikes x neurons run), global frames after the first, and the wall time per frame."""
+
+    protocol: str
+    k: int
+    accuracy: float
+    r_at_100p: float
+    events_per_frame: float
+    relocalisations: int
+    ms_per_frame: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def tracking_rows(
+    network: Checkpoint | FixedPointModel,
+    images: np.ndarray,
+    place_ids: np.ndarray,
+    truth: Truth,
+    options: SequenceOptions,
+    search: SearchWindow,
+    *,
+    precision: float = 1.0,
+    **backend: Any,
+) -> list[TrackingRow]:
+    """The tracking protocol beside the global one, per k of ``options``, on preprocessed frames (N, inputs) in
+    stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
+    same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
+    if not isinstance(search, SearchWindow):
+        raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
+    rows = []
+    for k in options.ks:
+        at_k = dataclasses.replace(options, ks=(k,))
+        whole = Localizer(network, options=at_k, **backend)
+        began = time.perf_counter()
+        point, decisions, curve = operating_point(whole, images, place_ids, precision=precision, truth=truth)
+        seconds = time.perf_counter() - began
+        spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
+        events = float(spikes) * network.calibration.shape[0] / max(len(decisions), 1)
+        rows.append(tracking_row("global", k, decisions, place_ids, truth, events, seconds))
+        if point.threshold is None:
+            raise InvalidValueError(
+                f"no confidence reaches precision {precision} at k={k} on these queries: the search window has no "
+                "operating point to track with (lower --precision)"
+            )
+        tracked = Localizer(network, options=at_k, threshold=point.threshold, search=search, **backend)
+        began = time.perf_counter()
+        decisions = tracked.run_inputs(images)
+        seconds = time.perf_counter() - began
+        events = float(np.mean([d.events or 0 for d in decisions]))
+        rows.append(tracking_row(f"window {search.places}", k, decisions, place_ids, truth, events, seconds))
+    return rows
+
+
+def tracking_row(
+    protocol: str,
+    k: int,
+    decisions: list[Decision],
+    place_ids: np.ndarray,
+    truth: Truth,
+    events: float,
+    seconds: float,
+) -> TrackingRow:
+    """One protocol's :class:`TrackingRow` from its decisions (R@100P: the recall at precision 1 of their curve)."""
+    curve = calibration_curve(decisions, place_ids, truth)
+    index = curve.index_for(1.0)
+    return TrackingRow(
+        protocol=protocol,
+        k=k,
+        accuracy=100 * float(np.mean(truth.correct(predicted_places(decisions), np.asarray(place_ids)))),
+        r_at_100p=0.0 if index is None else 100 * float(curve.recall[index]),
+        events_per_frame=float(events),
+        relocalisations=max(sum(d.search == "global" for d in decisions) - 1, 0),
+        ms_per_frame=1000 * seconds / max(len(decisions), 1),
+    )

@@ -1,0 +1,156 @@
+"""The search window (issue 43): a frame runs only the modules around the last accepted place, the first frame
+and a lost robot run the whole route, and a window over the whole route is the global localiser."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from vprsnn_export.cli import main
+from vprsnn_export.config import preset
+from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.synthetic import synthetic_route
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.checkpoint import save_checkpoint
+from vprsnn_export.network.modules import module_regions
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.deployment import deploy
+from vprsnn_export.runtime.localize import Localizer, SearchWindow, operating_point, tracking_rows
+from vprsnn_export.trainer.pipeline import train_and_calibrate
+
+PLACES = 300
+K3 = SequenceOptions(ks=(3,))
+
+
+@pytest.fixture(scope="module")
+def route():
+    """The lean preset (100-place modules) on a 300-place synthetic route, and its winter traversal as a query."""
+    cfg = preset("lean").replace(**{"train.epochs": 6})
+    data = load_dataset(f"synthetic:{PLACES}", ["summer", "winter"], cfg.preprocess)
+    ckpt = train_and_calibrate(data, ["summer"], cfg, progress=False)
+    query = data.query("winter", ["summer"])
+    point, _, _ = operating_point(Localizer(ckpt, options=K3), query.images, query.place_ids, precision=0.9)
+    assert point.threshold is not None
+    return ckpt, data, query, point.threshold
+
+
+def answers(decisions):
+    return [(d.place_id, d.confidence, d.accepted, d.velocity) for d in decisions]
+
+
+def test_the_windows_modules_are_those_its_places_meet():
+    regions = module_regions(1000, 100)
+    window = SearchWindow(300)
+    assert window.modules(500.0, regions) == (3, 7)  # places 350..649 meet modules 3..6
+    assert window.modules(0.0, regions) == (0, 3)  # clipped at the route's start: places 0..299
+    assert window.modules(999.4, regions) == (7, 10)  # and at its end: places 700..999
+    assert SearchWindow(5000).modules(10.0, regions) == (0, 10)
+
+
+def test_the_window_follows_accepted_places_and_widens_after_its_patience():
+    window = SearchWindow(300, patience=3)
+    assert window.follow(None, 0, 120, True, 1.0) == (120.0, 0)  # a global frame accepted: the window goes there
+    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2)  # not accepted: one more miss looks again
+    assert window.follow(None, 0, None, False, 1.0) == (None, 2)  # no place: global again
+    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0)
+    assert window.follow(50.0, 1, 57, False, 1.5) == (51.5, 2)  # unaccepted: on at the velocity
+    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3)  # the third miss in a row: the next frame is global
+
+
+def test_a_window_over_the_whole_route_decides_as_the_global_localiser(route):
+    ckpt, _, query, threshold = route
+    whole = Localizer(ckpt, options=K3, threshold=threshold).run_inputs(query.images[:60])
+    window = Localizer(ckpt, options=K3, threshold=threshold, search=SearchWindow(PLACES)).run_inputs(query.images[:60])
+    assert answers(window) == answers(whole)
+    assert window[0].search == "global" and {d.search for d in window[1:]} <= {"window", "global"}
+
+
+def test_a_frame_runs_the_windows_modules_alone_and_the_first_frame_the_route(route):
+    ckpt, _, query, threshold = route
+    decisions = Localizer(ckpt, options=K3, threshold=threshold, search=SearchWindow(100)).run_inputs(query.images)
+    neurons = ckpt.calibration.shape[0]
+    assert decisions[0].search == "global"
+    windowed = [d for d in decisions if d.search == "window"]
+    assert len(windowed) > len(decisions) // 2  # it tracks most of the route
+    assert all(d.events is not None and d.events > 0 for d in decisions)
+    # every input spike reaches the neurons that run: a 100-place window meets at most 2 of the 3 modules
+    assert max(d.events for d in windowed) < max(d.events for d in decisions if d.search == "global")
+    assert neurons == 3 * ckpt.config.network.n_neurons
+
+
+def test_a_kidnapped_robot_is_relocalised(route):
+    ckpt, _, query, threshold = route
+    jump = np.r_[np.arange(0, 60), np.arange(220, PLACES)]  # 160 places ahead after frame 59
+    truth = query.place_ids[jump]
+
+    def right(localizer):
+        decisions = localizer.run_inputs(query.images[jump])
+        return decisions, [
+            d.place_id is not None and abs(d.place_id - t) <= 1 for d, t in zip(decisions, truth, strict=True)
+        ]
+
+    _, whole = right(Localizer(ckpt, options=K3, threshold=threshold))
+    decisions, tracked = right(Localizer(ckpt, options=K3, threshold=threshold, search=SearchWindow(100)))
+    assert sum(tracked) >= sum(whole) - 3  # tracking loses nothing against the whole route, before and after
+    back = next(j for j in range(60, len(jump)) if tracked[j]) - 60
+    assert back <= next(j for j in range(60, len(jump)) if whole[j]) - 60 + 3  # the patience's frames at most
+    assert any(d.search == "global" for d in decisions[60 : 60 + back + 1])  # found by a global re-localisation
+
+
+def test_the_tracking_protocol_beside_the_global_one(route):
+    ckpt, _, query, _ = route
+    rows = tracking_rows(
+        ckpt, query.images, query.place_ids, query.truth, SequenceOptions(ks=(1, 3)), SearchWindow(100), precision=0.9
+    )
+    assert [(r.protocol, r.k) for r in rows] == [("global", 1), ("window 100", 1), ("global", 3), ("window 100", 3)]
+    for whole, window in (rows[:2], rows[2:]):
+        assert window.events_per_frame < whole.events_per_frame and whole.relocalisations == 0
+        assert 0 <= window.accuracy <= 100 and 0 <= window.r_at_100p <= 100
+
+
+def test_the_integer_simulator_tracks_the_same_pushed_or_batched(route):
+    ckpt, data, query, _ = route
+    model = deploy(ckpt, "0" * 64, 8, reference_images={"summer": data.traversal("summer")})
+    frames = [*synthetic_route(PLACES, ("winter",))["winter"][:40]]
+    frames[7] = np.full_like(frames[7], 128)  # a frame without contrast: no decision, it still moves the stream on
+    search = SearchWindow(100)
+    pushed = Localizer(model, options=K3, threshold=0.5, search=search)
+    one = [pushed.push(f) for f in frames]
+    batched = Localizer(model, options=K3, threshold=0.5, search=search).run_batch(frames)
+    assert answers(one) == answers(batched) and [d.events for d in one] == [d.events for d in batched]
+    assert one[7].reason == "no contrast" and one[7].place_id is None
+    assert {d.search for d in one} == {"global", "window"}
+
+
+def test_search_window_refusals(route, tmp_path, capsys):
+    ckpt, _, _, threshold = route
+    with pytest.raises(InvalidValueError, match="operating point"):
+        Localizer(ckpt, search=SearchWindow(100))
+    with pytest.raises(InvalidValueError, match="search window must be a whole number"):
+        SearchWindow(0)
+    with pytest.raises(InvalidValueError, match="patience"):
+        SearchWindow(100, patience=0)
+    single = train_and_calibrate(
+        load_dataset("synthetic:12", ["summer"], ckpt.config.preprocess),
+        ["summer"],
+        ckpt.config.replace(**{"train.module_size": 0, "train.epochs": 1, "network.n_neurons": 12}),
+        progress=False,
+    )
+    with pytest.raises(InvalidValueError, match="ensemble of modules"):
+        Localizer(single, threshold=threshold, search=SearchWindow(4))
+    path = save_checkpoint(tmp_path / "net.npz", ckpt)
+    assert main(["localize", str(path), "--frames", str(tmp_path), "--patience", "2"]) == 2
+    assert capsys.readouterr().err.strip().count("\n") == 0
+    assert main(["localize", str(path), "--calibrate", "winter", "--search-window", "100"]) == 2
+    assert "--search-window" in capsys.readouterr().err
+
+
+def test_a_decision_line_has_events_and_search_only_with_a_window(route):
+    ckpt, _, query, threshold = route
+    plain = Localizer(ckpt, options=K3, threshold=threshold).run_inputs(query.images[:2])[1].to_dict()
+    window = Localizer(ckpt, options=K3, threshold=threshold, search=SearchWindow(100)).run_inputs(query.images[:2])
+    assert "events" not in plain and "search" not in plain
+    line = json.loads(json.dumps(window[1].to_dict()))
+    assert set(line) - set(plain) == {"events", "search"}
