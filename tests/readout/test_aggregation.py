@@ -9,7 +9,7 @@ import pytest
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout import aggregation
-from vprsnn_export.readout.aggregation import aggregate, estimate_velocity, shift_window
+from vprsnn_export.readout.aggregation import aggregate, aggregate_newest, estimate_velocity, shift_window
 
 
 def _diagonal(
@@ -182,3 +182,12 @@ def test_invalid_arguments() -> None:
     # an all-zero sum-rule window is uniform
     out = aggregate(np.zeros((3, 4)), 2, 1.0, "sum")
     np.testing.assert_array_equal(out, np.full((3, 4), 0.25))
+
+
+@pytest.mark.parametrize(
+    ("frames", "k", "velocity", "rule"),
+    [(10, 10, 1.0, "product"), (3, 5, 1.3, "product"), (7, 5, -0.7, "sum"), (2, 10, 0.5, "product")],
+)
+def test_the_newest_aggregate_is_the_last_row_of_the_whole(frames, k, velocity, rule):
+    prob = np.random.default_rng(frames).dirichlet(np.ones(40), frames)
+    assert np.array_equal(aggregate_newest(prob, k, velocity, rule), aggregate(prob, k, velocity, rule)[-1:])

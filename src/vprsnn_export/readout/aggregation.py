@@ -228,6 +228,18 @@ def _aggregate_scored(
     return out, score
 
 
+def aggregate_newest(
+    prob: np.ndarray, k: int, velocity: float, rule: str = DEFAULT_RULE, eps: float = 1e-6
+) -> np.ndarray:
+    """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
+    k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
+    n_queries = len(prob)
+    window = _window(k, n_queries)
+    positions = np.arange(n_queries, dtype=np.float64)
+    shifted, valid = shift_window(prob, np.array([n_queries - 1]), window, np.full(n_queries, velocity), positions)
+    return RULES.get(rule).combine(shifted, valid, eps)[0]
+
+
 def window_scores(
     prob: np.ndarray,
     k: int,

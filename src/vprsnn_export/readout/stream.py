@@ -13,7 +13,7 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import aggregate, stream_contrast, window_scores
+from .aggregation import aggregate_newest, stream_contrast, window_scores
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, decide
 from .velocity import VELOCITY_ESTIMATES, causal_estimates
@@ -79,7 +79,7 @@ class ReadoutStream:
             if span > 1:
                 scores.append(newest)
         window = np.asarray(recent)[-k:]
-        final = aggregate(window, k, velocity, options.rule)[-1:] if k > 1 else row[None]
+        final = aggregate_newest(window, k, velocity, options.rule) if k > 1 else row[None]
         index, confidence = decide(final, SEQUENCE_STRATEGY)
         return int(index[0]), float(confidence[0]), float(velocity)
 

@@ -1,0 +1,90 @@
+"""The search window's tracking protocol beside the global localiser, and a kidnapped robot (issue 43).
+
+    OMP_NUM_THREADS=1 python bench/bench_tracking.py CHECKPOINT [--query winter] [--k 1,5,10]
+                                                    [--search-window 300] [--patience 3] [--jump 1000]
+
+On the checkpoint's own data (or --data), the query traversal in stream order, per k: the localiser over the whole
+route every frame ("global") and within the search window ("window W"; ``runtime.localize.tracking_rows``), the
+window accepting at the global run's operating point at precision 1 on the same frames (as R@100P is chosen):
+accuracy and R@100P in %, synaptic events per frame (input spikes x the neurons that ran), global frames after the
+first (re-localisations) and wall ms per frame. Then the kidnapped robot: 100 frames, a jump of --jump places
+ahead (modulo the route), 100 frames; per jump, the frames from the jump to the first right decision and to the
+first right accepted one, for the window and the global localiser at the largest k (right: the query's truth).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+import vprsnn_export as vx
+from vprsnn_export.data.dataset import load_selection
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.localize import Localizer, SearchWindow, operating_point, predicted_places, tracking_rows
+from vprsnn_export.threads import set_threads
+
+
+def frames_back(decisions, truth, place_ids, after: int) -> tuple[int | None, int | None]:
+    """Frames from ``after`` to the first right decision, and to the first right accepted one (None: never)."""
+    right = truth.correct(predicted_places(decisions), place_ids)
+    first = next((j - after for j in range(after, len(decisions)) if right[j]), None)
+    accepted = next((j - after for j in range(after, len(decisions)) if right[j] and decisions[j].accepted), None)
+    return first, accepted
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("checkpoint")
+    parser.add_argument("--data", help="the data set (default: the checkpoint's)")
+    parser.add_argument("--query", default="winter")
+    parser.add_argument("--k", default="1,5,10")
+    parser.add_argument("--search-window", type=int, default=300)
+    parser.add_argument("--patience", type=int, default=3)
+    parser.add_argument("--jump", type=int, default=1000, help="places the kidnapped robot jumps ahead")
+    parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args()
+    set_threads(args.threads)
+    ckpt = vx.load_checkpoint(args.checkpoint)
+    dataset = load_selection(ckpt.data, [args.query], ckpt.config.preprocess, source=args.data)
+    query = dataset.query(args.query, ckpt.reference_traversals)
+    ks = tuple(int(k) for k in args.k.split(","))
+    search = SearchWindow(args.search_window, args.patience)
+    n = len(query.place_ids)
+    print(
+        f"load average {os.getloadavg()[0]:.1f}; {args.checkpoint}: {ckpt.calibration.shape[0]} neurons, "
+        f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames); window {search.places} places, "
+        f"patience {search.patience}; {args.threads} thread(s)"
+    )
+    began = time.perf_counter()
+    rows = tracking_rows(ckpt, query.images, query.place_ids, query.truth, SequenceOptions(ks=ks), search)
+    header = (
+        f"{'protocol':<12} {'k':>3} {'acc %':>6} {'R@100P %':>9} {'events/frame M':>15} {'reloc':>6} {'ms/frame':>9}"
+    )
+    print(header + "\n" + "-" * len(header))
+    for r in rows:
+        print(
+            f"{r.protocol:<12} {r.k:>3} {r.accuracy:>6.1f} {r.r_at_100p:>9.1f} {r.events_per_frame / 1e6:>15.2f} "
+            f"{r.relocalisations:>6} {r.ms_per_frame:>9.2f}"
+        )
+    print(f"({time.perf_counter() - began:.0f} s)")
+    options = SequenceOptions(ks=(ks[-1],))
+    point, _, _ = operating_point(Localizer(ckpt, options=options), query.images, query.place_ids, truth=query.truth)
+    tracked = Localizer(ckpt, options=options, threshold=point.threshold, search=search)
+    whole = Localizer(ckpt, options=options, threshold=point.threshold)
+    print(f"\nkidnapped at k={ks[-1]}: 100 frames, a jump of {args.jump} places, 100 frames; frames to the first right")
+    print("decision / the first right accepted one (window | global):")
+    for start in np.linspace(100, n - 100, args.jumps, dtype=int):
+        to = (start + args.jump) % (n - 100)
+        stream = np.r_[np.arange(start - 100, start), np.arange(to, to + 100)]
+        images, ids = query.images[stream], query.place_ids[stream]
+        window = frames_back(tracked.run_inputs(images), query.truth, ids, 100)
+        every = frames_back(whole.run_inputs(images), query.truth, ids, 100)
+        print(f"  frame {start} -> place index {to}: {window[0]} / {window[1]} | {every[0]} / {every[1]}")
+
+
+if __name__ == "__main__":
+    main()
