@@ -29,6 +29,8 @@ LENS = SHARED / "lens_example_davis128"
 VOLATILE = re.compile(
     r"(seconds|_s$|^wall|elapsed|time|created|duration|host|latency|version|commit|python|platform)", re.I
 )
+#: The "platform" entry of a report's versions block in text (Markdown, or HTML-escaped): the machine, not the run.
+PLATFORM = re.compile(r'("|&quot;)(platform)("|&quot;): ("|&quot;)[^"&]*("|&quot;)')
 T = ["--threads", "2", "--quiet"]
 DEV = ["--data", str(NORDLAND), "--places", "0:300"]
 
@@ -178,6 +180,7 @@ def masked_text(text: str, work: Path) -> str:
     except ValueError:
         pass
     text = re.sub(r"\d+(\.\d+)? ?(s|ms|min)\b", "N s", text)
+    text = PLATFORM.sub(r"\1\2\3: \4MACHINE\5", text)  # a report's versions block names the kernel it ran on
     return re.sub(r"\d+(\.\d+)?/s\b", "N/s", text)
 
 
