@@ -175,10 +175,9 @@ def run(args: argparse.Namespace) -> int:
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)
     unused = [f"--{name.replace('_', '-')}" for name in ("query", "data", "subset", "places") if getattr(args, name)]
-    if not args.check and unused:
-        raise InvalidValueError(f"{', '.join(unused)}: only used with --check (add --check, or leave them out)")
-    if args.check and not args.query and len(unused):
-        raise InvalidValueError(f"{', '.join(unused)}: only used with --query (the check's real queries)")
+    if unused and not (args.check and args.query):  # the options of a check on real queries
+        needs = "--query (the check's real queries)" if args.check else "--check (add --check, or leave them out)"
+        raise InvalidValueError(f"{', '.join(unused)}: only used with {needs}")
     if not 0 <= args.check_samples <= MAX_PLACES:
         raise InvalidValueError(f"--check-samples expects 0 (all queries) to {MAX_PLACES}, got {args.check_samples}")
     out = Path(args.out)

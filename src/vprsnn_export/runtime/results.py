@@ -252,15 +252,21 @@ class VerifyReport(JsonDataclass):
             report = from_json_dict(cls, data)
         except READ_ERRORS as exc:
             raise ReportError(f"malformed verify report ({describe(exc)})", source) from None
-        if any(not run.bits for run in report.runs):
-            raise ReportError("a run of the report holds no bit widths", source)
-        if problem := _non_finite(data) or _out_of_range(report):
+        if problem := _problem(data, report):
             raise ReportError(problem, source)
-        if data.get("passed") is not report.passed:
-            raise ReportError(
-                f"the stored verdict passed={data.get('passed')!r} does not match the report's checks", source
-            )
         return report
+
+
+def _problem(data: Mapping[str, Any], report: VerifyReport) -> str | None:
+    """What no verify run writes, the first found: a run without bit widths, a NaN or infinite number, a value
+    outside its range, a stored verdict that its checks contradict; None when there is nothing."""
+    if any(not run.bits for run in report.runs):
+        return "a run of the report holds no bit widths"
+    if problem := _non_finite(data) or _out_of_range(report):
+        return problem
+    if data.get("passed") is not report.passed:
+        return f"the stored verdict passed={data.get('passed')!r} does not match the report's checks"
+    return None
 
 
 def _non_finite(data: Any, where: str = "") -> str | None:

@@ -134,9 +134,8 @@ def export_and_check(
         )
         atomic_write_text(staging / MANIFEST_NAME, json.dumps(manifest_dict(result), indent=2))
         publish_folder(staging, out)
-    except BaseException:
+    finally:  # an interrupted export leaves no staging folder (a published one is no longer there)
         shutil.rmtree(staging, ignore_errors=True)
-        raise
     return result
 
 
