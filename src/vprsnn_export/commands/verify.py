@@ -150,29 +150,22 @@ def paired_rows(report: VerifyReport, as_json: bool = False) -> list[dict]:
 def conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
     """The last line and the exit code: FAILS (1), UNDECIDED (0, or 3 with --strict) or HOLDS (0), with the float
     networks that do not recognise places named (the exit code is the verdict's)."""
-    line, code = _conclusion(report, strict)
-    if report.degenerate:
-        line += f"; DEGENERATE float network ({report.degenerate}): a width that holds keeps nothing worth keeping"
-    return line, code
-
-
-def _conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
-    verdict = report.verdict
-    checks = [c for run in report.runs for r in run.bits for c in r.paired if c.verdict == "undecided"]
-    if verdict == "fails":
-        return f"FAILS: {len(report.runs) - report.n_passed} of {len(report.runs)} network(s) fail a check", (
-            EXIT_CHECK_FAILED
-        )
-    if verdict == "undecided":
+    line, code = "HOLDS: every check holds at every bit width", 0
+    if report.verdict == "fails":
+        line = f"FAILS: {len(report.runs) - report.n_passed} of {len(report.runs)} network(s) fail a check"
+        code = EXIT_CHECK_FAILED
+    elif report.verdict == "undecided":
+        checks = [c for run in report.runs for r in run.bits for c in r.paired if c.verdict == "undecided"]
         needed = [c.queries_to_decide for c in checks if c.queries_to_decide]
         more = f" (about {max(needed)} queries would decide them)" if needed else ""
         code = EXIT_UNDECIDED if strict else 0
-        return (
+        line = (
             f"UNDECIDED: nothing fails, but {len(checks)} paired check(s) straddle their tolerance{more}; "
-            f"exit {code}" + ("" if strict else f" ({EXIT_UNDECIDED} with --strict)"),
-            code,
+            f"exit {code}" + ("" if strict else f" ({EXIT_UNDECIDED} with --strict)")
         )
-    return "HOLDS: every check holds at every bit width", 0
+    if report.degenerate:
+        line += f"; DEGENERATE float network ({report.degenerate}): a width that holds keeps nothing worth keeping"
+    return line, code
 
 
 MAX_SEEDS = 1000  # networks trained by one verify run

@@ -6,7 +6,7 @@ and add the no-learning baselines and spike statistics."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
 import numpy as np
@@ -20,6 +20,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import CALIBRATIONS
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
 from vprsnn_export.network.runs import SpikeRun, joined_runs
@@ -40,16 +41,13 @@ NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
 
 
 @dataclass(frozen=True)
-class SpikeStatistics:
+class SpikeStatistics(JsonDataclass):
     """How the WTA is exercised on the queries: mean |C[t]|, steps with |C[t]| > 1 or 0, spikes per query."""
 
     mean_candidates_per_step: float
     multi_candidate_step_fraction: float
     quiet_step_fraction: float
     mean_spikes_per_query: float
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
 
 
 def spike_statistics(run: SpikeRun) -> SpikeStatistics:

@@ -26,7 +26,7 @@ from vprsnn_export.targets.loihi_budget import deployment_cost
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 
 from .checks import ExportChecks, check_exports
-from .source import MANIFEST_NAME, ExportSource, consumer_statements, export_all
+from .source import MANIFEST_ERRORS, MANIFEST_NAME, ExportSource, consumer_statements, export_all
 
 
 @dataclass(frozen=True)
@@ -208,15 +208,7 @@ def read_export(folder: str | Path) -> ExportResult:
             consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
             cost=data.get("cost"),
         )
-    except (
-        OSError,
-        UnicodeDecodeError,
-        json.JSONDecodeError,
-        InvalidValueError,
-        KeyError,
-        TypeError,
-        AttributeError,
-    ) as exc:
+    except MANIFEST_ERRORS as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
     recorded = str(data.get("folder", ""))
     checked: dict[str, tuple[WrittenFile, ...]] = {}
