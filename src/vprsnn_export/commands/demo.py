@@ -3,18 +3,11 @@
 train -> quantise (8, 4 and 2 bits, per-neuron scales, deployed calibration) -> export (NIR, Loihi-style, ONNX)
 and read every file back -> verify against float on the same input spikes -> report.
 
-The demo trains the lean preset (one neuron per place in modules of 100, T = 80 at inference) for 10 epochs on a
-600-place synthetic route: enough queries for the paired verdicts to decide (at 8 bits the intervals are a few
-tenths of a point wide; at 2 bits the accuracy drop lies wholly beyond its limit), in about a minute on two CPU
-threads. Torch runs one CPU thread unless ``--threads`` or OMP_NUM_THREADS says otherwise
-(see :mod:`vprsnn_export.threads`). ``--quick`` (for the tests) applies a tiny profile, which is written into the
-checkpoint's config and printed.
-
-Every width it computes (8, 4 and 2 bits) gets its paired verdict (docs/verify.md) and the one check that decides
-it: for a width that holds, the check closest to its limit; for one that fails, the check furthest beyond it; for
-an undecided one, the check that needs the most queries, with that number. The first line says what a user should
-conclude. It exits 0 when the chain ran as intended, whatever a width's verdict (a width that fails is a finding),
-and 1 only when an exported file does not run as the simulator does.
+It trains the lean preset for 10 epochs on a 600-place synthetic route: enough queries for the paired verdicts to
+decide, in about a minute on two CPU threads (``--quick``, for the tests: a tiny profile). Every width gets its
+paired verdict (docs/verify.md) and the one check that decides it. It exits 0 when the chain ran as intended,
+whatever a width's verdict (a width that fails is a finding), and 1 only when an exported file does not run as
+the simulator does.
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
 """`vprsnn-export verify`: quantise, export and run every implementation; judge each bit width against float.
 
-Every metric tolerance is judged on the paired table (float and deployed see the same spikes: each
-query is a pair): holds (the interval of the difference lies inside the tolerance), fails (entirely
-outside), undecided (it straddles: more queries would decide it). Exit codes: 0 when nothing fails
-(undecided included), 1 when a check fails, 2 on bad input (files, options, data), 3 with
-``--strict`` when nothing fails but a check is undecided.
+Every metric tolerance is judged on paired queries: holds (the interval lies inside the tolerance), fails
+(entirely outside), undecided (it straddles). Exit codes: 0 when nothing fails, 1 when a check fails, 2 on bad
+input, 3 with ``--strict`` when nothing fails but a check is undecided.
 """
 
 from __future__ import annotations

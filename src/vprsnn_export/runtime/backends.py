@@ -1,12 +1,9 @@
 """The backends' registry: the implementations that run a network's spike trains.
 
-A :class:`BackendKind` says which network it runs (a float checkpoint or a fixed-point model), which
-exported file it needs, if any, and how it is opened: ``open(network, path, device, threads, progress)`` gives a
-:class:`~vprsnn_export.network.runs.Backend` (``run(spikes) -> SpikeRun``). ``localize --backend`` lists
-:data:`BACKENDS`, :func:`choose_backend` resolves ``auto`` (the float network for a checkpoint, the integer
-simulator for a fixed-point model) and refuses a mismatch; evaluate, simulate, localize and the conformance
-baseline all get their counts through it. Adding one is a
-function and one ``BACKENDS.register`` line (docs/architecture.md).
+A :class:`BackendKind` says which network it runs, which exported file it needs (if any) and how it is opened
+into a :class:`~vprsnn_export.network.runs.Backend`. :func:`choose_backend` resolves ``auto`` (the float network
+for a checkpoint, the integer simulator for a fixed-point model) and refuses a mismatch; evaluate, simulate,
+localize and conformance get their counts through it. Adding one: a function and a ``BACKENDS.register`` line.
 """
 
 from __future__ import annotations

@@ -1,16 +1,10 @@
 """Cross-implementation conformance: every backend of one network must compute what the baseline computes.
 
-The baseline is the integer simulator (a fixed-point model) or the float network (a
-float checkpoint exported to NIR). Each *contender* is another backend on the same
-spike tensor: the slow reference stepper (first few presentations), the ONNX graph on
-onnxruntime, the NIR file read back and the Loihi-style files read back, each run on
-the simulator. Every :class:`~vprsnn_export.network.runs.SpikeRun` field both sides report is
-compared exactly (raster, counts, candidates per step, final voltages, saturations);
-a W+Prob head (float64 arithmetic in another summation order) must give identical
-decisions and differ from the readout by at most ``WPROB_ROUNDING``. A model read back
-from a file is also compared with the one written, integer by integer.
-
-Used by `verify` (every bit width) and by `export --check` (the files it wrote).
+The baseline is the integer simulator (a fixed-point model) or the float network (a checkpoint exported to NIR);
+each *contender* (the reference stepper on the first presentations, ONNX on onnxruntime, the NIR and Loihi-style
+files read back) runs on the same spike tensor. Every :class:`~vprsnn_export.network.runs.SpikeRun` field both
+report is compared exactly; a W+Prob head must give identical decisions within ``WPROB_ROUNDING``; a model read
+back from a file is compared with the one written, integer by integer. Used by `verify` and `export --check`.
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
 """Deployment: a float checkpoint becomes a calibrated fixed-point model.
 
-Quantisation (:mod:`vprsnn_export.export.quantize`) maps weights and thresholds to
-integers; the deployed network then answers the reference places differently from
-the float one, so by default its calibration S^R is re-measured on the integer
-simulator (the network that will run), exactly as the float network was calibrated.
+Quantisation (:mod:`vprsnn_export.export.quantize`) maps weights and thresholds to integers; by default the
+calibration S^R is then re-measured on the integer simulator, the network that will run.
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
 """The measurements a verification records, one frozen dataclass each (the parts of report.json and export.json).
 
-Per readout: :class:`ToleranceCheck` and :class:`PairedCheck` (and :func:`worst_verdict` over verdicts); per
-bit width: :class:`SpikeLevel`, :class:`DecisionLevel`, the curves and histograms and an ensemble's
-:class:`ModuleRow`; per fixed-point model: :class:`Comparison` of two implementations' outputs and
-:class:`ConformanceResult`, every comparison. Each maps to JSON by :mod:`vprsnn_export.io.serial`; the report's
-containers (:mod:`vprsnn_export.runtime.results`) hold them and re-export them.
+Per readout :class:`ToleranceCheck` and :class:`PairedCheck`; per bit width :class:`SpikeLevel`,
+:class:`DecisionLevel`, curves, histograms and :class:`ModuleRow`; per model :class:`Comparison` and
+:class:`ConformanceResult`. Each maps to JSON by :mod:`vprsnn_export.io.serial`.
 """
 
 from __future__ import annotations

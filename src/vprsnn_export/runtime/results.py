@@ -1,12 +1,8 @@
 """The typed results of `vprsnn-export verify`, and their JSON form (report.json, schema ``vprsnn-verify-report/1``).
 
-Every result is a frozen dataclass with ``to_dict()`` (the JSON value report.json holds)
-and ``from_dict()`` (its inverse: ``Type.from_dict(x.to_dict()) == x``), both by the one
-generic mapping of :mod:`vprsnn_export.io.serial` from the fields and their type hints; a
-field's options (``json_options``) keep the schema's keys and load older files. The report
-renderer and the commands read attributes, never nested string keys. The measurements the
-containers here hold (one check, one level, one comparison) are in :mod:`vprsnn_export.runtime.measurements`
-and re-exported here.
+Every result is a frozen dataclass whose ``to_dict()`` and ``from_dict()`` (``Type.from_dict(x.to_dict()) == x``)
+come from the fields by :mod:`vprsnn_export.io.serial`; field options keep the schema's keys and load older files.
+The measurements held here are in :mod:`vprsnn_export.runtime.measurements`, re-exported here.
 """
 
 from __future__ import annotations
