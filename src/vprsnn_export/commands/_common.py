@@ -324,11 +324,10 @@ MAX_VELOCITY_CANDIDATES = 10_000
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
     """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
     parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
-    if None in parsed:
-        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}")
-    values = tuple(int(v or 0) for v in parsed)
-    if not values or min(values) < 1 or max(values) > maximum:
-        raise InvalidValueError(f"{option} expects integers from 1 to {maximum}, got {raw!r}")
+    values = tuple(v for v in parsed if v is not None)
+    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > maximum:
+        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {maximum}"
+        raise InvalidValueError(f"{option} expects {expected}, got {raw!r}")
     return values
 
 

@@ -151,10 +151,11 @@ def choose_backend(network: Network, name: str = "auto", path: str | Path | None
         fits = [kind for kind in BACKENDS.values() if (kind.needs is None) == (path is None) and SLOW not in kind.tags]
         name = next((k for k in fits if isinstance(network, k.runs)), fits[0] if fits else BACKENDS.values()[0]).name
     kind = BACKENDS.get(name)
-    if not isinstance(network, kind.runs):
-        raise InvalidValueError(f"--backend {name} needs {_NETWORKS.get(kind.runs, kind.runs.__name__)}")
-    if kind.needs is not None and path is None:
-        raise InvalidValueError(f"--backend {name} needs {kind.needs}: the file exported from this model")
+    needs = None if isinstance(network, kind.runs) else _NETWORKS.get(kind.runs, kind.runs.__name__)
+    if needs is None and kind.needs is not None and path is None:
+        needs = f"{kind.needs}: the file exported from this model"
+    if needs is not None:
+        raise InvalidValueError(f"--backend {name} needs {needs}")
     return kind
 
 

@@ -75,16 +75,13 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
             tolerances[key] = None
             continue
         try:
-            value = float(raw)
+            value, counted = float(raw), key in COUNTED
+            fits = bool(np.isfinite(value) and value >= 0 and value == int(value)) if counted else 0 <= value <= 1
+            expected = "a whole number >= 0" if counted else "a fraction in [0, 1] (0.02 = 2 points)"
         except ValueError:
-            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw[:40]!r}") from None
-        if key in COUNTED:
-            if not np.isfinite(value) or value < 0 or value != int(value):
-                raise InvalidValueError(f"--tolerance {key}: expected a whole number >= 0, got {raw[:40]!r}")
-        elif not 0.0 <= value <= 1.0:
-            raise InvalidValueError(
-                f"--tolerance {key}: expected a fraction in [0, 1] (0.02 = 2 points), got {raw[:40]!r}"
-            )
+            fits, expected = False, "a number or off"
+        if not fits:
+            raise InvalidValueError(f"--tolerance {key}: expected {expected}, got {raw[:40]!r}")
         tolerances[key] = value
     return tolerances
 
