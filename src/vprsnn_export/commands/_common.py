@@ -341,12 +341,12 @@ def parse_names(raw: str, option: str) -> list[str]:
 def parse_velocity_grid(raw: str) -> tuple[float, ...]:
     try:
         lo, hi, step = (float(v) for v in raw.split(":"))
+        finite = all(math.isfinite(v) for v in (lo, hi, step)) and max(abs(lo), abs(hi)) <= MAX_VELOCITY
+        expected = "" if finite else f"finite velocities from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}"
     except ValueError:
-        raise InvalidValueError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
-    if not all(math.isfinite(v) for v in (lo, hi, step)) or max(abs(lo), abs(hi)) > MAX_VELOCITY:
-        raise InvalidValueError(
-            f"--velocity-search expects finite velocities from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, got {raw!r}"
-        )
+        expected = "LO:HI:STEP"
+    if expected:
+        raise InvalidValueError(f"--velocity-search expects {expected}, got {raw!r}")
     if step <= 0 or hi < lo:
         raise InvalidValueError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
     count = int(round((hi - lo) / step)) + 1

@@ -155,22 +155,24 @@ def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
     """The file export.json lists, inside ``folder``: a path relative to the folder (or, as export.json files
     of earlier versions recorded it, to the working directory, starting with the recorded folder).
     ModelFileError for an absolute path, a ``..`` part, or a path (symbolic links followed) outside ``folder``."""
-    if listed.is_absolute() or listed.drive:
-        raise ModelFileError(f"{MANIFEST_NAME} lists the absolute path {listed}: files must lie in its folder", folder)
     base = Path(recorded_folder)  # pathlib drops "." parts: a relative base starts with a name or ".."
     earlier = base.parts and base.parts[0] != ".." and not base.is_absolute()
     if earlier and listed.parts[: len(base.parts)] == base.parts:
         listed = listed.relative_to(base)  # an earlier version's path, relative to the working directory
-    if ".." in listed.parts or not listed.parts:
-        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which leaves its folder", folder)
     path = folder / listed
     try:
         inside = path.resolve().is_relative_to(folder.resolve())
     except (OSError, RuntimeError):
         inside = False
-    if not inside:
-        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which resolves outside its folder", folder)
-    return path
+    if listed.is_absolute() or listed.drive:
+        wrong = f"the absolute path {listed}: files must lie in its folder"
+    elif ".." in listed.parts or not listed.parts:
+        wrong = f"{listed}, which leaves its folder"
+    elif not inside:
+        wrong = f"{listed}, which resolves outside its folder"
+    else:
+        return path
+    raise ModelFileError(f"{MANIFEST_NAME} lists {wrong}", folder)
 
 
 def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
