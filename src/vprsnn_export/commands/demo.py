@@ -78,11 +78,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def demo_config(seed: int, quick: bool = False) -> Config:
-    """The lean preset with the demo profile (or the test profile) applied."""
-    return preset(DEMO_PRESET).replace(**{**(QUICK_PROFILE if quick else DEMO_PROFILE), "seed": seed})
-
-
 def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
     """What the demo trains: inputs, T, epochs and the ensemble's modules, and any profile changes."""
     inputs = CHANNELS.get(cfg.preprocess.channels).label
@@ -199,12 +194,12 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     threads = args.threads
-    cfg = demo_config(args.seed, args.quick)
+    profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
+    cfg = preset(DEMO_PRESET).replace(**{**profile, "seed": args.seed})  # the lean preset with the profile applied
     device = resolve_device(args.device)
     progress = not args.quiet
     started = time.perf_counter()
     data = f"{DEMO_DATA}:{QUICK_PLACES if args.quick else DEMO_PLACES}"
-    profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
 
     def say(message: str) -> None:
         if progress:

@@ -115,15 +115,11 @@ def evaluate_float(
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
     The counts come from ``backend`` of :data:`~vprsnn_export.runtime.backends.BACKENDS` (``auto``: the float
-    network). ``cluster``: the float network's modules run in tasks there (CPU workers) and are gathered
-    for the whole-route readout; the same counts bit for bit (:mod:`vprsnn_export.trainer.sharded`).
-
-    With ``reference_images`` (the checkpoint's reference traversals, same place order)
-    the no-learning baselines are added: SAD read out like W+Prob (strategy "sad") and the template
-    ceiling, cosine nearest neighbour on the same images (strategy "cosine", margin confidence). An ensemble
-    (``train.module_size`` > 0) is read out over the whole route with its hyperactive
-    neurons silenced (``assignment.hyperactive_share``), and per-module rows are added. ``truth`` judges the
-    queries (None: the options' match window).
+    network), or with ``cluster`` from the float network's modules run in tasks there (the same counts bit for
+    bit, :mod:`vprsnn_export.trainer.sharded`). ``reference_images`` (the reference traversals, same place order)
+    add the no-learning baselines: SAD read out like W+Prob ("sad") and cosine nearest neighbour ("cosine"). An
+    ensemble is read out over the whole route with its hyperactive neurons silenced, and per-module rows are
+    added. ``truth`` judges the queries (None: the options' match window).
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)

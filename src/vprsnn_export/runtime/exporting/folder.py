@@ -95,11 +95,9 @@ def export_and_check(
 ) -> ExportResult:
     """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
 
-    The folder is built as a whole beside ``out`` and then put in its place
-    (:func:`vprsnn_export.io.fileio.publish_folder`), export.json last: a reader never sees new
-    files beside old ones, and an interrupted export leaves the previous folder as it was.
-    An existing ``out`` must be empty or an earlier export (it holds export.json); that one is
-    replaced only with ``overwrite=True``.
+    The folder is built beside ``out`` and put in its place whole (:func:`vprsnn_export.io.fileio.publish_folder`),
+    export.json last: a reader never sees new files beside old ones, and an interrupted export leaves the previous
+    folder as it was. An existing ``out`` must be empty or an earlier export, replaced only with ``overwrite=True``.
     """
     out = Path(out)
     check_deploy_folder(out, overwrite=overwrite)

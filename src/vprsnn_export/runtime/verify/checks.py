@@ -227,14 +227,10 @@ def tolerance_checks(
 ) -> list[ToleranceCheck]:
     """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
 
-    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that
-    are not consecutive places, whose k-frame windows mix unrelated places:
-    :meth:`~vprsnn_export.readout.sequence.SequenceOptions.warning`) no k > 1 metric is judged.
-
-    Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
-    network that does better than float never fails. A metric moves in steps of 1/Q (one
-    query of Q), so the limit applied is max(limit, query_slack / Q): with 30 queries a
-    "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
+    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that are not consecutive
+    places) no k > 1 metric is judged. Metric tolerances bound the drop from float (float - quantised <= limit):
+    doing better than float never fails. A metric moves in steps of 1/Q, so the limit applied is
+    max(limit, query_slack / Q) (with 30 queries a "1 point" limit would mean "no query may change").
     """
     judged = sorted(k for k in set(ks) if k == 1 or sequences)
     checks: list[ToleranceCheck] = []
