@@ -131,16 +131,11 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
 def paired_rows(report: VerifyReport, as_json: bool = False) -> list[dict]:
     """The paired table of every network and bit width: every judged check and every readout's accuracy
     (``as_json``: every paired check, as its JSON object)."""
-    from ..runtime.report.labels import paired_cells, shown_paired
+    from ..runtime.report.labels import paired_cells, results, shown_paired
 
     return [
-        {
-            "network": run.label or str(index + 1),
-            "bits": result.bits,
-            **(check.to_dict() if as_json else paired_cells(check)),
-        }
-        for index, run in enumerate(report.runs)
-        for result in run.bits
+        {"network": label, "bits": result.bits, **(check.to_dict() if as_json else paired_cells(check))}
+        for label, _, result in results(report)
         for check in (result.paired if as_json else shown_paired(result.paired))
     ]
 
