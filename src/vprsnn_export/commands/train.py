@@ -131,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
         f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
         f"in {time.perf_counter() - started:.1f} s on {where} ({args.threads} thread(s)); wrote {path}"
     )
-    none = "none (no second traversal named; --adapt-from TRAVERSAL --adapt gain learns one)"
-    print(f"adaptation: {none if record is None else record}")
+    unadapted = "none (no second traversal named; --adapt-from TRAVERSAL --adapt gain learns one)"
+    print(f"adaptation: {unadapted if record is None else record}")
     return 0
 
 
