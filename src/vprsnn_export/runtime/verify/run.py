@@ -231,11 +231,12 @@ def verify_width(
     """One bit width: deploy, run the integer simulator, read back and run every exported file, read out once,
     compare with float (``stages`` advances by one per stage)."""
     ckpt, device, progress, readout = network.checkpoint, runtime.device, runtime.progress, options.readout
-    clock, seconds = [time.perf_counter()], {}
+    clock, seconds = time.perf_counter(), {}
 
     def finished(stage: str, following: str | None = None) -> None:
         """A stage done: its seconds kept, the bar one stage on (showing the following one)."""
-        seconds[stage], clock[0] = time.perf_counter() - clock[0], time.perf_counter()
+        nonlocal clock
+        seconds[stage], clock = time.perf_counter() - clock, time.perf_counter()
         stages.update(1)
         if following:
             stages.set_postfix(bits=bits, stage=following)
