@@ -60,10 +60,9 @@ def consumer_gate(
 ) -> tuple[Comparison, ...]:
     """One comparison per installed consumer: decisions of consumer + readout rule vs the network's.
 
-    ``raster`` is the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting.
-    A consumer that refuses the file (one threshold only, ...) gives a passing row saying so;
-    a graph with the recurrent ``wta`` node (no readout rule to apply) is not gated. ``label``: the label of the
-    file's target (its rows land under that target).
+    ``raster``: the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting. A consumer that
+    refuses the file gives a passing row saying so; a graph with the recurrent ``wta`` node is not gated.
+    ``label``: the file's target's label (its rows land under that target).
     """
     graph = load_graph(path)
     if "wta" in graph.nodes:

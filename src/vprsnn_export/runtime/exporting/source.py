@@ -100,11 +100,8 @@ def parse_export_targets(raw: str) -> tuple[str, ...]:
 
 
 def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
-    """The fixed-point model the integer targets get, or None when none is asked for.
-
-    A float checkpoint is quantised only when ``bits`` is given (per-neuron max-abs
-    scales, the float calibration kept): :func:`runtime.deployment.deploy`.
-    """
+    """The fixed-point model the integer targets get, or None when none is asked for: a float checkpoint is
+    quantised only when ``bits`` is given (per-neuron max-abs scales, the float calibration kept)."""
     if source.fixed_point is not None:
         if bits is not None:
             raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")

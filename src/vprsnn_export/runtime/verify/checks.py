@@ -153,11 +153,8 @@ def module_rows(
     float_raster: torch.Tensor,
     int_raster: torch.Tensor,
 ) -> tuple[ModuleRow, ...]:
-    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
-    and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
-
-    Vectorised over modules (one bincount per quantity in ``module_accuracy``, one raster reshape).
-    """
+    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1 and the
+    largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
     n_modules = len(regions)
     top = max(float_scored.ks)
     accuracy = {
