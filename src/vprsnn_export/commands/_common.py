@@ -324,11 +324,10 @@ MAX_VELOCITY_CANDIDATES = 10_000
 def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
     """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
     parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
-    if None in parsed:
-        raise InvalidValueError(f"{option} expects comma-separated integers, got {raw!r}")
-    values = tuple(int(v or 0) for v in parsed)
-    if not values or min(values) < 1 or max(values) > maximum:
-        raise InvalidValueError(f"{option} expects integers from 1 to {maximum}, got {raw!r}")
+    values = tuple(v for v in parsed if v is not None)
+    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > maximum:
+        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {maximum}"
+        raise InvalidValueError(f"{option} expects {expected}, got {raw!r}")
     return values
 
 
@@ -342,12 +341,12 @@ def parse_names(raw: str, option: str) -> list[str]:
 def parse_velocity_grid(raw: str) -> tuple[float, ...]:
     try:
         lo, hi, step = (float(v) for v in raw.split(":"))
+        finite = all(math.isfinite(v) for v in (lo, hi, step)) and max(abs(lo), abs(hi)) <= MAX_VELOCITY
+        expected = "" if finite else f"finite velocities from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}"
     except ValueError:
-        raise InvalidValueError(f"--velocity-search expects LO:HI:STEP, got {raw!r}") from None
-    if not all(math.isfinite(v) for v in (lo, hi, step)) or max(abs(lo), abs(hi)) > MAX_VELOCITY:
-        raise InvalidValueError(
-            f"--velocity-search expects finite velocities from -{MAX_VELOCITY:g} to {MAX_VELOCITY:g}, got {raw!r}"
-        )
+        expected = "LO:HI:STEP"
+    if expected:
+        raise InvalidValueError(f"--velocity-search expects {expected}, got {raw!r}")
     if step <= 0 or hi < lo:
         raise InvalidValueError(f"--velocity-search needs LO <= HI and STEP > 0, got {raw!r}")
     count = int(round((hi - lo) / step)) + 1

@@ -3,18 +3,11 @@
 train -> quantise (8, 4 and 2 bits, per-neuron scales, deployed calibration) -> export (NIR, Loihi-style, ONNX)
 and read every file back -> verify against float on the same input spikes -> report.
 
-The demo trains the lean preset (one neuron per place in modules of 100, T = 80 at inference) for 10 epochs on a
-600-place synthetic route: enough queries for the paired verdicts to decide (at 8 bits the intervals are a few
-tenths of a point wide; at 2 bits the accuracy drop lies wholly beyond its limit), in about a minute on two CPU
-threads. Torch runs one CPU thread unless ``--threads`` or OMP_NUM_THREADS says otherwise
-(see :mod:`vprsnn_export.threads`). ``--quick`` (for the tests) applies a tiny profile, which is written into the
-checkpoint's config and printed.
-
-Every width it computes (8, 4 and 2 bits) gets its paired verdict (docs/verify.md) and the one check that decides
-it: for a width that holds, the check closest to its limit; for one that fails, the check furthest beyond it; for
-an undecided one, the check that needs the most queries, with that number. The first line says what a user should
-conclude. It exits 0 when the chain ran as intended, whatever a width's verdict (a width that fails is a finding),
-and 1 only when an exported file does not run as the simulator does.
+It trains the lean preset for 10 epochs on a 600-place synthetic route: enough queries for the paired verdicts to
+decide, in about a minute on two CPU threads (``--quick``, for the tests: a tiny profile). Every width gets its
+paired verdict (docs/verify.md) and the one check that decides it. It exits 0 when the chain ran as intended,
+whatever a width's verdict (a width that fails is a finding), and 1 only when an exported file does not run as
+the simulator does.
 """
 
 from __future__ import annotations
@@ -83,11 +76,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--quick", action="store_true", help=argparse.SUPPRESS)  # tiny run for the tests
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
-
-
-def demo_config(seed: int, quick: bool = False) -> Config:
-    """The lean preset with the demo profile (or the test profile) applied."""
-    return preset(DEMO_PRESET).replace(**{**(QUICK_PROFILE if quick else DEMO_PROFILE), "seed": seed})
 
 
 def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
@@ -206,12 +194,12 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     threads = args.threads
-    cfg = demo_config(args.seed, args.quick)
+    profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
+    cfg = preset(DEMO_PRESET).replace(**{**profile, "seed": args.seed})  # the lean preset with the profile applied
     device = resolve_device(args.device)
     progress = not args.quiet
     started = time.perf_counter()
     data = f"{DEMO_DATA}:{QUICK_PLACES if args.quick else DEMO_PLACES}"
-    profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
 
     def say(message: str) -> None:
         if progress:

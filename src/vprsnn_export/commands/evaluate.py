@@ -7,10 +7,9 @@ import sys
 
 from ..cluster import CLUSTER_HELP, parse_cluster
 from ..data.dataset import dataset_files, load_selection, select_places
-from ..errors import InvalidValueError
 from ..io.checkpoint import load_checkpoint
 from ..io.fileio import check_output
-from ..runtime.predictions import predictions
+from ..runtime.predictions import prediction_format, predictions
 from ._common import (
     RESULT_COLUMNS,
     add_query_options,
@@ -59,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
     ckpt = load_checkpoint(args.checkpoint)
     if args.predictions is not None:
-        if not args.predictions.lower().endswith((".csv", ".jsonl")):
-            raise InvalidValueError(f"--predictions {args.predictions}: give a .csv or .jsonl file name")
+        prediction_format(args.predictions)
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)

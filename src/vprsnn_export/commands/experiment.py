@@ -1,9 +1,7 @@
 """`vprsnn-export experiment NAME`: regenerate one of the paper's tables or figures as JSON + Markdown + plots.
 
-The experiments are the repository's lab (its top-level ``experiments/`` package), not part of the installed
-library: this command finds them beside the library's source in a checkout (``src/vprsnn_export`` ->
-``experiments/``), else under the working folder, and hands them the command line. From an installed
-package without the repository it says so in one line (exit 2).
+The experiments are the repository's lab (``experiments/``), not the installed library: this command finds them
+beside the source in a checkout, else under the working folder; without one it says so in one line (exit 2).
 """
 
 from __future__ import annotations

@@ -1,17 +1,9 @@
 """`vprsnn-export export`: write NIR, a Loihi-style description and ONNX, and say what each consumer computes.
 
-MODEL is a float checkpoint (``train``) or a fixed-point model (``quantize``), told apart
-by the ``format`` field of its container. NIR takes either. The Loihi description and
-ONNX are integer targets: they need a fixed-point model, so a float checkpoint is refused
-with the command to run, unless ``--quantize BITS`` asks for an on-the-fly quantisation
-(per-neuron max-abs scales, float calibration kept; ``quantize`` offers every other choice).
-
-With ``--check`` every written file is read back and run beside the project's own
-simulators, on real query presentations (``--query`` and the data options) or on
-synthetic spike trains; the table states exact identities and measured agreements.
-
-``--loihi-cores MODULESxNEURONSxINPUTS`` (no MODEL, no --out) prints how many Loihi-class
-cores, chips and synapses such an ensemble needs at 8, 4 and 2 bits (docs/targets.md §2.5).
+MODEL is a float checkpoint or a fixed-point model. NIR takes either; the Loihi description and ONNX need a
+fixed-point model, so a checkpoint is refused with the command to run, unless ``--quantize BITS`` quantises on the
+fly. With ``--check`` every written file is read back and run beside the project's own simulators, on real
+queries (``--query``) or synthetic spike trains. ``--loihi-cores MxNxI`` alone prints the Loihi-class core budget.
 """
 
 from __future__ import annotations
@@ -175,10 +167,9 @@ def run(args: argparse.Namespace) -> int:
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)
     unused = [f"--{name.replace('_', '-')}" for name in ("query", "data", "subset", "places") if getattr(args, name)]
-    if not args.check and unused:
-        raise InvalidValueError(f"{', '.join(unused)}: only used with --check (add --check, or leave them out)")
-    if args.check and not args.query and len(unused):
-        raise InvalidValueError(f"{', '.join(unused)}: only used with --query (the check's real queries)")
+    if unused and not (args.check and args.query):  # the options of a check on real queries
+        needs = "--query (the check's real queries)" if args.check else "--check (add --check, or leave them out)"
+        raise InvalidValueError(f"{', '.join(unused)}: only used with {needs}")
     if not 0 <= args.check_samples <= MAX_PLACES:
         raise InvalidValueError(f"--check-samples expects 0 (all queries) to {MAX_PLACES}, got {args.check_samples}")
     out = Path(args.out)

@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import InvalidValueError
 from ..export.model import save_fixed_point
 from ..io.checkpoint import checkpoint_sha256, load_checkpoint
 from ..io.fileio import check_output
@@ -63,7 +62,7 @@ def model_filename(bits: int, options: QuantiseOptions) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
-    from ..runtime.deployment import deploy
+    from ..runtime.deployment import check_reference_places, deploy
 
     widths = bit_widths(args)
     options = quantise_options(args)
@@ -73,8 +72,7 @@ def run(args: argparse.Namespace) -> int:
     reference_images = None
     if options.calibration == "deployed":
         dataset = query_data(args, ckpt.data, ckpt.config.preprocess, list(ckpt.reference_traversals))
-        if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
-            raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
+        check_reference_places(dataset.place_ids, ckpt.reference_place_ids)
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
     paths = [Path(args.out) / model_filename(bits, options) for bits in widths]
     for path in paths:  # every output is checked before any quantisation runs

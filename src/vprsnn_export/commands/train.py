@@ -131,15 +131,9 @@ def run(args: argparse.Namespace) -> int:
         f"trained {cfg.train.epochs} epochs on {len(dataset.place_ids)} places x {len(references)} traversal(s) "
         f"in {time.perf_counter() - started:.1f} s on {where} ({args.threads} thread(s)); wrote {path}"
     )
-    print(adaptation_line(record))
+    unadapted = "none (no second traversal named; --adapt-from TRAVERSAL --adapt gain learns one)"
+    print(f"adaptation: {unadapted if record is None else record}")
     return 0
-
-
-def adaptation_line(summary: str | None) -> str:
-    """One line on what the network adapted to (or that no second traversal was named)."""
-    if summary is None:
-        return "adaptation: none (no second traversal named; --adapt-from TRAVERSAL --adapt gain learns one)"
-    return f"adaptation: {summary}"
 
 
 def capacity_warning(n_places: int, cfg: Config) -> str | None:

@@ -1,10 +1,8 @@
 """`vprsnn-export verify`: quantise, export and run every implementation; judge each bit width against float.
 
-Every metric tolerance is judged on the paired table (float and deployed see the same spikes: each
-query is a pair): holds (the interval of the difference lies inside the tolerance), fails (entirely
-outside), undecided (it straddles: more queries would decide it). Exit codes: 0 when nothing fails
-(undecided included), 1 when a check fails, 2 on bad input (files, options, data), 3 with
-``--strict`` when nothing fails but a check is undecided.
+Every metric tolerance is judged on paired queries: holds (the interval lies inside the tolerance), fails
+(entirely outside), undecided (it straddles). Exit codes: 0 when nothing fails, 1 when a check fails, 2 on bad
+input, 3 with ``--strict`` when nothing fails but a check is undecided.
 """
 
 from __future__ import annotations
@@ -133,16 +131,11 @@ def verdict_rows(report: VerifyReport) -> list[dict]:
 def paired_rows(report: VerifyReport, as_json: bool = False) -> list[dict]:
     """The paired table of every network and bit width: every judged check and every readout's accuracy
     (``as_json``: every paired check, as its JSON object)."""
-    from ..runtime.report.labels import paired_cells, shown_paired
+    from ..runtime.report.labels import paired_cells, results, shown_paired
 
     return [
-        {
-            "network": run.label or str(index + 1),
-            "bits": result.bits,
-            **(check.to_dict() if as_json else paired_cells(check)),
-        }
-        for index, run in enumerate(report.runs)
-        for result in run.bits
+        {"network": label, "bits": result.bits, **(check.to_dict() if as_json else paired_cells(check))}
+        for label, _, result in results(report)
         for check in (result.paired if as_json else shown_paired(result.paired))
     ]
 
@@ -150,29 +143,22 @@ def paired_rows(report: VerifyReport, as_json: bool = False) -> list[dict]:
 def conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
     """The last line and the exit code: FAILS (1), UNDECIDED (0, or 3 with --strict) or HOLDS (0), with the float
     networks that do not recognise places named (the exit code is the verdict's)."""
-    line, code = _conclusion(report, strict)
-    if report.degenerate:
-        line += f"; DEGENERATE float network ({report.degenerate}): a width that holds keeps nothing worth keeping"
-    return line, code
-
-
-def _conclusion(report: VerifyReport, strict: bool) -> tuple[str, int]:
-    verdict = report.verdict
-    checks = [c for run in report.runs for r in run.bits for c in r.paired if c.verdict == "undecided"]
-    if verdict == "fails":
-        return f"FAILS: {len(report.runs) - report.n_passed} of {len(report.runs)} network(s) fail a check", (
-            EXIT_CHECK_FAILED
-        )
-    if verdict == "undecided":
+    line, code = "HOLDS: every check holds at every bit width", 0
+    if report.verdict == "fails":
+        line = f"FAILS: {len(report.runs) - report.n_passed} of {len(report.runs)} network(s) fail a check"
+        code = EXIT_CHECK_FAILED
+    elif report.verdict == "undecided":
+        checks = [c for run in report.runs for r in run.bits for c in r.paired if c.verdict == "undecided"]
         needed = [c.queries_to_decide for c in checks if c.queries_to_decide]
         more = f" (about {max(needed)} queries would decide them)" if needed else ""
         code = EXIT_UNDECIDED if strict else 0
-        return (
+        line = (
             f"UNDECIDED: nothing fails, but {len(checks)} paired check(s) straddle their tolerance{more}; "
-            f"exit {code}" + ("" if strict else f" ({EXIT_UNDECIDED} with --strict)"),
-            code,
+            f"exit {code}" + ("" if strict else f" ({EXIT_UNDECIDED} with --strict)")
         )
-    return "HOLDS: every check holds at every bit width", 0
+    if report.degenerate:
+        line += f"; DEGENERATE float network ({report.degenerate}): a width that holds keeps nothing worth keeping"
+    return line, code
 
 
 MAX_SEEDS = 1000  # networks trained by one verify run

@@ -1,12 +1,9 @@
 """The backends' registry: the implementations that run a network's spike trains.
 
-A :class:`BackendKind` says which network it runs (a float checkpoint or a fixed-point model), which
-exported file it needs, if any, and how it is opened: ``open(network, path, device, threads, progress)`` gives a
-:class:`~vprsnn_export.network.runs.Backend` (``run(spikes) -> SpikeRun``). ``localize --backend`` lists
-:data:`BACKENDS`, :func:`choose_backend` resolves ``auto`` (the float network for a checkpoint, the integer
-simulator for a fixed-point model) and refuses a mismatch; evaluate, simulate, localize and the conformance
-baseline all get their counts through it. Adding one is a
-function and one ``BACKENDS.register`` line (docs/architecture.md).
+A :class:`BackendKind` says which network it runs, which exported file it needs (if any) and how it is opened
+into a :class:`~vprsnn_export.network.runs.Backend`. :func:`choose_backend` resolves ``auto`` (the float network
+for a checkpoint, the integer simulator for a fixed-point model) and refuses a mismatch; evaluate, simulate,
+localize and conformance get their counts through it. Adding one: a function and a ``BACKENDS.register`` line.
 """
 
 from __future__ import annotations
@@ -154,10 +151,11 @@ def choose_backend(network: Network, name: str = "auto", path: str | Path | None
         fits = [kind for kind in BACKENDS.values() if (kind.needs is None) == (path is None) and SLOW not in kind.tags]
         name = next((k for k in fits if isinstance(network, k.runs)), fits[0] if fits else BACKENDS.values()[0]).name
     kind = BACKENDS.get(name)
-    if not isinstance(network, kind.runs):
-        raise InvalidValueError(f"--backend {name} needs {_NETWORKS.get(kind.runs, kind.runs.__name__)}")
-    if kind.needs is not None and path is None:
-        raise InvalidValueError(f"--backend {name} needs {kind.needs}: the file exported from this model")
+    needs = None if isinstance(network, kind.runs) else _NETWORKS.get(kind.runs, kind.runs.__name__)
+    if needs is None and kind.needs is not None and path is None:
+        needs = f"{kind.needs}: the file exported from this model"
+    if needs is not None:
+        raise InvalidValueError(f"--backend {name} needs {needs}")
     return kind
 
 

@@ -1,16 +1,10 @@
 """Cross-implementation conformance: every backend of one network must compute what the baseline computes.
 
-The baseline is the integer simulator (a fixed-point model) or the float network (a
-float checkpoint exported to NIR). Each *contender* is another backend on the same
-spike tensor: the slow reference stepper (first few presentations), the ONNX graph on
-onnxruntime, the NIR file read back and the Loihi-style files read back, each run on
-the simulator. Every :class:`~vprsnn_export.network.runs.SpikeRun` field both sides report is
-compared exactly (raster, counts, candidates per step, final voltages, saturations);
-a W+Prob head (float64 arithmetic in another summation order) must give identical
-decisions and differ from the readout by at most ``WPROB_ROUNDING``. A model read back
-from a file is also compared with the one written, integer by integer.
-
-Used by `verify` (every bit width) and by `export --check` (the files it wrote).
+The baseline is the integer simulator (a fixed-point model) or the float network (a checkpoint exported to NIR);
+each *contender* (the reference stepper on the first presentations, ONNX on onnxruntime, the NIR and Loihi-style
+files read back) runs on the same spike tensor. Every :class:`~vprsnn_export.network.runs.SpikeRun` field both
+report is compared exactly; a W+Prob head must give identical decisions within ``WPROB_ROUNDING``; a model read
+back from a file is compared with the one written, integer by integer. Used by `verify` and `export --check`.
 """
 
 from __future__ import annotations
@@ -138,12 +132,9 @@ def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
 
 @dataclass(frozen=True)
 class Contender:
-    """A backend checked against the baseline, under the label its checks carry.
-
-    ``n_queries`` limits it to the first presentations (the slow reference stepper);
-    ``written``/``read_back`` are the model written to a file and the one read back
-    from it, compared integer by integer before the read-back model is run.
-    """
+    """A backend checked against the baseline, under the label its checks carry: on the first ``n_queries``
+    presentations only (the slow reference stepper); ``written``/``read_back``, the model written to a file and
+    the one read back, are compared integer by integer first."""
 
     target: str  # "reference" or a registered target's name
     label: str
@@ -215,12 +206,9 @@ def compare_backends(
 def write_targets(
     model: FixedPointModel, folder: Path, targets: Sequence[str]
 ) -> tuple[dict[str, list[Path]], dict[str, str]]:
-    """Write each target of ``model`` into ``folder``, in the registry's order (ONNX with its W+Prob head and raster).
-
-    Returns (files per target, targets skipped with the reason: a writer's InvalidValueError,
-    e.g. ONNX cannot express a network without state isolation). InvalidValueError for a
-    target that is not registered.
-    """
+    """Write each target of ``model`` into ``folder``, in the registry's order (ONNX with its W+Prob head and raster):
+    (files per target, the targets a writer refused with its InvalidValueError, e.g. ONNX without state isolation).
+    InvalidValueError for a target that is not registered."""
     wanted = {TARGETS.get(name).name for name in targets}
     options = WriteOptions(source_sha256=model.source_sha256, conformance=True)
     files: dict[str, list[Path]] = {}
@@ -264,10 +252,9 @@ def cross_implementation(
 ) -> ConformanceResult:
     """Write every requested target into ``folder``, read it back and run it; compare everything exactly.
 
-    The baseline is the registry's exact baseline, the integer simulator (``int_run``: its recorded run of
-    ``spikes``, when already made); every other exact backend runs beside it, a slow one (the reference stepper)
-    on the first ``reference_queries`` presentations. ``extra`` contenders (e.g. a tampered backend in the tests) are checked too.
-    ``targets``: names of registered targets (None: all of them).
+    The baseline is the integer simulator (``int_run``: its recorded run of ``spikes``, when already made); every
+    other exact backend runs beside it, a slow one on the first ``reference_queries`` presentations, and the
+    ``extra`` contenders too (a tampered backend in the tests). ``targets``: registered names (None: all).
     """
     files, skipped = write_targets(model, Path(folder), TARGETS.names() if targets is None else targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))

@@ -1,18 +1,15 @@
 """The NIR consumer gate: the field's float consumers must decide as the network does, within a stated tolerance.
 
-``export --check`` and ``verify --targets nir`` run every float NIR consumer that is installed
-and accepts the file (:data:`~vprsnn_export.targets.nir_consumers.GATE_CONSUMERS`), apply the
-file's readout rule to each consumer's WTA-off raster and compare decisions:
+``export --check`` and ``verify --targets nir`` run every installed float NIR consumer
+(:data:`~vprsnn_export.targets.nir_consumers.GATE_CONSUMERS`), apply the file's readout rule to its WTA-off raster
+and compare decisions:
 
     agreement = mean over queries of [ place(consumer + rule) == place(network) ]
     passes when agreement >= tolerance
 
-where place is the W+Prob decision (k = 1) with the network's own calibration, and the
-tolerance is the file's stated ``float_consumers.decision_tolerance`` (100 % for files stated
-exact, :data:`~vprsnn_export.targets.nir_semantics.LEAKY_DECISION_TOLERANCE` otherwise) unless
-the caller gives one. Each consumer gives one :class:`~vprsnn_export.runtime.results.Comparison`
-(target "NIR read back"), so the gate fails the export or the verification like any other check;
-its detail states the measured agreement, the raster differences and the tolerance.
+where place is the W+Prob decision (k = 1) with the network's own calibration, and the tolerance is the file's
+``float_consumers.decision_tolerance`` unless the caller gives one. Each consumer gives one
+:class:`~vprsnn_export.runtime.results.Comparison`, which fails the export or verification like any other check.
 """
 
 from __future__ import annotations
@@ -63,10 +60,9 @@ def consumer_gate(
 ) -> tuple[Comparison, ...]:
     """One comparison per installed consumer: decisions of consumer + readout rule vs the network's.
 
-    ``raster`` is the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting.
-    A consumer that refuses the file (one threshold only, ...) gives a passing row saying so;
-    a graph with the recurrent ``wta`` node (no readout rule to apply) is not gated. ``label``: the label of the
-    file's target (its rows land under that target).
+    ``raster``: the network's raster (N, T, neurons) of ``spikes``, with its own WTA setting. A consumer that
+    refuses the file gives a passing row saying so; a graph with the recurrent ``wta`` node is not gated.
+    ``label``: the file's target's label (its rows land under that target).
     """
     graph = load_graph(path)
     if "wta" in graph.nodes:

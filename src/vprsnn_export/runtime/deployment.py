@@ -1,9 +1,7 @@
 """Deployment: a float checkpoint becomes a calibrated fixed-point model.
 
-Quantisation (:mod:`vprsnn_export.export.quantize`) maps weights and thresholds to
-integers; the deployed network then answers the reference places differently from
-the float one, so by default its calibration S^R is re-measured on the integer
-simulator (the network that will run), exactly as the float network was calibrated.
+Quantisation (:mod:`vprsnn_export.export.quantize`) maps weights and thresholds to integers; by default the
+calibration S^R is then re-measured on the integer simulator, the network that will run.
 """
 
 from __future__ import annotations
@@ -41,8 +39,7 @@ def recalibrate(
     if reuse_float_calibration:
         report = dataclasses.replace(model.quantisation, calibration="float (reused)", calibration_saturations=None)
         return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
-    if not np.array_equal(np.asarray(place_ids), model.reference_place_ids):
-        raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
+    check_reference_places(place_ids, model.reference_place_ids)
     if missing := [name for name in model.reference_traversals if name not in reference_images]:
         raise InvalidValueError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
     network = IntegerNetwork(model, device=device, progress=progress)
@@ -52,6 +49,12 @@ def recalibrate(
         model.quantisation, calibration="deployed (integer simulator)", calibration_saturations=network.saturations
     )
     return dataclasses.replace(model, calibration=calibration, quantisation=report)
+
+
+def check_reference_places(place_ids: np.ndarray, reference_place_ids: np.ndarray) -> None:
+    """InvalidValueError unless ``place_ids`` are the reference places, in their order: what calibration runs on."""
+    if not np.array_equal(np.asarray(place_ids), reference_place_ids):
+        raise InvalidValueError("calibration needs the checkpoint's reference places, in the same order")
 
 
 def check_reference_images(options: QuantiseOptions, reference_images: Mapping[str, np.ndarray] | None) -> None:

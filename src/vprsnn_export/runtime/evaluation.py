@@ -6,7 +6,7 @@ and add the no-learning baselines and spike statistics."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
 import numpy as np
@@ -20,6 +20,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import CALIBRATIONS
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.cost import CostSummary, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
 from vprsnn_export.network.runs import SpikeRun, joined_runs
@@ -40,16 +41,13 @@ NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
 
 
 @dataclass(frozen=True)
-class SpikeStatistics:
+class SpikeStatistics(JsonDataclass):
     """How the WTA is exercised on the queries: mean |C[t]|, steps with |C[t]| > 1 or 0, spikes per query."""
 
     mean_candidates_per_step: float
     multi_candidate_step_fraction: float
     quiet_step_fraction: float
     mean_spikes_per_query: float
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
 
 
 def spike_statistics(run: SpikeRun) -> SpikeStatistics:
@@ -117,15 +115,11 @@ def evaluate_float(
     """Evaluate a float checkpoint on one query traversal: result rows plus spike statistics.
 
     The counts come from ``backend`` of :data:`~vprsnn_export.runtime.backends.BACKENDS` (``auto``: the float
-    network). ``cluster``: the float network's modules run in tasks there (CPU workers) and are gathered
-    for the whole-route readout; the same counts bit for bit (:mod:`vprsnn_export.trainer.sharded`).
-
-    With ``reference_images`` (the checkpoint's reference traversals, same place order)
-    the no-learning baselines are added: SAD read out like W+Prob (strategy "sad") and the template
-    ceiling, cosine nearest neighbour on the same images (strategy "cosine", margin confidence). An ensemble
-    (``train.module_size`` > 0) is read out over the whole route with its hyperactive
-    neurons silenced (``assignment.hyperactive_share``), and per-module rows are added. ``truth`` judges the
-    queries (None: the options' match window).
+    network), or with ``cluster`` from the float network's modules run in tasks there (the same counts bit for
+    bit, :mod:`vprsnn_export.trainer.sharded`). ``reference_images`` (the reference traversals, same place order)
+    add the no-learning baselines: SAD read out like W+Prob ("sad") and cosine nearest neighbour ("cosine"). An
+    ensemble is read out over the whole route with its hyperactive neurons silenced, and per-module rows are
+    added. ``truth`` judges the queries (None: the options' match window).
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)

@@ -1,10 +1,8 @@
 """The measurements a verification records, one frozen dataclass each (the parts of report.json and export.json).
 
-Per readout: :class:`ToleranceCheck` and :class:`PairedCheck` (and :func:`worst_verdict` over verdicts); per
-bit width: :class:`SpikeLevel`, :class:`DecisionLevel`, the curves and histograms and an ensemble's
-:class:`ModuleRow`; per fixed-point model: :class:`Comparison` of two implementations' outputs and
-:class:`ConformanceResult`, every comparison. Each maps to JSON by :mod:`vprsnn_export.io.serial`; the report's
-containers (:mod:`vprsnn_export.runtime.results`) hold them and re-export them.
+Per readout :class:`ToleranceCheck` and :class:`PairedCheck`; per bit width :class:`SpikeLevel`,
+:class:`DecisionLevel`, curves, histograms and :class:`ModuleRow`; per model :class:`Comparison` and
+:class:`ConformanceResult`. Each maps to JSON by :mod:`vprsnn_export.io.serial`.
 """
 
 from __future__ import annotations
@@ -142,10 +140,9 @@ class LevelHistogram(JsonDataclass):
 class ModuleRow(JsonDataclass):
     """One module of an ensemble at one bit width, against the float ensemble on the same queries.
 
-    Accuracies are the **whole-route** W+Prob decisions (every module's neurons, every place)
-    scored on the queries whose true place lies in this module's region, at k=1 and at the
-    largest k; ``winner_agreement`` is the share of (query, step) pairs on which this module's
-    WTA picks the same winner as the float module (or both stay silent), over all queries.
+    Accuracies are the **whole-route** W+Prob decisions scored on the queries whose true place lies in this module's
+    region, at k=1 and the largest k; ``winner_agreement``: the share of (query, step) pairs on which this module's
+    WTA picks the float module's winner (or both stay silent).
     """
 
     module: int
@@ -171,11 +168,9 @@ class ModuleRow(JsonDataclass):
 class Comparison(JsonDataclass):
     """One comparison of two implementations' outputs (``kind`` says how: "exact" or a bound).
 
-    ``family`` is what was compared: "array" (element by element), "distribution"
-    (W+Prob: identical decisions, |diff| bounded) or "config" (equal or not). ``equal`` says the
-    outputs are identical. A **tolerance row** (``tolerance`` set: a float consumer's decisions must
-    agree on at least that share of the ``n_elements`` decisions) passes within its tolerance while
-    ``n_differences`` decisions differ; it is never counted as exact.
+    ``family``: "array" (element by element), "distribution" (W+Prob: identical decisions, |diff| bounded) or
+    "config"; ``equal``: the outputs are identical. A **tolerance row** (``tolerance`` set: a float consumer's
+    decisions must agree on at least that share of ``n_elements``) passes within it; it is never counted as exact.
     """
 
     check: str

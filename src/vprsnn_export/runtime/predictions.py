@@ -98,10 +98,16 @@ class Predictions:
 
     def write(self, path: str | Path) -> Path:
         """Write as CSV or JSON lines, chosen by the suffix (.csv, .jsonl), atomically."""
-        suffix = Path(path).suffix.lower()
-        if suffix not in FORMATS:
-            raise InvalidValueError(f"--predictions {path}: give a .csv or .jsonl file name")
-        return atomic_write_text(path, self.to_csv() if suffix == ".csv" else self.to_jsonl())
+        as_csv = prediction_format(path) == ".csv"
+        return atomic_write_text(path, self.to_csv() if as_csv else self.to_jsonl())
+
+
+def prediction_format(path: str | Path) -> str:
+    """A predictions file's format, its suffix (.csv or .jsonl); InvalidValueError for any other."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in FORMATS:
+        raise InvalidValueError(f"--predictions {path}: give a .csv or .jsonl file name")
+    return suffix
 
 
 def predictions(scored: Scored) -> Predictions:

@@ -1,12 +1,8 @@
 """The typed results of `vprsnn-export verify`, and their JSON form (report.json, schema ``vprsnn-verify-report/1``).
 
-Every result is a frozen dataclass with ``to_dict()`` (the JSON value report.json holds)
-and ``from_dict()`` (its inverse: ``Type.from_dict(x.to_dict()) == x``), both by the one
-generic mapping of :mod:`vprsnn_export.io.serial` from the fields and their type hints; a
-field's options (``json_options``) keep the schema's keys and load older files. The report
-renderer and the commands read attributes, never nested string keys. The measurements the
-containers here hold (one check, one level, one comparison) are in :mod:`vprsnn_export.runtime.measurements`
-and re-exported here.
+Every result is a frozen dataclass whose ``to_dict()`` and ``from_dict()`` (``Type.from_dict(x.to_dict()) == x``)
+come from the fields by :mod:`vprsnn_export.io.serial`; field options keep the schema's keys and load older files.
+The measurements held here are in :mod:`vprsnn_export.runtime.measurements`, re-exported here.
 """
 
 from __future__ import annotations
@@ -252,15 +248,21 @@ class VerifyReport(JsonDataclass):
             report = from_json_dict(cls, data)
         except READ_ERRORS as exc:
             raise ReportError(f"malformed verify report ({describe(exc)})", source) from None
-        if any(not run.bits for run in report.runs):
-            raise ReportError("a run of the report holds no bit widths", source)
-        if problem := _non_finite(data) or _out_of_range(report):
+        if problem := _problem(data, report):
             raise ReportError(problem, source)
-        if data.get("passed") is not report.passed:
-            raise ReportError(
-                f"the stored verdict passed={data.get('passed')!r} does not match the report's checks", source
-            )
         return report
+
+
+def _problem(data: Mapping[str, Any], report: VerifyReport) -> str | None:
+    """What no verify run writes, the first found: a run without bit widths, a NaN or infinite number, a value
+    outside its range, a stored verdict that its checks contradict; None when there is nothing."""
+    if any(not run.bits for run in report.runs):
+        return "a run of the report holds no bit widths"
+    if problem := _non_finite(data) or _out_of_range(report):
+        return problem
+    if data.get("passed") is not report.passed:
+        return f"the stored verdict passed={data.get('passed')!r} does not match the report's checks"
+    return None
 
 
 def _non_finite(data: Any, where: str = "") -> str | None:

@@ -26,7 +26,7 @@ from vprsnn_export.targets.loihi_budget import deployment_cost
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 
 from .checks import ExportChecks, check_exports
-from .source import MANIFEST_NAME, ExportSource, consumer_statements, export_all
+from .source import MANIFEST_ERRORS, MANIFEST_NAME, ExportSource, consumer_statements, export_all
 
 
 @dataclass(frozen=True)
@@ -95,11 +95,9 @@ def export_and_check(
 ) -> ExportResult:
     """Write the targets into ``out``, check them on ``spikes`` when given, write export.json; return its content.
 
-    The folder is built as a whole beside ``out`` and then put in its place
-    (:func:`vprsnn_export.io.fileio.publish_folder`), export.json last: a reader never sees new
-    files beside old ones, and an interrupted export leaves the previous folder as it was.
-    An existing ``out`` must be empty or an earlier export (it holds export.json); that one is
-    replaced only with ``overwrite=True``.
+    The folder is built beside ``out`` and put in its place whole (:func:`vprsnn_export.io.fileio.publish_folder`),
+    export.json last: a reader never sees new files beside old ones, and an interrupted export leaves the previous
+    folder as it was. An existing ``out`` must be empty or an earlier export, replaced only with ``overwrite=True``.
     """
     out = Path(out)
     check_deploy_folder(out, overwrite=overwrite)
@@ -134,9 +132,8 @@ def export_and_check(
         )
         atomic_write_text(staging / MANIFEST_NAME, json.dumps(manifest_dict(result), indent=2))
         publish_folder(staging, out)
-    except BaseException:
+    finally:  # an interrupted export leaves no staging folder (a published one is no longer there)
         shutil.rmtree(staging, ignore_errors=True)
-        raise
     return result
 
 
@@ -156,22 +153,24 @@ def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
     """The file export.json lists, inside ``folder``: a path relative to the folder (or, as export.json files
     of earlier versions recorded it, to the working directory, starting with the recorded folder).
     ModelFileError for an absolute path, a ``..`` part, or a path (symbolic links followed) outside ``folder``."""
-    if listed.is_absolute() or listed.drive:
-        raise ModelFileError(f"{MANIFEST_NAME} lists the absolute path {listed}: files must lie in its folder", folder)
     base = Path(recorded_folder)  # pathlib drops "." parts: a relative base starts with a name or ".."
     earlier = base.parts and base.parts[0] != ".." and not base.is_absolute()
     if earlier and listed.parts[: len(base.parts)] == base.parts:
         listed = listed.relative_to(base)  # an earlier version's path, relative to the working directory
-    if ".." in listed.parts or not listed.parts:
-        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which leaves its folder", folder)
     path = folder / listed
     try:
         inside = path.resolve().is_relative_to(folder.resolve())
     except (OSError, RuntimeError):
         inside = False
-    if not inside:
-        raise ModelFileError(f"{MANIFEST_NAME} lists {listed}, which resolves outside its folder", folder)
-    return path
+    if listed.is_absolute() or listed.drive:
+        wrong = f"the absolute path {listed}: files must lie in its folder"
+    elif ".." in listed.parts or not listed.parts:
+        wrong = f"{listed}, which leaves its folder"
+    elif not inside:
+        wrong = f"{listed}, which resolves outside its folder"
+    else:
+        return path
+    raise ModelFileError(f"{MANIFEST_NAME} lists {wrong}", folder)
 
 
 def check_deploy_folder(out: Path, *, overwrite: bool) -> None:
@@ -209,15 +208,7 @@ def read_export(folder: str | Path) -> ExportResult:
             consumers={str(k): str(v) for k, v in data.get("consumers", {}).items()},
             cost=data.get("cost"),
         )
-    except (
-        OSError,
-        UnicodeDecodeError,
-        json.JSONDecodeError,
-        InvalidValueError,
-        KeyError,
-        TypeError,
-        AttributeError,
-    ) as exc:
+    except MANIFEST_ERRORS as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
     recorded = str(data.get("folder", ""))
     checked: dict[str, tuple[WrittenFile, ...]] = {}

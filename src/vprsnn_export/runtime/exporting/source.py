@@ -52,6 +52,8 @@ class ExportSource:
 
 
 MANIFEST_NAME = "export.json"  # a deploy folder's manifest: every file's sha256, written last by export
+#: What reading a damaged export.json raises (unreadable, not UTF-8 or JSON, beyond parse_json's limits, another shape).
+MANIFEST_ERRORS = (OSError, UnicodeDecodeError, InvalidValueError, KeyError, TypeError, AttributeError, ValueError)
 
 
 def check_against_manifest(path: str | Path, digest: str | None = None) -> Path:
@@ -70,7 +72,7 @@ def check_against_manifest(path: str | Path, digest: str | None = None) -> Path:
             for entry in entries
             if Path(str(entry["path"])).name == path.name
         ]
-    except (OSError, UnicodeDecodeError, InvalidValueError, KeyError, TypeError, AttributeError, ValueError) as exc:
+    except MANIFEST_ERRORS as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} beside the file ({str(exc)[:120]})", manifest) from None
     if listed and (digest or sha256_file(path)) not in {str(entry.get("sha256")) for entry in listed}:
         raise ModelFileError(
@@ -98,11 +100,8 @@ def parse_export_targets(raw: str) -> tuple[str, ...]:
 
 
 def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
-    """The fixed-point model the integer targets get, or None when none is asked for.
-
-    A float checkpoint is quantised only when ``bits`` is given (per-neuron max-abs
-    scales, the float calibration kept): :func:`runtime.deployment.deploy`.
-    """
+    """The fixed-point model the integer targets get, or None when none is asked for: a float checkpoint is
+    quantised only when ``bits`` is given (per-neuron max-abs scales, the float calibration kept)."""
     if source.fixed_point is not None:
         if bits is not None:
             raise InvalidValueError("--quantize applies to float checkpoints; this is already a fixed-point model")

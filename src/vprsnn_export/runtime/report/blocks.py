@@ -111,25 +111,19 @@ def failure_lines(report: VerifyReport) -> list[str]:
 
 def conclusion(report: VerifyReport) -> str:
     """What the verdict means, in one sentence, and the float networks that do not recognise places."""
-    warning = (
-        f"; BUT the float network is degenerate ({report.degenerate}): a width that holds keeps nothing worth keeping"
-        if report.degenerate
-        else ""
-    )
-    return _conclusion(report) + warning
-
-
-def _conclusion(report: VerifyReport) -> str:
     n_runs = len(report.runs)
+    text = "every check holds at every bit width (each paired interval lies inside its tolerance)"
     if report.verdict == "fails":
-        return f"{n_runs - report.n_passed} of {n_runs} network(s) fail a check at some bit width"
-    if report.verdict == "undecided":
+        text = f"{n_runs - report.n_passed} of {n_runs} network(s) fail a check at some bit width"
+    elif report.verdict == "undecided":
         n = sum(c.verdict == "undecided" for run in report.runs for r in run.bits for c in r.paired)
-        return (
+        text = (
             f"nothing fails, but {n} paired check(s) straddle their tolerance: on these queries the difference "
             "cannot be told from the paired sampling noise (the paired table says how many queries would decide)"
         )
-    return "every check holds at every bit width (each paired interval lies inside its tolerance)"
+    if report.degenerate:
+        text += f"; BUT the float network is degenerate ({report.degenerate}): a width that holds keeps nothing worth keeping"
+    return text
 
 
 def blocks_of(report: VerifyReport) -> list[Block]:

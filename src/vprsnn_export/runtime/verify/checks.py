@@ -75,16 +75,13 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
             tolerances[key] = None
             continue
         try:
-            value = float(raw)
+            value, counted = float(raw), key in COUNTED
+            fits = bool(np.isfinite(value) and value >= 0 and value == int(value)) if counted else 0 <= value <= 1
+            expected = "a whole number >= 0" if counted else "a fraction in [0, 1] (0.02 = 2 points)"
         except ValueError:
-            raise InvalidValueError(f"--tolerance {key}: expected a number or off, got {raw[:40]!r}") from None
-        if key in COUNTED:
-            if not np.isfinite(value) or value < 0 or value != int(value):
-                raise InvalidValueError(f"--tolerance {key}: expected a whole number >= 0, got {raw[:40]!r}")
-        elif not 0.0 <= value <= 1.0:
-            raise InvalidValueError(
-                f"--tolerance {key}: expected a fraction in [0, 1] (0.02 = 2 points), got {raw[:40]!r}"
-            )
+            fits, expected = False, "a number or off"
+        if not fits:
+            raise InvalidValueError(f"--tolerance {key}: expected {expected}, got {raw[:40]!r}")
         tolerances[key] = value
     return tolerances
 
@@ -156,11 +153,8 @@ def module_rows(
     float_raster: torch.Tensor,
     int_raster: torch.Tensor,
 ) -> tuple[ModuleRow, ...]:
-    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1
-    and the largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`).
-
-    Vectorised over modules (one bincount per quantity in ``module_accuracy``, one raster reshape).
-    """
+    """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1 and the
+    largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
     n_modules = len(regions)
     top = max(float_scored.ks)
     accuracy = {
@@ -230,14 +224,10 @@ def tolerance_checks(
 ) -> list[ToleranceCheck]:
     """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
 
-    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that
-    are not consecutive places, whose k-frame windows mix unrelated places:
-    :meth:`~vprsnn_export.readout.sequence.SequenceOptions.warning`) no k > 1 metric is judged.
-
-    Metric tolerances bound the drop from float (float - quantised <= limit): a quantised
-    network that does better than float never fails. A metric moves in steps of 1/Q (one
-    query of Q), so the limit applied is max(limit, query_slack / Q): with 30 queries a
-    "1 point" limit would otherwise mean "no query may change". 1e-12 absorbs float rounding.
+    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that are not consecutive
+    places) no k > 1 metric is judged. Metric tolerances bound the drop from float (float - quantised <= limit):
+    doing better than float never fails. A metric moves in steps of 1/Q, so the limit applied is
+    max(limit, query_slack / Q) (with 30 queries a "1 point" limit would mean "no query may change").
     """
     judged = sorted(k for k in set(ks) if k == 1 or sequences)
     checks: list[ToleranceCheck] = []
@@ -248,8 +238,7 @@ def tolerance_checks(
             continue
         for strategy, k in readouts:
             row = find_row(rows, strategy, k)
-            if row is None or row.delta is None:
-                raise InvalidValueError(f"no quantised metric row {strategy} k={k} for the {metric} tolerance")
+            assert row is not None and row.delta is not None  # metric_deltas: every readout, with its float values
             value, applied = 0.0 - row.delta.get(metric), max(limit, slack)
             what = f"{metric} drop, {strategy} k={k}"
             checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))

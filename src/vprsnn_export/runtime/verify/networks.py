@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,15 +23,12 @@ def verify_data(
     """The query data set and the reference images of the checkpoint's reference places (for calibration)."""
     traversals = list(dict.fromkeys([*ckpt.reference_traversals, query]))
     key = (source, subset, places, tuple(traversals))
+    load = partial(load_dataset, source, subset=subset, places=places, progress=progress)
     if key not in cache:
         try:
-            cache[key] = load_dataset(
-                source, traversals, ckpt.config.preprocess, subset=subset, places=places, progress=progress
-            )
+            cache[key] = load(traversals, ckpt.config.preprocess)
         except DataError:  # a folder whose query traversal has another length than the references': alone
-            cache[key] = load_dataset(
-                source, [query], ckpt.config.preprocess, subset=subset, places=places, progress=progress
-            )
+            cache[key] = load([query], ckpt.config.preprocess)
     dataset = cache[key]
     if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
         return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}

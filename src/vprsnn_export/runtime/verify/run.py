@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import sys
 import tempfile
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,6 @@ from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config, VerifyConfig
 from vprsnn_export.data.encoding import query_spikes
 from vprsnn_export.data.truth import Query
-from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_point
 from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint
@@ -149,34 +148,19 @@ def verify_checkpoint(
     require_type("runtime", runtime, Runtime)
     check_reference_images(options.quantise, network.reference_images)  # before the float side runs
     floats = float_side(network.checkpoint, query, options.readout, runtime)
-    with export_folder(runtime.export_dir) as root, stage_bar(network, options, runtime) as stages:
+    # each width's files: in runtime.export_dir, or in a temporary folder removed afterwards; a bar over its stages
+    export_dir = runtime.export_dir
+    folder = (
+        tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else nullcontext(str(export_dir))
+    )
+    bar = tqdm(total=len(options.bits) * 4, desc=f"verify {network.label or ''}".strip(), unit="stage",
+               file=sys.stderr, disable=not runtime.progress, leave=False)  # fmt: skip
+    with folder as root, bar as stages:
         results = tuple(
-            verify_width(bits, network, query, options, floats, root / f"{bits}bit", runtime, stages)
+            verify_width(bits, network, query, options, floats, Path(root) / f"{bits}bit", runtime, stages)
             for bits in options.bits
         )
     return verified_run(network, query, options, floats, results, runtime.export_dir)
-
-
-@contextlib.contextmanager
-def export_folder(export_dir: str | Path | None) -> Iterator[Path]:
-    """The folder each width's files go to: ``export_dir``, or a temporary one removed afterwards."""
-    if export_dir is not None:
-        yield Path(export_dir)
-        return
-    with tempfile.TemporaryDirectory(prefix="vprsnn-verify-") as folder:
-        yield Path(folder)
-
-
-@contextlib.contextmanager
-def stage_bar(network: VerifiedNetwork, options: VerifyOptions, runtime: Runtime) -> Iterator[tqdm]:
-    """A progress bar over the four stages of each width (on stderr, when ``runtime.progress``)."""
-    desc = f"verify {network.label or ''}".strip()
-    bar = tqdm(total=len(options.bits) * 4, desc=desc, unit="stage", file=sys.stderr, disable=not runtime.progress,
-               leave=False)  # fmt: skip
-    try:
-        yield bar
-    finally:
-        bar.close()
 
 
 def verified_run(
@@ -248,33 +232,35 @@ def verify_width(
     compare with float (``stages`` advances by one per stage)."""
     ckpt, device, progress, readout = network.checkpoint, runtime.device, runtime.progress, options.readout
     clock, seconds = time.perf_counter(), {}
+
+    def finished(stage: str, following: str | None = None) -> None:
+        """A stage done: its seconds kept, the bar one stage on (showing the following one)."""
+        nonlocal clock
+        seconds[stage], clock = time.perf_counter() - clock, time.perf_counter()
+        stages.update(1)
+        if following:
+            stages.set_postfix(bits=bits, stage=following)
+
     stages.set_postfix(bits=bits, stage="quantise")
     model = deploy(ckpt, network.sha256, bits, options.quantise, reference_images=network.reference_images,
                    device=device, progress=progress)  # fmt: skip
     model_path = save_fixed_point(folder / "model.npz", model)
-    seconds["quantise_and_calibrate"], clock = time.perf_counter() - clock, time.perf_counter()
-    stages.update(1)
-    stages.set_postfix(bits=bits, stage="simulate")
+    finished("quantise_and_calibrate", "simulate")
     recorded_spikes = floats.spikes[: floats.recorded]
     int_network = IntegerNetwork(model, device, progress=progress)
     int_run = int_network.run(recorded_spikes, record=True)
     int_all = int_run if floats.recorded == floats.spikes.shape[0] else int_network.run(floats.spikes)
     int_counts = int_all.counts.numpy()
-    seconds["integer_simulator"], clock = time.perf_counter() - clock, time.perf_counter()
-    stages.update(1)
-    stages.set_postfix(bits=bits, stage="targets")
+    finished("integer_simulator", "targets")
     cross = cross_implementation(model, recorded_spikes, int_run, folder=folder, targets=options.targets,
                                  reference_queries=options.reference_queries, device=device)  # fmt: skip
     cross = with_consumer_gate(cross.with_files("model", [str(model_path)]), model, int_run.raster, recorded_spikes)
-    seconds["targets_and_reference"], clock = time.perf_counter() - clock, time.perf_counter()
-    stages.update(1)
-    stages.set_postfix(bits=bits, stage="readout")
+    finished("targets_and_reference", "readout")
     scored = Readout.of(model.calibration, model.config, readout).score(
         int_counts, ckpt.reference_place_ids, query.place_ids, floats.scored.truth
     )
     rows = metric_deltas(floats.scored.rows, scored.rows)
-    if floats.run.raster is None or int_run.raster is None:
-        raise InvalidValueError("verify needs the recorded rasters of both networks")
+    assert floats.run.raster is not None and int_run.raster is not None  # both recorded
     rasters = (floats.run.raster, int_run.raster)
     saturations = model.quantisation.calibration_saturations
     spike = spike_level(*rasters, floats.counts, int_counts, int_all.saturations, saturations)
@@ -286,8 +272,7 @@ def verify_width(
     regions = module_regions(len(ckpt.reference_place_ids), ckpt.config.train.module_size)
     group = ckpt.config.network.n_neurons  # neurons per module
     modules = module_rows(regions, group, floats.scored, scored, *rasters) if len(regions) > 1 else ()
-    seconds["readout"] = time.perf_counter() - clock
-    stages.update(1)
+    finished("readout")
     return BitsResult(
         bits=bits,
         quantisation=model.quantisation,
