@@ -67,7 +67,7 @@ def main() -> None:
     print(header + "\n" + "-" * len(header))
     for r in rows:
         print(
-            f"{r.protocol:<12} {r.k:>3} {r.accuracy:>6.1f} {r.r_at_100p:>9.1f} {r.events_per_frame / 1e6:>15.2f} "
+            f"{r.protocol:<12} {r.k:>3} {100 * r.accuracy:>6.1f} {100 * r.r_at_100p:>9.1f} {r.events_per_frame / 1e6:>15.2f} "
             f"{r.relocalisations:>6} {r.ms_per_frame:>9.2f}"
         )
     print(f"({time.perf_counter() - began:.0f} s)")

@@ -107,7 +107,7 @@ def test_the_tracking_protocol_beside_the_global_one(route):
     assert [(r.protocol, r.k) for r in rows] == [("global", 1), ("window 100", 1), ("global", 3), ("window 100", 3)]
     for whole, window in (rows[:2], rows[2:]):
         assert window.events_per_frame < whole.events_per_frame and whole.relocalisations == 0
-        assert 0 <= window.accuracy <= 100 and 0 <= window.r_at_100p <= 100
+        assert 0 <= window.accuracy <= 1 and 0 <= window.r_at_100p <= 1
 
 
 def test_the_integer_simulator_tracks_the_same_pushed_or_batched(route):
@@ -154,3 +154,18 @@ def test_a_decision_line_has_events_and_search_only_with_a_window(route):
     assert "events" not in plain and "search" not in plain
     line = json.loads(json.dumps(window[1].to_dict()))
     assert set(line) - set(plain) == {"events", "search"}
+
+
+def test_evaluate_scores_the_tracking_protocol_beside_the_global_one(route, tmp_path, capsys):
+    ckpt, _, _, _ = route
+    path = save_checkpoint(tmp_path / "net.npz", ckpt)
+    capsys.readouterr()
+    argv = ["evaluate", str(path), "--query", "winter", "--k", "3", "--search-window", "100", "--quiet"]
+    assert main([*argv, "--json"]) == 0
+    tracking = json.loads(capsys.readouterr().out)["tracking"]
+    assert [(row["protocol"], row["k"]) for row in tracking] == [("global", 3), ("window 100", 3)]
+    assert tracking[1]["events_per_frame"] < tracking[0]["events_per_frame"]
+    assert main(argv) == 0
+    assert "tracking within 100 places (patience 3)" in capsys.readouterr().out
+    assert main(["evaluate", str(path), "--query", "winter", "--patience", "2"]) == 2
+    assert "--patience is for --search-window" in capsys.readouterr().err

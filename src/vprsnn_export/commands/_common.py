@@ -21,6 +21,7 @@ from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
 from ..io.fileio import parse_json
 from ..readout.rules import RULES
+from ..readout.search import DEFAULT_PATIENCE, SearchWindow
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
 
@@ -432,3 +433,39 @@ def warn_sequences(options: SequenceOptions, dataset: Dataset) -> None:
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
+
+
+def positive_int(text: str) -> int:
+    """An ASCII decimal integer >= 1 (argparse type: '1_0', '١٠' and '0' are refused)."""
+    if not (text.isascii() and text.isdigit() and int(text) >= 1):
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
+    return int(text)
+
+
+def add_search_options(parser: argparse.ArgumentParser) -> None:
+    """--search-window and --patience: track within a window of places (localize --frames, evaluate)."""
+    search = parser.add_argument_group("search window (docs/localize.md)")
+    search.add_argument(
+        "--search-window",
+        type=positive_int,
+        metavar="PLACES",
+        help="run only the modules whose places lie within PLACES places around the last accepted place (one WTA "
+        "over them); the first frame, and the frame after --patience frames without an accepted decision, run the "
+        "whole route (an ensemble on the float network or the integer simulator)",
+    )
+    search.add_argument(
+        "--patience",
+        type=positive_int,
+        metavar="N",
+        help="with --search-window: frames in a row without an accepted decision before the whole route runs "
+        f"again (default {DEFAULT_PATIENCE})",
+    )
+
+
+def search_window(args: argparse.Namespace) -> SearchWindow | None:
+    """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
+    if args.search_window is None and args.patience is not None:
+        raise InvalidValueError("--patience is for --search-window")
+    if args.search_window is None:
+        return None
+    return SearchWindow(args.search_window, DEFAULT_PATIENCE if args.patience is None else args.patience)

@@ -14,13 +14,24 @@ from ._common import (
     RESULT_COLUMNS,
     add_query_options,
     add_runtime_options,
+    add_search_options,
     format_table,
     print_json,
     query_data,
+    search_window,
     sequence_options,
     warn_sequences,
 )
 
+TRACKING_COLUMNS = (
+    ("protocol", "protocol"),
+    ("k", "k"),
+    ("accuracy", "acc %"),
+    ("r_at_100p", "R@100P %"),
+    ("events", "events/frame"),
+    ("relocalisations", "re-localisations"),
+    ("ms_per_frame", "ms/frame"),
+)
 MODULE_COLUMNS = (
     ("module", "module"),
     ("places", "places"),
@@ -45,6 +56,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also write every query's decision per strategy and k (query, truth: the ground truth's place ids, "
         "place_id, confidence, correct, note) to FILE: .csv or .jsonl",
     )
+    add_search_options(parser)
     add_runtime_options(parser)
     parser.add_argument(
         "--cluster", help=f"run the modules on a Ray cluster, one task per module, CPU workers ({CLUSTER_HELP})"
@@ -55,6 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.evaluation import evaluate_float
+    from ..runtime.localize import tracking_rows
 
     ckpt = load_checkpoint(args.checkpoint)
     if args.predictions is not None:
@@ -62,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     options = sequence_options(args)
+    search = search_window(args)
     dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query], ckpt.reference_traversals)
     truth = dataset.query(args.query, ckpt.reference_traversals, args.match_window).truth
     warn_sequences(options, dataset)
@@ -89,6 +103,11 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         truth=truth,
     )
+    tracking = None
+    if search is not None:  # the same frames in stream order, the whole route and the window, one frame at a time
+        tracking = tracking_rows(
+            ckpt, dataset.traversal(args.query), dataset.place_ids, truth, options, search, threads=args.threads
+        )
     if args.predictions is not None:
         assert result.scored is not None
         written = predictions(result.scored).write(args.predictions)
@@ -105,11 +124,19 @@ def run(args: argparse.Namespace) -> int:
                 "truth": truth.label,
                 "threads": args.threads,
                 **result.to_dict(),
+                **({} if tracking is None else {"tracking": [row.to_dict() for row in tracking]}),
             }
         )
     else:
         print(format_table(result.rows, RESULT_COLUMNS))
         print(f"scored against the {truth.label}")
+        if tracking is not None and search is not None:
+            print(
+                f"\ntracking within {search.places} places (patience {search.patience}) beside the whole route, frame by "
+                "frame in stream order, accepting at the whole route's precision-1 point on these queries:"
+            )
+            rows = [{**row.to_dict(), "events": f"{row.events_per_frame / 1e6:.2f} M"} for row in tracking]
+            print(format_table(rows, TRACKING_COLUMNS))
         if result.modules is not None:
             print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")
             rows = [{**m.to_dict(), "places": f"{m.first_place}-{m.last_place}"} for m in result.modules]

@@ -33,9 +33,12 @@ from ..runtime.backends import BACKENDS
 from ._common import (
     add_data_options,
     add_runtime_options,
+    add_search_options,
     add_sequence_options,
     given_sequence_options,
+    positive_int,
     query_data,
+    search_window,
     sequence_options,
 )
 
@@ -97,44 +100,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_data_options(parser, data_required=False)
     add_runtime_options(parser)
     parser.set_defaults(handler=run, file_output=calibration_output)
-
-
-def add_search_options(parser: argparse.ArgumentParser) -> None:
-    """--search-window and --patience: track within a window of places (localize --frames, evaluate)."""
-    search = parser.add_argument_group("search window (docs/localize.md)")
-    search.add_argument(
-        "--search-window",
-        type=positive_int,
-        metavar="PLACES",
-        help="run only the modules whose places lie within PLACES places around the last accepted place (one WTA "
-        "over them); the first frame, and the frame after --patience frames without an accepted decision, run the "
-        "whole route (an ensemble on the float network or the integer simulator)",
-    )
-    search.add_argument(
-        "--patience",
-        type=positive_int,
-        metavar="N",
-        help="with --search-window: frames in a row without an accepted decision before the whole route runs "
-        "again (default 3)",
-    )
-
-
-def search_window(args: argparse.Namespace):
-    """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
-    from ..runtime.localize import SearchWindow
-
-    if args.search_window is None:
-        if args.patience is not None:
-            raise InvalidValueError("--patience is for --search-window")
-        return None
-    return SearchWindow(args.search_window, 3 if args.patience is None else args.patience)
-
-
-def positive_int(text: str) -> int:
-    """An ASCII decimal integer >= 1 (argparse type: '1_0', '١٠' and '0' are refused)."""
-    if not (text.isascii() and text.isdigit() and int(text) >= 1):
-        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
-    return int(text)
 
 
 def calibration_output(args: argparse.Namespace) -> str | None:

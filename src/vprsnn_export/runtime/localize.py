@@ -57,6 +57,7 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.readout.early import early_run
 from vprsnn_export.readout.scoring import Readout
+from vprsnn_export.readout.search import SearchWindow
 from vprsnn_export.readout.sequence import SequenceOptions
 
 from .backends import open_backend
@@ -151,49 +152,6 @@ def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, con
     up to the step the early rule stops at (:func:`~vprsnn_export.readout.early.early_run`), as in evaluate."""
     early = early_run(runner.run, spikes, calibration, config, isolated=True)
     return runner.run(spikes).counts.cpu().numpy() if early is None else np.asarray(early.counts)
-
-
-@dataclass(frozen=True)
-class SearchWindow:
-    """Localise within ``places`` reference places around the last confident place: only the modules whose
-    places lie in the window run (one WTA over them) and the frame is decided among their places; after
-    ``patience`` frames in a row without an accepted decision the next frame runs the whole route (a global
-    re-localisation), as does the first.
-
-    .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\\\ c_j + v_j & \\text{otherwise}
-              \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -
-              \\lfloor w / 2 \\rfloor, 0), L - w), \\quad \\text{run} = \\{m : \\text{region}_m \\cap W_j \\ne
-              \\emptyset\\}
-    """
-
-    places: int
-    patience: int = 3
-
-    def __post_init__(self) -> None:
-        for name, value in (("search window", self.places), ("patience", self.patience)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise InvalidValueError(f"{name} must be a whole number of frames or places >= 1, got {value!r:.40}")
-
-    def follow(
-        self, centre: float | None, misses: int, place: int | None, accepted: bool, velocity: float
-    ) -> tuple[float | None, int]:
-        """The next frame's (centre, misses) after a frame decided at place index ``place`` (None: no place):
-        ``centre`` None, a global frame, puts the window at its place (None: global again), and when it was not
-        accepted one more miss looks at the whole route again; a window frame moves it to an accepted place, else
-        ``velocity`` places on, and after ``patience`` misses in a row the next frame is global (centre None)."""
-        if centre is None:
-            return (None if place is None else float(place)), 0 if accepted else self.patience - 1
-        if accepted and place is not None:
-            return float(place), 0
-        return (None if misses + 1 >= self.patience else centre + velocity), misses + 1
-
-    def modules(self, centre: float, regions: np.ndarray) -> tuple[int, int]:
-        """[first, last) modules whose regions meet the window around ``centre`` (a reference place index)."""
-        n_places = int(regions[-1, 1])
-        start = min(max(int(round(centre)) - self.places // 2, 0), max(n_places - self.places, 0))
-        stop = min(start + self.places, n_places)
-        first = int(np.searchsorted(regions[:, 1], start, side="right"))
-        return first, int(np.searchsorted(regions[:, 0], stop - 1, side="right"))
 
 
 def network_part(network: Checkpoint | FixedPointModel, neurons: slice) -> Checkpoint | FixedPointModel:
@@ -614,7 +572,7 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
 @dataclass(frozen=True)
 class TrackingRow:
     """One protocol's figures on a labelled traversal at one k (:func:`tracking_rows`): the localiser over the
-    whole route every frame ("global") or within a search window ("window W"); percentages, events per frame
+    whole route every frame ("global") or within a search window ("window W"); fractions, events per frame
     (input spikes x neurons run), global frames after the first, and the wall time per frame."""
 
     protocol: str
@@ -684,8 +642,8 @@ def tracking_row(
     return TrackingRow(
         protocol=protocol,
         k=k,
-        accuracy=100 * float(np.mean(truth.correct(predicted_places(decisions), np.asarray(place_ids)))),
-        r_at_100p=0.0 if index is None else 100 * float(curve.recall[index]),
+        accuracy=float(np.mean(truth.correct(predicted_places(decisions), np.asarray(place_ids)))),
+        r_at_100p=0.0 if index is None else float(curve.recall[index]),
         events_per_frame=float(events),
         relocalisations=max(sum(d.search == "global" for d in decisions) - 1, 0),
         ms_per_frame=1000 * seconds / max(len(decisions), 1),
