@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arguments import ascii_uint, check_place_ids
+from ..arguments import MAX_PLACE_ID, ascii_uint, check_place_ids  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
@@ -39,6 +39,7 @@ from .folders import (
     ground_truths,
     is_folder_dataset,
     query_truth,
+    require_traversals,
 )
 from .frames import image_files
 from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT, ground_truth_files
@@ -143,7 +144,6 @@ class Manifest:
     rows: dict[int, tuple[int, dict[str, str]]]  # place_id -> (CSV line number, row)
 
 
-MAX_PLACE_ID = 2**53  # ids beyond this cannot be told apart once they pass through float64
 MAX_PLACES = 10_000_000  # a selection larger than this is a typing error, not a route
 MAX_SYNTHETIC_PLACES = 100_000
 
@@ -153,14 +153,19 @@ def parse_places(spec: str) -> tuple[int, int, int]:
 
     START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an InvalidValueError.
     """
-    parts = str(spec).strip().split(":")
-    usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
-    numbers = [ascii_uint(part.strip()) for part in parts]
-    if len(parts) not in (2, 3) or None in numbers:
-        raise InvalidValueError(usage)
-    start, count, stride = (int(number or 0) for number in [*numbers, 1][:3])  # STRIDE defaults to 1
-    if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
-        raise InvalidValueError(usage)
+    numbers = [ascii_uint(part.strip()) for part in str(spec).strip().split(":")]
+    start, count, stride = (number or 0 for number in [*numbers, 1, 1][:3])  # STRIDE defaults to 1
+    last = start + (count - 1) * stride
+    if (
+        len(numbers) not in (2, 3)
+        or None in numbers
+        or not 1 <= count <= MAX_PLACES
+        or stride < 1
+        or last > MAX_PLACE_ID
+    ):
+        raise InvalidValueError(
+            f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
+        )
     return start, count, stride
 
 
@@ -326,12 +331,9 @@ def load_dataset(
     if _is_folders(Path(data)):
         return _load_folder(Path(data), names, cfg, subset, places, progress)
     manifest = read_manifest(data)
-    missing = [name for name in names if name not in manifest.columns]
-    if missing:
-        raise DataError(
-            f"traversal column(s) {', '.join(repr(m) for m in missing)} not in the manifest; its columns are: {', '.join(manifest.columns)}",
-            manifest.path,
-        )
+    require_traversals(
+        names, manifest.columns, "traversal column(s) {} not in the manifest; its columns are: {}", manifest.path
+    )
     selected = _select(
         np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
     )
@@ -374,24 +376,19 @@ def read_manifest(data: str | Path) -> Manifest:
                 f"this folder has no {MANIFEST_NAME} place manifest and no traversal folders of images", path
             )
         path = path / MANIFEST_NAME
-    elif not is_readable_file(path):
-        hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
-        raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
-    raw = path.read_bytes()
-    columns, rows = _read_csv(raw, path, "place manifest")
-    if not rows:
-        raise DataError("the place manifest lists no places", path)
+    hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
+    missing = f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}"
+    raw, columns, rows = _read_csv(path, "place manifest", missing, "the place manifest lists no places")
     return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
 
 
 def read_subset(path: str | Path) -> np.ndarray:
     """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
-    path = Path(path)
-    if not is_readable_file(path):
-        raise DataError("no such subset file (a CSV with a place_id column)", path)
-    _, rows = _read_csv(path.read_bytes(), path, "subset file")
-    if not rows:
-        raise DataError("empty selection: the subset file lists no places", path)
+    missing, empty = (
+        "no such subset file (a CSV with a place_id column)",
+        "empty selection: the subset file lists no places",
+    )
+    _, _, rows = _read_csv(Path(path), "subset file", missing, empty)
     return np.fromiter(rows, dtype=np.int64, count=len(rows))  # file order
 
 
@@ -406,9 +403,15 @@ def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
     return names
 
 
-def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[int, tuple[int, dict[str, str]]]]:
-    """Header and rows by place id, in file order (place_id -> (line number, row)) of a UTF-8 CSV with a
-    ``place_id`` column, names and cells stripped of spaces; DataError on a defect or a repeated place id."""
+def _read_csv(
+    path: Path, kind: str, missing: str, empty: str
+) -> tuple[bytes, tuple[str, ...], dict[int, tuple[int, dict[str, str]]]]:
+    """Bytes, header and rows by place id, in file order (place_id -> (line number, row)) of a UTF-8 CSV with a
+    ``place_id`` column, names and cells stripped of spaces; DataError on a defect or a repeated place id, and
+    the messages ``missing`` for no readable file and ``empty`` for no row."""
+    if not is_readable_file(path):
+        raise DataError(missing, path)
+    raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -437,7 +440,9 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[
             rows[place] = (reader.line_num, record)
     except csv.Error as exc:
         raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
-    return columns, rows
+    if not rows:
+        raise DataError(empty, path)
+    return raw, columns, rows
 
 
 def _place_id(value: str | None, line: int, path: Path) -> int:
@@ -498,12 +503,7 @@ def _load_synthetic(
     subset: Selection,
     places: str | None,
 ) -> Dataset:
-    missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]
-    if missing:
-        raise DataError(
-            f"the synthetic route has no traversal(s) {', '.join(repr(m) for m in missing)}; available: {', '.join(SYNTHETIC_TRAVERSALS)}",
-            source,
-        )
+    require_traversals(names, SYNTHETIC_TRAVERSALS, "the synthetic route has no traversal(s) {}; available: {}", source)
     selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
     route = synthetic_route(n_places, names)
     images = {name: preprocess_images(route[name][selected], cfg) for name in names}

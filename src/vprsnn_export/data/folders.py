@@ -30,7 +30,7 @@ from ..config import PreprocessConfig
 from ..errors import DataError
 from ..io.fileio import sha256_bytes
 from .frames import image_files
-from .groundtruth import ground_truth_digest, pair_ground_truth
+from .groundtruth import agreeing, ground_truth_digest, pair_ground_truth
 from .preprocess import normalise_resized, read_grey_image, resize_image
 
 
@@ -78,8 +78,8 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
         )
     counts = {name: len(image_files(folder / name)) for name in [query, *others]}
     pairs = (pair_ground_truth(folder, reference, query, counts[reference], counts[query]) for reference in others)
-    found = [truth for truth in pairs if truth is not None]
-    if not found:
+    truth = agreeing([pair for pair in pairs if pair is not None], " (two reference traversals)")
+    if truth is None:
         unequal = [name for name in others if counts[name] != counts[query]]
         if unequal:
             raise DataError(
@@ -88,12 +88,7 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
                 f"({unequal[0]}_{query}_GT.npy or .csv) says which frames match; refusing to score by index",
                 folder,
             )
-        return None
-    matrix, path = found[0]
-    for other, other_path in found[1:]:
-        if not np.array_equal(other, matrix):
-            raise DataError(f"this ground truth disagrees with {other_path} (two reference traversals)", path)
-    return matrix, path
+    return truth
 
 
 def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) -> list[FolderGroundTruth]:
@@ -108,16 +103,17 @@ def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) ->
     return found
 
 
+def require_traversals(names: Sequence[str], available: Sequence[str], says: str, where: str | Path) -> None:
+    """DataError at ``where`` naming the ``names`` not ``available``: ``says`` filled with both lists."""
+    missing = [name for name in names if name not in available]
+    if missing:
+        raise DataError(says.format(", ".join(map(repr, missing)), ", ".join(available) or "none"), where)
+
+
 def folder_files(folder: Path, names: Sequence[str]) -> dict[str, list[Path]]:
     """Each traversal's frames in time order; DataError naming a missing traversal or unequal counts."""
     available = sorted(child.name for child in folder.iterdir() if child.is_dir())
-    missing = [name for name in names if name not in available]
-    if missing:
-        raise DataError(
-            f"no traversal folder(s) {', '.join(repr(m) for m in missing)}; its traversals are: "
-            f"{', '.join(available) or 'none'}",
-            folder,
-        )
+    require_traversals(names, available, "no traversal folder(s) {}; its traversals are: {}", folder)
     files = {name: image_files(folder / name) for name in names}
     counts = {name: len(paths) for name, paths in files.items()}
     if len(set(counts.values())) > 1:
