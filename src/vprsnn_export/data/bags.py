@@ -92,15 +92,15 @@ def bag_frames(path: str | Path, topic: str | None = None) -> Iterator[tuple[str
     except Exception as exc:  # rosbags raises its own reader errors, and OSError or KeyError on damaged files
         raise DataError(f"cannot read this bag ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
     images = sorted({c.topic for c in reader.connections if c.msgtype in (IMAGE, COMPRESSED)})
-    if topic is None and len(images) != 1:
+    chosen = topic if topic is not None else images[0] if len(images) == 1 else None
+    if chosen not in images:
         reader.close()
         found = f"image topics {', '.join(images)}: give --topic" if images else "no image topic"
-        raise DataError(f"this bag holds {found} ({IMAGE} or {COMPRESSED})", path)
-    if topic is not None and topic not in images:
-        reader.close()
-        raise DataError(f"no image topic {topic!r} in this bag (its image topics: {', '.join(images) or 'none'})", path)
-    chosen = topic if topic is not None else images[0]
-    return _messages(reader, path, chosen)
+        problem = f"this bag holds {found} ({IMAGE} or {COMPRESSED})"
+        if topic is not None:
+            problem = f"no image topic {topic!r} in this bag (its image topics: {', '.join(images) or 'none'})"
+        raise DataError(problem, path)
+    return _messages(reader, path, str(chosen))
 
 
 def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]]:

@@ -71,10 +71,9 @@ def _columns(path: Path) -> dict[str, np.ndarray]:
         with warnings.catch_warnings():  # an empty file: "input contained no data" (refused below)
             warnings.simplefilter("ignore", UserWarning)
             table = np.loadtxt(path, dtype=np.float64, comments="#", ndmin=2)
-        if table.size == 0:
-            raise DataError("the recording holds no events", path)
-        if table.shape[1] != 4:
+        if table.size and table.shape[1] != 4:
             raise DataError(f"expected 4 columns 't x y p' per line, got {table.shape[1]}", path)
+        table = table.reshape(-1, 4)  # no line: refused as no events below
         return {"t": table[:, 0] * 1e6, "x": table[:, 1], "y": table[:, 2], "p": table[:, 3]}
     if suffix == ".npz":
         with np.load(path, allow_pickle=False) as archive:

@@ -211,11 +211,6 @@ def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarra
     return resized.astype(np.float32) / np.float32(255.0)
 
 
-def dog_channels(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
-    """DoG ON and OFF channels with the config's sigmas, (N, S, 2S) (:func:`dog_on_off`)."""
-    return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
-
-
 @dataclass(frozen=True)
 class Channel:
     """One choice of input channels (``preprocess.channels``).
@@ -232,14 +227,19 @@ class Channel:
 
 CHANNELS: Registry[Channel] = Registry("config.preprocess.channels")
 CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised"))
-CHANNELS.register(Channel("dog_on_off", 2, dog_channels, "DoG ON/OFF"))
+CHANNELS.register(
+    Channel(
+        "dog_on_off",
+        2,
+        lambda resized, cfg: dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround),
+        "DoG ON/OFF",
+    )
+)
 
 
 def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
-    if resized.ndim != 3 or resized.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
-    if len(resized) == 0:
+    if len(_image_stack(resized)) == 0:
         raise DataError("no images to preprocess")
     scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
@@ -247,10 +247,15 @@ def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarra
 
 def preprocess_images(grey: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
-    if grey.ndim != 3 or grey.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {grey.shape} dtype {grey.dtype}")
     size = cfg.image_size
-    resized = np.empty((len(grey), size, size), dtype=np.uint8)
+    resized = np.empty((len(_image_stack(grey)), size, size), dtype=np.uint8)
     for index, image in enumerate(grey):
         resized[index] = resize_image(image, size)
     return normalise_resized(resized, cfg)
+
+
+def _image_stack(images: np.ndarray) -> np.ndarray:
+    """``images`` when they are ``(N, H, W)`` uint8; DataError otherwise."""
+    if images.ndim != 3 or images.dtype != np.uint8:
+        raise DataError(f"expected (N, H, W) uint8 images, got shape {images.shape} dtype {images.dtype}")
+    return images
