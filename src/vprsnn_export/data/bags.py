@@ -1,16 +1,13 @@
 """Frames from the image topic of a ROS 1 bag (``.bag``) or a ROS 2 bag (a folder with ``metadata.yaml``).
 
-Robots record their cameras as bags. They are read with the ``rosbags`` library (pure Python: no ROS
-install), in the bag's time order, one frame per message of one topic:
+Read with the pure-Python ``rosbags`` library (no ROS install) in the bag's time order, one frame per message of
+the bag's one image topic (with several, ``topic`` names one), named ``<bag>#<index>``:
 
-* ``sensor_msgs/msg/Image`` with encoding ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of
-  ``step`` bytes, padding dropped); colour becomes grey with OpenCV's weights; the message's size is
-  checked against the memory limit before it is deserialised (:func:`raw_image_need`);
-* ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its size
-  checked against the memory limit first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
-
-With one image topic in the bag it is read; with several, ``topic`` names one (one error lists them).
-Frames are named ``<bag>#<index>``.
+* ``sensor_msgs/msg/Image`` in ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of ``step`` bytes,
+  padding dropped; colour to grey with OpenCV's weights), its size checked against the memory limit before it
+  is deserialised (:func:`raw_image_need`);
+* ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its header checked
+  first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
 """
 
 from __future__ import annotations

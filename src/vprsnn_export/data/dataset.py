@@ -1,15 +1,13 @@
 """Place manifests, place selection and the preprocessed image set.
 
 A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.data.folders`: frames in
-time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`).
+time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`). A place
+manifest is a CSV with one row per place: an integer ``place_id`` column and one column per traversal holding
+an image path relative to the CSV's folder; the same place id in two traversals is the same place.
 
-A place manifest is a CSV with one row per place: an integer ``place_id`` column and
-one column per traversal holding an image path relative to the CSV's folder. The
-same place id in two traversals is the same place (the ground truth).
-
-``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of
-traversal folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
-START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
+``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of traversal
+folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places START:COUNT[:STRIDE]``),
+then decodes and preprocesses only the selected images once.
 
 Over 400 lines because it is one concept, the data set as the commands see it: the three sources
 (manifest, traversal folders, synthetic route) share one selection (subset file, ``--places`` or ids)
@@ -26,7 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arguments import MAX_PLACE_ID, ascii_uint, check_place_ids  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
+from ..arguments import (
+    MAX_PLACE_ID,
+    ascii_uint,
+    check_place_ids,
+    require_type,
+)  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
@@ -287,8 +290,7 @@ def load_selection(
 
 def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
     """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
-    if not isinstance(dataset, Dataset):
-        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    require_type("dataset", dataset, Dataset)
     wanted = check_place_ids(place_ids)
     if wanted.size == 0:
         raise InvalidValueError("place_ids must name at least one place")
@@ -326,10 +328,25 @@ def load_dataset(
     if subset is not None and places is not None:
         raise InvalidValueError("give either --subset or --places, not both")
     n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
-    if n_synthetic is not None:
-        return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
-    if _is_folders(Path(data)):
-        return _load_folder(Path(data), names, cfg, subset, places, progress)
+    if n_synthetic is not None:  # the synthetic route: place j is image j of every traversal
+        require_traversals(
+            names, SYNTHETIC_TRAVERSALS, "the synthetic route has no traversal(s) {}; available: {}", data
+        )
+        selected = _select(np.arange(n_synthetic, dtype=np.int64), subset, places, str(data))
+        route = synthetic_route(n_synthetic, names)
+        images = {name: preprocess_images(route[name][selected], cfg) for name in names}
+        return Dataset(str(data), synthetic_fingerprint(n_synthetic, SYNTHETIC_TRAVERSALS), selected, images)
+    folder = Path(data)
+    if _is_folders(folder):  # traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each
+        files = folder_files(folder, names)
+        truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
+        selected = _select(np.arange(len(files[names[0]]), dtype=np.int64), subset, places, str(folder))
+        cells = {
+            name: [(paths[i], f"frame {i} of traversal {name!r}") for i in selected.tolist()]
+            for name, paths in files.items()
+        }
+        images = decode_images(cells, cfg, progress)
+        return Dataset(str(folder.resolve()), folder_fingerprint(files, truths), selected, images, tuple(truths))
     manifest = read_manifest(data)
     require_traversals(
         names, manifest.columns, "traversal column(s) {} not in the manifest; its columns are: {}", manifest.path
@@ -339,32 +356,7 @@ def load_dataset(
     )
     images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
-    return Dataset(
-        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
-    )
-
-
-def _load_folder(
-    folder: Path, names: tuple[str, ...], cfg: PreprocessConfig, subset: Selection, places: str | None, progress: bool
-) -> Dataset:
-    """A folder of traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each traversal."""
-    files = folder_files(folder, names)
-    n_frames = len(next(iter(files.values())))
-    truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
-    selected = _select(np.arange(n_frames, dtype=np.int64), subset, places, str(folder))
-    cells = {
-        name: [(paths[i], f"frame {i} of traversal {name!r}") for i in selected.tolist()]
-        for name, paths in files.items()
-    }
-    images = decode_images(cells, cfg, progress)
-    fingerprint = folder_fingerprint(files, truths)
-    return Dataset(
-        source=str(folder.resolve()),
-        manifest_sha256=fingerprint,
-        place_ids=selected,
-        images=images,
-        ground_truth=tuple(truths),
-    )
+    return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
 
 
 def read_manifest(data: str | Path) -> Manifest:
@@ -493,19 +485,3 @@ def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tu
             raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
         paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
     return paths
-
-
-def _load_synthetic(
-    source: str,
-    n_places: int,
-    names: tuple[str, ...],
-    cfg: PreprocessConfig,
-    subset: Selection,
-    places: str | None,
-) -> Dataset:
-    require_traversals(names, SYNTHETIC_TRAVERSALS, "the synthetic route has no traversal(s) {}; available: {}", source)
-    selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
-    route = synthetic_route(n_places, names)
-    images = {name: preprocess_images(route[name][selected], cfg) for name in names}
-    fingerprint = synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS)
-    return Dataset(source=source, manifest_sha256=fingerprint, place_ids=selected, images=images)

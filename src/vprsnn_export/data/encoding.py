@@ -2,12 +2,10 @@
 
 s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)) for t = 0..T-1 and i = 0..783.
 
-Every presentation of an image (a training epoch, calibration, a query) has a
-*presentation key* (seed, stream, traversal, place_id, epoch). The key is hashed
-to a 63-bit generator seed and the image's uniforms u[t, i] are drawn from its
-own CPU generator, so the spikes of one image never depend on batching, on the
-other images, or on the device that later consumes them. The float network, the
-integer simulator and the ONNX graph are all fed these same tensors.
+Every presentation of an image (a training epoch, calibration, a query) has a *presentation key* (seed, stream,
+traversal, place_id, epoch), hashed to a 63-bit seed of the image's own CPU generator that draws its uniforms
+u[t, i]: the spikes of one image never depend on batching, on the other images or on the device that consumes
+them. The float network, the integer simulator and the ONNX graph are all fed these same tensors.
 """
 
 from __future__ import annotations

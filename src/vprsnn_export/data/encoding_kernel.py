@@ -1,10 +1,9 @@
 """The compiled Bernoulli encoder: ``torch.rand(...) < p`` bit for bit, without building the uniforms.
 
-torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is
-u = m / 2^24 with m the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the
-kernel (:func:`_bernoulli_kernel`, checked entry point :func:`bernoulli_kernel`) runs the twister
-and compares integers. Its caller is :mod:`vprsnn_export.data.encoding`; the training kernel
-(:mod:`vprsnn_export.trainer.stdp_kernel`) encodes each module's batch with it inside one call.
+torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is u = m / 2^24 with m
+the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the kernel (:func:`_bernoulli_kernel`, checked
+entry point :func:`bernoulli_kernel`) runs the twister and compares integers, for :mod:`vprsnn_export.data.encoding`
+and inside the training kernel (:mod:`vprsnn_export.trainer.stdp_kernel`, each module's batch in one call).
 """
 
 from __future__ import annotations

@@ -1,23 +1,21 @@
 """Frames binned from an event-camera recording: accumulated event counts per pixel over a window.
 
-An event camera (DVS, DAVIS) records events ``(x, y, t, p)``: pixel column and row, time and polarity.
-The field turns them into frames by counting (LENS' DAVIS frames, tonic's ``ToFrame``): frame ``i`` is
+An event camera (DVS, DAVIS) records events ``(x, y, t, p)``: pixel column and row, time and polarity. Frames
+count them (LENS' DAVIS frames, tonic's ``ToFrame``): frame ``i`` is
 
     F_i[y, x] = min(255, #{events e in window i : (x_e, y_e) = (x, y)})        (both polarities, uint8)
 
-with the windows either of time, ``[t_0 + i W, t_0 + (i + 1) W)`` for ``W = window_us`` microseconds
-from the first event's time ``t_0``, or of count, events ``i N .. (i + 1) N - 1`` for ``N = count``;
-the last window may be partial. Each frame is one ``np.bincount`` of its slice of the (time-ordered)
-events, computed when it is asked for. Files read (:func:`read_events`):
+with windows of time, ``[t_0 + i W, t_0 + (i + 1) W)`` for ``W = window_us`` microseconds from the first event's
+time ``t_0``, or of count, events ``i N .. (i + 1) N - 1`` for ``N = count`` (the last may be partial); each frame
+is one ``np.bincount`` of its slice of the time-ordered events, when asked for. Files (:func:`read_events`):
 
-* ``.npy``: a structured array with fields ``x``, ``y``, ``t``, ``p`` (``t`` in microseconds), loaded
-  without pickles and memory-mapped;
+* ``.npy``: a structured array with fields ``x``, ``y``, ``t``, ``p`` (``t`` in microseconds), memory-mapped,
+  without pickles;
 * ``.npz``: arrays ``x``, ``y``, ``t``, ``p``, or one structured array with those fields;
-* ``.txt``: one event per line, ``t x y p`` separated by spaces, ``t`` in seconds (the RPG / ESIM
-  event data sets' ``events.txt``); lines starting with ``#`` are skipped.
+* ``.txt``: lines ``t x y p``, ``t`` in seconds (the RPG / ESIM data sets' ``events.txt``), ``#`` lines skipped.
 
-The frame size is the model's reference image size when the caller knows it (an event outside it is
-refused), else ``(max y + 1, max x + 1)`` of the recording. Times must not decrease.
+Times must not decrease. The frame size is the model's reference image size when the caller knows it (an event
+outside it is refused), else ``(max y + 1, max x + 1)`` of the recording.
 """
 
 from __future__ import annotations

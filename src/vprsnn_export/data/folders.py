@@ -6,13 +6,12 @@ Layout (no CSV manifest)::
     myimgs/winter/0001.png 0002.png ...
     myimgs/summer_winter_GT.npy             optional ground truth for a (reference, query) pair
 
-The place id of a frame is its index in its traversal (0, 1, ...). With a ground-truth file for a
-(reference, query) pair (:mod:`vprsnn_export.data.groundtruth`: LENS's ``<a>_<b>_GT.npy``, VPR-Bench's
-``ground_truth_new.npy`` beside ``ref/`` and ``query/``, or a CSV of pairs) every query is scored against
-the reference frames that file names, whatever the two traversals' lengths and offsets
-(:func:`query_truth`). Without one, frame ``j`` of every traversal is place ``j`` ("same index"): that
-needs equal frame counts, and a pair of different lengths is refused rather than scored by index.
-Traversals loaded together share their place ids, so they must hold the same number of frames.
+A frame's place id is its index in its traversal (0, 1, ...). With a ground-truth file for a (reference, query)
+pair (:mod:`vprsnn_export.data.groundtruth`: LENS's ``<a>_<b>_GT.npy``, VPR-Bench's ``ground_truth_new.npy``
+beside ``ref/`` and ``query/``, or a CSV of pairs) every query is scored against the reference frames it names,
+whatever the two traversals' lengths and offsets (:func:`query_truth`). Without one, frame ``j`` of every
+traversal is place ``j`` ("same index"), which needs equal frame counts: a pair of different lengths is refused
+rather than scored by index. Traversals loaded together share their place ids, so hold as many frames.
 """
 
 from __future__ import annotations

@@ -1,20 +1,19 @@
 """Ground-truth files of a (reference, query) pair of traversals, read strictly.
 
-Every form is turned into one boolean matrix ``GT[reference, query]`` (True: that reference frame is
-a correct match of that query frame):
+Every form becomes one boolean matrix ``GT[reference, query]`` (True: that reference frame is a correct match of
+that query frame):
 
-* a 0/1 matrix in a ``.npy`` (bool, integer or float holding only 0 and 1), in either orientation:
-  ``(references, queries)`` or ``(queries, references)``, told apart by the traversal sizes. A square
-  matrix (equal sizes) must be symmetric (the identity is), else its orientation is ambiguous and it is
-  refused: give a CSV of pairs instead. Soft ground truth (values strictly between 0 and 1) is not
-  supported and refused;
+* a 0/1 matrix in a ``.npy`` (bool, integer or float holding only 0 and 1), ``(references, queries)`` or
+  ``(queries, references)``, told apart by the traversal sizes. A square matrix (equal sizes) must be symmetric
+  (the identity is), else its orientation is ambiguous and it is refused: give a CSV of pairs instead. Soft
+  ground truth (values strictly between 0 and 1) is refused;
 * VPR-Bench's ``ground_truth_new.npy``: an ``(N, 2)`` object array of ``[query index, list of reference
-  indices]``, or a 1-D object array holding one list of reference indices per query. Object arrays are
-  pickled; they are read by :func:`vprsnn_export.io.npyload.load_npy`, which runs no code;
+  indices]``, or a 1-D object array of one list of reference indices per query, read (pickled) by
+  :func:`vprsnn_export.io.npyload.load_npy`, which runs no code;
 * a CSV with columns ``query,reference`` (ASCII decimal integers), one row per matching pair.
 
-Anything else (NaN, -1, 0.1, strings, complex, datetime, booleans or floats used as indices, ``1_0``,
-non-ASCII digits, an index outside the traversal) is a DataError naming the file.
+Anything else (NaN, -1, 0.1, strings, complex, datetime, booleans or floats used as indices, ``1_0``, non-ASCII
+digits, an index outside the traversal) is a DataError naming the file.
 """
 
 from __future__ import annotations

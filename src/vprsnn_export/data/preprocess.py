@@ -3,27 +3,23 @@
 For an input image ``I`` (uint8, any H x W) and ``S = image_size``, ``p = patch_size``:
 
 1. ``R = resize(I, S x S)`` with OpenCV's area interpolation (``cv2.INTER_AREA``), still uint8.
-2. With ``patch_norm`` (the method): split ``R`` into the ``(S/p)**2`` non-overlapping
-   ``p x p`` patches ``P`` and normalise each one independently,
-   ``P_hat = (P - min P) / (max P - min P)``; a flat patch (``max P == min P``) becomes 0.
-   Without it (an ablation): ``R_hat = R / 255``.
-3. Flatten row-major: the value of pixel ``(row, col)`` sits at index ``row * S + col``.
+2. With ``patch_norm`` (the method): split ``R`` into the ``(S/p)**2`` non-overlapping ``p x p`` patches ``P``
+   and normalise each one, ``P_hat = (P - min P) / (max P - min P)``; a flat patch (``max P == min P``) becomes
+   0. Without it (an ablation): ``R_hat = R / 255``.
+3. Flatten row-major: pixel ``(row, col)`` is index ``row * S + col``; float32 in [0, 1], shape ``(N, S * S)``.
 
-The result lies in [0, 1] as float32, shape ``(N, S * S)``.
-
-With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF
-channels (the retina's, and an event camera's, split of a signed response):
+With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF channels (the
+retina's, and an event camera's, split of a signed response):
 
     D = G_{sigma_c} * R - G_{sigma_s} * R          (Gaussian blurs of R as float, reflected borders)
     ON = max(D, 0),  OFF = max(-D, 0),  both divided by max(ON, OFF) over the image (0 if flat)
 
-and the image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input
-``r * 2S + c`` (ON) and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
+and image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input ``r * 2S + c`` (ON)
+and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
 
-The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function
-(step 2) and its number of channels, from which ``network.n_inputs`` follows
-(``n_channels * S * S``, checked by the config). Adding one is a function and one
-``CHANNELS.register`` line (docs/architecture.md).
+The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function (step 2) and its number
+of channels, whence ``network.n_inputs = n_channels * S * S`` (checked by the config). Adding one is a function
+and one ``CHANNELS.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations

@@ -8,8 +8,8 @@ query, whether the model's places can match the queries at all, how a result nam
 * :class:`GroundTruth`: a data set's ground-truth file, ``matrix[r, q]`` True when reference place id ``r``
   matches query place id ``q`` (a query may match several references, or none).
 
-A new kind goes here, as one more subclass; no reader asks which kind it holds. A :class:`Query` is one query
-traversal as every evaluation takes it: its frames, their place ids and its truth.
+A new kind is one more subclass; no reader asks which kind it holds. A :class:`Query` is one query traversal as
+every evaluation takes it: its frames, their place ids and its truth.
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
 """The float checkpoint: weights, thresholds, calibration, full config and provenance in one file.
 
-Format: an npz container (no pickle) from :mod:`vprsnn_export.io.fileio` with arrays
-``weights`` (inputs, neurons) float32, ``thresholds`` (neurons,) float32,
-``calibration`` (neurons, places) int64 = S^R and ``reference_place_ids``
-(places,) int64, and a JSON header holding the config, the seed, the data
-provenance (source, manifest sha256, reference traversals, place selection),
-the training history and the package version.
+Format: an npz container (no pickle, :mod:`vprsnn_export.io.fileio`) with arrays ``weights`` (inputs, neurons)
+float32, ``thresholds`` (neurons,) float32, ``calibration`` (neurons, places) int64 = S^R and
+``reference_place_ids`` (places,) int64, and a JSON header holding the config, the seed, the data provenance
+(source, manifest sha256, reference traversals, place selection), the training history and the package version.
 """
 
 from __future__ import annotations

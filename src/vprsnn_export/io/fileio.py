@@ -1,8 +1,7 @@
 """Atomic writes and the npz+JSON container used by checkpoints and fixed-point models.
 
-A container is an ``.npz`` (never pickled) holding named numeric arrays plus one
-``__meta__`` entry: the UTF-8 bytes of a JSON header. Files are written to a
-temporary name in the destination folder, flushed to disk, then renamed, so an
+A container is an ``.npz`` (never pickled) of named numeric arrays plus one ``__meta__`` entry, the UTF-8 bytes
+of a JSON header. A file is written to a temporary name in its folder, flushed to disk, then renamed: an
 interrupted run never leaves a half-written file under the final name.
 """
 
@@ -60,14 +59,17 @@ def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str 
     with _writing(path):
         if path.exists():
             mode = path.stat().st_mode
-            if stat.S_ISDIR(mode):
-                raise OutputError("is a folder: give a file name", path)
-            if not stat.S_ISREG(mode):
-                raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
-            if any(source and Path(source).exists() and path.samefile(source) for source in inputs):
-                raise OutputError("is one of this command's input files: give another output name", path)
-            if not overwrite:
-                raise OutputError("exists already: give another name, or --force to replace it", path)
+            for refused, reason in (
+                (stat.S_ISDIR(mode), "is a folder: give a file name"),
+                (not stat.S_ISREG(mode), "is not a regular file (a device, pipe or socket): refusing to replace it"),
+                (
+                    any(source and Path(source).exists() and path.samefile(source) for source in inputs),
+                    "is one of this command's input files: give another output name",
+                ),
+                (not overwrite, "exists already: give another name, or --force to replace it"),
+            ):
+                if refused:
+                    raise OutputError(reason, path)
         _check_ancestors(path)
     return path
 
