@@ -411,16 +411,18 @@ def _read_csv(
     try:
         reader = csv.reader(io.StringIO(text, newline=""))
         header = next(reader, None)
-        if header is None:
-            raise DataError(f"the {kind} is empty (no header row)", path)
-        columns = tuple(name.strip() for name in header)
+        columns = tuple(name.strip() for name in header or ())
         duplicated = sorted({name for name in columns if columns.count(name) > 1})
-        if duplicated:
-            raise DataError(f"the {kind} repeats column(s) {', '.join(duplicated)}", path)
-        if PLACE_ID not in columns:
-            raise DataError(
-                f"the {kind} has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
-            )
+        for refused, problem in (
+            (header is None, f"the {kind} is empty (no header row)"),
+            (duplicated, f"the {kind} repeats column(s) {', '.join(duplicated)}"),
+            (
+                PLACE_ID not in columns,
+                f"the {kind} has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}",
+            ),
+        ):
+            if refused:
+                raise DataError(problem, path)
         rows: dict[int, tuple[int, dict[str, str]]] = {}
         for cells in reader:
             if not any(cell.strip() for cell in cells):

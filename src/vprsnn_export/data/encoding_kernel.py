@@ -12,7 +12,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import InvalidValueError
 from ..network.kernel_checks import require_array, require_int
 from ..network.kernel_sums import SPIKES, compiled
 
@@ -89,9 +88,7 @@ def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> 
     """Spikes (N, T, D) uint8 with s[n, t, i] = u[n, t, i] < p[n, i], bit for bit
     ``torch.rand((T, D), generator=torch.Generator().manual_seed(seeds[n])) < p[n]`` (about 13x faster, as
     u < p iff m < ceil(p 2^24): module docstring; NaN never fires, as u < NaN is false)."""
-    p = np.asarray(prob, dtype=np.float32)
-    if p.ndim != 2 or len(seeds) != p.shape[0]:
-        raise InvalidValueError(f"prob: expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
+    p = np.asarray(prob, dtype=np.float32)  # (N, D) and N seeds: checked by the caller, encode
     limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
     bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)

@@ -130,12 +130,13 @@ def read_events(path: str | Path) -> Events:
     if len(set(sizes.values())) != 1 or len(sizes["t"]) != 1:
         raise DataError(f"the event fields must be 1-D and of one length, got {sizes}", path)
     x, y, t = (_integers(columns[name], name, path) for name in ("x", "y", "t"))
-    if t.size == 0:
-        raise DataError("the recording holds no events", path)
-    if min(int(x.min()), int(y.min())) < 0:
-        raise DataError("event pixel coordinates must be >= 0", path)
-    if np.any(np.diff(t) < 0):
-        raise DataError("event times decrease: the events must be in time order", path)
+    for refused, problem in (
+        (t.size == 0, "the recording holds no events"),
+        (t.size and min(int(x.min()), int(y.min())) < 0, "event pixel coordinates must be >= 0"),
+        (np.any(np.diff(t) < 0), "event times decrease: the events must be in time order"),
+    ):
+        if refused:
+            raise DataError(problem, path)
     return Events(x, y, t)
 
 

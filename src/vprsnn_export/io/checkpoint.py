@@ -99,10 +99,12 @@ def check_header(
 
     Run by the reader on what it reads and by the writer on what it is about to write.
     """
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    for key, expected, problem in (
+        ("format", FORMAT, "not a vprsnn checkpoint (format {!r})"),
+        ("format_version", FORMAT_VERSION, "unsupported checkpoint format version {!r}"),
+    ):
+        if meta.get(key) != expected:
+            raise ModelFileError(problem.format(meta.get(key)), path)
     try:
         config = Config.from_dict(meta["config"])
     except (KeyError, VprError) as exc:
