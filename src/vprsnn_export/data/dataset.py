@@ -84,9 +84,9 @@ class Dataset:
         *,
         source: str = "arrays",
     ) -> Dataset:
-        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)``
-        uint8 frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1); they are
-        preprocessed with ``cfg`` like loaded images. ``manifest_sha256`` hashes the pixels and ids.
+        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)`` uint8
+        frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1), preprocessed with ``cfg``
+        like loaded images; ``manifest_sha256`` hashes the pixels and ids.
 
         ``vx.Dataset.from_arrays({"day": day, "night": night}, vx.Config().preprocess)``
         """
@@ -193,11 +193,11 @@ def selection_record(subset: str | Path | None, places: str | None) -> dict[str,
 
 
 def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> GroundTruth | None:
-    """How the queries of traversal ``query`` are scored against a network trained on ``references``: the
-    data set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data
-    set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
-    a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
-    match, or the folder when its traversals are not index-aligned and no file says how they match."""
+    """How the queries of traversal ``query`` are scored against a network trained on ``references``: the data
+    set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data set with a
+    ground-truth file; None for same-index data (a manifest, the synthetic route, a folder pair of equal lengths
+    without a file). DataError naming the file when a selected query has no match, or the folder when its
+    traversals are not index-aligned and no file says how they match."""
     folder = Path(dataset.source)
     if parse_synthetic(dataset.source) is not None:
         return None

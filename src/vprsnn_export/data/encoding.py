@@ -73,9 +73,9 @@ def firing_probabilities(images: np.ndarray | torch.Tensor, cfg: EncoderConfig) 
 def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torch.Tensor:
     """Spike trains of shape (N, T, D), dtype uint8, on the CPU.
 
-    Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i]
-    with u drawn from ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced by
-    the compiled :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes` without building u.
+    Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i] with u drawn from
+    ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced without building u by the compiled
+    :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes`.
     """
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:

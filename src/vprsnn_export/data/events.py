@@ -103,10 +103,9 @@ def _integers(values: np.ndarray, name: str, path: Path) -> np.ndarray:
 
 
 def load_need(path: Path) -> MemoryNeed:
-    """Reading ``path``'s events: ``9 B`` bytes for ``B`` bytes of event data (the file, or an .npz's members
-    uncompressed): an event takes at least 4 bytes there (4 one-byte fields, or 8 characters of text a line)
-    and at most 36 in memory (x, y, t, their flat pixel index as int64 and the text parser's row), so 9 B
-    bounds it; checked before reading."""
+    """Reading ``path``'s events, checked before reading: ``9 B`` bytes for ``B`` bytes of event data (the file,
+    or an .npz's members uncompressed), as an event takes at least 4 bytes there (4 one-byte fields, or 8
+    characters of text a line) and at most 36 in memory (x, y, t, their flat int64 pixel index, the parser's row)."""
     size = path.stat().st_size
     if path.suffix.lower() == ".npz" and zipfile.is_zipfile(path):
         with zipfile.ZipFile(path) as archive:

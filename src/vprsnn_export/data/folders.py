@@ -61,9 +61,8 @@ def check_every_query_matched(matrix: np.ndarray, queries: np.ndarray, path: Pat
 def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np.ndarray, Path] | None:
     """GT[reference frame, query frame] of traversal ``query`` against the reference traversal(s), from the
     ground-truth files beside them (several references must agree); None when the pair has no file and the
-    traversals are index-aligned (equal frame counts) or ``query`` is a reference itself. DataError naming
-    the folder when the frame counts differ and no file says which frames match: never an index score on
-    data that is not index-aligned."""
+    traversals are index-aligned (equal frame counts) or ``query`` is a reference itself. DataError naming the
+    folder when the frame counts differ and no file says which frames match (never an index score)."""
     others = [name for name in dict.fromkeys(references) if name != query]
     if not others:
         return None

@@ -69,11 +69,9 @@ SINK: list[IO[bytes]] = []  # one temporary file, reused: a new one per image co
 
 @contextmanager
 def captured_stderr() -> Iterator[list[str]]:
-    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines.
-
-    The lines are filled in when the block ends, so an error raised after it can quote the decoder
-    instead of the decoder printing above the error. Without a usable descriptor 2 nothing is captured.
-    """
+    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines,
+    filled in when the block ends: an error raised after it quotes the decoder instead of the decoder printing
+    above the error. Without a usable descriptor 2 nothing is captured."""
     lines: list[str] = []
     with DECODE_LOCK:
         sys.stderr.flush()
@@ -127,12 +125,10 @@ def decoder_said(noise: list[str]) -> str:
 def read_grey_image(path: Path, context: str = "") -> np.ndarray:
     """Decode one image file as 2-D uint8 greyscale (``cv2.IMREAD_GRAYSCALE``).
 
-    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path
-    Python can open works (a folder name that is not UTF-8 included) and none reaches OpenCV's
-    own path handling. A missing or unreadable file, one OpenCV cannot decode, or one the decoder
-    reports as cut short (libjpeg's "premature end") raises a :class:`DataError` naming ``path``,
-    with the decoder's message; the decoder's stderr lines never reach the terminal.
-    ``context`` (e.g. which manifest row asked for it) is appended to the message.
+    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path Python can open
+    works (a folder name that is not UTF-8 included). A missing or unreadable file, one OpenCV cannot decode, or
+    one the decoder reports as cut short (libjpeg's "premature end") is a :class:`DataError` naming ``path``,
+    quoting the decoder (whose stderr never reaches the terminal), with ``context`` (e.g. the manifest row).
     """
     path = Path(path)
     suffix = f" ({context})" if context else ""
@@ -165,11 +161,8 @@ def resize_image(grey: np.ndarray, size: int) -> np.ndarray:
 
 
 def patch_normalise(resized: np.ndarray, patch_size: int) -> np.ndarray:
-    """Min-max normalise every ``p x p`` patch of every image independently.
-
-    ``resized`` is ``(N, S, S)``; returns float32 ``(N, S, S)`` with
-    ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``.
-    """
+    """Min-max normalise every ``p x p`` patch of every ``(N, S, S)`` image independently, float32 ``(N, S, S)``:
+    ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``."""
     n, height, width = resized.shape
     if height % patch_size or width % patch_size:
         raise InvalidValueError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")

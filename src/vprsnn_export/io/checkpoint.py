@@ -96,9 +96,7 @@ def check_header(
     meta: dict[str, Any], path: str | Path
 ) -> tuple[Config, list[str], dict[str, str | None], list[dict[str, Any]]]:
     """A checkpoint header's config, reference traversals, data record and history; ModelFileError naming ``path``.
-
-    Run by the reader on what it reads and by the writer on what it is about to write.
-    """
+    Run by the reader on what it reads and by the writer on what it is about to write."""
     for key, expected, problem in (
         ("format", FORMAT, "not a vprsnn checkpoint (format {!r})"),
         ("format_version", FORMAT_VERSION, "unsupported checkpoint format version {!r}"),
@@ -117,11 +115,9 @@ def check_header(
 
 
 def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
-    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
-
-    Shared by checkpoints and fixed-point models (which also need a string ``package_version``);
-    ModelFileError naming ``path`` otherwise.
-    """
+    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings), for
+    checkpoints and fixed-point models (which also need a string ``package_version``); ModelFileError naming ``path``
+    otherwise."""
     problem = next(_header_defects(meta), None)
     if problem is not None:
         raise ModelFileError(problem, path)

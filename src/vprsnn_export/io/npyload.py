@@ -132,11 +132,9 @@ def _numeric_array(shape: tuple[int, ...], dtype: np.dtype, fortran: bool, data:
 
 
 def _rebuild(root: object) -> object:
-    """``root`` with every :class:`_ArrayRecipe` replaced by its array, walked iteratively (each object once; the
-    root keeps every node alive, so no ``id`` is reused during the walk).
-
-    An object array's elements are its list form; containers are rebuilt with their elements replaced.
-    """
+    """``root`` with every :class:`_ArrayRecipe` replaced by its array (an object array's elements: its list form)
+    and containers rebuilt with their elements replaced, walked iteratively (each object once; the root keeps
+    every node alive, so no ``id`` is reused during the walk)."""
     done: dict[int, object] = {}
     stack: list[tuple[object, int, bool]] = [(root, 0, False)]
     while stack:
@@ -192,10 +190,9 @@ def _header(stream: io.BytesIO, what: str, path: Path) -> tuple[tuple[int, ...],
 def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
     """The array stored in the ``.npy`` file ``path``; an object array through the restricted unpickler.
 
-    DataError naming the file for anything that is not one readable ``.npy`` array (an ``.npz`` archive,
-    a truncated file, a header whose shape the file cannot hold, a pickle naming any global outside
-    :data:`_GLOBALS`, a forged dtype state, an object array given as raw bytes, nesting deeper
-    than :data:`MAX_DEPTH`).
+    DataError naming the file for anything that is not one readable ``.npy`` array (an ``.npz`` archive, a
+    truncated file, a header whose shape the file cannot hold, a pickle naming any global outside :data:`_GLOBALS`,
+    a forged dtype state, an object array given as raw bytes, nesting deeper than :data:`MAX_DEPTH`).
     """
     path = Path(path)
     try:
