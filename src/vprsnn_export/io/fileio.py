@@ -296,24 +296,24 @@ def parse_json(text: str | bytes, what: str) -> Any:
     if isinstance(text, bytes):
         text = text.decode("utf-8")
     try:
-        value = json.loads(text, parse_int=_json_int)
-    except RecursionError:
-        raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels") from None
-    except InvalidValueError as exc:  # an integer literal beyond the limit
-        raise InvalidValueError(f"{what}: {exc}") from None
-    stack: list[tuple[Any, int]] = [(value, 1)]
-    while stack:
-        item, depth = stack.pop()
-        if isinstance(item, dict | list):
-            if depth > JSON_MAX_DEPTH:
-                raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
-            stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
-    return value
+        value = json.loads(text, parse_int=lambda literal: _json_int(literal, what))
+        stack: list[tuple[Any, int]] = [(value, 1)]
+        while stack:
+            item, depth = stack.pop()
+            if isinstance(item, dict | list):
+                if depth > JSON_MAX_DEPTH:
+                    break
+                stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
+        else:  # no object or list nested deeper than the limit
+            return value
+    except RecursionError:  # nested deeper than the parser itself goes
+        pass
+    raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
 
 
-def _json_int(literal: str) -> int:
+def _json_int(literal: str, what: str) -> int:
     if len(literal.lstrip("-")) > JSON_MAX_DIGITS:
-        raise InvalidValueError(f"JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
+        raise InvalidValueError(f"{what}: JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
     return int(literal)
 
 
