@@ -1,16 +1,13 @@
 """Frames from the image topic of a ROS 1 bag (``.bag``) or a ROS 2 bag (a folder with ``metadata.yaml``).
 
-Robots record their cameras as bags. They are read with the ``rosbags`` library (pure Python: no ROS
-install), in the bag's time order, one frame per message of one topic:
+Read with the pure-Python ``rosbags`` library (no ROS install) in the bag's time order, one frame per message of
+the bag's one image topic (with several, ``topic`` names one), named ``<bag>#<index>``:
 
-* ``sensor_msgs/msg/Image`` with encoding ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of
-  ``step`` bytes, padding dropped); colour becomes grey with OpenCV's weights; the message's size is
-  checked against the memory limit before it is deserialised (:func:`raw_image_need`);
-* ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its size
-  checked against the memory limit first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
-
-With one image topic in the bag it is read; with several, ``topic`` names one (one error lists them).
-Frames are named ``<bag>#<index>``.
+* ``sensor_msgs/msg/Image`` in ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of ``step`` bytes,
+  padding dropped; colour to grey with OpenCV's weights), its size checked against the memory limit before it
+  is deserialised (:func:`raw_image_need`);
+* ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its header checked
+  first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
 """
 
 from __future__ import annotations
@@ -92,15 +89,15 @@ def bag_frames(path: str | Path, topic: str | None = None) -> Iterator[tuple[str
     except Exception as exc:  # rosbags raises its own reader errors, and OSError or KeyError on damaged files
         raise DataError(f"cannot read this bag ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
     images = sorted({c.topic for c in reader.connections if c.msgtype in (IMAGE, COMPRESSED)})
-    if topic is None and len(images) != 1:
+    chosen = topic if topic is not None else images[0] if len(images) == 1 else None
+    if chosen not in images:
         reader.close()
         found = f"image topics {', '.join(images)}: give --topic" if images else "no image topic"
-        raise DataError(f"this bag holds {found} ({IMAGE} or {COMPRESSED})", path)
-    if topic is not None and topic not in images:
-        reader.close()
-        raise DataError(f"no image topic {topic!r} in this bag (its image topics: {', '.join(images) or 'none'})", path)
-    chosen = topic if topic is not None else images[0]
-    return _messages(reader, path, chosen)
+        problem = f"this bag holds {found} ({IMAGE} or {COMPRESSED})"
+        if topic is not None:
+            problem = f"no image topic {topic!r} in this bag (its image topics: {', '.join(images) or 'none'})"
+        raise DataError(problem, path)
+    return _messages(reader, path, str(chosen))
 
 
 def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]]:

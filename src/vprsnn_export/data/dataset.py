@@ -1,15 +1,13 @@
 """Place manifests, place selection and the preprocessed image set.
 
 A data set is a place manifest, a folder of traversal folders (:mod:`vprsnn_export.data.folders`: frames in
-time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`).
+time order, frame j is place j, optional ground-truth files) or arrays (:meth:`Dataset.from_arrays`). A place
+manifest is a CSV with one row per place: an integer ``place_id`` column and one column per traversal holding
+an image path relative to the CSV's folder; the same place id in two traversals is the same place.
 
-A place manifest is a CSV with one row per place: an integer ``place_id`` column and
-one column per traversal holding an image path relative to the CSV's folder. The
-same place id in two traversals is the same place (the ground truth).
-
-``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of
-traversal folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places
-START:COUNT[:STRIDE]``), then decodes and preprocesses only the selected images once.
+``load_dataset`` resolves ``--data`` (a manifest, a folder holding ``places.csv``, a folder of traversal
+folders, or ``synthetic[:N]``), applies the selection (``--subset`` file or ``--places START:COUNT[:STRIDE]``),
+then decodes and preprocesses only the selected images once.
 
 Over 400 lines because it is one concept, the data set as the commands see it: the three sources
 (manifest, traversal folders, synthetic route) share one selection (subset file, ``--places`` or ids)
@@ -26,7 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arguments import ascii_uint, check_place_ids
+from ..arguments import (
+    MAX_PLACE_ID,
+    ascii_uint,
+    check_place_ids,
+    require_type,
+)  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
@@ -39,6 +42,7 @@ from .folders import (
     ground_truths,
     is_folder_dataset,
     query_truth,
+    require_traversals,
 )
 from .frames import image_files
 from .groundtruth import GT_SUFFIXES, VPR_BENCH_GT, ground_truth_files
@@ -80,9 +84,9 @@ class Dataset:
         *,
         source: str = "arrays",
     ) -> Dataset:
-        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)``
-        uint8 frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1); they are
-        preprocessed with ``cfg`` like loaded images. ``manifest_sha256`` hashes the pixels and ids.
+        """A data set from greyscale frames held in memory: ``images`` maps each traversal to ``(N, H, W)`` uint8
+        frames, row k of every traversal being place ``place_ids[k]`` (default 0..N-1), preprocessed with ``cfg``
+        like loaded images; ``manifest_sha256`` hashes the pixels and ids.
 
         ``vx.Dataset.from_arrays({"day": day, "night": night}, vx.Config().preprocess)``
         """
@@ -143,7 +147,6 @@ class Manifest:
     rows: dict[int, tuple[int, dict[str, str]]]  # place_id -> (CSV line number, row)
 
 
-MAX_PLACE_ID = 2**53  # ids beyond this cannot be told apart once they pass through float64
 MAX_PLACES = 10_000_000  # a selection larger than this is a typing error, not a route
 MAX_SYNTHETIC_PLACES = 100_000
 
@@ -153,14 +156,19 @@ def parse_places(spec: str) -> tuple[int, int, int]:
 
     START >= 0, COUNT >= 1, STRIDE >= 1 (default 1); anything else is an InvalidValueError.
     """
-    parts = str(spec).strip().split(":")
-    usage = f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
-    numbers = [ascii_uint(part.strip()) for part in parts]
-    if len(parts) not in (2, 3) or None in numbers:
-        raise InvalidValueError(usage)
-    start, count, stride = (int(number or 0) for number in [*numbers, 1][:3])  # STRIDE defaults to 1
-    if start < 0 or count < 1 or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID or count > MAX_PLACES:
-        raise InvalidValueError(usage)
+    numbers = [ascii_uint(part.strip()) for part in str(spec).strip().split(":")]
+    start, count, stride = (number or 0 for number in [*numbers, 1, 1][:3])  # STRIDE defaults to 1
+    last = start + (count - 1) * stride
+    if (
+        len(numbers) not in (2, 3)
+        or None in numbers
+        or not 1 <= count <= MAX_PLACES
+        or stride < 1
+        or last > MAX_PLACE_ID
+    ):
+        raise InvalidValueError(
+            f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
+        )
     return start, count, stride
 
 
@@ -185,11 +193,11 @@ def selection_record(subset: str | Path | None, places: str | None) -> dict[str,
 
 
 def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> GroundTruth | None:
-    """How the queries of traversal ``query`` are scored against a network trained on ``references``: the
-    data set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data
-    set with a ground-truth file; None for same-index data (a manifest's place ids, the synthetic route,
-    a folder pair of equal lengths without a file). DataError naming the file when a selected query has no
-    match, or the folder when its traversals are not index-aligned and no file says how they match."""
+    """How the queries of traversal ``query`` are scored against a network trained on ``references``: the data
+    set's ground truth in place ids (:func:`vprsnn_export.data.folders.query_truth`) for a folder data set with a
+    ground-truth file; None for same-index data (a manifest, the synthetic route, a folder pair of equal lengths
+    without a file). DataError naming the file when a selected query has no match, or the folder when its
+    traversals are not index-aligned and no file says how they match."""
     folder = Path(dataset.source)
     if parse_synthetic(dataset.source) is not None:
         return None
@@ -282,8 +290,7 @@ def load_selection(
 
 def select_places(dataset: Dataset, place_ids: Sequence[int] | np.ndarray) -> Dataset:
     """The places with these ids, in this order (a DataError names ids the data set does not hold)."""
-    if not isinstance(dataset, Dataset):
-        raise InvalidValueError(f"dataset must be a Dataset, got {type(dataset).__name__}")
+    require_type("dataset", dataset, Dataset)
     wanted = check_place_ids(place_ids)
     if wanted.size == 0:
         raise InvalidValueError("place_ids must name at least one place")
@@ -321,48 +328,35 @@ def load_dataset(
     if subset is not None and places is not None:
         raise InvalidValueError("give either --subset or --places, not both")
     n_synthetic = parse_synthetic(data) if isinstance(data, str) else None
-    if n_synthetic is not None:
-        return _load_synthetic(str(data), n_synthetic, names, cfg, subset, places)
-    if _is_folders(Path(data)):
-        return _load_folder(Path(data), names, cfg, subset, places, progress)
-    manifest = read_manifest(data)
-    missing = [name for name in names if name not in manifest.columns]
-    if missing:
-        raise DataError(
-            f"traversal column(s) {', '.join(repr(m) for m in missing)} not in the manifest; its columns are: {', '.join(manifest.columns)}",
-            manifest.path,
+    if n_synthetic is not None:  # the synthetic route: place j is image j of every traversal
+        require_traversals(
+            names, SYNTHETIC_TRAVERSALS, "the synthetic route has no traversal(s) {}; available: {}", data
         )
+        selected = _select(np.arange(n_synthetic, dtype=np.int64), subset, places, str(data))
+        route = synthetic_route(n_synthetic, names)
+        images = {name: preprocess_images(route[name][selected], cfg) for name in names}
+        return Dataset(str(data), synthetic_fingerprint(n_synthetic, SYNTHETIC_TRAVERSALS), selected, images)
+    folder = Path(data)
+    if _is_folders(folder):  # traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each
+        files = folder_files(folder, names)
+        truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
+        selected = _select(np.arange(len(files[names[0]]), dtype=np.int64), subset, places, str(folder))
+        cells = {
+            name: [(paths[i], f"frame {i} of traversal {name!r}") for i in selected.tolist()]
+            for name, paths in files.items()
+        }
+        images = decode_images(cells, cfg, progress)
+        return Dataset(str(folder.resolve()), folder_fingerprint(files, truths), selected, images, tuple(truths))
+    manifest = read_manifest(data)
+    require_traversals(
+        names, manifest.columns, "traversal column(s) {} not in the manifest; its columns are: {}", manifest.path
+    )
     selected = _select(
         np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
     )
     images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
-    return Dataset(
-        source=str(manifest.path.resolve()), manifest_sha256=manifest.sha256, place_ids=selected, images=images
-    )
-
-
-def _load_folder(
-    folder: Path, names: tuple[str, ...], cfg: PreprocessConfig, subset: Selection, places: str | None, progress: bool
-) -> Dataset:
-    """A folder of traversal folders (:mod:`vprsnn_export.data.folders`): place j is frame j of each traversal."""
-    files = folder_files(folder, names)
-    n_frames = len(next(iter(files.values())))
-    truths = ground_truths(folder, names, {name: len(paths) for name, paths in files.items()})
-    selected = _select(np.arange(n_frames, dtype=np.int64), subset, places, str(folder))
-    cells = {
-        name: [(paths[i], f"frame {i} of traversal {name!r}") for i in selected.tolist()]
-        for name, paths in files.items()
-    }
-    images = decode_images(cells, cfg, progress)
-    fingerprint = folder_fingerprint(files, truths)
-    return Dataset(
-        source=str(folder.resolve()),
-        manifest_sha256=fingerprint,
-        place_ids=selected,
-        images=images,
-        ground_truth=tuple(truths),
-    )
+    return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
 
 
 def read_manifest(data: str | Path) -> Manifest:
@@ -374,24 +368,19 @@ def read_manifest(data: str | Path) -> Manifest:
                 f"this folder has no {MANIFEST_NAME} place manifest and no traversal folders of images", path
             )
         path = path / MANIFEST_NAME
-    elif not is_readable_file(path):
-        hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
-        raise DataError(f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}", path)
-    raw = path.read_bytes()
-    columns, rows = _read_csv(raw, path, "place manifest")
-    if not rows:
-        raise DataError("the place manifest lists no places", path)
+    hint = f"; {NORDLAND_HINT}" if "nordland" in str(path).lower() or "shared" in path.parts else ""
+    missing = f"no such place manifest (a CSV file, or a folder holding {MANIFEST_NAME}){hint}"
+    raw, columns, rows = _read_csv(path, "place manifest", missing, "the place manifest lists no places")
     return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
 
 
 def read_subset(path: str | Path) -> np.ndarray:
     """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
-    path = Path(path)
-    if not is_readable_file(path):
-        raise DataError("no such subset file (a CSV with a place_id column)", path)
-    _, rows = _read_csv(path.read_bytes(), path, "subset file")
-    if not rows:
-        raise DataError("empty selection: the subset file lists no places", path)
+    missing, empty = (
+        "no such subset file (a CSV with a place_id column)",
+        "empty selection: the subset file lists no places",
+    )
+    _, _, rows = _read_csv(Path(path), "subset file", missing, empty)
     return np.fromiter(rows, dtype=np.int64, count=len(rows))  # file order
 
 
@@ -406,9 +395,15 @@ def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
     return names
 
 
-def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[int, tuple[int, dict[str, str]]]]:
-    """Header and rows by place id, in file order (place_id -> (line number, row)) of a UTF-8 CSV with a
-    ``place_id`` column, names and cells stripped of spaces; DataError on a defect or a repeated place id."""
+def _read_csv(
+    path: Path, kind: str, missing: str, empty: str
+) -> tuple[bytes, tuple[str, ...], dict[int, tuple[int, dict[str, str]]]]:
+    """Bytes, header and rows by place id, in file order (place_id -> (line number, row)) of a UTF-8 CSV with a
+    ``place_id`` column, names and cells stripped of spaces; DataError on a defect or a repeated place id, and
+    the messages ``missing`` for no readable file and ``empty`` for no row."""
+    if not is_readable_file(path):
+        raise DataError(missing, path)
+    raw = path.read_bytes()
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -416,16 +411,18 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[
     try:
         reader = csv.reader(io.StringIO(text, newline=""))
         header = next(reader, None)
-        if header is None:
-            raise DataError(f"the {kind} is empty (no header row)", path)
-        columns = tuple(name.strip() for name in header)
+        columns = tuple(name.strip() for name in header or ())
         duplicated = sorted({name for name in columns if columns.count(name) > 1})
-        if duplicated:
-            raise DataError(f"the {kind} repeats column(s) {', '.join(duplicated)}", path)
-        if PLACE_ID not in columns:
-            raise DataError(
-                f"the {kind} has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}", path
-            )
+        for refused, problem in (
+            (header is None, f"the {kind} is empty (no header row)"),
+            (duplicated, f"the {kind} repeats column(s) {', '.join(duplicated)}"),
+            (
+                PLACE_ID not in columns,
+                f"the {kind} has no {PLACE_ID!r} column; its columns are: {', '.join(columns) or 'none'}",
+            ),
+        ):
+            if refused:
+                raise DataError(problem, path)
         rows: dict[int, tuple[int, dict[str, str]]] = {}
         for cells in reader:
             if not any(cell.strip() for cell in cells):
@@ -437,7 +434,9 @@ def _read_csv(raw: bytes, path: Path, kind: str) -> tuple[tuple[str, ...], dict[
             rows[place] = (reader.line_num, record)
     except csv.Error as exc:
         raise DataError(f"the {kind} is not valid CSV ({exc})", path) from None
-    return columns, rows
+    if not rows:
+        raise DataError(empty, path)
+    return raw, columns, rows
 
 
 def _place_id(value: str | None, line: int, path: Path) -> int:
@@ -488,24 +487,3 @@ def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tu
             raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
         paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
     return paths
-
-
-def _load_synthetic(
-    source: str,
-    n_places: int,
-    names: tuple[str, ...],
-    cfg: PreprocessConfig,
-    subset: Selection,
-    places: str | None,
-) -> Dataset:
-    missing = [name for name in names if name not in SYNTHETIC_TRAVERSALS]
-    if missing:
-        raise DataError(
-            f"the synthetic route has no traversal(s) {', '.join(repr(m) for m in missing)}; available: {', '.join(SYNTHETIC_TRAVERSALS)}",
-            source,
-        )
-    selected = _select(np.arange(n_places, dtype=np.int64), subset, places, source)
-    route = synthetic_route(n_places, names)
-    images = {name: preprocess_images(route[name][selected], cfg) for name in names}
-    fingerprint = synthetic_fingerprint(n_places, SYNTHETIC_TRAVERSALS)
-    return Dataset(source=source, manifest_sha256=fingerprint, place_ids=selected, images=images)

@@ -2,12 +2,10 @@
 
 s_i[t] ~ Bernoulli(clip(rate_scale * p_i, 0, 1)) for t = 0..T-1 and i = 0..783.
 
-Every presentation of an image (a training epoch, calibration, a query) has a
-*presentation key* (seed, stream, traversal, place_id, epoch). The key is hashed
-to a 63-bit generator seed and the image's uniforms u[t, i] are drawn from its
-own CPU generator, so the spikes of one image never depend on batching, on the
-other images, or on the device that later consumes them. The float network, the
-integer simulator and the ONNX graph are all fed these same tensors.
+Every presentation of an image (a training epoch, calibration, a query) has a *presentation key* (seed, stream,
+traversal, place_id, epoch), hashed to a 63-bit seed of the image's own CPU generator that draws its uniforms
+u[t, i]: the spikes of one image never depend on batching, on the other images or on the device that consumes
+them. The float network, the integer simulator and the ONNX graph are all fed these same tensors.
 """
 
 from __future__ import annotations
@@ -75,9 +73,9 @@ def firing_probabilities(images: np.ndarray | torch.Tensor, cfg: EncoderConfig) 
 def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torch.Tensor:
     """Spike trains of shape (N, T, D), dtype uint8, on the CPU.
 
-    Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i]
-    with u drawn from ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced by
-    the compiled :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes` without building u.
+    Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i] with u drawn from
+    ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced without building u by the compiled
+    :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes`.
     """
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:

@@ -1,10 +1,9 @@
 """The compiled Bernoulli encoder: ``torch.rand(...) < p`` bit for bit, without building the uniforms.
 
-torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is
-u = m / 2^24 with m the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the
-kernel (:func:`_bernoulli_kernel`, checked entry point :func:`bernoulli_kernel`) runs the twister
-and compares integers. Its caller is :mod:`vprsnn_export.data.encoding`; the training kernel
-(:mod:`vprsnn_export.trainer.stdp_kernel`) encodes each module's batch with it inside one call.
+torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is u = m / 2^24 with m
+the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the kernel (:func:`_bernoulli_kernel`, checked
+entry point :func:`bernoulli_kernel`) runs the twister and compares integers, for :mod:`vprsnn_export.data.encoding`
+and inside the training kernel (:mod:`vprsnn_export.trainer.stdp_kernel`, each module's batch in one call).
 """
 
 from __future__ import annotations
@@ -13,7 +12,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import InvalidValueError
 from ..network.kernel_checks import require_array, require_int
 from ..network.kernel_sums import SPIKES, compiled
 
@@ -90,9 +88,7 @@ def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> 
     """Spikes (N, T, D) uint8 with s[n, t, i] = u[n, t, i] < p[n, i], bit for bit
     ``torch.rand((T, D), generator=torch.Generator().manual_seed(seeds[n])) < p[n]`` (about 13x faster, as
     u < p iff m < ceil(p 2^24): module docstring; NaN never fires, as u < NaN is false)."""
-    p = np.asarray(prob, dtype=np.float32)
-    if p.ndim != 2 or len(seeds) != p.shape[0]:
-        raise InvalidValueError(f"prob: expected (N, D) probabilities and N seeds, got {p.shape} and {len(seeds)}")
+    p = np.asarray(prob, dtype=np.float32)  # (N, D) and N seeds: checked by the caller, encode
     limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
     bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)

@@ -1,23 +1,21 @@
 """Frames binned from an event-camera recording: accumulated event counts per pixel over a window.
 
-An event camera (DVS, DAVIS) records events ``(x, y, t, p)``: pixel column and row, time and polarity.
-The field turns them into frames by counting (LENS' DAVIS frames, tonic's ``ToFrame``): frame ``i`` is
+An event camera (DVS, DAVIS) records events ``(x, y, t, p)``: pixel column and row, time and polarity. Frames
+count them (LENS' DAVIS frames, tonic's ``ToFrame``): frame ``i`` is
 
     F_i[y, x] = min(255, #{events e in window i : (x_e, y_e) = (x, y)})        (both polarities, uint8)
 
-with the windows either of time, ``[t_0 + i W, t_0 + (i + 1) W)`` for ``W = window_us`` microseconds
-from the first event's time ``t_0``, or of count, events ``i N .. (i + 1) N - 1`` for ``N = count``;
-the last window may be partial. Each frame is one ``np.bincount`` of its slice of the (time-ordered)
-events, computed when it is asked for. Files read (:func:`read_events`):
+with windows of time, ``[t_0 + i W, t_0 + (i + 1) W)`` for ``W = window_us`` microseconds from the first event's
+time ``t_0``, or of count, events ``i N .. (i + 1) N - 1`` for ``N = count`` (the last may be partial); each frame
+is one ``np.bincount`` of its slice of the time-ordered events, when asked for. Files (:func:`read_events`):
 
-* ``.npy``: a structured array with fields ``x``, ``y``, ``t``, ``p`` (``t`` in microseconds), loaded
-  without pickles and memory-mapped;
+* ``.npy``: a structured array with fields ``x``, ``y``, ``t``, ``p`` (``t`` in microseconds), memory-mapped,
+  without pickles;
 * ``.npz``: arrays ``x``, ``y``, ``t``, ``p``, or one structured array with those fields;
-* ``.txt``: one event per line, ``t x y p`` separated by spaces, ``t`` in seconds (the RPG / ESIM
-  event data sets' ``events.txt``); lines starting with ``#`` are skipped.
+* ``.txt``: lines ``t x y p``, ``t`` in seconds (the RPG / ESIM data sets' ``events.txt``), ``#`` lines skipped.
 
-The frame size is the model's reference image size when the caller knows it (an event outside it is
-refused), else ``(max y + 1, max x + 1)`` of the recording. Times must not decrease.
+Times must not decrease. The frame size is the model's reference image size when the caller knows it (an event
+outside it is refused), else ``(max y + 1, max x + 1)`` of the recording.
 """
 
 from __future__ import annotations
@@ -71,10 +69,9 @@ def _columns(path: Path) -> dict[str, np.ndarray]:
         with warnings.catch_warnings():  # an empty file: "input contained no data" (refused below)
             warnings.simplefilter("ignore", UserWarning)
             table = np.loadtxt(path, dtype=np.float64, comments="#", ndmin=2)
-        if table.size == 0:
-            raise DataError("the recording holds no events", path)
-        if table.shape[1] != 4:
+        if table.size and table.shape[1] != 4:
             raise DataError(f"expected 4 columns 't x y p' per line, got {table.shape[1]}", path)
+        table = table.reshape(-1, 4)  # no line: refused as no events below
         return {"t": table[:, 0] * 1e6, "x": table[:, 1], "y": table[:, 2], "p": table[:, 3]}
     if suffix == ".npz":
         with np.load(path, allow_pickle=False) as archive:
@@ -106,10 +103,9 @@ def _integers(values: np.ndarray, name: str, path: Path) -> np.ndarray:
 
 
 def load_need(path: Path) -> MemoryNeed:
-    """Reading ``path``'s events: ``9 B`` bytes for ``B`` bytes of event data (the file, or an .npz's members
-    uncompressed): an event takes at least 4 bytes there (4 one-byte fields, or 8 characters of text a line)
-    and at most 36 in memory (x, y, t, their flat pixel index as int64 and the text parser's row), so 9 B
-    bounds it; checked before reading."""
+    """Reading ``path``'s events, checked before reading: ``9 B`` bytes for ``B`` bytes of event data (the file,
+    or an .npz's members uncompressed), as an event takes at least 4 bytes there (4 one-byte fields, or 8
+    characters of text a line) and at most 36 in memory (x, y, t, their flat int64 pixel index, the parser's row)."""
     size = path.stat().st_size
     if path.suffix.lower() == ".npz" and zipfile.is_zipfile(path):
         with zipfile.ZipFile(path) as archive:
@@ -133,12 +129,13 @@ def read_events(path: str | Path) -> Events:
     if len(set(sizes.values())) != 1 or len(sizes["t"]) != 1:
         raise DataError(f"the event fields must be 1-D and of one length, got {sizes}", path)
     x, y, t = (_integers(columns[name], name, path) for name in ("x", "y", "t"))
-    if t.size == 0:
-        raise DataError("the recording holds no events", path)
-    if min(int(x.min()), int(y.min())) < 0:
-        raise DataError("event pixel coordinates must be >= 0", path)
-    if np.any(np.diff(t) < 0):
-        raise DataError("event times decrease: the events must be in time order", path)
+    for refused, problem in (
+        (t.size == 0, "the recording holds no events"),
+        (t.size and min(int(x.min()), int(y.min())) < 0, "event pixel coordinates must be >= 0"),
+        (np.any(np.diff(t) < 0), "event times decrease: the events must be in time order"),
+    ):
+        if refused:
+            raise DataError(problem, path)
     return Events(x, y, t)
 
 

@@ -6,13 +6,12 @@ Layout (no CSV manifest)::
     myimgs/winter/0001.png 0002.png ...
     myimgs/summer_winter_GT.npy             optional ground truth for a (reference, query) pair
 
-The place id of a frame is its index in its traversal (0, 1, ...). With a ground-truth file for a
-(reference, query) pair (:mod:`vprsnn_export.data.groundtruth`: LENS's ``<a>_<b>_GT.npy``, VPR-Bench's
-``ground_truth_new.npy`` beside ``ref/`` and ``query/``, or a CSV of pairs) every query is scored against
-the reference frames that file names, whatever the two traversals' lengths and offsets
-(:func:`query_truth`). Without one, frame ``j`` of every traversal is place ``j`` ("same index"): that
-needs equal frame counts, and a pair of different lengths is refused rather than scored by index.
-Traversals loaded together share their place ids, so they must hold the same number of frames.
+A frame's place id is its index in its traversal (0, 1, ...). With a ground-truth file for a (reference, query)
+pair (:mod:`vprsnn_export.data.groundtruth`: LENS's ``<a>_<b>_GT.npy``, VPR-Bench's ``ground_truth_new.npy``
+beside ``ref/`` and ``query/``, or a CSV of pairs) every query is scored against the reference frames it names,
+whatever the two traversals' lengths and offsets (:func:`query_truth`). Without one, frame ``j`` of every
+traversal is place ``j`` ("same index"), which needs equal frame counts: a pair of different lengths is refused
+rather than scored by index. Traversals loaded together share their place ids, so hold as many frames.
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ from ..config import PreprocessConfig
 from ..errors import DataError
 from ..io.fileio import sha256_bytes
 from .frames import image_files
-from .groundtruth import ground_truth_digest, pair_ground_truth
+from .groundtruth import agreeing, ground_truth_digest, pair_ground_truth
 from .preprocess import normalise_resized, read_grey_image, resize_image
 
 
@@ -62,9 +61,8 @@ def check_every_query_matched(matrix: np.ndarray, queries: np.ndarray, path: Pat
 def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np.ndarray, Path] | None:
     """GT[reference frame, query frame] of traversal ``query`` against the reference traversal(s), from the
     ground-truth files beside them (several references must agree); None when the pair has no file and the
-    traversals are index-aligned (equal frame counts) or ``query`` is a reference itself. DataError naming
-    the folder when the frame counts differ and no file says which frames match: never an index score on
-    data that is not index-aligned."""
+    traversals are index-aligned (equal frame counts) or ``query`` is a reference itself. DataError naming the
+    folder when the frame counts differ and no file says which frames match (never an index score)."""
     others = [name for name in dict.fromkeys(references) if name != query]
     if not others:
         return None
@@ -78,8 +76,8 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
         )
     counts = {name: len(image_files(folder / name)) for name in [query, *others]}
     pairs = (pair_ground_truth(folder, reference, query, counts[reference], counts[query]) for reference in others)
-    found = [truth for truth in pairs if truth is not None]
-    if not found:
+    truth = agreeing([pair for pair in pairs if pair is not None], " (two reference traversals)")
+    if truth is None:
         unequal = [name for name in others if counts[name] != counts[query]]
         if unequal:
             raise DataError(
@@ -88,12 +86,7 @@ def query_truth(folder: Path, references: Sequence[str], query: str) -> tuple[np
                 f"({unequal[0]}_{query}_GT.npy or .csv) says which frames match; refusing to score by index",
                 folder,
             )
-        return None
-    matrix, path = found[0]
-    for other, other_path in found[1:]:
-        if not np.array_equal(other, matrix):
-            raise DataError(f"this ground truth disagrees with {other_path} (two reference traversals)", path)
-    return matrix, path
+    return truth
 
 
 def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) -> list[FolderGroundTruth]:
@@ -108,16 +101,17 @@ def ground_truths(folder: Path, names: Sequence[str], counts: dict[str, int]) ->
     return found
 
 
+def require_traversals(names: Sequence[str], available: Sequence[str], says: str, where: str | Path) -> None:
+    """DataError at ``where`` naming the ``names`` not ``available``: ``says`` filled with both lists."""
+    missing = [name for name in names if name not in available]
+    if missing:
+        raise DataError(says.format(", ".join(map(repr, missing)), ", ".join(available) or "none"), where)
+
+
 def folder_files(folder: Path, names: Sequence[str]) -> dict[str, list[Path]]:
     """Each traversal's frames in time order; DataError naming a missing traversal or unequal counts."""
     available = sorted(child.name for child in folder.iterdir() if child.is_dir())
-    missing = [name for name in names if name not in available]
-    if missing:
-        raise DataError(
-            f"no traversal folder(s) {', '.join(repr(m) for m in missing)}; its traversals are: "
-            f"{', '.join(available) or 'none'}",
-            folder,
-        )
+    require_traversals(names, available, "no traversal folder(s) {}; its traversals are: {}", folder)
     files = {name: image_files(folder / name) for name in names}
     counts = {name: len(paths) for name, paths in files.items()}
     if len(set(counts.values())) > 1:

@@ -1,25 +1,18 @@
 """Frames in time order from a folder of images, a video, stdin, a ROS bag or an event-camera recording.
 
-A robot (or a recorded run) hands the localiser one greyscale frame at a time. The sources:
+Each frame comes out as ``(name, grey)``: a display name (file name, ``video.mp4#17``) and a 2-D uint8 image of
+any size, which the localiser resizes and preprocesses like the training data. The sources:
 
-* a **folder**: every image file in it (``IMAGE_SUFFIXES``), in the *natural* order of their
-  names (``frame2.png`` before ``frame10.png``): name frames so that this is their time order;
+* a **folder**: its image files (``IMAGE_SUFFIXES``) in *natural* name order (``frame2.png`` before
+  ``frame10.png``): name frames so that this is their time order;
 * a **video file** (``VIDEO_SUFFIXES``), decoded frame by frame with ``cv2.VideoCapture``;
-* ``-``: **paths on stdin**, one image path per line (blank lines skipped), read as they arrive,
-  so another process can push frames while the localiser runs. Raw pixels on stdin are not
-  accepted: a path names the frame in the output and carries its own size. A line is at most
-  ``MAX_LINE`` characters (a path longer than any file system allows): a longer one, or input
-  without newlines, stops with one error instead of growing in memory;
-* a **ROS 1 bag** (``.bag``) or **ROS 2 bag** (a folder with ``metadata.yaml``): the messages of one
-  image topic (:mod:`.bags`);
-* an **event-camera recording** (``.npy``, ``.npz``, ``.txt`` of events x, y, t, p), binned into
-  count frames by a time or count window (:mod:`.events`).
+* ``-``: **image paths on stdin**, one a line (at most ``MAX_LINE`` characters, blank lines skipped), read as
+  they arrive, so another process can push frames while the localiser runs; raw pixels are not accepted (a
+  path names the frame in the output and carries its own size);
+* a **ROS bag** (:mod:`.bags`) or an **event-camera recording** binned into count frames (:mod:`.events`).
 
-An image is checked against the memory limit from its header before it is decoded; what OpenCV
-or FFmpeg print while decoding never reaches the terminal (it is quoted in the error, if any).
-
-Each frame comes out as ``(name, grey)``: a display name (file name, ``video.mp4#17``) and a
-2-D uint8 image of any size; the localiser resizes and preprocesses it like the training data.
+An image's header is checked against the memory limit before it is decoded; what OpenCV or FFmpeg print while
+decoding never reaches the terminal (an error quotes it).
 """
 
 from __future__ import annotations
@@ -142,12 +135,15 @@ def iter_frames(
             f"source must be a path (str or Path) or '-', got {type(source).__name__} {source!r:.40}"
         )
     path = Path(source)
-    if topic is not None and not is_bag(path):
-        raise DataError("--topic is for a ROS bag (a .bag file or a ROS 2 bag folder)", path)
-    if events is not None and path.suffix.lower() not in EVENT_SUFFIXES:
-        raise DataError(
-            f"--event-window-us / --event-count are for an event recording ({', '.join(sorted(EVENT_SUFFIXES))})", path
-        )
+    for misplaced, option in (
+        (topic is not None and not is_bag(path), "--topic is for a ROS bag (a .bag file or a ROS 2 bag folder)"),
+        (
+            events is not None and path.suffix.lower() not in EVENT_SUFFIXES,
+            f"--event-window-us / --event-count are for an event recording ({', '.join(sorted(EVENT_SUFFIXES))})",
+        ),
+    ):
+        if misplaced:
+            raise DataError(option, path)
     if str(source) == STDIN:
         return stdin_frames(sys.stdin if stdin is None else stdin)
     if is_bag(path):

@@ -1,27 +1,26 @@
 """Ground-truth files of a (reference, query) pair of traversals, read strictly.
 
-Every form is turned into one boolean matrix ``GT[reference, query]`` (True: that reference frame is
-a correct match of that query frame):
+Every form becomes one boolean matrix ``GT[reference, query]`` (True: that reference frame is a correct match of
+that query frame):
 
-* a 0/1 matrix in a ``.npy`` (bool, integer or float holding only 0 and 1), in either orientation:
-  ``(references, queries)`` or ``(queries, references)``, told apart by the traversal sizes. A square
-  matrix (equal sizes) must be symmetric (the identity is), else its orientation is ambiguous and it is
-  refused: give a CSV of pairs instead. Soft ground truth (values strictly between 0 and 1) is not
-  supported and refused;
+* a 0/1 matrix in a ``.npy`` (bool, integer or float holding only 0 and 1), ``(references, queries)`` or
+  ``(queries, references)``, told apart by the traversal sizes. A square matrix (equal sizes) must be symmetric
+  (the identity is), else its orientation is ambiguous and it is refused: give a CSV of pairs instead. Soft
+  ground truth (values strictly between 0 and 1) is refused;
 * VPR-Bench's ``ground_truth_new.npy``: an ``(N, 2)`` object array of ``[query index, list of reference
-  indices]``, or a 1-D object array holding one list of reference indices per query. Object arrays are
-  pickled; they are read by :func:`vprsnn_export.io.npyload.load_npy`, which runs no code;
+  indices]``, or a 1-D object array of one list of reference indices per query, read (pickled) by
+  :func:`vprsnn_export.io.npyload.load_npy`, which runs no code;
 * a CSV with columns ``query,reference`` (ASCII decimal integers), one row per matching pair.
 
-Anything else (NaN, -1, 0.1, strings, complex, datetime, booleans or floats used as indices, ``1_0``,
-non-ASCII digits, an index outside the traversal) is a DataError naming the file.
+Anything else (NaN, -1, 0.1, strings, complex, datetime, booleans or floats used as indices, ``1_0``, non-ASCII
+digits, an index outside the traversal) is a DataError naming the file.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from numbers import Integral
 from pathlib import Path
 
@@ -58,22 +57,15 @@ _READ: dict[tuple, tuple[str, dict[tuple[int, int, bool], np.ndarray]]] = {}
 MAX_REMEMBERED = 8
 
 
-def file_key(path: Path) -> tuple:
-    try:
-        stat = path.stat()
-    except OSError as exc:
-        raise DataError(f"cannot read this ground truth ({exc.strerror or exc})", path) from None
-    return (str(path.resolve()), stat.st_size, stat.st_mtime_ns, stat.st_ino)
-
-
 def opened(path: Path) -> tuple[tuple, bytes | None]:
     """The file's key and, when this process has not read it yet, its bytes (read once, size-checked)."""
-    key = file_key(path)
-    if key in _READ:
-        return key, None
-    if key[1] > MAX_NPY_BYTES:
-        raise DataError(f"the ground truth file is {key[1]} bytes, more than {MAX_NPY_BYTES}", path)
     try:
+        stat = path.stat()
+        key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns, stat.st_ino)
+        if key in _READ:
+            return key, None
+        if stat.st_size > MAX_NPY_BYTES:
+            raise DataError(f"the ground truth file is {stat.st_size} bytes, more than {MAX_NPY_BYTES}", path)
         raw = path.read_bytes()
     except OSError as exc:
         raise DataError(f"cannot read this ground truth ({exc.strerror or exc})", path) from None
@@ -237,11 +229,17 @@ def pair_ground_truth(
     """GT[reference, query] from every file of the pair (:func:`ground_truth_files`), which must agree;
     None without one. DataError naming both files when two disagree."""
     found = ground_truth_files(folder, reference, query)
-    if not found:
-        return None
-    first_path, forward = found[0]
-    matrix = read_ground_truth(first_path, n_reference, n_query, forward)
-    for other, other_forward in found[1:]:
-        if not np.array_equal(read_ground_truth(other, n_reference, n_query, other_forward), matrix):
-            raise DataError(f"this ground truth disagrees with {other}: keep one of the two", first_path)
-    return matrix, first_path
+    read = ((read_ground_truth(path, n_reference, n_query, forward), path) for path, forward in found)
+    return agreeing(read, ": keep one of the two")
+
+
+def agreeing(found: Iterable[tuple[np.ndarray, Path]], advice: str) -> tuple[np.ndarray, Path] | None:
+    """The first (matrix, file) of ``found`` (None without one), read in turn; DataError naming the first file and
+    the first later one whose matrix differs (then ``advice``)."""
+    items = iter(found)
+    first = next(items, None)
+    if first is not None:
+        for matrix, path in items:
+            if not np.array_equal(matrix, first[0]):
+                raise DataError(f"this ground truth disagrees with {path}{advice}", first[1])
+    return first

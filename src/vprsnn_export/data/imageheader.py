@@ -1,8 +1,8 @@
 """An image's width and height read from its header, before any pixel is decoded.
 
-A decoder allocates the whole image before it can say anything about it: a 20000 x 20000 PNG of a few
-kilobytes decodes to over a gigabyte. The header names the size, so the memory a decode needs is
-checked against the limit first (:func:`vprsnn_export.resources.decode_need`). Read here:
+A decoder allocates the whole image before it can say anything about it (a 20000 x 20000 PNG of a few kilobytes
+decodes to over a gigabyte), so the memory a decode needs is checked against the limit from the header first
+(:func:`vprsnn_export.resources.decode_need`). Read here:
 
 * PNG: the IHDR chunk, big-endian width and height at bytes 16 and 20;
 * JPEG: the first start-of-frame marker (SOF0-SOF15 but DHT C4, JPG C8, DAC CC), height then width;
@@ -10,8 +10,7 @@ checked against the limit first (:func:`vprsnn_export.resources.decode_need`). R
 * PNM (PBM/PGM/PPM): the ASCII tokens after the magic number, comments skipped;
 * WebP: the VP8 / VP8L / VP8X chunk's size fields.
 
-Other formats (TIFF) return None: their size is not known before decoding (OpenCV's own limit,
-``CV_IO_MAX_IMAGE_PIXELS``, still applies).
+Other formats (TIFF) give None: their size is not known before decoding (OpenCV's ``CV_IO_MAX_IMAGE_PIXELS`` applies).
 """
 
 from __future__ import annotations

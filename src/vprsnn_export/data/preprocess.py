@@ -3,27 +3,23 @@
 For an input image ``I`` (uint8, any H x W) and ``S = image_size``, ``p = patch_size``:
 
 1. ``R = resize(I, S x S)`` with OpenCV's area interpolation (``cv2.INTER_AREA``), still uint8.
-2. With ``patch_norm`` (the method): split ``R`` into the ``(S/p)**2`` non-overlapping
-   ``p x p`` patches ``P`` and normalise each one independently,
-   ``P_hat = (P - min P) / (max P - min P)``; a flat patch (``max P == min P``) becomes 0.
-   Without it (an ablation): ``R_hat = R / 255``.
-3. Flatten row-major: the value of pixel ``(row, col)`` sits at index ``row * S + col``.
+2. With ``patch_norm`` (the method): split ``R`` into the ``(S/p)**2`` non-overlapping ``p x p`` patches ``P``
+   and normalise each one, ``P_hat = (P - min P) / (max P - min P)``; a flat patch (``max P == min P``) becomes
+   0. Without it (an ablation): ``R_hat = R / 255``.
+3. Flatten row-major: pixel ``(row, col)`` is index ``row * S + col``; float32 in [0, 1], shape ``(N, S * S)``.
 
-The result lies in [0, 1] as float32, shape ``(N, S * S)``.
-
-With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF
-channels (the retina's, and an event camera's, split of a signed response):
+With ``channels = "dog_on_off"`` step 2 is instead a centre-surround filter with ON and OFF channels (the
+retina's, and an event camera's, split of a signed response):
 
     D = G_{sigma_c} * R - G_{sigma_s} * R          (Gaussian blurs of R as float, reflected borders)
     ON = max(D, 0),  OFF = max(-D, 0),  both divided by max(ON, OFF) over the image (0 if flat)
 
-and the image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input
-``r * 2S + c`` (ON) and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
+and image row ``r`` holds ``S`` ON values then ``S`` OFF values: pixel ``(r, c)`` is input ``r * 2S + c`` (ON)
+and ``r * 2S + S + c`` (OFF), ``2 * S * S`` inputs in all.
 
-The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function
-(step 2) and its number of channels, from which ``network.n_inputs`` follows
-(``n_channels * S * S``, checked by the config). Adding one is a function and one
-``CHANNELS.register`` line (docs/architecture.md).
+The channels are a registry (:data:`CHANNELS`): each :class:`Channel` names its function (step 2) and its number
+of channels, whence ``network.n_inputs = n_channels * S * S`` (checked by the config). Adding one is a function
+and one ``CHANNELS.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -73,11 +69,9 @@ SINK: list[IO[bytes]] = []  # one temporary file, reused: a new one per image co
 
 @contextmanager
 def captured_stderr() -> Iterator[list[str]]:
-    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines.
-
-    The lines are filled in when the block ends, so an error raised after it can quote the decoder
-    instead of the decoder printing above the error. Without a usable descriptor 2 nothing is captured.
-    """
+    """Send what native code writes to file descriptor 2 (libpng, libjpeg, OpenCV's log) to a list of lines,
+    filled in when the block ends: an error raised after it quotes the decoder instead of the decoder printing
+    above the error. Without a usable descriptor 2 nothing is captured."""
     lines: list[str] = []
     with DECODE_LOCK:
         sys.stderr.flush()
@@ -131,12 +125,10 @@ def decoder_said(noise: list[str]) -> str:
 def read_grey_image(path: Path, context: str = "") -> np.ndarray:
     """Decode one image file as 2-D uint8 greyscale (``cv2.IMREAD_GRAYSCALE``).
 
-    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path
-    Python can open works (a folder name that is not UTF-8 included) and none reaches OpenCV's
-    own path handling. A missing or unreadable file, one OpenCV cannot decode, or one the decoder
-    reports as cut short (libjpeg's "premature end") raises a :class:`DataError` naming ``path``,
-    with the decoder's message; the decoder's stderr lines never reach the terminal.
-    ``context`` (e.g. which manifest row asked for it) is appended to the message.
+    Python reads the bytes and OpenCV decodes them from memory (``cv2.imdecode``), so any path Python can open
+    works (a folder name that is not UTF-8 included). A missing or unreadable file, one OpenCV cannot decode, or
+    one the decoder reports as cut short (libjpeg's "premature end") is a :class:`DataError` naming ``path``,
+    quoting the decoder (whose stderr never reaches the terminal), with ``context`` (e.g. the manifest row).
     """
     path = Path(path)
     suffix = f" ({context})" if context else ""
@@ -169,11 +161,8 @@ def resize_image(grey: np.ndarray, size: int) -> np.ndarray:
 
 
 def patch_normalise(resized: np.ndarray, patch_size: int) -> np.ndarray:
-    """Min-max normalise every ``p x p`` patch of every image independently.
-
-    ``resized`` is ``(N, S, S)``; returns float32 ``(N, S, S)`` with
-    ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``.
-    """
+    """Min-max normalise every ``p x p`` patch of every ``(N, S, S)`` image independently, float32 ``(N, S, S)``:
+    ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``."""
     n, height, width = resized.shape
     if height % patch_size or width % patch_size:
         raise InvalidValueError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")
@@ -211,11 +200,6 @@ def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarra
     return resized.astype(np.float32) / np.float32(255.0)
 
 
-def dog_channels(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
-    """DoG ON and OFF channels with the config's sigmas, (N, S, 2S) (:func:`dog_on_off`)."""
-    return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
-
-
 @dataclass(frozen=True)
 class Channel:
     """One choice of input channels (``preprocess.channels``).
@@ -232,14 +216,19 @@ class Channel:
 
 CHANNELS: Registry[Channel] = Registry("config.preprocess.channels")
 CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised"))
-CHANNELS.register(Channel("dog_on_off", 2, dog_channels, "DoG ON/OFF"))
+CHANNELS.register(
+    Channel(
+        "dog_on_off",
+        2,
+        lambda resized, cfg: dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround),
+        "DoG ON/OFF",
+    )
+)
 
 
 def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
-    if resized.ndim != 3 or resized.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {resized.shape} dtype {resized.dtype}")
-    if len(resized) == 0:
+    if len(_image_stack(resized)) == 0:
         raise DataError("no images to preprocess")
     scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
@@ -247,10 +236,15 @@ def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarra
 
 def preprocess_images(grey: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
-    if grey.ndim != 3 or grey.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {grey.shape} dtype {grey.dtype}")
     size = cfg.image_size
-    resized = np.empty((len(grey), size, size), dtype=np.uint8)
+    resized = np.empty((len(_image_stack(grey)), size, size), dtype=np.uint8)
     for index, image in enumerate(grey):
         resized[index] = resize_image(image, size)
     return normalise_resized(resized, cfg)
+
+
+def _image_stack(images: np.ndarray) -> np.ndarray:
+    """``images`` when they are ``(N, H, W)`` uint8; DataError otherwise."""
+    if images.ndim != 3 or images.dtype != np.uint8:
+        raise DataError(f"expected (N, H, W) uint8 images, got shape {images.shape} dtype {images.dtype}")
+    return images

@@ -1,23 +1,19 @@
 """A deterministic synthetic train route: the embedded default data set (``--data synthetic``).
 
-It is *not* real data. It models what makes Nordland-style place recognition work
-and fail, so the whole pipeline can be demonstrated and tested without a download:
+It is *not* real data. It models what makes Nordland-style place recognition work and fail, so the whole
+pipeline can be demonstrated and tested without a download:
 
-* One long panorama ``L(y, x)`` (36 rows, padded around the 32 visible ones) is
-  rendered from smooth low-frequency noise (sky, terrain), a skyline ``s(x)``
-  (ground where ``y >= s(x)``), blurred random blobs (vegetation, rocks) and sharp
-  structures (catenary poles, buildings, a track band).
-* Place ``i`` is the 64 x 32 window whose left edge is at ``x = i * STRIDE``:
-  consecutive places overlap (a train moving) and look alike, distant ones differ.
-* Each traversal (season) changes the appearance: vegetation blobs are rescaled,
-  terrain is brightened/flattened (snow), then, per pixel in [0, 1],
-  ``v' = clip(gain * (contrast * (v - 1/2) + 1/2) ** gamma + offset + n, 0, 1)``
-  with Gaussian noise ``n``, and each image is shifted by a few pixels.
-  ``summer`` is the clean rendering.
+* One long panorama ``L(y, x)`` (36 rows, padded around the 32 visible ones) is rendered from smooth
+  low-frequency noise (sky, terrain), a skyline ``s(x)`` (ground where ``y >= s(x)``), blurred random blobs
+  (vegetation, rocks) and sharp structures (catenary poles, buildings, a track band).
+* Place ``i`` is the 64 x 32 window whose left edge is at ``x = i * STRIDE``: consecutive places overlap (a
+  train moving) and look alike, distant ones differ.
+* Each traversal (season) rescales the vegetation blobs, brightens and flattens the terrain (snow), then maps
+  each pixel in [0, 1] to ``v' = clip(gain * (contrast * (v - 1/2) + 1/2) ** gamma + offset + n, 0, 1)``
+  with Gaussian noise ``n`` and shifts each image by a few pixels; ``summer`` is the clean rendering.
 
-Every random number comes from ``np.random.default_rng`` seeded with a tuple derived
-from ``seed``, a layer or season code and a chunk or place index, so the output is
-bit-for-bit reproducible, and place ``i`` does not depend on ``n_places``
+Every random number comes from ``np.random.default_rng`` seeded with ``seed``, a layer or season code and a
+chunk or place index: the output is reproducible bit for bit, and place ``i`` does not depend on ``n_places``
 (``synthetic_route(100)`` starts with ``synthetic_route(60)``).
 """
 

@@ -8,12 +8,13 @@ query, whether the model's places can match the queries at all, how a result nam
 * :class:`GroundTruth`: a data set's ground-truth file, ``matrix[r, q]`` True when reference place id ``r``
   matches query place id ``q`` (a query may match several references, or none).
 
-A new kind goes here, as one more subclass; no reader asks which kind it holds. A :class:`Query` is one query
-traversal as every evaluation takes it: its frames, their place ids and its truth.
+A new kind is one more subclass; no reader asks which kind it holds. A :class:`Query` is one query traversal as
+every evaluation takes it: its frames, their place ids and its truth.
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,24 +25,24 @@ from vprsnn_export.errors import InvalidValueError
 MAX_WINDOW = 1_000_000  # places either side: beyond any route
 
 
-class Truth:
+class Truth(ABC):
     """The judge of one query traversal's decisions (:class:`MatchWindow` or :class:`GroundTruth`)."""
 
     source: str = ""  # the ground-truth file ("": index-aligned place ids)
 
     @property
+    @abstractmethod
     def label(self) -> str:
         """How decisions were judged, in the words every result states (``match window: N`` or ``ground truth: FILE``)."""
-        raise NotImplementedError
 
     @property
     def match_window(self) -> int:
         """The match window a result records beside ``source`` (0 with a ground truth)."""
         return 0
 
+    @abstractmethod
     def matches(self, predicted: np.ndarray, queries: np.ndarray) -> np.ndarray:
         """Whether each predicted place id (never a no-match) is a correct match of the query's place id."""
-        raise NotImplementedError
 
     def correct(self, predicted_ids: np.ma.MaskedArray | np.ndarray, query_place_ids: np.ndarray) -> np.ndarray:
         """Per query: the prediction names a true place (a masked entry, a no-match, is never correct).
@@ -52,16 +53,16 @@ class Truth:
         predicted = np.asarray(np.ma.filled(predicted_ids, 0), dtype=np.int64)
         return matched & self.matches(predicted, np.asarray(query_place_ids, dtype=np.int64))
 
+    @abstractmethod
     def true_places(self, query_place_ids: np.ndarray) -> tuple[np.ndarray, ...]:
         """Each query's true reference place ids (int64 arrays)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def first_true(self, reference_place_ids: np.ndarray, query_place_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For each query, the index into ``reference_place_ids`` of its first true reference, and whether it has one
 
         .. math:: \\hat r_q = \\min \\{l : \\mathrm{true}(\\mathrm{ref}_l, q)\\} \\quad (0 \\text{ where there is none})
         """
-        raise NotImplementedError
 
     def check_overlap(self, reference_place_ids: np.ndarray, query_place_ids: np.ndarray) -> None:
         """InvalidValueError when no query can match a reference place: every decision would be wrong by
@@ -71,8 +72,9 @@ class Truth:
         if reference.size and queries.size and not self.first_true(reference, queries)[1].any():
             raise InvalidValueError(self.no_overlap(reference, queries))
 
+    @abstractmethod
     def no_overlap(self, reference: np.ndarray, queries: np.ndarray) -> str:
-        raise NotImplementedError
+        """Why no query can match a reference place, for :meth:`check_overlap`'s error."""
 
 
 @dataclass(frozen=True)

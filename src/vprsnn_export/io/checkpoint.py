@@ -1,15 +1,14 @@
 """The float checkpoint: weights, thresholds, calibration, full config and provenance in one file.
 
-Format: an npz container (no pickle) from :mod:`vprsnn_export.io.fileio` with arrays
-``weights`` (inputs, neurons) float32, ``thresholds`` (neurons,) float32,
-``calibration`` (neurons, places) int64 = S^R and ``reference_place_ids``
-(places,) int64, and a JSON header holding the config, the seed, the data
-provenance (source, manifest sha256, reference traversals, place selection),
-the training history and the package version.
+Format: an npz container (no pickle, :mod:`vprsnn_export.io.fileio`) with arrays ``weights`` (inputs, neurons)
+float32, ``thresholds`` (neurons,) float32, ``calibration`` (neurons, places) int64 = S^R and
+``reference_place_ids`` (places,) int64, and a JSON header holding the config, the seed, the data provenance
+(source, manifest sha256, reference traversals, place selection), the training history and the package version.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -97,13 +96,13 @@ def check_header(
     meta: dict[str, Any], path: str | Path
 ) -> tuple[Config, list[str], dict[str, str | None], list[dict[str, Any]]]:
     """A checkpoint header's config, reference traversals, data record and history; ModelFileError naming ``path``.
-
-    Run by the reader on what it reads and by the writer on what it is about to write.
-    """
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn checkpoint (format {meta.get('format')!r})", path)
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported checkpoint format version {meta.get('format_version')!r}", path)
+    Run by the reader on what it reads and by the writer on what it is about to write."""
+    for key, expected, problem in (
+        ("format", FORMAT, "not a vprsnn checkpoint (format {!r})"),
+        ("format_version", FORMAT_VERSION, "unsupported checkpoint format version {!r}"),
+    ):
+        if meta.get(key) != expected:
+            raise ModelFileError(problem.format(meta.get(key)), path)
     try:
         config = Config.from_dict(meta["config"])
     except (KeyError, VprError) as exc:
@@ -116,13 +115,19 @@ def check_header(
 
 
 def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
-    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings).
+    """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings), for
+    checkpoints and fixed-point models (which also need a string ``package_version``); ModelFileError naming ``path``
+    otherwise."""
+    problem = next(_header_defects(meta), None)
+    if problem is not None:
+        raise ModelFileError(problem, path)
+    return list(meta.get("reference_traversals", [])), dict(meta.get("data", {}))
 
-    Shared by checkpoints and fixed-point models (which also need a string ``package_version``);
-    ModelFileError naming ``path`` otherwise.
-    """
+
+def _header_defects(meta: dict[str, Any]) -> Iterator[str]:
+    """What is wrong with a header's version, reference traversals and data record, in the order checked."""
     if not isinstance(meta.get("package_version", "unknown"), str):
-        raise ModelFileError(f"package_version must be a version string, got {meta['package_version']!r}", path)
+        yield f"package_version must be a version string, got {meta['package_version']!r}"
     traversals = meta.get("reference_traversals", [])
     if (
         not isinstance(traversals, list)
@@ -130,18 +135,17 @@ def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str],
         or not all(isinstance(t, str) and t for t in traversals)
         or len(set(traversals)) != len(traversals)
     ):
-        raise ModelFileError("reference_traversals must be a non-empty list of distinct traversal names", path)
+        yield "reference_traversals must be a non-empty list of distinct traversal names"
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
-        raise ModelFileError("data must be a mapping of names to strings (source, selection)", path)
+        yield "data must be a mapping of names to strings (source, selection)"
     try:
         if data.get("places"):
             parse_places(data["places"])
         if str(data.get("source", "")).startswith("synthetic"):
             parse_synthetic(data["source"])
     except InvalidValueError as exc:
-        raise ModelFileError(f"the data record is invalid ({exc})", path) from None
-    return list(traversals), dict(data)
+        yield f"the data record is invalid ({exc})"
 
 
 def validate_reference_ids(ids: np.ndarray, path: str | Path) -> int:
@@ -162,34 +166,39 @@ def checkpoint_sha256(path: str | Path) -> str:
 def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> None:
     """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
     path = Path(path)
+    problem = next(_checkpoint_defects(ckpt, path), None)
+    if problem is not None:
+        raise ModelFileError(problem, path)
+
+
+def _checkpoint_defects(ckpt: Checkpoint, path: Path) -> Iterator[str]:
+    """What is wrong with ``ckpt``, in the order checked (each check may assume the ones before it passed)."""
     if not isinstance(ckpt, Checkpoint):
-        raise ModelFileError(f"not a Checkpoint: a {type(ckpt).__name__}", path)
+        yield f"not a Checkpoint: a {type(ckpt).__name__}"
     if isinstance(ckpt.reference_traversals, str) or not isinstance(ckpt.reference_traversals, list | tuple):
-        raise ModelFileError(
-            f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}", path
-        )
+        yield f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}"
     n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side
     for name, shape in (("weights", (ckpt.config.network.n_inputs, n_neurons)), ("thresholds", (n_neurons,))):
         array = getattr(ckpt, name)
         if array.shape != shape:
-            raise ModelFileError(f"{name} has shape {array.shape}, expected {shape} from its config", path)
+            yield f"{name} has shape {array.shape}, expected {shape} from its config"
         if not np.issubdtype(array.dtype, np.floating):
-            raise ModelFileError(f"{name} has dtype {array.dtype}, expected float32", path)
+            yield f"{name} has dtype {array.dtype}, expected float32"
         if not np.all(np.isfinite(array)):
-            raise ModelFileError(f"{name} contains NaN or infinite values", path)
+            yield f"{name} contains NaN or infinite values"
     if np.any(ckpt.weights < 0):
-        raise ModelFileError("weights contain negative values (STDP weights are non-negative)", path)
+        yield "weights contain negative values (STDP weights are non-negative)"
     if np.any(ckpt.weights > ckpt.config.stdp.w_max * (1 + 1e-6)):
-        raise ModelFileError(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}", path)
+        yield f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}"
     if np.any(ckpt.thresholds <= 0):
-        raise ModelFileError("thresholds must be positive", path)
+        yield "thresholds must be positive"
     ceiling = max(ckpt.config.homeostasis.theta_max, ckpt.config.network.theta_init)
     if np.any(ckpt.thresholds > ceiling * (1 + 1e-6)):
-        raise ModelFileError(f"thresholds exceed the config's theta_max / theta_init ({ceiling})", path)
+        yield f"thresholds exceed the config's theta_max / theta_init ({ceiling})"
     if ckpt.calibration.shape != (n_neurons, n_places):
-        raise ModelFileError(f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}", path)
+        yield f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}"
     if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(ckpt.calibration < 0):
-        raise ModelFileError("calibration must hold non-negative integer spike counts", path)
+        yield "calibration must hold non-negative integer spike counts"
     if not ckpt.reference_traversals:
-        raise ModelFileError("checkpoint names no reference traversal", path)
+        yield "checkpoint names no reference traversal"

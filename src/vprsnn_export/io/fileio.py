@@ -1,8 +1,7 @@
 """Atomic writes and the npz+JSON container used by checkpoints and fixed-point models.
 
-A container is an ``.npz`` (never pickled) holding named numeric arrays plus one
-``__meta__`` entry: the UTF-8 bytes of a JSON header. Files are written to a
-temporary name in the destination folder, flushed to disk, then renamed, so an
+A container is an ``.npz`` (never pickled) of named numeric arrays plus one ``__meta__`` entry, the UTF-8 bytes
+of a JSON header. A file is written to a temporary name in its folder, flushed to disk, then renamed: an
 interrupted run never leaves a half-written file under the final name.
 """
 
@@ -60,14 +59,17 @@ def check_output(path: str | Path, *, overwrite: bool = True, inputs: tuple[str 
     with _writing(path):
         if path.exists():
             mode = path.stat().st_mode
-            if stat.S_ISDIR(mode):
-                raise OutputError("is a folder: give a file name", path)
-            if not stat.S_ISREG(mode):
-                raise OutputError("is not a regular file (a device, pipe or socket): refusing to replace it", path)
-            if any(source and Path(source).exists() and path.samefile(source) for source in inputs):
-                raise OutputError("is one of this command's input files: give another output name", path)
-            if not overwrite:
-                raise OutputError("exists already: give another name, or --force to replace it", path)
+            for refused, reason in (
+                (stat.S_ISDIR(mode), "is a folder: give a file name"),
+                (not stat.S_ISREG(mode), "is not a regular file (a device, pipe or socket): refusing to replace it"),
+                (
+                    any(source and Path(source).exists() and path.samefile(source) for source in inputs),
+                    "is one of this command's input files: give another output name",
+                ),
+                (not overwrite, "exists already: give another name, or --force to replace it"),
+            ):
+                if refused:
+                    raise OutputError(reason, path)
         _check_ancestors(path)
     return path
 
@@ -111,11 +113,9 @@ def _umask() -> int:
 
 
 def atomic_write(path: str | Path, write: Callable[[Any], Any]) -> Path:
-    """Call ``write(binary_handle)`` on a temp file next to ``path``, then rename it into place.
-
-    The file gets the permissions a plain ``open`` would give (0666 less the umask); the temp
-    file is removed on any failure or interrupt; an unwritable place is one OutputError.
-    """
+    """Call ``write(binary_handle)`` on a temp file next to ``path``, then rename it into place, with the
+    permissions a plain ``open`` gives (0666 less the umask); the temp file is removed on any failure or
+    interrupt; an unwritable place is one OutputError."""
     path = check_output(path)
     with _writing(path):
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -142,15 +142,13 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
 def output_lock(path: str | Path | None) -> Iterator[None]:
     """Hold an exclusive lock on the output ``path`` (a file or a folder) for the whole ``with`` block.
 
-    The lock is an ``flock`` on a hidden file beside the output, ``.NAME.lock`` (in the nearest
-    existing folder above it when its folder does not exist yet); the kernel releases it when the
-    process dies, so a killed run never blocks the next one. A second writer to the same output
-    gets one OutputError instead of both runs finishing and the last one winning. While the lock
-    is held, temp files and staging folders that a killed run left beside the output
-    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``) are removed: no live writer owns them;
-    so are those inside an output folder (``quantize --out DIR``, ``verify --report DIR``), down to
-    :data:`LEFTOVER_DEPTH` sub-folders, unless another run holds their own output's lock.
-    ``None`` or an empty path: no lock.
+    The lock is an ``flock`` on a hidden file beside the output, ``.NAME.lock`` (in the nearest existing folder
+    above it when its folder does not exist yet), released by the kernel when the process dies: a killed run
+    never blocks the next one, and a second writer to the same output gets one OutputError instead of the last
+    one winning. While it is held, the temp files and staging folders a killed run left beside the output
+    (``.NAME.*.tmp``, ``.NAME.staging-*``, ``.NAME.old-*``: no live writer owns them) are removed, and those
+    inside an output folder (``quantize --out DIR``, ``verify --report DIR``) down to :data:`LEFTOVER_DEPTH`
+    sub-folders unless another run holds their own output's lock. ``None`` or an empty path: no lock.
     """
     if path is None or str(path).strip() == "":
         yield
@@ -267,12 +265,9 @@ def staging_folder(out: Path) -> Path:
 
 
 def publish_folder(staging: Path, out: Path) -> Path:
-    """Put the finished folder ``staging`` in place of ``out`` as a whole.
-
-    With no ``out`` yet this is one atomic rename. An existing ``out`` is first renamed aside
-    (``.NAME.old-*``), the new folder renamed into place, the old one removed: a reader sees the
-    old folder, then briefly none, then the new one, never a mix of the two.
-    """
+    """Put the finished folder ``staging`` in place of ``out`` as a whole: one atomic rename, or with an existing
+    ``out`` that renamed aside (``.NAME.old-*``), the new one renamed into place and the old one removed (a reader
+    sees the old folder, then briefly none, then the new one, never a mix of the two)."""
     out = Path(out)
     os.chmod(staging, 0o777 & ~_umask())
     with _writing(out):
@@ -292,35 +287,33 @@ JSON_MAX_DIGITS = 40  # digits of an integer literal (the counts written here ha
 
 
 def parse_json(text: str | bytes, what: str) -> Any:
-    """JSON parsed within limits: size (:data:`JSON_MAX_BYTES`), nesting (:data:`JSON_MAX_DEPTH`) and integer
-    length (:data:`JSON_MAX_DIGITS`); InvalidValueError naming ``what`` beyond them.
-
-    The one JSON reader for every header, option and report. Malformed JSON raises ``json.JSONDecodeError``
-    (bytes that are not UTF-8: ``UnicodeDecodeError``), which callers turn into their own error.
-    """
+    """JSON parsed within limits of size (:data:`JSON_MAX_BYTES`), nesting (:data:`JSON_MAX_DEPTH`) and integer
+    length (:data:`JSON_MAX_DIGITS`), InvalidValueError naming ``what`` beyond them: the one JSON reader for every
+    header, option and report. Malformed JSON raises ``json.JSONDecodeError`` (bytes that are not UTF-8:
+    ``UnicodeDecodeError``), which callers turn into their own error."""
     if len(text) > JSON_MAX_BYTES:
         raise InvalidValueError(f"{what}: {len(text)} bytes of JSON exceed the limit of {JSON_MAX_BYTES}")
     if isinstance(text, bytes):
         text = text.decode("utf-8")
     try:
-        value = json.loads(text, parse_int=_json_int)
-    except RecursionError:
-        raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels") from None
-    except InvalidValueError as exc:  # an integer literal beyond the limit
-        raise InvalidValueError(f"{what}: {exc}") from None
-    stack: list[tuple[Any, int]] = [(value, 1)]
-    while stack:
-        item, depth = stack.pop()
-        if isinstance(item, dict | list):
-            if depth > JSON_MAX_DEPTH:
-                raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
-            stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
-    return value
+        value = json.loads(text, parse_int=lambda literal: _json_int(literal, what))
+        stack: list[tuple[Any, int]] = [(value, 1)]
+        while stack:
+            item, depth = stack.pop()
+            if isinstance(item, dict | list):
+                if depth > JSON_MAX_DEPTH:
+                    break
+                stack += [(child, depth + 1) for child in (item.values() if isinstance(item, dict) else item)]
+        else:  # no object or list nested deeper than the limit
+            return value
+    except RecursionError:  # nested deeper than the parser itself goes
+        pass
+    raise InvalidValueError(f"{what}: JSON nested deeper than {JSON_MAX_DEPTH} levels")
 
 
-def _json_int(literal: str) -> int:
+def _json_int(literal: str, what: str) -> int:
     if len(literal.lstrip("-")) > JSON_MAX_DIGITS:
-        raise InvalidValueError(f"JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
+        raise InvalidValueError(f"{what}: JSON integer of {len(literal)} digits exceeds the limit of {JSON_MAX_DIGITS}")
     return int(literal)
 
 

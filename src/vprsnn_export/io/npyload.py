@@ -40,15 +40,20 @@ PLAIN_CODES = frozenset(("b1", "i1", "i2", "i4", "i8", "u1", "u2", "u4", "u8", "
 _MULTIARRAY = ("numpy.core.multiarray", "numpy._core.multiarray")
 
 
-class _DtypeRecipe:
-    """Stand-in for ``numpy.dtype(code, align, copy)`` while unpickling; its state is checked, never applied."""
+class _Recipe:
+    """A stand-in of a numpy global while unpickling: it records the state the pickle sets, never applies it."""
 
-    def __init__(self, code: object, align: object = False, copy: object = True) -> None:
-        self.code: object = code
-        self.state: object = None
+    state: object = None
 
     def __setstate__(self, state: object) -> None:
         self.state = state
+
+
+class _DtypeRecipe(_Recipe):
+    """Stand-in for ``numpy.dtype(code, align, copy)``; its state is checked, never applied."""
+
+    def __init__(self, code: object, align: object = False, copy: object = True) -> None:
+        self.code: object = code
 
     def dtype(self) -> np.dtype:
         """The plain dtype named by the code, if the pickled state is exactly the one numpy writes for it."""
@@ -64,16 +69,12 @@ class _DtypeRecipe:
         return dtype
 
 
-class _ArrayRecipe:
+class _ArrayRecipe(_Recipe):
     """Stand-in for ``numpy.core.multiarray._reconstruct(ndarray, shape, typecode)`` while unpickling."""
 
     def __init__(self, cls: object, shape: object, typecode: object) -> None:
         if cls is not _NDARRAY:
             raise ValueError("an array of a class other than numpy.ndarray")
-        self.state: object = None
-
-    def __setstate__(self, state: object) -> None:
-        self.state = state
 
     def parts(self) -> tuple[tuple[int, ...], np.dtype, bool, object]:
         """(shape, dtype, Fortran order, data) of the pickled state ``(version, shape, dtype, fortran, data)``."""
@@ -132,11 +133,9 @@ def _numeric_array(shape: tuple[int, ...], dtype: np.dtype, fortran: bool, data:
 
 
 def _rebuild(root: object) -> object:
-    """``root`` with every :class:`_ArrayRecipe` replaced by its array, walked iteratively (each object once; the
-    root keeps every node alive, so no ``id`` is reused during the walk).
-
-    An object array's elements are its list form; containers are rebuilt with their elements replaced.
-    """
+    """``root`` with every :class:`_ArrayRecipe` replaced by its array (an object array's elements: its list form)
+    and containers rebuilt with their elements replaced, walked iteratively (each object once; the root keeps
+    every node alive, so no ``id`` is reused during the walk)."""
     done: dict[int, object] = {}
     stack: list[tuple[object, int, bool]] = [(root, 0, False)]
     while stack:
@@ -192,10 +191,9 @@ def _header(stream: io.BytesIO, what: str, path: Path) -> tuple[tuple[int, ...],
 def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
     """The array stored in the ``.npy`` file ``path``; an object array through the restricted unpickler.
 
-    DataError naming the file for anything that is not one readable ``.npy`` array (an ``.npz`` archive,
-    a truncated file, a header whose shape the file cannot hold, a pickle naming any global outside
-    :data:`_GLOBALS`, a forged dtype state, an object array given as raw bytes, nesting deeper
-    than :data:`MAX_DEPTH`).
+    DataError naming the file for anything that is not one readable ``.npy`` array (an ``.npz`` archive, a
+    truncated file, a header whose shape the file cannot hold, a pickle naming any global outside :data:`_GLOBALS`,
+    a forged dtype state, an object array given as raw bytes, nesting deeper than :data:`MAX_DEPTH`).
     """
     path = Path(path)
     try:
