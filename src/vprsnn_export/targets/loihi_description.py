@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.config import wta_group
-from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel, validate
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.targets.contract import decision_rule, encoder_contract
@@ -64,11 +63,7 @@ def mantissas_from_lava(weights: np.ndarray, weight_exp: int) -> np.ndarray:
 
 def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> LoihiDescription:
     """The Lava-convention description of ``model`` (see the module docstring)."""
-    validate(model, Path("<fixed-point model>"))
-    if model.bits > LAVA_WEIGHT_BITS:
-        raise InvalidValueError(
-            f"Lava's Dense holds {LAVA_WEIGHT_BITS}-bit weights; {model.bits}-bit mantissas do not fit"
-        )
+    validate(model, Path("<fixed-point model>"))  # at most 8 bits: Lava's Dense holds them
     _, num_weight_bits, weight_exp = lava_weights(model)
     cfg = model.config
     n_in, n = model.n_inputs, model.n_neurons

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
+from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
@@ -195,9 +195,8 @@ def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi desc
         model = model_from_header(fixed, arrays, path, "Loihi description's fixed-point header", **lava)
     except (KeyError, IndexError, TypeError, ValueError, VprError) as exc_:
         raise ModelFileError(f"incomplete Loihi description ({type(exc_).__name__}: {exc_})", path) from None
-    if int(exc["du"]) != DU_NO_CURRENT_MEMORY or (1 << DECAY_BITS) <= model.decay_dv:
+    if int(exc["du"]) != DU_NO_CURRENT_MEMORY:  # dv: model_from_header validated it
         raise ModelFileError("du must be 4095 and dv a 12-bit decay", path)
-    validate(model, path)
     return model
 
 

@@ -115,10 +115,8 @@ def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
         if isinstance(lif, nir.LIF):
             gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
             lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
-    elif consumer == "spikingjelly":
-        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
     else:
-        raise InvalidValueError(f"no load settings for consumer {consumer!r} (norse, spikingjelly)")
+        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
     return adjusted
 
 
