@@ -244,15 +244,8 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
     path = require_path("path", path)
     validate(model, path)
     check_header(model.header(), path)  # the reader's own checks: nothing is written that it refuses
-    arrays: dict[str, np.ndarray] = {
-        "weight_mantissa": model.weight_mantissa.astype(np.int32),
-        "scale_multiplier": model.scale_multiplier.astype(np.int32),
-        "threshold": model.threshold.astype(np.int32),
-        "calibration": model.calibration.astype(np.int64),
-        "float_calibration": model.float_calibration.astype(np.int64),
-        "reference_place_ids": model.reference_place_ids.astype(np.int64),
-    }
-    return write_container(path, model.header(), arrays)
+    arrays = {name: getattr(model, name).astype(np.int32 if k < 3 else np.int64) for k, name in enumerate(MODEL_ARRAYS)}
+    return write_container(path, model.header(), arrays)  # the integer arrays int32, the counts and ids int64
 
 
 def load_fixed_point(path: str | Path) -> FixedPointModel:
