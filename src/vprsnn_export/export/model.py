@@ -342,23 +342,18 @@ def validate(model: FixedPointModel, path: Path) -> None:
     net = model.config.network
     n_places = validate_reference_ids(model.reference_place_ids, path)
     n_neurons = ensemble_neurons(model.config, n_places)  # M n: every module's neurons side by side
-    shapes = {
-        "weight_mantissa": (net.n_inputs, n_neurons),
-        "scale_multiplier": (n_neurons,),
-        "threshold": (n_neurons,),
+    limits = {  # name: (shape, lowest, highest); every shape and dtype is checked before any value
+        "weight_mantissa": ((net.n_inputs, n_neurons), 0, (1 << model.bits) - 1),
+        "scale_multiplier": ((n_neurons,), 1, (1 << MULTIPLIER_BITS) - 1),
+        "threshold": ((n_neurons,), 1, (1 << THRESHOLD_BITS) - 1),
     }
-    for name, shape in shapes.items():
+    for name, (shape, _, _) in limits.items():
         array = getattr(model, name)
         if array.shape != shape:
             fail(f"{name} has shape {array.shape}, expected {shape}")
         if not np.issubdtype(array.dtype, np.integer):
             fail(f"{name} has dtype {array.dtype}, expected integers")
-    ranges = {
-        "weight_mantissa": (0, (1 << model.bits) - 1),
-        "scale_multiplier": (1, (1 << MULTIPLIER_BITS) - 1),
-        "threshold": (1, (1 << THRESHOLD_BITS) - 1),
-    }
-    for name, (low, high) in ranges.items():
+    for name, (_, low, high) in limits.items():
         array = getattr(model, name)
         if array.size and (array.min() < low or array.max() > high):
             fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.config import wta_group
-from vprsnn_export.export.model import FixedPointModel, validate
+from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, validate
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.targets.contract import decision_rule, encoder_contract
 from vprsnn_export.targets.loihi_budget import model_budgets
@@ -73,9 +73,7 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
         "exc_vth": model.threshold.astype(np.int32),
         "exc_bias_mant": np.zeros(n, dtype=np.int16),
         "wta_score_multiplier": model.scale_multiplier.astype(np.int32),
-        "calibration": model.calibration.astype(np.int64),
-        "float_calibration": model.float_calibration.astype(np.int64),
-        "reference_place_ids": model.reference_place_ids.astype(np.int64),
+        **{name: getattr(model, name).astype(np.int64) for name in MODEL_ARRAYS[3:]},  # the counts and place ids
     }
     uniform = bool(np.all(model.threshold == model.threshold[0]))
     header = {
