@@ -244,15 +244,8 @@ def save_fixed_point(path: str | Path, model: FixedPointModel) -> Path:
     path = require_path("path", path)
     validate(model, path)
     check_header(model.header(), path)  # the reader's own checks: nothing is written that it refuses
-    arrays: dict[str, np.ndarray] = {
-        "weight_mantissa": model.weight_mantissa.astype(np.int32),
-        "scale_multiplier": model.scale_multiplier.astype(np.int32),
-        "threshold": model.threshold.astype(np.int32),
-        "calibration": model.calibration.astype(np.int64),
-        "float_calibration": model.float_calibration.astype(np.int64),
-        "reference_place_ids": model.reference_place_ids.astype(np.int64),
-    }
-    return write_container(path, model.header(), arrays)
+    arrays = {name: getattr(model, name).astype(np.int32 if k < 3 else np.int64) for k, name in enumerate(MODEL_ARRAYS)}
+    return write_container(path, model.header(), arrays)  # the integer arrays int32, the counts and ids int64
 
 
 def load_fixed_point(path: str | Path) -> FixedPointModel:
@@ -349,23 +342,18 @@ def validate(model: FixedPointModel, path: Path) -> None:
     net = model.config.network
     n_places = validate_reference_ids(model.reference_place_ids, path)
     n_neurons = ensemble_neurons(model.config, n_places)  # M n: every module's neurons side by side
-    shapes = {
-        "weight_mantissa": (net.n_inputs, n_neurons),
-        "scale_multiplier": (n_neurons,),
-        "threshold": (n_neurons,),
+    limits = {  # name: (shape, lowest, highest); every shape and dtype is checked before any value
+        "weight_mantissa": ((net.n_inputs, n_neurons), 0, (1 << model.bits) - 1),
+        "scale_multiplier": ((n_neurons,), 1, (1 << MULTIPLIER_BITS) - 1),
+        "threshold": ((n_neurons,), 1, (1 << THRESHOLD_BITS) - 1),
     }
-    for name, shape in shapes.items():
+    for name, (shape, _, _) in limits.items():
         array = getattr(model, name)
         if array.shape != shape:
             fail(f"{name} has shape {array.shape}, expected {shape}")
         if not np.issubdtype(array.dtype, np.integer):
             fail(f"{name} has dtype {array.dtype}, expected integers")
-    ranges = {
-        "weight_mantissa": (0, (1 << model.bits) - 1),
-        "scale_multiplier": (1, (1 << MULTIPLIER_BITS) - 1),
-        "threshold": (1, (1 << THRESHOLD_BITS) - 1),
-    }
-    for name, (low, high) in ranges.items():
+    for name, (_, low, high) in limits.items():
         array = getattr(model, name)
         if array.size and (array.min() < low or array.max() > high):
             fail(f"{name} values [{array.min()}, {array.max()}] do not fit [{low}, {high}]")

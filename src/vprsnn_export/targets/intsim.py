@@ -258,12 +258,8 @@ def run_prepared(
 
 
 def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:
-    """The loop over t for shifted currents (T, B, neurons) int32, starting from voltage (B, neurons) int64.
-
-    Per step (see the module docstring): V = ((V keep) >> 12) + A[t]; clip and count
-    if possible; C = V > thr; WTA winner = first argmax of (a m if in C else -1),
-    fired iff that maximum is >= 0; V[C] = 0. Winners are gathered after the loop.
-    """
+    """The loop over t (module docstring, step 2) for shifted currents (T, B, neurons) int32, starting from voltage
+    (B, neurons) int64; a WTA winner fires iff its score is >= 0, and the winners are gathered after the loop."""
     timesteps, batch, n_neurons = currents.shape
     device = currents.device
     threshold, limit, multipliers = prep.threshold, prep.limit, prep.multipliers

@@ -224,8 +224,6 @@ def integer_run(
     array = as_spike_array(spikes)
     prepared = mantissas if isinstance(mantissas, KernelWeights) else kernel_weights(mantissas)
     weights, bound = prepared.weights, prepared.bound
-    if array.shape[2] != weights.shape[0]:
-        raise InvalidValueError(f"mantissas: spikes {array.shape} do not match weights {weights.shape}")
     if (bound << shift) >= (1 << 62):
         raise InvalidValueError(f"shift: current sums up to {bound} << {shift} overflow 64-bit voltages")
     n, timesteps, _ = array.shape

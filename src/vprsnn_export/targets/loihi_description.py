@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.config import wta_group
-from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import FixedPointModel, validate
+from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, validate
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.targets.contract import decision_rule, encoder_contract
 from vprsnn_export.targets.loihi_budget import model_budgets
@@ -64,11 +63,7 @@ def mantissas_from_lava(weights: np.ndarray, weight_exp: int) -> np.ndarray:
 
 def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> LoihiDescription:
     """The Lava-convention description of ``model`` (see the module docstring)."""
-    validate(model, Path("<fixed-point model>"))
-    if model.bits > LAVA_WEIGHT_BITS:
-        raise InvalidValueError(
-            f"Lava's Dense holds {LAVA_WEIGHT_BITS}-bit weights; {model.bits}-bit mantissas do not fit"
-        )
+    validate(model, Path("<fixed-point model>"))  # at most 8 bits: Lava's Dense holds them
     _, num_weight_bits, weight_exp = lava_weights(model)
     cfg = model.config
     n_in, n = model.n_inputs, model.n_neurons
@@ -78,9 +73,7 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
         "exc_vth": model.threshold.astype(np.int32),
         "exc_bias_mant": np.zeros(n, dtype=np.int16),
         "wta_score_multiplier": model.scale_multiplier.astype(np.int32),
-        "calibration": model.calibration.astype(np.int64),
-        "float_calibration": model.float_calibration.astype(np.int64),
-        "reference_place_ids": model.reference_place_ids.astype(np.int64),
+        **{name: getattr(model, name).astype(np.int64) for name in MODEL_ARRAYS[3:]},  # the counts and place ids
     }
     uniform = bool(np.all(model.threshold == model.threshold[0]))
     header = {

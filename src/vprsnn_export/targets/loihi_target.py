@@ -26,17 +26,12 @@ emitted; every candidate still resets, so the LIF dynamics are the WTA-off ones)
 ``tests/targets/lava_conformance/run_lava.py --wta`` implements it as a Lava process
 (``WtaReadout``) fed by the LIF spikes and the Dense current.
 
-Ensembles (src/vprsnn_export/network/modules.py): the M modules are M populations ``exc_m`` (the
-header's ``modules``: neurons [m n, (m + 1) n), their region of places, their threshold
-and current bounds), each with its own parameters and its own WTA (``wta.group_size`` = n).
-Lava's Dense + LIF of the whole ensemble computes every module's WTA-off network at once
-(the modules share the input and never interact), so ``exc`` stays one LIF process of M n
-neurons and the arrays one (M n, inputs) matrix; a Lava user may equally build one Dense +
-LIF per module from the rows [m n, (m + 1) n). :func:`core_budget` states how many
-Loihi-class cores and synapses the ensemble needs (the rule and its sources: docs/targets.md).
+Ensembles: the M modules share the input and never interact, so ``exc`` stays one LIF of M n
+neurons (one (M n, inputs) matrix) and the header lists each module's population ``exc_m``, with
+its own WTA (``wta.group_size`` = n); :mod:`.loihi_budget` counts the cores they need.
 
-The header and arrays are built by :mod:`.loihi_description`, network.net by :mod:`.loihi_netx`
-and the core budget by :mod:`.loihi_budget`; this module writes the folder and reads it back.
+Header and arrays: :mod:`.loihi_description`; network.net: :mod:`.loihi_netx`; this module writes
+the folder and reads it back.
 """
 
 from __future__ import annotations
@@ -49,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
-from vprsnn_export.export.model import DECAY_BITS, MODEL_ARRAYS, FixedPointModel, model_from_header, validate
+from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, parse_json, sha256_bytes
 from vprsnn_export.targets.loihi_description import (
     ARRAYS_NAME,
@@ -195,9 +190,8 @@ def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi desc
         model = model_from_header(fixed, arrays, path, "Loihi description's fixed-point header", **lava)
     except (KeyError, IndexError, TypeError, ValueError, VprError) as exc_:
         raise ModelFileError(f"incomplete Loihi description ({type(exc_).__name__}: {exc_})", path) from None
-    if int(exc["du"]) != DU_NO_CURRENT_MEMORY or (1 << DECAY_BITS) <= model.decay_dv:
+    if int(exc["du"]) != DU_NO_CURRENT_MEMORY:  # dv: model_from_header validated it
         raise ModelFileError("du must be 4095 and dv a 12-bit decay", path)
-    validate(model, path)
     return model
 
 

@@ -66,11 +66,6 @@ def spec_lif_raster(graph, spikes: torch.Tensor, dtype: torch.dtype = torch.floa
     return out
 
 
-def norse_default_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
-    """Norse as a user loads the file without its settings: ``norse.torch.from_nir(graph)`` (dt = 1e-3)."""
-    return norse_consumer_raster(graph, spikes, dt=NORSE_DEFAULT_DT, plain=True)
-
-
 def _installed(package: str) -> bool:
     return importlib.util.find_spec(package) is not None
 
@@ -103,7 +98,10 @@ MATRIX_CONSUMERS: dict[str, tuple[Callable[[Any, torch.Tensor], torch.Tensor], s
     "eulerlif": (CONSUMERS["nirtorch"], "the project's EulerLIF through nirtorch.nir_to_torch (float32 buffers)"),
     "snntorch": (CONSUMERS["snntorch"], "snntorch.import_nir.import_from_nir"),
     "norse": (CONSUMERS["norse"], "Norse from_nir with the file's consumer_settings (dt 1e-4, gain threshold)"),
-    "norse-default": (norse_default_raster, "Norse from_nir(graph) as is: dt 1e-3, r ignored"),
+    "norse-default": (  # as a user loads the file without its settings: norse.torch.from_nir(graph)
+        lambda g, s: norse_consumer_raster(g, s, dt=NORSE_DEFAULT_DT, plain=True),
+        "Norse from_nir(graph) as is: dt 1e-3, r ignored",
+    ),
     "spikingjelly": (CONSUMERS["spikingjelly"], "SpikingJelly with the file's consumer_settings"),
     "spikingjelly-default": (CONSUMERS["spikingjelly-plain"], "SpikingJelly import_from_nir(graph, dt=1e-4) as is"),
     "rockpool": (rockpool_raster, "Rockpool 3.1 from_nir"),

@@ -11,27 +11,20 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.config import Config
-from vprsnn_export.errors import ModelFileError, VprError
+from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.io.checkpoint import Checkpoint, validate_checkpoint
 from vprsnn_export.io.fileio import parse_json
 from vprsnn_export.targets.nir_target import EDGES, FORMAT, FORMAT_VERSION, NODES, PLAIN_EDGES, Source, effective_beta
+from vprsnn_export.targets.registry import load_file
 
 
 def load_graph(path: str | Path):
-    """``nir.read`` with every failure turned into a ModelFileError naming the file."""
+    """``nir.read`` with every failure (h5py's OSError, nir's KeyError, ValueError...) a ModelFileError naming the file."""
     import nir
 
-    path = Path(path)
-    if not path.is_file():
-        raise ModelFileError("no such NIR file", path)
-    try:
-        return nir.read(path)
-    except Exception as exc:  # h5py raises OSError, nir KeyError/ValueError/AssertionError on damage
-        raise ModelFileError(
-            f"not a readable NIR file (truncated or corrupt: {type(exc).__name__}: {exc})", path
-        ) from None
+    return load_file(Path(path), "NIR", "NIR file", nir.read)
 
 
 def read_nir(path: str | Path) -> Source:
@@ -40,9 +33,7 @@ def read_nir(path: str | Path) -> Source:
     graph = load_graph(path)
     try:
         return graph_to_source(graph, path)
-    except ModelFileError:
-        raise
-    except (KeyError, TypeError, ValueError, AttributeError, VprError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a ModelFileError passes as it is
         raise ModelFileError(f"not a vprsnn NIR export ({type(exc).__name__}: {exc})", path) from None
 
 

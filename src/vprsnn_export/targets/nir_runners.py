@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import importlib
 import io
 import logging
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import torch
@@ -36,12 +38,9 @@ class EulerLIF(torch.nn.Module):
         leaky = isinstance(node, nir.LIF)
         gain = dt / np.asarray(node.tau, dtype=np.float64) if leaky else np.zeros(n)
         drive = (gain if leaky else dt) * np.asarray(node.r, dtype=np.float64)
-        self.register_buffer("gain", torch.as_tensor(gain))
-        self.register_buffer("drive", torch.as_tensor(drive))
-        self.register_buffer(
-            "v_leak", torch.as_tensor(np.asarray(getattr(node, "v_leak", np.zeros(n)), dtype=np.float64))
-        )
-        self.register_buffer("v_threshold", torch.as_tensor(np.asarray(node.v_threshold, dtype=np.float64)))
+        v_leak = getattr(node, "v_leak", np.zeros(n))
+        for name, value in (("gain", gain), ("drive", drive), ("v_leak", v_leak), ("v_threshold", node.v_threshold)):
+            self.register_buffer(name, torch.as_tensor(np.asarray(value, dtype=np.float64)))
         self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
 
     gain: torch.Tensor
@@ -100,6 +99,15 @@ def snntorch_consumer_raster(graph, spikes: torch.Tensor) -> torch.Tensor:
 CONSUMERS_INSTALL = 'pip install -c constraints.txt ".[consumers]"'
 
 
+def consumer_package(module: str, label: str) -> Any:
+    """The consumer's ``module`` imported; InvalidValueError saying what to install when its package is missing."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        package = module.split(".")[0]
+        raise InvalidValueError(f"the {label} consumer needs the {package} package ({CONSUMERS_INSTALL})") from None
+
+
 def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
     """A copy of ``graph`` with :func:`consumer_settings` applied for ``consumer`` (norse, spikingjelly).
 
@@ -115,10 +123,8 @@ def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
         if isinstance(lif, nir.LIF):
             gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
             lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
-    elif consumer == "spikingjelly":
-        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
     else:
-        raise InvalidValueError(f"no load settings for consumer {consumer!r} (norse, spikingjelly)")
+        lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
     return adjusted
 
 
@@ -130,10 +136,7 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     executor returns the output of the last node it runs, which is ``wta`` when that node is
     present, so the spikes are read from the executor's cache of the ``lif`` node instead.
     """
-    try:
-        import norse.torch as norse_torch
-    except ImportError:
-        raise InvalidValueError(f"the Norse consumer needs the norse package ({CONSUMERS_INSTALL})") from None
+    norse_torch = consumer_package("norse.torch", "Norse")
     logging.getLogger().disabled = True
     try:
         module = norse_torch.from_nir(graph if plain else consumer_graph(graph, "norse", dt), dt=dt)
@@ -152,15 +155,9 @@ def spikingjelly_consumer_raster(
     threshold is moved to the next float32 above it as :func:`consumer_settings` says. It
     refuses (ValueError) per-neuron thresholds.
     """
-    try:
-        from spikingjelly.activation_based.nir_exchange import import_from_nir
-        from spikingjelly.logger import logger
-    except ImportError:
-        raise InvalidValueError(
-            f"the SpikingJelly consumer needs the spikingjelly package ({CONSUMERS_INSTALL})"
-        ) from None
-    logger.disable("spikingjelly")
-    module = import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly", dt), dt=dt)
+    nir_exchange = consumer_package("spikingjelly.activation_based.nir_exchange", "SpikingJelly")
+    consumer_package("spikingjelly.logger", "SpikingJelly").logger.disable("spikingjelly")
+    module = nir_exchange.import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly", dt), dt=dt)
     return step_module(module, spikes)
 
 

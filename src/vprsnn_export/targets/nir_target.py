@@ -26,11 +26,8 @@ consumers that ignore the metadata, as lateral inhibition one step late:
 
 With k = 0 such a consumer computes the WTA-off network (every candidate spikes, a
 superset of the network's spikes). ``wta_node=False`` leaves the node out for importers
-that mishandle recurrent graphs (snnTorch 1.0, Norse 1.1).
-
-Alongside, in :mod:`.nir_runners`: :func:`generic_consumer_raster` runs a file through nirtorch
-with NIR's own LIF equations and :func:`snntorch_consumer_raster` through snnTorch's importer, so
-the agreement of a metadata-blind consumer can be measured (:func:`spike_agreement`).
+that mishandle recurrent graphs (snnTorch 1.0, Norse 1.1). Metadata-blind consumers run
+the file in :mod:`.nir_runners`.
 """
 
 from __future__ import annotations
@@ -269,13 +266,9 @@ def build_graph(
     wta_node: bool = False,
     dt: float = DT_SECONDS,
 ):
-    """The ``nir.NIRGraph`` of a float checkpoint or a fixed-point model (see the module docstring).
-
-    The default is the portable graph input -> linear -> lif -> output, with the hard WTA as
-    the machine-readable readout rule in the metadata (:func:`apply_readout_rule`).
-    ``wta_node=True`` adds the recurrent ``wta`` Linear (lateral inhibition, an approximation
-    for consumers that ignore the metadata; snnTorch's and Norse's importers mishandle it).
-    """
+    """The ``nir.NIRGraph`` of a float checkpoint or a fixed-point model (module docstring): input -> linear ->
+    lif -> output with the hard WTA as the metadata's readout rule (:func:`apply_readout_rule`), plus the
+    recurrent ``wta`` Linear when ``wta_node``."""
     import nir
 
     if wta_inhibition < 0 or not np.isfinite(wta_inhibition):

@@ -13,6 +13,7 @@ import torch
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.targets.onnx_target import INPUT
+from vprsnn_export.targets.registry import load_file
 
 
 @dataclass
@@ -26,18 +27,17 @@ class OnnxRun:
     seconds: float  # wall time of the session.run calls
 
 
+def checked_onnx(path: Path) -> onnx.ModelProto:
+    """``onnx.load`` and the checker's verdict on what it loaded."""
+    loaded = onnx.load(str(path))
+    onnx.checker.check_model(loaded)
+    return loaded
+
+
 def read_onnx(path: str | Path) -> onnx.ModelProto:
     """Load and check an exported graph; a missing, truncated or foreign file is a ModelFileError."""
     path = Path(path)
-    if not path.is_file():
-        raise ModelFileError("no such ONNX file", path)
-    try:
-        loaded = onnx.load(str(path))
-        onnx.checker.check_model(loaded)
-    except Exception as exc:  # onnx raises DecodeError, ValidationError, ... on a damaged file
-        raise ModelFileError(
-            f"not a readable ONNX model (truncated or corrupt: {type(exc).__name__}: {exc})", path
-        ) from None
+    loaded = load_file(path, "ONNX", "ONNX model", checked_onnx)  # onnx raises DecodeError, ValidationError...
     props = {p.key: p.value for p in loaded.metadata_props}
     if props.get("vprsnn.format") != "vprsnn-onnx/1":
         raise ModelFileError("not an ONNX graph written by vprsnn-export (metadata vprsnn.format missing)", path)

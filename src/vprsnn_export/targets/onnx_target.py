@@ -105,15 +105,14 @@ def zeros(dtype: type) -> TensorProto:
 
 
 def check_exportable(model: FixedPointModel) -> None:
-    """The graph implements state isolation (V = 0 at t = 0 of every presentation) and 8-bit-or-less mantissas."""
+    """The graph implements state isolation (V = 0 at t = 0 of every presentation); :func:`validate` bounds the
+    mantissas to 8 bits, MatMulInteger's operands."""
     validate(model, Path("<fixed-point model>"))
     if not model.config.network.state_isolation:
         raise InvalidValueError(
             "the ONNX graph zeroes the voltage at the start of every presentation; "
             "this model was built with state isolation off, which the ONNX target does not express"
         )
-    if model.bits > 8:
-        raise InvalidValueError(f"MatMulInteger takes 8-bit operands; {model.bits}-bit mantissas do not fit")
     bound = int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) if model.weight_mantissa.size else 0
     if bound > INT32_MAX:
         raise InvalidValueError(

@@ -15,8 +15,9 @@ import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
+from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.registry import Registry
@@ -26,6 +27,7 @@ if TYPE_CHECKING:
     from vprsnn_export.network.runs import Backend
 
 Network = Checkpoint | FixedPointModel
+Loaded = TypeVar("Loaded")
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,18 @@ class Target:
     def reader_path(self, files: Sequence[Path]) -> Path:
         """What the reader takes: the (first) file written, or their folder."""
         return Path(files[0]).parent if self.reads_folder else Path(files[0])
+
+
+def load_file(path: Path, kind: str, what: str, load: Callable[[Path], Loaded]) -> Loaded:
+    """``load(path)``; "no such <kind> file" when absent, "not a readable <what>" when the loader raises anything."""
+    if not path.is_file():
+        raise ModelFileError(f"no such {kind} file", path)
+    try:
+        return load(path)
+    except Exception as exc:  # whatever a third-party reader raises on a damaged file
+        raise ModelFileError(
+            f"not a readable {what} (truncated or corrupt: {type(exc).__name__}: {exc})", path
+        ) from None
 
 
 def integer(network: Network, target: str) -> FixedPointModel:

@@ -109,9 +109,9 @@ def onnx_statement(network: Network, model: FixedPointModel | None, options: Wri
 
 
 def loihi_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str | None:
-    """Loihi-style description: what Lava's Dense + LIF compute, and the cores the network needs."""
-    if model is None:
-        return None
+    """Loihi-style description: what Lava's Dense + LIF compute, and the cores the network needs (``model``: the
+    fixed-point model written, never None for an integer-only target)."""
+    assert model is not None
     ensemble = ensemble_sentence(network)
     return (
         "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
