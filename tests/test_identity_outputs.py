@@ -1,6 +1,7 @@
 """Every command's outputs are those recorded before the readout's redesign (issue 42): stdout and every file
 written, on the LENS example, a 300-place stretch of the dev route and the demo's route, timings masked
-(``tools/identity_outputs.py``; the record is ``tests/data/identity_outputs.json``, recorded at 824b1db).
+(``tools/identity_outputs.py``; the record is ``tests/data/identity_outputs.json``, recorded at 824b1db, and its six
+report files again from 2e0a365's code with the report's "platform" entry masked: it names the machine's kernel).
 
 The tool runs in a process of its own with ``OMP_NUM_THREADS=2``, as the record was made: numpy's BLAS takes
 its thread count when it loads, and the float sums of a product differ in the last bit between one thread and
