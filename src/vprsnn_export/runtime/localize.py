@@ -55,6 +55,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
+from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.readout.early import early_run
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.search import SearchWindow
@@ -570,7 +571,7 @@ def load_operating_point(path: str | Path, model_sha256: str | None = None) -> O
 
 
 @dataclass(frozen=True)
-class TrackingRow:
+class TrackingRow(JsonDataclass):
     """One protocol's figures on a labelled traversal at one k (:func:`tracking_rows`): the localiser over the
     whole route every frame ("global") or within a search window ("window W"); fractions, events per frame
     (input spikes x neurons run), global frames after the first, and the wall time per frame."""
@@ -582,9 +583,6 @@ class TrackingRow:
     events_per_frame: float
     relocalisations: int
     ms_per_frame: float
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def tracking_rows(
