@@ -55,8 +55,8 @@ def npz_statement(network: Network, model: FixedPointModel | None, options: Writ
 
 
 def any_place_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
-    """The toy strategy: each neuron votes for every place it fired for, Score = S^Q [S^R > 0]."""
-    return np.asarray(sq, dtype=np.float64) @ (np.asarray(sr) > 0).astype(np.float64)
+    """The toy strategy: each neuron votes for every place it fired for, Score = S^Q [S^R > 0] (CSR in, dense out)."""
+    return (sq @ (sr > 0).astype(np.float64)).toarray()
 
 
 def pair_channels(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:

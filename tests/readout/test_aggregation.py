@@ -191,3 +191,22 @@ def test_invalid_arguments() -> None:
 def test_the_newest_aggregate_is_the_last_row_of_the_whole(frames, k, velocity, rule):
     prob = np.random.default_rng(frames).dirichlet(np.ones(40), frames)
     assert np.array_equal(aggregate_newest(prob, k, velocity, rule), aggregate(prob, k, velocity, rule)[-1:])
+
+
+@pytest.mark.parametrize("velocity", [2.0, -1.0, 0.0, 7.0])
+def test_a_whole_place_shift_is_the_interpolation_with_no_fraction(velocity):
+    """The sliced path (every row moved by the same whole number of places per offset) against the formula:
+    P~_{j,o}(l) = P_{j-o}(l - v o), 0 outside the map or before the stream."""
+    rng = np.random.default_rng(4)
+    prob = rng.random((9, 6))
+    queries, k = np.arange(9), 4
+    shifted, valid = shift_window(prob, queries, k, np.full(9, velocity), np.arange(9.0))
+    expected = np.zeros((9, k, 6))
+    for j in queries:
+        for o in range(k):
+            for place in range(6):
+                source = place - int(velocity) * o
+                if j - o >= 0 and 0 <= source < 6:
+                    expected[j, o, place] = prob[j - o, source]
+    assert shifted.tobytes() == expected.tobytes()
+    np.testing.assert_array_equal(valid, (queries[:, None] - np.arange(k)[None, :]) >= 0)

@@ -9,7 +9,7 @@ import pytest
 from vprsnn_export.config import Config
 from vprsnn_export.data.truth import GroundTruth, MatchWindow
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.readout.scoring import BLOCK_ALIGN, Readout
+from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.predictions import predictions
 
@@ -69,7 +69,7 @@ def test_an_ensemble_with_frame_positions_and_a_ground_truth_reads_out_alike():
     truth = GroundTruth(matrix, "gt.npy")
     positions = np.cumsum(np.random.default_rng(1).integers(1, 3, places))  # dropped frames
     whole = readout.score(counts, ids, ids, truth, positions)
-    blocks = readout.score_in_blocks(counts, ids, ids, truth, positions, block=BLOCK_ALIGN)
+    blocks = readout.score_in_blocks(counts, ids, ids, truth, positions, block=64)
     same_columns(whole, blocks)
     assert [m.to_dict() for m in whole.regions(readout.modules.regions, 4)] == [
         m.to_dict() for m in blocks.regions(readout.modules.regions, 4)

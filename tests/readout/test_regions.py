@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy import sparse
 
 from vprsnn_export.config import Config
 from vprsnn_export.data.truth import EXACT, GroundTruth
@@ -16,7 +17,7 @@ from vprsnn_export.readout.regions import (
     outside_involvement,
     region_weighting,
     regularise,
-    silence,
+    silenced_counts,
 )
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -80,14 +81,25 @@ def test_single_network_is_never_changed():
     np.testing.assert_array_equal(out_sq, sq)
 
 
-def test_silence_zeroes_row_and_column_without_touching_inputs():
-    sq = np.arange(8).reshape(2, 4) + 1
-    before = (SR.copy(), sq.copy())
-    out_sr, out_sq = silence(SR, sq, np.array([False, True, False, False]))
-    assert not out_sr[1].any() and not out_sq[:, 1].any()
-    np.testing.assert_array_equal(np.delete(out_sr, 1, axis=0), np.delete(SR, 1, axis=0))
-    np.testing.assert_array_equal(SR, before[0])
-    np.testing.assert_array_equal(sq, before[1])
+def test_silencing_zeroes_the_column_without_touching_the_input():
+    sq = sparse.csr_array(np.arange(8).reshape(2, 4) + 1.0)
+    before = sq.toarray()
+    out = silenced_counts(sq, np.array([False, True, False, False])).toarray()
+    assert not out[:, 1].any()
+    np.testing.assert_array_equal(np.delete(out, 1, axis=1), np.delete(before, 1, axis=1))
+    np.testing.assert_array_equal(sq.toarray(), before)
+
+
+def test_sparse_and_dense_calibrations_regularise_alike():
+    sq = np.arange(8).reshape(2, 4) % 3
+    dense = regularise(SR, sq, ModuleLayout(REGIONS, 2, 0.5, 0.25))
+    stored = regularise(sparse.csr_array(SR), sparse.csr_array(sq), ModuleLayout(REGIONS, 2, 0.5, 0.25))
+    assert all(sparse.issparse(part) for part in stored) and not any(sparse.issparse(part) for part in dense)
+    for a, b in zip(dense, stored, strict=True):
+        assert a.tobytes() == b.toarray().tobytes()
+    assert (
+        hyperactive_neurons(sparse.csr_array(SR), layout(0.5)).tolist() == hyperactive_neurons(SR, layout(0.5)).tolist()
+    )
 
 
 def test_queries_do_not_decide_who_is_silenced():

@@ -18,8 +18,9 @@ Three strategies turn them into one row of place scores per query:
 
 :mod:`readout.strategies` registers them (scores, confidence, title) and
 :func:`~vprsnn_export.readout.strategies.decide` turns scores into a predicted place
-index (``-1`` = no match) and a confidence. Everything is float64 numpy, vectorised over queries,
-neurons and places (matrix products and fancy indexing only).
+index (``-1`` = no match) and a confidence. S^R, S'' and S^Q are float64 CSR arrays (scipy.sparse: a neuron
+fires for a handful of places, a query reaches a few neurons) and every product runs over their stored entries,
+vectorised over queries, neurons and places; the scores come out dense, (queries, places).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from collections.abc import Callable
 from typing import Any, Final
 
 import numpy as np
+from scipy import sparse
 
 from vprsnn_export.arguments import real_array, real_number
 from vprsnn_export.errors import InvalidValueError
@@ -52,9 +54,9 @@ def once_per_calibration(name: str, sr: np.ndarray, key: tuple, compute: Callabl
     return value
 
 
-def _counts(name: str, a: np.ndarray) -> np.ndarray:
-    """Validate a 2-D, finite, non-negative count array and return it as float64."""
-    arr = real_array(name, a)
+def _counts(name: str, a: np.ndarray | sparse.sparray) -> np.ndarray:
+    """Validate a 2-D, finite, non-negative count array and return it as float64 (a sparse array: dense)."""
+    arr = real_array(name, a.toarray() if sparse.issparse(a) else a)  # type: ignore[union-attr]
     if arr.ndim != 2:
         raise InvalidValueError(f"{name} must be 2-D, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -64,9 +66,33 @@ def _counts(name: str, a: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    sr_ = _counts("sr", sr)
-    sq_ = _counts("sq", sq)
+def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array:
+    """A count array, dense or scipy.sparse, as float64 CSR with its column indices sorted and no stored zeros,
+    checked as :func:`_counts` checks a dense one (2-D, finite, non-negative). A neuron fires for a handful of
+    places and a query reaches a few of the neurons, so S^R and S^Q are mostly zeros: every readout product runs
+    over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
+    if not sparse.issparse(a):
+        return sparse.csr_array(_counts(name, a))
+    if a.ndim != 2:
+        raise InvalidValueError(f"{name} must be 2-D, got shape {a.shape}")
+    out = sparse.csr_array(a, dtype=np.float64, copy=True)
+    if not np.all(np.isfinite(out.data)):
+        raise InvalidValueError(f"{name} contains NaN or infinite values")
+    if np.any(out.data < 0):
+        raise InvalidValueError(f"{name} contains negative spike counts")
+    out.sum_duplicates()
+    out.eliminate_zeros()
+    return out
+
+
+def like_input(result: sparse.csr_array, original: object) -> np.ndarray | sparse.csr_array:
+    """``result`` as the caller gave its input: CSR for a sparse array, else dense."""
+    return result if sparse.issparse(original) else result.toarray()
+
+
+def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_array]:
+    sr_ = sparse_counts("sr", sr)
+    sq_ = sparse_counts("sq", sq)
     if sq_.shape[1] != sr_.shape[0]:
         raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
     return sr_, sq_
@@ -86,20 +112,10 @@ def standard_assignment(sr: np.ndarray) -> np.ndarray:
 
     .. math:: l^*_i = \\arg\\max_l S^R_{il}, \\qquad A_{il} = [\\,l = l^*_i \\wedge \\textstyle\\sum_m S^R_{im} > 0\\,]
 
-    Ties go to the lowest place index (``np.argmax``). A neuron that never
-    spiked during calibration (an all-zero row) is assigned to no place: its
-    row of A is all zero.
+    Ties go to the lowest place index. A neuron that never spiked during calibration (an all-zero row) is
+    assigned to no place: its row of A is all zero. Dense; :func:`standard_voters` gives it sparse.
     """
-    sr_ = _counts("sr", sr)
-    n_neurons, n_places = sr_.shape
-    one_hot = np.zeros((n_neurons, n_places), dtype=np.float64)
-    if n_places == 0 or n_neurons == 0:
-        return one_hot
-    best = np.argmax(sr_, axis=1)
-    active = sr_.sum(axis=1) > 0
-    rows = np.flatnonzero(active)
-    one_hot[rows, best[rows]] = 1.0
-    return one_hot
+    return standard_voters(sparse_counts("sr", sr)).toarray()
 
 
 def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
@@ -108,35 +124,24 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     .. math:: \\mathrm{Score}_{ql} = \\sum_{i:\\, l^*_i = l} S^Q_{qi} = (S^Q A)_{ql}
 
     with ``A = standard_assignment(sr)`` (ties to the lowest place index;
-    neurons silent during calibration belong to no place and never vote).
-    The product with the one-hot A is a sum of the columns of S^Q grouped by
-    place (``np.add.reduceat``): O(queries x neurons), not a dense matrix product;
-    the counts are integers, so the sums are exact either way.
+    neurons silent during calibration belong to no place and never vote), a sparse product:
+    O(the queries' stored counts); the counts are integers, so the sums are exact.
     """
     sr_, sq_ = _pair(sr, sq)
-    scores = np.zeros((sq_.shape[0], sr_.shape[1]), dtype=np.float64)
-    if sr_.size == 0:
-        return scores
-    voters, places, starts = once_per_calibration("voters", sr_, (), lambda: standard_voters(sr_))
-    if voters.size == 0:
-        return scores
-    scores[:, places] = np.add.reduceat(sq_[:, voters], starts, axis=1)
-    return scores
+    votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
+    return (sq_ @ votes).toarray()
 
 
-def standard_voters(sr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The neurons that vote (fired in calibration), ordered by their best place, with each place they vote for
-    and where its voters start: :math:`l^*_i = \\arg\\max_l S^R_{il}` (ties to the lowest index)."""
-    voters = np.flatnonzero(sr.sum(axis=1) > 0)
-    best = np.argmax(sr[voters], axis=1)
-    order = np.argsort(best, kind="stable")
-    voters, best = voters[order], best[order]
-    places, starts = np.unique(best, return_index=True)
-    return voters, places, starts
+def standard_voters(sr: sparse.csr_array) -> sparse.csr_array:
+    """A of :func:`standard_assignment` as CSR (float64, one entry per neuron that fired in calibration):
+    :math:`l^*_i = \\arg\\max_l S^R_{il}` (ties to the lowest index: a CSR row's columns are sorted)."""
+    voters = np.flatnonzero(np.diff(sr.indptr) > 0)
+    best = np.asarray(sr.argmax(axis=1)).ravel()[voters]
+    return sparse.csr_array((np.ones(len(voters)), (voters, best)), shape=sr.shape)
 
 
-def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray:
-    """The weighted-assignment matrix S'' of eq. 9-10, shape ``(n_neurons, n_places)``.
+def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray | sparse.csr_array:
+    """The weighted-assignment matrix S'' of eq. 9-10, shape ``(n_neurons, n_places)``, dense or CSR as S^R.
 
     .. math::
         \\omega_i = \\#\\{l : S^R_{il} > 0\\}, \\qquad
@@ -148,18 +153,16 @@ def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray:
     A neuron silent during calibration has ``S''_{i\\cdot} = 0``.
     ``gamma`` is the involvement threshold, in [0, 1] (the paper: (0, 1)).
     """
-    sr_ = _counts("sr", sr)
+    sr_ = sparse_counts("sr", sr)
     gamma = real_number("gamma", gamma)
     if not (0.0 <= gamma <= 1.0):
         raise InvalidValueError(f"gamma must lie in [0, 1], got {gamma}")
-    n_places = sr_.shape[1]
-    omega = np.count_nonzero(sr_ > 0, axis=1).astype(np.float64)
-    penalised = omega > gamma * n_places  # implies omega >= 1
-    divisor = np.where(penalised, omega, 1.0)
-    s_prime = sr_ / divisor[:, None]
-    rowsum = sr_.sum(axis=1)
-    safe = np.where(rowsum > 0, rowsum, 1.0)
-    return s_prime * (sr_ / safe[:, None])  # a silent row is 0 * 0 = 0
+    omega = np.diff(sr_.indptr).astype(np.float64)  # stored entries are the positive ones
+    divisor = np.where(omega > gamma * sr_.shape[1], omega, 1.0)  # penalised: omega >= 1
+    rowsum = np.asarray(sr_.sum(axis=1)).ravel()
+    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    data = (sr_.data / divisor[rows]) * (sr_.data / rowsum[rows])
+    return like_input(sparse.csr_array((data, sr_.indices, sr_.indptr), shape=sr_.shape), sr)
 
 
 def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
@@ -169,15 +172,16 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
               = \\frac{([S^Q > 0]\\, S^R)_{ql}}{\\sum_m S^R_{ml}}
 
     ``Active_q`` = neurons with at least one spike in query q. The factor is 0
-    for a place whose calibration column sum is 0.
+    for a place whose calibration column sum is 0 (integer sums: exact).
     """
     sr_, sq_ = _pair(sr, sq)
-    colsum = sr_.sum(axis=0)
-    safe = np.where(colsum > 0, colsum, 1.0)
-    active = (sq_ > 0).astype(np.float64)
-    pen = (active @ sr_) / safe[None, :]
-    pen[:, colsum <= 0] = 0.0
-    return pen
+    return _penalty(sr_, sq_)
+
+
+def _penalty(sr: sparse.csr_array, sq: sparse.csr_array) -> np.ndarray:
+    colsum = np.asarray(sr.sum(axis=0)).ravel()
+    active = sparse.csr_array((np.ones_like(sq.data), sq.indices, sq.indptr), shape=sq.shape)
+    return (active @ sr).toarray() / np.where(colsum > 0, colsum, 1.0)[None, :]  # 0 / 1 where the column is 0
 
 
 def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
@@ -188,11 +192,12 @@ def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
 
     with S'' from :func:`weighted_matrix` (eq. 9-10) and the penalty from
     :func:`missing_spikes_penalty` (eq. 11). Scores are non-negative; a query
-    with no spike at all scores 0 everywhere.
+    with no spike at all scores 0 everywhere. The sum over i runs over the neurons that fired for the query and
+    for the place, in neuron order (a sparse product: a row's numbers do not depend on the other rows).
     """
     sr_, sq_ = _pair(sr, sq)
-    weighting = once_per_calibration("weighted", sr_, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
-    return (sq_ @ weighting) * missing_spikes_penalty(sr_, sq_)
+    weighting = once_per_calibration("weighted", sr, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
+    return (sq_ @ weighting).toarray() * _penalty(sr_, sq_)
 
 
 def wprob_distribution(scores: np.ndarray) -> np.ndarray:

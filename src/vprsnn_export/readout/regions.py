@@ -12,7 +12,7 @@ its own region; both use the reference (calibration) responses only. Here:
     S~[i, l]  = S^R[i, l] if l in R(i), else lambda S^R[i, l]                         region_weighting
     o_i       = #{ l not in R(i) : S^R[i, l] > 0 } / #{ l not in R(i) }               outside_involvement
     silent_i  = o_i > rho                                                             hyperactive_neurons
-    S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silence
+    S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silenced_counts
 
 and the readout (Standard, Weighted, W+Prob, aggregation) then runs on S~ in place of S^R.
 lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1];
@@ -20,8 +20,8 @@ lambda = 0 is Hussaini's region-specific assignment (a neuron votes only for pla
 lambda = 1 the whole-route assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one
 module: no place lies outside its region, o_i = 0) is never changed. A silenced neuron neither votes
 nor counts as active in the missing-spikes penalty (eq. 11): it is removed from the readout as if it
-had not been there; its module's WTA is unchanged. Everything is computed on whole (neurons, places)
-arrays, without a loop over neurons or modules.
+had not been there; its module's WTA is unchanged. Everything is computed on the stored entries of S^R (CSR),
+without a loop over neurons or modules.
 """
 
 from __future__ import annotations
@@ -29,13 +29,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
 
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.network.modules import module_regions, region_mask
+from vprsnn_export.network.modules import module_regions, neuron_modules
 
-from .assignment import _counts
+from .assignment import like_input, sparse_counts
 
 
 @dataclass(frozen=True)
@@ -99,14 +100,23 @@ def module_layout(
     return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
 
 
-def _inside(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
-    inside = region_mask(check_regions(regions), group)
-    if inside.shape != sr.shape:
+def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray:
+    """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries)."""
+    regions = check_regions(regions)
+    shape = (len(regions) * group, int(regions[-1, 1]))
+    if shape != sr.shape:
         raise InvalidValueError(
-            f"sr has shape {sr.shape} but the module layout describes {inside.shape[0]} neurons x "
-            f"{inside.shape[1]} places"
+            f"sr has shape {sr.shape} but the module layout describes {shape[0]} neurons x {shape[1]} places"
         )
-    return inside
+    rows = np.repeat(np.arange(sr.shape[0]), np.diff(sr.indptr))
+    return neuron_modules(shape[0], group)[rows] == np.searchsorted(regions[:, 1], sr.indices, side="right")
+
+
+def _scaled(sr: sparse.csr_array, factor: np.ndarray) -> sparse.csr_array:
+    """``sr`` with each stored entry multiplied by ``factor`` (one per entry), the entries made 0 dropped."""
+    out = sparse.csr_array((sr.data * factor, sr.indices.copy(), sr.indptr.copy()), shape=sr.shape)
+    out.eliminate_zeros()
+    return out
 
 
 def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_weight: float) -> np.ndarray:
@@ -114,18 +124,13 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
 
     .. math:: \\tilde S_{il} = \\begin{cases} S^R_{il} & l \\in R(i) \\\\ \\lambda\\, S^R_{il} & l \\notin R(i) \\end{cases}
 
-    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged.
+    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged. Dense or CSR, as given.
     """
-    sr_ = _counts("sr", sr)
+    sr_ = sparse_counts("sr", sr)
     lam = float(outside_weight)
     if not 0.0 <= lam <= 1.0:
         raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
-    if lam == 1.0:
-        return sr_
-    inside = _inside(sr_, regions, group)
-    if lam == 0.0:
-        return sr_ * inside
-    return sr_ * np.where(inside, 1.0, lam)
+    return like_input(_scaled(sr_, np.where(_inside(sr_, regions, group), 1.0, lam)), sr)
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -135,10 +140,11 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
 
     0 for a neuron whose region covers every place (a single network).
     """
-    sr_ = _counts("sr", sr)
-    inside = _inside(sr_, regions, group)
-    fires_outside = np.count_nonzero((sr_ > 0) & ~inside, axis=1)
-    outside = np.count_nonzero(~inside, axis=1)
+    sr_ = sparse_counts("sr", sr)
+    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    fires_outside = np.bincount(rows[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
+    regions_ = check_regions(regions)
+    outside = (sr_.shape[1] - (regions_[:, 1] - regions_[:, 0]))[neuron_modules(sr_.shape[0], group)]
     return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
 
 
@@ -149,68 +155,51 @@ def hyperactive_neurons(sr: np.ndarray, layout: ModuleLayout) -> np.ndarray:
 
     with :math:`o_i` from :func:`outside_involvement` and :math:`\\rho` = ``layout.hyperactive_share``.
     """
-    rho = float(layout.hyperactive_share)
-    if not 0.0 <= rho <= 1.0:
-        raise InvalidValueError(f"hyperactive_share must lie in [0, 1], got {rho}")
-    return outside_involvement(sr, layout.regions, layout.group) > rho
+    return outside_involvement(sr, layout.regions, layout.group) > float(layout.hyperactive_share)
 
 
-def silence(sr: np.ndarray, sq: np.ndarray, silent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """S^R and S^Q without the silent neurons' responses (copies; the inputs are not changed).
-
-    .. math:: S^R_{i\\cdot} \\leftarrow 0, \\quad S^Q_{\\cdot i} \\leftarrow 0 \\qquad \\text{for every silent } i
-    """
-    sr_ = np.array(sr, dtype=np.float64)
-    sq_ = np.array(sq, dtype=np.float64)
-    mask = np.asarray(silent, dtype=bool)
-    sr_[mask, :] = 0.0
-    sq_[:, mask] = 0.0
-    return sr_, sq_
+def silenced_counts(sq: sparse.csr_array, silent: np.ndarray | None) -> sparse.csr_array:
+    """S^Q without the silent neurons' counts: :math:`S^Q_{\\cdot i} \\leftarrow 0` for every silent i (CSR)."""
+    return sq if silent is None or not silent.any() else _scaled(sq, np.where(silent[sq.indices], 0.0, 1.0))
 
 
 def regularise(
     sr: np.ndarray,
     sq: np.ndarray,
     layout: ModuleLayout | None,
-    calibrated: tuple[np.ndarray, np.ndarray | None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
-    (both unchanged when ``layout`` is None).
+    (both unchanged when ``layout`` is None), each dense or CSR as given.
 
     .. math:: \\mathrm{silent}_i = o_i > \\rho, \\quad
               o_i = \\frac{\\#\\{l \\notin R(i) : S^R_{il} > 0\\}}{\\#\\{l \\notin R(i)\\}}, \\quad
               \\tilde S_{il} = S^R_{il} \\,(1 \\text{ if } l \\in R(i) \\text{ else } \\lambda)
 
-    Only S^R (reference data) decides; the queries are not looked at. ``calibrated``: the query-independent half
-    already computed (:func:`calibrated_half`), as a readout reading several blocks of queries passes it.
+    Only S^R (reference data) decides; the queries are not looked at.
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
-    weighted, silent = calibrated_half(sr, layout) if calibrated is None else calibrated
-    sq_ = _counts("sq", sq).copy()
+    weighted, silent = calibrated_half(sr, layout)
+    sq_ = sparse_counts("sq", sq)
     if sq_.shape[1] != weighted.shape[0]:
         raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {weighted.shape[0]} neurons")
-    if silent is None:
-        return weighted, sq_
-    sq_[:, silent] = 0.0
-    return weighted, sq_
+    return like_input(weighted, sr), like_input(silenced_counts(sq_, silent), sq)
 
 
-def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray | None]:
-    """S^R as float64, or S~ and the silenced neurons of ``layout`` (:func:`regularised_calibration`; None: none)."""
-    sr_ = _counts("sr", sr)
+def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[sparse.csr_array, np.ndarray | None]:
+    """S^R as float64 CSR, or S~ and the silenced neurons of ``layout`` (:func:`regularised_calibration`; None:
+    none): the query-independent half of a readout."""
+    sr_ = sparse_counts("sr", sr)
     return (sr_, None) if layout is None else regularised_calibration(sr_, layout)
 
 
 def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.ndarray, np.ndarray]:
-    """S~ (float64: region-weighted, the silenced rows zeroed) and the silenced neurons (bool, (neurons,)),
-    the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
-    sr_ = _counts("sr", sr)
+    """S~ (float64: region-weighted, the silenced rows zeroed; dense or CSR as given) and the silenced neurons
+    (bool, (neurons,)), the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
+    sr_ = sparse_counts("sr", sr)
     silent = hyperactive_neurons(sr_, layout)
-    weighted = region_weighting(sr_, layout.regions, layout.group, layout.outside_weight)
-    if weighted is sr_:
-        weighted = sr_.copy()
-    weighted[silent, :] = 0.0
-    return weighted, silent
+    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[rows]
+    return like_input(_scaled(sr_, factor), sr), silent
 
 
 @dataclass(frozen=True)

@@ -12,24 +12,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from scipy import sparse
 
 from vprsnn_export.arguments import real_number, require_integer, require_type
 from vprsnn_export.config import Config
 from vprsnn_export.data.truth import Truth, window
 from vprsnn_export.errors import InvalidValueError
 
-from .assignment import weighted_matrix, wprob_distribution
+from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
-from .regions import ModuleLayout, calibrated_half, module_layout, regularise
+from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
 from .scored import Scored, decided_column, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
 from .stream import ReadoutStream
 
-#: Queries read out at once by :meth:`Readout.score_in_blocks` (its default), and the multiple every block starts
-#: on: BLAS computes rows in groups (4 here); rows aligned alike give the whole matrix's numbers bit for bit.
-READOUT_BLOCK, BLOCK_ALIGN = 1024, 64
+#: Queries read out at once by :meth:`Readout.score_in_blocks` (its default).
+READOUT_BLOCK = 1024
 
 
 def decision_metrics(
@@ -167,11 +167,14 @@ class Readout:
         An ensemble's hyperactive neurons are silenced first (``readout.regions.regularise``: decided from S^R
         alone); the weighted scores are computed once and W+Prob derived from them (``all_scores``).
         """
-        sr, sq = regularise(self.calibration, counts, self.modules, self.calibrated())
-        return all_scores(sr, sq, self.gamma)
+        sr, silent = self.calibrated()
+        sq = sparse_counts("counts", counts)
+        if sq.shape[1] != sr.shape[0]:
+            raise InvalidValueError(f"counts has {sq.shape[1]} neurons per query but the calibration {sr.shape[0]}")
+        return all_scores(sr, silenced_counts(sq, silent), self.gamma)
 
-    def calibrated(self) -> tuple[np.ndarray, np.ndarray | None]:
-        """S~ (S^R as float64 for a single network) and the silenced neurons (None: none), computed once: the
+    def calibrated(self) -> tuple[sparse.csr_array, np.ndarray | None]:
+        """S~ (S^R for a single network; float64 CSR) and the silenced neurons (None: none), computed once: the
         query-independent half of every batch, block and frame read out (:func:`~.regions.calibrated_half`)."""
         if self._calibrated is None:
             self._calibrated = calibrated_half(self.calibration, self.modules)
@@ -222,8 +225,8 @@ class Readout:
     ) -> Scored:
         """:meth:`score` computed ``block`` queries at a time: no (queries x places) matrix is held, only each
         block's (block + k - 1 frames of history) and the decisions. Every column equals :meth:`score`'s bit for
-        bit: the rows of a block start on a multiple of :data:`BLOCK_ALIGN` (BLAS computes a row of the scores as
-        it does in the whole matrix) and the k-frame windows reach back k - 1 frames, no further.
+        bit: a row of scores is a sparse product of that query's counts alone, and the k-frame windows reach back
+        k - 1 frames, no further.
 
         .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}) \\text{ needs rows } j-k+1..j \\text{ only}
 
@@ -235,10 +238,9 @@ class Readout:
         if self.options.velocity_candidates is not None:
             raise InvalidValueError("a velocity estimated from the stream looks ahead: read the queries out whole")
         n, history = len(query_place_ids), max(self.options.ks) - 1
-        block = max(BLOCK_ALIGN, block // BLOCK_ALIGN * BLOCK_ALIGN)
         decided: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]]] = {}
         for start in range(0, n, block):
-            low, stop = max(0, start - history) // BLOCK_ALIGN * BLOCK_ALIGN, min(n, start + block)
+            low, stop = max(0, start - history), min(n, start + block)
             positions = None if frame_positions is None else np.asarray(frame_positions)[low:stop]
             scores = self.scores(counts[low:stop])
             aggregates = self.sequences(scores[SEQUENCE_STRATEGY], positions)
@@ -276,7 +278,7 @@ class Readout:
         """
         sr, silent = self.calibrated()
         if self._prepared is None:
-            self._prepared = (weighted_matrix(sr, self.gamma), sr.sum(axis=0))
+            self._prepared = (weighted_matrix(sr, self.gamma), np.asarray(sr.sum(axis=0)).ravel())
         weighting, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
         active = sq > 0
@@ -285,8 +287,9 @@ class Readout:
         rows = np.flatnonzero(active)
         cols = slice(None) if places is None else places
         total = column_sum[cols]
-        penalty = np.where(total > 0, sr[rows, cols].sum(axis=0) / np.where(total > 0, total, 1.0), 0.0)
-        distribution = wprob_distribution(((sq[rows] @ weighting[rows, cols]) * penalty)[None])[0]
+        fired, weights = sr[rows][:, cols], weighting[rows][:, cols]
+        penalty = np.where(total > 0, np.asarray(fired.sum(axis=0)).ravel() / np.where(total > 0, total, 1.0), 0.0)
+        distribution = wprob_distribution(((sq[rows] @ weights) * penalty)[None])[0]
         if places is None or np.ptp(distribution) == 0:  # a flat window is no evidence: the uniform row, no match
             return distribution if places is None else np.full(len(column_sum), 1.0 / len(column_sum))
         row = np.zeros(len(column_sum))

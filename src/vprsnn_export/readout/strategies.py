@@ -30,7 +30,8 @@ from .assignment import (
     wprob_distribution,
 )
 
-#: scores(sr (neurons, places), sq (queries, neurons), gamma) -> (queries, places)
+#: scores(sr (neurons, places), sq (queries, neurons), gamma) -> (queries, places): S^R (S~) and S^Q as float64 CSR
+#: arrays (scipy.sparse, :func:`~.assignment.sparse_counts`), the scores dense
 ScoreFunction = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 #: decision(scores (queries, places)) -> (no-match mask (queries,), confidence (queries,))
 DecisionFunction = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]

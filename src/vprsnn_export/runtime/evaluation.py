@@ -29,7 +29,7 @@ from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
 from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
 from vprsnn_export.readout.scored import Scored
-from vprsnn_export.readout.scoring import BLOCK_ALIGN, READOUT_BLOCK, Readout, baseline_rows, nearest_neighbour_rows
+from vprsnn_export.readout.scoring import READOUT_BLOCK, Readout, baseline_rows, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import step_agreement
 from vprsnn_export.trainer.calibrate import calibrate
@@ -229,7 +229,7 @@ def _prepared(
     """The network with ``state_isolation`` (None: its config's own) in its config, as its backend runs it;
     InvalidValueError when the run (``rasters`` recorded, one more without state isolation; the readout a block
     and its history at a time, :func:`read_out`) would not fit."""
-    rows = None if options.velocity_candidates is not None else READOUT_BLOCK + BLOCK_ALIGN + max(options.ks)
+    rows = None if options.velocity_candidates is not None else READOUT_BLOCK + max(options.ks)
     if state_isolation is not None:
         network = replace(network, config=network.config.replace(**{"network.state_isolation": bool(state_isolation)}))
     check_run_memory(
