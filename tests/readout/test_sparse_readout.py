@@ -42,7 +42,9 @@ def test_the_sparse_kernels_are_the_dense_formulas():
     np.testing.assert_array_equal(standard_scores(sr, counts), expected)
     new, old = weighted_scores(sr, counts, 0.02), dense_weighted_scores(sr, counts, 0.02)
     np.testing.assert_allclose(new, old, rtol=1e-13, atol=0)
-    np.testing.assert_array_equal(decide(wprob_distribution(new), "wprob")[0], decide(wprob_distribution(old), "wprob")[0])
+    np.testing.assert_array_equal(
+        decide(wprob_distribution(new), "wprob")[0], decide(wprob_distribution(old), "wprob")[0]
+    )
 
 
 def test_sparse_and_dense_inputs_give_the_same_columns_bit_for_bit():
@@ -58,3 +60,14 @@ def test_sparse_and_dense_inputs_give_the_same_columns_bit_for_bit():
     for a, b in zip(dense.columns, stored.columns, strict=True):
         assert a.index.tobytes() == b.index.tobytes() and a.confidence.tobytes() == b.confidence.tobytes()
         assert a.row == b.row
+
+
+def test_a_frame_pushed_alone_gets_the_batch_distribution_bit_for_bit():
+    places = 640
+    sr, counts = route_counts(places, places, seed=11)
+    cfg = Config().replace(**{"train.module_size": 64, "network.n_neurons": 64, "assignment.hyperactive_share": 0.005})
+    readout = Readout.of(sr, cfg, SequenceOptions(ks=(1,)))
+    assert readout.calibrated()[1] is not None and readout.calibrated()[1].any()  # some neurons silenced
+    batch = readout.scores(counts)["wprob"]
+    for j in range(0, places, 7):
+        assert readout.wprob(counts[j]).tobytes() == batch[j].tobytes()

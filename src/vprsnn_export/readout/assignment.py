@@ -57,13 +57,19 @@ def once_per_calibration(name: str, sr: np.ndarray, key: tuple, compute: Callabl
 def _counts(name: str, a: np.ndarray | sparse.sparray) -> np.ndarray:
     """Validate a 2-D, finite, non-negative count array and return it as float64 (a sparse array: dense)."""
     arr = real_array(name, a.toarray() if sparse.issparse(a) else a)  # type: ignore[union-attr]
-    if arr.ndim != 2:
-        raise InvalidValueError(f"{name} must be 2-D, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    return _checked_counts(name, arr.shape, arr)
+
+
+def _checked_counts(name: str, shape: tuple, values: np.ndarray) -> np.ndarray:
+    """``values`` (the array, or a sparse array's stored entries) when the shape is 2-D and every value finite
+    and >= 0; InvalidValueError naming ``name`` otherwise."""
+    if len(shape) != 2:
+        raise InvalidValueError(f"{name} must be 2-D, got shape {shape}")
+    if not np.all(np.isfinite(values)):
         raise InvalidValueError(f"{name} contains NaN or infinite values")
-    if np.any(arr < 0):
+    if np.any(values < 0):
         raise InvalidValueError(f"{name} contains negative spike counts")
-    return arr
+    return values
 
 
 def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array:
@@ -73,13 +79,8 @@ def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array
     over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
     if not sparse.issparse(a):
         return sparse.csr_array(_counts(name, a))
-    if a.ndim != 2:
-        raise InvalidValueError(f"{name} must be 2-D, got shape {a.shape}")
-    out = sparse.csr_array(a, dtype=np.float64, copy=True)
-    if not np.all(np.isfinite(out.data)):
-        raise InvalidValueError(f"{name} contains NaN or infinite values")
-    if np.any(out.data < 0):
-        raise InvalidValueError(f"{name} contains negative spike counts")
+    out = sparse.csr_array(a, dtype=np.float64, copy=True) if a.ndim == 2 else a
+    _checked_counts(name, a.shape, out.data)
     out.sum_duplicates()
     out.eliminate_zeros()
     return out

@@ -133,7 +133,8 @@ class Readout:
 
     ``score(counts, ...)`` reads a batch out (Q x neurons), every column decided once; ``stream()`` gives a
     :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob
-    distributions up to the order of the float sums). The readout itself keeps no stream state.
+    distributions bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream
+    state.
     """
 
     def __init__(
@@ -271,25 +272,31 @@ class Readout:
                   \\frac{\\sum_{i \\in A} S^R_{il}}{\\sum_m S^R_{ml}}, \\quad
                   A = \\{i : S^Q_i > 0, \\text{not silent}\\}, \\quad P = \\text{wprob\\_distribution}(\\mathrm{Score})
 
-        :meth:`scores`' W+Prob (equal up to the order of the float sums), at the cost of the few neurons that
-        fired rather than all of them; the query-independent half (S'' of eq. 9-11) is computed once. ``places``:
-        the distribution over those places alone (a search window, 0 elsewhere; uniform when flat there), at the
-        cost of the window.
+        :meth:`scores`' W+Prob bit for bit (each place's terms summed in neuron order, ``np.bincount`` over the
+        fired neurons' stored entries of S~ and S''), at the cost of the few neurons that fired rather than all of
+        them; the query-independent half (S'' of eq. 9-11) is computed once. ``places``: the distribution over
+        those places alone (a search window, 0 elsewhere; uniform when flat there), at the cost of the window.
         """
         sr, silent = self.calibrated()
-        if self._prepared is None:
-            self._prepared = (weighted_matrix(sr, self.gamma), np.asarray(sr.sum(axis=0)).ravel())
-        weighting, column_sum = self._prepared
+        if self._prepared is None:  # S'' has S~'s entries (weighted_matrix keeps its structure): its values alone
+            self._prepared = (weighted_matrix(sr, self.gamma).data, np.asarray(sr.sum(axis=0)).ravel())
+        weights, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
         active = sq > 0
         if silent is not None:
             active &= ~silent
         rows = np.flatnonzero(active)
-        cols = slice(None) if places is None else places
-        total = column_sum[cols]
-        fired, weights = sr[rows][:, cols], weighting[rows][:, cols]
-        penalty = np.where(total > 0, np.asarray(fired.sum(axis=0)).ravel() / np.where(total > 0, total, 1.0), 0.0)
-        distribution = wprob_distribution(((sq[rows] @ weights) * penalty)[None])[0]
+        first, last, _ = (slice(None) if places is None else places).indices(len(column_sum))
+        starts, lengths = sr.indptr[rows], np.diff(sr.indptr)[rows]
+        entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
+        place = sr.indices[entries]
+        inside = (place >= first) & (place < last)
+        entries, place = entries[inside], place[inside] - first
+        summed = np.bincount(place, np.repeat(sq[rows], lengths)[inside] * weights[entries], last - first)
+        fired = np.bincount(place, sr.data[entries], last - first)
+        total = column_sum[first:last]
+        penalty = np.where(total > 0, fired / np.where(total > 0, total, 1.0), 0.0)
+        distribution = wprob_distribution((summed * penalty)[None])[0]
         if places is None or np.ptp(distribution) == 0:  # a flat window is no evidence: the uniform row, no match
             return distribution if places is None else np.full(len(column_sum), 1.0 / len(column_sum))
         row = np.zeros(len(column_sum))
