@@ -77,10 +77,10 @@ def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array
     checked as :func:`_counts` checks a dense one (2-D, finite, non-negative). A neuron fires for a handful of
     places and a query reaches a few of the neurons, so S^R and S^Q are mostly zeros: every readout product runs
     over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
-    if not sparse.issparse(a):
+    if not sparse.issparse(a) or a.ndim != 2:
         return sparse.csr_array(_counts(name, a))
-    out = sparse.csr_array(a, dtype=np.float64, copy=True) if a.ndim == 2 else a
-    _checked_counts(name, a.shape, out.data)
+    out = sparse.csr_array(a, dtype=np.float64, copy=True)
+    _checked_counts(name, out.shape, np.asarray(out.data))
     out.sum_duplicates()
     out.eliminate_zeros()
     return out

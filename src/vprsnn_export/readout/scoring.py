@@ -279,7 +279,7 @@ class Readout:
         """
         sr, silent = self.calibrated()
         if self._prepared is None:  # S'' has S~'s entries (weighted_matrix keeps its structure): its values alone
-            self._prepared = (weighted_matrix(sr, self.gamma).data, np.asarray(sr.sum(axis=0)).ravel())
+            self._prepared = (np.asarray(weighted_matrix(sr, self.gamma).data), np.asarray(sr.sum(axis=0)).ravel())
         weights, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
         active = sq > 0
