@@ -7,6 +7,7 @@ skips, with the reason, when no Python 3.10 exists or the install fails.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
@@ -21,7 +22,16 @@ LAVA_DL = "lava-dl==0.6.0"  # pulls torch 2.3 (a CUDA build, about 3 GB, runs on
 
 
 def venv_python(probe: str, requirement: str) -> Path:
-    """The venv's interpreter once ``import probe`` works in it, creating the venv and installing ``requirement``."""
+    """The venv's interpreter once ``import probe`` works in it, creating the venv and installing ``requirement``:
+    one process at a time (an exclusive lock beside the venv), so that two xdist workers never install into it
+    at once (the second saw a half-installed torch: ``cannot import name 'nccl'``)."""
+    LAVA_VENV.parent.mkdir(parents=True, exist_ok=True)
+    with open(LAVA_VENV.parent / f"{LAVA_VENV.name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return _built_python(probe, requirement)
+
+
+def _built_python(probe: str, requirement: str) -> Path:
     python = LAVA_VENV / "bin" / "python"
     if python.exists() and subprocess.run([python, "-c", f"import {probe}"], capture_output=True).returncode == 0:
         return python
@@ -30,7 +40,6 @@ def venv_python(probe: str, requirement: str) -> Path:
         base = next((Path(p) for p in PYTHON310 if p and Path(p).exists()), None)
         if base is None:
             pytest.skip("Lava needs Python 3.10 and none was found (pyenv 3.10.13 or python3.10 on PATH)")
-        LAVA_VENV.parent.mkdir(parents=True, exist_ok=True)
         steps.insert(0, [str(base), "-m", "venv", str(LAVA_VENV)])
     for step in steps:
         done = subprocess.run(step, capture_output=True, text=True, timeout=3600)
