@@ -79,11 +79,20 @@ def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array
     over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
     if not sparse.issparse(a) or a.ndim != 2:
         return sparse.csr_array(_counts(name, a))
+    if isinstance(a, sparse.csr_array) and a.dtype == np.float64 and a.has_canonical_format:
+        _checked_counts(name, a.shape, a.data)
+        if np.all(a.data != 0):  # already in the readout's form (S~ read block after block): no copy
+            return a
     out = sparse.csr_array(a, dtype=np.float64, copy=True)
     _checked_counts(name, out.shape, np.asarray(out.data))
     out.sum_duplicates()
     out.eliminate_zeros()
     return out
+
+
+def entry_rows(a: sparse.csr_array) -> np.ndarray:
+    """The row of every stored entry of a CSR array, in storage order: :math:`i` repeated once per entry of row i."""
+    return np.repeat(np.arange(a.shape[0]), np.diff(a.indptr))
 
 
 def like_input(result: sparse.csr_array, original: object) -> np.ndarray | sparse.csr_array:
@@ -161,7 +170,7 @@ def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray | sparse.csr_arr
     omega = np.diff(sr_.indptr).astype(np.float64)  # stored entries are the positive ones
     divisor = np.where(omega > gamma * sr_.shape[1], omega, 1.0)  # penalised: omega >= 1
     rowsum = np.asarray(sr_.sum(axis=1)).ravel()
-    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    rows = entry_rows(sr_)
     data = (sr_.data / divisor[rows]) * (sr_.data / rowsum[rows])
     return like_input(sparse.csr_array((data, sr_.indices, sr_.indptr), shape=sr_.shape), sr)
 

@@ -36,7 +36,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
-from .assignment import like_input, sparse_counts
+from .assignment import entry_rows, like_input, sparse_counts
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,7 @@ def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray
         raise InvalidValueError(
             f"sr has shape {sr.shape} but the module layout describes {shape[0]} neurons x {shape[1]} places"
         )
-    rows = np.repeat(np.arange(sr.shape[0]), np.diff(sr.indptr))
+    rows = entry_rows(sr)
     return neuron_modules(shape[0], group)[rows] == np.searchsorted(regions[:, 1], sr.indices, side="right")
 
 
@@ -141,7 +141,7 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
     0 for a neuron whose region covers every place (a single network).
     """
     sr_ = sparse_counts("sr", sr)
-    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    rows = entry_rows(sr_)
     fires_outside = np.bincount(rows[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
     regions_ = check_regions(regions)
     outside = (sr_.shape[1] - (regions_[:, 1] - regions_[:, 0]))[neuron_modules(sr_.shape[0], group)]
@@ -197,7 +197,7 @@ def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.nd
     (bool, (neurons,)), the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
     sr_ = sparse_counts("sr", sr)
     silent = hyperactive_neurons(sr_, layout)
-    rows = np.repeat(np.arange(sr_.shape[0]), np.diff(sr_.indptr))
+    rows = entry_rows(sr_)
     factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[rows]
     return like_input(_scaled(sr_, factor), sr), silent
 
