@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import sparse
 
 from vprsnn_export.arguments import require_bool, require_choice, require_type
 from vprsnn_export.errors import InvalidValueError, ModelFileError
@@ -347,6 +348,8 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
     report = QuantisationReport.from_dict(
         dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
     )
+    sr = ckpt.calibration
+    sr = sr.toarray() if isinstance(sr, sparse.csr_array) else sr  # a fixed-point model's S^R is dense
     model = FixedPointModel(
         bits=int(bits),
         weight_mantissa=arrays.weight_mantissa,
@@ -355,8 +358,8 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
         threshold=arrays.threshold,
         decay_dv=decay_mantissa(ckpt.config.network.beta),
         config=ckpt.config,
-        calibration=ckpt.calibration.astype(np.int64).copy(),
-        float_calibration=ckpt.calibration.astype(np.int64).copy(),
+        calibration=sr.astype(np.int64, order="C"),
+        float_calibration=sr.astype(np.int64, order="C"),
         reference_place_ids=ckpt.reference_place_ids.astype(np.int64).copy(),
         reference_traversals=list(ckpt.reference_traversals),
         quantisation=report,

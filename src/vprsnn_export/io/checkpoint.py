@@ -2,7 +2,9 @@
 
 Format: an npz container (no pickle, :mod:`vprsnn_export.io.fileio`) with arrays ``weights`` (inputs, neurons)
 float32, ``thresholds`` (neurons,) float32, ``calibration`` (neurons, places) int64 = S^R and
-``reference_place_ids`` (places,) int64, and a JSON header holding the config, the seed, the data provenance
+``reference_place_ids`` (places,) int64 (a sparse S^R, :func:`vprsnn_export.trainer.calibrate.calibrate` on a
+long route, as its CSR arrays ``calibration_data`` int64, ``calibration_indices`` and ``calibration_indptr``
+int64 instead of ``calibration``), and a JSON header holding the config, the seed, the data provenance
 (source, manifest sha256, reference traversals, place selection), the training history and the package version.
 """
 
@@ -14,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import sparse
 
 from ..arguments import require_path
 from ..config import Config
@@ -27,6 +30,8 @@ FORMAT = "vprsnn-checkpoint"
 FORMAT_VERSION = 1
 #: The arrays of a checkpoint file, in the order written, with the dtype each is written as.
 ARRAYS = {"weights": np.float32, "thresholds": np.float32, "calibration": np.int64, "reference_place_ids": np.int64}
+#: A sparse S^R's arrays (CSR), in place of ``calibration``.
+SPARSE_CALIBRATION = ("calibration_data", "calibration_indices", "calibration_indptr")
 
 
 @dataclass
@@ -34,7 +39,7 @@ class Checkpoint:
     config: Config
     weights: np.ndarray
     thresholds: np.ndarray
-    calibration: np.ndarray
+    calibration: np.ndarray | sparse.csr_array  # S^R (neurons, places): dense, or CSR on a long route
     reference_place_ids: np.ndarray
     reference_traversals: list[str]
     data: dict[str, Any]  # source, manifest_sha256, subset, places
@@ -72,7 +77,17 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     validate_checkpoint(ckpt, path)
     meta = checkpoint_header(ckpt)
     check_header(meta, path)  # the reader's own checks: nothing is written that load_checkpoint refuses
-    return write_container(path, meta, {name: getattr(ckpt, name).astype(dtype) for name, dtype in ARRAYS.items()})
+    arrays: dict[str, np.ndarray] = {}
+    for name, dtype in ARRAYS.items():  # in order: a dense checkpoint's bytes do not depend on the sparse case
+        value = getattr(ckpt, name)
+        if name == "calibration" and sparse.issparse(value):
+            parts = (value.data, value.indices, value.indptr)
+            arrays.update(
+                (key, np.asarray(a, dtype=np.int64)) for key, a in zip(SPARSE_CALIBRATION, parts, strict=True)
+            )
+        else:
+            arrays[name] = value.astype(dtype)
+    return write_container(path, meta, arrays)
 
 
 def load_checkpoint(path: str | Path) -> Checkpoint:
@@ -80,6 +95,8 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     meta, arrays = read_container(path, "checkpoint")  # the path as given: '' is named as empty, not '.'
     path = Path(path)
     config, traversals, data, history = check_header(meta, path)
+    if "calibration" not in arrays and {*SPARSE_CALIBRATION, "reference_place_ids"} <= set(arrays):
+        arrays["calibration"] = _sparse_calibration(arrays, config, path)
     missing = set(ARRAYS) - set(arrays)
     if missing:
         raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
@@ -90,6 +107,19 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     )
     validate_checkpoint(ckpt, path)
     return ckpt
+
+
+def _sparse_calibration(arrays: dict[str, np.ndarray], config: Config, path: Path) -> sparse.csr_array:
+    """The CSR S^R of a long route's checkpoint, (neurons, places) from its config and place ids, its structure
+    checked in full; ModelFileError naming ``path`` otherwise."""
+    data, indices, indptr = (arrays.pop(name) for name in SPARSE_CALIBRATION)
+    places = validate_reference_ids(arrays["reference_place_ids"], path)
+    try:
+        csr = sparse.csr_array((data, indices, indptr), shape=(ensemble_neurons(config, places), places))
+        csr.check_format(full_check=True)
+    except (ValueError, TypeError, OverflowError, VprError) as exc:
+        raise ModelFileError(f"the sparse calibration arrays do not form a CSR array ({exc})", path) from None
+    return csr
 
 
 def check_header(
@@ -198,7 +228,8 @@ def _checkpoint_defects(ckpt: Checkpoint, path: Path) -> Iterator[str]:
         yield f"thresholds exceed the config's theta_max / theta_init ({ceiling})"
     if ckpt.calibration.shape != (n_neurons, n_places):
         yield f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}"
-    if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(ckpt.calibration < 0):
+    values = np.asarray(ckpt.calibration.data if sparse.issparse(ckpt.calibration) else ckpt.calibration)
+    if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(values < 0):
         yield "calibration must hold non-negative integer spike counts"
     if not ckpt.reference_traversals:
         yield "checkpoint names no reference traversal"

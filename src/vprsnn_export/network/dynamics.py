@@ -36,7 +36,14 @@ from .runs import SpikeRun, run_in_chunks
 
 
 def config_run_need(
-    cfg: Config, *, presentations: int, n_neurons: int, places: int, rasters: int = 0, readout_rows: int | None = None
+    cfg: Config,
+    *,
+    presentations: int,
+    n_neurons: int,
+    places: int,
+    rasters: int = 0,
+    readout_rows: int | None = None,
+    sparse_counts: bool = False,
 ) -> MemoryNeed:
     """:func:`~vprsnn_export.resources.run_need` with the sizes of ``cfg`` (T, D, rate scale) and the chunk of runs."""
     return run_need(
@@ -49,6 +56,7 @@ def config_run_need(
         rate_scale=cfg.encoder.rate_scale,
         rasters=rasters,
         readout_rows=readout_rows,
+        sparse_counts=sparse_counts,
     )
 
 
@@ -61,10 +69,17 @@ def check_run_memory(
     places: int,
     rasters: int = 0,
     readout_rows: int | None = None,
+    sparse_counts: bool = False,
 ) -> None:
     """InvalidValueError (one line) when such a run would not fit in the memory limit (:mod:`~vprsnn_export.resources`)."""
     need = config_run_need(
-        cfg, presentations=presentations, n_neurons=n_neurons, places=places, rasters=rasters, readout_rows=readout_rows
+        cfg,
+        presentations=presentations,
+        n_neurons=n_neurons,
+        places=places,
+        rasters=rasters,
+        readout_rows=readout_rows,
+        sparse_counts=sparse_counts,
     )
     check_memory(need, what, LOWER_RUN)
 

@@ -5,12 +5,15 @@ and add the no-learning baselines and spike statistics."""
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
 import numpy as np
 import torch
+from scipy import sparse
+from tqdm import tqdm
 
 from vprsnn_export.arguments import check_place_ids, require_type
 from vprsnn_export.cluster import Cluster
@@ -32,12 +35,14 @@ from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.scoring import READOUT_BLOCK, Readout, baseline_rows, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.targets.intsim import step_agreement
-from vprsnn_export.trainer.calibrate import calibrate
+from vprsnn_export.trainer.calibrate import DENSE_COUNT_ENTRIES, calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
 from .backends import Network, choose_backend, open_backend
 
 NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
+#: The queries of a long route run at once, their counts then kept as CSR (:func:`_run_queries`).
+LONG_ROUTE_BLOCK = 1024
 
 
 @dataclass(frozen=True)
@@ -50,8 +55,8 @@ class SpikeStatistics(JsonDataclass):
     mean_spikes_per_query: float
 
 
-def spike_statistics(run: SpikeRun) -> SpikeStatistics:
-    """Statistics of one run: its candidates per step (N, T) and spike counts (N, neurons)."""
+def spike_statistics(run: SpikeRun, counts: np.ndarray | sparse.csr_array) -> SpikeStatistics:
+    """Statistics of one run: its candidates per step (N, T) and its spike counts (N, neurons), dense or CSR."""
     if run.candidates_per_step is None:
         raise InvalidValueError("this backend does not report candidates per step: evaluate needs them")
     candidates = run.candidates_per_step.numpy()
@@ -59,7 +64,7 @@ def spike_statistics(run: SpikeRun) -> SpikeStatistics:
         mean_candidates_per_step=float(candidates.mean()),
         multi_candidate_step_fraction=float((candidates > 1).mean()),
         quiet_step_fraction=float((candidates == 0).mean()),
-        mean_spikes_per_query=float(run.counts.numpy().sum(axis=1).mean()),
+        mean_spikes_per_query=float(np.asarray(counts.sum(axis=1)).mean()),
     )
 
 
@@ -73,7 +78,7 @@ class Evaluation:
 
     rows: list[dict[str, Any]]
     spike_stats: SpikeStatistics
-    query_counts: np.ndarray  # (Q, neurons) int64
+    query_counts: np.ndarray | sparse.csr_array  # (Q, neurons) int64; CSR on a long route (_run_queries)
     saturations: int = 0
     max_current: int = 0
     winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
@@ -126,7 +131,7 @@ def evaluate_float(
     network = _prepared(ckpt, query_place_ids, state_isolation, options)
     cost = None
     if cluster is None:
-        run, cost, _ = _run_queries(
+        run, counts, cost, _ = _run_queries(
             network, query_images, query_place_ids, traversal, backend, device=device, progress=progress
         )
     elif not is_off(ckpt.config.early):
@@ -138,7 +143,7 @@ def evaluate_float(
         run = float_runs_on_cluster(
             ckpt.weights, ckpt.thresholds, network.config, images, query_place_ids, "query", cluster, progress=progress
         )[traversal]
-    counts = run.counts.numpy()
+        counts = run.counts.numpy()
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
     truth = window(options.tolerance) if truth is None else truth
@@ -152,7 +157,7 @@ def evaluate_float(
         typed += nearest_neighbour_rows(similarities, "cosine", reference_ids, query_place_ids, options, truth)
     return Evaluation(
         rows=[row.to_dict() for row in typed],
-        spike_stats=spike_statistics(run),
+        spike_stats=spike_statistics(run, counts),
         query_counts=counts,
         modules=None if layout is None else scored.regions(layout.regions),
         silenced=None if layout is None else int(hyperactive_neurons(ckpt.calibration, layout).sum()),
@@ -185,10 +190,9 @@ def evaluate_fixed_point(
     require_type("options", options, SequenceOptions)
     network = _prepared(model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2)
     compare = float_checkpoint is not None
-    run, cost, spikes = _run_queries(
+    run, counts, cost, spikes = _run_queries(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
     )
-    counts = run.counts.numpy()
     rows, sides = [], []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
         readout = Readout.of(calibration, model.config, options)
@@ -202,7 +206,7 @@ def evaluate_fixed_point(
         agreement = step_agreement(float_run.raster, run.raster)
     return Evaluation(
         rows=rows,
-        spike_stats=spike_statistics(run),
+        spike_stats=spike_statistics(run, counts),
         query_counts=counts,
         saturations=run.saturations,
         max_current=run.max_current,
@@ -240,6 +244,7 @@ def _prepared(
         places=len(network.reference_place_ids),
         rasters=rasters + (0 if network.config.network.state_isolation else 1),
         readout_rows=rows,
+        sparse_counts=sparse_query_counts(network, len(place_ids), rasters > 0),
     )
     return network
 
@@ -254,20 +259,51 @@ def _run_queries(
     device: torch.device | None,
     progress: bool,
     record: bool = False,
-) -> tuple[SpikeRun, CostSummary, torch.Tensor]:
-    """Encode the queries and run them on the registry's ``backend`` for this network: (the run, with
-    ``config.early``'s counts when that rule is on, its cost per query, the spike trains)."""
+) -> tuple[SpikeRun, np.ndarray | sparse.csr_array, CostSummary, torch.Tensor]:
+    """Encode the queries and run them on the registry's ``backend`` for this network: (the run, its counts
+    (``config.early``'s when that rule is on), its cost per query, the spike trains). A long route's counts
+    (more than :data:`~vprsnn_export.trainer.calibrate.DENSE_COUNT_ENTRIES` queries x neurons, state
+    isolated, nothing recorded) are kept as an int64 CSR array, :data:`LONG_ROUTE_BLOCK` queries at a time: the
+    same counts (each query starts from V = 0), without a dense (queries, neurons) array."""
     spikes = query_spikes(images, place_ids, traversal, network.config)
-    runner = open_backend(network, backend, device=device, progress=progress)[1]
+    neurons, early_off = int(network.calibration.shape[0]), is_off(network.config.early)
+    long_route = sparse_query_counts(network, len(place_ids), record)
+    runner = open_backend(network, backend, device=device, progress=progress and not long_route)[1]
     steps = None
-    if is_off(network.config.early):
+    if long_route:
+        run, counts = _sparse_run(runner, spikes, progress)
+    elif early_off:
         run = runner.run(spikes, record=record)
     else:  # each chunk run once: the rule's counts, and the whole presentations' candidates and saturations
         parts, early = early_queries(runner.run, spikes, network.calibration, network.config, keep_raster=record)
         run, steps = replace(joined_runs(parts), counts=torch.from_numpy(early.counts)), early.steps
-    places = len(network.reference_place_ids)
-    cost = query_cost(spikes, int(run.counts.shape[1]), places=places, images=images, steps=steps)
-    return run, cost.summary(), spikes
+    if not long_route:
+        counts = run.counts.numpy()
+    cost = query_cost(spikes, neurons, places=len(network.reference_place_ids), images=images, steps=steps)
+    return run, counts, cost.summary(), spikes
+
+
+def sparse_query_counts(network: Network, queries: int, record: bool = False) -> bool:
+    """Whether :func:`_run_queries` keeps the counts as CSR: more than
+    :data:`~vprsnn_export.trainer.calibrate.DENSE_COUNT_ENTRIES` queries x neurons, each query from V = 0
+    (state isolation), no early decision and no raster recorded."""
+    config = network.config
+    big = queries * int(network.calibration.shape[0]) > DENSE_COUNT_ENTRIES
+    return big and config.network.state_isolation and is_off(config.early) and not record
+
+
+def _sparse_run(runner, spikes: torch.Tensor, progress: bool) -> tuple[SpikeRun, sparse.csr_array]:
+    """``runner.run`` over blocks of :data:`LONG_ROUTE_BLOCK` presentations: the joined run without its counts
+    ((N, 0): they are the second value, int64 CSR (N, neurons)), a bar on stderr when ``progress``."""
+    parts, counts = [], []
+    n = int(spikes.shape[0])
+    with tqdm(total=n, desc=runner.name, unit="query", file=sys.stderr, leave=False, disable=not progress) as bar:
+        for start in range(0, n, LONG_ROUTE_BLOCK):
+            part = runner.run(spikes[start : start + LONG_ROUTE_BLOCK])
+            counts.append(sparse.csr_array(part.counts.numpy().astype(np.int64)))
+            parts.append(replace(part, counts=torch.empty((len(part.counts), 0), dtype=torch.int64)))
+            bar.update(len(part.counts))
+    return joined_runs(parts), sparse.vstack(counts, format="csr")
 
 
 def calibrate_and_evaluate(

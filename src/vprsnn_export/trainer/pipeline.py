@@ -13,10 +13,10 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.network.dynamics import FloatNetwork, check_run_memory
+from vprsnn_export.network.dynamics import FloatNetwork
 
 from .batched import check_training_memory, module_training_rows, train_modules
-from .calibrate import calibrate
+from .calibrate import calibrate, check_calibration_memory
 from .sharded import calibrate_on_cluster, train_modules_on_cluster
 from .train import Presentation
 
@@ -55,14 +55,7 @@ def train_and_calibrate(
     rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
     check_training_memory(cfg, len(rows), max(len(r) for r in rows), threads)
     n_places = len(dataset.place_ids)
-    check_run_memory(
-        cfg,
-        "calibration",
-        presentations=n_places,
-        n_neurons=len(rows) * cfg.network.n_neurons,
-        places=n_places,
-        readout_rows=0,  # calibration sums counts per place: no score matrix
-    )
+    check_calibration_memory(cfg, n_places, len(rows) * cfg.network.n_neurons, n_places)
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
         trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
@@ -81,8 +74,7 @@ def train_and_calibrate(
     else:
         trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
         network = FloatNetwork.from_arrays(trained.weights.numpy(), trained.thresholds.numpy(), cfg, device)
-        network.progress = progress  # calibration presents every reference place to the whole ensemble
-        calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg)
+        calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg, progress=progress)
     return Checkpoint(
         config=cfg,
         weights=network.weights.cpu().numpy(),

@@ -7,6 +7,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from scipy import sparse
 
 from vprsnn_export.cli import main
 from vprsnn_export.errors import ModelFileError
@@ -45,7 +46,24 @@ HEADER_EDITS = {
     "no reference traversal": lambda m: {**m, "reference_traversals": []},
 }
 
+
+def as_sparse(arrays, data=None, indices=None, indptr=None):
+    """``arrays`` with its calibration written as a long route's CSR arrays, any of them replaced."""
+    csr = sparse.csr_array(arrays["calibration"])
+    parts = {"data": csr.data, "indices": csr.indices, "indptr": csr.indptr}
+    given = {"data": data, "indices": indices, "indptr": indptr}
+    out = {k: v for k, v in arrays.items() if k != "calibration"}
+    return out | {f"calibration_{k}": parts[k] if given[k] is None else given[k](parts[k]) for k in parts}
+
+
 ARRAY_EDITS = {
+    "sparse calibration, an index past the places": lambda a: as_sparse(a, indices=lambda i: i + 1000),
+    "sparse calibration, indptr too short": lambda a: as_sparse(a, indptr=lambda p: p[:-1]),
+    "sparse calibration, indptr falling": lambda a: as_sparse(a, indptr=lambda p: p[::-1].copy()),
+    "sparse calibration, negative counts": lambda a: as_sparse(a, data=lambda d: -d),
+    "sparse calibration, float counts": lambda a: as_sparse(a, data=lambda d: d + 0.5),
+    "sparse calibration, 2-D data": lambda a: as_sparse(a, data=lambda d: d[:, None]),
+    "sparse calibration, no indptr": lambda a: {k: v for k, v in as_sparse(a).items() if k != "calibration_indptr"},
     "0-d reference ids": lambda a: {**a, "reference_place_ids": np.array(3)},
     "duplicate reference ids": lambda a: {**a, "reference_place_ids": np.zeros_like(a["reference_place_ids"])},
     "float reference ids": lambda a: {**a, "reference_place_ids": a["reference_place_ids"].astype(float)},

@@ -1,0 +1,74 @@
+"""A long route's calibration: presented in chunks and kept sparse, the same S^R and the same readout."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy import sparse
+
+import vprsnn_export.runtime.evaluation as evaluation
+import vprsnn_export.trainer.calibrate as calibration
+from vprsnn_export.io.checkpoint import load_checkpoint, save_checkpoint
+from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.runtime.evaluation import evaluate_float
+from vprsnn_export.runtime.predictions import predictions
+from vprsnn_export.trainer.calibrate import calibrate
+
+
+def _sparse(ckpt):
+    return type(ckpt)(**{**ckpt.__dict__, "calibration": sparse.csr_array(ckpt.calibration)})
+
+
+def test_chunked_sparse_calibration_equals_the_whole(ensemble, monkeypatch):
+    ckpt, data = ensemble
+    cfg = ckpt.config
+    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, cfg, torch.device("cpu"))
+    references = {name: data.traversal(name) for name in ("summer", "winter")}
+    whole = calibrate(network.counts, references, data.place_ids, cfg)
+    assert isinstance(whole, np.ndarray) and whole.dtype == np.int64
+    assert np.array_equal(
+        calibrate(network.counts, {"summer": references["summer"]}, data.place_ids, cfg), ckpt.calibration
+    )
+    monkeypatch.setattr(calibration, "SPIKES_PER_CHUNK", 5 * cfg.encoder.timesteps * cfg.network.n_inputs)
+    assert calibration.calibration_chunk(cfg, len(data.place_ids)) == 5
+    chunked = calibrate(network.counts, references, data.place_ids, cfg, dense_entries=0)
+    assert isinstance(chunked, sparse.csr_array) and chunked.dtype == np.int64
+    assert chunked.has_canonical_format and np.all(chunked.data > 0)
+    assert np.array_equal(chunked.toarray(), whole) and whole.sum() > ckpt.calibration.sum()
+    isolated_off = cfg.replace(**{"network.state_isolation": False})
+    assert calibration.calibration_chunk(isolated_off, len(data.place_ids)) == len(data.place_ids)
+
+
+def test_a_sparse_checkpoint_round_trips_and_reads_out_as_the_dense_one(ensemble, tmp_path):
+    ckpt, data = ensemble
+    dense_path = save_checkpoint(tmp_path / "dense.npz", ckpt)
+    sparse_path = save_checkpoint(tmp_path / "sparse.npz", _sparse(ckpt))
+    with np.load(sparse_path) as npz:
+        assert "calibration" not in npz.files and "calibration_indptr" in npz.files
+    loaded = load_checkpoint(sparse_path)
+    assert isinstance(loaded.calibration, sparse.csr_array)
+    assert np.array_equal(loaded.calibration.toarray(), ckpt.calibration)
+    assert isinstance(load_checkpoint(dense_path).calibration, np.ndarray)
+    options = SequenceOptions(ks=(1, 3), tolerance=1)
+    query = data.traversal("winter"), data.place_ids, "winter", options
+    a, b = evaluate_float(ckpt, *query), evaluate_float(loaded, *query)
+    assert a.rows == b.rows and a.modules == b.modules and a.silenced == b.silenced
+    assert predictions(a.scored).to_csv() == predictions(b.scored).to_csv()
+
+
+def test_a_long_routes_query_counts_are_sparse_blocks_and_read_out_the_same(ensemble, monkeypatch):
+    ckpt, data = ensemble
+    options = SequenceOptions(ks=(1, 3), tolerance=1)
+    query = data.traversal("winter"), data.place_ids, "winter", options
+    dense = evaluate_float(ckpt, *query)
+    assert isinstance(dense.query_counts, np.ndarray)
+    monkeypatch.setattr(evaluation, "DENSE_COUNT_ENTRIES", 0)
+    monkeypatch.setattr(evaluation, "LONG_ROUTE_BLOCK", 5)
+    long = evaluate_float(_sparse(ckpt), *query, progress=True)
+    assert isinstance(long.query_counts, sparse.csr_array) and long.query_counts.dtype == np.int64
+    assert np.array_equal(long.query_counts.toarray(), dense.query_counts)
+    assert long.to_dict() == dense.to_dict()
+    assert predictions(long.scored).to_csv() == predictions(dense.scored).to_csv()
+    isolated_off = ckpt.config.replace(**{"network.state_isolation": False})
+    assert not evaluation.sparse_query_counts(type(ckpt)(**{**ckpt.__dict__, "config": isolated_off}), 24)
