@@ -2,6 +2,7 @@
 
     OMP_NUM_THREADS=1 python bench/bench_tracking.py CHECKPOINT [--query winter] [--k 1,5,10]
                                                     [--search-window 300] [--patience 3] [--jump 1000]
+                                                    [--frames N]
 
 On the checkpoint's own data (or --data), the query traversal in stream order, per k: the localiser over the whole
 route every frame ("global") and within the search window ("window W"; ``runtime.localize.tracking_rows``), the
@@ -10,6 +11,8 @@ accuracy and R@100P in %, synaptic events per frame (input spikes x the neurons 
 first (re-localisations) and wall ms per frame. Then the kidnapped robot: 100 frames, a jump of --jump places
 ahead (modulo the route), 100 frames; per jump, the frames from the jump to the first right decision and to the
 first right accepted one, for the window and the global localiser at the largest k (right: the query's truth).
+``--frames N``: the table and the operating point on the stream's first N frames only (a long route, whose
+every global frame costs the whole route); the kidnappings still jump along the whole traversal.
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ def main() -> None:
     parser.add_argument("--patience", type=int, default=3)
     parser.add_argument("--jump", type=int, default=1000, help="places the kidnapped robot jumps ahead")
     parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
+    parser.add_argument("--frames", type=int, help="the table on the first N frames (default: all)")
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
     set_threads(args.threads)
@@ -54,13 +58,14 @@ def main() -> None:
     ks = tuple(int(k) for k in args.k.split(","))
     search = SearchWindow(args.search_window, args.patience)
     n = len(query.place_ids)
+    first = slice(0, args.frames)
     print(
         f"load average {os.getloadavg()[0]:.1f}; {args.checkpoint}: {ckpt.calibration.shape[0]} neurons, "
-        f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames); window {search.places} places, "
+        f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames, the table on {len(query.place_ids[first])}); window {search.places} places, "
         f"patience {search.patience}; {args.threads} thread(s)"
     )
     began = time.perf_counter()
-    rows = tracking_rows(ckpt, query.images, query.place_ids, query.truth, SequenceOptions(ks=ks), search)
+    rows = tracking_rows(ckpt, query.images[first], query.place_ids[first], query.truth, SequenceOptions(ks=ks), search)
     header = (
         f"{'protocol':<12} {'k':>3} {'acc %':>6} {'R@100P %':>9} {'events/frame M':>15} {'reloc':>6} {'ms/frame':>9}"
     )
@@ -72,7 +77,8 @@ def main() -> None:
         )
     print(f"({time.perf_counter() - began:.0f} s)")
     options = SequenceOptions(ks=(ks[-1],))
-    point, _, _ = operating_point(Localizer(ckpt, options=options), query.images, query.place_ids, truth=query.truth)
+    whole = Localizer(ckpt, options=options)
+    point, _, _ = operating_point(whole, query.images[first], query.place_ids[first], truth=query.truth)
     tracked = Localizer(ckpt, options=options, threshold=point.threshold, search=search)
     whole = Localizer(ckpt, options=options, threshold=point.threshold)
     print(f"\nkidnapped at k={ks[-1]}: 100 frames, a jump of {args.jump} places, 100 frames; frames to the first right")

@@ -22,6 +22,7 @@ over t is a loop, vectorised over presentations and neurons.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -30,57 +31,17 @@ from ..arguments import real_array, require_type
 from ..config import Config, wta_group
 from ..device import check_device
 from ..errors import InvalidValueError
-from ..resources import LOWER_RUN, MemoryNeed, check_memory, run_need
+from ..resources import LOWER_RUN, check_memory, run_need
 from .dynamics_kernel import QUERY_CHUNK, float_run
 from .runs import SpikeRun, run_in_chunks
 
 
-def config_run_need(
-    cfg: Config,
-    *,
-    presentations: int,
-    n_neurons: int,
-    places: int,
-    rasters: int = 0,
-    readout_rows: int | None = None,
-    sparse_counts: bool = False,
-) -> MemoryNeed:
-    """:func:`~vprsnn_export.resources.run_need` with the sizes of ``cfg`` (T, D, rate scale) and the chunk of runs."""
-    return run_need(
-        presentations=presentations,
-        timesteps=cfg.encoder.timesteps,
-        n_inputs=cfg.network.n_inputs,
-        n_neurons=n_neurons,
-        places=places,
-        chunk=QUERY_CHUNK,
-        rate_scale=cfg.encoder.rate_scale,
-        rasters=rasters,
-        readout_rows=readout_rows,
-        sparse_counts=sparse_counts,
-    )
-
-
-def check_run_memory(
-    cfg: Config,
-    what: str,
-    *,
-    presentations: int,
-    n_neurons: int,
-    places: int,
-    rasters: int = 0,
-    readout_rows: int | None = None,
-    sparse_counts: bool = False,
-) -> None:
-    """InvalidValueError (one line) when such a run would not fit in the memory limit (:mod:`~vprsnn_export.resources`)."""
-    need = config_run_need(
-        cfg,
-        presentations=presentations,
-        n_neurons=n_neurons,
-        places=places,
-        rasters=rasters,
-        readout_rows=readout_rows,
-        sparse_counts=sparse_counts,
-    )
+def check_run_memory(cfg: Config, what: str, **sizes: Any) -> None:
+    """InvalidValueError (one line) when a run would not fit in the memory limit (:mod:`~vprsnn_export.resources`):
+    :func:`~vprsnn_export.resources.run_need` of ``sizes`` with the sizes of ``cfg`` (T, D, rate scale) and
+    :data:`QUERY_CHUNK` presentations run at once."""
+    timesteps, inputs, rate = cfg.encoder.timesteps, cfg.network.n_inputs, cfg.encoder.rate_scale
+    need = run_need(timesteps=timesteps, n_inputs=inputs, chunk=QUERY_CHUNK, rate_scale=rate, **sizes)
     check_memory(need, what, LOWER_RUN)
 
 

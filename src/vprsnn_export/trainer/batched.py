@@ -215,7 +215,8 @@ def train_modules(
     n_rows = np.array([len(r) for r in rows])
     check_training_memory(cfg, len(rows), int(n_rows.max(initial=0)), threads)
     states = module_epochs(images, presentations, rows, cfg, device=device, threads=threads, compiled=compiled)
-    epochs = tqdm(states, total=cfg.train.epochs, desc="train", unit="epoch", disable=not progress, leave=False)
+    desc = "train" if len(rows) == 1 else f"train {len(rows)} modules"  # the bar's ETA: the time left
+    epochs = tqdm(states, total=cfg.train.epochs, desc=desc, unit="epoch", disable=not progress, leave=False)
     history: list[dict] = []
     weights, theta = initial_state(cfg, len(rows), device)
     for state in epochs:
