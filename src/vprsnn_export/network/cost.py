@@ -21,7 +21,7 @@ Pure numpy, vectorised over queries and steps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -98,6 +98,22 @@ class QueryCost:
             snn_weights=self.snn_weights,
             template_weights=self.template_weights,
         )
+
+
+def joined_costs(costs: list[QueryCost]) -> QueryCost:
+    """The costs of consecutive blocks of queries of one network as one: their per-query arrays concatenated."""
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(cost, name) for cost in costs])
+
+    return replace(
+        costs[0],
+        input_spikes=joined("input_spikes"),
+        steps=joined("steps"),
+        synaptic_events=joined("synaptic_events"),
+        neuron_updates=joined("neuron_updates"),
+        template_macs=joined("template_macs"),
+    )
 
 
 def _spikes(spikes: object) -> np.ndarray:

@@ -24,9 +24,9 @@ from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import CALIBRATIONS
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.serial import JsonDataclass
-from vprsnn_export.network.cost import CostSummary, query_cost
+from vprsnn_export.network.cost import CostSummary, joined_costs, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
-from vprsnn_export.network.runs import SpikeRun, joined_runs
+from vprsnn_export.network.runs import Backend, SpikeRun, joined_runs
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
 from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
@@ -199,7 +199,7 @@ def evaluate_fixed_point(
         sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth))
         rows += [{"calibration": name, **row.to_dict()} for row in sides[-1].rows]
     agreement = None
-    if float_checkpoint is not None and run.raster is not None:
+    if float_checkpoint is not None and run.raster is not None and spikes is not None:  # recorded: never blocks
         float_network = replace(float_checkpoint, config=network.config)
         float_run = open_backend(float_network, "float", device=device, progress=progress)[1].run(spikes, record=True)
         assert float_run.raster is not None
@@ -259,51 +259,56 @@ def _run_queries(
     device: torch.device | None,
     progress: bool,
     record: bool = False,
-) -> tuple[SpikeRun, np.ndarray | sparse.csr_array, CostSummary, torch.Tensor]:
+) -> tuple[SpikeRun, np.ndarray | sparse.csr_array, CostSummary, torch.Tensor | None]:
     """Encode the queries and run them on the registry's ``backend`` for this network: (the run, its counts
-    (``config.early``'s when that rule is on), its cost per query, the spike trains). A long route's counts
-    (more than :data:`~vprsnn_export.trainer.calibrate.DENSE_COUNT_ENTRIES` queries x neurons, state
-    isolated, nothing recorded) are kept as an int64 CSR array, :data:`LONG_ROUTE_BLOCK` queries at a time: the
-    same counts (each query starts from V = 0), without a dense (queries, neurons) array."""
-    spikes = query_spikes(images, place_ids, traversal, network.config)
-    neurons, early_off = int(network.calibration.shape[0]), is_off(network.config.early)
+    (``config.early``'s when that rule is on), its cost per query, the spike trains). A long route
+    (:func:`sparse_query_counts`) is encoded and run :data:`LONG_ROUTE_BLOCK` queries at a time, its counts
+    kept as an int64 CSR array: the same counts and cost (each query has its own seed and starts from V = 0),
+    without the whole route's spike trains (None) or a dense (queries, neurons) array."""
     long_route = sparse_query_counts(network, len(place_ids), record)
     runner = open_backend(network, backend, device=device, progress=progress and not long_route)[1]
-    steps = None
     if long_route:
-        run, counts = _sparse_run(runner, spikes, progress)
-    elif early_off:
+        return _long_route_run(runner, network, images, place_ids, traversal, progress)
+    spikes = query_spikes(images, place_ids, traversal, network.config)
+    steps = None
+    if is_off(network.config.early):
         run = runner.run(spikes, record=record)
     else:  # each chunk run once: the rule's counts, and the whole presentations' candidates and saturations
         parts, early = early_queries(runner.run, spikes, network.calibration, network.config, keep_raster=record)
         run, steps = replace(joined_runs(parts), counts=torch.from_numpy(early.counts)), early.steps
-    if not long_route:
-        counts = run.counts.numpy()
-    cost = query_cost(spikes, neurons, places=len(network.reference_place_ids), images=images, steps=steps)
-    return run, counts, cost.summary(), spikes
+    places = len(network.reference_place_ids)
+    cost = query_cost(spikes, int(run.counts.shape[1]), places=places, images=images, steps=steps)
+    return run, run.counts.numpy(), cost.summary(), spikes
+
+
+def _long_route_run(
+    runner: Backend, network: Network, images: np.ndarray, place_ids: np.ndarray, traversal: str, progress: bool
+) -> tuple[SpikeRun, sparse.csr_array, CostSummary, None]:
+    """:func:`_run_queries` of a long route, :data:`LONG_ROUTE_BLOCK` queries encoded and run at a time: the
+    joined run (its counts (N, 0): they are the second value, int64 CSR), the cost, no spike trains."""
+    runs, counts, costs = [], [], []
+    places = len(network.reference_place_ids)
+    with tqdm(
+        total=len(place_ids), desc=runner.name, unit="query", file=sys.stderr, leave=False, disable=not progress
+    ) as bar:
+        for start in range(0, len(place_ids), LONG_ROUTE_BLOCK):
+            block = slice(start, start + LONG_ROUTE_BLOCK)
+            spikes = query_spikes(images[block], place_ids[block], traversal, network.config)
+            run = runner.run(spikes)
+            counts.append(sparse.csr_array(run.counts.numpy().astype(np.int64)))
+            runs.append(replace(run, counts=run.counts[:, :0].clone()))
+            costs.append(query_cost(spikes, int(run.counts.shape[1]), places=places, images=images[block]))
+            bar.update(len(spikes))
+    return joined_runs(runs), sparse.vstack(counts, format="csr"), joined_costs(costs).summary(), None
 
 
 def sparse_query_counts(network: Network, queries: int, record: bool = False) -> bool:
-    """Whether :func:`_run_queries` keeps the counts as CSR: more than
+    """Whether :func:`_run_queries` runs a long route in blocks with its counts as CSR: more than
     :data:`~vprsnn_export.trainer.calibrate.DENSE_COUNT_ENTRIES` queries x neurons, each query from V = 0
     (state isolation), no early decision and no raster recorded."""
     config = network.config
     big = queries * int(network.calibration.shape[0]) > DENSE_COUNT_ENTRIES
     return big and config.network.state_isolation and is_off(config.early) and not record
-
-
-def _sparse_run(runner, spikes: torch.Tensor, progress: bool) -> tuple[SpikeRun, sparse.csr_array]:
-    """``runner.run`` over blocks of :data:`LONG_ROUTE_BLOCK` presentations: the joined run without its counts
-    ((N, 0): they are the second value, int64 CSR (N, neurons)), a bar on stderr when ``progress``."""
-    parts, counts = [], []
-    n = int(spikes.shape[0])
-    with tqdm(total=n, desc=runner.name, unit="query", file=sys.stderr, leave=False, disable=not progress) as bar:
-        for start in range(0, n, LONG_ROUTE_BLOCK):
-            part = runner.run(spikes[start : start + LONG_ROUTE_BLOCK])
-            counts.append(sparse.csr_array(part.counts.numpy().astype(np.int64)))
-            parts.append(replace(part, counts=torch.empty((len(part.counts), 0), dtype=torch.int64)))
-            bar.update(len(part.counts))
-    return joined_runs(parts), sparse.vstack(counts, format="csr")
 
 
 def calibrate_and_evaluate(
