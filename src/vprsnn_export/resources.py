@@ -134,26 +134,30 @@ def run_need(
     rate_scale: float = 1.0,
     rasters: int = 0,
     readout_rows: int | None = None,
-    sparse_counts: bool = False,
+    block: int | None = None,
 ) -> MemoryNeed:
     """Presenting ``presentations`` spike trains to a network of ``n_neurons`` and reading out ``places`` places.
 
     ``rasters``: output rasters kept whole (a recorded run; state isolation off records one internally);
-    ``readout_rows``: the queries read out at once (None: all; 0: no readout); ``sparse_counts``: the counts and
-    S^R kept as CSR (a long route): int64 + int32 index per entry, at most T entries per presentation and place.
+    ``readout_rows``: the queries read out at once (None: all; 0: no readout); ``block``: a long route encoded
+    and run ``block`` presentations at a time, its counts and S^R kept as CSR (int64 + int32 index per entry,
+    at most T entries per presentation and place; None: all at once, dense).
     """
     rows = presentations if readout_rows is None else min(readout_rows, presentations)
+    encoded = presentations if block is None else min(block, presentations)
+    counts = (
+        8 * n_neurons * (presentations + places)
+        if block is None
+        else 12 * min(timesteps, n_neurons) * (2 * presentations + places)
+    )
     terms = [
-        (f"input spikes {presentations} x {timesteps} x {n_inputs}", presentations * timesteps * n_inputs),
+        (f"input spikes {encoded} x {timesteps} x {n_inputs}", encoded * timesteps * n_inputs),
         ("spike lists", int(4 * min(presentations, chunk) * timesteps * n_inputs * min(1.0, rate_scale))),
         (f"weights {n_inputs} x {n_neurons} (2 copies)", 4 * n_inputs * n_neurons * 2),
-        (
-            f"counts and S^R ({n_neurons} neurons{', sparse' if sparse_counts else ''})",
-            12 * min(timesteps, n_neurons) * (presentations + places)
-            if sparse_counts
-            else 8 * n_neurons * (presentations + places),
-        ),
+        (f"counts and S^R ({n_neurons} neurons{'' if block is None else ', sparse'})", counts),
     ]
+    if block is not None:
+        terms.append((f"counts of a block {encoded} x {n_neurons}", 8 * encoded * n_neurons))
     if rows:
         terms.append((f"scores {rows} x {places}", 8 * rows * places * 4))
     if rasters:

@@ -4,9 +4,11 @@ and a lost robot run the whole route, and a window over the whole route is the g
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import sparse
 
 from vprsnn_export.cli import main
 from vprsnn_export.config import preset
@@ -169,3 +171,16 @@ def test_evaluate_scores_the_tracking_protocol_beside_the_global_one(route, tmp_
     assert "tracking within 100 places (patience 3)" in capsys.readouterr().out
     assert main(["evaluate", str(path), "--query", "winter", "--patience", "2"]) == 2
     assert "--patience is for --search-window" in capsys.readouterr().err
+
+
+def test_a_sparse_calibration_localises_as_the_dense_one(route):
+    """A long route's checkpoint holds S^R as CSR (trainer.calibrate): the localiser, global and windowed, and its
+    operating point decide every frame as they do with the dense S^R."""
+    ckpt, _, query, threshold = route
+    csr = replace(ckpt, calibration=sparse.csr_array(ckpt.calibration))
+    for search in (None, SearchWindow(100)):
+        dense = Localizer(ckpt, options=K3, threshold=threshold, search=search).run_inputs(query.images[:80])
+        sparse_ = Localizer(csr, options=K3, threshold=threshold, search=search).run_inputs(query.images[:80])
+        assert answers(sparse_) == answers(dense)
+    point = operating_point(Localizer(csr, options=K3), query.images, query.place_ids, precision=0.9)[0]
+    assert point.threshold == threshold

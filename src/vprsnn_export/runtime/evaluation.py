@@ -244,7 +244,7 @@ def _prepared(
         places=len(network.reference_place_ids),
         rasters=rasters + (0 if network.config.network.state_isolation else 1),
         readout_rows=rows,
-        sparse_counts=sparse_query_counts(network, len(place_ids), rasters > 0),
+        block=LONG_ROUTE_BLOCK if sparse_query_counts(network, len(place_ids), rasters > 0) else None,
     )
     return network
 

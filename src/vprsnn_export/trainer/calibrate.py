@@ -46,15 +46,10 @@ def calibrate(
     """
     chunk = calibration_chunk(cfg, len(place_ids))
     total: sparse.csr_array | None = None
-    bar = tqdm(
-        total=len(place_ids) * len(reference_images),
-        desc="calibration",
-        unit="place",
-        file=sys.stderr,
-        leave=False,
-        disable=not progress,
-    )
-    with bar:
+    total_places = len(place_ids) * len(reference_images)
+    with tqdm(
+        total=total_places, desc="calibration", unit="place", file=sys.stderr, leave=False, disable=not progress
+    ) as bar:
         for traversal, images in reference_images.items():
             parts = []
             for start in range(0, len(place_ids), chunk):
@@ -67,7 +62,6 @@ def calibrate(
     assert total is not None
     if total.shape[0] * total.shape[1] <= dense_entries:  # column-major, as the transposed counts always were:
         return np.asfortranarray(total.toarray())  # a checkpoint's bytes (its sha256) do not change
-    total.sum_duplicates()
     return total
 
 
