@@ -95,13 +95,13 @@ def test_run_need_terms():
 
 def test_a_long_route_run_in_blocks_needs_a_blocks_spikes_and_sparse_counts():
     sizes = {"presentations": 27000, "timesteps": 80, "n_inputs": 1568, "n_neurons": 27000, "places": 27000}
-    whole = dict(run_need(**sizes, chunk=128).terms)
-    blocks = dict(run_need(**sizes, chunk=128, block=1024).terms)
+    whole = dict(run_need(**sizes, chunk=128, readout_rows=1034).terms)
+    blocks = dict(run_need(**sizes, chunk=128, readout_rows=1034, block=1024).terms)
     assert whole["input spikes 27000 x 80 x 1568"] == 27000 * 80 * 1568
     assert blocks["input spikes 1024 x 80 x 1568"] == 1024 * 80 * 1568
     assert blocks["counts and S^R (27000 neurons, sparse)"] == 12 * 80 * (2 * 27000 + 27000)
     assert blocks["counts of a block 1024 x 27000"] == 8 * 1024 * 27000
-    assert sum(blocks.values()) < sum(whole.values()) / 8
+    assert sum(blocks.values()) < sum(whole.values()) / 8  # 1.6 GiB against 14.4
 
 
 def test_training_need_grows_with_modules_and_threads():
