@@ -141,7 +141,8 @@ def test_integer_kernel_wide_mantissas_use_int64_sums():
 @pytest.mark.parametrize("isolation", [True, False])
 @pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3)])
 def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
-    """The integer kernel in tiles and on threads: the same run as one thread, one tile (saturations and peak too)."""
+    """The integer kernel in tiles and on threads, a wide group in column blocks for chunks of presentations: the
+    same run as one thread, one tile (saturations and peak too)."""
     gen = np.random.default_rng(5)
     q = gen.integers(0, 16, size=(30, 12))
     spikes = (gen.random((5, 40, 30)) < 0.2).astype(np.uint8)
@@ -149,6 +150,7 @@ def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, thr
     threshold = gen.integers(50, 200, size=12) << 2
     one = integer_run(spikes, q, threshold, None, threads=1, **args)
     monkeypatch.setattr(parallel, "TILE_NEURONS", 4)
+    monkeypatch.setattr(parallel, "CURRENT_BYTES", 2 * 4 * 40 * 12)  # two presentations' currents
     many = integer_run(spikes, q, threshold, None, threads=threads, **args)
     for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
         assert torch.equal(getattr(one, field), getattr(many, field)), field

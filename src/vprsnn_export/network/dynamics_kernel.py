@@ -25,17 +25,21 @@ import torch
 
 from ..errors import InvalidValueError
 from .kernel_checks import require_array, require_groups, require_int
-from .kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, _numpy, as_spike_array, compiled, kernel_block
-from .parallel import check_group, neuron_tile, run_parts, run_threads
+from .kernel_sums import (
+    ANY3,
+    SPIKES,
+    _all_step_lists,
+    _column_blocks,
+    _numpy,
+    _tile_currents,
+    as_spike_array,
+    compiled,
+    kernel_block,
+)
+from .parallel import check_group, current_blocks, neuron_tile, run_parts, run_threads
 from .runs import SpikeRun
 
 QUERY_CHUNK = 128  # presentations run_network multiplies at once: bounds its (chunk, T, neurons) currents
-
-
-L2_WEIGHT_BYTES = (
-    640 * 1024
-)  # the float kernel sums currents in column blocks whose weights fit in this (1 MiB L2 here)
-PRESENTATION_CHUNK = 16  # presentations whose currents the float kernel sums per column block before their steps
 
 
 @compiled
@@ -52,6 +56,8 @@ def _float_kernel(
     start: int,  # the neurons [start, stop) this call runs: whole WTA groups
     stop: int,
     tile: int,  # neurons per tile: whole WTA groups
+    column: int,  # neurons per column block of a tile's current sums
+    chunk: int,  # presentations whose currents are summed before their steps
     counts: np.ndarray,  # (N, neurons) int64, written for [start, stop)
     n_candidates: np.ndarray,  # (N, T) int32, this call's candidates added
     raster: np.ndarray,  # (N or 0, T, neurons) bool
@@ -61,9 +67,10 @@ def _float_kernel(
     state for every presentation before the next tile.
 
     Tiles hold whole WTA groups and groups never interact, so the order changes no number. A
-    tile's weights are copied into contiguous rows (they stay in cache across presentations); the
-    state update runs branch-free over the tile (vectorised), the WTA only on steps with candidates.
-    (Summing the currents of a chunk of presentations in column blocks that fit in L2 measured slower.)
+    tile's weights are copied into contiguous column blocks of ``column`` neurons; the currents of ``chunk``
+    presentations are summed block by block (a block's weights stay in cache across them), then their steps
+    run: the state update branch-free over the tile (vectorised), the WTA only on steps with candidates.
+    Each current is the same blocked sum over the same inputs whatever the blocks, so no number changes.
     """
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
@@ -71,52 +78,48 @@ def _float_kernel(
     lowest = np.float32(-np.inf)
     lane_value = np.empty(LANES, dtype=np.float32)
     lane_index = np.empty(LANES, dtype=np.int64)
-    current_store = np.empty(timesteps * tile, dtype=np.float32)
-    partial_store = np.empty(tile, dtype=np.float32)
+    current_store = np.empty(chunk * timesteps * tile, dtype=np.float32)
+    partial_store = np.empty(column, dtype=np.float32)
     tile_store = np.empty(n_inputs * tile, dtype=np.float32)
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
-        current = current_store[: timesteps * width].reshape((timesteps, width))
-        partial = partial_store[:width]
-        tile_weights = tile_store[: n_inputs * width].reshape((n_inputs, width))  # contiguous rows
-        for i in range(n_inputs):
-            for jj in range(width):
-                tile_weights[i, jj] = weights[i, g0 + jj]
+        current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
+        _column_blocks(weights, g0, width, column, tile_store)
         tile_theta = theta[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.float32)
         candidate = np.zeros(width, dtype=np.bool_)
         masked = np.empty(width, dtype=np.float32)  # I_j of the candidates, -inf elsewhere
-        for p in range(n):
-            if isolation:
-                voltage[:] = 0
-            for t in range(timesteps):
-                first, last = offsets[p, t], offsets[p, t + 1]
-                _blocked_sum(tile_weights, index[first:last], last - first, block, current[t], partial)
-            for t in range(timesteps):
-                step = current[t]
-                n_cand = 0
-                for jj in range(width):  # branch-free: vectorised
-                    v = beta * voltage[jj] + step[jj]
-                    fire = v > tile_theta[jj]
-                    candidate[jj] = fire
-                    masked[jj] = step[jj] if fire else lowest
-                    voltage[jj] = zero if fire else v
-                    n_cand += fire
-                n_candidates[p, t] += n_cand
-                if n_cand > 0 and wta:
-                    for g in range(0, width, group):
-                        best = _first_argmax(masked, g, g + group, lane_value, lane_index)
-                        if best >= 0:
-                            counts[p, g0 + best] += 1
-                            if record:
-                                raster[p, t, g0 + best] = True
-                elif n_cand > 0:
-                    for jj in range(width):
-                        if candidate[jj]:
-                            counts[p, g0 + jj] += 1
-                            if record:
-                                raster[p, t, g0 + jj] = True
-            final[p, g0 : g0 + width] = voltage[:width]
+        for p0 in range(0, n, chunk):
+            p1 = min(n, p0 + chunk)
+            _tile_currents(tile_store, n_inputs, width, column, index, offsets, p0, p1, block, current, partial_store)
+            for p in range(p0, p1):
+                if isolation:
+                    voltage[:] = 0
+                for t in range(timesteps):
+                    step = current[p - p0, t]
+                    n_cand = 0
+                    for jj in range(width):  # branch-free: vectorised
+                        v = beta * voltage[jj] + step[jj]
+                        fire = v > tile_theta[jj]
+                        candidate[jj] = fire
+                        masked[jj] = step[jj] if fire else lowest
+                        voltage[jj] = zero if fire else v
+                        n_cand += fire
+                    n_candidates[p, t] += n_cand
+                    if n_cand > 0 and wta:
+                        for g in range(0, width, group):
+                            best = _first_argmax(masked, g, g + group, lane_value, lane_index)
+                            if best >= 0:
+                                counts[p, g0 + best] += 1
+                                if record:
+                                    raster[p, t, g0 + best] = True
+                    elif n_cand > 0:
+                        for jj in range(width):
+                            if candidate[jj]:
+                                counts[p, g0 + jj] += 1
+                                if record:
+                                    raster[p, t, g0 + jj] = True
+                final[p, g0 : g0 + width] = voltage[:width]
 
 
 LANES = 16  # independent running maxima of _first_argmax (one AVX-512 register of float32)
@@ -170,6 +173,8 @@ def float_kernel(
     start: int,
     stop: int,
     tile: int,
+    column: int,
+    chunk: int,
     counts: np.ndarray,
     n_candidates: np.ndarray,
     raster: np.ndarray,
@@ -184,13 +189,15 @@ def float_kernel(
     require_array(k, "theta", theta, (np.float32,), (n_neurons,))
     require_groups(k, n_neurons, group, start, stop, tile)
     require_int(k, "block", block, 1)
+    require_int(k, "column", column, 1)
+    require_int(k, "chunk", chunk, 1)
     require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
     require_array(k, "n_candidates", n_candidates, (np.int32,), (n, timesteps), writable=True)
     require_array(k, "raster", raster, (np.bool_,), (n if record else None, timesteps, n_neurons), writable=True)
     require_array(k, "final", final, (np.float32,), (n, n_neurons), writable=True)
     _float_kernel(
         spikes, weights, theta, np.float32(beta), bool(wta), int(group), bool(isolation), bool(record), int(block),
-        int(start), int(stop), int(tile), counts, n_candidates, raster, final,
+        int(start), int(stop), int(tile), int(column), int(chunk), counts, n_candidates, raster, final,
     )  # fmt: skip
 
 
@@ -237,6 +244,7 @@ def float_run(
     theta_array = np.ascontiguousarray(_numpy(theta), dtype=np.float32)
     parts = run_parts(n, n_neurons, size, torch.get_num_threads() if threads is None else threads, isolation)
     candidates = [np.zeros((len(range(n)[rows]), timesteps), dtype=np.int32) for rows, _, _ in parts]
+    tile = neuron_tile(n_neurons, size)
 
     def task(k: int) -> Callable[[], None]:
         rows, start, stop = parts[k]
@@ -252,7 +260,8 @@ def float_run(
             max(1, int(block)),
             start,
             stop,
-            neuron_tile(n_neurons, size),
+            tile,
+            *current_blocks(timesteps, tile, len(range(n)[rows])),
             counts[rows],
             candidates[k],
             raster[rows] if record else raster,

@@ -154,6 +154,46 @@ def _blocked_sum(
 
 
 @compiled
+def _column_blocks(weights: np.ndarray, g0: int, width: int, column: int, store: np.ndarray) -> None:
+    """Copy the tile weights[:, g0:g0 + width] into ``store`` as contiguous (inputs, columns) blocks of ``column``
+    neurons, block after block (:func:`_tile_currents` reads them)."""
+    n_inputs = weights.shape[0]
+    for c0 in range(0, width, column):
+        columns = min(column, width - c0)
+        block_weights = store[n_inputs * c0 : n_inputs * (c0 + columns)].reshape((n_inputs, columns))
+        for i in range(n_inputs):
+            for jj in range(columns):
+                block_weights[i, jj] = weights[i, g0 + c0 + jj]
+
+
+@compiled
+def _tile_currents(
+    store: np.ndarray,
+    n_inputs: int,
+    width: int,
+    column: int,
+    index: np.ndarray,
+    offsets: np.ndarray,
+    p0: int,
+    p1: int,
+    block: int,
+    current: np.ndarray,
+    partial_store: np.ndarray,
+) -> None:
+    """current[p - p0, t] = the tile's currents (:func:`_blocked_sum`) of presentations [p0, p1) at every step,
+    one column block of :func:`_column_blocks` at a time (its weights stay in cache across the presentations)."""
+    for c0 in range(0, width, column):
+        columns = min(column, width - c0)
+        block_weights = store[n_inputs * c0 : n_inputs * (c0 + columns)].reshape((n_inputs, columns))
+        partial = partial_store[:columns]
+        for p in range(p0, p1):
+            for t in range(current.shape[1]):
+                first, last = offsets[p, t], offsets[p, t + 1]
+                total = current[p - p0, t, c0 : c0 + columns]
+                _blocked_sum(block_weights, index[first:last], last - first, block, total, partial)
+
+
+@compiled
 def _blocked_currents(spikes: np.ndarray, weights: np.ndarray, block: int) -> np.ndarray:
     """Currents (rows, neurons) float32 of 0/1 spikes (rows, inputs) by :func:`_blocked_sum` (the BLAS probe)."""
     rows, n_inputs = spikes.shape

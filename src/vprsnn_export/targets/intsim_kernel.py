@@ -25,8 +25,16 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.kernel_checks import require_array, require_groups, require_int
-from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _all_step_lists, _blocked_sum, as_spike_array, compiled
-from vprsnn_export.network.parallel import check_group, neuron_tile, run_parts, run_threads
+from vprsnn_export.network.kernel_sums import (
+    ANY3,
+    SPIKES,
+    _all_step_lists,
+    _column_blocks,
+    _tile_currents,
+    as_spike_array,
+    compiled,
+)
+from vprsnn_export.network.parallel import check_group, current_blocks, neuron_tile, run_parts, run_threads
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.network.widths import DECAY_BITS
 
@@ -47,10 +55,12 @@ def _integer_kernel(
     group: int,  # neurons per WTA group (one module of an ensemble)
     isolation: bool,
     record: bool,
-    current_store: np.ndarray,  # (T tile,) scratch: int32 when every sum of q fits, else int64
+    current_store: np.ndarray,  # (chunk T tile,) scratch: int32 when every sum of q fits, else int64
     start: int,  # the neurons [start, stop) this call runs: whole WTA groups
     stop: int,
     tile: int,  # neurons per tile: whole WTA groups
+    column: int,  # neurons per column block of a tile's current sums (network.parallel.current_blocks)
+    chunk: int,  # presentations whose currents are summed before their steps
     counts: np.ndarray,  # (N, neurons) int64, written for [start, stop)
     n_candidates: np.ndarray,  # (N, T) int32, this call's candidates added
     raster: np.ndarray,  # (N or 0, T, neurons) bool
@@ -62,29 +72,27 @@ def _integer_kernel(
     """
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
-    partial_store = np.empty(tile, dtype=current_store.dtype)
+    partial_store = np.empty(column, dtype=current_store.dtype)
     tile_store = np.empty(n_inputs * tile, dtype=mantissas.dtype)
     saturations = 0
     peak = np.int64(0)
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
-        current = current_store[: timesteps * width].reshape((timesteps, width))
-        partial = partial_store[:width]
-        tile_weights = tile_store[: n_inputs * width].reshape((n_inputs, width))  # contiguous rows
-        for i in range(n_inputs):
-            for jj in range(width):
-                tile_weights[i, jj] = mantissas[i, g0 + jj]
+        current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
+        _column_blocks(mantissas, g0, width, column, tile_store)
         tile_threshold = threshold[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.int64)
         candidate = np.zeros(width, dtype=np.bool_)
         for p in range(n):
+            if p % chunk == 0:
+                p1 = min(n, p + chunk)
+                _tile_currents(
+                    tile_store, n_inputs, width, column, index, offsets, p, p1, n_inputs, current, partial_store
+                )
             if isolation:
                 voltage[:] = 0
             for t in range(timesteps):
-                first, last = offsets[p, t], offsets[p, t + 1]
-                _blocked_sum(tile_weights, index[first:last], last - first, n_inputs, current[t], partial)
-            for t in range(timesteps):
-                step = current[t]
+                step = current[p % chunk, t]
                 n_cand = 0
                 for jj in range(width):  # branch-free: vectorised
                     c = np.int64(step[jj]) << shift
@@ -140,6 +148,8 @@ def integer_kernel(
     start: int,
     stop: int,
     tile: int,
+    column: int,
+    chunk: int,
     counts: np.ndarray,
     n_candidates: np.ndarray,
     raster: np.ndarray,
@@ -156,8 +166,11 @@ def integer_kernel(
     require_groups(k, n_neurons, group, start, stop, tile)
     require_int(k, "shift", shift, 0, 62)
     require_array(k, "current_store", current_store, (np.int32, np.int64), (None,), writable=True)
-    if current_store.shape[0] < timesteps * tile:
-        raise InvalidValueError(f"{k}: current_store holds {current_store.shape[0]} values, needs {timesteps * tile}")
+    require_int(k, "column", column, 1)
+    require_int(k, "chunk", chunk, 1)
+    if current_store.shape[0] < chunk * timesteps * tile:
+        need = chunk * timesteps * tile
+        raise InvalidValueError(f"{k}: current_store holds {current_store.shape[0]} values, needs {need}")
     require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
     require_array(k, "n_candidates", n_candidates, (np.int32,), (n, timesteps), writable=True)
     require_array(k, "raster", raster, (np.bool_,), (n if record else None, timesteps, n_neurons), writable=True)
@@ -165,7 +178,7 @@ def integer_kernel(
     return _integer_kernel(
         spikes, mantissas, int(shift), threshold, multipliers, bool(use_multipliers), int(keep), int(limit),
         bool(wta), int(group), bool(isolation), bool(record), current_store, int(start), int(stop), int(tile),
-        counts, n_candidates, raster, final,
+        int(column), int(chunk), counts, n_candidates, raster, final,
     )  # fmt: skip
 
 
@@ -243,10 +256,11 @@ def integer_run(
         rows, start, stop = parts[k]
 
         def run() -> None:
-            current_store = np.zeros(timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64)
+            column, chunk = current_blocks(timesteps, tile, len(range(n)[rows]))
+            current_store = np.zeros(chunk * timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64)
             saturations, peak = integer_kernel(
                 array[rows], weights, int(shift), thresholds, scores, multipliers is not None, int(keep), int(limit),
-                bool(wta), size, bool(isolation), bool(record), current_store, start, stop, tile,
+                bool(wta), size, bool(isolation), bool(record), current_store, start, stop, tile, column, chunk,
                 counts[rows], candidates[k], raster[rows] if record else raster, final[rows],
             )  # fmt: skip
             extremes[k] = (int(saturations), int(peak))

@@ -88,11 +88,17 @@ def test_an_ensemble_runs_each_module_as_it_would_run_alone():
 @pytest.mark.parametrize("isolation", [True, False])
 @pytest.mark.parametrize(("group", "threads"), [(None, 2), (4, 2), (4, 3), (1000, 2)])
 def test_float_kernel_tiles_and_threads_change_no_number(isolation, group, threads, monkeypatch):
-    """Tiles of whole WTA groups, threads over groups or presentations: the same run as one thread, one tile."""
-    n_neurons = 1000 if group == 1000 else 12
+    """Tiles of whole WTA groups, threads over groups or presentations, a group wider than a tile summed in column
+    blocks (the last one short) for chunks of presentations (the last one short): the same run as one thread, one
+    tile."""
+    n_neurons = {1000: 1000, None: 10}.get(group, 12)
     spikes, weights, theta = float_case(13, n=5, n_neurons=n_neurons)
     one = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=1)
     monkeypatch.setattr(parallel, "TILE_NEURONS", 4)
+    monkeypatch.setattr(parallel, "CURRENT_BYTES", 2 * 4 * 40 * n_neurons)  # two presentations' currents
+    assert parallel.current_blocks(40, parallel.neuron_tile(n_neurons, group or n_neurons), 5) == (
+        (4, 2) if group in (None, 1000) else (4, 1)
+    )
     many = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=threads)
     for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
         assert torch.equal(getattr(one, field), getattr(many, field)), field
