@@ -323,7 +323,9 @@ def load_dataset(
     places: str | None = None,
     progress: bool = False,
 ) -> Dataset:
-    """Load, select, decode and preprocess; every expected problem is a DataError/InvalidValueError naming the file."""
+    """Load, select, decode and preprocess; every expected problem is a DataError/InvalidValueError naming the file
+    (``cfg``: a config's ``preprocess`` settings)."""
+    require_type("cfg", cfg, PreprocessConfig)
     names = _check_traversals(traversals)
     if subset is not None and places is not None:
         raise InvalidValueError("give either --subset or --places, not both")

@@ -156,6 +156,10 @@ def test_synthetic_errors() -> None:
     assert "synthetic:0" in _error(InvalidValueError, "synthetic:0", TRAVERSALS, CFG)
     assert "synthetic:x" in _error(InvalidValueError, "synthetic:x", TRAVERSALS, CFG)
     assert "ids 0..59" in _error(DataError, "synthetic", TRAVERSALS, CFG, places="58:3")
+    # a whole Config where its preprocess settings belong: one error naming the argument, not an AttributeError
+    assert "cfg must be a PreprocessConfig, got Config" in _error(
+        InvalidValueError, "synthetic", TRAVERSALS, preset("paper")
+    )
 
 
 # --- errors ------------------------------------------------------------------------------------
