@@ -31,10 +31,12 @@ def neuron_tile(n_neurons: int, group: int) -> int:
 
 
 def current_blocks(timesteps: int, tile: int, presentations: int) -> tuple[int, int]:
-    """(column, chunk) of a kernel's tile (:func:`~.dynamics_kernel._float_kernel`): a tile of at most ``TILE_NEURONS`` is one block, its currents
-    one presentation at a time (its weights stay in cache across presentations); a wider one is cut into blocks of
-    ``TILE_NEURONS`` and the currents of :data:`CURRENT_BYTES` of presentations are summed at once."""
-    if tile <= TILE_NEURONS:
+    """(column, chunk) of a kernel's tile (:func:`~.dynamics_kernel._float_kernel`): a tile of at most
+    ``TILE_NEURONS`` is one block, its currents one presentation at a time (its weights stay in cache across
+    presentations); a wider one is cut into blocks of
+    ``TILE_NEURONS`` and the currents of :data:`CURRENT_BYTES` of presentations are summed at once. A lone
+    presentation (a localiser's frame) has none to share a block's weights with: one block (7 % faster at 27k)."""
+    if tile <= TILE_NEURONS or presentations < 2:
         return tile, 1
     return TILE_NEURONS, max(1, min(presentations, CURRENT_BYTES // (4 * timesteps * tile)))
 

@@ -96,6 +96,7 @@ def test_float_kernel_tiles_and_threads_change_no_number(isolation, group, threa
     one = float_run(spikes, weights, theta, beta=0.9, isolation=isolation, record=True, group=group, threads=1)
     monkeypatch.setattr(parallel, "TILE_NEURONS", 4)
     monkeypatch.setattr(parallel, "CURRENT_BYTES", 2 * 4 * 40 * n_neurons)  # two presentations' currents
+    assert parallel.current_blocks(40, 10, 1) == (10, 1)  # a lone presentation: one block
     assert parallel.current_blocks(40, parallel.neuron_tile(n_neurons, group or n_neurons), 5) == (
         (4, 2) if group in (None, 1000) else (4, 1)
     )
