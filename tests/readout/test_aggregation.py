@@ -210,3 +210,12 @@ def test_a_whole_place_shift_is_the_interpolation_with_no_fraction(velocity):
                     expected[j, o, place] = prob[j - o, source]
     assert shifted.tobytes() == expected.tobytes()
     np.testing.assert_array_equal(valid, (queries[:, None] - np.arange(k)[None, :]) >= 0)
+
+
+def test_a_velocity_far_beyond_the_map_shifts_every_frame_out_without_an_overflow():
+    """1e300 places per frame: every older frame lands off the map, as at 1e6; no RuntimeWarning from an integer
+    cast of the displacement (it once overflowed: "invalid value encountered in cast")."""
+    prob = np.random.default_rng(3).dirichlet(np.ones(30), size=12)
+    with np.errstate(all="raise"):
+        far = aggregate(prob, 3, 1e300)
+    assert np.array_equal(far, aggregate(prob, 3, 1e6))

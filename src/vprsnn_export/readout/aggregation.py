@@ -148,7 +148,8 @@ def _shift_rows(
         displacement = np.rint(displacement)
     common = np.where(valid[-1], displacement[-1], 0.0)  # the last row reaches every offset any row reaches
     if np.all((displacement == common) | ~valid) and np.all(common == np.rint(common)):
-        return _shifted_by_whole_places(prob, frames_safe, valid, common.astype(np.intp)), valid
+        shift = np.clip(common, -n_places, n_places).astype(np.intp)  # beyond the map: all of it out, as at n_places
+        return _shifted_by_whole_places(prob, frames_safe, valid, shift), valid
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
