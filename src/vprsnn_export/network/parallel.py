@@ -21,7 +21,7 @@ TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default
 #: The bytes of presentations' currents (T x tile float32 each) a wide tile sums before their steps, in column
 #: blocks of :data:`TILE_NEURONS`: a tile wider than that (one WTA over a whole
 #: ensemble: 27,000 neurons on a 27k lean route) then reads each block's weights from cache for all of them,
-#: not every row of the tile from memory for every presentation (1.9x faster at 27k, 2 threads, measured side by side)
+#: not every row of the tile from memory for every presentation (1.8x at 27,000 neurons, 2 threads: bench_wide_group.py)
 CURRENT_BYTES = 32 * 2**20
 
 
