@@ -33,7 +33,6 @@ from vprsnn_export.export.quantize import QuantiseOptions, quantize_checkpoint
 from vprsnn_export.io.checkpoint import checkpoint_sha256, load_checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork, input_currents, run_network
 from vprsnn_export.network.dynamics_kernel import float_run
-from vprsnn_export.network.kernel_sums import blas_block
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.targets.intsim import IntegerNetwork, run_prepared
 from vprsnn_export.targets.intsim_kernel import integer_run
@@ -155,7 +154,7 @@ def main() -> None:
         f"numba kernels serial (threading layer never launched; NUMBA_NUM_THREADS="
         f"{numba.config.NUMBA_NUM_THREADS}), OMP_NUM_THREADS="
         f"{os.environ.get('OMP_NUM_THREADS', 'unset')}; load average {load:.2f} on {os.cpu_count()} cores; "
-        f"best of {args.repeats}; BLAS block probed: {blas_block(min(n, 128) * args.timesteps, 784, 400)}\n"
+        f"best of {args.repeats}\n"
     )
     print("| path | batch 100 q/s | x dense bound | batch 1 ms/query | batch 1 q/s | x dense bound |")
     print("|---|---|---|---|---|---|")

@@ -8,6 +8,14 @@ Re-recorded once since, for a change meant to move the last bits: the readout's 
 files and one command's stdout changed, only in confidences, by at most 2.4e-15 relative: every place, decision,
 metric row and verdict the same (``IDENTITY_KEEP=DIR`` on both sides, then ``python tools/float_diff.py OLD NEW``).
 
+Re-recorded a second time (2026-12-03) when the compiled kernels stopped following the machine's BLAS order (a
+probe picked MKL's block of 192 or 384 inputs per shape and thread count, or the kernels' own order where none
+matched) and now sum every current in increasing input order on every CPU. The record had stopped matching the
+development machine (there the demo printed "no width is shown to hold" where the record said "8 bits holds", and
+LENS scored 10 / 14 % at k = 1 where it said 8 / 13 %). On that machine this change, against the commit before it,
+moved only LENS files: the trained weights' last bits (the checkpoint's hash), the predictions' confidences in
+their last digits, and the localiser's per-frame decisions and threshold (its frames run one at a time).
+
 The tool runs in a process of its own with ``OMP_NUM_THREADS=2``, as the record was made: numpy's BLAS takes
 its thread count when it loads (the readout's sums no longer use it, other products still may).
 

@@ -22,7 +22,7 @@ is checked against (docs/fixed-point.md §5.1 has the same table):
     implementation                          where                                 proved equal by
     float step (torch; the reference)       dynamics.wta_step / run_network       tests/core/network/test_dynamics.py (by hand)
     float kernel loop (numba)               dynamics_kernel.float_run             tests/core/network/test_dynamics_kernel.py::test_float_kernel_matches_run_network
-    training window (numba, WTA + STDP)     trainer/stdp_kernel.stdp_window / stdp_windows  tests/trainer/test_stdp_kernel.py::test_stdp_window_gives_train_batch_weights_bit_for_bit
+    training window (numba, WTA + STDP)     trainer/stdp_kernel.stdp_window / stdp_windows  tests/trainer/test_stdp_kernel.py::test_stdp_window_gives_train_batch_weights_bit_for_bit_where_no_sum_can_differ
     integer kernel loop (numba)             targets/intsim_kernel.integer_run     tests/targets/test_intsim_kernel.py::test_integer_kernel_is_bit_identical_to_the_simulator_and_the_reference
     integer simulator (torch path)          targets/intsim.run_prepared           tests/targets/test_intsim.py::test_fast_simulator_equals_reference_on_random_models,
                                                                                   tests/targets/test_device_paths.py::test_torch_integer_path_equals_the_cpu_kernel

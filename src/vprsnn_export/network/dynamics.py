@@ -96,8 +96,8 @@ def run_network(
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
     On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.network.dynamics_kernel.float_run`; the same counts bit for bit where it can sum the
-    currents in this machine's BLAS order, else in its own, :func:`vprsnn_export.network.kernel_sums.kernel_block`);
+    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the currents summed in increasing input order, the
+    same on every CPU; the torch loop agrees to float32 rounding);
     ``compiled=False`` (and any GPU) runs the torch loop below,
     one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
     moved to ``weights.device`` chunk by chunk.

@@ -9,10 +9,10 @@ The step equations are those of :mod:`vprsnn_export.network.dynamics`:
     V_j <- 0 for every j in C
 
 State is zeroed at the start of every presentation (isolation) or carried over in order. The
-kernel sums each step's active rows in float32 in the order this machine's BLAS uses for the
-dense matmul (probed: :func:`vprsnn_export.network.kernel_sums.blas_block`), so it reproduces
-:func:`vprsnn_export.network.dynamics.run_network` bit for bit where the probe succeeds; elsewhere a
-current may differ in its last bit and, rarely, a threshold decision with it. The neurons run in
+kernel sums each step's active rows in float32 in increasing input order, the same on every CPU
+(:func:`vprsnn_export.network.kernel_sums._row_sum`); the torch loop of
+:func:`vprsnn_export.network.dynamics.run_network` (GPU, ``compiled=False``) sums in its BLAS's order,
+so a current may differ in its last bit and, rarely, a threshold decision with it. The neurons run in
 tiles of whole WTA groups, on threads (:mod:`vprsnn_export.network.parallel`).
 """
 
@@ -34,7 +34,6 @@ from .kernel_sums import (
     _tile_currents,
     as_spike_array,
     compiled,
-    kernel_block,
 )
 from .parallel import check_group, current_blocks, neuron_tile, run_parts, run_threads
 from .runs import SpikeRun
@@ -52,7 +51,6 @@ def _float_kernel(
     group: int,  # neurons per WTA group (one module of an ensemble)
     isolation: bool,
     record: bool,
-    block: int,
     start: int,  # the neurons [start, stop) this call runs: whole WTA groups
     stop: int,
     tile: int,  # neurons per tile: whole WTA groups
@@ -70,7 +68,7 @@ def _float_kernel(
     tile's weights are copied into contiguous column blocks of ``column`` neurons; the currents of ``chunk``
     presentations are summed block by block (a block's weights stay in cache across them), then their steps
     run: the state update branch-free over the tile (vectorised), the WTA only on steps with candidates.
-    Each current is the same blocked sum over the same inputs whatever the blocks, so no number changes.
+    Each current is the same ordered sum over the same inputs whatever the blocks, so no number changes.
     """
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
@@ -79,7 +77,6 @@ def _float_kernel(
     lane_value = np.empty(LANES, dtype=np.float32)
     lane_index = np.empty(LANES, dtype=np.int64)
     current_store = np.empty(chunk * timesteps * tile, dtype=np.float32)
-    partial_store = np.empty(column, dtype=np.float32)
     tile_store = np.empty(n_inputs * tile, dtype=np.float32)
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
@@ -91,7 +88,7 @@ def _float_kernel(
         masked = np.empty(width, dtype=np.float32)  # I_j of the candidates, -inf elsewhere
         for p0 in range(0, n, chunk):
             p1 = min(n, p0 + chunk)
-            _tile_currents(tile_store, n_inputs, width, column, index, offsets, p0, p1, block, current, partial_store)
+            _tile_currents(tile_store, n_inputs, width, column, index, offsets, p0, p1, current)
             for p in range(p0, p1):
                 if isolation:
                     voltage[:] = 0
@@ -169,7 +166,6 @@ def float_kernel(
     group: int,
     isolation: bool,
     record: bool,
-    block: int,
     start: int,
     stop: int,
     tile: int,
@@ -188,7 +184,6 @@ def float_kernel(
     n_neurons = weights.shape[1]
     require_array(k, "theta", theta, (np.float32,), (n_neurons,))
     require_groups(k, n_neurons, group, start, stop, tile)
-    require_int(k, "block", block, 1)
     require_int(k, "column", column, 1)
     require_int(k, "chunk", chunk, 1)
     require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
@@ -196,7 +191,7 @@ def float_kernel(
     require_array(k, "raster", raster, (np.bool_,), (n if record else None, timesteps, n_neurons), writable=True)
     require_array(k, "final", final, (np.float32,), (n, n_neurons), writable=True)
     _float_kernel(
-        spikes, weights, theta, np.float32(beta), bool(wta), int(group), bool(isolation), bool(record), int(block),
+        spikes, weights, theta, np.float32(beta), bool(wta), int(group), bool(isolation), bool(record),
         int(start), int(stop), int(tile), int(column), int(chunk), counts, n_candidates, raster, final,
     )  # fmt: skip
 
@@ -210,7 +205,6 @@ def float_run(
     wta: bool = True,
     isolation: bool = True,
     record: bool = False,
-    block: int | None = None,
     group: int | None = None,
     threads: int | None = None,
 ) -> SpikeRun:
@@ -223,10 +217,8 @@ def float_run(
     in cache across the presentations.
 
     Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`. Each step's currents are the
-    active inputs' weight rows summed in float32 in blocks of ``block`` inputs (see
-    :func:`_blocked_sum`); by default the block that reproduces this machine's BLAS on the
-    shape ``run_network`` multiplies (:func:`kernel_block`), so the counts are those of
-    ``run_network`` bit for bit wherever the probe succeeds. ``final_voltage`` is reported
+    active inputs' weight rows summed in float32 in increasing input order (:func:`_row_sum`), the
+    same on every CPU; ``run_network``'s torch loop agrees to float32 rounding. ``final_voltage`` is reported
     with and without isolation.
     """
     array = as_spike_array(spikes)
@@ -234,8 +226,6 @@ def float_run(
     if w.ndim != 2 or array.shape[2] != w.shape[0]:
         raise InvalidValueError(f"weights: spikes {array.shape} do not match weights {w.shape}")
     n, timesteps, n_inputs = array.shape
-    if block is None:
-        block = kernel_block(max(1, min(n, QUERY_CHUNK) * timesteps), n_inputs, w.shape[1])
     n_neurons = w.shape[1]
     size = check_group(n_neurons, group)
     counts = np.zeros((n, n_neurons), dtype=np.int64)
@@ -257,7 +247,6 @@ def float_run(
             size,
             bool(isolation),
             bool(record),
-            max(1, int(block)),
             start,
             stop,
             tile,

@@ -72,7 +72,6 @@ def _integer_kernel(
     """
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
-    partial_store = np.empty(column, dtype=current_store.dtype)
     tile_store = np.empty(n_inputs * tile, dtype=mantissas.dtype)
     saturations = 0
     peak = np.int64(0)
@@ -86,9 +85,7 @@ def _integer_kernel(
         for p in range(n):
             if p % chunk == 0:
                 p1 = min(n, p + chunk)
-                _tile_currents(
-                    tile_store, n_inputs, width, column, index, offsets, p, p1, n_inputs, current, partial_store
-                )
+                _tile_currents(tile_store, n_inputs, width, column, index, offsets, p, p1, current)
             if isolation:
                 voltage[:] = 0
             for t in range(timesteps):

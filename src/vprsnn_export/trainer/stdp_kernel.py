@@ -1,10 +1,10 @@
 """The compiled STDP training window: the step loop of ``train.train_batch`` in one call.
 
 :func:`stdp_window` is the training window (WTA step, traces, STDP, clip, column normalisation)
-with every float32 operation in the torch loop's order, so the weights are bit for bit those of
-the torch loop where this machine's BLAS orders its sums as probed
-(:func:`vprsnn_export.network.kernel_sums.matches_torch`); elsewhere the currents are summed in the
-kernels' own machine-independent order (:func:`vprsnn_export.network.kernel_sums.kernel_block`).
+with every float32 operation in the torch loop's order but the currents, which are summed in increasing
+input order on every CPU (:func:`vprsnn_export.network.kernel_sums._row_sum`; the torch loop's BLAS blocks
+them its own way), so the weights agree with the torch loop's to float32 rounding and a seed fixes them
+on every machine.
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
 encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
@@ -30,10 +30,9 @@ from vprsnn_export.network.kernel_sums import (
     ANY3,
     SPIKES,
     _active_inputs,
-    _blocked_sum,
+    _row_sum,
     as_spike_array,
     compiled,
-    kernel_block,
 )
 from vprsnn_export.network.parallel import module_slices
 
@@ -51,7 +50,6 @@ def _stdp_window(
     a_minus: np.float32,
     w_max: np.float32,
     weight_norm: bool,
-    block: int,
 ) -> np.ndarray:
     """The training window, each float32 operation in the torch loop's order, in one pass over W per step.
 
@@ -75,7 +73,6 @@ def _stdp_window(
     pre_trace = np.zeros((batch, n_inputs), dtype=np.float32)
     current = np.empty((batch, n_neurons), dtype=np.float32)
     fired = np.zeros((batch, n_neurons), dtype=np.bool_)
-    partial = np.empty(n_neurons, dtype=np.float32)
     index = np.empty((batch, n_inputs), dtype=np.int64)
     n_active = np.empty(batch, dtype=np.int64)
     row_traced = np.zeros(batch, dtype=np.bool_)  # some neuron has fired in row b (y_b != 0)
@@ -94,7 +91,6 @@ def _stdp_window(
     squares = np.empty(n_neurons, dtype=np.float32)
     scale = np.empty(n_neurons, dtype=np.float32)
     fired_total = np.zeros(n_neurons, dtype=np.float32)
-    partials = np.empty((batch, n_neurons), dtype=np.float32)
     starts = np.empty(n_inputs + 1, dtype=np.int64)
     members = np.empty(batch * n_inputs, dtype=np.int64)
     ready = False  # this step's lists and currents were made while normalising the last step's weights
@@ -102,7 +98,7 @@ def _stdp_window(
         if not ready:
             for b in range(batch):
                 n_active[b] = _active_inputs(spikes[b, t], index[b])
-                _blocked_sum(weights, index[b], n_active[b], block, current[b], partial)
+                _row_sum(weights, index[b], n_active[b], current[b])
         ready = False
         for b in range(batch):
             row_voltage, row_current, row_fired = voltage[b], current[b], fired[b]
@@ -197,9 +193,7 @@ def _stdp_window(
                         settled[j] = scale[j] == one
                         dividing = dividing or not settled[j]
                 if dividing and t + 1 < timesteps:
-                    _divide_and_sum(
-                        weights, scale, spikes[:, t + 1], index, n_active, block, current, partials, starts, members
-                    )
+                    _divide_and_sum(weights, scale, spikes[:, t + 1], index, n_active, current, starts, members)
                     ready = True
                 elif dividing:
                     for i in range(n_inputs):
@@ -220,18 +214,15 @@ def _divide_and_sum(
     spikes: np.ndarray,  # (B, inputs) the next step's input spikes
     index: np.ndarray,  # (B, inputs) out: the next step's active inputs per row
     n_active: np.ndarray,  # (B,) out
-    block: int,
-    current: np.ndarray,  # (B, neurons) out: the next step's currents, as _blocked_sum sums them
-    partials: np.ndarray,  # (B, neurons) scratch
+    current: np.ndarray,  # (B, neurons) out: the next step's currents, as _row_sum sums them
     starts: np.ndarray,  # (inputs + 1,) scratch
     members: np.ndarray,  # (B inputs,) scratch
 ) -> None:
     """Column normalisation w_ij <- w_ij / n_j fused with the next step's currents, in one pass over W.
 
     Each row of W, once divided, is added (still in L1) to the currents of the rows b whose input
-    is active next: row b's inputs arrive in increasing order, its first block summed into the
-    total from zero and every later block from zero into a partial added to the total when the
-    block ends, exactly the additions of :func:`_blocked_sum`.
+    is active next: row b's inputs arrive in increasing order, so its sum from zero makes exactly the
+    additions of :func:`_row_sum`.
     """
     batch, n_inputs = spikes.shape
     n = weights.shape[1]
@@ -250,40 +241,15 @@ def _divide_and_sum(
     for i in range(n_inputs - 1, 0, -1):
         starts[i] = starts[i - 1]
     starts[0] = 0
-    open_block = np.full(batch, -1, dtype=np.int64)  # per row: the block being summed (-1: none yet)
-    into_total = np.ones(batch, dtype=np.bool_)  # the open block is the row's first: summed into the total
+    current[:] = 0
     for i in range(n_inputs):
         row = weights[i]
         for j in range(n):
             row[j] = row[j] / scale[j]
-        here = i // block
         for m in range(starts[i], starts[i + 1]):
-            b = members[m]
-            if open_block[b] == here:
-                sums = current[b] if into_total[b] else partials[b]
-                for j in range(n):
-                    sums[j] += row[j]
-                continue
-            if open_block[b] >= 0:  # a later block starts: the last one ends
-                if not into_total[b]:
-                    total = current[b]
-                    part = partials[b]
-                    for j in range(n):
-                        total[j] += part[j]
-                into_total[b] = False
-            open_block[b] = here
-            sums = current[b] if into_total[b] else partials[b]
+            sums = current[members[m]]
             for j in range(n):
-                sums[j] = 0 + row[j]
-    for b in range(batch):
-        total = current[b]
-        if open_block[b] < 0:
-            for j in range(n):
-                total[j] = 0
-        elif not into_total[b]:
-            part = partials[b]
-            for j in range(n):
-                total[j] += part[j]
+                sums[j] += row[j]
 
 
 @compiled
@@ -291,7 +257,6 @@ def _stdp_windows(
     limits: np.ndarray,  # (M, B, inputs) int32: bernoulli_limits of each row's firing probabilities
     seeds: np.ndarray,  # (M, B) int64: generator_seeds of each row's presentation seed
     sizes: np.ndarray,  # (M,) int64: rows of module m in this batch (0: it sits the batch out)
-    blocks: np.ndarray,  # (M,) int64: the K-block of each module's current sums (kernel_block of its rows)
     timesteps: int,
     weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
     theta: np.ndarray,  # (M, neurons) float32
@@ -328,7 +293,6 @@ def _stdp_windows(
                 a_minus,
                 w_max,
                 weight_norm,
-                blocks[m],
             )
     return fired
 
@@ -345,25 +309,21 @@ def stdp_window_kernel(
     a_minus: np.float32,
     w_max: np.float32,
     weight_norm: bool,
-    block: int,
 ) -> np.ndarray:
     """:func:`_stdp_window` once every array it indexes is checked (InvalidValueError naming it)."""
     k = "STDP window kernel"
     require_array(k, "spikes", spikes, SPIKES, ANY3)
     require_array(k, "weights", weights, (np.float32,), (spikes.shape[2], None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (weights.shape[1],))
-    require_int(k, "block", block, 1)
     return _stdp_window(
-        spikes, weights, theta, beta, bool(wta), pre_keep, post_keep, a_plus, a_minus, w_max, bool(weight_norm),
-        int(block),
-    )  # fmt: skip
+        spikes, weights, theta, beta, bool(wta), pre_keep, post_keep, a_plus, a_minus, w_max, bool(weight_norm)
+    )
 
 
 def stdp_windows_kernel(
     limits: np.ndarray,
     seeds: np.ndarray,
     sizes: np.ndarray,
-    blocks: np.ndarray,
     timesteps: int,
     weights: np.ndarray,
     theta: np.ndarray,
@@ -378,17 +338,14 @@ def stdp_windows_kernel(
     n_modules, batch, n_inputs = limits.shape
     require_array(k, "seeds", seeds, (np.int64,), (n_modules, batch))
     require_array(k, "sizes", sizes, (np.int64,), (n_modules,))
-    require_array(k, "blocks", blocks, (np.int64,), (n_modules,))
     if sizes.size and (sizes.min() < 0 or sizes.max() > batch):
         raise InvalidValueError(f"{k}: sizes must lie in [0, {batch}], got [{sizes.min()}, {sizes.max()}]")
-    if (blocks[sizes > 0] < 1).any():
-        raise InvalidValueError(f"{k}: blocks must be >= 1 for every module with a batch")
     steps = require_int(k, "timesteps", timesteps, 0)
     require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
     if len(args) != 8:
         raise InvalidValueError(f"{k}: expected 8 scalar parameters, got {len(args)}")
-    return _stdp_windows(limits, seeds, sizes, blocks, steps, weights, theta, *args)
+    return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *args)
 
 
 #: The kernels' scalar parameters (:func:`kernel_scalars`).
@@ -410,24 +367,19 @@ def stdp_window(
     """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``.
 
     Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
-    and column normalisation, each float32 operation in torch's order, so the weights are bit
-    for bit those of the torch loop when this machine's BLAS orders its sums as probed
-    (:func:`matches_torch`; else in :func:`kernel_block`'s fixed order). Returns (new weights, spikes
+    and column normalisation, each float32 operation in torch's order but the currents' sums
+    (increasing input order, :func:`_row_sum`). Returns (new weights, spikes
     per neuron in the batch as float32), or ``None`` when the tensors are not float32 on the CPU:
     the caller then runs the torch loop. Homeostasis is the caller's.
     """
-    batch, _, n_inputs = spikes.shape
-    n_neurons = weights.shape[1]
     if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
         return None
-    block = kernel_block(batch, n_inputs, n_neurons)
     updated = weights.detach().clone().contiguous()
     fired = stdp_window_kernel(
         as_spike_array(spikes),
         updated.numpy(),
         np.ascontiguousarray(theta.detach().numpy()),
         *kernel_scalars(cfg),
-        block,
     )
     return updated, torch.from_numpy(fired)
 
@@ -452,19 +404,13 @@ def stdp_windows(
     modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
     not used). Returns the spikes per neuron (M, n) float32.
     """
-    n_modules, _, n_inputs = limits.shape
-    n_neurons = weights.shape[2]
-    blocks = np.zeros(n_modules, dtype=np.int64)
-    for size in sorted({int(s) for s in sizes if s > 0}):
-        blocks[np.asarray(sizes) == size] = kernel_block(size, n_inputs, n_neurons)
+    n_modules = limits.shape[0]
     args = kernel_scalars(cfg)
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
     def run(part: slice) -> np.ndarray:
-        return stdp_windows_kernel(
-            limits[part], seeds[part], sizes[part], blocks[part], timesteps, weights[part], theta[part], *args
-        )
+        return stdp_windows_kernel(limits[part], seeds[part], sizes[part], timesteps, weights[part], theta[part], *args)
 
     parts = module_slices(n_modules, threads)
     if len(parts) == 1:

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import torch
 
 from vprsnn_export.network import parallel
 from vprsnn_export.network.dynamics import run_network
 from vprsnn_export.network.dynamics_kernel import float_run
-from vprsnn_export.network.kernel_sums import _blocked_currents, blas_block
 
 pytestmark = pytest.mark.usefixtures("one_thread")  # tests/conftest.py
 
@@ -49,16 +47,6 @@ def test_float_kernel_matches_run_network(wta, isolation, group):
         assert torch.equal(fast.candidates_per_step, slow.candidates_per_step)
         if isolation:
             assert torch.equal(fast.final_voltage, slow.final_voltage)
-
-
-def test_blocked_sums_reproduce_this_machines_blas_on_wide_inputs():
-    """784 inputs: BLAS blocks its sums (MKL: 192 inputs); the probed block gives torch's currents bit for bit."""
-    spikes, weights, _ = float_case(7, n=1, timesteps=64, n_inputs=784, n_neurons=40)
-    block = blas_block(64, 784, 40)
-    if block is None:
-        pytest.skip("this machine's BLAS order is not one of the probed blockings")
-    expected = torch.matmul(spikes[0].float(), weights).numpy()
-    assert np.array_equal(_blocked_currents(spikes[0].numpy(), weights.numpy(), block), expected)
 
 
 def test_float_kernel_exact_on_dyadic_weights_ties_to_the_lowest_index():

@@ -71,7 +71,6 @@ def float_args() -> dict[str, Any]:
         group=GROUP,
         isolation=True,
         record=True,
-        block=D,
         start=0,
         stop=NEURONS,
         tile=NEURONS,
@@ -82,10 +81,6 @@ def float_args() -> dict[str, Any]:
         raster=np.zeros((N, T, NEURONS), dtype=np.bool_),
         final=np.zeros((N, NEURONS), dtype=F32),
     )
-
-
-def blocked_args() -> dict[str, Any]:
-    return dict(spikes=_spikes((3, D)), weights=np.ones((D, NEURONS), dtype=F32), block=D)
 
 
 def stdp_args() -> dict[str, Any]:
@@ -101,7 +96,6 @@ def stdp_args() -> dict[str, Any]:
         a_minus=F32(0.01),
         w_max=F32(1.0),
         weight_norm=True,
-        block=D,
     )
 
 
@@ -120,7 +114,6 @@ def stdp_windows_args() -> dict[str, Any]:
         limits=np.full((2, 3, D), 1 << 23, dtype=np.int32),
         seeds=np.arange(6, dtype=np.int64).reshape(2, 3),
         sizes=np.array([3, 2], dtype=np.int64),
-        blocks=np.array([D, D], dtype=np.int64),
         timesteps=T,
         weights=np.full((2, D, NEURONS), 0.3, dtype=F32),
         theta=np.full((2, NEURONS), 0.5, dtype=F32),
@@ -130,7 +123,7 @@ def stdp_windows_args() -> dict[str, Any]:
 
 def call_stdp_windows(scalars: tuple, **arrays: Any) -> Any:
     """:func:`stdp_kernel.stdp_windows_kernel` with its arrays by name (its scalars are positional)."""
-    order = ("limits", "seeds", "sizes", "blocks", "timesteps", "weights", "theta")
+    order = ("limits", "seeds", "sizes", "timesteps", "weights", "theta")
     return stdp_kernel.stdp_windows_kernel(*(arrays[name] for name in order), *scalars)
 
 
@@ -148,7 +141,6 @@ CASES: dict[str, tuple[Callable[..., Any], Callable[[], dict[str, Any]], set[str
         {"counts", "n_candidates", "raster", "final"},
         {"spikes", "weights"},
     ),
-    "blocked": (kernel_sums.blocked_currents, blocked_args, set(), {"spikes", "weights"}),
     "stdp": (stdp_kernel.stdp_window_kernel, stdp_args, {"weights"}, {"spikes", "weights"}),
     "bernoulli": (encoding_kernel.bernoulli_kernel, bernoulli_args, {"out"}, {"thresholds"}),
     "stdp_windows": (call_stdp_windows, stdp_windows_args, {"weights"}, {"limits", "weights"}),
@@ -156,8 +148,6 @@ CASES: dict[str, tuple[Callable[..., Any], Callable[[], dict[str, Any]], set[str
 
 #: (kernel, argument, variant) that is a smaller but consistent problem, not a bad array
 CONSISTENT = {
-    ("blocked", "weights", "short_last"),  # fewer neurons
-    ("blocked", "spikes", "short_first"),  # fewer rows
     ("stdp", "spikes", "short_first"),  # a smaller batch
 }
 
@@ -214,9 +204,6 @@ def test_bad_array_is_refused_by_name(kernel, name, variant):
 @pytest.mark.parametrize(
     ("kernel", "name", "value"),
     [
-        ("float", "block", 0),
-        ("blocked", "block", -1),
-        ("stdp", "block", 0),
         ("integer", "group", 3),
         ("integer", "stop", NEURONS + GROUP),
         ("integer", "start", 1),
@@ -225,7 +212,6 @@ def test_bad_array_is_refused_by_name(kernel, name, variant):
         ("integer", "shift", 63),
         ("bernoulli", "timesteps", -1),
         ("stdp_windows", "sizes", np.array([4, 2], dtype=np.int64)),
-        ("stdp_windows", "blocks", np.array([0, D], dtype=np.int64)),
         ("integer", "current_store", np.zeros(T * NEURONS - 1, dtype=np.int32)),
         ("float", "group", 2.0),
     ],
@@ -254,7 +240,7 @@ def compiled_kernels() -> set[str]:
 def test_compiled_kernels_are_called_from_python_only_through_checked_entry_points():
     """A compiled function may call another; a plain Python function only calls the checked entry points."""
     compiled = compiled_kernels()
-    checked = {"integer_kernel", "float_kernel", "blocked_currents", "stdp_window_kernel", "bernoulli_kernel"}
+    checked = {"integer_kernel", "float_kernel", "stdp_window_kernel", "bernoulli_kernel"}
     checked.add("stdp_windows_kernel")
     for module in KERNEL_MODULES:
         for node in ast.parse(inspect.getsource(module)).body:
