@@ -219,3 +219,22 @@ def test_a_velocity_far_beyond_the_map_shifts_every_frame_out_without_an_overflo
     with np.errstate(all="raise"):
         far = aggregate(prob, 3, 1e300)
     assert np.array_equal(far, aggregate(prob, 3, 1e6))
+
+
+@pytest.mark.parametrize("rule", ["product", "sum"])
+@pytest.mark.parametrize(("velocity", "k"), [(1.0, 5), (-2.0, 4), (0.0, 3), (3.0, 12), (40.0, 3), (-1.0, 30)])
+def test_whole_place_windows_from_each_frames_term_once_are_the_shifted_windows_combined(rule, velocity, k):
+    """aggregate's whole-place path (each frame's term once, summed in place offset by offset) against the rule
+    combining the shifted (rows, k, places) window, bit for bit: at the stream's start, beyond the map, against
+    the route, and over several chunks of queries."""
+    prob = np.random.default_rng(int(abs(velocity)) + k).dirichlet(np.ones(30), size=25)
+    prob[3, 4] = 0.0  # an exact zero: log(0 + eps)
+    queries = np.arange(25)
+    shifted, valid = shift_window(prob, queries, k, np.full(25, velocity), np.arange(25.0))
+    expected, expected_score = aggregation.RULES.get(rule).combine(shifted, valid, 1e-6)
+    got, score = aggregation._aggregate_scored(prob, k, velocity, rule, None, 1e-6)
+    assert got.tobytes() == expected.tobytes() and score.tobytes() == expected_score.tobytes()
+    with pytest.MonkeyPatch.context() as patch:  # 60 elements a chunk: two queries at a time
+        patch.setattr(aggregation, "_MAX_ELEMENTS", 60)
+        chunked, chunked_score = aggregation._aggregate_scored(prob, k, velocity, rule, None, 1e-6)
+    assert chunked.tobytes() == expected.tobytes() and chunked_score.tobytes() == expected_score.tobytes()

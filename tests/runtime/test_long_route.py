@@ -72,3 +72,17 @@ def test_a_long_routes_query_counts_are_sparse_blocks_and_read_out_the_same(ense
     assert predictions(long.scored).to_csv() == predictions(dense.scored).to_csv()
     isolated_off = ckpt.config.replace(**{"network.state_isolation": False})
     assert not evaluation.sparse_query_counts(type(ckpt)(**{**ckpt.__dict__, "config": isolated_off}), 24)
+
+
+def test_a_long_routes_joined_run_keeps_no_query_by_neuron_array(ensemble, monkeypatch):
+    """Run in blocks, a long route keeps per query its candidates per step only: no final voltages (a
+    (queries, neurons) array, 2.9 GB of float32 at 27k places), W+Prob rows or spike trains."""
+    ckpt, data = ensemble
+    monkeypatch.setattr(evaluation, "DENSE_COUNT_ENTRIES", 0)
+    monkeypatch.setattr(evaluation, "LONG_ROUTE_BLOCK", 5)
+    run, counts, _, spikes = evaluation._run_queries(
+        _sparse(ckpt), data.traversal("winter"), data.place_ids, "winter", "auto", device=None, progress=False
+    )
+    assert spikes is None and run.final_voltage is None and run.raster is None and run.wprob is None
+    assert run.candidates_per_step is not None and run.candidates_per_step.shape[0] == len(data.place_ids)
+    assert isinstance(counts, sparse.csr_array) and counts.shape[0] == len(data.place_ids)

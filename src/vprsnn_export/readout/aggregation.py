@@ -138,17 +138,10 @@ def _shift_rows(
     place (half to even) instead of interpolating, so ``f = 0``.
     """
     n_places = prob.shape[1]
-    offsets = np.arange(k)
-    frames = queries[:, None] - offsets[None, :]  # (C, k)
-    valid = frames >= 0
-    frames_safe = np.where(valid, frames, 0)
-    dist = frame_positions[queries][:, None] - frame_positions[frames_safe]  # (C, k)
-    displacement = row_velocity[:, None] * dist  # (C, k)
-    if nearest:
-        displacement = np.rint(displacement)
-    common = np.where(valid[-1], displacement[-1], 0.0)  # the last row reaches every offset any row reaches
-    if np.all((displacement == common) | ~valid) and np.all(common == np.rint(common)):
-        shift = np.clip(common, -n_places, n_places).astype(np.intp)  # beyond the map: all of it out, as at n_places
+    frames_safe, valid, displacement, shift = _window_frames(
+        queries, k, row_velocity, frame_positions, n_places, nearest
+    )
+    if shift is not None:
         return _shifted_by_whole_places(prob, frames_safe, valid, shift), valid
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
@@ -163,6 +156,59 @@ def _shift_rows(
     shifted = (1.0 - frac) * left + frac * right
     shifted[~inside] = 0.0
     return shifted, valid
+
+
+def _window_frames(
+    queries: np.ndarray,
+    k: int,
+    row_velocity: np.ndarray,
+    frame_positions: np.ndarray,
+    n_places: int,
+    nearest: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """The frames of each row's window (C, k) (0 before the stream), whether they exist, their displacements
+    :math:`v_j (t_j - t_m)` and, when every row's offset o moves by the same whole number of places (a constant
+    velocity over frame indices: the common case), that shift per offset (else None; beyond the map: n_places)."""
+    frames = queries[:, None] - np.arange(k)[None, :]  # (C, k)
+    valid = frames >= 0
+    frames_safe = np.where(valid, frames, 0)
+    displacement = row_velocity[:, None] * (frame_positions[queries][:, None] - frame_positions[frames_safe])
+    if nearest:
+        displacement = np.rint(displacement)
+    common = np.where(valid[-1], displacement[-1], 0.0)  # the last row reaches every offset any row reaches
+    if np.all((displacement == common) | ~valid) and np.all(common == np.rint(common)):
+        return frames_safe, valid, displacement, np.clip(common, -n_places, n_places).astype(np.intp)
+    return frames_safe, valid, displacement, None
+
+
+def _summed_terms(
+    terms: np.ndarray, queries: np.ndarray, valid: np.ndarray, shift: np.ndarray, outside: float
+) -> np.ndarray:
+    r""":math:`A_j(l) = \sum_o \text{term}(P_{j-o})(l - d_o)` for the consecutive ``queries``, from each frame's
+    ``terms`` computed once: offset by offset (as ``combine`` sums the shifted window), each added in place from a
+    view of the terms, ``outside`` (the term of 0) where :math:`l - d_o` lies beyond the map, and a frame before
+    the stream's start adding ``outside * 0`` (as ``combine``'s mask makes it). The same numbers as shifting the
+    probabilities first, at one term per frame instead of k and no (rows, k, places) window."""
+    n_places = terms.shape[1]
+    total = terms[queries]  # offset 0: the query frame itself, never shifted (d_0 = 0)
+    for o, d in enumerate(shift.tolist()[1:], start=1):
+        ok = valid[:, o]
+        rows = slice(None) if ok.all() else np.flatnonzero(ok)
+        frames = queries[rows] - o
+        source = terms[frames[0] : frames[-1] + 1] if len(frames) else terms[:0]
+        target = total[rows]  # a view when every row has this frame, else a copy written back below
+        if abs(d) >= n_places:
+            target += outside
+        elif d >= 0:
+            target[:, :d] += outside
+            target[:, d:] += source[:, : n_places - d]
+        else:
+            target[:, d:] += outside
+            target[:, :d] += source[:, -d:]
+        if not ok.all():
+            total[rows] = target
+            total[~ok] += outside * 0.0
+    return total
 
 
 def _shifted_by_whole_places(prob: np.ndarray, frames: np.ndarray, valid: np.ndarray, shift: np.ndarray) -> np.ndarray:
@@ -242,11 +288,19 @@ def _aggregate_scored(
         return p.copy(), p.max(axis=1)
     out = np.empty_like(p)
     score = np.empty(n_queries)
-    chunk = max(1, _MAX_ELEMENTS // (k * n_places))
+    combiner, terms = RULES.get(rule), None
+    chunk = max(1, _MAX_ELEMENTS // n_places)
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
-        shifted, valid = shift_window(p, queries, k, v, t)
-        out[queries], score[queries] = RULES.get(rule).combine(shifted, valid, eps)
+        _, valid, _, shift = _window_frames(queries, k, v[queries], t, n_places)
+        if shift is not None:  # whole places: every frame's term once, shifted
+            terms = combiner.term(p, eps) if terms is None else terms
+            outside = float(combiner.term(np.zeros(1), eps)[0])
+            out[queries], score[queries] = combiner.finish(_summed_terms(terms, queries, valid, shift, outside))
+            continue
+        for part in np.array_split(queries, -(-len(queries) * k // chunk)):  # the (rows, k, places) window
+            shifted, valid = shift_window(p, part, k, v, t)
+            out[part], score[part] = combiner.combine(shifted, valid, eps)
     return out, score
 
 

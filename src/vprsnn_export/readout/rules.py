@@ -16,52 +16,63 @@ import numpy as np
 from vprsnn_export.registry import Registry
 
 
-def product_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Softmax of the summed logs of the shifted window (``shifted`` (Q, k, places), ``valid`` (Q, k)).
+def log_term(probability: np.ndarray, eps: float) -> np.ndarray:
+    r"""The product rule's term of one frame: :math:`\log(\tilde P_m(l) + \varepsilon)`."""
+    return np.log(probability + eps)
 
-    .. math:: A_j(l) = \\sum_m \\log(\\tilde P_m(l) + \\varepsilon), \\quad
-              \\hat P_j(l) = e^{A_j(l)} / \\sum_{l'} e^{A_j(l')}
 
-    Returns ``(hat P, max_l A_j(l))``: the score is the best joint log-likelihood.
-    """
-    logs = np.log(shifted + eps) * valid[:, :, None]
-    a = logs.sum(axis=1)
+def softmax_finish(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The product rule's end: :math:`\hat P_j(l) = e^{A_j(l)} / \sum_{l'} e^{A_j(l')}` (a stable softmax), and
+    the score :math:`\max_l A_j(l)`, the best joint log-likelihood."""
     peak = a.max(axis=1, keepdims=True)
     e = np.exp(a - peak)
     return e / e.sum(axis=1, keepdims=True), peak[:, 0]
 
 
-def sum_rule(shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
-    """L1 normalisation of the summed shifted window (a window that is 0 everywhere gives the uniform distribution).
+def probability_term(probability: np.ndarray, eps: float) -> np.ndarray:
+    """The sum rule's term of one frame: :math:`\tilde P_m(l)` itself."""
+    return probability
 
-    .. math:: A_j(l) = \\sum_m \\tilde P_m(l), \\quad \\hat P_j(l) = A_j(l) / \\sum_{l'} A_j(l')
 
-    Returns ``(hat P, max_l A_j(l))``: the score is the best summed probability.
-    """
-    n_places = shifted.shape[2]
-    a = shifted.sum(axis=1)
+def l1_finish(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The sum rule's end: :math:`\hat P_j(l) = A_j(l) / \sum_{l'} A_j(l')` (the uniform distribution where
+    :math:`A_j` is 0 everywhere), and the score :math:`\max_l A_j(l)`, the best summed probability."""
     total = a.sum(axis=1, keepdims=True)
     out = a / np.where(total > 0, total, 1.0)
-    out[total[:, 0] <= 0, :] = 1.0 / n_places
+    out[total[:, 0] <= 0, :] = 1.0 / a.shape[1]
     return out, a.max(axis=1)
 
 
 @dataclass(frozen=True)
 class AggregationRule:
-    """How a shifted window is combined: ``combine(shifted (Q, k, places), valid (Q, k), eps)`` ->
-    (aggregated distribution (Q, places), window score (Q,))."""
+    r"""How a shifted window is combined: each frame's ``term`` summed over the window, then ``finish``ed.
+
+    .. math:: A_j(l) = \sum_{m \in W_j} \text{term}(\tilde P_m(l)), \quad
+              (\hat P_j, \text{score}_j) = \text{finish}(A_j)
+
+    Product: term :math:`\log(\cdot + \varepsilon)`, finish a softmax; sum: term the probability, finish an L1
+    normalisation. A frame shifted by whole places is its term shifted (``term(0)`` beyond the map), so a window of
+    k frames needs each frame's term once (:func:`~vprsnn_export.readout.aggregation.aggregate`)."""
 
     name: str
-    combine: Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+    term: Callable[[np.ndarray, float], np.ndarray]
+    finish: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     description: str
+
+    def combine(self, shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+        """``shifted`` (Q, k, places), ``valid`` (Q, k) -> (aggregated distribution (Q, places), window score (Q,));
+        a frame before the stream's start (not valid) adds nothing."""
+        return self.finish((self.term(shifted, eps) * valid[:, :, None]).sum(axis=1))
 
 
 #: The aggregation rules (the CLI's --rule; the first is the default).
 RULES: Registry[AggregationRule] = Registry("aggregation rule")
-RULES.register(AggregationRule("product", product_rule, "product of the frames' probabilities (softmax of log sums)"))
-RULES.register(AggregationRule("sum", sum_rule, "sum of the frames' probabilities"))
+RULES.register(
+    AggregationRule("product", log_term, softmax_finish, "product of the frames' probabilities (softmax of log sums)")
+)
+RULES.register(AggregationRule("sum", probability_term, l1_finish, "sum of the frames' probabilities"))
 #: The default rule of the library and the CLI: the first registered.
 DEFAULT_RULE: Final[str] = RULES.names()[0]
 
 
-__all__ = ["DEFAULT_RULE", "RULES", "AggregationRule", "product_rule", "sum_rule"]
+__all__ = ["DEFAULT_RULE", "RULES", "AggregationRule"]

@@ -285,7 +285,8 @@ def _long_route_run(
     runner: Backend, network: Network, images: np.ndarray, place_ids: np.ndarray, traversal: str, progress: bool
 ) -> tuple[SpikeRun, sparse.csr_array, CostSummary, None]:
     """:func:`_run_queries` of a long route, :data:`LONG_ROUTE_BLOCK` queries encoded and run at a time: the
-    joined run (its counts (N, 0): they are the second value, int64 CSR), the cost, no spike trains."""
+    joined run (its counts (N, 0): they are the second value, int64 CSR; no final voltages or W+Prob rows, each
+    (queries, neurons or places): 2.9 GB of float32 voltages at 27k), the cost, no spike trains."""
     runs, counts, costs = [], [], []
     places = len(network.reference_place_ids)
     with tqdm(
@@ -296,7 +297,7 @@ def _long_route_run(
             spikes = query_spikes(images[block], place_ids[block], traversal, network.config)
             run = runner.run(spikes)
             counts.append(sparse.csr_array(run.counts.numpy().astype(np.int64)))
-            runs.append(replace(run, counts=run.counts[:, :0].clone()))
+            runs.append(replace(run, counts=run.counts[:, :0].clone(), final_voltage=None, wprob=None))
             costs.append(query_cost(spikes, int(run.counts.shape[1]), places=places, images=images[block]))
             bar.update(len(spikes))
     return joined_runs(runs), sparse.vstack(counts, format="csr"), joined_costs(costs).summary(), None
