@@ -134,12 +134,14 @@ def run_need(
     rate_scale: float = 1.0,
     rasters: int = 0,
     readout_rows: int | None = None,
+    readout_arrays: int = 4,
     block: int | None = None,
 ) -> MemoryNeed:
     """Presenting ``presentations`` spike trains to a network of ``n_neurons`` and reading out ``places`` places.
 
     ``rasters``: output rasters kept whole (a recorded run; state isolation off records one internally);
-    ``readout_rows``: the queries read out at once (None: all; 0: no readout); ``block``: a long route encoded
+    ``readout_rows``: the queries read out at once (None: all; 0: no readout), ``readout_arrays`` float64 arrays
+    of them by places alive at once (every strategy's scores, the aggregate at every k, two in the making); ``block``: a long route encoded
     and run ``block`` presentations at a time, its counts and S^R kept as CSR (int64 + int32 index per entry,
     at most T entries per presentation and place; None: all at once, dense).
     """
@@ -159,7 +161,7 @@ def run_need(
     if block is not None:
         terms.append((f"counts of a block {encoded} x {n_neurons}", 8 * encoded * n_neurons))
     if rows:
-        terms.append((f"scores {rows} x {places}", 8 * rows * places * 4))
+        terms.append((f"scores {readout_arrays} x {rows} x {places}", 8 * rows * places * readout_arrays))
     if rasters:
         terms.append(
             (f"raster {presentations} x {timesteps} x {n_neurons}", rasters * presentations * timesteps * n_neurons)

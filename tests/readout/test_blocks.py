@@ -105,3 +105,15 @@ def test_the_new_types_refuse_bad_values_when_built():
     ids = np.arange(80)
     with pytest.raises(InvalidValueError, match="block must be an integer"):
         Readout(sr, 0.5).score_in_blocks(counts, ids, ids, block="64")  # type: ignore[arg-type]
+
+
+def test_the_block_readout_shows_its_progress_only_when_asked(capsys):
+    """A long route's readout takes minutes (1.6 at 27k): with ``progress`` a bar of queries on stderr, the same
+    columns; without, nothing printed."""
+    sr, counts = route_counts(200, 200)
+    readout, ids = Readout(sr, 0.5), np.arange(200)
+    quiet = readout.score_in_blocks(counts, ids, ids, block=64)
+    assert capsys.readouterr().err == ""
+    shown = readout.score_in_blocks(counts, ids, ids, block=64, progress=True)
+    assert "readout" in capsys.readouterr().err
+    same_columns(quiet, shown)

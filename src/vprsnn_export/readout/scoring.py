@@ -9,10 +9,12 @@ settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.rea
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 
 import numpy as np
 from scipy import sparse
+from tqdm import tqdm
 
 from vprsnn_export.arguments import real_number, require_integer, require_type
 from vprsnn_export.config import Config
@@ -223,6 +225,7 @@ class Readout:
         truth: Truth | None = None,
         frame_positions: np.ndarray | None = None,
         block: int = READOUT_BLOCK,
+        progress: bool = False,
     ) -> Scored:
         """:meth:`score` computed ``block`` queries at a time: no (queries x places) matrix is held, only each
         block's (block + k - 1 frames of history) and the decisions. Every column equals :meth:`score`'s bit for
@@ -232,7 +235,7 @@ class Readout:
         .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}) \\text{ needs rows } j-k+1..j \\text{ only}
 
         InvalidValueError as :meth:`score`, or with a velocity estimated from the stream (its windows reach
-        ahead: read it out whole).
+        ahead: read it out whole). ``progress``: a bar on stderr, queries read out and time left.
         """
         truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
         block = require_integer("block", block, 1, 1 << 30)
@@ -240,13 +243,15 @@ class Readout:
             raise InvalidValueError("a velocity estimated from the stream looks ahead: read the queries out whole")
         n, history = len(query_place_ids), max(self.options.ks) - 1
         decided: dict[tuple[str, int], list[tuple[np.ndarray, np.ndarray]]] = {}
-        for start in range(0, n, block):
-            low, stop = max(0, start - history), min(n, start + block)
-            positions = None if frame_positions is None else np.asarray(frame_positions)[low:stop]
-            scores = self.scores(counts[low:stop])
-            aggregates = self.sequences(scores[SEQUENCE_STRATEGY], positions)
-            for strategy, k, matrix in readout_columns(scores, aggregates):
-                decided.setdefault((strategy, k), []).append(decide(matrix[start - low :], strategy))
+        with tqdm(total=n, desc="readout", unit="query", file=sys.stderr, leave=False, disable=not progress) as bar:
+            for start in range(0, n, block):
+                low, stop = max(0, start - history), min(n, start + block)
+                positions = None if frame_positions is None else np.asarray(frame_positions)[low:stop]
+                scores = self.scores(counts[low:stop])
+                aggregates = self.sequences(scores[SEQUENCE_STRATEGY], positions)
+                for strategy, k, matrix in readout_columns(scores, aggregates):
+                    decided.setdefault((strategy, k), []).append(decide(matrix[start - low :], strategy))
+                bar.update(stop - start)
         columns = []
         for (strategy, k), parts in decided.items():
             index, confidence = (np.concatenate(part) for part in zip(*parts, strict=True))

@@ -34,6 +34,7 @@ from vprsnn_export.readout.regions import ModuleAccuracy, hyperactive_neurons
 from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.scoring import READOUT_BLOCK, Readout, baseline_rows, nearest_neighbour_rows
 from vprsnn_export.readout.sequence import SequenceOptions
+from vprsnn_export.readout.strategies import STRATEGIES
 from vprsnn_export.targets.intsim import step_agreement
 from vprsnn_export.trainer.calibrate import DENSE_COUNT_ENTRIES, calibrate
 from vprsnn_export.trainer.sharded import float_runs_on_cluster
@@ -147,7 +148,7 @@ def evaluate_float(
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
     truth = window(options.tolerance) if truth is None else truth
-    scored = read_out(readout, counts, reference_ids, query_place_ids, truth)
+    scored = read_out(readout, counts, reference_ids, query_place_ids, truth, progress=progress)
     typed, layout = scored.rows, readout.modules
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
@@ -196,7 +197,7 @@ def evaluate_fixed_point(
     rows, sides = [], []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
         readout = Readout.of(calibration, model.config, options)
-        sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth))
+        sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth, progress))
         rows += [{"calibration": name, **row.to_dict()} for row in sides[-1].rows]
     agreement = None
     if float_checkpoint is not None and run.raster is not None and spikes is not None:  # recorded: never blocks
@@ -217,13 +218,18 @@ def evaluate_fixed_point(
 
 
 def read_out(
-    readout: Readout, counts: np.ndarray, reference_ids: np.ndarray, query_ids: np.ndarray, truth: Truth | None
+    readout: Readout,
+    counts: np.ndarray,
+    reference_ids: np.ndarray,
+    query_ids: np.ndarray,
+    truth: Truth | None,
+    progress: bool = False,
 ) -> Scored:
     """The queries read out: in blocks of :data:`~vprsnn_export.readout.scoring.READOUT_BLOCK` queries when there
     are more (the same columns bit for bit, without a (queries x places) matrix), else whole; a velocity searched
     over the stream looks ahead, so it is read out whole."""
     if len(query_ids) > READOUT_BLOCK and readout.options.velocity_candidates is None:
-        return readout.score_in_blocks(counts, reference_ids, query_ids, truth)
+        return readout.score_in_blocks(counts, reference_ids, query_ids, truth, progress=progress)
     return readout.score(counts, reference_ids, query_ids, truth)
 
 
@@ -244,6 +250,7 @@ def _prepared(
         places=len(network.reference_place_ids),
         rasters=rasters + (0 if network.config.network.state_isolation else 1),
         readout_rows=rows,
+        readout_arrays=len(STRATEGIES.names()) + len(options.ks) + 2,
         block=LONG_ROUTE_BLOCK if sparse_query_counts(network, len(place_ids), rasters > 0) else None,
     )
     return network
