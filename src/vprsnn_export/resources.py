@@ -140,10 +140,10 @@ def run_need(
     """Presenting ``presentations`` spike trains to a network of ``n_neurons`` and reading out ``places`` places.
 
     ``rasters``: output rasters kept whole (a recorded run; state isolation off records one internally);
-    ``readout_rows``: the queries read out at once (None: all; 0: no readout), ``readout_arrays`` float64 arrays
-    of them by places alive at once (every strategy's scores, the aggregate at every k, two in the making); ``block``: a long route encoded
-    and run ``block`` presentations at a time, its counts and S^R kept as CSR (int64 + int32 index per entry,
-    at most T entries per presentation and place; None: all at once, dense).
+    ``readout_rows``: the queries read out at once (None: all; 0: no readout); ``readout_arrays``: the float64
+    (rows x places) arrays alive at once (every strategy's scores, the aggregate at every k, two in the making);
+    ``block``: a long route encoded and run ``block`` presentations at a time, its counts and S^R kept as CSR
+    (int64 + int32 index per entry, at most T entries per presentation and place; None: all at once, dense).
     """
     rows = presentations if readout_rows is None else min(readout_rows, presentations)
     encoded = presentations if block is None else min(block, presentations)

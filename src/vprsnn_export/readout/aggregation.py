@@ -289,13 +289,13 @@ def _aggregate_scored(
     out = np.empty_like(p)
     score = np.empty(n_queries)
     combiner, terms = RULES.get(rule), None
+    outside = float(combiner.term(np.zeros(1), eps)[0])  # a place beyond the map: the term of 0
     chunk = max(1, _MAX_ELEMENTS // n_places)
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
         _, valid, _, shift = _window_frames(queries, k, v[queries], t, n_places)
         if shift is not None:  # whole places: every frame's term once, shifted
             terms = combiner.term(p, eps) if terms is None else terms
-            outside = float(combiner.term(np.zeros(1), eps)[0])
             out[queries], score[queries] = combiner.finish(_summed_terms(terms, queries, valid, shift, outside))
             continue
         for part in np.array_split(queries, -(-len(queries) * k // chunk)):  # the (rows, k, places) window

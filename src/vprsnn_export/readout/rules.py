@@ -30,7 +30,7 @@ def softmax_finish(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def probability_term(probability: np.ndarray, eps: float) -> np.ndarray:
-    """The sum rule's term of one frame: :math:`\tilde P_m(l)` itself."""
+    r"""The sum rule's term of one frame: :math:`\tilde P_m(l)` itself."""
     return probability
 
 
