@@ -29,8 +29,8 @@ from .kernel_sums import (
     ANY3,
     SPIKES,
     _all_step_lists,
-    _column_blocks,
     _numpy,
+    _column_blocks,
     _tile_currents,
     as_spike_array,
     compiled,
@@ -77,18 +77,19 @@ def _float_kernel(
     lane_value = np.empty(LANES, dtype=np.float32)
     lane_index = np.empty(LANES, dtype=np.int64)
     current_store = np.empty(chunk * timesteps * tile, dtype=np.float32)
-    tile_store = np.empty(n_inputs * tile, dtype=np.float32)
+    store = np.empty(n_inputs * tile if n > 1 else 0, dtype=np.float32)  # none for a lone presentation: in place
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
         current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
-        _column_blocks(weights, g0, width, column, tile_store)
+        if store.shape[0] > 0:
+            _column_blocks(weights, g0, width, column, store)
         tile_theta = theta[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.float32)
         candidate = np.zeros(width, dtype=np.bool_)
         masked = np.empty(width, dtype=np.float32)  # I_j of the candidates, -inf elsewhere
         for p0 in range(0, n, chunk):
             p1 = min(n, p0 + chunk)
-            _tile_currents(tile_store, n_inputs, width, column, index, offsets, p0, p1, current)
+            _tile_currents(weights, store, g0, width, column, index, offsets, p0, p1, current)
             for p in range(p0, p1):
                 if isolation:
                     voltage[:] = 0

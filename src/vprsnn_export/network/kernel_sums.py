@@ -111,9 +111,10 @@ def _all_step_lists(spikes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @compiled
-def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray) -> None:
-    """total_j = (((0 + w_{i_1 j}) + w_{i_2 j}) + ...) + w_{i_k j}: the weight rows of the active inputs
-    index[:k], summed in float32 in increasing input order (the same on every CPU; 0 when none is active).
+def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray, offset: int = 0) -> None:
+    """total_j = (((0 + w_{i_1, o+j}) + w_{i_2, o+j}) + ...) + w_{i_k, o+j}: the weight rows of the active inputs
+    index[:k] from column o = ``offset`` on, summed in float32 in increasing input order (the same on every CPU;
+    0 when none is active).
 
     Eight rows are added per pass over ``total``, still one after another in that order, so each number is
     the same as one row per pass with an eighth of the loads and stores of ``total`` (30 % faster).
@@ -126,12 +127,13 @@ def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray) 
         r0, r1, r2, r3 = weights[index[a]], weights[index[a + 1]], weights[index[a + 2]], weights[index[a + 3]]
         r4, r5, r6, r7 = weights[index[a + 4]], weights[index[a + 5]], weights[index[a + 6]], weights[index[a + 7]]
         for j in range(n):
-            total[j] = (((((((total[j] + r0[j]) + r1[j]) + r2[j]) + r3[j]) + r4[j]) + r5[j]) + r6[j]) + r7[j]
+            o = offset + j
+            total[j] = (((((((total[j] + r0[o]) + r1[o]) + r2[o]) + r3[o]) + r4[o]) + r5[o]) + r6[o]) + r7[o]
         a += 8
     for b in range(a, k):
         row = weights[index[b]]
         for j in range(n):
-            total[j] += row[j]
+            total[j] += row[offset + j]
 
 
 @compiled
@@ -148,9 +150,29 @@ def _column_blocks(weights: np.ndarray, g0: int, width: int, column: int, store:
 
 
 @compiled
+def _block_currents(
+    weights: np.ndarray,
+    offset: int,
+    c0: int,
+    columns: int,
+    index: np.ndarray,
+    offsets: np.ndarray,
+    p0: int,
+    p1: int,
+    current: np.ndarray,
+) -> None:
+    """current[p - p0, t, c0:c0 + columns] = the rows of step (p, t)'s active inputs from column ``offset`` on."""
+    for p in range(p0, p1):
+        for t in range(current.shape[1]):
+            first, last = offsets[p, t], offsets[p, t + 1]
+            _row_sum(weights, index[first:last], last - first, current[p - p0, t, c0 : c0 + columns], offset)
+
+
+@compiled
 def _tile_currents(
+    weights: np.ndarray,
     store: np.ndarray,
-    n_inputs: int,
+    g0: int,
     width: int,
     column: int,
     index: np.ndarray,
@@ -159,16 +181,19 @@ def _tile_currents(
     p1: int,
     current: np.ndarray,
 ) -> None:
-    """current[p - p0, t] = the tile's currents (:func:`_row_sum`) of presentations [p0, p1) at every step,
-    one column block of :func:`_column_blocks` at a time (its weights stay in cache across the presentations)."""
+    """current[p - p0, t] = the currents (:func:`_row_sum`) of the tile's neurons [g0, g0 + width) for presentations
+    [p0, p1) at every step, one column block of ``column`` neurons at a time: from the tile's blocks in ``store``
+    (:func:`_column_blocks`: its weights stay in cache across the presentations), or with an empty ``store`` (a lone
+    presentation's: copying 169 MB of weights to sum one frame's rows cost 4x the sums) from the (inputs, neurons)
+    weights in place."""
+    n_inputs = weights.shape[0]
     for c0 in range(0, width, column):
         columns = min(column, width - c0)
-        block_weights = store[n_inputs * c0 : n_inputs * (c0 + columns)].reshape((n_inputs, columns))
-        for p in range(p0, p1):
-            for t in range(current.shape[1]):
-                first, last = offsets[p, t], offsets[p, t + 1]
-                total = current[p - p0, t, c0 : c0 + columns]
-                _row_sum(block_weights, index[first:last], last - first, total)
+        if store.shape[0] == 0:
+            _block_currents(weights, g0 + c0, c0, columns, index, offsets, p0, p1, current)
+        else:
+            block = store[n_inputs * c0 : n_inputs * (c0 + columns)].reshape((n_inputs, columns))
+            _block_currents(block, 0, c0, columns, index, offsets, p0, p1, current)
 
 
 # Every compiled kernel is called from Python only through a checked entry point beside it, which

@@ -72,20 +72,21 @@ def _integer_kernel(
     """
     n, timesteps, n_inputs = spikes.shape
     index, offsets = _all_step_lists(spikes)
-    tile_store = np.empty(n_inputs * tile, dtype=mantissas.dtype)
     saturations = 0
     peak = np.int64(0)
+    store = np.empty(n_inputs * tile if n > 1 else 0, dtype=mantissas.dtype)  # none for a lone presentation: in place
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
         current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
-        _column_blocks(mantissas, g0, width, column, tile_store)
+        if store.shape[0] > 0:
+            _column_blocks(mantissas, g0, width, column, store)
         tile_threshold = threshold[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.int64)
         candidate = np.zeros(width, dtype=np.bool_)
         for p in range(n):
             if p % chunk == 0:
                 p1 = min(n, p + chunk)
-                _tile_currents(tile_store, n_inputs, width, column, index, offsets, p, p1, current)
+                _tile_currents(mantissas, store, g0, width, column, index, offsets, p, p1, current)
             if isolation:
                 voltage[:] = 0
             for t in range(timesteps):
