@@ -155,3 +155,19 @@ def test_integer_kernel_tiles_and_threads_change_no_number(isolation, group, thr
     for field in ("counts", "candidates_per_step", "raster", "final_voltage"):
         assert torch.equal(getattr(one, field), getattr(many, field)), field
     assert (one.saturations, one.max_current) == (many.saturations, many.max_current) and one.saturations > 0
+
+
+@pytest.mark.parametrize("group", [None, 4])
+def test_integer_kernel_lone_presentations_read_in_place_are_their_rows_of_the_batch(group, monkeypatch):
+    """A lone presentation's integer currents read the mantissas in place, a batch's from copied tiles: the same."""
+    monkeypatch.setattr(parallel, "TILE_NEURONS", 4)
+    gen = np.random.default_rng(6)
+    q = gen.integers(0, 16, size=(30, 12))
+    spikes = (gen.random((4, 40, 30)) < 0.2).astype(np.uint8)
+    args = dict(shift=2, keep=4096 - 300, limit=900, wta=True, isolation=True, record=True, group=group)
+    threshold = gen.integers(50, 200, size=12) << 2
+    batch = integer_run(spikes, q, threshold, None, **args)
+    for p in range(len(spikes)):
+        alone = integer_run(spikes[p : p + 1], q, threshold, None, **args)
+        for field in ("counts", "raster", "final_voltage"):
+            assert torch.equal(getattr(alone, field)[0], getattr(batch, field)[p]), field

@@ -104,3 +104,18 @@ def test_wide_wta_groups_pick_the_first_largest_candidate_as_run_network(group):
         fast = float_run(spikes, weights, theta, beta=0.95, record=True, group=group)
         assert int(slow.candidates_per_step.max()) > 16
         assert torch.equal(fast.raster, slow.raster) and torch.equal(fast.counts, slow.counts)
+
+
+@pytest.mark.parametrize(("group", "threads"), [(None, 1), (4, 1), (4, 2)])
+def test_a_lone_presentation_read_in_place_is_its_row_of_the_batch(group, threads, monkeypatch):
+    """A lone presentation's currents read the weights in place (tiles from column 4, 8 on; threads over groups),
+    a batch's from its copied tiles: every presentation alone gives its row of the batch, bit for bit."""
+    monkeypatch.setattr(parallel, "TILE_NEURONS", 4)
+    spikes, weights, theta = float_case(17, n=4, n_neurons=12)
+    weights = weights * torch.logspace(-3, 2, 12)  # magnitudes apart: an order of the sums would show
+    kw = dict(beta=0.9, record=True, group=group, threads=threads)
+    batch = float_run(spikes, weights, theta, **kw)
+    for p in range(len(spikes)):
+        alone = float_run(spikes[p : p + 1], weights, theta, **kw)
+        for field in ("counts", "raster", "final_voltage"):
+            assert torch.equal(getattr(alone, field)[0], getattr(batch, field)[p]), field
