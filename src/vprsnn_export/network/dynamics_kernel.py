@@ -81,8 +81,7 @@ def _float_kernel(
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
         current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
-        if store.shape[0] > 0:
-            _column_blocks(weights, g0, width, column, store)
+        _column_blocks(weights, g0, width, column, store)
         tile_theta = theta[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.float32)
         candidate = np.zeros(width, dtype=np.bool_)

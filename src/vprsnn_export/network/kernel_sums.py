@@ -117,7 +117,7 @@ def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray, 
     0 when none is active).
 
     Eight rows are added per pass over ``total``, still one after another in that order, so each number is
-    the same as one row per pass with an eighth of the loads and stores of ``total`` (30 % faster).
+    the same as one row per pass with an eighth of the loads and stores of ``total`` (1.2-1.5x at 27k neurons).
     """
     n = total.shape[0]
     for j in range(n):
@@ -139,7 +139,10 @@ def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray, 
 @compiled
 def _column_blocks(weights: np.ndarray, g0: int, width: int, column: int, store: np.ndarray) -> None:
     """Copy the tile weights[:, g0:g0 + width] into ``store`` as contiguous (inputs, columns) blocks of ``column``
-    neurons, block after block (:func:`_tile_currents` reads them)."""
+    neurons, block after block (:func:`_tile_currents` reads them); nothing into an empty ``store`` (a lone
+    presentation's, read in place)."""
+    if store.shape[0] == 0:
+        return
     n_inputs = weights.shape[0]
     for c0 in range(0, width, column):
         columns = min(column, width - c0)

@@ -78,8 +78,7 @@ def _integer_kernel(
     for g0 in range(start, stop, tile):
         width = min(tile, stop - g0)
         current = current_store[: chunk * timesteps * width].reshape((chunk, timesteps, width))
-        if store.shape[0] > 0:
-            _column_blocks(mantissas, g0, width, column, store)
+        _column_blocks(mantissas, g0, width, column, store)
         tile_threshold = threshold[g0 : g0 + width].copy()
         voltage = np.zeros(width, dtype=np.int64)
         candidate = np.zeros(width, dtype=np.bool_)
