@@ -24,19 +24,24 @@ from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import shift_window
-from .assignment import NO_MATCH, wprob_distribution
+from .assignment import NO_MATCH, finite_array, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
 _MAX_ELEMENTS: Final[int] = 4_000_000
 
 
-def _images(name: str, a: np.ndarray) -> np.ndarray:
-    arr = real_array(name, a)
-    if arr.ndim != 2:
-        raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidValueError(f"{name} contains NaN or infinite values")
-    return arr
+def _images(reference: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference and query images as finite float64 (n_images, n_pixels) arrays of the same width."""
+    arrays = []
+    for name, a in (("reference", reference), ("queries", queries)):
+        arr = real_array(name, a)
+        if arr.ndim != 2:
+            raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
+        arrays.append(finite_array(name, arr))
+    ref, qry = arrays
+    if ref.shape[1] != qry.shape[1]:
+        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+    return ref, qry
 
 
 def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -48,10 +53,7 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     flattened preprocessed images. Computed over chunks of queries so that the
     ``(chunk, n_places, D)`` difference array stays below ~4M elements.
     """
-    ref = _images("reference", reference)
-    qry = _images("queries", queries)
-    if ref.shape[1] != qry.shape[1]:
-        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+    ref, qry = _images(reference, queries)
     n_q, n_p = qry.shape[0], ref.shape[0]
     out = np.empty((n_q, n_p), dtype=np.float64)
     per_query = max(1, n_p * ref.shape[1])
@@ -88,10 +90,7 @@ def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarra
     .. math:: C_{ql} = \\frac{Q_q \\cdot R_l}{\\lVert Q_q \\rVert \\, \\lVert R_l \\rVert}
               \\quad (0 \\text{ for an all-zero image})
     """
-    ref = _images("reference", reference)
-    qry = _images("queries", queries)
-    if ref.shape[1] != qry.shape[1]:
-        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+    ref, qry = _images(reference, queries)
 
     def unit(a: np.ndarray) -> np.ndarray:
         norm = np.linalg.norm(a, axis=1, keepdims=True)

@@ -20,6 +20,8 @@ from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass, json_options
 
+from .assignment import finite_array
+
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 
 
@@ -97,9 +99,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
         if not np.all((c == 0) | (c == 1)):
             raise InvalidValueError("correct must be boolean (or 0/1)")
         c = c.astype(bool)
-    if not np.all(np.isfinite(conf)):
-        raise InvalidValueError("confidence contains NaN or infinite values")
-    return c, conf
+    return c, finite_array("confidence", conf)
 
 
 def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:

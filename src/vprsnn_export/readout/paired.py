@@ -23,6 +23,8 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
 
+from .assignment import finite_array
+
 #: The metrics the bootstrap measures on each resample (readout.metrics.pr_metrics' keys).
 PAIRED_METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 #: The verdicts of one check.
@@ -293,9 +295,7 @@ def _pair(a: np.ndarray, b: np.ndarray, *, second_real: bool = False) -> tuple[n
     if x.dtype != np.bool_:
         raise InvalidValueError("correctness must be a boolean array")
     if second_real:
-        y = y.astype(np.float64)
-        if not np.all(np.isfinite(y)):
-            raise InvalidValueError("confidence contains NaN or infinite values")
+        y = finite_array("confidence", y)
     elif y.dtype != np.bool_:
         raise InvalidValueError("correctness must be a boolean array")
     return x, y

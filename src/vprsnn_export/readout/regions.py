@@ -34,6 +34,7 @@ from scipy import sparse
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
 from .assignment import entry_rows, like_input, sparse_counts
@@ -203,7 +204,7 @@ def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.nd
 
 
 @dataclass(frozen=True)
-class ModuleAccuracy:
+class ModuleAccuracy(JsonDataclass):
     """How the whole-route decisions fare on the queries of one module's region."""
 
     module: int
@@ -212,9 +213,6 @@ class ModuleAccuracy:
     n_queries: int
     accuracy: float  # correct decisions / queries of the region
     in_region: float  # decisions that name a place of the region / queries of the region (the right module won)
-
-    def to_dict(self) -> dict[str, float | int]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
 def module_accuracy(

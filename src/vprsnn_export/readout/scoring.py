@@ -10,7 +10,7 @@ settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.rea
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 from scipy import sparse
@@ -25,25 +25,13 @@ from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, pr_metrics, predicted_place_ids
 from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
-from .scored import Scored, decided_column, judged_column, readout_columns
+from .scored import Scored, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
 from .stream import ReadoutStream
 
 #: Queries read out at once by :meth:`Readout.score_in_blocks` (its default).
 READOUT_BLOCK = 1024
-
-
-def decision_metrics(
-    distribution: np.ndarray,
-    strategy: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    truth: Truth,
-) -> dict:
-    """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
-    column = decided_column(strategy, 1, distribution, reference_place_ids, query_place_ids, truth)
-    return pr_metrics(*column.decisions)
 
 
 def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
@@ -65,12 +53,14 @@ def baseline_rows(
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
-    rows = []
-    for k in sorted(set(options.ks)):
-        dist = options.aggregate(distribution, k, frame_positions)
-        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)
-        rows.append(metric_row("sad", k, metrics))
-    return rows
+    return _judged_rows(
+        "sad",
+        lambda k: decide(options.aggregate(distribution, k, frame_positions), "wprob"),
+        reference_place_ids,
+        query_place_ids,
+        options,
+        truth,
+    )
 
 
 def nearest_neighbour_rows(
@@ -85,27 +75,31 @@ def nearest_neighbour_rows(
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    decisions = nearest_neighbour_decisions(
-        similarities, reference_place_ids, query_place_ids, options, truth, frame_positions
+    return _judged_rows(
+        name,
+        lambda k: nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions)),
+        reference_place_ids,
+        query_place_ids,
+        options,
+        truth,
     )
-    return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
 
 
-def nearest_neighbour_decisions(
-    similarities: np.ndarray,
+def _judged_rows(
+    name: str,
+    decided: Callable[[int], tuple[np.ndarray, np.ndarray]],
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
-) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
-    out = {}
+) -> list[MetricRow]:
+    """Per k of ``options``: the metric row (strategy ``name``) of ``decided(k)``'s (predicted index, confidence)."""
+    rows = []
     for k in sorted(set(options.ks)):
-        summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
-        predicted, confidence = nearest_neighbour(summed)
-        out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
-    return out
+        index, confidence = decided(k)
+        correct = truth.correct(predicted_place_ids(index, np.asarray(reference_place_ids)), query_place_ids)
+        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
+    return rows
 
 
 def check_readout_arrays(
@@ -113,20 +107,23 @@ def check_readout_arrays(
 ) -> None:
     """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
     id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
-    shapes = {name: np.shape(value) for name, value in (("calibration", calibration), ("query_counts", query_counts))}
-    ids = {"reference_place_ids": np.shape(reference_place_ids), "query_place_ids": np.shape(query_place_ids)}
-    for name, shape in {**shapes, **ids}.items():
-        if len(shape) != (2 if name in shapes else 1):
-            raise InvalidValueError(f"{name} has shape {shape}, expected {2 if name in shapes else 1}-D")
-    if shapes["calibration"][1] != ids["reference_place_ids"][0]:
+    arrays = {"calibration": calibration, "query_counts": query_counts}
+    for name, value in {
+        **arrays,
+        "reference_place_ids": reference_place_ids,
+        "query_place_ids": query_place_ids,
+    }.items():
+        if np.ndim(value) != (2 if name in arrays else 1):
+            raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
+    (neurons, places), (n_references,), (n_queries,) = map(
+        np.shape, (calibration, reference_place_ids, query_place_ids)
+    )
+    if places != n_references:
+        raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
+    if np.shape(query_counts) != (n_queries, neurons):
         raise InvalidValueError(
-            f"calibration covers {shapes['calibration'][1]} places but reference_place_ids names "
-            f"{ids['reference_place_ids'][0]}"
-        )
-    if shapes["query_counts"] != (ids["query_place_ids"][0], shapes["calibration"][0]):
-        raise InvalidValueError(
-            f"query_counts has shape {shapes['query_counts']}, expected ({ids['query_place_ids'][0]}, "
-            f"{shapes['calibration'][0]}): one row per query id, one column per neuron of the calibration"
+            f"query_counts has shape {np.shape(query_counts)}, expected ({n_queries}, {neurons}): one row per query "
+            "id, one column per neuron of the calibration"
         )
 
 

@@ -22,7 +22,7 @@ from vprsnn_export.registry import Registry
 
 from .assignment import (
     NO_MATCH,
-    _scores2d,
+    _matrix,
     distribution_decision,
     share_decision,
     standard_scores,
@@ -103,7 +103,7 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     InvalidValueError for a strategy that is not registered.
     """
     entry = STRATEGIES.get(require_strategy(strategy))
-    s = _scores2d(scores)
+    s = _matrix("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     no_match, conf = entry.decision(s)
     pred[no_match] = NO_MATCH
