@@ -23,7 +23,7 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import shift_window
+from .aggregation import _count, shift_window
 from .assignment import NO_MATCH, finite_array, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
@@ -108,10 +108,15 @@ def sad_similarities(distances: np.ndarray) -> np.ndarray:
     :func:`nearest_neighbour` are those of ``-D``; but a window that reaches beyond the map adds 0 for
     the missing frame, which must not beat a real (negative) score.
     """
-    d = np.asarray(distances, dtype=np.float64)
-    if d.ndim != 2 or d.shape[1] == 0 or not np.all(np.isfinite(d)):
-        raise InvalidValueError(f"distances must be a finite 2-D array with at least one place, got shape {d.shape}")
+    d = _similarities("distances", distances)
     return d.max(axis=1, keepdims=True) - d
+
+
+def _similarities(name: str, values: np.ndarray) -> np.ndarray:
+    s = np.asarray(values, dtype=np.float64)
+    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
+        raise InvalidValueError(f"{name} must be a finite 2-D array with at least one place, got shape {s.shape}")
+    return s
 
 
 def diagonal_sums(
@@ -130,8 +135,7 @@ def diagonal_sums(
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or not np.all(np.isfinite(s)):
         raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
-    if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
-        raise InvalidValueError(f"k must be an integer >= 1, got {k!r}")
+    k = _count("k", k, 1)
     if np.any(s < 0):
         raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
     if k == 1:
@@ -140,10 +144,10 @@ def diagonal_sums(
     t = np.arange(n_queries, dtype=np.float64) if frame_positions is None else np.asarray(frame_positions, np.float64)
     v = np.full(n_queries, float(velocity))
     out = np.empty_like(s)
-    chunk = max(1, _MAX_ELEMENTS // (int(k) * max(1, n_places)))
+    chunk = max(1, _MAX_ELEMENTS // (k * max(1, n_places)))
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
-        shifted, _ = shift_window(s, queries, int(k), v, t)
+        shifted, _ = shift_window(s, queries, k, v, t)
         out[queries] = shifted.sum(axis=1)
     return out
 
@@ -156,9 +160,7 @@ def nearest_neighbour(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Ties go to the lowest index; a query whose scores are all equal is a no-match (index -1,
     confidence 0); with one place the confidence is 0.
     """
-    s = np.asarray(scores, dtype=np.float64)
-    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
-        raise InvalidValueError(f"scores must be a finite 2-D array with at least one place, got shape {s.shape}")
+    s = _similarities("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     if s.shape[1] == 1:
         return pred, np.zeros(s.shape[0])

@@ -55,9 +55,7 @@ def binomial_cdf(x: int, n: int, p: float) -> float:
     """
     if x < 0:
         return 0.0
-    if x >= n:
-        return 1.0
-    if p <= 0.0:
+    if x >= n or p <= 0.0:
         return 1.0
     if p >= 1.0:
         return 0.0
@@ -227,11 +225,8 @@ def paired_bootstrap(
         for m in PAIRED_METRICS:
             deltas[m].append(d[m] - f[m])
     alpha = 1.0 - level
-    out = {}
-    for m in PAIRED_METRICS:
-        low, high = np.quantile(np.concatenate(deltas[m]), [alpha / 2, 1 - alpha / 2])
-        out[m] = (float(low), float(high))
-    return out
+    quantiles = {m: np.quantile(np.concatenate(deltas[m]), [alpha / 2, 1 - alpha / 2]) for m in PAIRED_METRICS}
+    return {m: (float(low), float(high)) for m, (low, high) in quantiles.items()}
 
 
 # ---------------------------------------------------------------------------- the verdict

@@ -46,21 +46,6 @@ class Column:
         return precision, recall
 
 
-def decided_column(
-    strategy: str,
-    k: int,
-    distribution: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray | None,
-    truth: Truth | None,
-) -> Column:
-    """The decisions of one score matrix (Q, places) under ``strategy``, judged by ``truth`` (None: unlabelled).
-
-    .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\quad \\mathrm{correct}_q = \\mathrm{truth}(\\mathrm{id}(\\hat l_q), q)
-    """
-    return judged_column(strategy, k, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
-
-
 def judged_column(
     strategy: str,
     k: int,
@@ -111,9 +96,12 @@ class Scored:
         query_place_ids: np.ndarray | None,
         truth: Truth | None,
     ) -> Scored:
-        """Every readout column of these scores, each decided once."""
+        """Every readout column of these scores, each decided once and judged by ``truth`` (None: unlabelled):
+
+        .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\quad \\mathrm{correct}_q = \\mathrm{truth}(\\mathrm{id}(\\hat l_q), q)
+        """
         columns = tuple(
-            decided_column(s, k, m, reference_place_ids, query_place_ids, truth)
+            judged_column(s, k, *decide(m, s), reference_place_ids, query_place_ids, truth)
             for s, k, m in readout_columns(scores, aggregates)
         )
         return cls(columns, scores, aggregates, np.asarray(reference_place_ids), query_place_ids, truth)
@@ -144,6 +132,5 @@ class Scored:
         whose true place (by the same truth) lies in its region (:func:`~.regions.module_accuracy`)."""
         assert self.query_place_ids is not None and self.truth is not None, "unlabelled queries have no regions"
         column = self.column(SEQUENCE_STRATEGY, k)
-        correct = column.decisions[0]
         true_index, known = self.truth.first_true(self.reference_place_ids, self.query_place_ids)
-        return module_accuracy(column.index, correct, self.reference_place_ids, regions, true_index, known)
+        return module_accuracy(column.index, column.decisions[0], self.reference_place_ids, regions, true_index, known)

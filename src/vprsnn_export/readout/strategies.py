@@ -59,19 +59,20 @@ class Strategy:
     of_base: Callable[[np.ndarray], np.ndarray] | None = None
 
 
-def _standard(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
-    return standard_scores(sr, sq)
-
-
-def _wprob(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
-    return wprob_distribution(weighted_scores(sr, sq, gamma))
-
-
 STRATEGIES: Registry[Strategy] = Registry("strategy")
-STRATEGIES.register(Strategy("standard", "Standard", _standard, share_decision, needs_gamma=False))
+STRATEGIES.register(
+    Strategy("standard", "Standard", lambda sr, sq, gamma: standard_scores(sr, sq), share_decision, needs_gamma=False)
+)
 STRATEGIES.register(Strategy("weighted", "Weighted", weighted_scores, share_decision))
 STRATEGIES.register(
-    Strategy("wprob", "W+Prob", _wprob, distribution_decision, base="weighted", of_base=wprob_distribution)
+    Strategy(
+        "wprob",
+        "W+Prob",
+        lambda sr, sq, gamma: wprob_distribution(weighted_scores(sr, sq, gamma)),
+        distribution_decision,
+        base="weighted",
+        of_base=wprob_distribution,
+    )
 )
 
 
