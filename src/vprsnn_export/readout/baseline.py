@@ -54,14 +54,10 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     ``(chunk, n_places, D)`` difference array stays below ~4M elements.
     """
     ref, qry = _images(reference, queries)
-    n_q, n_p = qry.shape[0], ref.shape[0]
-    out = np.empty((n_q, n_p), dtype=np.float64)
-    per_query = max(1, n_p * ref.shape[1])
-    chunk = max(1, _MAX_ELEMENTS // per_query)
-    for start in range(0, n_q, chunk):
-        stop = min(start + chunk, n_q)
-        diff = np.abs(qry[start:stop, None, :] - ref[None, :, :])
-        out[start:stop] = diff.sum(axis=2)
+    out = np.empty((qry.shape[0], ref.shape[0]), dtype=np.float64)
+    chunk = max(1, _MAX_ELEMENTS // max(1, ref.size))
+    for start in range(0, qry.shape[0], chunk):
+        out[start : start + chunk] = np.abs(qry[start : start + chunk, None, :] - ref[None, :, :]).sum(axis=2)
     return out
 
 

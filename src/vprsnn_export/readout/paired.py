@@ -287,10 +287,6 @@ def _pair(a: np.ndarray, b: np.ndarray, *, second_real: bool = False) -> tuple[n
     x, y = np.asarray(a), np.asarray(b)
     if x.ndim != 1 or y.shape != x.shape:
         raise InvalidValueError(f"paired arrays must be 1-D of equal length, got {x.shape} and {y.shape}")
-    if x.dtype != np.bool_:
+    if x.dtype != np.bool_ or not (second_real or y.dtype == np.bool_):
         raise InvalidValueError("correctness must be a boolean array")
-    if second_real:
-        y = finite_array("confidence", y)
-    elif y.dtype != np.bool_:
-        raise InvalidValueError("correctness must be a boolean array")
-    return x, y
+    return x, finite_array("confidence", y) if second_real else y

@@ -135,11 +135,8 @@ class SequenceOptions:
         Aggregation assumes the query stream is a traversal (consecutive place ids, in order, at the
         velocity); on a subset spread along the route its windows mix unrelated places.
         """
-        ids = np.asarray(query_place_ids)
-        if max(self.ks) <= 1 or ids.size < 2:
-            return None
-        steps = np.abs(np.diff(ids))
-        if np.all(steps <= 2):
+        steps = np.abs(np.diff(np.asarray(query_place_ids)))
+        if max(self.ks) <= 1 or np.all(steps <= 2):  # fewer than two queries: no step
             return None
         return (
             f"sequence aggregation (k up to {max(self.ks)}) on queries that are not consecutive places: "
