@@ -10,7 +10,7 @@ settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.rea
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 
 import numpy as np
 from scipy import sparse
@@ -44,6 +44,18 @@ def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
     return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
+def decision_metrics(
+    distribution: np.ndarray,
+    strategy: str,
+    reference_place_ids: np.ndarray,
+    query_place_ids: np.ndarray,
+    truth: Truth,
+) -> dict:
+    """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
+    column = judged_column(strategy, 1, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
+    return pr_metrics(*column.decisions)
+
+
 def baseline_rows(
     distribution: np.ndarray,
     reference_place_ids: np.ndarray,
@@ -53,14 +65,20 @@ def baseline_rows(
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
-    return _judged_rows(
-        "sad",
-        lambda k: decide(options.aggregate(distribution, k, frame_positions), "wprob"),
-        reference_place_ids,
-        query_place_ids,
-        options,
-        truth,
-    )
+    return [
+        metric_row(
+            "sad",
+            k,
+            decision_metrics(
+                options.aggregate(distribution, k, frame_positions),
+                "wprob",
+                reference_place_ids,
+                query_place_ids,
+                truth,
+            ),
+        )
+        for k in sorted(set(options.ks))
+    ]
 
 
 def nearest_neighbour_rows(
@@ -75,31 +93,26 @@ def nearest_neighbour_rows(
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    return _judged_rows(
-        name,
-        lambda k: nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions)),
-        reference_place_ids,
-        query_place_ids,
-        options,
-        truth,
+    decisions = nearest_neighbour_decisions(
+        similarities, reference_place_ids, query_place_ids, options, truth, frame_positions
     )
+    return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
 
 
-def _judged_rows(
-    name: str,
-    decided: Callable[[int], tuple[np.ndarray, np.ndarray]],
+def nearest_neighbour_decisions(
+    similarities: np.ndarray,
     reference_place_ids: np.ndarray,
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-) -> list[MetricRow]:
-    """Per k of ``options``: the metric row (strategy ``name``) of ``decided(k)``'s (predicted index, confidence)."""
-    rows = []
+    frame_positions: np.ndarray | None = None,
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
+    out = {}
     for k in sorted(set(options.ks)):
-        index, confidence = decided(k)
-        correct = truth.correct(predicted_place_ids(index, np.asarray(reference_place_ids)), query_place_ids)
-        rows.append(metric_row(name, k, pr_metrics(correct, confidence)))
-    return rows
+        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions))
+        out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
+    return out
 
 
 def check_readout_arrays(
