@@ -186,8 +186,7 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     ``Active_q`` = neurons with at least one spike in query q. The factor is 0
     for a place whose calibration column sum is 0 (integer sums: exact).
     """
-    sr_, sq_ = _pair(sr, sq)
-    return _penalty(sr_, sq_)
+    return _penalty(*_pair(sr, sq))
 
 
 def _penalty(sr: sparse.csr_array, sq: sparse.csr_array) -> np.ndarray:

@@ -11,7 +11,7 @@ confidences are never split: they are accepted or rejected together.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -212,6 +212,11 @@ class MetricRow(JsonDataclass):
         return MetricRow(
             self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
         )
+
+
+def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
+    """The typed row of one readout from :func:`pr_metrics`' values."""
+    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
 
 
 def find_row(rows: Sequence[MetricRow], strategy: str, k: int) -> MetricRow | None:

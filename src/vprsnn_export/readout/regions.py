@@ -109,8 +109,7 @@ def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray
         raise InvalidValueError(
             f"sr has shape {sr.shape} but the module layout describes {shape[0]} neurons x {shape[1]} places"
         )
-    rows = entry_rows(sr)
-    return neuron_modules(shape[0], group)[rows] == np.searchsorted(regions[:, 1], sr.indices, side="right")
+    return neuron_modules(shape[0], group)[entry_rows(sr)] == np.searchsorted(regions[:, 1], sr.indices, side="right")
 
 
 def _scaled(sr: sparse.csr_array, factor: np.ndarray) -> sparse.csr_array:

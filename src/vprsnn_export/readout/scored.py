@@ -16,7 +16,7 @@ import numpy as np
 
 from vprsnn_export.data.truth import Truth
 
-from .metrics import MetricRow, pr_curve, pr_metrics, predicted_place_ids
+from .metrics import MetricRow, metric_row, pr_curve, pr_metrics, predicted_place_ids
 from .regions import ModuleAccuracy, module_accuracy
 from .strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 
@@ -63,8 +63,9 @@ def judged_column(
     if query_place_ids is None or truth is None:
         return Column(strategy, k, index, ids, confidence, None, None)
     correct = truth.correct(ids, query_place_ids)
-    row = MetricRow.from_dict({"strategy": strategy, "k": k, **pr_metrics(correct, confidence)})
-    return Column(strategy, k, index, ids, confidence, correct, row)
+    return Column(
+        strategy, k, index, ids, confidence, correct, metric_row(strategy, k, pr_metrics(correct, confidence))
+    )
 
 
 def readout_columns(

@@ -10,7 +10,6 @@ settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.rea
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
 
 import numpy as np
 from scipy import sparse
@@ -23,7 +22,7 @@ from vprsnn_export.errors import InvalidValueError
 
 from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
-from .metrics import MetricRow, pr_metrics, predicted_place_ids
+from .metrics import MetricRow, metric_row, pr_metrics, predicted_place_ids
 from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
 from .scored import Scored, judged_column, readout_columns
 from .sequence import SequenceOptions
@@ -32,11 +31,6 @@ from .stream import ReadoutStream
 
 #: Queries read out at once by :meth:`Readout.score_in_blocks` (its default).
 READOUT_BLOCK = 1024
-
-
-def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
-    """The typed row of one readout from :func:`~vprsnn_export.readout.metrics.pr_metrics`' values."""
-    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
 
 
 def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
