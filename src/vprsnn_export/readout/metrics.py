@@ -205,7 +205,8 @@ class MetricRow(JsonDataclass):
         """``row.accuracy`` and the other :data:`METRICS`: the row's values."""
         if name not in METRICS:
             raise AttributeError(name)
-        return float(getattr(self.values, name))
+        value: float = getattr(self.values, name)
+        return value
 
     def with_float(self, base: MetricRow) -> MetricRow:
         """This row with the float row's values and the differences (this - float)."""
