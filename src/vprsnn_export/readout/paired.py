@@ -74,9 +74,7 @@ def mcnemar_exact(b: int, c: int) -> float:
 
     (p = 1 when n = 0).
     """
-    if b < 0 or c < 0:
-        raise InvalidValueError(f"discordant counts must be >= 0, got b={b}, c={c}")
-    n = b + c
+    n = b + c  # b, c: the counts of :func:`flips`
     return 1.0 if n == 0 else min(1.0, 2.0 * binomial_cdf(min(b, c), n, 0.5))
 
 
