@@ -241,8 +241,7 @@ def module_accuracy(
     totals = np.bincount(modules, minlength=n_modules)
     hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
     inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
-    share = np.divide(hits, totals, out=np.zeros(n_modules), where=totals > 0)
-    routed = np.divide(inside, totals, out=np.zeros(n_modules), where=totals > 0)
+    share, routed = np.divide([hits, inside], totals, out=np.zeros((2, n_modules)), where=totals > 0)
     return [
         ModuleAccuracy(
             module=m,

@@ -190,7 +190,10 @@ class Readout:
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
         check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
-        self.options.check_length(len(query_place_ids))
+        if max(self.options.ks) > len(query_place_ids):  # no full window exists
+            raise InvalidValueError(
+                f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
+            )
         truth.check_overlap(reference_place_ids, query_place_ids)
         return truth
 

@@ -124,11 +124,6 @@ class SequenceOptions:
             return estimator.estimate(distribution, k, np.asarray(self.velocity_candidates), frame_positions, self)[1]
         return aggregate(distribution, k, self.velocity, rule=self.rule, frame_positions=frame_positions)
 
-    def check_length(self, n_queries: int) -> None:
-        """InvalidValueError when a sequence length k exceeds the number of queries (no full window exists)."""
-        if max(self.ks) > n_queries:
-            raise InvalidValueError(f"--k {max(self.ks)} exceeds the number of queries ({n_queries})")
-
     def warning(self, query_place_ids: np.ndarray) -> str | None:
         """A warning when sequence aggregation is asked for on queries that are not consecutive places.
 
