@@ -31,6 +31,7 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
+from .assignment import _matrix, finite_array
 from .rules import DEFAULT_RULE, RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
@@ -43,11 +44,7 @@ DEFAULT_MEMORY: Final[int] = 50
 
 
 def _prob2d(prob: np.ndarray) -> np.ndarray:
-    p = real_array("prob", prob)
-    if p.ndim != 2 or p.shape[1] == 0:
-        raise InvalidValueError(f"prob must be 2-D (n_queries, n_places>0), got shape {p.shape}")
-    if not np.all(np.isfinite(p)):
-        raise InvalidValueError("prob contains NaN or infinite values")
+    p = _matrix("prob", prob)
     if np.any(p < 0):
         raise InvalidValueError("prob contains negative values")
     return p
@@ -59,9 +56,7 @@ def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
     t = real_array("frame_positions", frame_positions)
     if t.shape != (n,):
         raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
-    if not np.all(np.isfinite(t)):
-        raise InvalidValueError("frame_positions contains NaN or infinite values")
-    if np.any(np.diff(t) < 0):
+    if np.any(np.diff(finite_array("frame_positions", t)) < 0):
         raise InvalidValueError("frame_positions must be non-decreasing in stream order")
     return t
 
@@ -74,9 +69,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
         v = np.full(n, float(v))
     if v.shape != (n,):
         raise InvalidValueError(f"velocity must be a float or have shape ({n},), got {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise InvalidValueError("velocity contains NaN or infinite values")
-    return v
+    return finite_array("velocity", v)
 
 
 def _count(name: str, value: int, low: int) -> int:
@@ -92,6 +85,15 @@ def _check_args(k: int, rule: str, eps: float) -> int:
     if not (np.isfinite(eps) and eps > 0):
         raise InvalidValueError(f"eps must be a finite value > 0, got {eps}")
     return k
+
+
+def _checked(
+    prob: np.ndarray, k: int, rule: str, eps: float, frame_positions: np.ndarray | None
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """The checked ``prob``, the window length that matters (:func:`_window`) and the frame positions."""
+    p = _prob2d(prob)
+    k = _window(_check_args(k, rule, eps), p.shape[0])
+    return p, k, _positions(frame_positions, p.shape[0])
 
 
 def _window(k: int, n_queries: int) -> int:
@@ -278,11 +280,8 @@ def _aggregate_scored(
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`aggregate` plus each window's score max_l A_j(l) of the un-normalised aggregate (the registered rule's
     ``combine``, :data:`RULES`), which the velocity search maximises."""
-    p = _prob2d(prob)
-    k = _check_args(k, rule, eps)
+    p, k, t = _checked(prob, k, rule, eps, frame_positions)
     n_queries, n_places = p.shape
-    k = _window(k, n_queries)
-    t = _positions(frame_positions, n_queries)
     v = _velocities(velocity, n_queries)
     if k == 1:
         return p.copy(), p.max(axis=1)
@@ -345,11 +344,8 @@ def window_scores(
     each the same numbers as in the full table (a stream scores only its newest window).
     """
     cands = _candidates(candidates)
-    p = _prob2d(prob)
-    k = _check_args(k, rule, eps)
+    p, k, t = _checked(prob, k, rule, eps, frame_positions)
     n_queries, n_places = p.shape
-    k = _window(k, n_queries)
-    t = _positions(frame_positions, n_queries)
     scored = np.arange(n_queries) if windows is None else np.asarray(windows, dtype=np.intp)
     if k == 1:
         return np.repeat(p[scored].max(axis=1)[:, None], cands.size, axis=1)
@@ -368,9 +364,7 @@ def _candidates(candidates: np.ndarray) -> np.ndarray:
     cands = real_array("candidates", candidates).ravel()
     if cands.size == 0:
         raise InvalidValueError("candidates must contain at least one velocity")
-    if not np.all(np.isfinite(cands)):
-        raise InvalidValueError("candidates contains NaN or infinite values")
-    return cands
+    return finite_array("candidates", cands)
 
 
 def estimate_velocity(

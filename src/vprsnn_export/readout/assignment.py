@@ -54,10 +54,20 @@ def once_per_calibration(name: str, sr: np.ndarray, key: tuple, compute: Callabl
     return value
 
 
-def _counts(name: str, a: np.ndarray | sparse.sparray) -> np.ndarray:
-    """Validate a 2-D, finite, non-negative count array and return it as float64 (a sparse array: dense)."""
-    arr = real_array(name, a.toarray() if sparse.issparse(a) else a)  # type: ignore[union-attr]
-    return _checked_counts(name, arr.shape, arr)
+def finite_array(name: str, value: object) -> np.ndarray:
+    """``value`` as a float64 array of finite real numbers; InvalidValueError naming ``name`` otherwise."""
+    arr = real_array(name, value)
+    if not np.all(np.isfinite(arr)):
+        raise InvalidValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def _matrix(name: str, value: object) -> np.ndarray:
+    """``value`` as a finite float64 (rows, columns > 0) array; InvalidValueError naming ``name`` otherwise."""
+    arr = real_array(name, value)
+    if arr.ndim != 2 or arr.shape[1] == 0:
+        raise InvalidValueError(f"{name} must be 2-D (n_queries, n_places>0), got shape {arr.shape}")
+    return finite_array(name, arr)
 
 
 def _checked_counts(name: str, shape: tuple, values: np.ndarray) -> np.ndarray:
@@ -74,11 +84,12 @@ def _checked_counts(name: str, shape: tuple, values: np.ndarray) -> np.ndarray:
 
 def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array:
     """A count array, dense or scipy.sparse, as float64 CSR with its column indices sorted and no stored zeros,
-    checked as :func:`_counts` checks a dense one (2-D, finite, non-negative). A neuron fires for a handful of
+    checked as a dense one (2-D, finite, non-negative). A neuron fires for a handful of
     places and a query reaches a few of the neurons, so S^R and S^Q are mostly zeros: every readout product runs
     over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
     if not sparse.issparse(a) or a.ndim != 2:
-        return sparse.csr_array(_counts(name, a))
+        arr = real_array(name, a.toarray() if sparse.issparse(a) else a)  # type: ignore[union-attr]
+        return sparse.csr_array(_checked_counts(name, arr.shape, arr))
     if isinstance(a, sparse.csr_array) and a.dtype == np.float64 and a.has_canonical_format:
         _checked_counts(name, a.shape, a.data)
         if np.all(a.data != 0):  # already in the readout's form (S~ read block after block): no copy
@@ -106,15 +117,6 @@ def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_
     if sq_.shape[1] != sr_.shape[0]:
         raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {sr_.shape[0]} neurons")
     return sr_, sq_
-
-
-def _scores2d(scores: np.ndarray) -> np.ndarray:
-    arr = real_array("scores", scores)
-    if arr.ndim != 2 or arr.shape[1] == 0:
-        raise InvalidValueError(f"scores must be 2-D (n_queries, n_places>0), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidValueError("scores contain NaN or infinite values")
-    return arr
 
 
 def standard_assignment(sr: np.ndarray) -> np.ndarray:
@@ -184,8 +186,7 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     ``Active_q`` = neurons with at least one spike in query q. The factor is 0
     for a place whose calibration column sum is 0 (integer sums: exact).
     """
-    sr_, sq_ = _pair(sr, sq)
-    return _penalty(sr_, sq_)
+    return _penalty(*_pair(sr, sq))
 
 
 def _penalty(sr: sparse.csr_array, sq: sparse.csr_array) -> np.ndarray:
@@ -224,7 +225,7 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
     Otherwise the best place has normalised score 1, so the L1 sum is >= 1
     and never 0.
     """
-    s = _scores2d(scores)
+    s = _matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
     hi = s.max(axis=1, keepdims=True)
     span = hi - lo
@@ -244,7 +245,7 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     (0 when the sum is 0). Scores must be non-negative, so c lies in [0, 1].
     For W+Prob the confidence is ``max_l P(l | Q)`` instead (:func:`distribution_decision`).
     """
-    s = _scores2d(scores)
+    s = _matrix("scores", scores)
     if np.any(s < 0):
         raise InvalidValueError("share_confidence needs non-negative scores")
     total = s.sum(axis=1)
@@ -258,7 +259,7 @@ def share_decision(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     .. math:: \\mathrm{no\\ match}_q = [\\forall l: \\mathrm{Score}_{ql} = 0], \\qquad
               c_q = \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql}
     """
-    s = _scores2d(scores)
+    s = _matrix("scores", scores)
     return np.all(s == 0, axis=1), share_confidence(s)
 
 
@@ -271,6 +272,6 @@ def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndar
     A flat row (every entry equal, e.g. the uniform distribution of
     :func:`wprob_distribution`) is a no-match.
     """
-    s = _scores2d(distribution)
+    s = _matrix("scores", distribution)
     top = s.max(axis=1)
     return top == s.min(axis=1), top.copy()

@@ -23,20 +23,25 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import shift_window
-from .assignment import NO_MATCH, wprob_distribution
+from .aggregation import _count, shift_window
+from .assignment import NO_MATCH, finite_array, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
 _MAX_ELEMENTS: Final[int] = 4_000_000
 
 
-def _images(name: str, a: np.ndarray) -> np.ndarray:
-    arr = real_array(name, a)
-    if arr.ndim != 2:
-        raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidValueError(f"{name} contains NaN or infinite values")
-    return arr
+def _images(reference: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference and query images as finite float64 (n_images, n_pixels) arrays of the same width."""
+    arrays = []
+    for name, a in (("reference", reference), ("queries", queries)):
+        arr = real_array(name, a)
+        if arr.ndim != 2:
+            raise InvalidValueError(f"{name} must be 2-D (n_images, n_pixels), got shape {arr.shape}")
+        arrays.append(finite_array(name, arr))
+    ref, qry = arrays
+    if ref.shape[1] != qry.shape[1]:
+        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+    return ref, qry
 
 
 def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -48,18 +53,11 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
     flattened preprocessed images. Computed over chunks of queries so that the
     ``(chunk, n_places, D)`` difference array stays below ~4M elements.
     """
-    ref = _images("reference", reference)
-    qry = _images("queries", queries)
-    if ref.shape[1] != qry.shape[1]:
-        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
-    n_q, n_p = qry.shape[0], ref.shape[0]
-    out = np.empty((n_q, n_p), dtype=np.float64)
-    per_query = max(1, n_p * ref.shape[1])
-    chunk = max(1, _MAX_ELEMENTS // per_query)
-    for start in range(0, n_q, chunk):
-        stop = min(start + chunk, n_q)
-        diff = np.abs(qry[start:stop, None, :] - ref[None, :, :])
-        out[start:stop] = diff.sum(axis=2)
+    ref, qry = _images(reference, queries)
+    out = np.empty((qry.shape[0], ref.shape[0]), dtype=np.float64)
+    chunk = max(1, _MAX_ELEMENTS // max(1, ref.size))
+    for start in range(0, qry.shape[0], chunk):
+        out[start : start + chunk] = np.abs(qry[start : start + chunk, None, :] - ref[None, :, :]).sum(axis=2)
     return out
 
 
@@ -88,10 +86,7 @@ def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarra
     .. math:: C_{ql} = \\frac{Q_q \\cdot R_l}{\\lVert Q_q \\rVert \\, \\lVert R_l \\rVert}
               \\quad (0 \\text{ for an all-zero image})
     """
-    ref = _images("reference", reference)
-    qry = _images("queries", queries)
-    if ref.shape[1] != qry.shape[1]:
-        raise InvalidValueError(f"reference images have {ref.shape[1]} pixels but queries have {qry.shape[1]}")
+    ref, qry = _images(reference, queries)
 
     def unit(a: np.ndarray) -> np.ndarray:
         norm = np.linalg.norm(a, axis=1, keepdims=True)
@@ -109,10 +104,15 @@ def sad_similarities(distances: np.ndarray) -> np.ndarray:
     :func:`nearest_neighbour` are those of ``-D``; but a window that reaches beyond the map adds 0 for
     the missing frame, which must not beat a real (negative) score.
     """
-    d = np.asarray(distances, dtype=np.float64)
-    if d.ndim != 2 or d.shape[1] == 0 or not np.all(np.isfinite(d)):
-        raise InvalidValueError(f"distances must be a finite 2-D array with at least one place, got shape {d.shape}")
+    d = _similarities("distances", distances)
     return d.max(axis=1, keepdims=True) - d
+
+
+def _similarities(name: str, values: np.ndarray) -> np.ndarray:
+    s = np.asarray(values, dtype=np.float64)
+    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
+        raise InvalidValueError(f"{name} must be a finite 2-D array with at least one place, got shape {s.shape}")
+    return s
 
 
 def diagonal_sums(
@@ -131,8 +131,7 @@ def diagonal_sums(
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or not np.all(np.isfinite(s)):
         raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
-    if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
-        raise InvalidValueError(f"k must be an integer >= 1, got {k!r}")
+    k = _count("k", k, 1)
     if np.any(s < 0):
         raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
     if k == 1:
@@ -141,10 +140,10 @@ def diagonal_sums(
     t = np.arange(n_queries, dtype=np.float64) if frame_positions is None else np.asarray(frame_positions, np.float64)
     v = np.full(n_queries, float(velocity))
     out = np.empty_like(s)
-    chunk = max(1, _MAX_ELEMENTS // (int(k) * max(1, n_places)))
+    chunk = max(1, _MAX_ELEMENTS // (k * max(1, n_places)))
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
-        shifted, _ = shift_window(s, queries, int(k), v, t)
+        shifted, _ = shift_window(s, queries, k, v, t)
         out[queries] = shifted.sum(axis=1)
     return out
 
@@ -157,9 +156,7 @@ def nearest_neighbour(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Ties go to the lowest index; a query whose scores are all equal is a no-match (index -1,
     confidence 0); with one place the confidence is 0.
     """
-    s = np.asarray(scores, dtype=np.float64)
-    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
-        raise InvalidValueError(f"scores must be a finite 2-D array with at least one place, got shape {s.shape}")
+    s = _similarities("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     if s.shape[1] == 1:
         return pred, np.zeros(s.shape[0])

@@ -79,7 +79,7 @@ def first_true(flags: np.ndarray, default: int) -> np.ndarray:
 
 def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.ndarray:
     """T_q of the margin rule: the first t with V_(1)(t) - V_(2)(t) > (T - t) c, else T (the module docstring)."""
-    z = _raster(raster)
+    z = raster
     n, timesteps, neurons = z.shape
     a = np.asarray(assignment, dtype=np.float64)
     if a.shape[0] != neurons or a.shape[1] < 1:
@@ -104,9 +104,8 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
 
 def spike_stops(raster: np.ndarray, spikes: int) -> np.ndarray:
     """T_q of the spike-count rule: the first t whose steps hold >= ``spikes`` output spikes, else T."""
-    z = _raster(raster)
-    emitted = np.cumsum(z.sum(axis=2, dtype=np.int64), axis=1)
-    return first_true(emitted >= spikes, z.shape[1])
+    emitted = np.cumsum(raster.sum(axis=2, dtype=np.int64), axis=1)
+    return first_true(emitted >= spikes, raster.shape[1])
 
 
 def stop_steps(raster: object, assignment: np.ndarray, group: int, rule: EarlyConfig) -> np.ndarray:

@@ -11,7 +11,7 @@ confidences are never split: they are accepted or rejected together.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,6 +19,8 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass, json_options
+
+from .assignment import finite_array
 
 METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 
@@ -97,9 +99,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
         if not np.all((c == 0) | (c == 1)):
             raise InvalidValueError("correct must be boolean (or 0/1)")
         c = c.astype(bool)
-    if not np.all(np.isfinite(conf)):
-        raise InvalidValueError("confidence contains NaN or infinite values")
-    return c, conf
+    return c, finite_array("confidence", conf)
 
 
 def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -201,27 +201,23 @@ class MetricRow(JsonDataclass):
     float_values: MetricValues | None = field(default=None, metadata=json_options(key="float", omit="none"))
     delta: MetricValues | None = field(default=None, metadata=json_options(omit="none"))  # quantised - float
 
-    @property
-    def accuracy(self) -> float:
-        return self.values.accuracy
-
-    @property
-    def p_at_100r(self) -> float:
-        return self.values.p_at_100r
-
-    @property
-    def r_at_100p(self) -> float:
-        return self.values.r_at_100p
-
-    @property
-    def auc_pr(self) -> float:
-        return self.values.auc_pr
+    def __getattr__(self, name: str) -> float:
+        """``row.accuracy`` and the other :data:`METRICS`: the row's values."""
+        if name not in METRICS:
+            raise AttributeError(name)
+        value: float = getattr(self.values, name)
+        return value
 
     def with_float(self, base: MetricRow) -> MetricRow:
         """This row with the float row's values and the differences (this - float)."""
         return MetricRow(
             self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
         )
+
+
+def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
+    """The typed row of one readout from :func:`pr_metrics`' values."""
+    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
 
 
 def find_row(rows: Sequence[MetricRow], strategy: str, k: int) -> MetricRow | None:

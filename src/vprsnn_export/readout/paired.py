@@ -23,6 +23,8 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
 
+from .assignment import finite_array
+
 #: The metrics the bootstrap measures on each resample (readout.metrics.pr_metrics' keys).
 PAIRED_METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 #: The verdicts of one check.
@@ -53,9 +55,7 @@ def binomial_cdf(x: int, n: int, p: float) -> float:
     """
     if x < 0:
         return 0.0
-    if x >= n:
-        return 1.0
-    if p <= 0.0:
+    if x >= n or p <= 0.0:
         return 1.0
     if p >= 1.0:
         return 0.0
@@ -74,9 +74,7 @@ def mcnemar_exact(b: int, c: int) -> float:
 
     (p = 1 when n = 0).
     """
-    if b < 0 or c < 0:
-        raise InvalidValueError(f"discordant counts must be >= 0, got b={b}, c={c}")
-    n = b + c
+    n = b + c  # b, c: the counts of :func:`flips`
     return 1.0 if n == 0 else min(1.0, 2.0 * binomial_cdf(min(b, c), n, 0.5))
 
 
@@ -225,11 +223,8 @@ def paired_bootstrap(
         for m in PAIRED_METRICS:
             deltas[m].append(d[m] - f[m])
     alpha = 1.0 - level
-    out = {}
-    for m in PAIRED_METRICS:
-        low, high = np.quantile(np.concatenate(deltas[m]), [alpha / 2, 1 - alpha / 2])
-        out[m] = (float(low), float(high))
-    return out
+    quantiles = {m: np.quantile(np.concatenate(deltas[m]), [alpha / 2, 1 - alpha / 2]) for m in PAIRED_METRICS}
+    return {m: (float(low), float(high)) for m, (low, high) in quantiles.items()}
 
 
 # ---------------------------------------------------------------------------- the verdict
@@ -290,12 +285,6 @@ def _pair(a: np.ndarray, b: np.ndarray, *, second_real: bool = False) -> tuple[n
     x, y = np.asarray(a), np.asarray(b)
     if x.ndim != 1 or y.shape != x.shape:
         raise InvalidValueError(f"paired arrays must be 1-D of equal length, got {x.shape} and {y.shape}")
-    if x.dtype != np.bool_:
+    if x.dtype != np.bool_ or not (second_real or y.dtype == np.bool_):
         raise InvalidValueError("correctness must be a boolean array")
-    if second_real:
-        y = y.astype(np.float64)
-        if not np.all(np.isfinite(y)):
-            raise InvalidValueError("confidence contains NaN or infinite values")
-    elif y.dtype != np.bool_:
-        raise InvalidValueError("correctness must be a boolean array")
-    return x, y
+    return x, finite_array("confidence", y) if second_real else y

@@ -34,6 +34,7 @@ from scipy import sparse
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import Config
 from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
 from .assignment import entry_rows, like_input, sparse_counts
@@ -108,8 +109,7 @@ def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray
         raise InvalidValueError(
             f"sr has shape {sr.shape} but the module layout describes {shape[0]} neurons x {shape[1]} places"
         )
-    rows = entry_rows(sr)
-    return neuron_modules(shape[0], group)[rows] == np.searchsorted(regions[:, 1], sr.indices, side="right")
+    return neuron_modules(shape[0], group)[entry_rows(sr)] == np.searchsorted(regions[:, 1], sr.indices, side="right")
 
 
 def _scaled(sr: sparse.csr_array, factor: np.ndarray) -> sparse.csr_array:
@@ -203,7 +203,7 @@ def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.nd
 
 
 @dataclass(frozen=True)
-class ModuleAccuracy:
+class ModuleAccuracy(JsonDataclass):
     """How the whole-route decisions fare on the queries of one module's region."""
 
     module: int
@@ -212,9 +212,6 @@ class ModuleAccuracy:
     n_queries: int
     accuracy: float  # correct decisions / queries of the region
     in_region: float  # decisions that name a place of the region / queries of the region (the right module won)
-
-    def to_dict(self) -> dict[str, float | int]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
 def module_accuracy(
@@ -244,8 +241,7 @@ def module_accuracy(
     totals = np.bincount(modules, minlength=n_modules)
     hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
     inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
-    share = np.divide(hits, totals, out=np.zeros(n_modules), where=totals > 0)
-    routed = np.divide(inside, totals, out=np.zeros(n_modules), where=totals > 0)
+    share, routed = np.divide([hits, inside], totals, out=np.zeros((2, n_modules)), where=totals > 0)
     return [
         ModuleAccuracy(
             module=m,

@@ -16,7 +16,7 @@ import numpy as np
 
 from vprsnn_export.data.truth import Truth
 
-from .metrics import MetricRow, pr_curve, pr_metrics, predicted_place_ids
+from .metrics import MetricRow, metric_row, pr_curve, pr_metrics, predicted_place_ids
 from .regions import ModuleAccuracy, module_accuracy
 from .strategies import SEQUENCE_STRATEGY, STRATEGIES, decide
 
@@ -46,21 +46,6 @@ class Column:
         return precision, recall
 
 
-def decided_column(
-    strategy: str,
-    k: int,
-    distribution: np.ndarray,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray | None,
-    truth: Truth | None,
-) -> Column:
-    """The decisions of one score matrix (Q, places) under ``strategy``, judged by ``truth`` (None: unlabelled).
-
-    .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\quad \\mathrm{correct}_q = \\mathrm{truth}(\\mathrm{id}(\\hat l_q), q)
-    """
-    return judged_column(strategy, k, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
-
-
 def judged_column(
     strategy: str,
     k: int,
@@ -78,8 +63,9 @@ def judged_column(
     if query_place_ids is None or truth is None:
         return Column(strategy, k, index, ids, confidence, None, None)
     correct = truth.correct(ids, query_place_ids)
-    row = MetricRow.from_dict({"strategy": strategy, "k": k, **pr_metrics(correct, confidence)})
-    return Column(strategy, k, index, ids, confidence, correct, row)
+    return Column(
+        strategy, k, index, ids, confidence, correct, metric_row(strategy, k, pr_metrics(correct, confidence))
+    )
 
 
 def readout_columns(
@@ -111,9 +97,12 @@ class Scored:
         query_place_ids: np.ndarray | None,
         truth: Truth | None,
     ) -> Scored:
-        """Every readout column of these scores, each decided once."""
+        """Every readout column of these scores, each decided once and judged by ``truth`` (None: unlabelled):
+
+        .. math:: \\hat l_q = \\arg\\max_l \\mathrm{Score}_{ql}, \\quad \\mathrm{correct}_q = \\mathrm{truth}(\\mathrm{id}(\\hat l_q), q)
+        """
         columns = tuple(
-            decided_column(s, k, m, reference_place_ids, query_place_ids, truth)
+            judged_column(s, k, *decide(m, s), reference_place_ids, query_place_ids, truth)
             for s, k, m in readout_columns(scores, aggregates)
         )
         return cls(columns, scores, aggregates, np.asarray(reference_place_ids), query_place_ids, truth)
@@ -144,6 +133,5 @@ class Scored:
         whose true place (by the same truth) lies in its region (:func:`~.regions.module_accuracy`)."""
         assert self.query_place_ids is not None and self.truth is not None, "unlabelled queries have no regions"
         column = self.column(SEQUENCE_STRATEGY, k)
-        correct = column.decisions[0]
         true_index, known = self.truth.first_true(self.reference_place_ids, self.query_place_ids)
-        return module_accuracy(column.index, correct, self.reference_place_ids, regions, true_index, known)
+        return module_accuracy(column.index, column.decisions[0], self.reference_place_ids, regions, true_index, known)

@@ -10,7 +10,6 @@ settings (gamma, an ensemble's module layout) and the :class:`~vprsnn_export.rea
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
 
 import numpy as np
 from scipy import sparse
@@ -23,15 +22,20 @@ from vprsnn_export.errors import InvalidValueError
 
 from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
-from .metrics import MetricRow, pr_metrics, predicted_place_ids
+from .metrics import MetricRow, metric_row, pr_metrics, predicted_place_ids
 from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
-from .scored import Scored, decided_column, judged_column, readout_columns
+from .scored import Scored, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
 from .stream import ReadoutStream
 
 #: Queries read out at once by :meth:`Readout.score_in_blocks` (its default).
 READOUT_BLOCK = 1024
+
+
+def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
+    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
+    return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
 def decision_metrics(
@@ -42,18 +46,8 @@ def decision_metrics(
     truth: Truth,
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
-    column = decided_column(strategy, 1, distribution, reference_place_ids, query_place_ids, truth)
+    column = judged_column(strategy, 1, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
     return pr_metrics(*column.decisions)
-
-
-def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
-    """The typed row of one readout from :func:`~vprsnn_export.readout.metrics.pr_metrics`' values."""
-    return MetricRow.from_dict({"strategy": strategy, "k": k, **metrics})
-
-
-def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
-    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
-    return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
 def baseline_rows(
@@ -68,8 +62,7 @@ def baseline_rows(
     rows = []
     for k in sorted(set(options.ks)):
         dist = options.aggregate(distribution, k, frame_positions)
-        metrics = decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)
-        rows.append(metric_row("sad", k, metrics))
+        rows.append(metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)))
     return rows
 
 
@@ -102,8 +95,7 @@ def nearest_neighbour_decisions(
     """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
     out = {}
     for k in sorted(set(options.ks)):
-        summed = diagonal_sums(similarities, k, options.velocity, frame_positions)
-        predicted, confidence = nearest_neighbour(summed)
+        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions))
         out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
     return out
 
@@ -113,20 +105,23 @@ def check_readout_arrays(
 ) -> None:
     """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
     id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
-    shapes = {name: np.shape(value) for name, value in (("calibration", calibration), ("query_counts", query_counts))}
-    ids = {"reference_place_ids": np.shape(reference_place_ids), "query_place_ids": np.shape(query_place_ids)}
-    for name, shape in {**shapes, **ids}.items():
-        if len(shape) != (2 if name in shapes else 1):
-            raise InvalidValueError(f"{name} has shape {shape}, expected {2 if name in shapes else 1}-D")
-    if shapes["calibration"][1] != ids["reference_place_ids"][0]:
+    arrays = {"calibration": calibration, "query_counts": query_counts}
+    for name, value in {
+        **arrays,
+        "reference_place_ids": reference_place_ids,
+        "query_place_ids": query_place_ids,
+    }.items():
+        if np.ndim(value) != (2 if name in arrays else 1):
+            raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
+    (neurons, places), (n_references,), (n_queries,) = map(
+        np.shape, (calibration, reference_place_ids, query_place_ids)
+    )
+    if places != n_references:
+        raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
+    if np.shape(query_counts) != (n_queries, neurons):
         raise InvalidValueError(
-            f"calibration covers {shapes['calibration'][1]} places but reference_place_ids names "
-            f"{ids['reference_place_ids'][0]}"
-        )
-    if shapes["query_counts"] != (ids["query_place_ids"][0], shapes["calibration"][0]):
-        raise InvalidValueError(
-            f"query_counts has shape {shapes['query_counts']}, expected ({ids['query_place_ids'][0]}, "
-            f"{shapes['calibration'][0]}): one row per query id, one column per neuron of the calibration"
+            f"query_counts has shape {np.shape(query_counts)}, expected ({n_queries}, {neurons}): one row per query "
+            "id, one column per neuron of the calibration"
         )
 
 
@@ -195,7 +190,10 @@ class Readout:
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
         check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
-        self.options.check_length(len(query_place_ids))
+        if max(self.options.ks) > len(query_place_ids):  # no full window exists
+            raise InvalidValueError(
+                f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
+            )
         truth.check_overlap(reference_place_ids, query_place_ids)
         return truth
 

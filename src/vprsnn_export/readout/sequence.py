@@ -124,22 +124,14 @@ class SequenceOptions:
             return estimator.estimate(distribution, k, np.asarray(self.velocity_candidates), frame_positions, self)[1]
         return aggregate(distribution, k, self.velocity, rule=self.rule, frame_positions=frame_positions)
 
-    def check_length(self, n_queries: int) -> None:
-        """InvalidValueError when a sequence length k exceeds the number of queries (no full window exists)."""
-        if max(self.ks) > n_queries:
-            raise InvalidValueError(f"--k {max(self.ks)} exceeds the number of queries ({n_queries})")
-
     def warning(self, query_place_ids: np.ndarray) -> str | None:
         """A warning when sequence aggregation is asked for on queries that are not consecutive places.
 
         Aggregation assumes the query stream is a traversal (consecutive place ids, in order, at the
         velocity); on a subset spread along the route its windows mix unrelated places.
         """
-        ids = np.asarray(query_place_ids)
-        if max(self.ks) <= 1 or ids.size < 2:
-            return None
-        steps = np.abs(np.diff(ids))
-        if np.all(steps <= 2):
+        steps = np.abs(np.diff(np.asarray(query_place_ids)))
+        if max(self.ks) <= 1 or np.all(steps <= 2):  # fewer than two queries: no step
             return None
         return (
             f"sequence aggregation (k up to {max(self.ks)}) on queries that are not consecutive places: "

@@ -22,7 +22,7 @@ from vprsnn_export.registry import Registry
 
 from .assignment import (
     NO_MATCH,
-    _scores2d,
+    _matrix,
     distribution_decision,
     share_decision,
     standard_scores,
@@ -59,19 +59,20 @@ class Strategy:
     of_base: Callable[[np.ndarray], np.ndarray] | None = None
 
 
-def _standard(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
-    return standard_scores(sr, sq)
-
-
-def _wprob(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
-    return wprob_distribution(weighted_scores(sr, sq, gamma))
-
-
 STRATEGIES: Registry[Strategy] = Registry("strategy")
-STRATEGIES.register(Strategy("standard", "Standard", _standard, share_decision, needs_gamma=False))
+STRATEGIES.register(
+    Strategy("standard", "Standard", lambda sr, sq, gamma: standard_scores(sr, sq), share_decision, needs_gamma=False)
+)
 STRATEGIES.register(Strategy("weighted", "Weighted", weighted_scores, share_decision))
 STRATEGIES.register(
-    Strategy("wprob", "W+Prob", _wprob, distribution_decision, base="weighted", of_base=wprob_distribution)
+    Strategy(
+        "wprob",
+        "W+Prob",
+        lambda sr, sq, gamma: wprob_distribution(weighted_scores(sr, sq, gamma)),
+        distribution_decision,
+        base="weighted",
+        of_base=wprob_distribution,
+    )
 )
 
 
@@ -103,7 +104,7 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     InvalidValueError for a strategy that is not registered.
     """
     entry = STRATEGIES.get(require_strategy(strategy))
-    s = _scores2d(scores)
+    s = _matrix("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     no_match, conf = entry.decision(s)
     pred[no_match] = NO_MATCH

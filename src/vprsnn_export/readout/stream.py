@@ -59,9 +59,14 @@ class ReadoutStream:
         .. math:: \\hat P_j = \\text{aggregate}(P_{j-k+1..j}, k, v_j), \\quad
                   \\hat l_j = \\arg\\max_l \\hat P_j(l), \\quad c_j = \\max_l \\hat P_j(l)
 
-        at the given velocity, or ``v_j`` tracked causally: :func:`causal_velocity` over the stream contrast
-        of the ``memory`` recent frames, with the trajectory length, span and memory of the estimate's causal form
-        (``VelocityEstimator.stream``: "track" 2k, span, memory; "window" k, 1, 0).
+        at the given velocity, or ``v_j`` tracked causally over the stream contrast Q of the ``memory`` recent
+        frames, with the trajectory length T, span S and memory of the estimate's causal form
+        (``VelocityEstimator.stream``: "track" 2k, span, memory; "window" k, 1, 0):
+
+        .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } T \\text{ frames of } Q, \\quad
+                  v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
+
+        (the previous windows' e rows kept, at most S - 1; ties to the first candidate).
         """
         options, k = self.options, self.k
         tracking = self._tracking()
@@ -75,27 +80,13 @@ class ReadoutStream:
         if tracking is not None:
             contrast.append(stream_contrast(np.asarray(recent)[-max(memory, 1) :], memory)[-1])
             candidates = np.asarray(options.velocity_candidates)
-            newest, velocity = causal_velocity(np.asarray(contrast), scores, length, candidates, options.rule)
+            last = np.array([len(contrast) - 1])  # the contrast deque holds the last T rows
+            newest = window_scores(np.asarray(contrast), length, candidates, options.rule, windows=last)[0]
+            total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
+            velocity = float(candidates[int(np.argmax(total))])
             if span > 1:
                 scores.append(newest)
         window = np.asarray(recent)[-k:]
         final = aggregate_newest(window, k, velocity, options.rule) if k > 1 else row[None]
         index, confidence = decide(final, SEQUENCE_STRATEGY)
         return int(index[0]), float(confidence[0]), float(velocity)
-
-
-def causal_velocity(
-    contrast: np.ndarray, scores: deque, length: int, candidates: np.ndarray, rule: str
-) -> tuple[np.ndarray, float]:
-    """The newest window's scores e_j(v) and the tracked velocity.
-
-    .. math:: e_j(v) = \\max_l A^{(v)}_j(l) \\text{ over the last } T \\text{ frames of } Q, \\quad
-              v_j = \\arg\\max_v \\sum_{i=j-S+1}^{j} e_i(v)
-
-    ``contrast``: the recent rows of Q (stream contrast), newest last; ``scores``: the e rows of the
-    previous windows (at most S - 1 kept by the caller). Ties go to the first candidate.
-    """
-    recent = contrast[-length:]
-    newest = window_scores(recent, length, candidates, rule, windows=np.array([len(recent) - 1]))[0]
-    total = newest + (np.sum(np.asarray(scores), axis=0) if scores else 0.0)
-    return newest, float(candidates[int(np.argmax(total))])
