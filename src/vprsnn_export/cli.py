@@ -68,16 +68,11 @@ class Parser(argparse.ArgumentParser):
 def join_negative_values(argv: Sequence[str]) -> list[str]:
     """``--opt -2:2:0.1`` -> ``--opt=-2:2:0.1``: argparse would read a value starting with '-' as an option."""
     out: list[str] = []
-    index = 0
-    while index < len(argv):
-        token = argv[index]
-        following = argv[index + 1] if index + 1 < len(argv) else None
-        if token.startswith("--") and "=" not in token and following is not None and NEGATIVE_VALUE.match(following):
-            out.append(f"{token}={following}")
-            index += 2
-            continue
-        out.append(token)
-        index += 1
+    for token in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and NEGATIVE_VALUE.match(token):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
     return out
 
 

@@ -218,7 +218,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     outputs = (point_path, *curve_paths(point_path))
     for output in outputs:
         check_output(output, inputs=(args.model, onnx))
-    dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate], network.reference_traversals)
+    dataset = query_data(args, network, args.calibrate)
     inputs = (args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
     for output in outputs:
         check_output(output, inputs=inputs)

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     reference_images = None
     if options.calibration == "deployed":
-        dataset = query_data(args, ckpt.data, ckpt.config.preprocess, list(ckpt.reference_traversals))
+        dataset = query_data(args, ckpt)
         check_reference_places(dataset.place_ids, ckpt.reference_place_ids)
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
     paths = [Path(args.out) / model_filename(bits, options) for bits in widths]
