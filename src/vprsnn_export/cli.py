@@ -37,7 +37,7 @@ class DefaultsFormatter(argparse.HelpFormatter):
         default = action.default
         if default in (None, False, [], ()) or default is argparse.SUPPRESS or not action.option_strings:
             return text
-        if "%(default)" in text or "default" in text.lower():
+        if "default" in text.lower():  # %(default)s included
             return text
         return f"{text} (default: %(default)s)" if text else "default: %(default)s"
 
