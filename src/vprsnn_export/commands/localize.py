@@ -192,13 +192,7 @@ def sized_frames(
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
-    from ..runtime.localize import (
-        Localizer,
-        curve_paths,
-        operating_point,
-        save_curve,
-        save_operating_point,
-    )
+    from ..runtime.localize import Localizer, curve_paths, operating_point, save_curve, save_operating_point
     from ..runtime.report.plots import plot_precision_recall
 
     if args.threshold is not None:
