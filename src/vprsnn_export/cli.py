@@ -111,8 +111,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     listed by name and summary, so ``--help`` and ``--version`` start in well under a second
     (bench/bench_cli.py). ``argv=None``: every command's full parser."""
     parser = Parser(
-        prog="vprsnn-export",
-        description="STDP place-recognition SNNs: train, quantise, export, verify, localise.",
+        prog="vprsnn-export", description="STDP place-recognition SNNs: train, quantise, export, verify, localise."
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

@@ -364,22 +364,18 @@ def parse_velocity_grid(raw: str) -> tuple[float, ...]:
 
 
 def print_json(payload: dict) -> None:
-    json.dump(payload, sys.stdout, indent=2, sort_keys=False)
-    sys.stdout.write("\n")
+    print(json.dumps(payload, indent=2))
 
 
 def format_table(rows: Sequence[dict], columns: Sequence[tuple[str, str]]) -> str:
     """Plain text table; floats in [0, 1] metric columns are shown as percentages."""
-    cells = [[title for _, title in columns]]
-    for row in rows:
-        line = []
-        for key, _ in columns:
-            value = row.get(key, "")
-            if isinstance(value, float):
-                line.append(f"{100 * value:6.2f}" if key in PERCENT_KEYS else f"{value:.4g}")
-            else:
-                line.append(str(value))
-        cells.append(line)
+
+    def cell(key: str, value: object) -> str:
+        if not isinstance(value, float):
+            return str(value)
+        return f"{100 * value:6.2f}" if key in PERCENT_KEYS else f"{value:.4g}"
+
+    cells = [[title for _, title in columns], *([cell(key, row.get(key, "")) for key, _ in columns] for row in rows)]
     widths = [max(len(r[i]) for r in cells) for i in range(len(columns))]
     out = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     out.insert(1, "  ".join("-" * w for w in widths))

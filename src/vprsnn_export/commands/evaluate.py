@@ -103,10 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if args.predictions is not None:
         assert result.scored is not None
         written = predictions(result.scored).write(args.predictions)
-        print(
-            f"wrote per-query predictions to {written} (scored against the {truth.label})",
-            file=sys.stderr,
-        )
+        print(f"wrote per-query predictions to {written} (scored against the {truth.label})", file=sys.stderr)
     if args.json:
         print_json(
             {

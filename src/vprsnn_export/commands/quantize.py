@@ -84,16 +84,12 @@ def run(args: argparse.Namespace) -> int:
         )
         path = save_fixed_point(file, model)
         report = model.quantisation.to_dict()
+        scheme = ("per-neuron" if report["per_neuron"] else "per-tensor") + (
+            " folded" if report["threshold_folding"] else ""
+        )
+        sat = report["calibration_saturations"]
         rows.append(
-            {
-                **report,
-                "scheme": ("per-neuron" if report["per_neuron"] else "per-tensor")
-                + (" folded" if report["threshold_folding"] else ""),
-                "calibration_saturations": "-"
-                if report["calibration_saturations"] is None
-                else report["calibration_saturations"],
-                "file": str(path),
-            }
+            {**report, "scheme": scheme, "calibration_saturations": "-" if sat is None else sat, "file": str(path)}
         )
     if args.json:
         print_json({"checkpoint": str(args.checkpoint), "source_sha256": digest, "models": rows})
