@@ -263,14 +263,12 @@ OTHER_TARGETS = (1.0, 0.99, 0.95, 0.9, 0.8, 0.5)
 
 def other_targets(curve) -> str:
     """Each of :data:`OTHER_TARGETS` with the recall and the frames it accepts on the calibration queries."""
-    cells = []
-    for target in OTHER_TARGETS:
-        index = curve.index_for(target)
-        cells.append(
-            f"{target:g}: unreached"
-            if index is None
-            else f"{target:g}: recall {100 * curve.recall[index]:.1f} % ({int(curve.accepted[index])} of {curve.n_queries})"
-        )
+    cells = [
+        f"{target:g}: unreached"
+        if (index := curve.index_for(target)) is None
+        else f"{target:g}: recall {100 * curve.recall[index]:.1f} % ({int(curve.accepted[index])} of {curve.n_queries})"
+        for target in OTHER_TARGETS
+    ]
     return "precision target -> recall (frames accepted): " + "; ".join(cells)
 
 
