@@ -220,20 +220,10 @@ def run(args: argparse.Namespace) -> int:
         if query.truth.source:  # the report says what the queries were scored against
             settings["ground_truth"] = query.truth.source
         settings["truth"] = query.truth.label
-        runs.append(
-            verify_checkpoint(
-                VerifiedNetwork(
-                    ckpt,
-                    checkpoint_sha256(path),
-                    None if options.quantise.calibration == "float" else reference_images,
-                    label,
-                    str(path),
-                ),
-                query,
-                options,
-                Runtime(device, progress, out / "exports" / folder_name(label, index)),
-            )
-        )
+        references = None if options.quantise.calibration == "float" else reference_images
+        network = VerifiedNetwork(ckpt, checkpoint_sha256(path), references, label, str(path))
+        runtime = Runtime(device, progress, out / "exports" / folder_name(label, index))
+        runs.append(verify_checkpoint(network, query, options, runtime))
         report = build_report(runs, settings, command=command, seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     line, code = conclusion(report, args.strict)
