@@ -38,7 +38,7 @@ def run() -> None:
     try:
         code = main()
         sys.stdout.flush()
-        atexit.register(_ignore_interrupts)  # the run is over: a late Ctrl-C cannot break the process's exit
+        atexit.register(signal.signal, signal.SIGINT, signal.SIG_IGN)  # a late Ctrl-C cannot break the exit
     except KeyboardInterrupt:  # between the guard's end and main's own handler
         print("error: interrupted", file=sys.stderr)
         code = EXIT_INTERRUPTED
@@ -52,10 +52,6 @@ def run() -> None:
         print(f"error: cannot write the standard output ({exc.strerror})", file=sys.stderr)
         code = EXIT_WRITE_ERROR
     sys.exit(code)
-
-
-def _ignore_interrupts() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _silence_stdout() -> None:

@@ -43,11 +43,10 @@ def require_type(name: str, value: object, kind: type | tuple[type, ...]) -> Non
 
 def require_integer(name: str, value: object, low: int, high: int) -> int:
     """``value`` as an int in [low, high] (a Python or numpy integer, not a bool, float or string)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise InvalidValueError(f"{name} must be an integer from {low} to {high}, got {value!r}")
-    number = int(value)
-    if not low <= number <= high:
-        raise InvalidValueError(f"{name} must be an integer from {low} to {high}, got {number}")
+    number = None if isinstance(value, bool) or not isinstance(value, numbers.Integral) else int(value)
+    if number is None or not low <= number <= high:
+        shown = repr(value) if number is None else number
+        raise InvalidValueError(f"{name} must be an integer from {low} to {high}, got {shown}")
     return number
 
 

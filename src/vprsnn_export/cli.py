@@ -37,7 +37,7 @@ class DefaultsFormatter(argparse.HelpFormatter):
         default = action.default
         if default in (None, False, [], ()) or default is argparse.SUPPRESS or not action.option_strings:
             return text
-        if "%(default)" in text or "default" in text.lower():
+        if "default" in text.lower():  # %(default)s included
             return text
         return f"{text} (default: %(default)s)" if text else "default: %(default)s"
 
@@ -68,16 +68,11 @@ class Parser(argparse.ArgumentParser):
 def join_negative_values(argv: Sequence[str]) -> list[str]:
     """``--opt -2:2:0.1`` -> ``--opt=-2:2:0.1``: argparse would read a value starting with '-' as an option."""
     out: list[str] = []
-    index = 0
-    while index < len(argv):
-        token = argv[index]
-        following = argv[index + 1] if index + 1 < len(argv) else None
-        if token.startswith("--") and "=" not in token and following is not None and NEGATIVE_VALUE.match(following):
-            out.append(f"{token}={following}")
-            index += 2
-            continue
-        out.append(token)
-        index += 1
+    for token in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and NEGATIVE_VALUE.match(token):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
     return out
 
 
@@ -116,8 +111,7 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     listed by name and summary, so ``--help`` and ``--version`` start in well under a second
     (bench/bench_cli.py). ``argv=None``: every command's full parser."""
     parser = Parser(
-        prog="vprsnn-export",
-        description="STDP place-recognition SNNs: train, quantise, export, verify, localise.",
+        prog="vprsnn-export", description="STDP place-recognition SNNs: train, quantise, export, verify, localise."
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

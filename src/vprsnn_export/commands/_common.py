@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
-from ..config import PRESETS, Config, PreprocessConfig, preset
+from ..config import PRESETS, Config, preset
 from ..data.dataset import Dataset, load_selection, window_beside_truth
 from ..data.groundtruth import ground_truth_files
 from ..errors import InvalidValueError
@@ -26,7 +26,12 @@ from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
 from ..readout.velocity import VELOCITY_ESTIMATES, causal_estimates
 
 if TYPE_CHECKING:
+    from ..data.truth import Query
+    from ..export.model import FixedPointModel
     from ..export.quantize import QuantiseOptions
+    from ..io.checkpoint import Checkpoint
+
+    Network = Checkpoint | FixedPointModel
 
 
 def integer(text: str) -> int:
@@ -359,22 +364,18 @@ def parse_velocity_grid(raw: str) -> tuple[float, ...]:
 
 
 def print_json(payload: dict) -> None:
-    json.dump(payload, sys.stdout, indent=2, sort_keys=False)
-    sys.stdout.write("\n")
+    print(json.dumps(payload, indent=2))
 
 
 def format_table(rows: Sequence[dict], columns: Sequence[tuple[str, str]]) -> str:
     """Plain text table; floats in [0, 1] metric columns are shown as percentages."""
-    cells = [[title for _, title in columns]]
-    for row in rows:
-        line = []
-        for key, _ in columns:
-            value = row.get(key, "")
-            if isinstance(value, float):
-                line.append(f"{100 * value:6.2f}" if key in PERCENT_KEYS else f"{value:.4g}")
-            else:
-                line.append(str(value))
-        cells.append(line)
+
+    def cell(key: str, value: object) -> str:
+        if not isinstance(value, float):
+            return str(value)
+        return f"{100 * value:6.2f}" if key in PERCENT_KEYS else f"{value:.4g}"
+
+    cells = [[title for _, title in columns], *([cell(key, row.get(key, "")) for key, _ in columns] for row in rows)]
     widths = [max(len(r[i]) for r in cells) for i in range(len(columns))]
     out = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     out.insert(1, "  ".join("-" * w for w in widths))
@@ -406,21 +407,16 @@ def refuse_window_beside_truth(
         raise window_beside_truth(match_window, found[0])
 
 
-def query_data(
-    args: argparse.Namespace,
-    record: dict[str, Any],
-    preprocess: PreprocessConfig,
-    traversals: list[str],
-    references: Sequence[str] = (),
-) -> Dataset:
-    """The data set named by --data/--subset/--places, else the one a checkpoint or model records; with
-    ``references``, --match-window beside a ground-truth file of (reference, ``traversals[0]``) is refused first."""
-    source = args.data if args.data is not None else record.get("source")
-    refuse_window_beside_truth(getattr(args, "match_window", None), source, references, traversals[0])
+def query_data(args: argparse.Namespace, network: Network, query: str | None = None) -> Dataset:
+    """The data set named by --data/--subset/--places, else the one ``network`` records: its traversal ``query``
+    (--match-window beside a ground-truth file of (reference, ``query``) refused first), else its references."""
+    if query is not None:
+        source = args.data if args.data is not None else network.data.get("source")
+        refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
     return load_selection(
-        record,
-        traversals,
-        preprocess,
+        network.data,
+        list(network.reference_traversals) if query is None else [query],
+        network.config.preprocess,
         source=args.data,
         subset=args.subset,
         places=args.places,
@@ -428,11 +424,24 @@ def query_data(
     )
 
 
-def warn_sequences(options: SequenceOptions, dataset: Dataset) -> None:
-    """The options' warning on these queries (not consecutive places), printed: what evaluate and simulate say."""
+def load_query(args: argparse.Namespace, network: Network) -> tuple[SequenceOptions, Dataset, Query]:
+    """evaluate and simulate: the sequence options, the data and the --query of ``network``; the options' warning
+    on these queries (not consecutive places) printed."""
+    options = sequence_options(args)
+    dataset = query_data(args, network, args.query)
+    query = dataset.query(args.query, network.reference_traversals, args.match_window)
     warning = options.warning(dataset.place_ids)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
+    return options, dataset, query
+
+
+def run_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keywords of evaluate's and simulate's evaluation: --device, --no-state-isolation and --quiet."""
+    from ..device import resolve_device
+
+    state_isolation = False if args.no_state_isolation else None
+    return {"device": resolve_device(args.device), "state_isolation": state_isolation, "progress": not args.quiet}
 
 
 def positive_int(text: str) -> int:

@@ -193,7 +193,6 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    threads = args.threads
     profile = QUICK_PROFILE if args.quick else DEMO_PROFILE
     cfg = preset(DEMO_PRESET).replace(**{**profile, "seed": args.seed})  # the lean preset with the profile applied
     device = resolve_device(args.device)
@@ -208,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
     dataset = load_dataset(data, [DEMO_REFERENCE, DEMO_QUERY], cfg.preprocess, progress=progress)
     say(
         f"synthetic route ({data}): {dataset.n_places} places, reference {DEMO_REFERENCE}, query {DEMO_QUERY}; "
-        f"{threads} CPU thread(s) (--threads N to change)"
+        f"{args.threads} CPU thread(s) (--threads N to change)"
     )
     say(profile_text(cfg, dataset.n_places, profile))
     ckpt = train_and_calibrate(

@@ -16,11 +16,10 @@ from ._common import (
     add_runtime_options,
     add_search_options,
     format_table,
+    load_query,
     print_json,
-    query_data,
+    run_options,
     search_window,
-    sequence_options,
-    warn_sequences,
 )
 
 TRACKING_COLUMNS = (
@@ -65,7 +64,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..device import resolve_device
     from ..runtime.evaluation import evaluate_float
     from ..runtime.localize import tracking_rows
 
@@ -74,11 +72,9 @@ def run(args: argparse.Namespace) -> int:
         prediction_format(args.predictions)
         check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
-    options = sequence_options(args)
     search = search_window(args)
-    dataset = query_data(args, ckpt.data, ckpt.config.preprocess, [args.query], ckpt.reference_traversals)
-    truth = dataset.query(args.query, ckpt.reference_traversals, args.match_window).truth
-    warn_sequences(options, dataset)
+    options, dataset, query = load_query(args, ckpt)
+    truth = query.truth
     reference_images = None
     if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)
         references = select_places(
@@ -92,29 +88,22 @@ def run(args: argparse.Namespace) -> int:
         )
     result = evaluate_float(
         ckpt,
-        dataset.traversal(args.query),
-        dataset.place_ids,
+        query.images,
+        query.place_ids,
         args.query,
         options,
-        device=resolve_device(args.device),
-        state_isolation=False if args.no_state_isolation else None,
         reference_images=reference_images,
         cluster=cluster,
-        progress=not args.quiet,
         truth=truth,
+        **run_options(args),
     )
     tracking = None
     if search is not None:  # the same frames in stream order, the whole route and the window, one frame at a time
-        tracking = tracking_rows(
-            ckpt, dataset.traversal(args.query), dataset.place_ids, truth, options, search, threads=args.threads
-        )
+        tracking = tracking_rows(ckpt, query.images, query.place_ids, truth, options, search, threads=args.threads)
     if args.predictions is not None:
         assert result.scored is not None
         written = predictions(result.scored).write(args.predictions)
-        print(
-            f"wrote per-query predictions to {written} (scored against the {truth.label})",
-            file=sys.stderr,
-        )
+        print(f"wrote per-query predictions to {written} (scored against the {truth.label})", file=sys.stderr)
     if args.json:
         print_json(
             {

@@ -126,8 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def parse_shape(raw: str) -> tuple[int, int, int]:
     """'MxNxI' -> (modules, neurons per module, inputs), each a positive integer."""
-    parts = raw.lower().split("x")
-    numbers = [ascii_uint(part.strip()) for part in parts]
+    numbers = [ascii_uint(part.strip()) for part in raw.lower().split("x")]
     if len(numbers) != 3 or not all(numbers):
         raise InvalidValueError(f"--loihi-cores expects MODULESxNEURONSxINPUTS of positive integers, got {raw!r}")
     modules, neurons, inputs = (int(number or 0) for number in numbers)

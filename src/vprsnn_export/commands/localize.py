@@ -124,26 +124,24 @@ def options_from(given: dict, stored: SequenceOptions | None, where: Path | None
     return SequenceOptions.from_dict(base)
 
 
-def onnx_file(raw: str | None) -> Path | None:
-    from ..runtime.exporting.folder import read_export
-    from ..runtime.exporting.source import check_against_manifest
-
-    if raw is None:
-        return None
-    path = Path(raw)
-    return read_export(path).written("onnx") if path.is_dir() else check_against_manifest(path)
-
-
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
-    from ..runtime.exporting import load_source
+    from ..runtime.exporting import load_source, read_export
+    from ..runtime.exporting.source import check_against_manifest
     from ..runtime.localize import Localizer, load_operating_point, operating_point_path
 
     source = load_source(args.model)
     expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
-    frames = None if args.frames is None else stream_frames(args, expected)  # a bad source fails before any output
+    frames = None
+    if args.frames is not None:  # a bad source fails before any output; a bag's --topic, an event recording's window
+        window = None
+        if args.event_window_us is not None or args.event_count is not None:
+            window = EventWindow(window_us=args.event_window_us, count=args.event_count)
+        frames = iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
-    onnx = onnx_file(args.onnx)
+    onnx = None if args.onnx is None else Path(args.onnx)
+    if onnx is not None:  # a deploy folder's graph, or a file checked against its folder's manifest
+        onnx = read_export(onnx).written("onnx") if onnx.is_dir() else check_against_manifest(onnx)
     device = resolve_device(args.device)
     if args.calibrate:
         if args.topic is not None or args.event_window_us is not None or args.event_count is not None:
@@ -177,14 +175,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def stream_frames(args: argparse.Namespace, expected: tuple[int, int] | None) -> Iterator[tuple[str, np.ndarray]]:
-    """--frames with its source options: a bag's --topic, an event recording's window (binned at ``expected``)."""
-    window = None
-    if args.event_window_us is not None or args.event_count is not None:
-        window = EventWindow(window_us=args.event_window_us, count=args.event_count)
-    return iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
-
-
 def sized_frames(
     frames: Iterator[tuple[str, np.ndarray]], expected: tuple[int, int] | None
 ) -> Iterator[tuple[str, np.ndarray]]:
@@ -202,13 +192,7 @@ def sized_frames(
 
 
 def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
-    from ..runtime.localize import (
-        Localizer,
-        curve_paths,
-        operating_point,
-        save_curve,
-        save_operating_point,
-    )
+    from ..runtime.localize import Localizer, curve_paths, operating_point, save_curve, save_operating_point
     from ..runtime.report.plots import plot_precision_recall
 
     if args.threshold is not None:
@@ -218,7 +202,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     outputs = (point_path, *curve_paths(point_path))
     for output in outputs:
         check_output(output, inputs=(args.model, onnx))
-    dataset = query_data(args, network.data, network.config.preprocess, [args.calibrate], network.reference_traversals)
+    dataset = query_data(args, network, args.calibrate)
     inputs = (args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
     for output in outputs:
         check_output(output, inputs=inputs)
@@ -279,14 +263,12 @@ OTHER_TARGETS = (1.0, 0.99, 0.95, 0.9, 0.8, 0.5)
 
 def other_targets(curve) -> str:
     """Each of :data:`OTHER_TARGETS` with the recall and the frames it accepts on the calibration queries."""
-    cells = []
-    for target in OTHER_TARGETS:
-        index = curve.index_for(target)
-        cells.append(
-            f"{target:g}: unreached"
-            if index is None
-            else f"{target:g}: recall {100 * curve.recall[index]:.1f} % ({int(curve.accepted[index])} of {curve.n_queries})"
-        )
+    cells = [
+        f"{target:g}: unreached"
+        if (index := curve.index_for(target)) is None
+        else f"{target:g}: recall {100 * curve.recall[index]:.1f} % ({int(curve.accepted[index])} of {curve.n_queries})"
+        for target in OTHER_TARGETS
+    ]
     return "precision target -> recall (frames accepted): " + "; ".join(cells)
 
 

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     device = resolve_device(args.device)
     reference_images = None
     if options.calibration == "deployed":
-        dataset = query_data(args, ckpt.data, ckpt.config.preprocess, list(ckpt.reference_traversals))
+        dataset = query_data(args, ckpt)
         check_reference_places(dataset.place_ids, ckpt.reference_place_ids)
         reference_images = {name: dataset.traversal(name) for name in ckpt.reference_traversals}
     paths = [Path(args.out) / model_filename(bits, options) for bits in widths]
@@ -84,16 +84,12 @@ def run(args: argparse.Namespace) -> int:
         )
         path = save_fixed_point(file, model)
         report = model.quantisation.to_dict()
+        scheme = ("per-neuron" if report["per_neuron"] else "per-tensor") + (
+            " folded" if report["threshold_folding"] else ""
+        )
+        sat = report["calibration_saturations"]
         rows.append(
-            {
-                **report,
-                "scheme": ("per-neuron" if report["per_neuron"] else "per-tensor")
-                + (" folded" if report["threshold_folding"] else ""),
-                "calibration_saturations": "-"
-                if report["calibration_saturations"] is None
-                else report["calibration_saturations"],
-                "file": str(path),
-            }
+            {**report, "scheme": scheme, "calibration_saturations": "-" if sat is None else sat, "file": str(path)}
         )
     if args.json:
         print_json({"checkpoint": str(args.checkpoint), "source_sha256": digest, "models": rows})

@@ -13,10 +13,9 @@ from ._common import (
     add_query_options,
     add_runtime_options,
     format_table,
+    load_query,
     print_json,
-    query_data,
-    sequence_options,
-    warn_sequences,
+    run_options,
 )
 
 
@@ -34,7 +33,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..device import resolve_device
     from ..runtime.evaluation import evaluate_fixed_point
 
     model = load_fixed_point(args.model)
@@ -45,21 +43,17 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError(
                 f"--compare {args.compare}: not the checkpoint this model was quantised from (sha256 differs)"
             )
-    options = sequence_options(args)
-    dataset = query_data(args, model.data, model.config.preprocess, [args.query], model.reference_traversals)
-    truth = dataset.query(args.query, model.reference_traversals, args.match_window).truth
-    warn_sequences(options, dataset)
+    options, _, query = load_query(args, model)
+    truth = query.truth
     result = evaluate_fixed_point(
         model,
-        dataset.traversal(args.query),
-        dataset.place_ids,
+        query.images,
+        query.place_ids,
         args.query,
         options,
-        device=resolve_device(args.device),
-        state_isolation=False if args.no_state_isolation else None,
         float_checkpoint=float_checkpoint,
-        progress=not args.quiet,
         truth=truth,
+        **run_options(args),
     )
     if args.json:
         print_json(

@@ -181,24 +181,22 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidValueError(f"--reference-queries expects 0 to {MAX_PLACES}, got {args.reference_queries}")
     device = resolve_device(args.device)
     out = Path(args.report)
-    templates = [(Path(p).stem, load_checkpoint(p), Path(p)) for p in args.checkpoints]
+    stems = [Path(p).stem for p in args.checkpoints]
+    templates = [
+        (stem if stems.count(stem) == 1 else f"{stem} ({i + 1})", load_checkpoint(p), Path(p))
+        for i, (stem, p) in enumerate(zip(stems, args.checkpoints, strict=True))
+    ]
+    template = templates[0][1]
+    networks: Iterable[tuple[str, Checkpoint, Path]] = templates
     options = verify_options(args)
-    source, subset, places = data_selection(templates[0][1].data, args.data, args.subset, args.places)
-    refuse_window_beside_truth(args.match_window, source, templates[0][1].reference_traversals, args.query)
+    source, subset, places = data_selection(template.data, args.data, args.subset, args.places)
+    refuse_window_beside_truth(args.match_window, source, template.reference_traversals, args.query)
     cache: dict = {}
-    networks: Iterable[tuple[str, Checkpoint, Path]]
     if args.seeds is not None:
-        template = templates[0][1]
         dataset, _ = verify_data(template, args.query, source, subset, places, progress, cache)  # training places
         networks = seed_networks(template, args.seeds, dataset, source, subset, places, out, args.device, progress)
-    else:
-        labels = [stem for stem, _, _ in templates]
-        networks = [
-            (stem if labels.count(stem) == 1 else f"{stem} ({i + 1})", ckpt, path)
-            for i, (stem, ckpt, path) in enumerate(templates)
-        ]
     settings = {
-        **options.to_dict(templates[0][1].config),
+        **options.to_dict(template.config),
         "query": args.query,
         "data": source,
         "subset": subset,
@@ -219,24 +217,13 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         query = dataset.query(args.query, ckpt.reference_traversals, args.match_window)
-        truth = query.truth
-        if truth.source:  # the report says what the queries were scored against
-            settings["ground_truth"] = truth.source
-        settings["truth"] = truth.label
-        runs.append(
-            verify_checkpoint(
-                VerifiedNetwork(
-                    ckpt,
-                    checkpoint_sha256(path),
-                    None if options.quantise.calibration == "float" else reference_images,
-                    label,
-                    str(path),
-                ),
-                query,
-                options,
-                Runtime(device, progress, out / "exports" / folder_name(label, index)),
-            )
-        )
+        if query.truth.source:  # the report says what the queries were scored against
+            settings["ground_truth"] = query.truth.source
+        settings["truth"] = query.truth.label
+        references = None if options.quantise.calibration == "float" else reference_images
+        network = VerifiedNetwork(ckpt, checkpoint_sha256(path), references, label, str(path))
+        runtime = Runtime(device, progress, out / "exports" / folder_name(label, index))
+        runs.append(verify_checkpoint(network, query, options, runtime))
         report = build_report(runs, settings, command=command, seconds=time.perf_counter() - started)
         written = write_report(report, out)  # after every network: a long --seeds run leaves a usable report
     line, code = conclusion(report, args.strict)
