@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -17,6 +16,7 @@ from vprsnn_export.data.encoding import encode, query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
@@ -47,12 +47,14 @@ class CheckRow:
 
 
 @dataclass(frozen=True)
-class ExportChecks:
-    """Every written file read back and run: the exact comparisons and the measurements."""
+class ExportChecks(JsonDataclass):
+    """Every written file read back and run: the exact comparisons and the measurements (JSON: the rows)."""
 
     spikes: str  # what was presented
-    comparisons: tuple[Comparison, ...]
-    measurements: tuple[CheckRow, ...] = ()
+    comparisons: tuple[Comparison, ...] = field(metadata=json_options(write=False))
+    measurements: tuple[CheckRow, ...] = field(default=(), metadata=json_options(write=False))
+
+    __json_extra__ = ("rows", "passed")
 
     @property
     def passed(self) -> bool:
@@ -67,9 +69,6 @@ class ExportChecks:
             prefix, _, what = c.check.partition(": ")
             rows.append(CheckRow(names.get(prefix, prefix), f"{what or prefix}: {c.a} vs {c.b}", c.passed, c.detail))
         return rows + list(self.measurements)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
 
 
 def check_presentations(
