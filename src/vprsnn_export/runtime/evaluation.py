@@ -70,11 +70,6 @@ def spike_statistics(run: SpikeRun, counts: np.ndarray | sparse.csr_array) -> Sp
     )
 
 
-def _single(evaluation: Evaluation) -> bool:
-    """Whether an evaluation is of one network (no modules): its JSON has no ``silenced_neurons``."""
-    return evaluation.modules is None
-
-
 @dataclass(frozen=True)
 class Evaluation(JsonDataclass):
     """One network evaluated on one query traversal; its JSON is that of `evaluate --json` / `simulate --json`
@@ -95,7 +90,9 @@ class Evaluation(JsonDataclass):
     # an ensemble: per module, W+Prob k=1
     modules: list[ModuleAccuracy] | None = field(default=None, metadata=json_options(omit="none"))
     # an ensemble: neurons silenced by the region regularisation
-    silenced: int | None = field(default=None, metadata=json_options(key="silenced_neurons", omit=_single))
+    silenced: int | None = field(
+        default=None, metadata=json_options(key="silenced_neurons", omit=lambda e: e.modules is None)
+    )
     cost: CostSummary | None = field(default=None, metadata=json_options(omit="none"))  # events per query
     # every readout column of the network's own S^R
     scored: Scored | None = field(default=None, repr=False, metadata=NOT_WRITTEN)
