@@ -24,7 +24,6 @@ import torch
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.strategies import SEQUENCE_STRATEGY, decide
 from vprsnn_export.targets.nir_consumers import GATE_CONSUMERS, ConsumerUnavailable, available, run_consumer
 from vprsnn_export.targets.nir_read import load_graph
@@ -32,14 +31,14 @@ from vprsnn_export.targets.nir_semantics import float_consumers
 from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS
 
+from .conformance import wprob_readout
 from .results import Comparison, ConformanceResult
 
 
 def decided_places(network: Checkpoint | FixedPointModel, counts: np.ndarray) -> np.ndarray:
     """The sequence strategy's (W+Prob) decision (k = 1) of each presentation with the network's own
     calibration (an ensemble's with its region regularisation)."""
-    scores = Readout.of(network.calibration, network.config).scores(counts)
-    return decide(scores[SEQUENCE_STRATEGY], SEQUENCE_STRATEGY)[0]
+    return decide(wprob_readout(network)(counts), SEQUENCE_STRATEGY)[0]
 
 
 def check_tolerance(tolerance: float | None) -> float | None:
@@ -104,8 +103,6 @@ def with_consumer_gate(
     model: FixedPointModel,
     raster: torch.Tensor | None,
     spikes: torch.Tensor,
-    *,
-    tolerance: float | None = None,
 ) -> ConformanceResult:
     """``result`` (a verification's cross-implementation checks) plus the gate on each written file that the field's
     float consumers read (:attr:`~vprsnn_export.targets.registry.Target.float_consumers`: NIR)."""
@@ -114,6 +111,6 @@ def with_consumer_gate(
         row
         for entry, path in gated
         if entry.float_consumers and raster is not None
-        for row in consumer_gate(path, model, raster, spikes, tolerance=tolerance, label=entry.label)
+        for row in consumer_gate(path, model, raster, spikes, label=entry.label)
     )
     return dataclasses.replace(result, comparisons=result.comparisons + gate)

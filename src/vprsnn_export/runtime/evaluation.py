@@ -23,7 +23,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.export.quantize import CALIBRATIONS
 from vprsnn_export.io.checkpoint import Checkpoint
-from vprsnn_export.io.serial import JsonDataclass
+from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.network.cost import CostSummary, joined_costs, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
 from vprsnn_export.network.runs import Backend, SpikeRun, joined_runs
@@ -41,6 +41,7 @@ from vprsnn_export.trainer.sharded import float_runs_on_cluster
 
 from .backends import Network, choose_backend, open_backend
 
+NOT_WRITTEN = json_options(write=False)
 NetworkT = TypeVar("NetworkT", Checkpoint, FixedPointModel)
 #: The queries of a long route run at once, their counts then kept as CSR (:func:`_run_queries`).
 LONG_ROUTE_BLOCK = 1024
@@ -70,37 +71,31 @@ def spike_statistics(run: SpikeRun, counts: np.ndarray | sparse.csr_array) -> Sp
 
 
 @dataclass(frozen=True)
-class Evaluation:
-    """One network evaluated on one query traversal.
+class Evaluation(JsonDataclass):
+    """One network evaluated on one query traversal; its JSON is that of `evaluate --json` / `simulate --json`
+    (without the spike counts; an ensemble adds ``modules``, per-module accuracy, and ``silenced_neurons``).
 
     ``rows`` are result rows {strategy, k, accuracy, p_at_100r, r_at_100p, auc_pr, n_queries}
     (plus ``calibration`` for a fixed-point model: its deployed and its float S^R).
     """
 
-    rows: list[dict[str, Any]]
+    rows: list[dict[str, Any]] = field(metadata=json_options(key="results"))
     spike_stats: SpikeStatistics
-    query_counts: np.ndarray | sparse.csr_array  # (Q, neurons) int64; CSR on a long route (_run_queries)
-    saturations: int = 0
-    max_current: int = 0
-    winner_agreement: dict[str, float] | None = field(default=None)  # vs the float network, same spikes
-    modules: list[ModuleAccuracy] | None = field(default=None)  # an ensemble: per module, W+Prob k=1
-    silenced: int | None = None  # an ensemble: neurons silenced by the region regularisation
-    cost: CostSummary | None = None  # events per query, SNN vs template (network.cost)
-    scored: Scored | None = field(default=None, repr=False)  # every readout column of the network's own S^R
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON of `evaluate --json` / `simulate --json` (without the spike counts).
-
-        An ensemble adds ``modules`` (per-module accuracy) and ``silenced_neurons``."""
-        out: dict[str, Any] = {"results": self.rows, "spike_stats": self.spike_stats.to_dict()}
-        if self.winner_agreement is not None:
-            out["winner_agreement"] = self.winner_agreement
-        if self.modules is not None:
-            out["modules"] = [m.to_dict() for m in self.modules]
-            out["silenced_neurons"] = self.silenced
-        if self.cost is not None:
-            out["cost"] = self.cost.to_dict()
-        return out
+    # (Q, neurons) int64; CSR on a long route (_run_queries)
+    query_counts: np.ndarray | sparse.csr_array = field(metadata=NOT_WRITTEN)
+    saturations: int = field(default=0, metadata=NOT_WRITTEN)
+    max_current: int = field(default=0, metadata=NOT_WRITTEN)
+    # vs the float network, same spikes
+    winner_agreement: dict[str, float] | None = field(default=None, metadata=json_options(omit="none"))
+    # an ensemble: per module, W+Prob k=1
+    modules: list[ModuleAccuracy] | None = field(default=None, metadata=json_options(omit="none"))
+    # an ensemble: neurons silenced by the region regularisation
+    silenced: int | None = field(
+        default=None, metadata=json_options(key="silenced_neurons", omit=lambda e: e.modules is None)
+    )
+    cost: CostSummary | None = field(default=None, metadata=json_options(omit="none"))  # events per query
+    # every readout column of the network's own S^R
+    scored: Scored | None = field(default=None, repr=False, metadata=NOT_WRITTEN)
 
 
 def evaluate_float(

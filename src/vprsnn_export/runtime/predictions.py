@@ -93,13 +93,11 @@ class Predictions:
             writer.writerow({k: "" if v is None else v for k, v in row.items()})
         return buffer.getvalue()
 
-    def to_jsonl(self) -> str:
-        return "".join(json.dumps(row) + "\n" for row in self.rows())
-
     def write(self, path: str | Path) -> Path:
         """Write as CSV or JSON lines, chosen by the suffix (.csv, .jsonl), atomically."""
-        as_csv = prediction_format(path) == ".csv"
-        return atomic_write_text(path, self.to_csv() if as_csv else self.to_jsonl())
+        if prediction_format(path) == ".csv":
+            return atomic_write_text(path, self.to_csv())
+        return atomic_write_text(path, "".join(json.dumps(row) + "\n" for row in self.rows()))
 
 
 def prediction_format(path: str | Path) -> str:

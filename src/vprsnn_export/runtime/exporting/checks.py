@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -17,12 +16,14 @@ from vprsnn_export.data.encoding import encode, query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
+from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, target_labels
 
-from ..conformance import Contender, backend_of, compare_backends, read_back, target_path, wprob_readout
+from ..backends import open_backend
+from ..conformance import Contender, compare_backends, read_back, target_path, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -46,12 +47,14 @@ class CheckRow:
 
 
 @dataclass(frozen=True)
-class ExportChecks:
-    """Every written file read back and run: the exact comparisons and the measurements."""
+class ExportChecks(JsonDataclass):
+    """Every written file read back and run: the exact comparisons and the measurements (JSON: the rows)."""
 
     spikes: str  # what was presented
-    comparisons: tuple[Comparison, ...]
-    measurements: tuple[CheckRow, ...] = ()
+    comparisons: tuple[Comparison, ...] = field(metadata=json_options(write=False))
+    measurements: tuple[CheckRow, ...] = field(default=(), metadata=json_options(write=False))
+
+    __json_extra__ = ("rows", "passed")
 
     @property
     def passed(self) -> bool:
@@ -66,9 +69,6 @@ class ExportChecks:
             prefix, _, what = c.check.partition(": ")
             rows.append(CheckRow(names.get(prefix, prefix), f"{what or prefix}: {c.a} vs {c.b}", c.passed, c.detail))
         return rows + list(self.measurements)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"spikes": self.spikes, "rows": [r.to_dict() for r in self.rows], "passed": self.passed}
 
 
 def check_presentations(
@@ -160,7 +160,7 @@ def check_exports(
     for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
         if not isinstance(stage, str):  # a target written from the source itself, float or fixed point
             network = source.network
-            baseline = backend_of(network, device)
+            baseline = open_backend(network, device=device)[1]  # the float network or the integer simulator
             base_run = baseline.run(spikes, record=True)
             path = target_path(stage.name, written[stage.name])
             contender = read_back(stage.name, path, network, device)
@@ -172,5 +172,7 @@ def check_exports(
                 )
         elif model is not None:
             contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
-            comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+            comparisons += compare_backends(
+                open_backend(model, device=device)[1], contenders, spikes, wprob=wprob_readout(model)
+            )
     return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))

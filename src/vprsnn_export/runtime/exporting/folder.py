@@ -130,23 +130,18 @@ def export_and_check(
             checks=checks,
             cost=None if model is None else deployment_cost(model, spikes, spikes_label),
         )
-        atomic_write_text(staging / MANIFEST_NAME, json.dumps(manifest_dict(result), indent=2))
+        # export.json: every file's path relative to the deploy folder (``model.onnx``, ``loihi/network.json``),
+        # so that the folder reads the same from any working directory and after a rename
+        manifest = result.to_dict()
+        manifest["files"] = {
+            target: [{**entry, "path": Path(entry["path"]).relative_to(out).as_posix()} for entry in entries]
+            for target, entries in manifest["files"].items()
+        }
+        atomic_write_text(staging / MANIFEST_NAME, json.dumps(manifest, indent=2))
         publish_folder(staging, out)
     finally:  # an interrupted export leaves no staging folder (a published one is no longer there)
         shutil.rmtree(staging, ignore_errors=True)
     return result
-
-
-def manifest_dict(result: ExportResult) -> dict[str, Any]:
-    """export.json's content: :meth:`ExportResult.to_dict` with every file's path relative to the deploy folder
-    (``model.onnx``, ``loihi/network.json``), so that the folder reads the same from any working directory
-    and after a rename."""
-    data = result.to_dict()
-    data["files"] = {
-        target: [{**entry, "path": Path(entry["path"]).relative_to(result.folder).as_posix()} for entry in entries]
-        for target, entries in data["files"].items()
-    }
-    return data
 
 
 def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:

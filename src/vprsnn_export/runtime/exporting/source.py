@@ -8,7 +8,7 @@ from pathlib import Path
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FORMAT as FIXED_FORMAT
-from vprsnn_export.export.model import FixedPointModel, check_bits, load_fixed_point
+from vprsnn_export.export.model import FixedPointModel, load_fixed_point
 from vprsnn_export.export.quantize import QuantiseOptions
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 from vprsnn_export.io.checkpoint import Checkpoint, load_checkpoint
@@ -114,7 +114,7 @@ def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]
             f"{' and '.join(wanted)} need a fixed-point model: run `vprsnn-export quantize CHECKPOINT --bits 8 "
             "--per-neuron --out DIR` and export the model it writes, add --quantize 8 here, or export with --to nir"
         )
-    return deploy(source.checkpoint, source.sha256, check_bits(bits), QuantiseOptions(calibration="float"))
+    return deploy(source.checkpoint, source.sha256, bits, QuantiseOptions(calibration="float"))
 
 
 def consumer_statements(
