@@ -90,14 +90,6 @@ def _ray() -> Any:
     return ray
 
 
-def _run_task(threads: int, function: Callable[..., Any], *args: Any) -> Any:
-    """On a worker: fix the torch thread count, then run the task."""
-    import torch  # a worker process starts bare
-
-    torch.set_num_threads(threads)
-    return function(*args)
-
-
 @dataclass(frozen=True)
 class TaskTiming:
     """Wall time of one map: the whole map and the sum of the tasks' own run times."""
@@ -107,8 +99,12 @@ class TaskTiming:
 
 
 def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any, float]:
+    """On a worker: fix the torch thread count, then run the task, timed."""
     started = time.perf_counter()
-    result = _run_task(threads, function, *args)
+    import torch  # a worker process starts bare
+
+    torch.set_num_threads(threads)
+    result = function(*args)
     return result, time.perf_counter() - started
 
 

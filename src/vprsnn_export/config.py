@@ -172,8 +172,7 @@ class VerifyConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for item in fields(self):
-            check_range(f"verify.{item.name}", getattr(self, item.name))
+        _check_ranges(self, "verify.")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> VerifyConfig:
@@ -194,13 +193,7 @@ class Config:
     early: EarlyConfig = field(default_factory=EarlyConfig)
 
     def __post_init__(self) -> None:
-        for section in fields(self):
-            value = getattr(self, section.name)
-            if is_dataclass(value):
-                for item in fields(value):
-                    check_range(f"{section.name}.{item.name}", getattr(value, item.name))
-            else:
-                check_range(section.name, value)
+        _check_ranges(self, "")
         side = self.preprocess.image_size
         if self.preprocess.channels not in CHANNELS:
             raise InvalidValueError(
@@ -350,6 +343,16 @@ def check_range(key: str, value: Any) -> None:
     if below or above:
         interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
         raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
+
+
+def _check_ranges(value: Any, prefix: str) -> None:
+    """:func:`check_range` of every field of the dataclass ``value``, a section's fields as ``section.key``."""
+    for item in fields(value):
+        section = getattr(value, item.name)
+        if is_dataclass(section):
+            _check_ranges(section, f"{prefix}{item.name}.")
+        else:
+            check_range(prefix + item.name, section)
 
 
 #: What a setting of each type must be, in the words of the error that names it.

@@ -100,15 +100,6 @@ def memory_limit() -> int | None:
     return None if available is None else int(available * AVAILABLE_SHARE)
 
 
-def limit_source() -> str:
-    """Where the limit in use comes from, for the error message."""
-    if _explicit_limit is not None:
-        return f"set by {OPTION}"
-    if os.environ.get(ENV_LIMIT, "").strip():
-        return f"set by {ENV_LIMIT}"
-    return f"{AVAILABLE_SHARE:.0%} of the available memory; {OPTION} or {ENV_LIMIT} sets it"
-
-
 @dataclass(frozen=True)
 class MemoryNeed:
     """The big arrays of one step of a run: (name, bytes) terms."""
@@ -118,9 +109,6 @@ class MemoryNeed:
     @property
     def total(self) -> int:
         return sum(size for _, size in self.terms)
-
-    def largest(self) -> tuple[str, int]:
-        return max(self.terms, key=lambda term: term[1])
 
 
 def run_need(
@@ -183,16 +171,9 @@ def training_need(
     )
 
 
-def spikes_need(presentations: int, timesteps: int, n_inputs: int) -> MemoryNeed:
-    """The uint8 input spikes (N, T, D) of ``presentations`` presentations encoded at once."""
-    return MemoryNeed(
-        ((f"input spikes {presentations} x {timesteps} x {n_inputs}", presentations * timesteps * n_inputs),)
-    )
-
-
-def decode_need(width: int, height: int) -> MemoryNeed:
-    """Decoding one ``width x height`` image: ``4 W H`` bytes (up to 4 uint8 channels before the grey copy)."""
-    return MemoryNeed(((f"decoded image {width} x {height}", 4 * width * height),))
+def single_need(name: str, size: int) -> MemoryNeed:
+    """A need of one array: ``size`` bytes named ``name``."""
+    return MemoryNeed(((name, size),))
 
 
 LOWER_RUN = "fewer places (--places) or timesteps (--timesteps, encoder.timesteps)"
@@ -206,11 +187,18 @@ def check_memory(need: MemoryNeed, what: str, lower: str, limit: int | None = No
 
     ``what``: the step (``train``, ``calibration``); ``lower``: the settings that make the need smaller.
     """
-    source = "given" if limit is not None else limit_source()
+    if limit is not None:
+        source = "given"
+    elif _explicit_limit is not None:
+        source = f"set by {OPTION}"
+    elif os.environ.get(ENV_LIMIT, "").strip():
+        source = f"set by {ENV_LIMIT}"
+    else:
+        source = f"{AVAILABLE_SHARE:.0%} of the available memory; {OPTION} or {ENV_LIMIT} sets it"
     limit = memory_limit() if limit is None else limit
     if limit is None or need.total <= limit:
         return
-    name, size = need.largest()
+    name, size = max(need.terms, key=lambda term: term[1])
     raise InvalidValueError(
         f"{what} needs about {format_size(need.total)} of memory (largest: {name}, {format_size(size)}), "
         f"over the limit of {format_size(limit)} ({source}); {lower} lower the need"

@@ -5,7 +5,7 @@ the bag's one image topic (with several, ``topic`` names one), named ``<bag>#<in
 
 * ``sensor_msgs/msg/Image`` in ``mono8``, ``rgb8``, ``bgr8``, ``rgba8`` or ``bgra8`` (rows of ``step`` bytes,
   padding dropped; colour to grey with OpenCV's weights), its size checked against the memory limit before it
-  is deserialised (:func:`raw_image_need`);
+  is deserialised (``2 n`` bytes for a message of ``n``: its data, then the converted pixels);
 * ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its header checked
   first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
 """
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from ..resources import MemoryNeed, check_memory
+from ..resources import check_memory, single_need
 from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -35,12 +35,6 @@ ROS2_METADATA = "metadata.yaml"
 def is_bag(path: Path) -> bool:
     """A ROS 1 bag file (``.bag``) or a ROS 2 bag folder (holding ``metadata.yaml``)."""
     return (path.is_file() and path.suffix.lower() == BAG_SUFFIX) or (path / ROS2_METADATA).is_file()
-
-
-def raw_image_need(n_bytes: int) -> MemoryNeed:
-    """Reading one raw ``sensor_msgs/Image`` message of ``n_bytes`` bytes: its data deserialised, then the
-    pixels converted (at most as large again): ``2 n_bytes`` bytes, known before anything is decoded."""
-    return MemoryNeed(((f"image message of {n_bytes} bytes, deserialised and converted", 2 * n_bytes),))
 
 
 def image_grey(msg, where: str) -> np.ndarray:
@@ -112,7 +106,8 @@ def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]
             except Exception as exc:  # a damaged or truncated bag
                 raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
             if connection.msgtype == IMAGE:
-                check_memory(raw_image_need(len(raw)), f"reading message {index} of {topic} in {path}", SMALLER)
+                need = single_need(f"image message of {len(raw)} bytes, deserialised and converted", 2 * len(raw))
+                check_memory(need, f"reading message {index} of {topic} in {path}", SMALLER)
             try:
                 msg = reader.deserialize(raw, connection.msgtype)
             except Exception as exc:  # a message that does not deserialise

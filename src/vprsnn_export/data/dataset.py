@@ -376,16 +376,6 @@ def read_manifest(data: str | Path) -> Manifest:
     return Manifest(path=path, sha256=sha256_bytes(raw), columns=columns, rows=rows)
 
 
-def read_subset(path: str | Path) -> np.ndarray:
-    """The ``place_id`` column of a subset CSV, in file order, as int64; DataError on any defect."""
-    missing, empty = (
-        "no such subset file (a CSV with a place_id column)",
-        "empty selection: the subset file lists no places",
-    )
-    _, _, rows = _read_csv(Path(path), "subset file", missing, empty)
-    return np.fromiter(rows, dtype=np.int64, count=len(rows))  # file order
-
-
 def _check_traversals(traversals: Sequence[str]) -> tuple[str, ...]:
     if isinstance(traversals, str):
         traversals = (traversals,)
@@ -430,7 +420,12 @@ def _read_csv(
             if not any(cell.strip() for cell in cells):
                 continue
             record = {name: cell.strip() for name, cell in zip(columns, cells, strict=False)}
-            place = _place_id(record.get(PLACE_ID), reader.line_num, path)
+            value = record.get(PLACE_ID)
+            place = ascii_uint((value or "").strip(" \t"))
+            if place is None:
+                raise DataError(f"line {reader.line_num}: place_id {value!r} is not an integer", path) from None
+            if not 0 <= place <= MAX_PLACE_ID:
+                raise DataError(f"line {reader.line_num}: place_id {place} is outside 0..2**53", path)
             if place in rows:
                 raise DataError(f"duplicate place_id {place} on lines {rows[place][0]} and {reader.line_num}", path)
             rows[place] = (reader.line_num, record)
@@ -441,19 +436,12 @@ def _read_csv(
     return raw, columns, rows
 
 
-def _place_id(value: str | None, line: int, path: Path) -> int:
-    place = ascii_uint((value or "").strip(" \t"))
-    if place is None:
-        raise DataError(f"line {line}: place_id {value!r} is not an integer", path) from None
-    if not 0 <= place <= MAX_PLACE_ID:
-        raise DataError(f"line {line}: place_id {place} is outside 0..2**53", path)
-    return place
-
-
 def _select(available: np.ndarray, subset: Selection, places: str | None, source: str) -> np.ndarray:
     """Selected place ids in selection order; every one must be in ``available``."""
-    if isinstance(subset, str | Path):
-        selected = read_subset(subset)
+    if isinstance(subset, str | Path):  # a subset CSV's place_id column, in file order
+        missing = "no such subset file (a CSV with a place_id column)"
+        _, _, rows = _read_csv(Path(subset), "subset file", missing, "empty selection: the subset file lists no places")
+        selected = np.fromiter(rows, dtype=np.int64, count=len(rows))
         where = f"subset file {subset}"
     elif subset is not None:
         selected = np.asarray(subset, dtype=np.int64).reshape(-1)

@@ -19,7 +19,7 @@ import torch
 from ..arguments import check_place_ids, require_type
 from ..config import Config, EncoderConfig
 from ..errors import InvalidValueError
-from ..resources import LOWER_RUN, check_memory, spikes_need
+from ..resources import LOWER_RUN, check_memory, single_need
 from .encoding_kernel import bernoulli_spikes
 
 STREAM_QUERY = "query"
@@ -80,7 +80,9 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:
         raise InvalidValueError(f"images: expected (N, D) images and N seeds, got {images.shape} and {len(seeds)}")
-    check_memory(spikes_need(images.shape[0], cfg.timesteps, images.shape[1]), "encoding the spikes", LOWER_RUN)
+    n, d = images.shape
+    spikes = single_need(f"input spikes {n} x {cfg.timesteps} x {d}", n * cfg.timesteps * d)
+    check_memory(spikes, "encoding the spikes", LOWER_RUN)
     prob = firing_probabilities(images, cfg).numpy()
     return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps))
 

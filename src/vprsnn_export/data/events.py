@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, InvalidValueError
-from ..resources import MemoryNeed, check_memory, format_size
+from ..resources import MemoryNeed, check_memory, format_size, single_need
 
 EVENT_SUFFIXES = frozenset({".npy", ".npz", ".txt"})
 FIELDS = ("x", "y", "t", "p")
@@ -110,7 +110,7 @@ def load_need(path: Path) -> MemoryNeed:
     if path.suffix.lower() == ".npz" and zipfile.is_zipfile(path):
         with zipfile.ZipFile(path) as archive:
             size = sum(info.file_size for info in archive.infolist())
-    return MemoryNeed(((f"events of {format_size(size)} of data", 9 * size),))
+    return single_need(f"events of {format_size(size)} of data", 9 * size)
 
 
 def read_events(path: str | Path) -> Events:
@@ -183,7 +183,7 @@ def event_frames(
     extent = (int(events.y.max()) + 1, int(events.x.max()) + 1)
     if shape is None:
         shape = extent
-        need = MemoryNeed(((f"event frame {shape[1]} x {shape[0]} (int64 counts)", 9 * shape[0] * shape[1]),))
+        need = single_need(f"event frame {shape[1]} x {shape[0]} (int64 counts)", 9 * shape[0] * shape[1])
         check_memory(need, f"binning {path}", "a recording of a smaller sensor would")
     elif extent[0] > shape[0] or extent[1] > shape[1]:
         raise DataError(

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import DataError, InvalidValueError
 from ..registry import Registry
-from ..resources import check_memory, decode_need
+from ..resources import check_memory, single_need
 from .imageheader import image_dimensions
 
 
@@ -99,10 +99,13 @@ def captured_stderr() -> Iterator[list[str]]:
 
 def check_decodable(data: bytes, where: object) -> None:
     """InvalidValueError (one line) when the image ``data``'s header names more pixels than the memory limit
-    lets a decode allocate (:func:`~vprsnn_export.resources.decode_need`): refused before any pixel is decoded."""
+    lets a decode allocate (``4 W H`` bytes: up to 4 uint8 channels before the grey copy): refused before any
+    pixel is decoded."""
     size = image_dimensions(data)
     if size is not None:
-        check_memory(decode_need(*size), f"decoding {where}", "a smaller image would")
+        width, height = size
+        need = single_need(f"decoded image {width} x {height}", 4 * width * height)
+        check_memory(need, f"decoding {where}", "a smaller image would")
 
 
 def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
