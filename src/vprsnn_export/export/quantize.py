@@ -332,8 +332,7 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("ckpt_sha256", ckpt_sha256, str)
-    require_type("options", options, QuantiseOptions)
-    check_bits(bits)
+    require_type("options", options, QuantiseOptions)  # the bit width: quantise_arrays's
     if options.non_leaky:
         ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
     arrays = quantise_arrays(
