@@ -78,11 +78,9 @@ def check_interface(loaded, path: Path) -> None:
     )
     if len(inputs) != 1 or inputs[0].name != INPUT or len(dims) != 3 or not (dims[0] and dims[2]):
         raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
-    missing = [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]
-    if missing:
+    if missing := [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]:
         raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
-    foreign = sorted(graph_ops(loaded.graph) - WRITER_OPS)
-    if foreign:
+    if foreign := sorted(graph_ops(loaded.graph) - WRITER_OPS):
         raise ModelFileError(f"the graph uses operators export never writes ({', '.join(foreign[:5])})", path)
 
 
