@@ -31,15 +31,14 @@ and the clip is skipped; otherwise every clip is counted.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
 
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
-from vprsnn_export.errors import InvalidValueError, ModelFileError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.errors import InvalidValueError
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
 from .intsim_kernel import KernelWeights, integer_run, kernel_weights
@@ -79,7 +78,29 @@ class PreparedModel:
     mantissas: KernelWeights  # (inputs, neurons) the unshifted q_ij as the compiled CPU kernel reads them
 
 
+def check_arrays(model: FixedPointModel) -> None:
+    """The arrays the simulator indexes: mantissas (inputs, neurons) and thresholds and multipliers
+    (neurons,), all integers, neurons in whole WTA groups; InvalidValueError naming the array otherwise."""
+    arrays = {name: getattr(model, name) for name in ("weight_mantissa", "threshold", "scale_multiplier")}
+    for name, array in arrays.items():
+        if not isinstance(array, np.ndarray) or not np.issubdtype(array.dtype, np.integer):
+            raise InvalidValueError(f"fixed-point model: {name} must be an integer numpy array")
+    if model.weight_mantissa.ndim != 2:
+        raise InvalidValueError(f"fixed-point model: weight_mantissa has shape {model.weight_mantissa.shape}, not 2-D")
+    for name in ("threshold", "scale_multiplier"):
+        if arrays[name].shape != (model.n_neurons,):
+            raise InvalidValueError(
+                f"fixed-point model: {name} has shape {arrays[name].shape}, expected ({model.n_neurons},)"
+            )
+    group = model.config.network.n_neurons
+    if model.n_neurons == 0 or model.n_neurons % group:
+        raise InvalidValueError(
+            f"fixed-point model: {model.n_neurons} neurons are not whole modules of network.n_neurons = {group}"
+        )
+
+
 def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
+    check_arrays(model)
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
@@ -114,10 +135,6 @@ class IntegerNetwork:
 
     def __post_init__(self) -> None:
         require_type("model", self.model, FixedPointModel)
-        try:  # the writers' checks (every array's shape, dtype and width), as an argument error
-            validate(self.model, Path("<fixed-point model>"))
-        except ModelFileError as exc:
-            raise InvalidValueError(str(exc)) from None
         self.device = torch.device("cpu") if self.device is None else torch.device(self.device)
         self.prepared = prepare(self.model, self.device)
 
