@@ -180,10 +180,6 @@ class FixedPointModel:
         """Largest voltage magnitude: 2**(voltage_bits - 1) - 1."""
         return (1 << (self.voltage_bits - 1)) - 1
 
-    def float_weights(self) -> np.ndarray:
-        """The float weights the mantissas stand for: q_ij m_j 2**e."""
-        return self.weight_mantissa * (self.scale_multiplier * 2.0**self.scale_exponent)[None, :]
-
     def wta_description(self) -> str:
         """The header's WTA rule in words (per module for an ensemble)."""
         if not self.config.network.wta:
