@@ -51,6 +51,7 @@ from vprsnn_export.config import Config, wta_group
 from vprsnn_export.errors import InvalidValueError, ModelFileError, VprError
 from vprsnn_export.io.checkpoint import reference_header, validate_reference_ids
 from vprsnn_export.io.fileio import read_container, write_container
+from vprsnn_export.io.serial import json_options, to_json_dict
 from vprsnn_export.network.modules import ensemble_neurons
 from vprsnn_export.network.widths import DECAY_BITS
 from vprsnn_export.version import __version__
@@ -79,7 +80,7 @@ def check_bits(bits: int) -> int:
     return bits
 
 
-MODULE_FIELDS = ("module_weight_relative_rmse", "module_weights_clipped", "module_max_current")
+UNLESS_NONE = json_options(omit="none")
 
 
 @dataclass(frozen=True)
@@ -88,7 +89,7 @@ class QuantisationReport:
 
     The ``quantisation`` object of the model's JSON header. Every field is optional (None
     when not recorded), so headers written by older versions, which may lack some, load;
-    keys this version does not know are kept in ``extra`` and written back unchanged.
+    keys this version does not know are kept in ``extra`` and written back unchanged, after the fields.
     """
 
     bits: int | None = None
@@ -109,21 +110,14 @@ class QuantisationReport:
     max_current: int | None = None  # max_j sum_i q_ij: the largest possible a_j
     calibration: str | None = None  # how S^R was obtained ("deployed (integer simulator)", "float (reused)", ...)
     calibration_saturations: int | None = None  # voltage clips while re-measuring S^R (None: not re-measured)
-    module_weight_relative_rmse: tuple[float, ...] | None = None  # per module of an ensemble (older files: None)
-    module_weights_clipped: tuple[int, ...] | None = None
-    module_max_current: tuple[int, ...] | None = None
-    extra: Mapping[str, Any] = field(default_factory=dict)
+    # per module of an ensemble; absent from the JSON when not recorded (older headers are written back unchanged)
+    module_weight_relative_rmse: tuple[float, ...] | None = field(default=None, metadata=UNLESS_NONE)
+    module_weights_clipped: tuple[int, ...] | None = field(default=None, metadata=UNLESS_NONE)
+    module_max_current: tuple[int, ...] | None = field(default=None, metadata=UNLESS_NONE)
+    extra: Mapping[str, Any] = field(default_factory=dict, metadata=json_options(flatten=True))
 
     def to_dict(self) -> dict[str, Any]:
-        """The header's JSON object: the recorded fields (None ones included, except the per-module
-        lists, absent when not recorded so that older headers are written back unchanged) and the extra keys."""
-        data: dict[str, Any] = {}
-        for item in fields(self):
-            if item.name == "extra" or (item.name in MODULE_FIELDS and getattr(self, item.name) is None):
-                continue
-            value = getattr(self, item.name)
-            data[item.name] = list(value) if isinstance(value, tuple) else value
-        return {**data, **self.extra}
+        return to_json_dict(self)  # it reads itself (from_dict), so it is no JsonDataclass
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> QuantisationReport:
@@ -185,10 +179,6 @@ class FixedPointModel:
     def voltage_limit(self) -> int:
         """Largest voltage magnitude: 2**(voltage_bits - 1) - 1."""
         return (1 << (self.voltage_bits - 1)) - 1
-
-    def float_weights(self) -> np.ndarray:
-        """The float weights the mantissas stand for: q_ij m_j 2**e."""
-        return self.weight_mantissa * (self.scale_multiplier * 2.0**self.scale_exponent)[None, :]
 
     def wta_description(self) -> str:
         """The header's WTA rule in words (per module for an ensemble)."""

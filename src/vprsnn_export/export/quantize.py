@@ -207,8 +207,7 @@ def quantise_arrays(
         if fold_thresholds
         else integer_thresholds(thresholds, actual)
     )
-    report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits)
-    report.update(module_error_report(weights, mantissas, actual, bits, group))
+    report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits, group)
     report.update(
         bits=bits,
         per_neuron=per_neuron,
@@ -230,15 +229,28 @@ def error_report(
     scales: np.ndarray,
     theta_int: np.ndarray,
     bits: int,
+    group: int,
 ) -> dict[str, Any]:
-    """How far the fixed-point network is from the float one (all plain JSON numbers).
+    """How far the fixed-point network is from the float one (all plain JSON numbers), in all and per module
+    (lists of M; module m = columns [m n, (m + 1) n), n = ``group``).
 
     weight errors are w_ij - q_ij s_j; threshold errors (theta_int_j s_j - theta_j) / theta_j;
-    max_current is max_j sum_i q_ij, the largest possible a_j (every input spiking).
+    max_current is max_j sum_i q_ij, the largest possible a_j (every input spiking);
+    module_weight_relative_rmse_m = sqrt(mean_m (w - q s)**2) / sqrt(mean_m w**2);
+    module_weights_clipped_m = #{w / s >= 2**bits - 1/2};  module_max_current_m = max_{j in m} sum_i q_ij
     """
+    n_inputs = weights.shape[0]
+
+    def by_module(array: np.ndarray) -> np.ndarray:
+        return array.reshape(n_inputs, -1, group).transpose(1, 0, 2).reshape(array.shape[1] // group, -1)
+
     error = weights - mantissas * scales
     rms = float(np.sqrt(np.mean(weights * weights))) or 1.0
     ratio = weights / scales
+    module_error = by_module(error)
+    power = np.sqrt(np.mean(by_module(weights) ** 2, axis=1))
+    module_rmse = np.sqrt(np.mean(module_error * module_error, axis=1)) / np.where(power > 0, power, 1.0)
+    sums = mantissas.astype(np.int64).sum(axis=0)
     return {
         "weight_max_abs_error": float(np.abs(error).max()),
         "weight_rmse": float(np.sqrt(np.mean(error * error))),
@@ -250,32 +262,10 @@ def error_report(
         "thresholds_clipped": int(
             np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))
         ),
-        "max_current": int(mantissas.astype(np.int64).sum(axis=0).max()),
-    }
-
-
-def module_error_report(
-    weights: np.ndarray, mantissas: np.ndarray, scales: np.ndarray, bits: int, group: int
-) -> dict[str, list[float] | list[int]]:
-    """Each module's weight errors (lists of M; module m = columns [m n, (m + 1) n)).
-
-    module_weight_relative_rmse_m = sqrt(mean_m (w - q s)**2) / sqrt(mean_m w**2);
-    module_weights_clipped_m = #{w / s >= 2**bits - 1/2};  module_max_current_m = max_{j in m} sum_i q_ij
-    """
-    n_inputs = weights.shape[0]
-
-    def by_module(array: np.ndarray) -> np.ndarray:
-        return array.reshape(n_inputs, -1, group).transpose(1, 0, 2).reshape(array.shape[1] // group, -1)
-
-    error = by_module(weights - mantissas * scales)
-    power = np.sqrt(np.mean(by_module(weights) ** 2, axis=1))
-    rmse = np.sqrt(np.mean(error * error, axis=1)) / np.where(power > 0, power, 1.0)
-    clipped = np.sum(by_module(weights / scales) >= levels(bits) + 0.5, axis=1)
-    current = mantissas.astype(np.int64).sum(axis=0).reshape(-1, group).max(axis=1)
-    return {
-        "module_weight_relative_rmse": [float(x) for x in rmse],
-        "module_weights_clipped": [int(x) for x in clipped],
-        "module_max_current": [int(x) for x in current],
+        "max_current": int(sums.max()),
+        "module_weight_relative_rmse": [float(x) for x in module_rmse],
+        "module_weights_clipped": [int(x) for x in np.sum(by_module(ratio) >= levels(bits) + 0.5, axis=1)],
+        "module_max_current": [int(x) for x in sums.reshape(-1, group).max(axis=1)],
     }
 
 
@@ -332,8 +322,7 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("ckpt_sha256", ckpt_sha256, str)
-    require_type("options", options, QuantiseOptions)
-    check_bits(bits)
+    require_type("options", options, QuantiseOptions)  # the bit width: quantise_arrays's
     if options.non_leaky:
         ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
     arrays = quantise_arrays(

@@ -55,20 +55,17 @@ LOIHI1_GROUP_HEADER_BITS = 10  # 4-bit format index + 6-bit synapse count
 LOIHI1_WORD_BITS = 64
 
 
-def stored_weight_bits(limits: CoreLimits, bits: int) -> int:
-    """Loihi 1 stores 1-6 or 8 weight bits (a 7-bit weight takes 8); Loihi 2's dense format any width."""
-    return 8 if limits.charge == "nengo-loihi" and bits == 7 else bits
-
-
 def axon_synapse_bits(limits: CoreLimits, neurons: int, bits: int) -> int:
     """Synaptic memory one input axon needs to reach ``neurons`` neurons of one core at ``bits`` bits.
 
     Loihi 1 (nengo-loihi): sum over groups of c <= 64 synapses of 64 ceil((c b + 10) / 64)
     Loihi 2 (dense):       neurons b   (no headers: a lower bound; neuron state shares the memory)
+
+    Loihi 1 stores 1-6 or 8 weight bits (a 7-bit weight takes b = 8); Loihi 2's dense format any width.
     """
-    b = stored_weight_bits(limits, bits)
     if limits.charge == "dense":
-        return neurons * b
+        return neurons * bits
+    b = 8 if bits == 7 else bits
     total = 0
     for start in range(0, neurons, LOIHI1_GROUP):
         count = min(LOIHI1_GROUP, neurons - start)
@@ -118,9 +115,8 @@ class CoreBudget:
 
 
 def core_budget(modules: int, neurons: int, inputs: int, bits: int, limits: CoreLimits = LOIHI1) -> CoreBudget:
-    """The :class:`CoreBudget` of an ensemble on one Loihi-class chip family (the rule in its docstring)."""
-    if min(modules, neurons, inputs) < 1:
-        raise InvalidValueError(f"modules, neurons and inputs must be >= 1, got {modules}, {neurons}, {inputs}")
+    """The :class:`CoreBudget` of an ensemble on one Loihi-class chip family (the rule in its docstring); every count
+    >= 1 (export --loihi-cores checks its shape)."""
     k = min(neurons_per_core(limits, inputs, bits), neurons)
     per_module = -(-neurons // k)
     cores = modules * per_module

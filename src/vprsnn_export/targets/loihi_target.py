@@ -140,8 +140,7 @@ def read_loihi(path: str | Path) -> LoihiDescription:
     except (ValueError, OSError, EOFError, KeyError) as exc:
         raise ModelFileError(f"unreadable arrays ({exc})", arrays_path) from None
     needed = (WEIGHTS_NAME if version == 2 else WEIGHTS_NAME_V1, *OTHER_ARRAYS)
-    missing = sorted(set(needed) - set(arrays))
-    if missing:
+    if missing := sorted(set(needed) - set(arrays)):
         raise ModelFileError(f"the arrays file lacks {missing}", arrays_path)
     desc = LoihiDescription(header=header, arrays=arrays)
     try:

@@ -120,9 +120,8 @@ def available(consumer: str) -> bool:
 
 
 def run_consumer(consumer: str, graph, spikes: torch.Tensor) -> torch.Tensor:
-    """The consumer's WTA-off raster; raises what the consumer raises when it refuses the file."""
-    if consumer not in MATRIX_CONSUMERS:
-        raise ConsumerUnavailable(f"unknown NIR consumer {consumer!r} (one of {', '.join(MATRIX_CONSUMERS)})")
+    """The WTA-off raster of ``consumer`` (a name of :data:`MATRIX_CONSUMERS`); raises what the consumer raises when
+    it refuses the file."""
     if not available(consumer):
         raise ConsumerUnavailable(f"{PACKAGES[consumer.removesuffix('-default')]} is not installed")
     return MATRIX_CONSUMERS[consumer][0](graph, spikes)

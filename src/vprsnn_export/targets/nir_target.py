@@ -122,8 +122,7 @@ READABLE_RULE_VERSIONS = (1, 2)  # 1: one group of all neurons
 def readout_group(source: Source) -> int:
     """The WTA group of the readout rule: every neuron (``network.wta_scope`` = ensemble, or a single
     network), or one module's n = network.n_neurons (scope = module); :func:`vprsnn_export.config.wta_group`."""
-    thresholds = source.threshold if isinstance(source, FixedPointModel) else source.thresholds
-    return wta_group(source.config, len(thresholds))
+    return wta_group(source.config, source.calibration.shape[0])
 
 
 def populations(source: Source) -> list[dict[str, Any]]:
@@ -391,18 +390,15 @@ def apply_readout_rule(graph, spikes: torch.Tensor, candidates: torch.Tensor) ->
         fixed = str(meta["kind"]) == "fixed-point"
         dtype = torch.float64 if fixed else torch.float32  # float64 sums of integer weights are exact below 2**53
         matrix = torch.as_tensor(np.ascontiguousarray(weight.T), dtype=dtype)
-        multipliers = torch.as_tensor(np.asarray(meta["wta_score_multiplier"]), dtype=torch.float64) if fixed else None
+        if fixed:
+            multipliers = torch.as_tensor(np.asarray(meta["wta_score_multiplier"]), dtype=torch.int64)
         for chunk in steps.split(4096):
-            inputs = flat[chunk]
+            competing = grouped[chunk].reshape(chunk.numel(), -1)
             if fixed:  # exact in any order: the sparse product touches only the few inputs that spike
-                currents = sparse_currents(inputs, matrix)
+                score = sparse_currents(flat[chunk], matrix).round().to(torch.int64) * multipliers
+                masked = torch.where(competing, score, torch.iinfo(torch.int64).min)
             else:  # float32: the dense product's own summation order, as the float network computes it
-                currents = inputs.to(dtype) @ matrix
-            if multipliers is not None:
-                score = currents.round().to(torch.int64) * multipliers.to(torch.int64)
-                masked = torch.where(grouped[chunk].reshape(score.shape), score, torch.iinfo(torch.int64).min)
-            else:
-                masked = torch.where(grouped[chunk].reshape(currents.shape), currents, -torch.inf)
+                masked = torch.where(competing, flat[chunk].to(dtype) @ matrix, -torch.inf)
             best = masked.reshape(chunk.numel(), -1, group).argmax(dim=2)  # torch's first maximum: the lowest index
             winner[chunk] = torch.where(contested[chunk], best, winner[chunk])
     raster = torch.zeros(grouped.shape, dtype=torch.bool).scatter_(2, winner.unsqueeze(2), True)

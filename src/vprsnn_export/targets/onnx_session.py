@@ -71,18 +71,13 @@ def check_interface(loaded, path: Path) -> None:
     """ModelFileError unless the graph has the writer's interface: one input ``spikes`` [T, batch, inputs] with T
     and inputs fixed, the outputs counts and saturations, and only :data:`WRITER_OPS`."""
     inputs = list(loaded.graph.input)
-    dims = (
-        [d.dim_value if d.HasField("dim_value") else None for d in inputs[0].type.tensor_type.shape.dim]
-        if inputs
-        else []
-    )
+    shape = inputs[0].type.tensor_type.shape.dim if inputs else []
+    dims = [d.dim_value if d.HasField("dim_value") else None for d in shape]
     if len(inputs) != 1 or inputs[0].name != INPUT or len(dims) != 3 or not (dims[0] and dims[2]):
         raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
-    missing = [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]
-    if missing:
+    if missing := [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]:
         raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
-    foreign = sorted(graph_ops(loaded.graph) - WRITER_OPS)
-    if foreign:
+    if foreign := sorted(graph_ops(loaded.graph) - WRITER_OPS):
         raise ModelFileError(f"the graph uses operators export never writes ({', '.join(foreign[:5])})", path)
 
 

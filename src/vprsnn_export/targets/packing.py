@@ -30,25 +30,19 @@ def packed_size(count: int, bits: int) -> int:
     return (count * bits + 7) // 8
 
 
-def check_width(bits: int) -> int:
-    if not 1 <= bits <= MAX_BITS:
-        raise InvalidValueError(f"packed widths are 1 to {MAX_BITS} bits, got {bits}")
-    return bits
-
-
 def pack_bits(values: np.ndarray, bits: int) -> np.ndarray:
-    """The uint8 stream of ``values`` (any shape, row-major), each in [0, 2**bits - 1], ``bits`` bits each."""
-    check_width(bits)
+    """The uint8 stream of ``values`` (any shape, row-major), integers in [0, 2**bits - 1], ``bits`` (1 to 8) bits
+    each (a validated model's mantissas)."""
     flat = np.asarray(values).reshape(-1)
-    if flat.size and (not np.issubdtype(flat.dtype, np.integer) or flat.min() < 0 or flat.max() >= 1 << bits):
-        raise InvalidValueError(f"values must be integers in [0, {(1 << bits) - 1}] to pack into {bits} bits")
     planes = np.unpackbits(flat.astype(np.uint8)[:, None], axis=1, bitorder="little")[:, :bits]
     return np.packbits(planes.reshape(-1), bitorder="little")
 
 
 def unpack_bits(packed: np.ndarray, bits: int, shape: Sequence[int]) -> np.ndarray:
-    """Inverse of :func:`pack_bits`: the values as uint8 of ``shape``; a wrong length or a set padding bit is a ValueError."""
-    check_width(bits)
+    """Inverse of :func:`pack_bits`: the values as uint8 of ``shape``; a width outside 1 to 8, a wrong length or a set
+    padding bit is a ValueError."""
+    if not 1 <= bits <= MAX_BITS:
+        raise InvalidValueError(f"packed widths are 1 to {MAX_BITS} bits, got {bits}")
     stream = np.asarray(packed)
     count = prod(shape)
     if stream.dtype != np.uint8 or stream.ndim != 1 or stream.size != packed_size(count, bits):

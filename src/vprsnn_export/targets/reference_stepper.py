@@ -41,11 +41,7 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
         if isolation:
             v = [0] * model.n_neurons
         for t in range(timesteps):
-            a = (
-                [int(x) for x in q[spikes[p, t] != 0].sum(axis=0, dtype=np.int64)]
-                if spikes[p, t].any()
-                else [0] * len(m)
-            )
+            a = [int(x) for x in q[spikes[p, t] != 0].sum(axis=0, dtype=np.int64)]  # zeros when no input spikes
             for j in neurons:
                 v[j] = trunc_div(v[j] * keep, 4096) + (a[j] << model.voltage_shift)
                 if v[j] > limit or v[j] < -limit:
@@ -56,12 +52,8 @@ def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation
             if model.config.network.wta:
                 for module in range(model.n_neurons // group):
                     rivals = [j for j in candidates if j // group == module]
-                    if rivals:
-                        best = rivals[0]
-                        for j in rivals[1:]:
-                            if a[j] * m[j] > a[best] * m[best]:
-                                best = j
-                        raster[p, t, best] = True
+                    if rivals:  # max keeps the first of equal scores: the lowest index
+                        raster[p, t, max(rivals, key=lambda j: a[j] * m[j])] = True
             else:
                 raster[p, t, candidates] = True
             for j in candidates:
