@@ -48,6 +48,8 @@ def test_quantise_options_are_checked_once_when_built(given, message):
 
 def test_deploy_takes_the_options_object_and_nothing_else(make_checkpoint):
     ckpt = make_checkpoint(np.random.default_rng(5), uniform=True)
+    with pytest.raises(InvalidValueError, match="ckpt must be a Checkpoint, got str"):
+        deploy("net.npz", "0" * 64, 8)  # type: ignore[arg-type]  # named first, not as missing reference images
     with pytest.raises(InvalidValueError, match="options must be a QuantiseOptions, got dict"):
         deploy(ckpt, "0" * 64, 8, {"calibration": "float"})  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="non_leaky"):

@@ -31,7 +31,7 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .assignment import _matrix, finite_array
+from .assignment import finite_array, finite_matrix
 from .rules import DEFAULT_RULE, RULES
 
 #: Upper bound on the elements of one (chunk, k, n_places) working array. About
@@ -44,7 +44,7 @@ DEFAULT_MEMORY: Final[int] = 50
 
 
 def _prob2d(prob: np.ndarray) -> np.ndarray:
-    p = _matrix("prob", prob)
+    p = finite_matrix("prob", prob)
     if np.any(p < 0):
         raise InvalidValueError("prob contains negative values")
     return p
@@ -72,7 +72,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
     return finite_array("velocity", v)
 
 
-def _count(name: str, value: int, low: int) -> int:
+def count_at_least(name: str, value: int, low: int) -> int:
     """``value`` as an int when it is an integer (not a bool) >= ``low``; InvalidValueError naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
         raise InvalidValueError(f"{name} must be an integer >= {low}, got {value!r}")
@@ -80,7 +80,7 @@ def _count(name: str, value: int, low: int) -> int:
 
 
 def _check_args(k: int, rule: str, eps: float) -> int:
-    k = _count("window size k", k, 1)
+    k = count_at_least("window size k", k, 1)
     RULES.get(rule)  # InvalidValueError naming the registered rules
     if not (np.isfinite(eps) and eps > 0):
         raise InvalidValueError(f"eps must be a finite value > 0, got {eps}")
@@ -410,7 +410,7 @@ def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
     alone. ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
     """
     p = _prob2d(prob)
-    memory, lag = _count("background memory", memory, 0), _count("velocity lag", lag, 0)
+    memory, lag = count_at_least("background memory", memory, 0), count_at_least("velocity lag", lag, 0)
     if memory == 0:
         return p.copy()
     cumulative = np.concatenate([np.zeros((1, p.shape[1])), np.cumsum(p, axis=0)])
@@ -495,7 +495,7 @@ def track_velocity(
     stream order, ``frame_positions`` and the frames' distributions only (no
     ground truth).
     """
-    span = _count("velocity span", span, 1)
+    span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
     scores = window_scores(
@@ -547,9 +547,9 @@ def smooth_velocity(
     traversal. ``lag=0`` is causal. Uses the stream order, ``frame_positions``
     and the frames' distributions only (no ground truth).
     """
-    span = _count("velocity span", span, 1)
+    span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)
-    lag = _count("velocity lag", 2 * k - 1 if lag is None else lag, 0)
+    lag = count_at_least("velocity lag", 2 * k - 1 if lag is None else lag, 0)
     cands = _candidates(candidates)
     contrast = stream_contrast(prob, memory, lag)
     scores = window_scores(

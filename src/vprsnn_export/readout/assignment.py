@@ -62,7 +62,7 @@ def finite_array(name: str, value: object) -> np.ndarray:
     return arr
 
 
-def _matrix(name: str, value: object) -> np.ndarray:
+def finite_matrix(name: str, value: object) -> np.ndarray:
     """``value`` as a finite float64 (rows, columns > 0) array; InvalidValueError naming ``name`` otherwise."""
     arr = real_array(name, value)
     if arr.ndim != 2 or arr.shape[1] == 0:
@@ -225,7 +225,7 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
     Otherwise the best place has normalised score 1, so the L1 sum is >= 1
     and never 0.
     """
-    s = _matrix("scores", scores)
+    s = finite_matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
     hi = s.max(axis=1, keepdims=True)
     span = hi - lo
@@ -245,7 +245,7 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     (0 when the sum is 0). Scores must be non-negative, so c lies in [0, 1].
     For W+Prob the confidence is ``max_l P(l | Q)`` instead (:func:`distribution_decision`).
     """
-    s = _matrix("scores", scores)
+    s = finite_matrix("scores", scores)
     if np.any(s < 0):
         raise InvalidValueError("share_confidence needs non-negative scores")
     total = s.sum(axis=1)
@@ -259,7 +259,7 @@ def share_decision(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     .. math:: \\mathrm{no\\ match}_q = [\\forall l: \\mathrm{Score}_{ql} = 0], \\qquad
               c_q = \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql}
     """
-    s = _matrix("scores", scores)
+    s = finite_matrix("scores", scores)
     return np.all(s == 0, axis=1), share_confidence(s)
 
 
@@ -272,6 +272,6 @@ def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndar
     A flat row (every entry equal, e.g. the uniform distribution of
     :func:`wprob_distribution`) is a no-match.
     """
-    s = _matrix("scores", distribution)
+    s = finite_matrix("scores", distribution)
     top = s.max(axis=1)
     return top == s.min(axis=1), top.copy()

@@ -23,7 +23,7 @@ import numpy as np
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import _count, shift_window
+from .aggregation import count_at_least, shift_window
 from .assignment import NO_MATCH, finite_array, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
@@ -131,7 +131,7 @@ def diagonal_sums(
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or not np.all(np.isfinite(s)):
         raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
-    k = _count("k", k, 1)
+    k = count_at_least("k", k, 1)
     if np.any(s < 0):
         raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
     if k == 1:

@@ -201,12 +201,21 @@ class MetricRow(JsonDataclass):
     float_values: MetricValues | None = field(default=None, metadata=json_options(key="float", omit="none"))
     delta: MetricValues | None = field(default=None, metadata=json_options(omit="none"))  # quantised - float
 
-    def __getattr__(self, name: str) -> float:
-        """``row.accuracy`` and the other :data:`METRICS`: the row's values."""
-        if name not in METRICS:
-            raise AttributeError(name)
-        value: float = getattr(self.values, name)
-        return value
+    @property
+    def accuracy(self) -> float:
+        return self.values.accuracy
+
+    @property
+    def p_at_100r(self) -> float:
+        return self.values.p_at_100r
+
+    @property
+    def r_at_100p(self) -> float:
+        return self.values.r_at_100p
+
+    @property
+    def auc_pr(self) -> float:
+        return self.values.auc_pr
 
     def with_float(self, base: MetricRow) -> MetricRow:
         """This row with the float row's values and the differences (this - float)."""

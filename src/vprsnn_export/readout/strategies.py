@@ -22,8 +22,8 @@ from vprsnn_export.registry import Registry
 
 from .assignment import (
     NO_MATCH,
-    _matrix,
     distribution_decision,
+    finite_matrix,
     share_decision,
     standard_scores,
     weighted_scores,
@@ -104,7 +104,7 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
     InvalidValueError for a strategy that is not registered.
     """
     entry = STRATEGIES.get(require_strategy(strategy))
-    s = _matrix("scores", scores)
+    s = finite_matrix("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     no_match, conf = entry.decision(s)
     pred[no_match] = NO_MATCH

@@ -117,6 +117,12 @@ def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b:
     return checks
 
 
+def backend_of(source: Network, device: torch.device | None = None) -> Backend:
+    """The project's own simulator of a network (the registered backend ``auto`` picks: the float network or
+    the integer simulator)."""
+    return open_backend(source, device=device)[1]
+
+
 def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
     """counts (N, neurons) -> the W+Prob distribution (N, places) with the source's own calibration
     (an ensemble's with its region regularisation, as every evaluation reads it out)."""
@@ -147,7 +153,7 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
         return Contender(target, entry.label, rebuilt)
     runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(open_backend(rebuilt, device=device)[1], f"{entry.title} model on the {runs_on}")
+    backend = _Renamed(backend_of(rebuilt, device), f"{entry.title} model on the {runs_on}")
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
         return Contender(target, entry.label, backend, written=written, read_back=rebuilt)
     return Contender(target, entry.label, backend)

@@ -79,7 +79,8 @@ def deploy(
     The deployed calibration (the default) re-measures S^R on the integer simulator and needs the checkpoint's
     reference images; a non-leaky deployment quantises the checkpoint with network.beta = 1 (decay_dv = 0).
     """
-    require_type("options", options, QuantiseOptions)  # the checkpoint and the bit width: quantize_checkpoint's
+    require_type("ckpt", ckpt, Checkpoint)
+    require_type("options", options, QuantiseOptions)  # the bit width: quantize_checkpoint's
     require_type("reference_images", reference_images, (Mapping, type(None)))
     check_reference_images(options, reference_images)
     model = quantize_checkpoint(ckpt, ckpt_sha256, bits, options)

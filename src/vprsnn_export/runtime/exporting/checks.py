@@ -22,8 +22,7 @@ from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, target_labels
 
-from ..backends import open_backend
-from ..conformance import Contender, compare_backends, read_back, target_path, wprob_readout
+from ..conformance import Contender, backend_of, compare_backends, read_back, target_path, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -160,7 +159,7 @@ def check_exports(
     for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
         if not isinstance(stage, str):  # a target written from the source itself, float or fixed point
             network = source.network
-            baseline = open_backend(network, device=device)[1]  # the float network or the integer simulator
+            baseline = backend_of(network, device)
             base_run = baseline.run(spikes, record=True)
             path = target_path(stage.name, written[stage.name])
             contender = read_back(stage.name, path, network, device)
@@ -172,7 +171,5 @@ def check_exports(
                 )
         elif model is not None:
             contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
-            comparisons += compare_backends(
-                open_backend(model, device=device)[1], contenders, spikes, wprob=wprob_readout(model)
-            )
+            comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
     return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))
