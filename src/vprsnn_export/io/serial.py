@@ -1,7 +1,7 @@
 """Frozen dataclasses <-> JSON: written field by field, read back by dacite, typed, with one error naming the field.
 
 ``to_json(value)`` is the plain JSON value of ``value`` (dataclasses by ``to_dict``, mappings with string
-keys, tuples as lists, numpy scalars and arrays as numbers and lists). ``JsonDataclass.from_dict`` reads
+keys, tuples as lists, numpy scalars and arrays as numbers and lists, paths as strings). ``JsonDataclass.from_dict`` reads
 one back with dacite: every value is checked against its field's type hint (nested dataclasses,
 ``X | None``, tuples from JSON arrays, ``Mapping[int, X]`` from an object with string keys, a float from
 an integer, numpy scalars as Python ones), and the first one that does not fit is one error naming its
@@ -32,6 +32,7 @@ import re
 import reprlib
 import typing
 from collections.abc import Callable, Mapping
+from pathlib import PurePath
 from typing import Any, TypeVar
 
 import dacite
@@ -70,6 +71,8 @@ def to_json(value: Any) -> Any:
         return value.to_dict() if hasattr(value, "to_dict") else to_json_dict(value)
     if isinstance(value, np.ndarray | np.generic):
         return value.tolist()
+    if isinstance(value, PurePath):
+        return str(value)
     if isinstance(value, Mapping):
         return {k if isinstance(k, str) else str(to_json(k)): to_json(v) for k, v in value.items()}
     if isinstance(value, tuple | list):

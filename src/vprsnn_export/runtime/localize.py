@@ -39,7 +39,7 @@ import math
 import time
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +55,7 @@ from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
-from vprsnn_export.io.serial import JsonDataclass
+from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.readout.early import early_run
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.search import SearchWindow
@@ -71,7 +71,7 @@ CURVE_FORMAT = "vprsnn-precision-recall/1"
 
 
 @dataclass(frozen=True)
-class Decision:
+class Decision(JsonDataclass):
     """One frame's answer: the place (None: no match), its confidence, whether it is accepted, the
     velocity used and the latency from the decoded frame to the decision. ``reason`` (None: decided) says
     why a frame that carries no place has no decision (:func:`no_place_reasons`)."""
@@ -83,18 +83,11 @@ class Decision:
     accepted: bool
     velocity: float
     latency_ms: float
-    reason: str | None = None
-    events: int | None = None  # with a search window: synaptic events of the frame (input spikes x neurons run)
-    search: str | None = None  # with a search window: "window", or "global" (the whole route ran)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON line of the decision (``reason`` only on a frame without a decision, ``events`` and ``search``
-        only with a search window)."""
-        return {key: value for key, value in asdict(self).items() if value is not None or key not in OPTIONAL}
-
-
-#: The fields of a decision's JSON line that are left out when None.
-OPTIONAL = ("reason", "events", "search")
+    # JSON: reason only on a frame without a decision, events and search only with a search window
+    reason: str | None = field(default=None, metadata=json_options(omit="none"))
+    # with a search window: synaptic events of the frame (input spikes x neurons run), and "window" or "global"
+    events: int | None = field(default=None, metadata=json_options(omit="none"))
+    search: str | None = field(default=None, metadata=json_options(omit="none"))
 
 
 #: Why a frame carries no place, in the order they are checked (:func:`no_place_reasons`).

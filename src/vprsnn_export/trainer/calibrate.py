@@ -73,14 +73,13 @@ def calibration_chunk(cfg: Config, presentations: int) -> int:
     return max(1, min(presentations, SPIKES_PER_CHUNK // max(1, cfg.encoder.timesteps * cfg.network.n_inputs)))
 
 
-def check_calibration_memory(cfg: Config, presentations: int, n_neurons: int, places: int) -> None:
-    """InvalidValueError (one line) when calibrating ``n_neurons`` on ``presentations`` would not fit the memory
-    limit: one chunk's input spikes and counts (int64, dense and as CSR), the weights, and S^R dense or as CSR
-    (int64 + int32 index per entry, at most T entries per presentation)."""
+def calibration_need(cfg: Config, presentations: int, n_neurons: int, places: int) -> MemoryNeed:
+    """Calibrating ``n_neurons`` on ``presentations``: one chunk's input spikes and counts (int64, dense and as
+    CSR), the weights, and S^R dense or as CSR (int64 + int32 index per entry, at most T entries per presentation)."""
     chunk, timesteps = calibration_chunk(cfg, presentations), cfg.encoder.timesteps
     entries = n_neurons * places
     sr = 8 * entries if entries <= DENSE_COUNT_ENTRIES else 12 * presentations * min(timesteps, n_neurons) * 2
-    need = MemoryNeed(
+    return MemoryNeed(
         (
             (f"input spikes {chunk} x {timesteps} x {cfg.network.n_inputs}", chunk * timesteps * cfg.network.n_inputs),
             (f"counts {chunk} x {n_neurons}", 2 * 8 * chunk * n_neurons),
@@ -88,4 +87,8 @@ def check_calibration_memory(cfg: Config, presentations: int, n_neurons: int, pl
             (f"S^R {n_neurons} x {places}", sr),
         )
     )
-    check_memory(need, "calibration", LOWER_RUN)
+
+
+def check_calibration_memory(cfg: Config, presentations: int, n_neurons: int, places: int) -> None:
+    """InvalidValueError (one line) when :func:`calibration_need` exceeds the memory limit."""
+    check_memory(calibration_need(cfg, presentations, n_neurons, places), "calibration", LOWER_RUN)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,7 @@ from vprsnn_export.io.fileio import (
     sha256_file,
     staging_folder,
 )
+from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.targets.loihi_budget import deployment_cost
 from vprsnn_export.targets.nir_target import WTA_INHIBITION
 
@@ -30,16 +31,13 @@ from .source import MANIFEST_ERRORS, MANIFEST_NAME, ExportSource, consumer_state
 
 
 @dataclass(frozen=True)
-class WrittenFile:
+class WrittenFile(JsonDataclass):
     path: Path
     sha256: str
 
-    def to_dict(self) -> dict[str, str]:
-        return {"path": str(self.path), "sha256": self.sha256}
-
 
 @dataclass(frozen=True)
-class ExportResult:
+class ExportResult(JsonDataclass):
     """What `export` wrote (export.json): the folder, the model, every file with its hash, the consumers, the checks."""
 
     folder: Path
@@ -48,8 +46,9 @@ class ExportResult:
     kind: str
     files: Mapping[str, tuple[WrittenFile, ...]]
     consumers: Mapping[str, str]
-    checks: ExportChecks | None = None
-    cost: Mapping[str, Any] | None = None  # per query: steps, events, the chip estimates (targets.loihi_budget)
+    checks: ExportChecks | None = field(default=None, metadata=json_options(omit="none"))
+    # per query: steps, events, the chip estimates (targets.loihi_budget)
+    cost: Mapping[str, Any] | None = field(default=None, metadata=json_options(omit="none"))
 
     @property
     def passed(self) -> bool:
@@ -60,21 +59,6 @@ class ExportResult:
         if target not in self.files:
             raise InvalidValueError(f"no {target} file was written (targets: {', '.join(self.files) or 'none'})")
         return self.files[target][0].path
-
-    def to_dict(self) -> dict[str, Any]:
-        data: dict[str, Any] = {
-            "folder": str(self.folder),
-            "model": self.model,
-            "model_sha256": self.model_sha256,
-            "kind": self.kind,
-            "files": {t: [f.to_dict() for f in files] for t, files in self.files.items()},
-            "consumers": dict(self.consumers),
-        }
-        if self.checks is not None:
-            data["checks"] = self.checks.to_dict()
-        if self.cost is not None:
-            data["cost"] = dict(self.cost)
-        return data
 
 
 def export_and_check(
