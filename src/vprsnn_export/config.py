@@ -27,11 +27,20 @@ class EncoderConfig:
     (``train --adapt-from``, :mod:`vprsnn_export.trainer.adaptation`): the encoder then reads
     p_i = g_i x_i / max_j g_j x_j (0 for an image with no input left) instead of x_i. It is part of the model:
     learnt, not chosen, so it is written into the checkpoint and every exported file with the rest of this section.
+
+    ``generator``: what draws the uniforms. ``"mt19937"`` (the default) is torch's CPU generator, one per
+    presentation seed; ``"philox"`` is the counter-based Philox4x32-10 (:mod:`vprsnn_export.data.philox`), whose
+    spikes are integer arithmetic of (seed, t, i) that a GPU draws in place and the CPU alike, bit for bit.
     """
 
     rate_scale: float = 0.25
     timesteps: int = 300
     input_gain: tuple[float, ...] = ()
+    generator: str = "mt19937"
+
+
+#: The encoder's uniform generators (``encoder.generator``).
+GENERATORS = ("mt19937", "philox")
 
 
 WTA_SCOPES = ("ensemble", "module")
@@ -154,7 +163,7 @@ class EarlyConfig:
 #: before they existed (and files that do not use them) stay byte-identical; a missing section reads as its defaults.
 OPTIONAL_SECTIONS = ("early",)
 #: Keys written only when they differ from their defaults, for the same reason (section -> keys).
-OPTIONAL_KEYS = {"train": ("timesteps", "rate_scale"), "encoder": ("input_gain",)}
+OPTIONAL_KEYS = {"train": ("timesteps", "rate_scale"), "encoder": ("input_gain", "generator")}
 
 
 @dataclass(frozen=True)
@@ -216,6 +225,10 @@ class Config:
             raise InvalidValueError(
                 f"config.encoder.input_gain: expected {inputs} finite non-negative gains, not all 0, got {len(gain)} "
                 "values" + ("" if len(gain) != inputs else " with a negative, non-finite or all-zero gain")
+            )
+        if self.encoder.generator not in GENERATORS:
+            raise InvalidValueError(
+                f"config.encoder.generator: {self.encoder.generator!r} is not one of {', '.join(GENERATORS)}"
             )
         if self.network.wta_scope not in WTA_SCOPES:
             raise InvalidValueError(

@@ -75,7 +75,8 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
 
     Row n uses only ``images[n]`` and ``seeds[n]``: s[n, t, i] = u[n, t, i] < p[n, i] with u drawn from
     ``torch.Generator().manual_seed(seeds[n])`` (``torch.rand``), reproduced without building u by the compiled
-    :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes`.
+    :func:`vprsnn_export.data.encoding_kernel.bernoulli_spikes`; with ``cfg.generator`` ``"philox"`` u is
+    Philox4x32-10's of (seeds[n], t, i) (:mod:`vprsnn_export.data.philox`).
     """
     images = pixel_array(images)
     if images.ndim != 2 or len(seeds) != images.shape[0]:
@@ -84,7 +85,7 @@ def encode(images: np.ndarray, seeds: Sequence[int], cfg: EncoderConfig) -> torc
     spikes = single_need(f"input spikes {n} x {cfg.timesteps} x {d}", n * cfg.timesteps * d)
     check_memory(spikes, "encoding the spikes", LOWER_RUN)
     prob = firing_probabilities(images, cfg).numpy()
-    return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps))
+    return torch.from_numpy(bernoulli_spikes(prob, seeds, cfg.timesteps, cfg.generator))
 
 
 def encode_presentations(

@@ -3,7 +3,8 @@
 torch's CPU generator is MT19937 seeded with the seed's low 32 bits, and a float32 uniform is u = m / 2^24 with m
 the low 24 bits of one 32-bit draw, so u < p iff m < ceil(p 2^24): the kernel (:func:`_bernoulli_kernel`, checked
 entry point :func:`bernoulli_kernel`) runs the twister and compares integers, for :mod:`vprsnn_export.data.encoding`
-and inside the training kernel (:mod:`vprsnn_export.trainer.stdp_kernel`, each module's batch in one call).
+and inside the training kernel (:mod:`vprsnn_export.trainer.stdp_kernel`, each module's batch in one call); with
+``encoder.generator = "philox"`` the same kernels draw Philox4x32-10's words instead (:mod:`.philox`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 
 from ..network.kernel_checks import require_array, require_int
 from ..network.kernel_sums import SPIKES, compiled
+from .philox import _philox_rows
 
 MT_N = 624  # words of the Mersenne Twister state (torch's CPU generator is MT19937)
 MT_M = 397
@@ -73,25 +75,37 @@ def _bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int,
                 target[i] = row[i] < limit[i]
 
 
-def bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int, out: np.ndarray) -> None:
-    """:func:`_bernoulli_kernel` once its arrays are checked (InvalidValueError naming them)."""
+@compiled
+def _encode_rows(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int, out: np.ndarray, philox: bool) -> None:
+    """out[n] = row n's spikes from MT19937 (:func:`_bernoulli_kernel`) or, with ``philox``, Philox4x32-10."""
+    if philox:
+        _philox_rows(thresholds, seeds, timesteps, out)
+    else:
+        _bernoulli_kernel(thresholds, seeds, timesteps, out)
+
+
+def bernoulli_kernel(
+    thresholds: np.ndarray, seeds: np.ndarray, timesteps: int, out: np.ndarray, philox: bool = False
+) -> None:
+    """:func:`_encode_rows` once its arrays are checked (InvalidValueError naming them)."""
     k = "Bernoulli kernel"
     require_array(k, "thresholds", thresholds, (np.int32,), (None, None))
     n_rows, n_inputs = thresholds.shape
     require_array(k, "seeds", seeds, (np.int64,), (n_rows,))
     steps = require_int(k, "timesteps", timesteps, 0)
     require_array(k, "out", out, SPIKES, (n_rows, steps, n_inputs), writable=True)
-    _bernoulli_kernel(thresholds, seeds, steps, out)
+    _encode_rows(thresholds, seeds, steps, out, bool(philox))
 
 
-def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int) -> np.ndarray:
+def bernoulli_spikes(prob: np.ndarray, seeds: Sequence[int], timesteps: int, generator: str = "mt19937") -> np.ndarray:
     """Spikes (N, T, D) uint8 with s[n, t, i] = u[n, t, i] < p[n, i], bit for bit
     ``torch.rand((T, D), generator=torch.Generator().manual_seed(seeds[n])) < p[n]`` (about 13x faster, as
-    u < p iff m < ceil(p 2^24): module docstring; NaN never fires, as u < NaN is false)."""
+    u < p iff m < ceil(p 2^24): module docstring; NaN never fires, as u < NaN is false); with ``generator``
+    ``"philox"`` u is Philox4x32-10's (:mod:`.philox`)."""
     p = np.asarray(prob, dtype=np.float32)  # (N, D) and N seeds: checked by the caller, encode
     limits = bernoulli_limits(p)
     out = np.empty((p.shape[0], int(timesteps), p.shape[1]), dtype=np.uint8)
-    bernoulli_kernel(limits, generator_seeds(seeds), int(timesteps), out)
+    bernoulli_kernel(limits, generator_seeds(seeds, generator), int(timesteps), out, generator == "philox")
     return out
 
 
@@ -102,6 +116,7 @@ def bernoulli_limits(prob: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.clip(scaled, 0, 1 << MANTISSA_BITS), dtype=np.int32)
 
 
-def generator_seeds(seeds: Sequence[int]) -> np.ndarray:
-    """The seeds as torch's CPU generator uses them: their low 32 bits, int64."""
-    return np.array([int(s) & 0xFFFFFFFF for s in seeds], dtype=np.int64)
+def generator_seeds(seeds: Sequence[int], generator: str = "mt19937") -> np.ndarray:
+    """The seeds as the generator uses them, int64: torch's CPU generator their low 32 bits, Philox all 63."""
+    mask = 0xFFFFFFFF if generator == "mt19937" else (1 << 63) - 1
+    return np.array([int(s) & mask for s in seeds], dtype=np.int64)

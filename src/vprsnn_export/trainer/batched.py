@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, firing_probabilities, presentation_seed
 from vprsnn_export.data.encoding_kernel import bernoulli_limits, generator_seeds
+from vprsnn_export.data.philox import philox_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
@@ -72,7 +73,9 @@ def _kernel_batch(
     for m, rows in enumerate(batch_rows):
         if len(rows):
             limits[m, : len(rows)] = bernoulli_limits(firing_probabilities(images[rows], cfg.training_encoder).numpy())
-            seeds[m, : len(rows)] = generator_seeds(training_seeds(cfg, presentations, rows, epoch))
+            seeds[m, : len(rows)] = generator_seeds(
+                training_seeds(cfg, presentations, rows, epoch), cfg.encoder.generator
+            )
     return torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
 
 
@@ -103,15 +106,25 @@ def _torch_batch(
         members = np.flatnonzero(sizes == size)
         spikes = torch.stack(
             [
-                encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.training_encoder)
+                device_spikes(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg, weights.device)
                 for rows in (batch_rows[int(m)] for m in members)
             ]
-        ).to(weights.device)
+        )
         index = torch.from_numpy(members).to(weights.device)
         weights[index], theta[index], fired[index] = train_batch(
             weights[index], theta[index], spikes, cfg, compiled=False
         )
     return weights, theta, fired
+
+
+def device_spikes(images: np.ndarray, seeds: Sequence[int], cfg: Config, device: torch.device) -> torch.Tensor:
+    """A training batch's spikes on ``device``: with the Philox generator drawn there (:func:`.philox_spikes`, the
+    CPU encoder's bits), else encoded on the CPU and copied."""
+    encoder = cfg.training_encoder
+    if encoder.generator != "philox" or device.type == "cpu":
+        return encode(images, seeds, encoder).to(device)
+    limits = torch.from_numpy(bernoulli_limits(firing_probabilities(images, encoder).numpy())).to(device)
+    return philox_spikes(limits, torch.from_numpy(generator_seeds(seeds, "philox")), encoder.timesteps)
 
 
 @dataclass(frozen=True)

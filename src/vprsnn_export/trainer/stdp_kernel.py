@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from vprsnn_export.config import Config
-from vprsnn_export.data.encoding_kernel import _bernoulli_kernel
+from vprsnn_export.data.encoding_kernel import _encode_rows
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.kernel_checks import require_array, require_int
 from vprsnn_export.network.kernel_sums import (
@@ -268,8 +268,10 @@ def _stdp_windows(
     a_minus: np.float32,
     w_max: np.float32,
     weight_norm: bool,
+    philox: bool,
 ) -> np.ndarray:
-    """One training batch of every module: encode module m's rows, then its :func:`_stdp_window`.
+    """One training batch of every module: encode module m's rows (MT19937, or Philox4x32-10 with ``philox``), then
+    its :func:`_stdp_window`.
 
     The modules are independent networks, so each one's window is exactly the single network's;
     returns the spikes per neuron of every module in this batch (M, neurons) float32.
@@ -280,7 +282,7 @@ def _stdp_windows(
     for m in range(n_modules):
         rows = sizes[m]
         if rows > 0:
-            _bernoulli_kernel(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows])
+            _encode_rows(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows], philox)
             fired[m] = _stdp_window(
                 spikes[:rows],
                 weights[m],
@@ -331,7 +333,8 @@ def stdp_windows_kernel(
 ) -> np.ndarray:
     """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it).
 
-    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm.
+    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm, and optionally philox (the
+    encoder's generator; default MT19937).
     """
     k = "STDP windows kernel"
     require_array(k, "limits", limits, (np.int32,), ANY3)
@@ -343,9 +346,10 @@ def stdp_windows_kernel(
     steps = require_int(k, "timesteps", timesteps, 0)
     require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
-    if len(args) != 8:
-        raise InvalidValueError(f"{k}: expected 8 scalar parameters, got {len(args)}")
-    return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *args)
+    if len(args) not in (8, 9):
+        raise InvalidValueError(f"{k}: expected 8 scalar parameters (and the generator flag), got {len(args)}")
+    scalars = (*args[:8], bool(args[8:] and args[8]))
+    return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *scalars)
 
 
 #: The kernels' scalar parameters (:func:`kernel_scalars`).
@@ -399,13 +403,13 @@ def stdp_windows(
     ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
     module m's batch is its first ``sizes[m]`` rows of ``limits`` (M, B, inputs) int32
     (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
-    kernel exactly as :func:`bernoulli_spikes` encodes them, so module m's weights are those of
+    kernel exactly as :func:`bernoulli_spikes` encodes them with the config's generator, so module m's weights are those of
     ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
     modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
     not used). Returns the spikes per neuron (M, n) float32.
     """
     n_modules = limits.shape[0]
-    args = kernel_scalars(cfg)
+    args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 

@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from vprsnn_export.config import preset
-from vprsnn_export.data import encoding_kernel
+from vprsnn_export.data import encoding_kernel, philox
 from vprsnn_export.errors import InvalidValueError, VprError
 from vprsnn_export.network import dynamics_kernel, kernel_sums
 from vprsnn_export.network.dynamics import FloatNetwork, run_network
@@ -225,7 +225,7 @@ def test_bad_sizes_are_refused(kernel, name, value):
 
 
 #: every module that holds compiled kernels: the shared sums and each kernel beside its caller
-KERNEL_MODULES = (kernel_sums, encoding_kernel, dynamics_kernel, intsim_kernel, stdp_kernel)
+KERNEL_MODULES = (kernel_sums, encoding_kernel, philox, dynamics_kernel, intsim_kernel, stdp_kernel)
 
 
 def compiled_kernels() -> set[str]:
