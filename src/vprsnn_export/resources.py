@@ -10,8 +10,9 @@ kernel's out-of-memory kill. The prediction counts the arrays that grow with the
     weights           4 D K x copies              (float32; K = all neurons of the ensemble)
     counts, S^R       8 N K + 8 K P               (int64 counts and the calibration matrix, P places)
     scores            8 R P x 4                   (float64 score matrices of the readout, R of its rows at once:
-                                                    a block, :data:`~vprsnn_export.readout.scoring.READOUT_BLOCK`,
-                                                    or all N; none in calibration, which reads nothing out)
+                                                    a block: the largest of
+                                                    :data:`~vprsnn_export.runtime.evaluation.READOUT_BLOCKS` that
+                                                    fits, or all N; none in calibration, which reads nothing out)
     raster            N T K                       (bool, per recorded run; state isolation off records one)
     STDP scratch      8 D n x threads              (float32 P^T and D of one module per thread)
     decoded image     4 W H                        (an image of W x H pixels read from its header before

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 from scipy import sparse
 
@@ -86,3 +87,35 @@ def test_a_long_routes_joined_run_keeps_no_query_by_neuron_array(ensemble, monke
     assert spikes is None and run.final_voltage is None and run.raster is None and run.wprob is None
     assert run.candidates_per_step is not None and run.candidates_per_step.shape[0] == len(data.place_ids)
     assert isinstance(counts, sparse.csr_array) and counts.shape[0] == len(data.place_ids)
+
+
+def test_an_evaluation_over_the_memory_limit_reads_out_in_the_largest_block_that_fits(ensemble, monkeypatch):
+    """The readout block halves until the run's memory need fits: the same rows and predictions as the default
+    block's; when even the smallest does not fit, its need is the one refused."""
+    ckpt, data = ensemble
+    options = SequenceOptions(ks=(1, 3), tolerance=1)
+    query = data.traversal("winter"), data.place_ids, "winter", options
+    whole = evaluate_float(ckpt, *query)
+    real_check, blocks, asked = evaluation.check_run_memory, [], []
+
+    def limited(cfg, what, *, readout_rows, **sizes):  # a limit between the needs of readout blocks 8 and 16
+        asked.append(readout_rows)
+        if readout_rows > 8 + max(options.ks):
+            raise evaluation.InvalidValueError(f"{what} needs more than the limit ({readout_rows} rows)")
+        return real_check(cfg, what, readout_rows=readout_rows, **sizes)
+
+    real_blocks = evaluation.Readout.score_in_blocks
+
+    def spied(self, *args, block, **kwargs):
+        blocks.append(block)
+        return real_blocks(self, *args, block=block, **kwargs)
+
+    monkeypatch.setattr(evaluation, "check_run_memory", limited)
+    monkeypatch.setattr(evaluation.Readout, "score_in_blocks", spied)
+    monkeypatch.setattr(evaluation, "READOUT_BLOCKS", (32, 16, 8, 4))
+    fitted = evaluate_float(ckpt, *query)
+    assert asked == [35, 19, 11] and blocks == [8]  # 24 queries: read out in blocks of 8
+    assert fitted.rows == whole.rows and predictions(fitted.scored).to_csv() == predictions(whole.scored).to_csv()
+    monkeypatch.setattr(evaluation, "READOUT_BLOCKS", (32, 16))
+    with pytest.raises(evaluation.InvalidValueError, match=r"\(19 rows\)"):
+        evaluate_float(ckpt, *query)

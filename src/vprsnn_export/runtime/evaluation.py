@@ -5,6 +5,7 @@ and add the no-learning baselines and spike statistics."""
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -124,7 +125,7 @@ def evaluate_float(
     """
     require_type("ckpt", ckpt, Checkpoint)
     require_type("options", options, SequenceOptions)
-    network = _prepared(ckpt, query_place_ids, state_isolation, options)
+    network, block = _prepared(ckpt, query_place_ids, state_isolation, options)
     cost = None
     if cluster is None:
         run, counts, cost, _ = _run_queries(
@@ -143,7 +144,7 @@ def evaluate_float(
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
     truth = window(options.tolerance) if truth is None else truth
-    scored = read_out(readout, counts, reference_ids, query_place_ids, truth, progress=progress)
+    scored = read_out(readout, counts, reference_ids, query_place_ids, truth, progress=progress, block=block)
     typed, layout = scored.rows, readout.modules
     if reference_images is not None:
         reference = np.mean([reference_images[name] for name in ckpt.reference_traversals], axis=0)
@@ -184,7 +185,9 @@ def evaluate_fixed_point(
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, SequenceOptions)
-    network = _prepared(model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2)
+    network, block = _prepared(
+        model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2
+    )
     compare = float_checkpoint is not None
     run, counts, cost, spikes = _run_queries(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
@@ -192,7 +195,7 @@ def evaluate_fixed_point(
     rows, sides = [], []
     for name, calibration in zip(CALIBRATIONS, (model.calibration, model.float_calibration), strict=True):
         readout = Readout.of(calibration, model.config, options)
-        sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth, progress))
+        sides.append(read_out(readout, counts, model.reference_place_ids, query_place_ids, truth, progress, block))
         rows += [{"calibration": name, **row.to_dict()} for row in sides[-1].rows]
     agreement = None
     if float_checkpoint is not None and run.raster is not None and spikes is not None:  # recorded: never blocks
@@ -219,36 +222,51 @@ def read_out(
     query_ids: np.ndarray,
     truth: Truth | None,
     progress: bool = False,
+    block: int = READOUT_BLOCK,
 ) -> Scored:
-    """The queries read out: in blocks of :data:`~vprsnn_export.readout.scoring.READOUT_BLOCK` queries when there
-    are more (the same columns bit for bit, without a (queries x places) matrix), else whole; a velocity searched
-    over the stream looks ahead, so it is read out whole."""
-    if len(query_ids) > READOUT_BLOCK and readout.options.velocity_candidates is None:
-        return readout.score_in_blocks(counts, reference_ids, query_ids, truth, progress=progress)
+    """The queries read out: in blocks of ``block`` queries when there are more (the same columns bit for bit,
+    without a (queries x places) matrix), else whole; a velocity searched over the stream looks ahead, so it is
+    read out whole."""
+    if len(query_ids) > block and readout.options.velocity_candidates is None:
+        return readout.score_in_blocks(counts, reference_ids, query_ids, truth, block=block, progress=progress)
     return readout.score(counts, reference_ids, query_ids, truth)
+
+
+#: The readout blocks an evaluation tries, largest first, until its memory need fits the limit (:func:`_prepared`).
+READOUT_BLOCKS = tuple(READOUT_BLOCK >> halving for halving in range(5))
 
 
 def _prepared(
     network: NetworkT, place_ids: np.ndarray, state_isolation: bool | None, options: SequenceOptions, rasters: int = 0
-) -> NetworkT:
-    """The network with ``state_isolation`` (None: its config's own) in its config, as its backend runs it;
-    InvalidValueError when the run (``rasters`` recorded, one more without state isolation; the readout a block
-    and its history at a time, :func:`read_out`) would not fit."""
-    rows = None if options.velocity_candidates is not None else READOUT_BLOCK + max(options.ks)
+) -> tuple[NetworkT, int]:
+    """The network with ``state_isolation`` (None: its config's own) in its config, as its backend runs it, and the
+    largest readout block of :data:`READOUT_BLOCKS` whose run fits the memory limit (``rasters`` recorded, one more
+    without state isolation; the readout a block and its history at a time, :func:`read_out`); InvalidValueError
+    when the run would not fit even with the smallest."""
     if state_isolation is not None:
         network = replace(network, config=network.config.replace(**{"network.state_isolation": bool(state_isolation)}))
-    check_run_memory(
-        network.config,
-        "evaluation",
-        presentations=len(check_place_ids(place_ids, "query_place_ids")),
-        n_neurons=network.calibration.shape[0],
-        places=len(network.reference_place_ids),
-        rasters=rasters + (0 if network.config.network.state_isolation else 1),
-        readout_rows=rows,
-        readout_arrays=len(STRATEGIES.names()) + len(options.ks) + 2,
-        block=LONG_ROUTE_BLOCK if sparse_query_counts(network, len(place_ids), rasters > 0) else None,
-    )
-    return network
+    sizes = {
+        "presentations": len(check_place_ids(place_ids, "query_place_ids")),
+        "n_neurons": network.calibration.shape[0],
+        "places": len(network.reference_place_ids),
+        "rasters": rasters + (0 if network.config.network.state_isolation else 1),
+        "readout_arrays": len(STRATEGIES.names()) + len(options.ks) + 2,
+        "block": LONG_ROUTE_BLOCK if sparse_query_counts(network, len(place_ids), rasters > 0) else None,
+    }
+
+    def check(rows: int | None) -> None:
+        check_run_memory(network.config, "evaluation", readout_rows=rows, **sizes)
+
+    if options.velocity_candidates is not None:  # read out whole
+        check(None)
+        return network, READOUT_BLOCK
+    *larger, smallest = READOUT_BLOCKS
+    for block in larger:
+        with contextlib.suppress(InvalidValueError):
+            check(block + max(options.ks))
+            return network, block
+    check(smallest + max(options.ks))  # the smallest need's error when even that does not fit
+    return network, smallest
 
 
 def _run_queries(
