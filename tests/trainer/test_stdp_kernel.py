@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from vprsnn_export.config import Config, preset
+from vprsnn_export.trainer import stdp_kernel
 from vprsnn_export.trainer import train as train_module
 from vprsnn_export.trainer.stdp import initial_weights
 from vprsnn_export.trainer.stdp_kernel import stdp_window
@@ -89,3 +90,49 @@ def test_training_through_the_kernel_is_the_torch_loops_to_float32_rounding(monk
     assert torch.equal(got.weights, again.weights) and torch.equal(got.thresholds, again.thresholds)
     assert torch.allclose(got.weights, expected.weights, atol=1e-4)
     assert torch.allclose(got.thresholds, expected.thresholds, atol=1e-4)
+
+
+def _module_batch(n_modules: int):
+    """Random limits, seeds and starting weights of ``n_modules`` small modules (3 rows each, 6 inputs, 4 neurons)."""
+    rng = np.random.default_rng(n_modules)
+    limits = (rng.random((n_modules, 3, 6)) * (1 << 23)).astype(np.int32)
+    seeds = rng.integers(0, 2**31, (n_modules, 3), dtype=np.int64)
+    weights = rng.random((n_modules, 6, 4)).astype(np.float32)
+    theta = np.full((n_modules, 4), 0.5, dtype=np.float32)
+    return limits, seeds, np.full(n_modules, 3, dtype=np.int64), weights, theta
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_batch_runs_in_slices_of_modules_with_the_weights_of_one_call(threads, monkeypatch):
+    cfg = preset("paper").replace(**{"train.timesteps": 5})
+    limits, seeds, sizes, weights, theta = _module_batch(7)
+    whole = weights.copy()
+    monkeypatch.setattr(stdp_kernel, "MODULES_PER_CALL", 7)
+    fired_whole = stdp_kernel.stdp_windows(whole, theta, limits, seeds, sizes, cfg, threads=1)
+    calls: list[int] = []
+    real = stdp_kernel.stdp_windows_kernel
+    monkeypatch.setattr(stdp_kernel, "MODULES_PER_CALL", 2)
+    monkeypatch.setattr(
+        stdp_kernel, "stdp_windows_kernel", lambda limits, *a: calls.append(len(limits)) or real(limits, *a)
+    )
+    fired = stdp_kernel.stdp_windows(weights, theta, limits, seeds, sizes, cfg, threads=threads)
+    assert sorted(calls) == [1, 2, 2, 2]  # 7 modules in 4 slices
+    assert np.array_equal(fired, fired_whole) and np.array_equal(weights, whole)
+
+
+def test_an_interrupt_during_a_batch_waits_for_the_slices_in_flight_only(monkeypatch):
+    cfg = preset("paper").replace(**{"train.timesteps": 5})
+    limits, seeds, sizes, weights, theta = _module_batch(40)
+    started: list[int] = []
+
+    def interrupted(limits, *args):
+        started.append(len(limits))
+        if len(started) == 2:
+            raise KeyboardInterrupt
+        return np.zeros((len(limits), 4), dtype=np.float32)
+
+    monkeypatch.setattr(stdp_kernel, "MODULES_PER_CALL", 1)
+    monkeypatch.setattr(stdp_kernel, "stdp_windows_kernel", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        stdp_kernel.stdp_windows(weights, theta, limits, seeds, sizes, cfg, threads=2)
+    assert max(started) == 1 and len(started) < 10  # 40 slices of one module: the queued ones were cancelled

@@ -352,6 +352,9 @@ def stdp_windows_kernel(
     return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *scalars)
 
 
+#: Modules one call of the training kernel trains (:func:`stdp_windows`): what an interrupt waits for, per thread.
+MODULES_PER_CALL = 8
+
 #: The kernels' scalar parameters (:func:`kernel_scalars`).
 Scalars = tuple[np.float32, bool, np.float32, np.float32, np.float32, np.float32, np.float32, bool]
 
@@ -403,10 +406,12 @@ def stdp_windows(
     ``weights`` (M, inputs, n) float32 C-contiguous are updated in place; ``theta`` (M, n) float32;
     module m's batch is its first ``sizes[m]`` rows of ``limits`` (M, B, inputs) int32
     (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
-    kernel exactly as :func:`bernoulli_spikes` encodes them with the config's generator, so module m's weights are those of
-    ``stdp_window`` on its own batch bit for bit. ``threads`` > 1 runs contiguous slices of the
-    modules in a pool of Python threads (the kernel releases the GIL; numba's threading layer is
-    not used). Returns the spikes per neuron (M, n) float32.
+    kernel exactly as :func:`bernoulli_spikes` encodes them with the config's generator, so module m's weights are
+    those of ``stdp_window`` on its own batch bit for bit. Each kernel call trains a contiguous slice of at most
+    :data:`MODULES_PER_CALL` modules; ``threads`` > 1 runs the slices on a pool of Python threads (the kernel
+    releases the GIL; numba's threading layer is not used). An interrupt or SIGTERM waits for the slices in flight
+    only, not the whole batch (at 27k places a thread's half of a batch is 135 modules, ~30 s). Returns the spikes
+    per neuron (M, n) float32.
     """
     n_modules = limits.shape[0]
     args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
@@ -416,8 +421,11 @@ def stdp_windows(
     def run(part: slice) -> np.ndarray:
         return stdp_windows_kernel(limits[part], seeds[part], sizes[part], timesteps, weights[part], theta[part], *args)
 
-    parts = module_slices(n_modules, threads)
-    if len(parts) == 1:
-        return run(parts[0])
-    with ThreadPoolExecutor(max_workers=len(parts)) as pool:
+    parts = module_slices(n_modules, max(threads, -(-n_modules // MODULES_PER_CALL)))
+    if threads < 2 or len(parts) == 1:
+        return np.concatenate([run(part) for part in parts])
+    pool = ThreadPoolExecutor(max_workers=threads)
+    try:
         return np.concatenate(list(pool.map(run, parts)))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)  # on an interrupt: the queued slices never start
