@@ -30,8 +30,10 @@ W0, W1 = 0x9E3779B9, 0xBB67AE85  # the key schedule's Weyl increments
 ROUNDS = 10
 WORD = 0xFFFFFFFF
 SHIFT = 8  # u = (x >> 8) / 2^24: the top 24 bits of each 32-bit word
-#: Draws (rows x T x D) of one torch pass: its int64 intermediates stay near 100 MB.
+#: Draws (rows x T x D) of one torch pass on the CPU, and on a GPU: its int64 intermediates stay near 100 MB and
+#: 2 GB (few passes: each is about 150 kernel launches).
 TORCH_DRAWS = 1 << 21
+DEVICE_DRAWS = 1 << 26
 
 
 @compiled
@@ -91,14 +93,15 @@ def philox4x32(counter: tuple[torch.Tensor, ...], key: tuple[torch.Tensor, torch
 def philox_spikes(limits: torch.Tensor, seeds: torch.Tensor, timesteps: int) -> torch.Tensor:
     """Spikes (N, T, D) uint8 on ``limits``' device: s[n, t, i] = (x_{t D + i} >> 8) < limits[n, i] (module
     docstring), ``limits`` (N, D) the thresholds ceil(p 2^24) and ``seeds`` (N,) int64 the presentation seeds;
-    the same bits as the CPU encoder's (:func:`_philox_rows`), drawn :data:`TORCH_DRAWS` at a time."""
+    the same bits as the CPU encoder's (:func:`_philox_rows`), drawn :data:`TORCH_DRAWS` (a GPU: :data:`DEVICE_DRAWS`)
+    at a time."""
     n, d = limits.shape
     total, device = timesteps * d, limits.device
     blocks = torch.arange((total + 3) // 4, device=device, dtype=torch.int64)
     zero = torch.zeros_like(blocks)
     out = torch.empty((n, timesteps, d), dtype=torch.uint8, device=device)
     seeds = seeds.to(device=device, dtype=torch.int64)
-    rows = max(1, TORCH_DRAWS // max(total, 1))
+    rows = max(1, (TORCH_DRAWS if device.type == "cpu" else DEVICE_DRAWS) // max(total, 1))
     for first in range(0, n, rows):
         part = seeds[first : first + rows, None]
         words = philox4x32((blocks & WORD, blocks >> 32, zero, zero), (part & WORD, (part >> 32) & WORD))

@@ -104,12 +104,9 @@ def _torch_batch(
     fired = torch.zeros_like(theta)
     for size in sorted({int(s) for s in sizes if s > 0}):
         members = np.flatnonzero(sizes == size)
-        spikes = torch.stack(
-            [
-                device_spikes(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg, weights.device)
-                for rows in (batch_rows[int(m)] for m in members)
-            ]
-        )
+        rows = np.concatenate([batch_rows[int(m)] for m in members])  # every member's batch, drawn at once
+        spikes = device_spikes(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg, weights.device)
+        spikes = spikes.reshape(len(members), size, *spikes.shape[1:])
         index = torch.from_numpy(members).to(weights.device)
         weights[index], theta[index], fired[index] = train_batch(
             weights[index], theta[index], spikes, cfg, compiled=False

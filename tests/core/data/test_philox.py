@@ -126,7 +126,8 @@ def test_the_compiled_kernel_and_the_torch_loop_train_on_the_same_philox_spikes(
     monkeypatch.setattr(batched, "device_spikes", recorded)
     loop = train_modules(images, presentations, rows, cfg, device=torch.device(device), progress=False, compiled=False)
     kernel = train_modules(images, presentations, rows, cfg, device=torch.device("cpu"), progress=False)
-    assert len(drawn) == 2 * 2 * 2 and all(s.device.type == device for s in drawn)  # epochs x batches x modules
+    assert len(drawn) == 2 * 2 and all(s.device.type == device for s in drawn)  # epochs x batches: every module at once
+    assert all(s.shape == (2 * 8, 10, 784) for s in drawn)
     seeds = [int(s) for s in generator_seeds(range(8), "philox")]
     assert torch.equal(
         device_spikes(images[:8], seeds, cfg, torch.device("cpu")), encode(images[:8], seeds, cfg.training_encoder)
