@@ -15,7 +15,7 @@ seed (low word k_0, high word k_1); its draw j = t D + i is word j mod 4 of coun
 pure function of (seed, t, i), so the spikes are integer arithmetic that every device computes alike:
 :func:`philox_block_words` runs it in numba on the CPU (the encoder and the training kernel), :func:`philox_spikes` in
 torch int64 operations on the tensors' own device (a GPU draws its training batches in place, no host copy), and
-both give the same bits (tests/data/test_philox.py, with Random123's known-answer vectors).
+both give the same bits (tests/core/data/test_philox.py, with Random123's known-answer vectors).
 """
 
 from __future__ import annotations
