@@ -333,8 +333,8 @@ def stdp_windows_kernel(
 ) -> np.ndarray:
     """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it).
 
-    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm, and optionally philox (the
-    encoder's generator; default MT19937).
+    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm and philox (the encoder's
+    generator: Philox4x32-10, else MT19937).
     """
     k = "STDP windows kernel"
     require_array(k, "limits", limits, (np.int32,), ANY3)
@@ -346,9 +346,9 @@ def stdp_windows_kernel(
     steps = require_int(k, "timesteps", timesteps, 0)
     require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
-    if len(args) not in (8, 9):
-        raise InvalidValueError(f"{k}: expected 8 scalar parameters (and the generator flag), got {len(args)}")
-    scalars = (*args[:8], bool(args[8:] and args[8]))
+    if len(args) != 9:
+        raise InvalidValueError(f"{k}: expected 9 scalar parameters, got {len(args)}")
+    scalars = (*args[:8], bool(args[8]))
     return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *scalars)
 
 

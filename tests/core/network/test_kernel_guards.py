@@ -109,7 +109,7 @@ def bernoulli_args() -> dict[str, Any]:
 
 
 def stdp_windows_args() -> dict[str, Any]:
-    scalars = (F32(0.9), True, F32(0.8), F32(0.8), F32(0.01), F32(0.01), F32(1.0), True)
+    scalars = (F32(0.9), True, F32(0.8), F32(0.8), F32(0.01), F32(0.01), F32(1.0), True, False)
     return dict(
         limits=np.full((2, 3, D), 1 << 23, dtype=np.int32),
         seeds=np.arange(6, dtype=np.int64).reshape(2, 3),
