@@ -1,10 +1,6 @@
 """The ``vprsnn-export`` command's entry point (also ``python -m vprsnn_export``).
 
-A Ctrl-C while the command loads (a few seconds on a busy machine) exits with
-code 130 and one line, like one during the command itself: the guard of
-:mod:`vprsnn_export.startup` (installed by the package's ``__init__``, and here for any other
-way in) stands until the command line and the command's module are imported, then Python's own
-handler is back and :func:`vprsnn_export.cli.main` turns the interrupt into the same line.
+The guard of :mod:`vprsnn_export.startup` stands until the command line and the command's module are imported.
 """
 
 import atexit
@@ -30,11 +26,7 @@ EXIT_WRITE_ERROR = 1
 
 def run() -> None:
     """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly.
-
-    Once ``main()`` has returned, SIGINT is ignored from the interpreter's exit on (the first exit handler):
-    a Ctrl-C during torch's and numba's clean-up would print a traceback or kill the process by the signal.
-    Not before: a program that calls ``run()`` and catches its SystemExit keeps its own handler (its children
-    would inherit an ignored SIGINT)."""
+    Once ``main()`` has returned, SIGINT is ignored from the interpreter's exit on (torch's and numba's clean-up)."""
     try:
         code = main()
         sys.stdout.flush()

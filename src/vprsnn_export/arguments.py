@@ -1,10 +1,5 @@
-"""Checks of arguments at the library's boundary and strict parsing of numbers written as text.
-
-A public function checks its arguments here before it uses them, so a bad one is one
-:class:`~vprsnn_export.errors.InvalidValueError` naming the argument, never an AttributeError
-or a numpy/torch error from deep inside. Numbers read from text (options, manifests, environment
-variables) are ASCII decimal only: ``str.isdigit()`` and ``int()`` also accept '²', full-width
-and Arabic-Indic digits, underscores and surrounding spaces.
+"""Checks of arguments at the library's boundary (one InvalidValueError naming the argument) and strict parsing
+of numbers written as text: ASCII decimal only (``int()`` also accepts '²', Arabic-Indic digits, '_' and spaces).
 """
 
 from __future__ import annotations

@@ -29,8 +29,7 @@ NEGATIVE_VALUE = re.compile(r"^-\.?\d")  # "-2:2:0.1", "-0.5": a value, not an o
 
 
 class DefaultsFormatter(argparse.HelpFormatter):
-    """Help that shows every option's default: ``(default: X)`` is appended unless the help already
-    names it (``%(default)s`` or the word "default") or there is none (None, False, an empty list, a suppressed default)."""
+    """Help that appends ``(default: X)`` unless the help names a default already or there is none."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
@@ -47,8 +46,7 @@ class DefaultsFormatter(argparse.HelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``error: <problem>`` and exit code 2, no usage block; every
-    option's default in ``--help`` (:class:`DefaultsFormatter`)."""
+    """argparse with one-line errors (``error: <problem>``, exit code 2) and :class:`DefaultsFormatter` help."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs.setdefault("formatter_class", DefaultsFormatter)
@@ -59,8 +57,7 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_BAD_INPUT)
 
     def _print_message(self, message: str, file: SupportsWrite[str] | None = None) -> None:
-        """argparse's, without its ``except OSError: pass``: help or a version that cannot be written (a full
-        device, a closed pipe) reaches ``__main__.run``, which exits 1 with one line or 141, not 0."""
+        """argparse's, without its ``except OSError: pass`` (``__main__.run`` reports a failed write)."""
         if message:
             (file or sys.stderr).write(message)
 
@@ -82,8 +79,7 @@ def command_names() -> list[str]:
 
 
 def summary(name: str) -> str:
-    """A command's one-line help: its module docstring's first line after "`vprsnn-export NAME`: ",
-    read from the source without importing it (the commands import torch and the whole library)."""
+    """A command's one-line help: its module docstring's first line after "`vprsnn-export NAME`: ", not imported."""
     spec = importlib.util.find_spec(f"{commands.__name__}.{name}")
     source = Path(spec.origin).read_text(encoding="utf-8") if spec and spec.origin else ""
     first = (ast.get_docstring(ast.parse(source)) or "").split("\n")[0]
@@ -96,20 +92,15 @@ def chosen_command(argv: Sequence[str]) -> str | None:
 
 
 def import_command(argv: Sequence[str]) -> None:
-    """Import the module of the command ``argv`` names: ``__main__`` calls this under its interrupt guard, so a
-    Ctrl-C while it loads exits cleanly. torch and numba load later, inside :func:`main`, where an interrupt is
-    caught as KeyboardInterrupt; torch in :func:`~vprsnn_export.threads.set_threads`, with SIGINT held until its
-    import ends (:class:`~vprsnn_export.startup.InterruptsHeld`: raised inside its C++ start-up, a pybind11 callback,
-    it would abort the process)."""
+    """Import the module of the command ``argv`` names (``__main__`` calls this under its interrupt guard)."""
     name = chosen_command(argv)
     if name in command_names():
         importlib.import_module(f"{commands.__name__}.{name}")
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """The parser for ``argv``: only the command it names is imported (its options), the others are
-    listed by name and summary, so ``--help`` and ``--version`` start in well under a second
-    (bench/bench_cli.py). ``argv=None``: every command's full parser."""
+    """The parser for ``argv``: only the command it names is imported, the others listed by :func:`summary`
+    (``argv=None``: every command's full parser)."""
     parser = Parser(
         prog="vprsnn-export", description="STDP place-recognition SNNs: train, quantise, export, verify, localise."
     )
@@ -133,11 +124,8 @@ def _terminate(signum: int, frame: object) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Parse, run one command; expected errors are one line and exit 2, an interrupt exits 130, SIGTERM 143.
-
-    The command's output (``--out``, or ``--report`` for verify) is locked for the whole run
-    (:func:`vprsnn_export.io.fileio.output_lock`): a second run writing the same output stops at once.
-    """
+    """Parse, run one command (its output locked for the run); expected errors are one line and exit 2, an
+    interrupt exits 130, SIGTERM 143."""
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminate)
     try:

@@ -1,16 +1,8 @@
 """Ctrl-C while the command loads: exit 130 with one line, as during the command itself, not a traceback.
 
-Started as ``vprsnn-export`` or ``python -m vprsnn_export``, the package's ``__init__`` installs
-:func:`interrupted_while_loading` as the SIGINT handler before it imports anything else (an import
-of the library in another program changes no handler); ``__main__`` keeps it while the command
-line and the command's module load, then :func:`end_guard` hands SIGINT back to Python and
-:func:`vprsnn_export.cli.main` turns an interrupt into the same line after cleaning up (torch and
-numba load there, lazily: see :func:`vprsnn_export.cli.import_command`).
-A SIGINT that was ignored when the process started (a job started in the background) stays ignored.
-Only the interpreter's own start, before the package's first line runs, is outside the guard;
-this module imports nothing that ``signal`` does not (no typing, no threading) to come in sooner.
-torch loads later, when a command sets its threads: :class:`InterruptsHeld` keeps a Ctrl-C out of its
-C++ start-up, and the command's handler turns it into the same line once torch is in.
+Started as the command, the package's ``__init__`` installs :func:`interrupted_while_loading` as the SIGINT handler
+before it imports anything else; ``__main__`` keeps it while the command's module loads, then :func:`end_guard` hands
+SIGINT back to Python (an ignored SIGINT stays ignored). This module imports nothing ``signal`` does not.
 """
 
 from __future__ import annotations
@@ -31,11 +23,7 @@ def interrupted_while_loading(signum: int, frame: object) -> None:
 
 
 def started_as_command(argv0: str, orig_argv: list[str] | tuple[str, ...]) -> bool:
-    """Whether the process runs the command: its script is ``vprsnn-export``, or Python runs ``-m vprsnn_export``.
-
-    ``orig_argv`` is Python's own command line (``sys.orig_argv``): its options are read up to the
-    first that names what runs (``-m MODULE``, ``-c CODE``, a script); ``-X`` and ``-W`` take a value.
-    """
+    """Whether the script is ``vprsnn-export`` or ``orig_argv`` (``sys.orig_argv``) runs ``-m vprsnn_export``."""
     if os.path.basename(argv0) == COMMAND:
         return True
     args = list(orig_argv[1:])
@@ -62,13 +50,7 @@ def install_guard() -> None:
 
 class InterruptsHeld:
     """``with InterruptsHeld():`` a SIGINT inside the block is only noted, and handed to the handler it replaced
-    (Python's: KeyboardInterrupt) when the block ends.
-
-    For torch's import after the guard: an exception raised inside its C++ start-up (a Python callback
-    under pybind11) aborts the process with a C++ message instead of exiting 130 with one line; noted, it
-    is raised after the import, where the command's own handler catches it. A plain class, not contextlib:
-    this module comes in before anything else. Outside the main thread, or with SIGINT ignored, a no-op.
-    """
+    when the block ends (torch's import: raised inside its C++ start-up, it would abort the process)."""
 
     def __enter__(self) -> None:
         self.noted = False

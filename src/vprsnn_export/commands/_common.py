@@ -77,8 +77,9 @@ DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 
 def add_bits_option(parser: argparse.ArgumentParser) -> None:
     """--bits of quantize and verify; :func:`bit_widths` reads it."""
-    help_text = f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
-    parser.add_argument("--bits", default=DEFAULT_BITS_TEXT, help=help_text)
+    parser.add_argument(
+        "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
+    )
 
 
 def bit_widths(args: argparse.Namespace) -> list[int]:
@@ -101,9 +102,7 @@ QUANTISE_HELP = {
 
 
 def add_quantise_options(parser: argparse.ArgumentParser) -> None:
-    """The quantisation flags of quantize and verify, one per :class:`~vprsnn_export.export.quantize.QuantiseOptions`
-    field (--per-tensor/--per-neuron, --scale, --fold-thresholds, --reuse-float-calibration, --non-leaky);
-    :func:`quantise_options` builds and validates them."""
+    """The quantisation flags of quantize and verify (:data:`QUANTISE_HELP`); :func:`quantise_options` reads them."""
     group = parser.add_argument_group("quantisation")
     scales = group.add_mutually_exclusive_group()
     for flag in ("--per-tensor", "--per-neuron"):
@@ -119,7 +118,7 @@ def add_quantise_options(parser: argparse.ArgumentParser) -> None:
 
 
 def quantise_options(args: argparse.Namespace) -> QuantiseOptions:
-    """The QuantiseOptions of the flags :func:`add_quantise_options` added (validated once, when built)."""
+    """The QuantiseOptions of the flags :func:`add_quantise_options` added."""
     from ..export.quantize import QuantiseOptions
 
     return QuantiseOptions(
@@ -191,9 +190,8 @@ def add_sequence_options(
     old_window_option: str | None = "--tolerance",
     json: bool = True,
 ) -> None:
-    """One option per :class:`SequenceOptions` field, its default the field's (``default_k``: a command's own
-    --k); ``stream``: a causal stream (localize), whose --velocity-estimate offers the causal estimates only.
-    Every option is None unless given: :func:`sequence_options` builds and validates them."""
+    """One option per :class:`SequenceOptions` field, None unless given (``default_k``: a command's own --k;
+    ``stream``: localize, the causal estimates only); :func:`sequence_options` reads them."""
     group = parser.add_argument_group("sequence")
     estimates = causal_estimates() if stream else VELOCITY_ESTIMATES.names()
     for item in fields(SequenceOptions):
@@ -245,7 +243,7 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def sequence_options(args: argparse.Namespace) -> SequenceOptions:
-    """The SequenceOptions of evaluate, simulate, verify and localize from their arguments (validated once, there)."""
+    """The SequenceOptions of evaluate, simulate, verify and localize from their arguments."""
     return SequenceOptions(**given_sequence_options(args))
 
 
@@ -315,8 +313,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
 
 
 def parse_value(raw: str) -> Any:
-    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string
-    (:func:`~vprsnn_export.io.fileio.parse_json`: a value beyond its limits is an InvalidValueError)."""
+    """A --set value: JSON when it parses as JSON (numbers, true/false, null, lists), else the string."""
     try:
         return parse_json(raw, f"--set/--grid value {raw[:40]!r}")
     except json.JSONDecodeError:
@@ -397,8 +394,7 @@ RESULT_COLUMNS = (
 def refuse_window_beside_truth(
     match_window: int | None, source: str | None, references: Sequence[str], query: str
 ) -> None:
-    """--match-window on a folder whose ground-truth file says how (reference, query) match: refused before any
-    image is decoded (the same refusal :meth:`~vprsnn_export.data.dataset.Dataset.query` makes once the data is loaded)."""
+    """--match-window on a folder with a ground-truth file of (reference, query): refused before any image is decoded."""
     folder = Path(source) if source else None
     if not match_window or folder is None or not folder.is_dir():
         return
@@ -408,8 +404,7 @@ def refuse_window_beside_truth(
 
 
 def query_data(args: argparse.Namespace, network: Network, query: str | None = None) -> Dataset:
-    """The data set named by --data/--subset/--places, else the one ``network`` records: its traversal ``query``
-    (--match-window beside a ground-truth file of (reference, ``query``) refused first), else its references."""
+    """The data set of --data/--subset/--places, else the one ``network`` records: traversal ``query``, else its references."""
     if query is not None:
         source = args.data if args.data is not None else network.data.get("source")
         refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
@@ -425,8 +420,7 @@ def query_data(args: argparse.Namespace, network: Network, query: str | None = N
 
 
 def load_query(args: argparse.Namespace, network: Network) -> tuple[SequenceOptions, Dataset, Query]:
-    """evaluate and simulate: the sequence options, the data and the --query of ``network``; the options' warning
-    on these queries (not consecutive places) printed."""
+    """evaluate and simulate: the sequence options, the data and the --query of ``network`` (a warning printed)."""
     options = sequence_options(args)
     dataset = query_data(args, network, args.query)
     query = dataset.query(args.query, network.reference_traversals, args.match_window)
