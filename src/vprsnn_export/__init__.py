@@ -1,8 +1,6 @@
 """vprsnn-export: STDP place-recognition SNNs from training to fixed-point deployment.
 
-``import vprsnn_export as vx`` gives the public API (:mod:`vprsnn_export.api`, listed in
-``__all__``). Its names load on first use, so importing one submodule (the command line,
-a test) does not import onnx, nir and matplotlib.
+``import vprsnn_export as vx`` gives the public API (:mod:`vprsnn_export.api`), its names loaded on first use.
 """
 
 from __future__ import annotations

@@ -1,23 +1,8 @@
 """The public API: everything a notebook needs, importable as ``import vprsnn_export as vx``.
 
-The chain of the command line, as library calls (docs/examples/quickstart.py runs it):
-
-    data = vx.load_dataset("synthetic:24", ["summer", "winter"], vx.Config().preprocess)
-    ckpt = vx.train_and_calibrate(data, ["summer"], cfg)                    # STDP + calibration S^R
-    cfg = vx.adapt_config(data, ["summer"], "winter", cfg).config           # a per-input gain from a 2nd traversal
-    cfg.replace(**{"train.module_size": 100})                                # a whole route: modules side by side
-    readout = vx.SequenceOptions(ks=(1, 3))                                 # k, rule, velocity (gamma: the config's)
-    vx.evaluate_float(ckpt, images, place_ids, "winter", readout)           # Standard/Weighted/W+Prob, k frames
-    quantise = vx.QuantiseOptions(per_neuron=True, non_leaky=False)         # scales, folding, calibration, leak
-    model = vx.deploy(ckpt, sha, 4, quantise, reference_images=...)         # quantise + calibrate on integers
-    vx.export_and_check(vx.ExportSource.of(model, sha), model, vx.TARGETS.names(), "deploy/")  # every target
-    backends = [vx.IntegerNetwork(model), vx.ReferenceStepper(model), vx.OnnxBackend(path)]
-    query = data.query("winter", ["summer"])                                # frames, place ids, the truth judging them
-    run = vx.verify_checkpoint(vx.VerifiedNetwork(ckpt, sha, references), query, vx.VerifyOptions(readout, quantise=quantise))
-    robot = vx.Localizer(model, options=vx.SequenceOptions(ks=(5,)), threshold=theta)  # one frame at a time
-    decision = robot.push(grey_frame)                                         # place, confidence, accepted
-
-The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx.STRATEGIES``,
+docs/examples/quickstart.py runs the chain of the command line as library calls: ``vx.load_dataset``,
+``vx.train_and_calibrate``, ``vx.evaluate_float``, ``vx.deploy``, ``vx.export_and_check``, ``vx.verify_checkpoint``,
+``vx.Localizer``. The extension points are registries (docs/architecture.md): ``vx.TARGETS``, ``vx.STRATEGIES``,
 ``vx.CHANNELS``, ``vx.VELOCITY_ESTIMATES``; ``vx.TARGETS.register(vx.Target(...))`` adds one.
 """
 

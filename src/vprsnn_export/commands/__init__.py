@@ -1,4 +1,1 @@
-"""One module per `vprsnn-export` subcommand; each defines `register(subparsers)`.
-
-The CLI discovers the modules of this package, so adding a command is adding a file.
-"""
+"""One module per `vprsnn-export` subcommand, each with `register(subparsers)`: adding a command is adding a file."""

@@ -1,13 +1,7 @@
 """`vprsnn-export demo`: the whole chain on the embedded synthetic route, no download needed, decided in minutes.
 
-train -> quantise (8, 4 and 2 bits, per-neuron scales, deployed calibration) -> export (NIR, Loihi-style, ONNX)
-and read every file back -> verify against float on the same input spikes -> report.
-
-It trains the lean preset for 10 epochs on a 600-place synthetic route: enough queries for the paired verdicts to
-decide, in about a minute on two CPU threads (``--quick``, for the tests: a tiny profile). Every width gets its
-paired verdict (docs/verify.md) and the one check that decides it. It exits 0 when the chain ran as intended,
-whatever a width's verdict (a width that fails is a finding), and 1 only when an exported file does not run as
-the simulator does.
+train -> quantise (8, 4, 2 bits) -> export and read every file back -> verify against float -> report. It exits 0
+when the chain ran as intended, whatever a width's verdict, and 1 only when an exported file differs.
 """
 
 from __future__ import annotations
@@ -90,25 +84,14 @@ def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
     )
 
 
-def failed_checks(result: BitsResult) -> list[str]:
-    """The non-paired checks behind a failing width: differing exports and missed point limits."""
-    from ..runtime.report.blocks import POINT_CHECKS
-    from ..runtime.report.labels import points
-
-    failed = [f"{c.what}: {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
-              for c in result.tolerance_checks if not c.passed and c.check in POINT_CHECKS]  # fmt: skip
-    if not result.cross_implementation.passed:
-        failed.insert(0, f"{result.cross_implementation.n_failed} cross-implementation differences")
-    return failed
-
-
 def deciding_check(result: BitsResult) -> str:
     """The one check that decides a width's verdict, with its interval and limit in points: the furthest beyond
     its limit (fails), the one needing the most queries (undecided), or the closest to its limit (holds)."""
+    from ..runtime.report.blocks import failed_points
     from ..runtime.report.labels import paired_cells
 
     judged = [c for c in result.paired if c.limit is not None and c.verdict in ("holds", "fails", "undecided")]
-    others = failed_checks(result)
+    others = failed_points(result, ":")
     if result.verdict == "fails" and others:
         return "; ".join(others)
     if not judged:

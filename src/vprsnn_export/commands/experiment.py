@@ -1,7 +1,6 @@
 """`vprsnn-export experiment NAME`: regenerate one of the paper's tables or figures as JSON + Markdown + plots.
 
-The experiments are the repository's lab (``experiments/``), not the installed library: this command finds them
-beside the source in a checkout, else under the working folder; without one it says so in one line (exit 2).
+The experiments are the repository's lab (``experiments/``), found beside the source or under the working folder.
 """
 
 from __future__ import annotations
@@ -25,8 +24,7 @@ MISSING = (
 
 
 def lab_folder() -> Path | None:
-    """The lab's folder: beside this package's source in a checkout (``ROOT/src/vprsnn_export`` ->
-    ``ROOT/experiments``), else ``experiments/`` under the working folder; None when neither holds its command."""
+    """The lab's folder: beside this package's source in a checkout, else under the working folder, else None."""
     beside = Path(__file__).resolve().parents[3] / LAB
     for folder in (beside, Path.cwd() / LAB):
         if (folder / "command.py").is_file() and (folder / "__init__.py").is_file():
@@ -35,9 +33,7 @@ def lab_folder() -> Path | None:
 
 
 def load_lab() -> ModuleType | None:
-    """The lab's command module (:data:`ENTRY`), its package imported from :func:`lab_folder` without touching
-    ``sys.path``; an ``experiments`` package already imported (the tests put the repository on the path) is used
-    if it is the lab. None: no lab here."""
+    """The lab's command module (:data:`ENTRY`) from :func:`lab_folder` or an already imported lab; None: no lab."""
     loaded = sys.modules.get(LAB)
     if loaded is None:
         folder = lab_folder()

@@ -1,9 +1,7 @@
 """`vprsnn-export export`: write NIR, a Loihi-style description and ONNX, and say what each consumer computes.
 
-MODEL is a float checkpoint or a fixed-point model. NIR takes either; the Loihi description and ONNX need a
-fixed-point model, so a checkpoint is refused with the command to run, unless ``--quantize BITS`` quantises on the
-fly. With ``--check`` every written file is read back and run beside the project's own simulators, on real
-queries (``--query``) or synthetic spike trains. ``--loihi-cores MxNxI`` alone prints the Loihi-class core budget.
+``--check`` reads every written file back and runs it beside the project's simulators; ``--loihi-cores MxNxI`` alone
+prints the Loihi-class core budget.
 """
 
 from __future__ import annotations

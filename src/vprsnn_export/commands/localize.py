@@ -1,13 +1,7 @@
 """`vprsnn-export localize`: a trained or deployed network over a stream of frames, one JSON line per frame.
 
-Two modes:
-
-* ``localize MODEL --frames DIR|VIDEO|-``: causal, one frame at a time (a folder in name order, a
-  video file, or image paths on stdin, one per line); prints one JSON object per frame
-  ``{frame, name, place_id, confidence, accepted, velocity, latency_ms}``.
-* ``localize MODEL --calibrate QUERY``: runs the same localiser over a labelled query traversal
-  and stores the operating point (the confidence threshold that reached ``--precision`` there)
-  beside the model, ``<model>.operating-point.json``; ``--frames`` then accepts at that threshold.
+``--frames`` decides causally, one frame at a time; ``--calibrate QUERY`` stores beside the model the operating point
+(the confidence threshold that reached ``--precision`` on a labelled query traversal) that ``--frames`` accepts at.
 """
 
 from __future__ import annotations
@@ -178,9 +172,7 @@ def run(args: argparse.Namespace) -> int:
 def sized_frames(
     frames: Iterator[tuple[str, np.ndarray]], expected: tuple[int, int] | None
 ) -> Iterator[tuple[str, np.ndarray]]:
-    """The frames, each checked against the size of the model's reference images (None: not known here):
-    a cropped or rescaled stream (a video writer that drops a row, a camera at another resolution) would be
-    decided on other pixels than the model learnt, so a frame of another size stops the run with one line."""
+    """The frames, each checked against the size of the model's reference images (None: not known here)."""
     for name, grey in frames:
         if expected is not None and grey.shape != expected:
             raise DataError(

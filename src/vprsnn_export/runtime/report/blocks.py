@@ -90,17 +90,23 @@ def figure(title: str, name: str, image: bytes, caption: str) -> Block:
 POINT_CHECKS = ("winner_agreement", "top1_agreement", "saturations")
 
 
+def failed_points(result: BitsResult, sep: str = " =") -> list[str]:
+    """A width's cross-implementation differences and missed point limits (``what{sep} value (limit L)``)."""
+    cross = result.cross_implementation
+    failed = [] if cross.passed else [f"{cross.n_failed} cross-implementation differences"]
+    return failed + [
+        f"{c.what}{sep} {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
+        for c in result.tolerance_checks
+        if not c.passed and c.check in POINT_CHECKS
+    ]
+
+
 def failure_lines(report: VerifyReport) -> list[str]:
     """Each failed check, named with its network and bit width: what the verdict line's FAIL means."""
     lines = []
     for label, run, result in results(report):
         where = f"{label if run.label else f'network {label}'}, {result.bits} bits"
-        if not result.cross_implementation.passed:
-            lines.append(f"{where}: {result.cross_implementation.n_failed} cross-implementation differences")
-        for check in result.tolerance_checks:
-            if not check.passed and check.check in POINT_CHECKS:
-                value, limit = points(check.check, check.value), points(check.check, check.applied_limit)
-                lines.append(f"{where}: {check.what} = {value} (limit {limit})")
+        lines += [f"{where}: {line}" for line in failed_points(result)]
         for cells in (paired_cells(c) for c in result.paired if c.verdict == "fails"):
             lines.append(
                 f"{where}: {cells['metric']} {cells['readout']} Δ {cells['difference']} pts, interval "
@@ -269,29 +275,25 @@ def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun]) -> list[Block
         "spike ratio": lambda b: ms(b.spike_ratio, percent=False, digits=3),
         "saturations": lambda b: ms(b.saturations, percent=False, digits=0),
     }
+    # step-level checks on the first queries only (a large network)
+    cut = [run for run in runs if run.recorded_queries is not None and run.recorded_queries < run.n_queries]
+    recorded = (
+        f" Same winner, the per-module agreement and the exported files' rasters are compared on the first "
+        f"{cut[0].recorded_queries} of {cut[0].n_queries} queries (a recorded raster of every query would "
+        "not fit in memory); counts, correlations, saturations and every metric use all queries."
+        if cut
+        else ""
+    )
     return [
         Block("h2", "Spike level"),
         Block(
             "p",
             "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
             "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
-            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries."
-            + recorded_note(runs),
+            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries." + recorded,
         ),
         table(columns, summary.bits),
     ]
-
-
-def recorded_note(runs: Sequence[VerifiedRun]) -> str:
-    """The sentence saying that step-level checks ran on the first queries only (a large network)."""
-    partial = [run for run in runs if run.recorded_queries is not None and run.recorded_queries < run.n_queries]
-    if not partial:
-        return ""
-    return (
-        f" Same winner, the per-module agreement and the exported files' rasters are compared on the first "
-        f"{partial[0].recorded_queries} of {partial[0].n_queries} queries (a recorded raster of every query would "
-        "not fit in memory); counts, correlations, saturations and every metric use all queries."
-    )
 
 
 def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:

@@ -47,12 +47,8 @@ OLDER_DEFAULTS = {"fold_thresholds": False, "non_leaky": False}
 def combine_reports(
     reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
 ) -> VerifyReport:
-    """One report holding every run of ``reports``; the summary becomes mean ± std over all of them.
-
-    Settings come from the first report; keys on which the others differ are listed under
-    ``settings_differ`` (and shown in the report). Reports that differ in a :data:`POOLING_KEYS`
-    setting (other data, bit widths, readout) are refused unless ``allow_mixed``.
-    """
+    """One report holding every run of ``reports`` (mean ± std over all), the first one's settings; those that
+    differ listed under ``settings_differ``, a :data:`POOLING_KEYS` one refused unless ``allow_mixed``."""
     if not reports:
         raise ReportError("no reports to combine")
     if len(reports) == 1:
