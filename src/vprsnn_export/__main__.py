@@ -25,8 +25,7 @@ EXIT_WRITE_ERROR = 1
 
 
 def run() -> None:
-    """``main()``; standard output that cannot be written (a closed pipe, a full device) ends the run quietly.
-    Once ``main()`` has returned, SIGINT is ignored from the interpreter's exit on (torch's and numba's clean-up)."""
+    """``main()``; a standard output that cannot be written ends the run quietly, and so does a late Ctrl-C."""
     try:
         code = main()
         sys.stdout.flush()

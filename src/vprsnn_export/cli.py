@@ -99,8 +99,7 @@ def import_command(argv: Sequence[str]) -> None:
 
 
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
-    """The parser for ``argv``: only the command it names is imported, the others listed by :func:`summary`
-    (``argv=None``: every command's full parser)."""
+    """The parser for ``argv``: only the command it names imported (``argv=None``: every command's)."""
     parser = Parser(
         prog="vprsnn-export", description="STDP place-recognition SNNs: train, quantise, export, verify, localise."
     )
@@ -124,8 +123,7 @@ def _terminate(signum: int, frame: object) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Parse, run one command (its output locked for the run); expected errors are one line and exit 2, an
-    interrupt exits 130, SIGTERM 143."""
+    """Parse, run one command (its output locked); an expected error is one line and exit 2."""
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, _terminate)
     try:

@@ -49,8 +49,7 @@ def install_guard() -> None:
 
 
 class InterruptsHeld:
-    """``with InterruptsHeld():`` a SIGINT inside the block is only noted, and handed to the handler it replaced
-    when the block ends (torch's import: raised inside its C++ start-up, it would abort the process)."""
+    """``with InterruptsHeld():`` a SIGINT inside the block is noted and handed on when the block ends (torch's import)."""
 
     def __enter__(self) -> None:
         self.noted = False

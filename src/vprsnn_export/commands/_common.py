@@ -190,8 +190,7 @@ def add_sequence_options(
     old_window_option: str | None = "--tolerance",
     json: bool = True,
 ) -> None:
-    """One option per :class:`SequenceOptions` field, None unless given (``default_k``: a command's own --k;
-    ``stream``: localize, the causal estimates only); :func:`sequence_options` reads them."""
+    """One option per :class:`SequenceOptions` field, None unless given; ``stream``: localize's causal estimates."""
     group = parser.add_argument_group("sequence")
     estimates = causal_estimates() if stream else VELOCITY_ESTIMATES.names()
     for item in fields(SequenceOptions):

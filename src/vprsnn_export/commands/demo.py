@@ -85,8 +85,7 @@ def profile_text(cfg: Config, n_places: int, profile: dict) -> str:
 
 
 def deciding_check(result: BitsResult) -> str:
-    """The one check that decides a width's verdict, with its interval and limit in points: the furthest beyond
-    its limit (fails), the one needing the most queries (undecided), or the closest to its limit (holds)."""
+    """The one check that decides a width's verdict, with its interval and limit in points."""
     from ..runtime.report.blocks import failed_points
     from ..runtime.report.labels import paired_cells
 
@@ -114,8 +113,7 @@ def deciding_check(result: BitsResult) -> str:
 
 
 def conclusion(report: VerifyReport) -> list[str]:
-    """What a user reads first: one line naming every width with its verdict and what to deploy, then a line per
-    width with the check that decides it."""
+    """A line naming every width's verdict and what to deploy, then a line per width with its deciding check."""
     results = report.runs[0].bits
     verdicts = {r.bits: r.verdict for r in results}
     parts = [

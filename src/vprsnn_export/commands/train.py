@@ -63,8 +63,7 @@ ADAPTATIONS = ("gain",)  # trainer.adaptation.MECHANISMS, named here so that --h
 
 
 def check_not_a_frame(out: Path, data: Path, traversals: list[str]) -> None:
-    """InvalidValueError when ``--out`` would replace an image of the data set: an image file name, or a path
-    inside one of the traversal folders read (reference or adaptation frames)."""
+    """InvalidValueError when ``--out`` is an image file name or lies inside a traversal folder read."""
     from ..data.frames import IMAGE_SUFFIXES
 
     folders = [data / name for name in traversals if (data / name).is_dir()]
@@ -137,9 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def capacity_warning(n_places: int, cfg: Config) -> str | None:
-    """A warning when one module must learn more places than it has neurons (places per module P, or every
-    place without modules, above ``network.n_neurons``): some places then have no neuron of their own. The
-    suggested module size is n / 4 places (docs/experiments.md: 100 places per module of 400 neurons)."""
+    """A warning when one module must learn more places than it has neurons; the module size it suggests is n / 4."""
     per_module = min(cfg.train.module_size or n_places, n_places)
     neurons = cfg.network.n_neurons
     if per_module <= neurons:

@@ -219,8 +219,7 @@ def verdict_blocks(report: VerifyReport) -> list[Block]:
 
 
 def paired_blocks(report: VerifyReport) -> list[Block]:
-    """The paired table: per network and bit width every judged metric (and every readout's accuracy) with its
-    flips, the difference, its interval and the verdict."""
+    """The paired table: per network and bit width every shown check's flips, difference, interval and verdict."""
     checks = per_result(report, lambda r: shown_paired(r.paired))
     if not checks:
         return []

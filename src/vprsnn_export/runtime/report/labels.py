@@ -73,8 +73,7 @@ PAIRED_COLUMNS = (
 
 
 def paired_cells(check: PairedCheck) -> dict[str, str]:
-    """One paired check as text cells: Δ and its interval in points, the flips (float right / deployed wrong,
-    and the reverse), the limit applied, the verdict (with the queries that would decide an undecided one)."""
+    """One paired check as text cells: Δ and its interval in points, the flips, the limit and the verdict."""
     verdict_text = check.verdict or "reported"
     if check.verdict == "undecided":
         verdict_text += (

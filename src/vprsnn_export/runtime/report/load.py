@@ -47,8 +47,7 @@ OLDER_DEFAULTS = {"fold_thresholds": False, "non_leaky": False}
 def combine_reports(
     reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
 ) -> VerifyReport:
-    """One report holding every run of ``reports`` (mean ± std over all), the first one's settings; those that
-    differ listed under ``settings_differ``, a :data:`POOLING_KEYS` one refused unless ``allow_mixed``."""
+    """One report of every run of ``reports`` (a :data:`POOLING_KEYS` difference refused unless ``allow_mixed``)."""
     if not reports:
         raise ReportError("no reports to combine")
     if len(reports) == 1:

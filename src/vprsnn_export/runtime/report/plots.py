@@ -35,8 +35,7 @@ def png(fig: Any) -> bytes:
 
 
 def merged(series: Sequence[tuple[str, Any]]) -> list[tuple[str, Any, int]]:
-    """``(label, data)`` series with identical data drawn once, labelled "A = B" (drawn apart, the later would
-    hide the earlier): ``(label, data, index of its first series)``, in first-seen order."""
+    """``(label, data)`` series with identical data once, labelled "A = B": ``(label, data, first index)``."""
     groups: list[tuple[list[str], Any, int]] = []
     for index, (label, data) in enumerate(series):
         same = next((group for group in groups if group[1] == data), None)
@@ -75,9 +74,7 @@ def bars(ax: Any, x: np.ndarray, values: Sequence[tuple[float, float]], width: f
 
 
 def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
-    """Each metric vs bit width, a line per readout over its float value (dashed); with one bit width, bars
-    (float and quantised side by side per readout, the top 15 % above the highest) instead of single points
-    on a wide axis."""
+    """Each metric vs bit width, a line per readout over its float value (dashed); with one bit width, bars."""
     plt = pyplot()
     keys = [(s, 1) for s in STRATEGIES] + [("wprob", k) for k in ks if k > 1]
     float_rows = {(r.strategy, r.k): r for r in summary.float}
@@ -134,8 +131,7 @@ def plot_pr(run: VerifiedRun) -> bytes:
 
 
 def plot_modules(run: VerifiedRun) -> bytes:
-    """Per module: whole-route accuracy at k (float and each bit width) and the same-winner share; identical
-    series drawn once, "A = B"."""
+    """Per module: whole-route accuracy at k (float and each bit width) and the same-winner share."""
     plt = pyplot()
     results = [result for result in run.bits if result.modules]
     modules = results[0].modules
@@ -164,15 +160,13 @@ def plot_modules(run: VerifiedRun) -> bytes:
 
 def window_share(edges: np.ndarray, counts: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     """The share of a histogram's values within ``width`` around each ``x`` (uniform within a bin):
-    ``share(x) = F(x + width/2) - F(x - width/2)``, F the cumulative share at the edges, interpolated.
-    At x = q / L with width 1 / L it is the share of float weights that round to level q: a share, <= 1."""
+    ``share(x) = F(x + width/2) - F(x - width/2)``, F the cumulative share at the edges, interpolated."""
     cdf = np.concatenate([[0.0], np.cumsum(counts)]) / max(float(np.sum(counts)), 1.0)
     return np.interp(x + width / 2, edges, cdf) - np.interp(x - width / 2, edges, cdf)
 
 
 def plot_weights(run: VerifiedRun) -> bytes:
-    """Per bit width: the share of weights on each level q / L (bars) over the float weights' share within
-    a level's width 1 / L around each point (line, :func:`window_share`): the same units, both <= 1."""
+    """Per bit width: the share of weights on each level q / L (bars) over :func:`window_share` (line)."""
     plt = pyplot()
     results = run.bits
     fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
@@ -198,8 +192,7 @@ def plot_weights(run: VerifiedRun) -> bytes:
 
 
 def plot_spikes(report: VerifyReport) -> bytes:
-    """Left: the agreements vs bit width (bars with one bit width; identical series drawn once, "A = B").
-    Right: the per-query count correlations per bit width, all networks pooled."""
+    """Left: the agreements vs bit width; right: the per-query count correlations per bit width, pooled."""
     plt = pyplot()
     summary = report.summary
     bits = [b.bits for b in summary.bits]
@@ -242,8 +235,7 @@ def plot_spikes(report: VerifyReport) -> bytes:
 def plot_precision_recall(
     recall: np.ndarray, precision: np.ndarray, target: float, chosen: tuple[float, float, float] | None, title: str
 ) -> bytes:
-    """A calibration curve (``localize --calibrate``): precision vs recall, a point per threshold, the target
-    precision dashed and the chosen (recall, precision, threshold) marked."""
+    """A calibration curve (``localize --calibrate``), the target dashed and the chosen point marked."""
     fig, ax = pyplot().subplots(figsize=(5, 4))
     ax.plot(recall, precision, ".-", color="black", label="calibration (a point per threshold)")
     ax.axhline(target, color="tab:red", linestyle="--", linewidth=1, label="target precision")
