@@ -49,7 +49,7 @@ def install_guard() -> None:
 
 
 class InterruptsHeld:
-    """``with InterruptsHeld():`` a SIGINT inside the block is noted and handed on when the block ends (torch's import)."""
+    """``with InterruptsHeld():`` a SIGINT inside the block is noted and handed on when it ends (torch's import)."""
 
     def __enter__(self) -> None:
         self.noted = False

@@ -393,7 +393,7 @@ RESULT_COLUMNS = (
 def refuse_window_beside_truth(
     match_window: int | None, source: str | None, references: Sequence[str], query: str
 ) -> None:
-    """--match-window on a folder with a ground-truth file of (reference, query): refused before any image is decoded."""
+    """--match-window on a folder with a ground-truth file of (reference, query): refused before any image loads."""
     folder = Path(source) if source else None
     if not match_window or folder is None or not folder.is_dir():
         return
@@ -403,7 +403,7 @@ def refuse_window_beside_truth(
 
 
 def query_data(args: argparse.Namespace, network: Network, query: str | None = None) -> Dataset:
-    """The data set of --data/--subset/--places, else the one ``network`` records: traversal ``query``, else its references."""
+    """The data set of --data/--subset/--places, else the one ``network`` records: ``query``, else its references."""
     if query is not None:
         source = args.data if args.data is not None else network.data.get("source")
         refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
