@@ -13,13 +13,8 @@ forward; its distribution is shifted by that much before combining:
 .. math:: \\tilde P_m(l) = P_m(l - v d)
 
 evaluated with linear interpolation between the two neighbouring places (no
-rounding). Windows are built from the stream order and ``frame_positions``
-only -- never from ground-truth labels (unlike the paper's code, field notes
-Sec. 1, which cuts windows where the true labels stop being consecutive).
-
-Over 400 lines because it is one concept: the shifted window and the velocity searches that score it
-(:func:`window_scores`, :func:`track_velocity`, :func:`smooth_velocity`) share its chunking and its
-argument checks, and each public function carries its equation in its docstring.
+rounding). Windows come from the stream order and ``frame_positions`` only, never from
+ground-truth labels (unlike the paper's code, field notes Sec. 1).
 """
 
 from __future__ import annotations
@@ -97,8 +92,7 @@ def _checked(
 
 
 def _window(k: int, n_queries: int) -> int:
-    """The window length that matters: W_j never reaches before frame 0, so any k > max(N, 2) acts as max(N, 2)
-    (a huge k would otherwise size the (queries, k, places) window arrays)."""
+    """The window length that matters: any k > max(N, 2) acts as max(N, 2) (W_j never reaches before frame 0)."""
     return k if k == 1 else min(k, max(n_queries, 2))
 
 
@@ -109,17 +103,13 @@ def shift_window(
     velocity: np.ndarray,
     frame_positions: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Shifted window distributions for some queries, shape ``(len(queries), k, n_places)``.
-
-    Offset ``o`` (0 = the query frame itself) holds frame ``m = j - o``:
+    """Shifted window distributions ``(len(queries), k, n_places)``; offset ``o`` holds frame ``m = j - o``:
 
     .. math:: \\tilde P_{j,o}(l) = (1 - f) P_m(\\lfloor x \\rfloor) + f P_m(\\lfloor x \\rfloor + 1),
               \\quad x = l - v_j (t_j - t_m), \\quad f = x - \\lfloor x \\rfloor
 
-    and ``0`` where ``x`` lies outside ``[0, n_places - 1]`` (the route beyond
-    the map). Returns ``(shifted, valid)``; ``valid[c, o]`` is False where
-    ``m < 0`` (before the start of the stream); those rows are 0 and must be
-    left out of the combination. Inputs must already be validated float64.
+    and 0 where ``x`` lies outside ``[0, n_places - 1]``. Returns ``(shifted, valid)``; ``valid[c, o]`` is False
+    (and the row 0) where ``m < 0``, before the stream's start.
     """
     return _shift_rows(prob, queries, k, velocity[queries], frame_positions)
 
@@ -132,13 +122,8 @@ def _shift_rows(
     frame_positions: np.ndarray,
     nearest: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`shift_window` with one velocity per row (``row_velocity[c]`` for ``queries[c]``).
-
-    A query may appear in several rows with different velocities, which is how
-    :func:`window_scores` evaluates every (query, candidate) pair at once.
-    ``nearest`` rounds each displacement ``v_j (t_j - t_m)`` to the nearest
-    place (half to even) instead of interpolating, so ``f = 0``.
-    """
+    """:func:`shift_window` with one velocity per row (a query may stand in several rows, as in
+    :func:`window_scores`); ``nearest`` rounds each displacement to whole places (half to even), so ``f = 0``."""
     n_places = prob.shape[1]
     frames_safe, valid, displacement, shift = _window_frames(
         queries, k, row_velocity, frame_positions, n_places, nearest
@@ -168,9 +153,8 @@ def _window_frames(
     n_places: int,
     nearest: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-    """The frames of each row's window (C, k) (0 before the stream), whether they exist, their displacements
-    :math:`v_j (t_j - t_m)` and, when every row's offset o moves by the same whole number of places (a constant
-    velocity over frame indices: the common case), that shift per offset (else None; beyond the map: n_places)."""
+    """Each row's window frames (C, k) (0 before the stream), whether they exist, their displacements
+    :math:`v_j (t_j - t_m)` and the whole-place shift per offset when all rows share it (else None)."""
     frames = queries[:, None] - np.arange(k)[None, :]  # (C, k)
     valid = frames >= 0
     frames_safe = np.where(valid, frames, 0)
@@ -186,11 +170,8 @@ def _window_frames(
 def _summed_terms(
     terms: np.ndarray, queries: np.ndarray, valid: np.ndarray, shift: np.ndarray, outside: float
 ) -> np.ndarray:
-    r""":math:`A_j(l) = \sum_o \text{term}(P_{j-o})(l - d_o)` for the consecutive ``queries``, from each frame's
-    ``terms`` computed once: offset by offset (as ``combine`` sums the shifted window), each added in place from a
-    view of the terms, ``outside`` (the term of 0) where :math:`l - d_o` lies beyond the map, and a frame before
-    the stream's start adding ``outside * 0`` (as ``combine``'s mask makes it). The same numbers as shifting the
-    probabilities first, at one term per frame instead of k and no (rows, k, places) window."""
+    r""":math:`A_j(l) = \sum_o \text{term}(P_{j-o})(l - d_o)` for the consecutive ``queries`` from each frame's
+    ``terms`` computed once, ``outside`` (the term of 0) beyond the map: the same numbers as ``combine``."""
     n_places = terms.shape[1]
     total = terms[queries]  # offset 0: the query frame itself, never shifted (d_0 = 0)
     for o, d in enumerate(shift.tolist()[1:], start=1):
@@ -214,10 +195,8 @@ def _summed_terms(
 
 
 def _shifted_by_whole_places(prob: np.ndarray, frames: np.ndarray, valid: np.ndarray, shift: np.ndarray) -> np.ndarray:
-    """:func:`_shift_rows` where every row's offset o moves by the same whole number of places ``shift[o]`` (a
-    constant velocity over frame indices: the common case), by slicing: :math:`\\tilde P_{j,o}(l) = P_{j-o}(l - d_o)`,
-    0 outside the map or before the stream. The same numbers as the interpolation (f = 0 drops the right
-    neighbour exactly), with one copy per offset instead of two gathers per entry."""
+    """:func:`_shift_rows` where every row's offset o moves by the same whole places ``shift[o]``, by slicing:
+    :math:`\\tilde P_{j,o}(l) = P_{j-o}(l - d_o)` (the same numbers as the interpolation at f = 0)."""
     n_places = prob.shape[1]
     shifted = np.zeros((len(frames), len(shift), n_places))
     for o, d in enumerate(shift.tolist()):  # k offsets, each a slice over every row and place
@@ -253,17 +232,10 @@ def aggregate(
         \\text{sum:}\\; A_j(l) = \\sum_{m \\in W_j} \\tilde P_m(l), \\quad
             \\hat P_j(l) = \\frac{A_j(l)}{\\sum_{l'} A_j(l')}
 
-    ``velocity``: places per frame unit, a float or one value per query
-    (negative = the route is traversed against the reference order).
-    ``frame_positions`` (``t``): non-decreasing frame index / timestamp per
-    query as the robot knows it, default ``arange(n_queries)``; a dropped frame
-    simply makes ``t_j - t_m`` larger. ``eps`` (product rule only, default
-    1e-6) floors every factor so that one frame with probability 0 at a place
-    cannot veto it; the product rule is computed in log space and normalised
-    with a stable softmax. A sum-rule window that is 0 everywhere returns the
-    uniform distribution. ``k == 1`` returns ``prob`` unchanged (an exact
-    float64 copy). Never takes ground truth: windows come from stream order
-    and ``frame_positions`` only. An empty stream (no query) is an InvalidValueError: there is nothing to aggregate.
+    ``velocity``: places per frame unit, a float or one per query (negative: against the reference order).
+    ``frame_positions`` (``t``): non-decreasing, default ``arange(n_queries)``. ``eps`` (product rule) floors
+    every factor so one frame cannot veto a place. A sum-rule window 0 everywhere gives the uniform distribution;
+    ``k == 1`` returns a float64 copy of ``prob``; an empty stream is an InvalidValueError.
     """
     if _prob2d(prob).shape[0] == 0:
         raise InvalidValueError("prob holds no query (shape (0, places)): there is nothing to aggregate")
@@ -330,18 +302,10 @@ def window_scores(
 
     .. math:: e_j(v) = \\max_l A_j^{(v)}(l)
 
-    where ``A^{(v)}`` is the un-normalised aggregate of :func:`aggregate` at
-    velocity v (summed logs for the product rule, summed probabilities for the
-    sum rule). Every (query, candidate) pair is evaluated at once, in chunks of
-    rows of at most ``_MAX_ELEMENTS`` elements. Uses the query frames and their
-    window only (no ground truth). With ``k == 1`` every candidate scores
-    ``max_l P_j(l)``. ``nearest=True`` scores trajectories through whole
-    places, as SeqSLAM does: each frame is shifted by ``round(v (t_j - t_m))``
-    places instead of interpolated. Interpolating blurs a frame between two
-    places, and the blurred window scores higher under the product rule
-    (``log`` is concave), which biases the search towards non-integral shifts.
-    ``windows``: the stream indices of the windows to score (default all); the rows come back in that order,
-    each the same numbers as in the full table (a stream scores only its newest window).
+    where ``A^{(v)}`` is :func:`aggregate`'s un-normalised aggregate at velocity v; with ``k == 1`` every
+    candidate scores ``max_l P_j(l)``. ``nearest=True`` shifts by whole places, as SeqSLAM does (interpolation
+    blurs a frame, which the concave log of the product rule rewards). ``windows``: the stream indices to score
+    (default all), rows in that order.
     """
     cands = _candidates(candidates)
     p, k, t = _checked(prob, k, rule, eps, frame_positions)
@@ -379,16 +343,8 @@ def estimate_velocity(
 
     .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} e_j(v) = \\arg\\max_{v} \\max_l A_j^{(v)}(l)
 
-    (:func:`window_scores`): for every query the candidate whose window
-    explains the frames best wins (ties: the first candidate in the given
-    order). The normalised peak is not used: it rewards velocities that pile
-    the window onto one place whatever the frames say. Each window decides
-    alone, so with few frames noise often picks a wrong velocity; see
-    :func:`track_velocity`. Returns the chosen velocity per query, shape
-    ``(n_queries,)``, and the aggregated distributions at that velocity, shape
-    ``(n_queries, n_places)``. Uses the query frames and their window only (no
-    ground truth). With ``k == 1`` every candidate gives the same result and
-    the first is returned.
+    (:func:`window_scores`; ties: the first candidate). Each window decides alone (see :func:`track_velocity`).
+    Returns the velocity per query ``(n_queries,)`` and the aggregate at it ``(n_queries, n_places)``.
     """
     return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps, length=k, memory=0)
 
@@ -401,13 +357,8 @@ def stream_contrast(prob: np.ndarray, memory: int, lag: int = 0) -> np.ndarray:
             j_0 = \\max(0, j - M + 1), \\; j_1 = \\min(n - 1, j + L), \\qquad
         Q_j(l) = \\frac{P_j(l) / B_j(l)}{\\sum_{l'} P_j(l') / B_j(l')}
 
-    (``P_j(l) / B_j(l) = 0`` where ``B_j(l) = 0``; a row that is then 0
-    everywhere stays 0). A "hub" place that many consecutive frames vote for,
-    whatever the true place, is discounted, while the true place, which moves
-    along the route, is not. With ``lag`` L = 0 (default) it is causal: frame
-    ``j`` uses frames ``j0 .. j`` only; a lag L lets it use the next L frames
-    too, so that the first frames of the stream are not divided by themselves
-    alone. ``memory == 0`` returns ``prob`` unchanged (a float64 copy).
+    (0 where ``B_j(l) = 0``; a row 0 everywhere stays 0): a "hub" place that consecutive frames all vote for is
+    discounted, the moving true place is not. ``lag`` L = 0 is causal; ``memory == 0`` returns a float64 copy.
     """
     p = _prob2d(prob)
     memory, lag = count_at_least("background memory", memory, 0), count_at_least("velocity lag", lag, 0)
@@ -428,9 +379,7 @@ def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
 
     .. math:: E_j = \\sum_{i=\\max(0,\\, j-S+1)}^{\\min(n-1,\\, j+L)} e_i
 
-    ``lag`` L = 0 is the causal sum over the S most recent rows (rows before
-    the start or after the end of the stream are left out). S >= 1 and L >= 0 as
-    the velocity searches have checked them.
+    ``lag`` L = 0 is the causal sum over the S most recent rows.
     """
     e = np.asarray(scores, dtype=np.float64)
     padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
@@ -442,11 +391,7 @@ def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
     .. math:: \\hat v_j = \\operatorname{mean} \\{ v \\in \\mathcal{V} : E_j(v) = \\max_{v'} E_j(v') \\}
 
-    Trajectories through whole places cannot tell apart velocities that round
-    to the same shifts (over 10 frames, 0.95, 1.0 and 1.05 place per frame all
-    do): they tie exactly, and the centre of the tied run is the estimate,
-    where the first of them would be biased towards the start of the grid.
-    ``candidates`` as :func:`smooth_velocity` has checked them.
+    Velocities that round to the same whole-place shifts tie exactly; their centre is unbiased, the first is not.
     """
     e = np.asarray(totals, dtype=np.float64)
     cands = np.asarray(candidates, dtype=np.float64)
@@ -476,24 +421,13 @@ def track_velocity(
         \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} E_j(v), \\qquad
         \\hat P_j = \\text{aggregate}(P, k, \\hat v)_j
 
-    1. :func:`stream_contrast` divides out the places that the last ``memory``
-       (M) frames all vote for. Without it, consecutive frames that vote for
-       the same wrong place make the velocity 0 look best.
-    2. ``e_i^{(Q, L)}(v)`` is :func:`window_scores` of Q over trajectories of
-       ``length`` (L, default 2k) frames: how well the frames line up at v.
-    3. The speed of a train or car changes slowly, so the scores of the
-       ``span`` (S) most recent windows are summed before the velocity is
-       chosen: the right velocity lines up every window, while spurious
-       alignments change from window to window and do not add up.
+    1. :func:`stream_contrast` divides out the places the last ``memory`` (M) frames all vote for (else
+       frames stuck on one wrong place make velocity 0 look best).
+    2. ``e_i^{(Q, L)}(v)``: :func:`window_scores` of Q over trajectories of ``length`` (L, default 2k) frames.
+    3. The scores of the ``span`` (S) most recent windows are summed: the right velocity lines up every window.
 
-    The decision itself aggregates the unchanged ``prob`` over k frames at the
-    chosen velocity, exactly as a given velocity would. The velocity is in
-    places per unit of ``frame_positions`` (dropped frames are handled as in
-    :func:`aggregate`); negative candidates cover a reversed traversal. Ties
-    go to the first candidate in the given order. ``span=1, length=k,
-    memory=0`` is the per-window search :func:`estimate_velocity`. Uses the
-    stream order, ``frame_positions`` and the frames' distributions only (no
-    ground truth).
+    The decision aggregates the unchanged ``prob`` over k frames at the chosen velocity (ties: the first
+    candidate). ``span=1, length=k, memory=0`` is :func:`estimate_velocity`.
     """
     span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)
@@ -529,23 +463,11 @@ def smooth_velocity(
 
     :func:`track_velocity` with three changes, for its warm-up:
 
-    1. **Fixed lag** L (default ``2k - 1``): the decision for query ``j`` is
-       given once frame ``j + L`` has arrived, and its velocity also sums the
-       scores of the next L windows (:func:`lagged_sum`); the background of
-       :func:`stream_contrast` also takes the next L frames. The decision
-       itself still aggregates frames ``j-k+1 .. j`` only, like a given
-       velocity. At the start of the stream the causal tracker has a handful
-       of short windows to go on; with the lag the first decisions already see
-       L + 1 windows.
-    2. **Trajectories through whole places** (``window_scores(...,
-       nearest=True)``) of ``length`` T (default 3k) frames: interpolated
-       trajectories favour velocities slightly off the true one.
+    1. **Fixed lag** L (default ``2k - 1``): query ``j``'s velocity also sums the next L windows' scores
+       (:func:`lagged_sum`) and its background takes the next L frames; the decision still aggregates frames
+       ``j-k+1 .. j``. ``lag=0`` is causal.
+    2. **Trajectories through whole places** (``nearest=True``) of ``length`` T (default 3k) frames.
     3. **The centre of the tied best velocities** (:func:`centre_of_best`).
-
-    The velocity is in places per unit of ``frame_positions`` (dropped frames
-    are handled as in :func:`aggregate`); negative candidates cover a reversed
-    traversal. ``lag=0`` is causal. Uses the stream order, ``frame_positions``
-    and the frames' distributions only (no ground truth).
     """
     span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)

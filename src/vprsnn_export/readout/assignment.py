@@ -16,11 +16,8 @@ Three strategies turn them into one row of place scores per query:
 * ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then
   L1-normalised into a distribution P(l | Q).
 
-:mod:`readout.strategies` registers them (scores, confidence, title) and
-:func:`~vprsnn_export.readout.strategies.decide` turns scores into a predicted place
-index (``-1`` = no match) and a confidence. S^R, S'' and S^Q are float64 CSR arrays (scipy.sparse: a neuron
-fires for a handful of places, a query reaches a few neurons) and every product runs over their stored entries,
-vectorised over queries, neurons and places; the scores come out dense, (queries, places).
+:mod:`readout.strategies` registers them. S^R, S'' and S^Q are float64 CSR arrays and every product runs over
+their stored entries; the scores come out dense, (queries, places).
 """
 
 from __future__ import annotations
@@ -71,8 +68,7 @@ def finite_matrix(name: str, value: object) -> np.ndarray:
 
 
 def _checked_counts(name: str, shape: tuple, values: np.ndarray) -> np.ndarray:
-    """``values`` (the array, or a sparse array's stored entries) when the shape is 2-D and every value finite
-    and >= 0; InvalidValueError naming ``name`` otherwise."""
+    """``values`` (or a sparse array's stored entries) when 2-D, finite and >= 0; InvalidValueError naming ``name``."""
     if len(shape) != 2:
         raise InvalidValueError(f"{name} must be 2-D, got shape {shape}")
     if not np.all(np.isfinite(values)):
@@ -83,10 +79,8 @@ def _checked_counts(name: str, shape: tuple, values: np.ndarray) -> np.ndarray:
 
 
 def sparse_counts(name: str, a: np.ndarray | sparse.sparray) -> sparse.csr_array:
-    """A count array, dense or scipy.sparse, as float64 CSR with its column indices sorted and no stored zeros,
-    checked as a dense one (2-D, finite, non-negative). A neuron fires for a handful of
-    places and a query reaches a few of the neurons, so S^R and S^Q are mostly zeros: every readout product runs
-    over the stored entries only, row by row, in column order (the same sums whatever the block of rows)."""
+    """A count array, dense or scipy.sparse, checked (2-D, finite, non-negative) as float64 CSR with sorted column
+    indices and no stored zeros (row by row in column order: the same sums whatever the block of rows)."""
     if not sparse.issparse(a) or a.ndim != 2:
         arr = real_array(name, a.toarray() if sparse.issparse(a) else a)  # type: ignore[union-attr]
         return sparse.csr_array(_checked_counts(name, arr.shape, arr))
@@ -124,8 +118,7 @@ def standard_assignment(sr: np.ndarray) -> np.ndarray:
 
     .. math:: l^*_i = \\arg\\max_l S^R_{il}, \\qquad A_{il} = [\\,l = l^*_i \\wedge \\textstyle\\sum_m S^R_{im} > 0\\,]
 
-    Ties go to the lowest place index. A neuron that never spiked during calibration (an all-zero row) is
-    assigned to no place: its row of A is all zero. Dense; :func:`standard_voters` gives it sparse.
+    Ties go to the lowest place; a neuron silent in calibration has no place. :func:`standard_voters`: sparse.
     """
     return standard_voters(sparse_counts("sr", sr)).toarray()
 
@@ -135,9 +128,7 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     .. math:: \\mathrm{Score}_{ql} = \\sum_{i:\\, l^*_i = l} S^Q_{qi} = (S^Q A)_{ql}
 
-    with ``A = standard_assignment(sr)`` (ties to the lowest place index;
-    neurons silent during calibration belong to no place and never vote), a sparse product:
-    O(the queries' stored counts); the counts are integers, so the sums are exact.
+    with ``A = standard_assignment(sr)``, a sparse product (integer counts: exact sums).
     """
     sr_, sq_ = _pair(sr, sq)
     votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
@@ -162,8 +153,7 @@ def weighted_matrix(sr: np.ndarray, gamma: float) -> np.ndarray | sparse.csr_arr
 
         S''_{il} = S'_{il} \\, \\frac{S^R_{il}}{\\sum_m S^R_{im}}
 
-    A neuron silent during calibration has ``S''_{i\\cdot} = 0``.
-    ``gamma`` is the involvement threshold, in [0, 1] (the paper: (0, 1)).
+    ``gamma``: the involvement threshold in [0, 1]; a neuron silent in calibration has ``S''_{i\\cdot} = 0``.
     """
     sr_ = sparse_counts("sr", sr)
     gamma = real_number("gamma", gamma)
@@ -183,8 +173,7 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     .. math:: \\mathrm{pen}_{ql} = \\frac{\\sum_{m \\in \\mathrm{Active}_q} S^R_{ml}}{\\sum_m S^R_{ml}}
               = \\frac{([S^Q > 0]\\, S^R)_{ql}}{\\sum_m S^R_{ml}}
 
-    ``Active_q`` = neurons with at least one spike in query q. The factor is 0
-    for a place whose calibration column sum is 0 (integer sums: exact).
+    ``Active_q``: the neurons that spiked in query q; 0 for a place whose calibration column sums to 0.
     """
     return _penalty(*_pair(sr, sq))
 
@@ -201,10 +190,8 @@ def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
     .. math:: \\mathrm{Score}_{ql} = \\Big(\\sum_i S^Q_{qi} S''_{il}\\Big)
               \\frac{\\sum_{m \\in \\mathrm{Active}_q} S^R_{ml}}{\\sum_m S^R_{ml}}
 
-    with S'' from :func:`weighted_matrix` (eq. 9-10) and the penalty from
-    :func:`missing_spikes_penalty` (eq. 11). Scores are non-negative; a query
-    with no spike at all scores 0 everywhere. The sum over i runs over the neurons that fired for the query and
-    for the place, in neuron order (a sparse product: a row's numbers do not depend on the other rows).
+    with S'' from :func:`weighted_matrix` and the penalty of :func:`missing_spikes_penalty`; a query with no
+    spike scores 0 everywhere.
     """
     sr_, sq_ = _pair(sr, sq)
     weighting = once_per_calibration("weighted", sr, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
@@ -219,11 +206,7 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
                                             {\\max_m \\mathrm{Score}_m - \\min_m \\mathrm{Score}_m},
         \\qquad P(l \\mid Q) = \\frac{\\widehat{\\mathrm{Score}}_l}{\\sum_m \\widehat{\\mathrm{Score}}_m}
 
-    Choice: when ``max == min`` for a query (all scores equal, e.g. a query
-    that produced no spike) eq. 12 is 0/0; that query gets the uniform
-    distribution ``1/n_places``, which ``strategies.decide`` reports as a no-match.
-    Otherwise the best place has normalised score 1, so the L1 sum is >= 1
-    and never 0.
+    Where ``max == min`` (eq. 12 is 0/0, e.g. a query with no spike) the row is uniform, ``1/n_places``: a no-match.
     """
     s = finite_matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
@@ -242,8 +225,7 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
 
     .. math:: c_q = \\frac{\\max_l \\mathrm{Score}_{ql}}{\\sum_l \\mathrm{Score}_{ql}}
 
-    (0 when the sum is 0). Scores must be non-negative, so c lies in [0, 1].
-    For W+Prob the confidence is ``max_l P(l | Q)`` instead (:func:`distribution_decision`).
+    (0 when the sum is 0); scores must be non-negative.
     """
     s = finite_matrix("scores", scores)
     if np.any(s < 0):
@@ -269,8 +251,7 @@ def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndar
     .. math:: \\mathrm{no\\ match}_q = [\\max_l P(l \\mid Q_q) = \\min_l P(l \\mid Q_q)], \\qquad
               c_q = \\max_l P(l \\mid Q_q)
 
-    A flat row (every entry equal, e.g. the uniform distribution of
-    :func:`wprob_distribution`) is a no-match.
+    (a flat row is a no-match).
     """
     s = finite_matrix("scores", distribution)
     top = s.max(axis=1)
