@@ -25,7 +25,11 @@ EXIT_WRITE_ERROR = 1
 
 
 def run() -> None:
-    """``main()``; a standard output that cannot be written ends the run quietly, and so does a late Ctrl-C."""
+    """``main()``; a standard output that cannot be written (a closed pipe, a full device) ends the run quietly.
+
+    Once ``main()`` has returned, SIGINT is ignored (the first exit handler): a Ctrl-C during torch's and numba's
+    clean-up would print a traceback or kill the process by the signal. Not before: a program that calls ``run()``
+    and catches its SystemExit keeps its own handler (its children would inherit an ignored SIGINT)."""
     try:
         code = main()
         sys.stdout.flush()

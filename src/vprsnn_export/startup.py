@@ -49,7 +49,12 @@ def install_guard() -> None:
 
 
 class InterruptsHeld:
-    """``with InterruptsHeld():`` a SIGINT inside the block is noted and handed on when it ends (torch's import)."""
+    """``with InterruptsHeld():`` a SIGINT inside the block is only noted, and handed to the handler it replaced
+    when the block ends.
+
+    For torch's import: an exception raised inside its C++ start-up (a Python callback under pybind11) aborts the
+    process instead of exiting 130 with one line. A plain class, not contextlib: this module comes in before
+    anything else. Outside the main thread, or with SIGINT ignored, a no-op."""
 
     def __enter__(self) -> None:
         self.noted = False

@@ -109,7 +109,7 @@ def shift_window(
               \\quad x = l - v_j (t_j - t_m), \\quad f = x - \\lfloor x \\rfloor
 
     and 0 where ``x`` lies outside ``[0, n_places - 1]``. Returns ``(shifted, valid)``; ``valid[c, o]`` is False
-    (and the row 0) where ``m < 0``, before the stream's start.
+    (and the row 0) where ``m < 0``, before the stream's start. Inputs must already be validated float64.
     """
     return _shift_rows(prob, queries, k, velocity[queries], frame_positions)
 
