@@ -47,7 +47,9 @@ def thresholds(n_neurons: int = 12, seed: int = 0) -> np.ndarray:
 @pytest.mark.parametrize("bits", [2, 3, 4, 8])
 def test_max_per_neuron_uses_the_full_unsigned_range_without_clipping(bits):
     w = stdp_like_weights()
-    q = quantise_arrays(w, thresholds(), bits, per_neuron=True, scale_method="max", fold_thresholds=False)
+    q = quantise_arrays(
+        w, thresholds(), bits, QuantiseOptions(per_neuron=True, scale_method="max", fold_thresholds=False)
+    )
     assert q.weight_mantissa.min() == 0 and q.weight_mantissa.max(axis=0).tolist() == [2**bits - 1] * 12
     assert q.report["weights_clipped"] == 0
     scales = q.scale_multiplier * 2.0**q.scale_exponent
@@ -56,14 +58,19 @@ def test_max_per_neuron_uses_the_full_unsigned_range_without_clipping(bits):
 
 def test_two_bits_are_four_unsigned_levels():
     q = quantise_arrays(
-        stdp_like_weights(), thresholds(), 2, per_neuron=True, scale_method="max", fold_thresholds=False
+        stdp_like_weights(),
+        thresholds(),
+        2,
+        QuantiseOptions(per_neuron=True, scale_method="max", fold_thresholds=False),
     )
     assert set(np.unique(q.weight_mantissa).tolist()) == {0, 1, 2, 3}
 
 
 def test_per_tensor_shares_one_scale_and_maps_the_largest_weight_to_the_top_level():
     w = stdp_like_weights()
-    q = quantise_arrays(w, thresholds(), 4, per_neuron=False, scale_method="max", fold_thresholds=False)
+    q = quantise_arrays(
+        w, thresholds(), 4, QuantiseOptions(per_neuron=False, scale_method="max", fold_thresholds=False)
+    )
     assert np.unique(q.scale_multiplier).size == 1
     assert q.weight_mantissa.max() == 15 and q.weight_mantissa[np.unravel_index(w.argmax(), w.shape)] == 15
 
@@ -74,7 +81,7 @@ def test_per_neuron_error_is_not_worse_than_per_tensor_and_errors_shrink_with_bi
     for per_neuron in (False, True):
         for bits in (2, 4, 8):
             rmse[per_neuron, bits] = quantise_arrays(
-                w, th, bits, per_neuron=per_neuron, scale_method="max", fold_thresholds=False
+                w, th, bits, QuantiseOptions(per_neuron=per_neuron, scale_method="max", fold_thresholds=False)
             ).report["weight_rmse"]
         assert rmse[per_neuron, 8] < rmse[per_neuron, 4] < rmse[per_neuron, 2]
     assert all(rmse[True, b] <= rmse[False, b] for b in (2, 4, 8))
@@ -104,7 +111,7 @@ def test_split_scales_keeps_sixteen_significant_bits():
 @pytest.mark.parametrize("bits", [2, 4, 8])
 def test_threshold_folding_gives_one_integer_threshold_and_keeps_float_thresholds(bits, method):
     w, th = stdp_like_weights(), thresholds()
-    q = quantise_arrays(w, th, bits, per_neuron=True, scale_method=method, fold_thresholds=True)
+    q = quantise_arrays(w, th, bits, QuantiseOptions(per_neuron=True, scale_method=method, fold_thresholds=True))
     assert np.unique(q.threshold).size == 1 and q.threshold[0] == q.report["shared_threshold"]
     assert q.report["threshold_max_relative_error"] < 2.0**-13
     if method == "max":
@@ -114,22 +121,31 @@ def test_threshold_folding_gives_one_integer_threshold_and_keeps_float_threshold
 def test_folding_needs_per_neuron_scales_and_methods_are_checked():
     with pytest.raises(InvalidValueError, match="per-neuron"):
         quantise_arrays(
-            stdp_like_weights(), thresholds(), 4, per_neuron=False, scale_method="max", fold_thresholds=True
+            stdp_like_weights(),
+            thresholds(),
+            4,
+            QuantiseOptions(per_neuron=False, scale_method="max", fold_thresholds=True),
         )
-    with pytest.raises(InvalidValueError, match="unknown scale method"):
+    with pytest.raises(InvalidValueError, match="scale_method"):
         quantise_arrays(
-            stdp_like_weights(), thresholds(), 4, per_neuron=True, scale_method="p99", fold_thresholds=False
+            stdp_like_weights(),
+            thresholds(),
+            4,
+            QuantiseOptions(per_neuron=True, scale_method="p99", fold_thresholds=False),
         )
     with pytest.raises(InvalidValueError, match="unsupported weight bit width"):
         quantise_arrays(
-            stdp_like_weights(), thresholds(), 1, per_neuron=True, scale_method="max", fold_thresholds=False
+            stdp_like_weights(),
+            thresholds(),
+            1,
+            QuantiseOptions(per_neuron=True, scale_method="max", fold_thresholds=False),
         )
 
 
 def test_a_dead_neuron_gets_a_representable_threshold():
     w = stdp_like_weights()
     w[:, 3] = 0.0
-    q = quantise_arrays(w, thresholds(), 4, per_neuron=True, scale_method="mse", fold_thresholds=False)
+    q = quantise_arrays(w, thresholds(), 4, QuantiseOptions(per_neuron=True, scale_method="mse", fold_thresholds=False))
     assert np.all(q.weight_mantissa[:, 3] == 0) and 1 <= q.threshold[3] < 2**17
     assert q.report["thresholds_clipped"] == 0
 

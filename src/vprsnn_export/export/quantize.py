@@ -118,8 +118,6 @@ def desired_scales(
     module's per-tensor scale (a module of zeros the whole ensemble's, else 1) so
     that its threshold still has a representable mantissa.
     """
-    if method not in SCALE_METHODS:
-        raise InvalidValueError(f"unknown scale method {method!r}: choose from {', '.join(SCALE_METHODS)}")
     choose = max_abs_scales if method == "max" else mse_scales
     n_inputs, n_neurons = weights.shape
     group = module_columns(n_neurons, group)
@@ -172,14 +170,7 @@ def shared_threshold(
 
 
 def quantise_arrays(
-    weights: np.ndarray,
-    thresholds: np.ndarray,
-    bits: int,
-    *,
-    per_neuron: bool,
-    scale_method: str,
-    fold_thresholds: bool,
-    group: int | None = None,
+    weights: np.ndarray, thresholds: np.ndarray, bits: int, options: QuantiseOptions, group: int | None = None
 ) -> QuantisedArrays:
     """Float weights (inputs, neurons) and thresholds (neurons,) -> mantissas, scales, integer thresholds.
 
@@ -187,32 +178,29 @@ def quantise_arrays(
     scales are per module, and the report adds each module's errors.
     """
     check_bits(bits)
-    if fold_thresholds and not per_neuron:
-        raise InvalidValueError("threshold folding needs per-neuron scales (--per-neuron)")
+    method, fold = options.scale_method, options.fold_thresholds
     weights = np.asarray(weights, dtype=np.float64)
     thresholds = np.asarray(thresholds, dtype=np.float64)
-    if fold_thresholds and np.any(thresholds <= 0):
+    if fold and np.any(thresholds <= 0):
         raise InvalidValueError("threshold folding needs positive float thresholds")
     group = module_columns(weights.shape[1], group)
-    scales = desired_scales(weights, bits, scale_method, per_neuron, group)
+    scales = desired_scales(weights, bits, method, options.per_neuron, group)
     theta_shared = None
-    if fold_thresholds:
-        theta_shared = shared_threshold(weights, thresholds, bits, scale_method, scales)
+    if fold:
+        theta_shared = shared_threshold(weights, thresholds, bits, method, scales)
         scales = thresholds / theta_shared
     multipliers, exponent = split_scales(scales)
     actual = np.ldexp(multipliers.astype(np.float64), exponent)
     mantissas = quantise_mantissas(weights, actual, bits)
     integer_theta = (
-        np.full(thresholds.shape, theta_shared, dtype=np.int32)
-        if fold_thresholds
-        else integer_thresholds(thresholds, actual)
+        np.full(thresholds.shape, theta_shared, dtype=np.int32) if fold else integer_thresholds(thresholds, actual)
     )
     report = error_report(weights, thresholds, mantissas, actual, integer_theta, bits, group)
     report.update(
         bits=bits,
-        per_neuron=per_neuron,
-        scale_method=scale_method,
-        threshold_folding=fold_thresholds,
+        per_neuron=options.per_neuron,
+        scale_method=method,
+        threshold_folding=fold,
         shared_threshold=theta_shared,
         rounding=ROUNDING,
         scale_exponent=exponent,
@@ -325,15 +313,7 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
     require_type("options", options, QuantiseOptions)  # the bit width: quantise_arrays's
     if options.non_leaky:
         ckpt = dataclasses.replace(ckpt, config=ckpt.config.replace(**{"network.beta": 1.0}))
-    arrays = quantise_arrays(
-        ckpt.weights,
-        ckpt.thresholds,
-        bits,
-        per_neuron=options.per_neuron,
-        scale_method=options.scale_method,
-        fold_thresholds=options.fold_thresholds,
-        group=ckpt.config.network.n_neurons,
-    )
+    arrays = quantise_arrays(ckpt.weights, ckpt.thresholds, bits, options, ckpt.config.network.n_neurons)
     report = QuantisationReport.from_dict(
         dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
     )
