@@ -111,8 +111,13 @@ def run_network(
     device = weights.device
     n_presentations, timesteps, _ = spikes.shape
     n_neurons = weights.shape[1]
-    if not state_isolation:
-        return _run_sequential(spikes, weights, theta, beta=beta, wta=wta, record=record, group=group)
+    if not state_isolation:  # all presentations form one stream, in order (the spillover ablation)
+        stream = spikes.reshape(1, n_presentations * timesteps, spikes.shape[2])
+        whole = run_network(stream, weights, theta, beta=beta, wta=wta, record=True, group=group)
+        assert whole.raster is not None and whole.candidates_per_step is not None  # recorded above
+        stepped = whole.raster.reshape(n_presentations, timesteps, -1)
+        per_step = whole.candidates_per_step.reshape(n_presentations, timesteps)
+        return SpikeRun(stepped.sum(dim=1, dtype=torch.int64), per_step, stepped if record else None)
     counts = torch.zeros((n_presentations, n_neurons), dtype=torch.int64)
     n_candidates = torch.zeros((n_presentations, timesteps), dtype=torch.int32)
     raster = torch.zeros((n_presentations, timesteps, n_neurons), dtype=torch.bool) if record else None
@@ -138,30 +143,6 @@ def run_network(
         if raster is not None and chunk_raster is not None:
             raster[start:stop] = chunk_raster.cpu()
     return SpikeRun(counts, n_candidates, raster, final_voltage)
-
-
-def _run_sequential(
-    spikes: torch.Tensor,
-    weights: torch.Tensor,
-    theta: torch.Tensor,
-    *,
-    beta: float,
-    wta: bool,
-    record: bool,
-    group: int | None = None,
-) -> SpikeRun:
-    """State isolation off: all presentations form one stream, in order (the spillover ablation)."""
-    n_presentations, timesteps, n_inputs = spikes.shape
-    stream = spikes.reshape(1, n_presentations * timesteps, n_inputs)
-    whole = run_network(stream, weights, theta, beta=beta, wta=wta, state_isolation=True, record=True, group=group)
-    assert whole.raster is not None and whole.candidates_per_step is not None  # recorded above
-    raster = whole.raster.reshape(n_presentations, timesteps, -1)
-    return SpikeRun(
-        counts=raster.sum(dim=1, dtype=torch.int64),
-        candidates_per_step=whole.candidates_per_step.reshape(n_presentations, timesteps),
-        raster=raster if record else None,
-        final_voltage=None,
-    )
 
 
 def check_network(spikes: torch.Tensor | None, weights: torch.Tensor, theta: torch.Tensor) -> None:
