@@ -244,14 +244,7 @@ def run_prepared(
         max_current = max(max_current, step.max_current >> prep.shift)
         if raster is not None and step.raster is not None:
             raster[start:stop] = step.raster.transpose(0, 1).cpu()
-    return SpikeRun(
-        counts=counts,
-        candidates_per_step=n_candidates,
-        raster=raster,
-        final_voltage=final_voltage,
-        saturations=saturations,
-        max_current=max_current,
-    )
+    return SpikeRun(counts, n_candidates, raster, final_voltage, saturations, max_current)
 
 
 def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:

@@ -31,14 +31,7 @@ DU_NO_CURRENT_MEMORY = 4095  # Lava adds 1: decay 4096/4096, u = a << 6 every st
 U_WRAP_CURRENT = 1 << 17  # a_j >= 2**17 makes a << 6 reach 2**23, where Lava's u wraps
 WEIGHTS_NAME = "input_exc_mantissas"  # version 2: packed mantissas q, (neurons, inputs)
 WEIGHTS_NAME_V1 = "input_exc_weights"  # version 1: Lava weights q << (8 - bits), (neurons, inputs) int32
-OTHER_ARRAYS = (
-    "exc_vth",
-    "exc_bias_mant",
-    "wta_score_multiplier",
-    "calibration",
-    "float_calibration",
-    "reference_place_ids",
-)
+OTHER_ARRAYS = ("exc_vth", "exc_bias_mant", "wta_score_multiplier", *MODEL_ARRAYS[3:])  # + the counts and place ids
 WEIGHT_LAYOUT = "(target, source) = (neurons, inputs)"
 
 
@@ -186,7 +179,7 @@ def module_populations(model: FixedPointModel) -> list[dict[str, Any]]:
     rows = []
     for m, (start, stop) in enumerate(regions.tolist()):
         own = slice(m * group, (m + 1) * group)
-        vth = model.threshold[own]
+        vth, multipliers = model.threshold[own], model.scale_multiplier[own]
         rows.append(
             {
                 "name": f"exc_{m}",
@@ -195,10 +188,7 @@ def module_populations(model: FixedPointModel) -> list[dict[str, Any]]:
                 "places": [int(start), int(stop)],
                 "vth_range": [int(vth.min()), int(vth.max())],
                 "vth_uniform": bool(np.all(vth == vth[0])),
-                "score_multiplier_range": [
-                    int(model.scale_multiplier[own].min()),
-                    int(model.scale_multiplier[own].max()),
-                ],
+                "score_multiplier_range": [int(multipliers.min()), int(multipliers.max())],
                 "current_bound": int(sums[own].max()),
                 "synapses": int(model.n_inputs * group),
             }

@@ -59,17 +59,10 @@ def train_and_calibrate(
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
         trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
-        network = FloatNetwork.from_arrays(
-            trained.weights.numpy(), trained.thresholds.numpy(), cfg, torch.device("cpu")
-        )
+        arrays = (trained.weights.numpy(), trained.thresholds.numpy())
+        network = FloatNetwork.from_arrays(*arrays, cfg, torch.device("cpu"))
         calibration = calibrate_on_cluster(
-            trained.weights.numpy(),
-            trained.thresholds.numpy(),
-            cfg,
-            reference_images,
-            dataset.place_ids,
-            cluster,
-            progress=progress,
+            *arrays, cfg, reference_images, dataset.place_ids, cluster, progress=progress
         )
     else:
         trained = train_modules(images, presentations, rows, cfg, device=device, progress=progress, threads=threads)
