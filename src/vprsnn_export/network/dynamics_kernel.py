@@ -239,31 +239,14 @@ def float_run(
     def task(k: int) -> Callable[[], None]:
         rows, start, stop = parts[k]
         return lambda: float_kernel(
-            array[rows],
-            w,
-            theta_array,
-            np.float32(beta),
-            bool(wta),
-            size,
-            bool(isolation),
-            bool(record),
-            start,
-            stop,
-            tile,
-            *current_blocks(timesteps, tile, len(range(n)[rows])),
-            counts[rows],
-            candidates[k],
-            raster[rows] if record else raster,
-            final[rows],
-        )
+            array[rows], w, theta_array, np.float32(beta), bool(wta), size, bool(isolation), bool(record), start,
+            stop, tile, *current_blocks(timesteps, tile, len(range(n)[rows])), counts[rows], candidates[k],
+            raster[rows] if record else raster, final[rows],
+        )  # fmt: skip
 
     run_threads([task(k) for k in range(len(parts))])
     n_candidates = np.zeros((n, timesteps), dtype=np.int32)
     for (rows, _, _), part in zip(parts, candidates, strict=True):
         n_candidates[rows] += part
-    return SpikeRun(
-        counts=torch.from_numpy(counts),
-        candidates_per_step=torch.from_numpy(n_candidates),
-        raster=torch.from_numpy(raster) if record else None,
-        final_voltage=torch.from_numpy(final),
-    )
+    raster_run = torch.from_numpy(raster) if record else None
+    return SpikeRun(torch.from_numpy(counts), torch.from_numpy(n_candidates), raster_run, torch.from_numpy(final))

@@ -56,7 +56,7 @@ def compiled(function: F) -> F:
 
 def as_spike_array(spikes: torch.Tensor | np.ndarray) -> np.ndarray:
     """Spikes (N, T, inputs) of 0/1 uint8 or bool as a C-contiguous uint8 numpy array (no copy when possible)."""
-    array = spikes.detach().cpu().numpy() if isinstance(spikes, torch.Tensor) else np.asarray(spikes)
+    array = _numpy(spikes)
     if array.ndim != 3:
         raise InvalidValueError(f"spikes: expected shape (N, T, inputs), got {array.shape}")
     if array.dtype == np.bool_:

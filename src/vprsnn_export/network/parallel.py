@@ -51,11 +51,9 @@ def run_parts(
     """
     groups = n_neurons // group
     if threads > 1 and groups >= threads:
-        cuts = np.linspace(0, groups, threads + 1).round().astype(np.int64) * group
-        return [(slice(0, n_presentations), int(a), int(b)) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+        return [(slice(0, n_presentations), p.start * group, p.stop * group) for p in module_slices(groups, threads)]
     if threads > 1 and isolation and n_presentations > 1:
-        cuts = np.linspace(0, n_presentations, min(threads, n_presentations) + 1).round().astype(np.int64)
-        return [(slice(int(a), int(b)), 0, n_neurons) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
+        return [(part, 0, n_neurons) for part in module_slices(n_presentations, threads)]
     return [(slice(0, n_presentations), 0, n_neurons)]
 
 
