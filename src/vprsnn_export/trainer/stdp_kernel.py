@@ -284,18 +284,9 @@ def _stdp_windows(
         if rows > 0:
             _encode_rows(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows], philox)
             fired[m] = _stdp_window(
-                spikes[:rows],
-                weights[m],
-                theta[m],
-                beta,
-                wta,
-                pre_keep,
-                post_keep,
-                a_plus,
-                a_minus,
-                w_max,
+                spikes[:rows], weights[m], theta[m], beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max,
                 weight_norm,
-            )
+            )  # fmt: skip
     return fired
 
 
