@@ -206,9 +206,8 @@ class FloatNetwork:
                 group=wta_group(self.cfg, int(self.weights.shape[1])),
             )
 
-        if not isolation:
-            return whole(spikes)
-        return run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress, desc=self.name)
+        # chunks only when isolated: each presentation then starts from V = 0 (run_in_chunks)
+        return run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress and isolation, desc=self.name)
 
     def counts(self, spikes: torch.Tensor) -> torch.Tensor:
         """Output spike counts (N, neurons): the ``run_counts`` callable of calibration."""

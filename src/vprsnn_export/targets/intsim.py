@@ -142,16 +142,12 @@ class IntegerNetwork:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
-        if isolation:
-            run = run_in_chunks(
-                lambda part: run_prepared(self.prepared, part, isolation=True, record=record),
-                spikes,
-                chunk=QUERY_CHUNK,
-                progress=self.progress,
-                desc=self.name,
-            )
-        else:
-            run = run_prepared(self.prepared, spikes, isolation=False, record=record)
+
+        def whole(part: torch.Tensor) -> SpikeRun:
+            return run_prepared(self.prepared, part, isolation=isolation, record=record)
+
+        # chunks only when isolated: each presentation then starts from V = 0 (run_in_chunks)
+        run = run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress and isolation, desc=self.name)
         self.saturations += run.saturations
         return run
 
