@@ -162,19 +162,12 @@ def float_runs_on_cluster(
     groups = module_groups(weights.shape[1] // n, modules_per_task)
     isolated = cfg.network.state_isolation if state_isolation is None else state_isolation
     if wta_group(cfg, weights.shape[1]) == n or len(groups) == 1:
+        columns = [slice(group.start * n, group.stop * n) for group in groups]
+        parts = [(np.ascontiguousarray(weights[:, c]), np.ascontiguousarray(thresholds[c])) for c in columns]
         tasks = [
-            (
-                np.ascontiguousarray(weights[:, group.start * n : group.stop * n]),
-                np.ascontiguousarray(thresholds[group.start * n : group.stop * n]),
-                cfg,
-                images,
-                place_ids,
-                traversal,
-                stream,
-                state_isolation,
-            )
+            (*part, cfg, images, place_ids, traversal, stream, state_isolation)
             for traversal, images in presentations.items()
-            for group in groups
+            for part in parts
         ]
         axis, parts_per_traversal = 1, len(groups)
     else:
