@@ -46,12 +46,7 @@ def check_run_memory(cfg: Config, what: str, **sizes: Any) -> None:
 
 
 def wta_step(
-    voltage: torch.Tensor,
-    current: torch.Tensor,
-    theta: torch.Tensor,
-    beta: float,
-    wta: bool,
-    group: int | None = None,
+    voltage: torch.Tensor, current: torch.Tensor, theta: torch.Tensor, beta: float, wta: bool, group: int | None = None
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One step: V = beta V + I; C = {V > theta}; S = winner(C) or C; V[C] = 0.
 

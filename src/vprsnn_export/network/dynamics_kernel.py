@@ -25,16 +25,7 @@ import torch
 
 from ..errors import InvalidValueError
 from .kernel_checks import require_array, require_groups, require_int
-from .kernel_sums import (
-    ANY3,
-    SPIKES,
-    _all_step_lists,
-    _column_blocks,
-    _numpy,
-    _tile_currents,
-    as_spike_array,
-    compiled,
-)
+from .kernel_sums import ANY3, SPIKES, _all_step_lists, _column_blocks, _numpy, _tile_currents, as_spike_array, compiled
 from .parallel import check_group, current_blocks, neuron_tile, run_parts, run_threads
 from .runs import SpikeRun
 

@@ -17,13 +17,7 @@ Shape = Sequence[int | None]  # None: any length along that axis
 
 
 def require_array(
-    kernel: str,
-    name: str,
-    array: object,
-    dtypes: Sequence[npt.DTypeLike],
-    shape: Shape,
-    *,
-    writable: bool = False,
+    kernel: str, name: str, array: object, dtypes: Sequence[npt.DTypeLike], shape: Shape, *, writable: bool = False
 ) -> np.ndarray:
     """``array`` itself if it is a C-contiguous numpy array of one of ``dtypes`` with ``shape``; else refuse it."""
     allowed = [np.dtype(d) for d in dtypes]

@@ -26,14 +26,7 @@ from vprsnn_export.config import Config
 from vprsnn_export.data.encoding_kernel import _encode_rows
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.kernel_checks import require_array, require_int
-from vprsnn_export.network.kernel_sums import (
-    ANY3,
-    SPIKES,
-    _active_inputs,
-    _row_sum,
-    as_spike_array,
-    compiled,
-)
+from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _active_inputs, _row_sum, as_spike_array, compiled
 from vprsnn_export.network.parallel import module_slices
 
 
@@ -374,10 +367,7 @@ def stdp_window(
         return None
     updated = weights.detach().clone().contiguous()
     fired = stdp_window_kernel(
-        as_spike_array(spikes),
-        updated.numpy(),
-        np.ascontiguousarray(theta.detach().numpy()),
-        *kernel_scalars(cfg),
+        as_spike_array(spikes), updated.numpy(), np.ascontiguousarray(theta.detach().numpy()), *kernel_scalars(cfg)
     )
     return updated, torch.from_numpy(fired)
 
