@@ -31,6 +31,7 @@ and the clip is skipped; otherwise every clip is counted.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -204,18 +205,10 @@ def run_prepared(
     bit-identical); otherwise (or ``compiled=False``) chunks of QUERY_CHUNK presentations in parallel
     (isolation), or one presentation at a time carrying V, through :func:`recur`."""
     if compiled and prep.threshold.device.type == "cpu":
+        multipliers = None if prep.multipliers is None else prep.multipliers.numpy()
+        steps: dict[str, Any] = dict(shift=prep.shift, keep=prep.keep, limit=prep.limit, wta=prep.wta, group=prep.group)
         return integer_run(
-            spikes,
-            prep.mantissas,
-            prep.threshold.numpy(),
-            None if prep.multipliers is None else prep.multipliers.numpy(),
-            shift=prep.shift,
-            keep=prep.keep,
-            limit=prep.limit,
-            wta=prep.wta,
-            isolation=isolation,
-            record=record,
-            group=prep.group,
+            spikes, prep.mantissas, prep.threshold.numpy(), multipliers, isolation=isolation, record=record, **steps
         )
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
