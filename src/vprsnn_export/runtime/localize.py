@@ -242,10 +242,9 @@ class Localizer:
         """One frame's counts over every neuron, the places it is decided among (None: all), its synaptic events
         (``inputs`` spikes in) and its search (None: no search window): the whole network, or the window's modules
         alone."""
-        if self.search is None:
-            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), None
-        if self.centre is None:
-            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), "global"
+        if self.search is None or self.centre is None:
+            search = None if self.search is None else "global"
+            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
         regions, group = self._regions, self.config.network.n_neurons
         first, last = self.search.modules(self.centre, regions)
         if (first, last) not in self._parts:
@@ -266,10 +265,10 @@ class Localizer:
         return normalise_resized(self._resized(np.asarray(grey))[None], self.config.preprocess)
 
     def _resized(self, grey: np.ndarray) -> np.ndarray:
-        if not isinstance(grey, np.ndarray) or grey.ndim != 2 or grey.size == 0 or grey.dtype.kind not in "uif":
+        if grey.ndim != 2 or grey.size == 0 or grey.dtype.kind not in "uif":
             raise InvalidValueError(
-                "a frame must be a non-empty 2-D greyscale array (height, width) of numbers, got "
-                + (f"shape {grey.shape} {grey.dtype}" if isinstance(grey, np.ndarray) else type(grey).__name__)
+                f"a frame must be a non-empty 2-D greyscale array (height, width) of numbers, got shape {grey.shape} "
+                f"{grey.dtype}"
             )
         if grey.dtype.kind == "f" and not np.isfinite(grey).all():
             raise InvalidValueError("a frame holds NaN or infinite values")
@@ -287,7 +286,7 @@ class Localizer:
     def push(self, grey: np.ndarray, name: str = "") -> Decision:
         """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
         began = time.perf_counter()
-        resized = self._resized(grey if isinstance(grey, np.ndarray) else np.asarray(grey))
+        resized = self._resized(np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
         inputs = input_spikes(spikes)
         counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))

@@ -41,6 +41,7 @@ from .checks import (
     DEFAULT_TOLERANCES,
     curves,
     decision_level,
+    judged_limits,
     level_histogram,
     metric_deltas,
     module_rows,
@@ -48,7 +49,7 @@ from .checks import (
     tolerance_checks,
     weight_histograms,
 )
-from .paired import bits_passed, judged_limits, paired_checks
+from .paired import bits_passed, paired_checks
 
 
 @dataclass(frozen=True)
@@ -267,7 +268,7 @@ def verify_width(
     decision = decision_level(floats.scored, scored, readout.ks)
     sequences = readout.warning(query.place_ids) is None
     checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
-    limits = judged_limits(options.tolerances, readout.ks, len(query.place_ids), sequences=sequences)
+    limits = judged_limits(options.tolerances, (1, *readout.ks), len(query.place_ids), sequences=sequences)
     table = paired_checks(floats.scored.decisions(), scored.decisions(), rows, limits, options.statistics)
     regions = module_regions(len(ckpt.reference_place_ids), ckpt.config.train.module_size)
     group = ckpt.config.network.n_neurons  # neurons per module
