@@ -288,9 +288,13 @@ class Localizer:
         began = time.perf_counter()
         resized = self._resized(np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
+        return self._present(spikes, np.ptp(resized)[None] == 0, name, began)
+
+    def _present(self, spikes: torch.Tensor, flat: np.ndarray, name: str, began: float) -> Decision:
+        """One frame's spike train (1, T, inputs) run and decided (``flat``: :func:`no_place_reasons`)."""
         inputs = input_spikes(spikes)
         counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))
-        reason = no_place_reasons(np.ptp(resized)[None] == 0, inputs, counts)[0]
+        reason = no_place_reasons(flat, inputs, counts)[0]
         return self._decide(counts[0], name, began, reason, places, events, search)
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
@@ -316,33 +320,22 @@ class Localizer:
         frame, whether its resized image was uniform (:func:`no_place_reasons`; None: none was).
         """
         self.reset()
-        inputs = np.asarray(inputs, dtype=np.float32)
-        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
-            return self._track_inputs(inputs, names, flat)
         began = time.perf_counter()
-        spikes = self.spikes(inputs, 0)
+        spikes = self.spikes(np.asarray(inputs, dtype=np.float32), 0)
+        flat = np.zeros(len(spikes), bool) if flat is None else flat
+        labels = names if names is not None else [str(i) for i in range(len(spikes))]
+        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
+            return [
+                self._present(spikes[j : j + 1], flat[j : j + 1], name, time.perf_counter())
+                for j, name in zip(range(len(spikes)), labels, strict=True)
+            ]
         counts = self._counts(spikes)
-        reasons = no_place_reasons(np.zeros(len(inputs), bool) if flat is None else flat, input_spikes(spikes), counts)
+        reasons = no_place_reasons(flat, input_spikes(spikes), counts)
         share = (time.perf_counter() - began) / max(len(counts), 1)
-        labels = names if names is not None else [str(i) for i in range(len(counts))]
         return [
             self._decide(row, name, time.perf_counter() - share, reason)
             for row, name, reason in zip(counts, labels, reasons, strict=True)
         ]
-
-    def _track_inputs(self, inputs: np.ndarray, names: list[str] | None, flat: np.ndarray | None) -> list[Decision]:
-        """:meth:`run_inputs` with a search window: the frames' spikes drawn at once, run and decided in order."""
-        spikes = self.spikes(inputs, 0)
-        flat = np.zeros(len(inputs), bool) if flat is None else flat
-        totals = input_spikes(spikes)
-        decisions = []
-        for j in range(len(inputs)):
-            began = time.perf_counter()
-            counts, places, events, search = self._frame_counts(spikes[j : j + 1], int(totals[j]))
-            reason = no_place_reasons(flat[j : j + 1], totals[j : j + 1], counts)[0]
-            name = names[j] if names is not None else str(j)
-            decisions.append(self._decide(counts[0], name, began, reason, places, events, search))
-        return decisions
 
     def _decide(
         self,
@@ -591,8 +584,6 @@ def tracking_rows(
     """The tracking protocol beside the global one, per k of ``options``, on preprocessed frames (N, inputs) in
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
-    if not isinstance(search, SearchWindow):
-        raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
     rows = []
     for k in options.ks:
         at_k = dataclasses.replace(options, ks=(k,))

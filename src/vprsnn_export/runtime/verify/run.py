@@ -150,9 +150,10 @@ def verify_checkpoint(
     check_reference_images(options.quantise, network.reference_images)  # before the float side runs
     floats = float_side(network.checkpoint, query, options.readout, runtime)
     # each width's files: in runtime.export_dir, or in a temporary folder removed afterwards; a bar over its stages
-    export_dir = runtime.export_dir
     folder = (
-        tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else nullcontext(str(export_dir))
+        tempfile.TemporaryDirectory(prefix="vprsnn-verify-")
+        if runtime.export_dir is None
+        else nullcontext(str(runtime.export_dir))
     )
     bar = tqdm(total=len(options.bits) * 4, desc=f"verify {network.label or ''}".strip(), unit="stage",
                file=sys.stderr, disable=not runtime.progress, leave=False)  # fmt: skip
@@ -161,19 +162,7 @@ def verify_checkpoint(
             verify_width(bits, network, query, options, floats, Path(root) / f"{bits}bit", runtime, stages)
             for bits in options.bits
         )
-    return verified_run(network, query, options, floats, results, runtime.export_dir)
-
-
-def verified_run(
-    network: VerifiedNetwork,
-    query: Query,
-    options: VerifyOptions,
-    floats: FloatSide,
-    results: tuple[BitsResult, ...],
-    export_dir: str | Path | None,
-) -> VerifiedRun:
-    """The report's record of one network verified at every width."""
-    ckpt = network.checkpoint
+    ckpt, export_dir = network.checkpoint, runtime.export_dir
     return VerifiedRun(
         label=network.label,
         seed=ckpt.config.seed,
@@ -185,7 +174,15 @@ def verified_run(
         query_place_ids=tuple(int(p) for p in query.place_ids),
         reference_place_ids=tuple(int(p) for p in ckpt.reference_place_ids),
         export_dir=None if export_dir is None else str(export_dir),
-        float=float_result(ckpt, query, floats, options),
+        float=FloatResult(  # its rows, spikes, PR curves, weight histogram and cost per query
+            metrics=tuple(floats.scored.rows),
+            total_spikes=int(floats.counts.sum()),
+            pr_curves=curves(floats.scored, options.readout.ks),
+            weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
+            cost=query_cost(
+                floats.spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query.images
+            ).summary(),
+        ),
         bits=results,
         checkpoint=network.path,
         recorded_queries=floats.recorded,
@@ -205,18 +202,6 @@ def float_side(ckpt: Checkpoint, query: Query, readout: SequenceOptions, runtime
         counts, ckpt.reference_place_ids, query.place_ids, query.truth
     )
     return FloatSide(spikes, recorded, run, counts, scored)
-
-
-def float_result(ckpt: Checkpoint, query: Query, floats: FloatSide, options: VerifyOptions) -> FloatResult:
-    """The report's float column: its rows, spikes, PR curves, weight histogram and cost per query."""
-    places = len(ckpt.reference_place_ids)
-    return FloatResult(
-        metrics=tuple(floats.scored.rows),
-        total_spikes=int(floats.counts.sum()),
-        pr_curves=curves(floats.scored, options.readout.ks),
-        weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
-        cost=query_cost(floats.spikes, ckpt.weights.shape[1], places=places, images=query.images).summary(),
-    )
 
 
 def verify_width(
