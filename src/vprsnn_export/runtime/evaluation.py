@@ -185,10 +185,8 @@ def evaluate_fixed_point(
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, SequenceOptions)
-    network, block = _prepared(
-        model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2
-    )
     compare = float_checkpoint is not None
+    network, block = _prepared(model, query_place_ids, state_isolation, options, rasters=2 * compare)
     run, counts, cost, spikes = _run_queries(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
     )
