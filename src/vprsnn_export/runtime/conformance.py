@@ -241,9 +241,8 @@ def cross_implementation(
     """
     files, skipped = write_targets(model, Path(folder), TARGETS.names() if targets is None else targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
-    contenders = [*exact_contenders(model, n_ref, device)]
-    contenders += [read_back(t, TARGETS.get(t).reader_path(paths), model, device) for t, paths in files.items()]
-    contenders += list(extra)
+    read = [read_back(t, TARGETS.get(t).reader_path(paths), model, device) for t, paths in files.items()]
+    contenders = [*exact_contenders(model, n_ref, device), *read, *extra]
     baseline = open_backend(model, tagged(EXACT, BASELINE)[0].name, device=device)[1]
     checks = compare_backends(baseline, contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model))
     return ConformanceResult(

@@ -250,8 +250,7 @@ class Localizer:
         if (first, last) not in self._parts:
             if len(self._parts) >= PARTS_KEPT:
                 self._parts.popitem(last=False)
-            neurons = slice(first * group, last * group)
-            part = network_part(self._isolated, neurons)
+            part = network_part(self._isolated, slice(first * group, last * group))
             runner = self._open_part(part)
             self._parts[first, last] = lambda s: frame_counts(runner, s, part.calibration, part.config)
         self._parts.move_to_end((first, last))

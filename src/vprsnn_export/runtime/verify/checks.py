@@ -193,13 +193,10 @@ def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) ->
 def curves(scored: Scored, ks: Sequence[int]) -> dict[str, PrCurve]:
     """PR curves of W+Prob at k=1 and at the largest k of ``ks``, for the report's plots."""
     name = SEQUENCE_STRATEGY
-    out = {}
-    for k in sorted({1, max(ks)}):
-        precision, recall = scored.column(name, k).curve()
-        out[f"{name} k={k}"] = PrCurve(
-            tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall)
-        )
-    return out
+    drawn = {k: scored.column(name, k).curve() for k in sorted({1, max(ks)})}  # (precision, recall)
+    return {
+        f"{name} k={k}": PrCurve(*(tuple(round(float(v), 6) for v in side) for side in pr)) for k, pr in drawn.items()
+    }
 
 
 def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:

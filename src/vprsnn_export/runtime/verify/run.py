@@ -24,15 +24,14 @@ from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_poin
 from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import query_cost
-from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
 
+from ..backends import open_backend
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import check_reference_images, deploy
@@ -194,8 +193,8 @@ def float_side(ckpt: Checkpoint, query: Query, readout: SequenceOptions, runtime
     out once."""
     spikes = query_spikes(query.images, query.place_ids, query.traversal, ckpt.config)
     recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
-    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, runtime.device)
-    network.progress = runtime.progress  # a bar over the query chunks of each network run below
+    # a bar over the query chunks of each network run below
+    network = open_backend(ckpt, "float", device=runtime.device, progress=runtime.progress)[1]
     run = network.run(spikes[:recorded], record=True)
     counts = (run if recorded == spikes.shape[0] else network.run(spikes)).counts.numpy()
     scored = Readout.of(ckpt.calibration, ckpt.config, readout).score(
@@ -233,7 +232,7 @@ def verify_width(
     model_path = save_fixed_point(folder / "model.npz", model)
     finished("quantise_and_calibrate", "simulate")
     recorded_spikes = floats.spikes[: floats.recorded]
-    int_network = IntegerNetwork(model, device, progress=progress)
+    int_network = open_backend(model, "integer", device=device, progress=progress)[1]
     int_run = int_network.run(recorded_spikes, record=True)
     int_all = int_run if floats.recorded == floats.spikes.shape[0] else int_network.run(floats.spikes)
     int_counts = int_all.counts.numpy()
