@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import real_number
+from vprsnn_export.arguments import real_number, require_type
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.data.preprocess import normalise_resized, resize_image
@@ -194,10 +194,8 @@ class Localizer:
             )
         if threshold is not None and not 0.0 <= real_number("threshold", threshold) <= 1.0:
             raise InvalidValueError(f"threshold must be a confidence in [0, 1] or None, got {threshold!r:.40}")
-        if options is not None and not isinstance(options, SequenceOptions):
-            raise InvalidValueError(f"options must be a SequenceOptions, got {type(options).__name__}")
         self.network = network
-        self.readout = Readout.of(network.calibration, network.config, options)
+        self.readout = Readout.of(network.calibration, network.config, options)  # it checks the options
         self.options = self.readout.options
         self.threshold = threshold
         self.config: Config = network.config
@@ -215,8 +213,7 @@ class Localizer:
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
 
     def _check_search(self, search: SearchWindow) -> None:
-        if not isinstance(search, SearchWindow):
-            raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
+        require_type("search", search, SearchWindow)
         if self.backend not in ("float", "integer"):
             raise InvalidValueError(
                 f"--search-window runs the float network or the integer simulator, not {self.backend} "
