@@ -95,20 +95,15 @@ def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun
 
 def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b: FixedPointModel) -> list[Comparison]:
     """A fixed-point model read back from a file against the one written: every integer and the config."""
-    checks = [
-        exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
-    ]
+    arrays = ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
     scalars = [[m.bits, m.scale_exponent, m.decay_dv, m.voltage_shift, m.voltage_bits] for m in (a, b)]
-    checks.append(
-        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1])
-    )
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
-    checks.append(
-        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config")
-    )
-    return checks
+    return [
+        *(exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name)) for name in arrays),
+        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1]),
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config"),
+    ]
 
 
 def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:

@@ -295,8 +295,7 @@ class Localizer:
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
-        for name, grey in frames:
-            yield self.push(grey, name)
+        return (self.push(grey, name) for name, grey in frames)
 
     def run_batch(self, grey_frames: np.ndarray | list[np.ndarray], names: list[str] | None = None) -> list[Decision]:
         """The decisions ``push`` would give on these greyscale frames (in order, from frame 0), with the
