@@ -31,7 +31,7 @@ from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.readout.strategies import STRATEGIES, Strategy, decide, strategy_scores
 from vprsnn_export.registry import Registry
 from vprsnn_export.runtime.backends import BACKENDS, BackendKind, choose_backend
-from vprsnn_export.runtime.conformance import cross_implementation, parse_targets, read_back, target_path, write_targets
+from vprsnn_export.runtime.conformance import cross_implementation, read_back, write_targets
 from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
 from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
@@ -126,10 +126,10 @@ def test_an_unknown_target_is_an_error_everywhere(make_model, tmp_path):
     model = make_model(np.random.default_rng(0))
     source = ExportSource.of(model, "ab" * 32)
     calls = [
-        lambda: parse_targets("onnx,tflite"),
+        lambda: TARGETS.parse_list("onnx,tflite", "--targets", allow_none=True),
         lambda: parse_export_targets("tflite"),
         lambda: read_back("tflite", tmp_path / "model.nir", model),  # was: the Loihi reader
-        lambda: target_path("tflite", [tmp_path / "x"]),
+        lambda: TARGETS.get("tflite").reader_path([tmp_path / "x"]),
         lambda: write_targets(model, tmp_path, ("nir", "tflite")),
         lambda: export_all(source, model, ("tflite",), tmp_path),
         lambda: TARGETS.get("tflite"),
@@ -187,7 +187,9 @@ def test_the_cli_and_the_library_share_the_velocity_estimate_default(capsys):
 
 def test_a_toy_target_is_exported_read_back_and_checked(toy_target, make_model, spikes_of, tmp_path):
     model = make_model(np.random.default_rng(0))
-    assert parse_export_targets("npz,nir") == ("npz", "nir") and "npz" in parse_targets("npz")
+    assert parse_export_targets("npz,nir") == ("npz", "nir") and "npz" in TARGETS.parse_list(
+        "npz", "--targets", allow_none=True
+    )
     source = ExportSource.of(model, "ab" * 32)
     result = export_and_check(source, model, ("npz", "onnx"), tmp_path / "deploy", spikes=spikes_of(model))
     assert list(result.files) == ["onnx", "npz"]  # the registry's order

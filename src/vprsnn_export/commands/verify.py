@@ -102,7 +102,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def verify_options(args: argparse.Namespace) -> VerifyOptions:
     """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
-    from ..runtime.conformance import parse_targets
     from ..runtime.verify import VerifyOptions, parse_tolerances
 
     return VerifyOptions(
@@ -110,7 +109,7 @@ def verify_options(args: argparse.Namespace) -> VerifyOptions:
         readout=sequence_options(args),
         quantise=quantise_options(args),
         reference_queries=args.reference_queries,
-        targets=parse_targets(args.targets),
+        targets=TARGETS.parse_list(args.targets, "--targets", allow_none=True),
         tolerances=parse_tolerances(args.tolerance),
     )
 

@@ -40,12 +40,6 @@ RUN_FIELDS = {
 }
 
 
-def parse_targets(raw: str, option: str = "--targets", *, allow_none: bool = True) -> tuple[str, ...]:
-    """``"onnx,nir"`` -> ("onnx", "nir"); "none" (when allowed) gives (); InvalidValueError on anything else
-    (the names are the registered targets, ``targets.registry.TARGETS``)."""
-    return TARGETS.parse_list(raw, option, allow_none=allow_none)
-
-
 def as_array(value: Any) -> np.ndarray:
     """A tensor, array or number as a numpy array."""
     if isinstance(value, torch.Tensor):
@@ -101,26 +95,15 @@ def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun
 
 def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b: FixedPointModel) -> list[Comparison]:
     """A fixed-point model read back from a file against the one written: every integer and the config."""
-    checks = [
-        exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name in ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
-    ]
+    arrays = ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
     scalars = [[m.bits, m.scale_exponent, m.decay_dv, m.voltage_shift, m.voltage_bits] for m in (a, b)]
-    checks.append(
-        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1])
-    )
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
-    checks.append(
-        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config")
-    )
-    return checks
-
-
-def backend_of(source: Network, device: torch.device | None = None) -> Backend:
-    """The project's own simulator of a network (the registered backend ``auto`` picks: the float network or
-    the integer simulator)."""
-    return open_backend(source, device=device)[1]
+    return [
+        *(exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name)) for name in arrays),
+        exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1]),
+        Comparison(f"{prefix}: config", a_name, b_name, "exact", same, detail, int(not same), family="config"),
+    ]
 
 
 def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
@@ -153,7 +136,7 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
         return Contender(target, entry.label, rebuilt)
     runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(backend_of(rebuilt, device), f"{entry.title} model on the {runs_on}")
+    backend = _Renamed(open_backend(rebuilt, device=device)[1], f"{entry.title} model on the {runs_on}")
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
         return Contender(target, entry.label, backend, written=written, read_back=rebuilt)
     return Contender(target, entry.label, backend)
@@ -221,11 +204,6 @@ def write_targets(
     return files, skipped
 
 
-def target_path(target: str, paths: Sequence[Path]) -> Path:
-    """What a target's reader takes: the file (ONNX, NIR) or the folder of the files (Loihi-style)."""
-    return TARGETS.get(target).reader_path(paths)
-
-
 def exact_contenders(model: FixedPointModel, slow_queries: int, device: torch.device | None) -> list[Contender]:
     """Every registered exact-integer backend that runs the model alone (no exported file) and is not the
     baseline; a slow one on the first ``slow_queries`` presentations only (none when 0)."""
@@ -258,9 +236,8 @@ def cross_implementation(
     """
     files, skipped = write_targets(model, Path(folder), TARGETS.names() if targets is None else targets)
     n_ref = int(min(max(reference_queries, 0), spikes.shape[0]))
-    contenders = [*exact_contenders(model, n_ref, device)]
-    contenders += [read_back(t, target_path(t, paths), model, device) for t, paths in files.items()]
-    contenders += list(extra)
+    read = [read_back(t, TARGETS.get(t).reader_path(paths), model, device) for t, paths in files.items()]
+    contenders = [*exact_contenders(model, n_ref, device), *read, *extra]
     baseline = open_backend(model, tagged(EXACT, BASELINE)[0].name, device=device)[1]
     checks = compare_backends(baseline, contenders, spikes, baseline_run=int_run, wprob=wprob_readout(model))
     return ConformanceResult(

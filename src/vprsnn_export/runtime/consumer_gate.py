@@ -67,8 +67,7 @@ def consumer_gate(
     if "wta" in graph.nodes:
         return ()
     statement = float_consumers(network)
-    given = check_tolerance(tolerance)
-    limit = float(statement["decision_tolerance"]) if given is None else given
+    limit = float(statement["decision_tolerance"]) if check_tolerance(tolerance) is None else tolerance
     truth = raster.to(torch.bool)
     places = decided_places(network, truth.sum(dim=1).numpy())
     rows: list[Comparison] = []
@@ -91,10 +90,8 @@ def consumer_gate(
             + ("stated exact" if statement["exact"] else f"not exact: {statement['cause']}")
         )
         identical = bool(agree.all() and differing == 0)  # a tolerance row is never counted as exact
-        n_differences, n_elements = int((~agree).sum()), int(agree.size)
-        rows.append(
-            Comparison(check, consumer, "network", kind, identical, detail, n_differences, n_elements, tolerance=limit)
-        )
+        counted = int((~agree).sum()), int(agree.size)
+        rows.append(Comparison(check, consumer, "network", kind, identical, detail, *counted, tolerance=limit))
     return tuple(rows)
 
 

@@ -9,6 +9,7 @@ import contextlib
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any, TypeVar
 
 import numpy as np
@@ -185,10 +186,8 @@ def evaluate_fixed_point(
     """
     require_type("model", model, FixedPointModel)
     require_type("options", options, SequenceOptions)
-    network, block = _prepared(
-        model, query_place_ids, state_isolation, options, rasters=0 if float_checkpoint is None else 2
-    )
     compare = float_checkpoint is not None
+    network, block = _prepared(model, query_place_ids, state_isolation, options, rasters=2 * compare)
     run, counts, cost, spikes = _run_queries(
         network, query_images, query_place_ids, traversal, backend, device=device, progress=progress, record=compare
     )
@@ -253,19 +252,16 @@ def _prepared(
         "readout_arrays": len(STRATEGIES.names()) + len(options.ks) + 2,
         "block": LONG_ROUTE_BLOCK if sparse_query_counts(network, len(place_ids), rasters > 0) else None,
     }
-
-    def check(rows: int | None) -> None:
-        check_run_memory(network.config, "evaluation", readout_rows=rows, **sizes)
-
+    check = partial(check_run_memory, network.config, "evaluation", **sizes)
     if options.velocity_candidates is not None:  # read out whole
-        check(None)
+        check(readout_rows=None)
         return network, READOUT_BLOCK
     *larger, smallest = READOUT_BLOCKS
     for block in larger:
         with contextlib.suppress(InvalidValueError):
-            check(block + max(options.ks))
+            check(readout_rows=block + max(options.ks))
             return network, block
-    check(smallest + max(options.ks))  # the smallest need's error when even that does not fit
+    check(readout_rows=smallest + max(options.ks))  # the smallest need's error when even that does not fit
     return network, smallest
 
 

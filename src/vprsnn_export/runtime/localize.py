@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from vprsnn_export.arguments import real_number
+from vprsnn_export.arguments import real_number, require_type
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import encode, presentation_seed
 from vprsnn_export.data.preprocess import normalise_resized, resize_image
@@ -194,10 +194,8 @@ class Localizer:
             )
         if threshold is not None and not 0.0 <= real_number("threshold", threshold) <= 1.0:
             raise InvalidValueError(f"threshold must be a confidence in [0, 1] or None, got {threshold!r:.40}")
-        if options is not None and not isinstance(options, SequenceOptions):
-            raise InvalidValueError(f"options must be a SequenceOptions, got {type(options).__name__}")
         self.network = network
-        self.readout = Readout.of(network.calibration, network.config, options)
+        self.readout = Readout.of(network.calibration, network.config, options)  # it checks the options
         self.options = self.readout.options
         self.threshold = threshold
         self.config: Config = network.config
@@ -215,8 +213,7 @@ class Localizer:
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
 
     def _check_search(self, search: SearchWindow) -> None:
-        if not isinstance(search, SearchWindow):
-            raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
+        require_type("search", search, SearchWindow)
         if self.backend not in ("float", "integer"):
             raise InvalidValueError(
                 f"--search-window runs the float network or the integer simulator, not {self.backend} "
@@ -242,17 +239,15 @@ class Localizer:
         """One frame's counts over every neuron, the places it is decided among (None: all), its synaptic events
         (``inputs`` spikes in) and its search (None: no search window): the whole network, or the window's modules
         alone."""
-        if self.search is None:
-            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), None
-        if self.centre is None:
-            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), "global"
+        if self.search is None or self.centre is None:
+            search = None if self.search is None else "global"
+            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
         regions, group = self._regions, self.config.network.n_neurons
         first, last = self.search.modules(self.centre, regions)
         if (first, last) not in self._parts:
             if len(self._parts) >= PARTS_KEPT:
                 self._parts.popitem(last=False)
-            neurons = slice(first * group, last * group)
-            part = network_part(self._isolated, neurons)
+            part = network_part(self._isolated, slice(first * group, last * group))
             runner = self._open_part(part)
             self._parts[first, last] = lambda s: frame_counts(runner, s, part.calibration, part.config)
         self._parts.move_to_end((first, last))
@@ -266,10 +261,10 @@ class Localizer:
         return normalise_resized(self._resized(np.asarray(grey))[None], self.config.preprocess)
 
     def _resized(self, grey: np.ndarray) -> np.ndarray:
-        if not isinstance(grey, np.ndarray) or grey.ndim != 2 or grey.size == 0 or grey.dtype.kind not in "uif":
+        if grey.ndim != 2 or grey.size == 0 or grey.dtype.kind not in "uif":
             raise InvalidValueError(
-                "a frame must be a non-empty 2-D greyscale array (height, width) of numbers, got "
-                + (f"shape {grey.shape} {grey.dtype}" if isinstance(grey, np.ndarray) else type(grey).__name__)
+                f"a frame must be a non-empty 2-D greyscale array (height, width) of numbers, got shape {grey.shape} "
+                f"{grey.dtype}"
             )
         if grey.dtype.kind == "f" and not np.isfinite(grey).all():
             raise InvalidValueError("a frame holds NaN or infinite values")
@@ -287,17 +282,20 @@ class Localizer:
     def push(self, grey: np.ndarray, name: str = "") -> Decision:
         """Present one frame and decide: :class:`Decision` (its latency covers preprocessing to decision)."""
         began = time.perf_counter()
-        resized = self._resized(grey if isinstance(grey, np.ndarray) else np.asarray(grey))
+        resized = self._resized(np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
+        return self._present(spikes, np.ptp(resized)[None] == 0, name, began)
+
+    def _present(self, spikes: torch.Tensor, flat: np.ndarray, name: str, began: float) -> Decision:
+        """One frame's spike train (1, T, inputs) run and decided (``flat``: :func:`no_place_reasons`)."""
         inputs = input_spikes(spikes)
         counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))
-        reason = no_place_reasons(np.ptp(resized)[None] == 0, inputs, counts)[0]
+        reason = no_place_reasons(flat, inputs, counts)[0]
         return self._decide(counts[0], name, began, reason, places, events, search)
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
-        for name, grey in frames:
-            yield self.push(grey, name)
+        return (self.push(grey, name) for name, grey in frames)
 
     def run_batch(self, grey_frames: np.ndarray | list[np.ndarray], names: list[str] | None = None) -> list[Decision]:
         """The decisions ``push`` would give on these greyscale frames (in order, from frame 0), with the
@@ -317,33 +315,22 @@ class Localizer:
         frame, whether its resized image was uniform (:func:`no_place_reasons`; None: none was).
         """
         self.reset()
-        inputs = np.asarray(inputs, dtype=np.float32)
-        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
-            return self._track_inputs(inputs, names, flat)
         began = time.perf_counter()
-        spikes = self.spikes(inputs, 0)
+        spikes = self.spikes(np.asarray(inputs, dtype=np.float32), 0)
+        flat = np.zeros(len(spikes), bool) if flat is None else flat
+        labels = names if names is not None else [str(i) for i in range(len(spikes))]
+        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
+            return [
+                self._present(spikes[j : j + 1], flat[j : j + 1], name, time.perf_counter())
+                for j, name in zip(range(len(spikes)), labels, strict=True)
+            ]
         counts = self._counts(spikes)
-        reasons = no_place_reasons(np.zeros(len(inputs), bool) if flat is None else flat, input_spikes(spikes), counts)
+        reasons = no_place_reasons(flat, input_spikes(spikes), counts)
         share = (time.perf_counter() - began) / max(len(counts), 1)
-        labels = names if names is not None else [str(i) for i in range(len(counts))]
         return [
             self._decide(row, name, time.perf_counter() - share, reason)
             for row, name, reason in zip(counts, labels, reasons, strict=True)
         ]
-
-    def _track_inputs(self, inputs: np.ndarray, names: list[str] | None, flat: np.ndarray | None) -> list[Decision]:
-        """:meth:`run_inputs` with a search window: the frames' spikes drawn at once, run and decided in order."""
-        spikes = self.spikes(inputs, 0)
-        flat = np.zeros(len(inputs), bool) if flat is None else flat
-        totals = input_spikes(spikes)
-        decisions = []
-        for j in range(len(inputs)):
-            began = time.perf_counter()
-            counts, places, events, search = self._frame_counts(spikes[j : j + 1], int(totals[j]))
-            reason = no_place_reasons(flat[j : j + 1], totals[j : j + 1], counts)[0]
-            name = names[j] if names is not None else str(j)
-            decisions.append(self._decide(counts[0], name, began, reason, places, events, search))
-        return decisions
 
     def _decide(
         self,
@@ -592,8 +579,6 @@ def tracking_rows(
     """The tracking protocol beside the global one, per k of ``options``, on preprocessed frames (N, inputs) in
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
-    if not isinstance(search, SearchWindow):
-        raise InvalidValueError(f"search must be a SearchWindow, got {type(search).__name__}")
     rows = []
     for k in options.ks:
         at_k = dataclasses.replace(options, ks=(k,))

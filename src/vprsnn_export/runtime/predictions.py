@@ -65,9 +65,8 @@ class Predictions:
         return len(self.decided[0].place_id) if self.decided else 0
 
     def column(self, strategy: str, k: int = 1) -> Decided:
-        for entry in self.decided:
-            if (entry.strategy, entry.k) == (strategy, k):
-                return entry
+        if found := next((entry for entry in self.decided if (entry.strategy, entry.k) == (strategy, k)), None):
+            return found
         raise InvalidValueError(f"no predictions for {strategy} at k={k}")
 
     def rows(self) -> list[dict[str, Any]]:

@@ -10,8 +10,8 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout.metrics import pr_metrics
 from vprsnn_export.readout.scoring import metric_row
 from vprsnn_export.runtime.results import ToleranceCheck
-from vprsnn_export.runtime.verify.checks import DEFAULT_TOLERANCES, parse_tolerances
-from vprsnn_export.runtime.verify.paired import bits_passed, judged_limits, paired_checks
+from vprsnn_export.runtime.verify.checks import DEFAULT_TOLERANCES, judged_limits, parse_tolerances
+from vprsnn_export.runtime.verify.paired import bits_passed, paired_checks
 
 SETTINGS = VerifyConfig(resamples=400)
 Q = 100

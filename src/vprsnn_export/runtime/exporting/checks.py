@@ -22,7 +22,8 @@ from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, target_labels
 
-from ..conformance import Contender, backend_of, compare_backends, read_back, target_path, wprob_readout
+from ..backends import open_backend
+from ..conformance import Contender, compare_backends, read_back, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -159,9 +160,9 @@ def check_exports(
     for stage in tqdm(stages, desc="checking exports", unit="target", file=sys.stderr, disable=not progress):
         if not isinstance(stage, str):  # a target written from the source itself, float or fixed point
             network = source.network
-            baseline = backend_of(network, device)
+            baseline = open_backend(network, device=device)[1]
             base_run = baseline.run(spikes, record=True)
-            path = target_path(stage.name, written[stage.name])
+            path = stage.reader_path(written[stage.name])
             contender = read_back(stage.name, path, network, device)
             comparisons += compare_backends(baseline, [contender], spikes, baseline_run=base_run)
             if base_run.raster is not None and stage.float_consumers:
@@ -170,6 +171,10 @@ def check_exports(
                     path, network, base_run.raster, spikes, tolerance=nir_tolerance, label=stage.label
                 )
         elif model is not None:
-            contenders: list[Contender] = [read_back(t, target_path(t, written[t]), model, device) for t in integer]
-            comparisons += compare_backends(backend_of(model, device), contenders, spikes, wprob=wprob_readout(model))
+            contenders: list[Contender] = [
+                read_back(t, TARGETS.get(t).reader_path(written[t]), model, device) for t in integer
+            ]
+            comparisons += compare_backends(
+                open_backend(model, device=device)[1], contenders, spikes, wprob=wprob_readout(model)
+            )
     return ExportChecks(spikes_label, tuple(comparisons), tuple(measurements))

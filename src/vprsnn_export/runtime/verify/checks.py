@@ -193,13 +193,10 @@ def metric_deltas(float_rows: Sequence[MetricRow], rows: Sequence[MetricRow]) ->
 def curves(scored: Scored, ks: Sequence[int]) -> dict[str, PrCurve]:
     """PR curves of W+Prob at k=1 and at the largest k of ``ks``, for the report's plots."""
     name = SEQUENCE_STRATEGY
-    out = {}
-    for k in sorted({1, max(ks)}):
-        precision, recall = scored.column(name, k).curve()
-        out[f"{name} k={k}"] = PrCurve(
-            tuple(round(float(p), 6) for p in precision), tuple(round(float(r), 6) for r in recall)
-        )
-    return out
+    drawn = {k: scored.column(name, k).curve() for k in sorted({1, max(ks)})}  # (precision, recall)
+    return {
+        f"{name} k={k}": PrCurve(*(tuple(round(float(v), 6) for v in side) for side in pr)) for k, pr in drawn.items()
+    }
 
 
 def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:
@@ -210,6 +207,25 @@ def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:
         "p_at_100r": [(s, 1) for s in STRATEGIES],
         "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
         "auc_pr": [(SEQUENCE_STRATEGY, max(judged))],
+    }
+
+
+def judged_limits(
+    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
+) -> dict[tuple[str, str, int], float]:
+    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on.
+
+    The readouts of :func:`metric_readouts` at the judged k of ``ks``: k = 1 and, on consecutive queries
+    (``sequences``), every k > 1. A metric moves in steps of 1/Q, so the limit applied is max(limit, query_slack / Q)
+    (with 30 queries a "1 point" limit would mean "no query may change").
+    """
+    judged = sorted(k for k in set(ks) if k == 1 or sequences)
+    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
+    return {
+        (metric, strategy, k): max(float(limit), slack)
+        for metric, readouts in metric_readouts(judged).items()
+        if (limit := tolerances.get(metric)) is not None
+        for strategy, k in readouts
     }
 
 
@@ -224,24 +240,18 @@ def tolerance_checks(
 ) -> list[ToleranceCheck]:
     """Each enabled tolerance as a ToleranceCheck; ``rows`` come from :func:`metric_deltas`.
 
-    R@100P is judged at every k, AUC-PR at the largest; with ``sequences=False`` (queries that are not consecutive
-    places) no k > 1 metric is judged. Metric tolerances bound the drop from float (float - quantised <= limit):
-    doing better than float never fails. A metric moves in steps of 1/Q, so the limit applied is
-    max(limit, query_slack / Q) (with 30 queries a "1 point" limit would mean "no query may change").
+    Metric tolerances bound the drop from float (float - quantised <= the limit :func:`judged_limits` applies):
+    doing better than float never fails.
     """
-    judged = sorted(k for k in set(ks) if k == 1 or sequences)
     checks: list[ToleranceCheck] = []
-    n_queries = rows[0].n_queries if rows else 1
-    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
-    for metric, readouts in metric_readouts(judged).items():
-        if (limit := tolerances.get(metric)) is None:
-            continue
-        for strategy, k in readouts:
-            row = find_row(rows, strategy, k)
-            assert row is not None and row.delta is not None  # metric_deltas: every readout, with its float values
-            value, applied = 0.0 - row.delta.get(metric), max(limit, slack)
-            what = f"{metric} drop, {strategy} k={k}"
-            checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))
+    limits = judged_limits(tolerances, ks, rows[0].n_queries if rows else 1, sequences=sequences)
+    for (metric, strategy, k), applied in limits.items():
+        row = find_row(rows, strategy, k)
+        assert row is not None and row.delta is not None  # metric_deltas: every readout, with its float values
+        value, limit = 0.0 - row.delta.get(metric), tolerances[metric]
+        assert limit is not None  # judged_limits: the tolerances that are on
+        what = f"{metric} drop, {strategy} k={k}"
+        checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))
     bounds = (
         ("winner_agreement", "steps with the float winner", spike.winner_agreement, True),
         ("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True),

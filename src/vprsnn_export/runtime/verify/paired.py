@@ -15,7 +15,6 @@ from vprsnn_export.config import VerifyConfig
 from vprsnn_export.readout import paired
 
 from ..results import MetricRow, PairedCheck, ToleranceCheck, find_row
-from .checks import metric_readouts
 
 #: The metrics of the paired table (P@100R equals accuracy: it is added only when its tolerance is on).
 TABLE_METRICS = ("accuracy", "r_at_100p", "auc_pr")
@@ -26,25 +25,6 @@ PAIRED_TOLERANCES = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
 Decisions = dict[tuple[str, int], tuple[np.ndarray, np.ndarray]]
 
 
-def judged_limits(
-    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
-) -> dict[tuple[str, str, int], float]:
-    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on.
-
-    The same readouts :func:`.checks.tolerance_checks` judges: accuracy and P@100R of every strategy at k=1,
-    R@100P of W+Prob at every judged k, AUC-PR at the largest; judged k are 1 and, on consecutive queries
-    (``sequences``), every k > 1. Applied limit: max(limit, query_slack / Q).
-    """
-    judged = sorted(k for k in set(ks) | {1} if k == 1 or sequences)
-    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
-    return {
-        (metric, strategy, k): max(float(limit), slack)
-        for metric, readouts in metric_readouts(judged).items()
-        if (limit := tolerances.get(metric)) is not None
-        for strategy, k in readouts
-    }
-
-
 def paired_checks(
     float_decisions: Decisions,
     decisions: Decisions,
@@ -53,7 +33,7 @@ def paired_checks(
     settings: VerifyConfig,
 ) -> tuple[PairedCheck, ...]:
     """The paired table of one bit width: per readout and metric the flips, the difference, its interval
-    and the verdict against ``limits`` (:func:`judged_limits`); ``rows`` are the deployed rows with their
+    and the verdict against ``limits`` (:func:`.checks.judged_limits`); ``rows`` are the deployed rows with their
     float values (:func:`.checks.metric_deltas`)."""
     out = []
     for (strategy, k), floats in float_decisions.items():

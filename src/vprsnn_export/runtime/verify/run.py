@@ -24,15 +24,14 @@ from vprsnn_export.export.model import DEFAULT_BITS, check_bits, save_fixed_poin
 from vprsnn_export.export.quantize import DEFAULT_QUANTISE, QuantiseOptions
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.cost import query_cost
-from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.network.runs import SpikeRun
 from vprsnn_export.readout.scored import Scored
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.registry import TARGETS
 
+from ..backends import open_backend
 from ..conformance import cross_implementation
 from ..consumer_gate import with_consumer_gate
 from ..deployment import check_reference_images, deploy
@@ -41,6 +40,7 @@ from .checks import (
     DEFAULT_TOLERANCES,
     curves,
     decision_level,
+    judged_limits,
     level_histogram,
     metric_deltas,
     module_rows,
@@ -48,7 +48,7 @@ from .checks import (
     tolerance_checks,
     weight_histograms,
 )
-from .paired import bits_passed, judged_limits, paired_checks
+from .paired import bits_passed, paired_checks
 
 
 @dataclass(frozen=True)
@@ -149,9 +149,10 @@ def verify_checkpoint(
     check_reference_images(options.quantise, network.reference_images)  # before the float side runs
     floats = float_side(network.checkpoint, query, options.readout, runtime)
     # each width's files: in runtime.export_dir, or in a temporary folder removed afterwards; a bar over its stages
-    export_dir = runtime.export_dir
     folder = (
-        tempfile.TemporaryDirectory(prefix="vprsnn-verify-") if export_dir is None else nullcontext(str(export_dir))
+        tempfile.TemporaryDirectory(prefix="vprsnn-verify-")
+        if runtime.export_dir is None
+        else nullcontext(str(runtime.export_dir))
     )
     bar = tqdm(total=len(options.bits) * 4, desc=f"verify {network.label or ''}".strip(), unit="stage",
                file=sys.stderr, disable=not runtime.progress, leave=False)  # fmt: skip
@@ -160,19 +161,7 @@ def verify_checkpoint(
             verify_width(bits, network, query, options, floats, Path(root) / f"{bits}bit", runtime, stages)
             for bits in options.bits
         )
-    return verified_run(network, query, options, floats, results, runtime.export_dir)
-
-
-def verified_run(
-    network: VerifiedNetwork,
-    query: Query,
-    options: VerifyOptions,
-    floats: FloatSide,
-    results: tuple[BitsResult, ...],
-    export_dir: str | Path | None,
-) -> VerifiedRun:
-    """The report's record of one network verified at every width."""
-    ckpt = network.checkpoint
+    ckpt, export_dir = network.checkpoint, runtime.export_dir
     return VerifiedRun(
         label=network.label,
         seed=ckpt.config.seed,
@@ -184,7 +173,15 @@ def verified_run(
         query_place_ids=tuple(int(p) for p in query.place_ids),
         reference_place_ids=tuple(int(p) for p in ckpt.reference_place_ids),
         export_dir=None if export_dir is None else str(export_dir),
-        float=float_result(ckpt, query, floats, options),
+        float=FloatResult(  # its rows, spikes, PR curves, weight histogram and cost per query
+            metrics=tuple(floats.scored.rows),
+            total_spikes=int(floats.counts.sum()),
+            pr_curves=curves(floats.scored, options.readout.ks),
+            weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
+            cost=query_cost(
+                floats.spikes, ckpt.weights.shape[1], places=len(ckpt.reference_place_ids), images=query.images
+            ).summary(),
+        ),
         bits=results,
         checkpoint=network.path,
         recorded_queries=floats.recorded,
@@ -196,26 +193,14 @@ def float_side(ckpt: Checkpoint, query: Query, readout: SequenceOptions, runtime
     out once."""
     spikes = query_spikes(query.images, query.place_ids, query.traversal, ckpt.config)
     recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
-    network = FloatNetwork.from_arrays(ckpt.weights, ckpt.thresholds, ckpt.config, runtime.device)
-    network.progress = runtime.progress  # a bar over the query chunks of each network run below
+    # a bar over the query chunks of each network run below
+    network = open_backend(ckpt, "float", device=runtime.device, progress=runtime.progress)[1]
     run = network.run(spikes[:recorded], record=True)
     counts = (run if recorded == spikes.shape[0] else network.run(spikes)).counts.numpy()
     scored = Readout.of(ckpt.calibration, ckpt.config, readout).score(
         counts, ckpt.reference_place_ids, query.place_ids, query.truth
     )
     return FloatSide(spikes, recorded, run, counts, scored)
-
-
-def float_result(ckpt: Checkpoint, query: Query, floats: FloatSide, options: VerifyOptions) -> FloatResult:
-    """The report's float column: its rows, spikes, PR curves, weight histogram and cost per query."""
-    places = len(ckpt.reference_place_ids)
-    return FloatResult(
-        metrics=tuple(floats.scored.rows),
-        total_spikes=int(floats.counts.sum()),
-        pr_curves=curves(floats.scored, options.readout.ks),
-        weights=weight_histograms(ckpt.weights, options.quantise.per_neuron),
-        cost=query_cost(floats.spikes, ckpt.weights.shape[1], places=places, images=query.images).summary(),
-    )
 
 
 def verify_width(
@@ -247,7 +232,7 @@ def verify_width(
     model_path = save_fixed_point(folder / "model.npz", model)
     finished("quantise_and_calibrate", "simulate")
     recorded_spikes = floats.spikes[: floats.recorded]
-    int_network = IntegerNetwork(model, device, progress=progress)
+    int_network = open_backend(model, "integer", device=device, progress=progress)[1]
     int_run = int_network.run(recorded_spikes, record=True)
     int_all = int_run if floats.recorded == floats.spikes.shape[0] else int_network.run(floats.spikes)
     int_counts = int_all.counts.numpy()
@@ -267,7 +252,7 @@ def verify_width(
     decision = decision_level(floats.scored, scored, readout.ks)
     sequences = readout.warning(query.place_ids) is None
     checks = tolerance_checks(rows, spike, decision, options.tolerances, readout.ks, sequences=sequences)
-    limits = judged_limits(options.tolerances, readout.ks, len(query.place_ids), sequences=sequences)
+    limits = judged_limits(options.tolerances, (1, *readout.ks), len(query.place_ids), sequences=sequences)
     table = paired_checks(floats.scored.decisions(), scored.decisions(), rows, limits, options.statistics)
     regions = module_regions(len(ckpt.reference_place_ids), ckpt.config.train.module_size)
     group = ckpt.config.network.n_neurons  # neurons per module
