@@ -161,7 +161,19 @@ def verify_checkpoint(
             verify_width(bits, network, query, options, floats, Path(root) / f"{bits}bit", runtime, stages)
             for bits in options.bits
         )
-    ckpt, export_dir = network.checkpoint, runtime.export_dir
+    return verified_run(network, query, options, floats, results, runtime.export_dir)
+
+
+def verified_run(
+    network: VerifiedNetwork,
+    query: Query,
+    options: VerifyOptions,
+    floats: FloatSide,
+    results: tuple[BitsResult, ...],
+    export_dir: str | Path | None,
+) -> VerifiedRun:
+    """The report's record of one network verified at every width."""
+    ckpt = network.checkpoint
     return VerifiedRun(
         label=network.label,
         seed=ckpt.config.seed,
