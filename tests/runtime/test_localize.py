@@ -127,6 +127,13 @@ def test_backend_mismatches_are_one_clear_error(networks, tmp_path):
         Localizer(ckpt, options=SequenceOptions(ks=(1, 3)))
     with pytest.raises(InvalidValueError, match="causally: choose track or window"):  # smooth waits for frames
         Localizer(ckpt, options=SequenceOptions(ks=(3,), velocity_candidates=(1.0,)))
+    # the guards stop 58 left to one place: Readout.of, require_type, the frame check after np.asarray
+    with pytest.raises(InvalidValueError, match="^options must be a SequenceOptions, got dict$"):
+        Localizer(ckpt, options={"ks": (1,)})
+    with pytest.raises(InvalidValueError, match="^search must be a SearchWindow, got int$"):
+        Localizer(ckpt, search=300)
+    with pytest.raises(InvalidValueError, match="a frame must be a non-empty 2-D greyscale array"):
+        Localizer(ckpt).push("not a frame")
 
 
 @pytest.mark.parametrize("module_size", [0, 8])

@@ -65,8 +65,9 @@ class Predictions:
         return len(self.decided[0].place_id) if self.decided else 0
 
     def column(self, strategy: str, k: int = 1) -> Decided:
-        if found := next((entry for entry in self.decided if (entry.strategy, entry.k) == (strategy, k)), None):
-            return found
+        for entry in self.decided:
+            if (entry.strategy, entry.k) == (strategy, k):
+                return entry
         raise InvalidValueError(f"no predictions for {strategy} at k={k}")
 
     def rows(self) -> list[dict[str, Any]]:

@@ -31,7 +31,6 @@ and the clip is skipped; otherwise every clip is counted.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import torch
@@ -206,10 +205,10 @@ def run_prepared(
     (isolation), or one presentation at a time carrying V, through :func:`recur`."""
     if compiled and prep.threshold.device.type == "cpu":
         multipliers = None if prep.multipliers is None else prep.multipliers.numpy()
-        steps: dict[str, Any] = dict(shift=prep.shift, keep=prep.keep, limit=prep.limit, wta=prep.wta, group=prep.group)
         return integer_run(
-            spikes, prep.mantissas, prep.threshold.numpy(), multipliers, isolation=isolation, record=record, **steps
-        )
+            spikes, prep.mantissas, prep.threshold.numpy(), multipliers, shift=prep.shift, keep=prep.keep,
+            limit=prep.limit, wta=prep.wta, isolation=isolation, record=record, group=prep.group,
+        )  # fmt: skip
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
     device = prep.threshold.device

@@ -39,9 +39,9 @@ class EulerLIF(torch.nn.Module):
         gain = dt / np.asarray(node.tau, dtype=np.float64) if leaky else np.zeros(n)
         drive = (gain if leaky else dt) * np.asarray(node.r, dtype=np.float64)
         v_leak = getattr(node, "v_leak", np.zeros(n))
-        buffers = {"gain": gain, "drive": drive, "v_leak": v_leak, "v_threshold": node.v_threshold}
-        for name, value in (buffers | {"v_reset": node.v_reset}).items():
+        for name, value in (("gain", gain), ("drive", drive), ("v_leak", v_leak), ("v_threshold", node.v_threshold)):
             self.register_buffer(name, torch.as_tensor(np.asarray(value, dtype=np.float64)))
+        self.register_buffer("v_reset", torch.as_tensor(np.asarray(node.v_reset, dtype=np.float64)))
 
     gain: torch.Tensor
     drive: torch.Tensor
@@ -182,12 +182,13 @@ def spike_agreement(reference: torch.Tensor, consumer: torch.Tensor) -> dict[str
     ref, out = reference.to(torch.bool), consumer.to(torch.bool)
     both = int((ref & out).sum())
     n_ref, n_out = int(ref.sum()), int(out.sum())
-    same_top = ref.sum(dim=1).argmax(dim=1) == out.sum(dim=1).argmax(dim=1)
+    top_ref = ref.sum(dim=1).argmax(dim=1)
+    top_out = out.sum(dim=1).argmax(dim=1)
     return {
         "recall": both / n_ref if n_ref else 1.0,
         "precision": both / n_out if n_out else 1.0,
         "exact_steps": float((ref == out).all(dim=2).float().mean()),
-        "top1_neuron": float(same_top.float().mean()),
+        "top1_neuron": float((top_ref == top_out).float().mean()),
         "network_spikes": n_ref,
         "consumer_spikes": n_out,
     }
