@@ -75,8 +75,8 @@ def bench_model(model, spikes: torch.Tensor, threads: list[int], repeat: int, fo
                 "threads": thread_count,
                 "queries": n,
                 "timesteps": timesteps,
-                "seconds": f"{seconds:.3f}",
-                "ms_per_query": f"{1000 * seconds / n:.2f}",
+                "seconds": f"{seconds:.3g}",  # significant digits: a tiny model runs in well under a millisecond
+                "ms_per_query": f"{1000 * seconds / n:.3g}",
                 "queries_per_s": f"{n / seconds:.1f}",
                 "identical": identical,
             }
