@@ -102,9 +102,8 @@ def plot_metrics(summary: RunSummary, ks: Sequence[int]) -> bytes:
                     )
                 if ref is not None:
                     ax.axhline(ref[0], color=colour, linestyle="--", linewidth=1)
-            ax.set_xticks(bits)
-            ax.set_xlim(max(bits) + 0.5, min(bits) - 0.5)  # fewer bits to the right
-            ax.set_xlabel("weight bits (dashed: float)")
+            # fewer bits to the right
+            ax.set(xticks=bits, xlim=(max(bits) + 0.5, min(bits) - 0.5), xlabel="weight bits (dashed: float)")
         ax.legend(fontsize=7)
         ax.set(title=METRIC_TITLES[metric], ylabel="%")
         ax.grid(alpha=0.3)
@@ -151,8 +150,7 @@ def plot_modules(run: VerifiedRun) -> bytes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, ncol=len(series), loc="lower center", bbox_to_anchor=(0.5, 1.02))
     axes[0].set_ylabel(f"accuracy k={modules[0].k} %")
-    axes[1].set_ylabel("same winner %")
-    axes[1].set_xlabel("module (region of consecutive places)")
+    axes[1].set(ylabel="same winner %", xlabel="module (region of consecutive places)")
     axes[1].xaxis.set_major_locator(plt.MaxNLocator(integer=True))  # module numbers, never 0.5
     fig.tight_layout()
     return png(fig)
@@ -182,8 +180,7 @@ def plot_weights(run: VerifiedRun) -> bytes:
         ax.bar(at, share, width=0.85 / top, color="tab:orange", alpha=0.85, label=f"{result.bits}-bit levels")
         ax.plot(x, window_share(edges, counts, x, 1 / top), color="tab:blue", linewidth=1.2, label="float")
         ax.set_title(f"{result.bits}-bit: {100 * levels.zero_fraction:.1f} % of weights at 0", fontsize=9)
-        ax.set_xlabel("weight / scale range")
-        ax.set_xlim(-0.08, 1.08)
+        ax.set(xlabel="weight / scale range", xlim=(-0.08, 1.08))
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=8)
     axes[0, 0].set_ylabel("share of weights")
@@ -212,12 +209,9 @@ def plot_spikes(report: VerifyReport) -> bytes:
     else:
         for label, (means, stds), _ in merged(series):
             left.errorbar(bits, means, yerr=stds, marker="o", capsize=3, label=label)
-        left.set_xticks(sorted(bits))
-        left.set_xlim(max(bits) + 0.5, min(bits) - 0.5)
-        left.set_xlabel("weight bits")
+        left.set(xticks=sorted(bits), xlim=(max(bits) + 0.5, min(bits) - 0.5), xlabel="weight bits")
         left.legend(fontsize=8, loc="lower left")
-    left.set_ylabel("%")
-    left.set_ylim(0, 102)
+    left.set(ylabel="%", ylim=(0, 102))
     left.grid(alpha=0.3)
     pooled = [
         [c for run in report.runs for r in run.bits if r.bits == b for c in r.spike_level.count_correlation]
@@ -225,9 +219,7 @@ def plot_spikes(report: VerifyReport) -> bytes:
     ]
     right.boxplot(pooled)
     right.set_xticks(range(1, len(bits) + 1), [str(b) for b in bits])
-    right.set_xlabel("weight bits")
-    right.set_ylabel("per-query spike-count correlation")
-    right.set_ylim(-0.05, 1.05)
+    right.set(xlabel="weight bits", ylabel="per-query spike-count correlation", ylim=(-0.05, 1.05))
     right.grid(alpha=0.3)
     return png(fig)
 
