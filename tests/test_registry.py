@@ -34,7 +34,7 @@ from vprsnn_export.runtime.backends import BACKENDS, BackendKind, choose_backend
 from vprsnn_export.runtime.conformance import cross_implementation, read_back, write_targets
 from vprsnn_export.runtime.evaluation import evaluate_fixed_point, evaluate_float
 from vprsnn_export.runtime.exporting import ExportSource, export_and_check
-from vprsnn_export.runtime.exporting.source import export_all, parse_export_targets
+from vprsnn_export.runtime.exporting.source import export_all
 from vprsnn_export.runtime.localize import Localizer
 from vprsnn_export.runtime.report import write_report
 from vprsnn_export.runtime.report.labels import row_label
@@ -127,7 +127,7 @@ def test_an_unknown_target_is_an_error_everywhere(make_model, tmp_path):
     source = ExportSource.of(model, "ab" * 32)
     calls = [
         lambda: TARGETS.parse_list("onnx,tflite", "--targets", allow_none=True),
-        lambda: parse_export_targets("tflite"),
+        lambda: TARGETS.parse_list("tflite", "--to"),
         lambda: read_back("tflite", tmp_path / "model.nir", model),  # was: the Loihi reader
         lambda: TARGETS.get("tflite").reader_path([tmp_path / "x"]),
         lambda: write_targets(model, tmp_path, ("nir", "tflite")),
@@ -187,7 +187,7 @@ def test_the_cli_and_the_library_share_the_velocity_estimate_default(capsys):
 
 def test_a_toy_target_is_exported_read_back_and_checked(toy_target, make_model, spikes_of, tmp_path):
     model = make_model(np.random.default_rng(0))
-    assert parse_export_targets("npz,nir") == ("npz", "nir") and "npz" in TARGETS.parse_list(
+    assert TARGETS.parse_list("npz,nir", "--to") == ("npz", "nir") and "npz" in TARGETS.parse_list(
         "npz", "--targets", allow_none=True
     )
     source = ExportSource.of(model, "ab" * 32)

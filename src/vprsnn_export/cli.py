@@ -34,9 +34,8 @@ class DefaultsFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
         default = action.default
-        if default in (None, False, [], ()) or default is argparse.SUPPRESS or not action.option_strings:
-            return text
-        if "default" in text.lower():  # %(default)s included
+        no_default = default in (None, False, [], ()) or default is argparse.SUPPRESS or not action.option_strings
+        if no_default or "default" in text.lower():  # named already: %(default)s included
             return text
         return f"{text} (default: %(default)s)" if text else "default: %(default)s"
 

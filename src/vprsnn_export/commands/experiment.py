@@ -37,12 +37,10 @@ def load_lab() -> ModuleType | None:
     loaded = sys.modules.get(LAB)
     if loaded is None:
         folder = lab_folder()
-        spec = (
-            None
-            if folder is None
-            else importlib.util.spec_from_file_location(
-                LAB, folder / "__init__.py", submodule_search_locations=[str(folder)]
-            )
+        if folder is None:
+            return None
+        spec = importlib.util.spec_from_file_location(
+            LAB, folder / "__init__.py", submodule_search_locations=[str(folder)]
         )
         if spec is None or spec.loader is None:
             return None

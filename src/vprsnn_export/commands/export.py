@@ -152,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     from ..runtime.exporting import export_and_check, load_source
     from ..runtime.exporting.checks import check_presentations
     from ..runtime.exporting.folder import MANIFEST_NAME, check_deploy_folder
-    from ..runtime.exporting.source import integer_model, parse_export_targets
+    from ..runtime.exporting.source import integer_model
 
     if args.loihi_cores:
         if args.model or args.out:
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
         return print_budget(args.loihi_cores, args.json)
     if not args.model or not args.out:
         raise InvalidValueError("export needs a MODEL and --out (or --loihi-cores MxNxI alone)")
-    targets = parse_export_targets(args.to)
+    targets = TARGETS.parse_list(args.to, "--to")  # at least one registered target
     source = load_source(args.model)
     model = integer_model(source, args.quantize, targets)
     unused = [f"--{name.replace('_', '-')}" for name in ("query", "data", "subset", "places") if getattr(args, name)]

@@ -94,11 +94,6 @@ def load_source(path: str | Path) -> ExportSource:
     raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
 
 
-def parse_export_targets(raw: str) -> tuple[str, ...]:
-    """``--to``: some of the registered targets (at least one); InvalidValueError otherwise."""
-    return TARGETS.parse_list(raw, "--to")
-
-
 def integer_model(source: ExportSource, bits: int | None, targets: Sequence[str]) -> FixedPointModel | None:
     """The fixed-point model the integer targets get, or None when none is asked for: a float checkpoint is
     quantised only when ``bits`` is given (per-neuron max-abs scales, the float calibration kept)."""

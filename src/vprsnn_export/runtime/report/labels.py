@@ -99,13 +99,10 @@ def shown_paired(checks: Sequence[PairedCheck]) -> list[PairedCheck]:
 
 
 def verdict_counts(checks: Sequence[PairedCheck]) -> str:
-    """ "2 hold, 1 undecided" over the judged checks."""
-    counts = Counter(check.verdict for check in checks if check.verdict is not None)
-    names = {"holds": "hold", "fails": "fail"}
-    return ", ".join(f"{n} {names.get(v, v)}" for v, n in sorted(counts.items(), key=lambda kv: _ORDER.index(kv[0])))
-
-
-_ORDER = ("fails", "undecided", "not judged", "holds")
+    """ "1 fail, 2 hold" over the judged checks, worst verdict first."""
+    counts = Counter(check.verdict for check in checks)
+    names = {"fails": "fail", "undecided": "undecided", "not judged": "not judged", "holds": "hold"}
+    return ", ".join(f"{counts[v]} {name}" for v, name in names.items() if counts[v])
 
 
 def exact_counts(results: Sequence[ConformanceResult]) -> str:
