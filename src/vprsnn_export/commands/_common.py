@@ -433,8 +433,8 @@ def run_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keywords of evaluate's and simulate's evaluation: --device, --no-state-isolation and --quiet."""
     from ..device import resolve_device
 
-    state_isolation = False if args.no_state_isolation else None
-    return {"device": resolve_device(args.device), "state_isolation": state_isolation, "progress": not args.quiet}
+    isolation = False if args.no_state_isolation else None  # None: the config's own
+    return {"device": resolve_device(args.device), "state_isolation": isolation, "progress": not args.quiet}
 
 
 def positive_int(text: str) -> int:

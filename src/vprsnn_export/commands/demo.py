@@ -20,7 +20,7 @@ from ..export.model import DEFAULT_BITS
 from ..io.checkpoint import checkpoint_sha256, save_checkpoint
 from ..network.modules import module_count
 from ..readout.sequence import SequenceOptions
-from ..runtime.results import BitsResult, VerifiedRun, VerifyReport
+from ..runtime.results import BitsResult, VerifyReport
 from ._common import RESULT_COLUMNS, add_runtime_options, format_table, integer
 
 DEMO_DATA = "synthetic"
@@ -123,8 +123,7 @@ def conclusion(report: VerifyReport) -> list[str]:
     ]
     deploy = [b for b, v in verdicts.items() if v == "holds"]
     advice = f"deploy at {min(deploy)} bits or more" if deploy else "no width is shown to hold"
-    n_queries = report.runs[0].n_queries
-    lines = [f"Conclusion: {', '.join(parts)} on this route's {n_queries} queries. So: {advice}."]
+    lines = [f"Conclusion: {', '.join(parts)} on this route's {report.runs[0].n_queries} queries. So: {advice}."]
     width = max(len(r.verdict) for r in results)
     lines += [f"  {r.bits} bits {r.verdict.upper():<{width}}  {deciding_check(r)}" for r in results]
     return lines
@@ -149,26 +148,11 @@ OWN_DATA = (
 )
 
 
-def demo_table_rows(run_result: VerifiedRun) -> list[dict]:
-    from ..runtime.report.labels import cross_counts, verdict_counts
-
-    return [
-        {
-            "bits": result.bits,
-            "verdict": result.verdict,
-            "paired": verdict_counts(result.paired) or "-",
-            "exports": cross_counts([result.cross_implementation])
-            + ("" if result.cross_implementation.passed else f", {result.cross_implementation.n_failed} DIFFER"),
-            "winner": f"{100 * result.spike_level.winner_agreement:.1f}",
-        }
-        for result in run_result.bits
-    ]
-
-
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..export.quantize import QuantiseOptions
     from ..runtime.report import write_report
+    from ..runtime.report.labels import cross_counts, verdict_counts
     from ..runtime.verify import Runtime, VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
@@ -221,9 +205,8 @@ def run(args: argparse.Namespace) -> int:
         "demo_profile": {"preset": DEMO_PRESET, **profile},
         "truth": query.truth.label,
     }
-    command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed)] + (
-        ["--quick"] if args.quick else []
-    )
+    quick = ["--quick"] if args.quick else []
+    command = ["vprsnn-export", "demo", "--out", str(out), "--seed", str(args.seed), *quick]
     report = build_report([result], settings, command=command, seconds=time.perf_counter() - started)
     written = write_report(report, out / "report")
     say(f"4/4 report written ({written['json']})")
@@ -235,7 +218,18 @@ def run(args: argparse.Namespace) -> int:
     print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
     print(f"scored against the {settings['truth']} (the synthetic route's places are index-aligned)")
     print("\nquantised and deployed vs float, on the same input spikes:")
-    print(format_table(demo_table_rows(result), SUMMARY_COLUMNS))
+    rows = [
+        {
+            "bits": r.bits,
+            "verdict": r.verdict,
+            "paired": verdict_counts(r.paired) or "-",
+            "exports": cross_counts([r.cross_implementation])
+            + ("" if r.cross_implementation.passed else f", {r.cross_implementation.n_failed} DIFFER"),
+            "winner": f"{100 * r.spike_level.winner_agreement:.1f}",
+        }
+        for r in result.bits
+    ]
+    print(format_table(rows, SUMMARY_COLUMNS))
     print(
         f"\nwhat it did: trained on {dataset.n_places} synthetic places ({trained:.0f} s), quantised to "
         f"{', '.join(map(str, DEMO_BITS))} bits, exported NIR, Loihi-style and ONNX and ran every file back "

@@ -126,11 +126,10 @@ def run(args: argparse.Namespace) -> int:
 
     source = load_source(args.model)
     expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
-    frames = None
-    if args.frames is not None:  # a bad source fails before any output; a bag's --topic, an event recording's window
-        window = None
-        if args.event_window_us is not None or args.event_count is not None:
-            window = EventWindow(window_us=args.event_window_us, count=args.event_count)
+    events = args.event_window_us is not None or args.event_count is not None
+    window = EventWindow(window_us=args.event_window_us, count=args.event_count) if events else None
+    frames = None  # a bad source fails before any output; a bag's --topic, an event recording's window
+    if args.frames is not None:
         frames = iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
     onnx = None if args.onnx is None else Path(args.onnx)
@@ -138,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         onnx = read_export(onnx).written("onnx") if onnx.is_dir() else check_against_manifest(onnx)
     device = resolve_device(args.device)
     if args.calibrate:
-        if args.topic is not None or args.event_window_us is not None or args.event_count is not None:
+        if args.topic is not None or events:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
         if args.search_window is not None or args.patience is not None:
             raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")

@@ -84,9 +84,8 @@ def run(args: argparse.Namespace) -> int:
         )
         path = save_fixed_point(file, model)
         report = model.quantisation.to_dict()
-        scheme = ("per-neuron" if report["per_neuron"] else "per-tensor") + (
-            " folded" if report["threshold_folding"] else ""
-        )
+        folded = " folded" if report["threshold_folding"] else ""
+        scheme = ("per-neuron" if report["per_neuron"] else "per-tensor") + folded
         sat = report["calibration_saturations"]
         rows.append(
             {**report, "scheme": scheme, "calibration_saturations": "-" if sat is None else sat, "file": str(path)}

@@ -27,10 +27,9 @@ def pyplot() -> Any:
 
 
 def png(fig: Any) -> bytes:
-    plt = pyplot()
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=100, bbox_inches="tight")
-    plt.close(fig)
+    pyplot().close(fig)
     return buffer.getvalue()
 
 

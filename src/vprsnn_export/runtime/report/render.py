@@ -134,9 +134,7 @@ def write_report(report: VerifyReport, out_dir: str | Path, *, write_json: bool 
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
     if write_json:
-        written["json"] = atomic_write_text(
-            out / REPORT_JSON, json.dumps(report.to_dict(), indent=1, sort_keys=False) + "\n"
-        )
+        written["json"] = atomic_write_text(out / REPORT_JSON, json.dumps(report.to_dict(), indent=1) + "\n")
     blocks = blocks_of(report)
     for block in blocks:
         if block.kind == "figure":
