@@ -118,7 +118,6 @@ def add_quantise_options(parser: argparse.ArgumentParser) -> None:
 
 
 def quantise_options(args: argparse.Namespace) -> QuantiseOptions:
-    """The QuantiseOptions of the flags :func:`add_quantise_options` added."""
     from ..export.quantize import QuantiseOptions
 
     return QuantiseOptions(
@@ -242,7 +241,6 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def sequence_options(args: argparse.Namespace) -> SequenceOptions:
-    """The SequenceOptions of evaluate, simulate, verify and localize from their arguments."""
     return SequenceOptions(**given_sequence_options(args))
 
 
@@ -300,7 +298,6 @@ def add_config_options(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
-    """The preset (or the defaults) with every override given on the command line applied."""
     keys = [key for key, _ in (*CONFIG_OPTIONS.values(), *ABLATIONS.values())]
     overrides = {key: getattr(args, key) for key in keys if getattr(args, key) is not None}
     for item in args.set:

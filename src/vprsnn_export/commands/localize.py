@@ -271,8 +271,7 @@ def curve_table(curve, around: int | None, chosen: int | None) -> str:
     digits = distinct_digits([threshold for threshold, *_ in rows])
     width = max(10, digits + 3)
     lines = [f"{'threshold':>{width}}  {'precision':>9}  {'recall':>7}  {'accepted':>8}"]
-    first = max(around - 3, 0)
-    for index, (threshold, precision, recall, accepted) in enumerate(rows, start=first):
+    for index, (threshold, precision, recall, accepted) in enumerate(rows, start=max(around - 3, 0)):
         mark = "  <- operating point" if index == chosen else ""
         lines.append(
             f"{threshold:{width}.{digits}g}  {100 * precision:8.1f}%  {100 * recall:6.1f}%  {accepted:8d}{mark}"

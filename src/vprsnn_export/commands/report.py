@@ -42,18 +42,13 @@ def run(args: argparse.Namespace) -> int:
     reports = [load_report(p) for p in args.runs]
     if len(reports) > 1 and not args.out:
         raise InvalidValueError("combining several reports needs --out DIR")
-    out = Path(args.out) if args.out else report_path(args.runs[0]).parent
+    here = report_path(args.runs[0]).parent
+    out = Path(args.out) if args.out else here
     combined = combine_reports(reports, sources, allow_mixed=args.allow_mixed)
-    rewrite_json = len(reports) > 1 or (
-        args.out is not None and out.resolve() != report_path(args.runs[0]).parent.resolve()
-    )
-    written = write_report(combined, out, write_json=rewrite_json)
+    written = write_report(combined, out, write_json=len(reports) > 1 or out.resolve() != here.resolve())
     if not args.quiet:
-        n_runs = len(combined.runs)
-        print(
-            f"{'PASS' if combined.passed else 'FAIL'}: {combined.n_passed} of {n_runs} network(s) pass every check",
-            file=sys.stderr,
-        )
+        verdict = "PASS" if combined.passed else "FAIL"
+        print(f"{verdict}: {combined.n_passed} of {len(combined.runs)} network(s) pass every check", file=sys.stderr)
         for kind, path in written.items():
             print(f"{kind}: {path}")
     return 0

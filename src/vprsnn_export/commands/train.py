@@ -141,8 +141,7 @@ def capacity_warning(n_places: int, cfg: Config) -> str | None:
     neurons = cfg.network.n_neurons
     if per_module <= neurons:
         return None
-    suggested = max(1, neurons // 4)
     return (
         f"{per_module} places per module but {neurons} neurons: the module cannot give every place a neuron of "
-        f"its own; train an ensemble with --module-size {suggested} (or more --neurons)"
+        f"its own; train an ensemble with --module-size {max(1, neurons // 4)} (or more --neurons)"
     )

@@ -133,7 +133,6 @@ def conclusion(report: VerifyReport) -> str:
 
 
 def blocks_of(report: VerifyReport) -> list[Block]:
-    """The whole document, format-neutral."""
     summary, runs = report.summary, report.runs
     first, n_runs = runs[0], len(runs)
     ks = first.ks

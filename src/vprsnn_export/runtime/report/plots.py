@@ -59,7 +59,6 @@ def _series(summary: RunSummary, key: tuple[str, int], metric: str) -> tuple[tup
 
 
 def pr_axes(ax: Any, title: str, **title_style: Any) -> None:
-    """Precision vs recall on [0, 1], titled, with a grid and a legend."""
     ax.set(xlim=(0, 1.02), ylim=(0, 1.05), xlabel="recall", ylabel="precision")
     ax.set_title(title, **title_style)
     ax.grid(alpha=0.3)
