@@ -107,12 +107,7 @@ def add_quantise_options(parser: argparse.ArgumentParser) -> None:
     scales = group.add_mutually_exclusive_group()
     for flag in ("--per-tensor", "--per-neuron"):
         scales.add_argument(flag, action="store_true", help=QUANTISE_HELP[flag])
-    group.add_argument(
-        "--scale",
-        choices=SCALE_METHODS,
-        default=SCALE_METHODS[0],
-        help=QUANTISE_HELP["--scale"] + " (default: %(default)s)",
-    )
+    group.add_argument("--scale", choices=SCALE_METHODS, default=SCALE_METHODS[0], help=QUANTISE_HELP["--scale"])
     for flag in ("--fold-thresholds", "--reuse-float-calibration", "--non-leaky"):
         group.add_argument(flag, action="store_true", help=QUANTISE_HELP[flag])
 
@@ -133,7 +128,6 @@ def add_threads_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--threads",
         type=integer,
-        default=None,
         metavar="N",
         help="CPU threads for torch (default: OMP_NUM_THREADS, else 1: more threads than free cores "
         "slow a shared machine down 10-20x)",
@@ -224,10 +218,8 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
         )
     raw = {f.name: getattr(args, option_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
     given = {name: value for name, value in raw.items() if value is not None}
-    if args.default_k and "ks" not in given:
-        given["ks"] = args.default_k
-    if "ks" in given:
-        given["ks"] = parse_int_list(given["ks"], "--k", MAX_K)
+    if "ks" in given or args.default_k:
+        given["ks"] = parse_int_list(given.get("ks", args.default_k), "--k", MAX_K)
     if "velocity_candidates" in given:
         given["velocity_candidates"] = parse_velocity_grid(given["velocity_candidates"])
         if max(given.get("ks", (1,))) == 1:

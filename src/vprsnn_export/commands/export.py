@@ -57,9 +57,7 @@ BUDGET_COLUMNS = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("export", help="export a model to NIR, a Loihi-style description and ONNX")
     parser.add_argument("model", nargs="?", help="float checkpoint (train) or fixed-point model (quantize)")
-    parser.add_argument(
-        "--to", default=",".join(TARGETS), help=f"comma-separated targets: {TARGETS.choices()} (default: %(default)s)"
-    )
+    parser.add_argument("--to", default=",".join(TARGETS), help=f"comma-separated targets: {TARGETS.choices()}")
     parser.add_argument(
         "--out",
         metavar="DIR",

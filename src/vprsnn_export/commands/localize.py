@@ -100,9 +100,7 @@ def calibration_output(args: argparse.Namespace) -> str | None:
     """The file --calibrate writes (locked for the run like every command's output); None without --calibrate."""
     from ..runtime.localize import operating_point_path
 
-    if args.calibrate is None:
-        return None
-    return args.operating_point or str(operating_point_path(args.model))
+    return None if args.calibrate is None else args.operating_point or str(operating_point_path(args.model))
 
 
 def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
