@@ -386,8 +386,7 @@ def refuse_window_beside_truth(
     folder = Path(source) if source else None
     if not match_window or folder is None or not folder.is_dir():
         return
-    found = [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]
-    if found:
+    if found := [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]:
         raise window_beside_truth(match_window, found[0])
 
 
@@ -412,8 +411,7 @@ def load_query(args: argparse.Namespace, network: Network) -> tuple[SequenceOpti
     options = sequence_options(args)
     dataset = query_data(args, network, args.query)
     query = dataset.query(args.query, network.reference_traversals, args.match_window)
-    warning = options.warning(dataset.place_ids)
-    if warning:
+    if warning := options.warning(dataset.place_ids):
         print(f"warning: {warning}", file=sys.stderr)
     return options, dataset, query
 

@@ -122,8 +122,7 @@ def run(args: argparse.Namespace) -> int:
         adaptation=record,
     )
     path = save_checkpoint(args.out, ckpt)
-    warning = capacity_warning(len(dataset.place_ids), cfg)  # after the run: an error stays the only stderr line
-    if warning:
+    if warning := capacity_warning(len(dataset.place_ids), cfg):  # after the run: an error stays the only stderr line
         print(f"warning: {warning}", file=sys.stderr)
     where = device if cluster is None else f"cluster {cluster.address}"
     print(

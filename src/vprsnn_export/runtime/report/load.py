@@ -47,9 +47,7 @@ OLDER_DEFAULTS = {"fold_thresholds": False, "non_leaky": False}
 def combine_reports(
     reports: Sequence[VerifyReport], sources: Sequence[str] | None = None, *, allow_mixed: bool = False
 ) -> VerifyReport:
-    """One report of every run of ``reports`` (a :data:`POOLING_KEYS` difference refused unless ``allow_mixed``)."""
-    if not reports:
-        raise ReportError("no reports to combine")
+    """One report of every run of ``reports`` (one or more; a :data:`POOLING_KEYS` difference needs ``allow_mixed``)."""
     if len(reports) == 1:
         return dataclasses.replace(reports[0], summary=summarise_runs(reports[0].runs))
 
