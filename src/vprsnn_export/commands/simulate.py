@@ -83,8 +83,7 @@ def run(args: argparse.Namespace) -> int:
         )
         if result.cost is not None:
             print(result.cost.line(), file=sys.stderr)
-        if result.winner_agreement is not None:
-            agreement = result.winner_agreement
+        if (agreement := result.winner_agreement) is not None:
             print(
                 f"same spikes as the float network on {100 * agreement['all_steps']:.2f} % of steps "
                 f"({100 * agreement['active_steps']:.2f} % of the steps where either spikes)",

@@ -203,8 +203,7 @@ def verdict_blocks(report: VerifyReport) -> list[Block]:
     """Per network and bit width, the columns the terminal shows too (:data:`.labels.VERDICT_COLUMNS`)."""
     cells = [(verdict_cells(*item), item[2]) for item in results(report)]
     columns: Columns = {title: partial(lambda key, item: item[0][key], key) for key, title in VERDICT_COLUMNS}
-    tolerances = report.settings.get("tolerances", {})
-    limits = ", ".join(f"{key} {value:g}" for key, value in tolerances.items() if value is not None)
+    limits = ", ".join(f"{k} {v:g}" for k, v in report.settings.get("tolerances", {}).items() if v is not None)
     return [
         Block("h2", "Verdict per bit width"),
         table(columns, cells, lambda item: VERDICT_STATUS.get(item[1].verdict)),
