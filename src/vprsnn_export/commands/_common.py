@@ -420,8 +420,8 @@ def run_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keywords of evaluate's and simulate's evaluation: --device, --no-state-isolation and --quiet."""
     from ..device import resolve_device
 
-    isolation = False if args.no_state_isolation else None  # None: the config's own
-    return {"device": resolve_device(args.device), "state_isolation": isolation, "progress": not args.quiet}
+    state_isolation = False if args.no_state_isolation else None
+    return {"device": resolve_device(args.device), "state_isolation": state_isolation, "progress": not args.quiet}
 
 
 def positive_int(text: str) -> int:
@@ -455,6 +455,4 @@ def search_window(args: argparse.Namespace) -> SearchWindow | None:
     """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
     if args.search_window is None and args.patience is not None:
         raise InvalidValueError("--patience is for --search-window")
-    if args.search_window is None:
-        return None
-    return SearchWindow(args.search_window, DEFAULT_PATIENCE if args.patience is None else args.patience)
+    return None if args.search_window is None else SearchWindow(args.search_window, args.patience or DEFAULT_PATIENCE)

@@ -152,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..export.quantize import QuantiseOptions
     from ..runtime.report import write_report
-    from ..runtime.report.labels import cross_counts, verdict_counts
+    from ..runtime.report.labels import cross_counts, verdict_cells
     from ..runtime.verify import Runtime, VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
     from ..trainer.pipeline import train_and_calibrate
 
@@ -218,14 +218,12 @@ def run(args: argparse.Namespace) -> int:
     print(format_table([row.to_dict() for row in result.float.metrics], RESULT_COLUMNS))
     print(f"scored against the {settings['truth']} (the synthetic route's places are index-aligned)")
     print("\nquantised and deployed vs float, on the same input spikes:")
-    rows = [
+    rows = [  # the verdict table's cells (bits, paired checks, same winner), the verdict without the degenerate note
         {
-            "bits": r.bits,
+            **verdict_cells("", result, r),
             "verdict": r.verdict,
-            "paired": verdict_counts(r.paired) or "-",
             "exports": cross_counts([r.cross_implementation])
             + ("" if r.cross_implementation.passed else f", {r.cross_implementation.n_failed} DIFFER"),
-            "winner": f"{100 * r.spike_level.winner_agreement:.1f}",
         }
         for r in result.bits
     ]

@@ -240,10 +240,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
 
 def distinct_digits(values: list[float], least: int = 6) -> int:
     """The fewest significant digits (at least ``least``, at most 17) that print distinct values distinctly."""
-    for digits in range(least, 17):
-        if len({f"{v:.{digits}g}" for v in values}) == len(set(values)):
-            return digits
-    return 17
+    return next((d for d in range(least, 17) if len({f"{v:.{d}g}" for v in values}) == len(set(values))), 17)
 
 
 #: Precision targets whose recall ``--calibrate`` prints beside the one asked for, so the choice is not a guess.
