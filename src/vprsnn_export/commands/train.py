@@ -66,8 +66,7 @@ def check_not_a_frame(out: Path, data: Path, traversals: list[str]) -> None:
     """InvalidValueError when ``--out`` is an image file name or lies inside a traversal folder read."""
     from ..data.frames import IMAGE_SUFFIXES
 
-    folders = [data / name for name in traversals if (data / name).is_dir()]
-    inside = [f for f in folders if out.resolve().is_relative_to(f.resolve())]
+    inside = [f for name in traversals if (f := data / name).is_dir() and out.resolve().is_relative_to(f.resolve())]
     if out.suffix.lower() in IMAGE_SUFFIXES or inside:
         where = f"inside the traversal folder {inside[0]}" if inside else "an image file name"
         raise InvalidValueError(f"--out {out}: {where}; a checkpoint never replaces a frame of the data set")
