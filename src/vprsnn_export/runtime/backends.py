@@ -21,7 +21,7 @@ from vprsnn_export.registry import Registry
 if TYPE_CHECKING:  # the registry is read by --help, which imports no torch: the implementations load when opened
     import torch
 
-    from vprsnn_export.network.runs import Backend, SpikeRun
+    from vprsnn_export.network.runs import Backend
 
 Network = Checkpoint | FixedPointModel
 #: open(network, exported file or None, device, threads, progress) -> a backend running that network
@@ -40,25 +40,6 @@ class BackendKind:
     description: str
     needs: str | None = None
     tags: frozenset[str] = frozenset()  # what it is: FLOAT, EXACT (the model's integers, bit for bit), SLOW, FILE
-
-
-@dataclass(frozen=True)
-class SessionBackend:
-    """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame)."""
-
-    session: object
-    name: str = "onnxruntime"
-
-    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        import numpy as np
-        import torch
-
-        from vprsnn_export.network.runs import SpikeRun
-        from vprsnn_export.targets.onnx_session import run_session
-
-        out = run_session(self.session, spikes)
-        counts = torch.from_numpy(np.asarray(out.counts, dtype=np.int64))
-        return SpikeRun(counts=counts, saturations=int(out.saturations.sum()), wprob=out.wprob)
 
 
 def check_graph(model: FixedPointModel, path: str | Path) -> None:
@@ -91,7 +72,7 @@ def _integer(network: Network, path: Path | None, device: torch.device, threads:
 
 
 def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
-    from vprsnn_export.targets.onnx_session import session
+    from vprsnn_export.targets.onnx_session import SessionBackend, session
 
     assert isinstance(network, FixedPointModel) and path is not None
     check_graph(network, path)
