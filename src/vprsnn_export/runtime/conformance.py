@@ -30,14 +30,8 @@ from vprsnn_export.targets.registry import TARGETS, WriteOptions
 from .backends import BASELINE, EXACT, SLOW, Network, open_backend, tagged
 from .results import Comparison, ConformanceResult
 
-#: The SpikeRun fields compared exactly, and the name each has in the check's label.
-RUN_FIELDS = {
-    "raster": "raster",
-    "counts": "counts",
-    "candidates_per_step": "candidates",
-    "final_voltage": "final_voltage",
-    "saturations": "saturations",
-}
+#: The SpikeRun fields compared exactly (named in the check's label without "_per_step").
+RUN_FIELDS = ("raster", "counts", "candidates_per_step", "final_voltage", "saturations")
 
 
 def as_array(value: Any) -> np.ndarray:
@@ -84,8 +78,10 @@ def distribution_comparison(
 def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun) -> list[Comparison]:
     """Exact comparisons of every SpikeRun field both runs report; the W+Prob distributions within rounding."""
     checks = [
-        exact_comparison(f"{prefix}: {label}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name, label in RUN_FIELDS.items()
+        exact_comparison(
+            f"{prefix}: {name.removesuffix('_per_step')}", a_name, getattr(a, name), b_name, getattr(b, name)
+        )
+        for name in RUN_FIELDS
         if getattr(a, name) is not None and getattr(b, name) is not None
     ]
     if a.wprob is not None and b.wprob is not None:
