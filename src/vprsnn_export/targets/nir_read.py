@@ -10,11 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.io.checkpoint import Checkpoint, validate_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint, check_header, validate_checkpoint
 from vprsnn_export.io.fileio import parse_json
 from vprsnn_export.targets.nir_target import EDGES, FORMAT, FORMAT_VERSION, NODES, PLAIN_EDGES, Source, effective_beta
 from vprsnn_export.targets.registry import load_file
@@ -103,16 +102,12 @@ def checkpoint_from_graph(
 ) -> Checkpoint:
     if header.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"the embedded header is not a checkpoint header ({header.get('format')!r})", path)
+    config, traversals, data, history = check_header(header, path)  # the checkpoint reader's own checks
+    calibration, ids = (np.asarray(meta[name]).astype(np.int64) for name in ("calibration", "reference_place_ids"))
+    weights = np.ascontiguousarray(weight.astype(np.float32))
+    version = str(header.get("package_version", "unknown"))
     ckpt = Checkpoint(
-        config=Config.from_dict(header["config"]),
-        weights=np.ascontiguousarray(weight.astype(np.float32)),
-        thresholds=thresholds.astype(np.float32),
-        calibration=np.asarray(meta["calibration"]).astype(np.int64),
-        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
-        reference_traversals=list(header["reference_traversals"]),
-        data=dict(header.get("data", {})),
-        history=list(header.get("history", [])),
-        version=str(header.get("package_version", "unknown")),
+        config, weights, thresholds.astype(np.float32), calibration, ids, traversals, data, history, version
     )
     validate_checkpoint(ckpt, path)
     return ckpt

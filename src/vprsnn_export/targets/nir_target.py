@@ -104,9 +104,7 @@ def wta_rule(source: Source) -> str:
     if not source.config.network.wta:
         return "off: every neuron over threshold spikes"
     score = (
-        "a_j * m_j (integer current times the neuron's scale multiplier)"
-        if isinstance(source, FixedPointModel)
-        else "I_j"
+        "I_j" if isinstance(source, Checkpoint) else "a_j * m_j (integer current times the neuron's scale multiplier)"
     )
     return (
         f"hard WTA: of the neurons with v_j > v_threshold_j at a step, only the one with the largest {score} "
@@ -136,21 +134,17 @@ def populations(source: Source) -> list[dict[str, Any]]:
     group = source.config.network.n_neurons  # one module's neurons
     regions = module_regions(n_places, source.config.train.module_size)
     thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)
-    rows = []
-    for m, (start, stop) in enumerate(regions.tolist()):
-        own = thresholds[m * group : (m + 1) * group]
-        rows.append(
-            {
-                "name": f"module_{m}",
-                "neurons": [m * group, (m + 1) * group],
-                "places": [int(start), int(stop)],
-                "place_ids": [int(source.reference_place_ids[start]), int(source.reference_place_ids[stop - 1])]
-                if stop > start
-                else [],
-                "v_threshold_range": [float(own.min()), float(own.max())],
-            }
-        )
-    return rows
+    ids = source.reference_place_ids
+    return [
+        {
+            "name": f"module_{m}",
+            "neurons": [m * group, (m + 1) * group],
+            "places": [int(start), int(stop)],
+            "place_ids": [int(ids[start]), int(ids[stop - 1])] if stop > start else [],
+            "v_threshold_range": [float(f(thresholds[m * group : (m + 1) * group])) for f in (np.min, np.max)],
+        }
+        for m, (start, stop) in enumerate(regions.tolist())
+    ]
 
 
 def readout_rule(source: Source) -> dict[str, Any]:
