@@ -121,14 +121,8 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         for name, value in zip(names, values, strict=True):
             pieces[name].append(value)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
-    raster = joined.get("raster")
-    return OnnxRun(
-        counts=joined["counts"],
-        saturations=joined["saturations"],
-        wprob=joined.get("wprob"),
-        raster=None if raster is None else raster.transpose(1, 0, 2),
-        seconds=seconds,
-    )
+    raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
+    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster, seconds)
 
 
 def run_onnx_outputs(

@@ -157,9 +157,9 @@ def module_rows(
     largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
     n_modules = len(regions)
     top = max(float_scored.ks)
-    accuracy = {
-        name: [side.regions(regions, k) for k in (1, top)] for name, side in (("float", float_scored), ("int", scored))
-    }
+    (float_1, float_k), (int_1, int_k) = (
+        [side.regions(regions, k) for k in (1, top)] for side in (float_scored, scored)
+    )
     n, timesteps, _ = float_raster.shape
     a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
@@ -172,15 +172,15 @@ def module_rows(
             last_place=region.last_place,
             n_queries=region.n_queries,
             k=int(top),
-            float_accuracy=accuracy["float"][0][m].accuracy,
-            accuracy=accuracy["int"][0][m].accuracy,
-            float_accuracy_k=accuracy["float"][1][m].accuracy,
-            accuracy_k=accuracy["int"][1][m].accuracy,
+            float_accuracy=region.accuracy,
+            accuracy=int_1[m].accuracy,
+            float_accuracy_k=float_k[m].accuracy,
+            accuracy_k=int_k[m].accuracy,
             winner_agreement=float(agreement[m]),
             spikes_float=int(spikes_float[m]),
             spikes=int(spikes[m]),
         )
-        for m, region in enumerate(accuracy["float"][0])
+        for m, region in enumerate(float_1)
     )
 
 
