@@ -44,10 +44,8 @@ def graph_to_source(graph, path: Path) -> Source:
         raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
     if int(meta.get("format_version", -1)) != FORMAT_VERSION:
         raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
-    edges = sorted(map(tuple, graph.edges))
-    expected = EDGES if "wta" in graph.nodes else PLAIN_EDGES
     missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
-    if missing or edges != sorted(expected):
+    if missing or sorted(map(tuple, graph.edges)) != sorted(EDGES if "wta" in graph.nodes else PLAIN_EDGES):
         raise ModelFileError(
             f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
         )
@@ -55,10 +53,8 @@ def graph_to_source(graph, path: Path) -> Source:
     if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
         raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
     header = parse_json(str(meta["header_json"]), "header_json")
-    weight = np.asarray(linear.weight).T
-    thresholds = np.asarray(lif.v_threshold)
     rebuild = fixed_point_from_graph if str(meta["kind"]) == "fixed-point" else checkpoint_from_graph
-    source = rebuild(header, meta, weight, thresholds, path)
+    source = rebuild(header, meta, np.asarray(linear.weight).T, np.asarray(lif.v_threshold), path)
     check_dynamics(lif, effective_beta(source), float(meta["dt"]), path)
     return source
 

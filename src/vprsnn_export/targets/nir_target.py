@@ -130,9 +130,8 @@ def populations(source: Source) -> list[dict[str, Any]]:
     linear / lif pair, trained on the reference places [region start, region stop) (indices into
     metadata['reference_place_ids']); a single network is one population.
     """
-    n_places = len(source.reference_place_ids)
     group = source.config.network.n_neurons  # one module's neurons
-    regions = module_regions(n_places, source.config.train.module_size)
+    regions = module_regions(len(source.reference_place_ids), source.config.train.module_size)
     thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)
     ids = source.reference_place_ids
     return [
@@ -247,8 +246,8 @@ def inhibition_weights(thresholds: np.ndarray, strength: float) -> np.ndarray:
     Each other neuron's spike at step t - 1 lowers neuron j's input at step t by ``strength``
     of j's own threshold, so the strength means the same in float and mantissa units.
     """
-    n = thresholds.shape[0]
-    return (-strength * np.asarray(thresholds, dtype=np.float64)[:, None] * (1.0 - np.eye(n))).astype(np.float32)
+    off_diagonal = 1.0 - np.eye(thresholds.shape[0])
+    return (-strength * np.asarray(thresholds, dtype=np.float64)[:, None] * off_diagonal).astype(np.float32)
 
 
 def build_graph(
@@ -279,7 +278,6 @@ def build_graph(
     else:
         raise InvalidValueError(f"cannot export a {type(source).__name__} to NIR")
     n_out, n_in = weight.shape
-    inhibition = inhibition_weights(thresholds, wta_inhibition)
     nodes = {
         "input": nir.Input(input_type=np.array([n_in])),
         "linear": nir.Linear(weight=weight),
@@ -287,7 +285,7 @@ def build_graph(
         "output": nir.Output(output_type=np.array([n_out])),
     }
     if wta_node:
-        nodes["wta"] = nir.Linear(weight=inhibition)
+        nodes["wta"] = nir.Linear(weight=inhibition_weights(thresholds, wta_inhibition))
     metadata = graph_metadata(source, source_sha256, wta_inhibition if wta_node else None, dt)
     return nir.NIRGraph(nodes=nodes, edges=list(EDGES if wta_node else PLAIN_EDGES), metadata=metadata)
 
