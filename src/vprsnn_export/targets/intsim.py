@@ -30,6 +30,7 @@ and the clip is skipped; otherwise every clip is counted.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -142,10 +143,7 @@ class IntegerNetwork:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
-
-        def whole(part: torch.Tensor) -> SpikeRun:
-            return run_prepared(self.prepared, part, isolation=isolation, record=record)
-
+        whole = functools.partial(run_prepared, self.prepared, isolation=isolation, record=record)
         # chunks only when isolated: each presentation then starts from V = 0 (run_in_chunks)
         run = run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress and isolation, desc=self.name)
         self.saturations += run.saturations
