@@ -113,7 +113,8 @@ def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
 class Contender:
     """A backend checked against the baseline, under the label its checks carry: on the first ``n_queries``
     presentations only (the slow reference stepper); ``written``/``read_back``, the model written to a file and
-    the one read back, are compared integer by integer first."""
+    the one read back, are compared integer by integer first; ``runs_on`` names the backend in its checks (None:
+    the backend's own name; a read-back model runs on the project's simulators)."""
 
     target: str  # "reference" or a registered target's name
     label: str
@@ -121,6 +122,7 @@ class Contender:
     n_queries: int | None = None
     written: FixedPointModel | None = None
     read_back: FixedPointModel | None = None
+    runs_on: str | None = None
 
 
 def read_back(target: str, path: Path, written: Network | None, device: torch.device | None = None) -> Contender:
@@ -131,22 +133,12 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     rebuilt = entry.read(Path(path))
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
         return Contender(target, entry.label, rebuilt)
-    runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(open_backend(rebuilt, device=device)[1], f"{entry.title} model on the {runs_on}")
+    simulator = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
+    runs_on = f"{entry.title} model on the {simulator}"
+    contender = Contender(target, entry.label, open_backend(rebuilt, device=device)[1], runs_on=runs_on)
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
-        return Contender(target, entry.label, backend, written=written, read_back=rebuilt)
-    return Contender(target, entry.label, backend)
-
-
-@dataclass(frozen=True)
-class _Renamed:
-    """A backend under another name (the read-back models run on the project's simulators)."""
-
-    inner: Backend
-    name: str
-
-    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        return self.inner.run(spikes, record=record)
+        return dataclasses.replace(contender, written=written, read_back=rebuilt)
+    return contender
 
 
 def compare_backends(
@@ -178,7 +170,7 @@ def compare_backends(
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
             base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))
-        checks += compare_runs(contender.label, baseline.name, base, contender.backend.name, run)
+        checks += compare_runs(contender.label, baseline.name, base, contender.runs_on or contender.backend.name, run)
     return checks
 
 
