@@ -94,27 +94,20 @@ def _reference(
 FLOAT, EXACT, BASELINE, SLOW, FILE = "float", "exact integer", "baseline", "slow", "file"
 
 BACKENDS: Registry[BackendKind] = Registry("--backend")
-for kind in (
-    BackendKind("float", Checkpoint, _float, "the float network (a checkpoint)", tags=frozenset({FLOAT})),
-    BackendKind(
-        "integer",
-        FixedPointModel,
-        _integer,
-        "the integer simulator (a fixed-point model)",
-        tags=frozenset({EXACT, BASELINE}),
-    ),
-    BackendKind(
+for name, runs, opener, description, needs, tags in (
+    ("float", Checkpoint, _float, "the float network (a checkpoint)", None, {FLOAT}),
+    ("integer", FixedPointModel, _integer, "the integer simulator (a fixed-point model)", None, {EXACT, BASELINE}),
+    (
         "reference",
         FixedPointModel,
         _reference,
         "the reference stepper: the slow oracle, one step at a time",
-        tags=frozenset({EXACT, SLOW}),
-    ),  # fmt: skip
-    BackendKind(
-        "onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx", frozenset({EXACT, FILE})
+        None,
+        {EXACT, SLOW},
     ),
+    ("onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx", {EXACT, FILE}),
 ):
-    BACKENDS.register(kind)
+    BACKENDS.register(BackendKind(name, runs, opener, description, needs, frozenset(tags)))
 
 
 def tagged(*tags: str) -> tuple[BackendKind, ...]:
