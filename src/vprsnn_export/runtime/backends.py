@@ -42,19 +42,6 @@ class BackendKind:
     tags: frozenset[str] = frozenset()  # what it is: FLOAT, EXACT (the model's integers, bit for bit), SLOW, FILE
 
 
-def check_graph(model: FixedPointModel, path: str | Path) -> None:
-    """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
-    from vprsnn_export.targets.onnx_session import read_onnx
-
-    props = {p.key: p.value for p in read_onnx(path).metadata_props}
-    if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
-        raise ModelFileError(
-            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
-            f"{props.get('vprsnn.bits')} bits; model: source {model.source_sha256}, {model.bits} bits)",
-            path,
-        )
-
-
 def _float(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.network.dynamics import FloatNetwork
 
@@ -72,10 +59,17 @@ def _integer(network: Network, path: Path | None, device: torch.device, threads:
 
 
 def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
-    from vprsnn_export.targets.onnx_session import SessionBackend, session
+    """One session on the graph; ModelFileError unless it was exported from ``network`` (its source and bit width)."""
+    from vprsnn_export.targets.onnx_session import SessionBackend, read_onnx, session
 
     assert isinstance(network, FixedPointModel) and path is not None
-    check_graph(network, path)
+    props = {p.key: p.value for p in read_onnx(path).metadata_props}
+    if props.get("vprsnn.source_sha256") != network.source_sha256 or props.get("vprsnn.bits") != str(network.bits):
+        raise ModelFileError(
+            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
+            f"{props.get('vprsnn.bits')} bits; model: source {network.source_sha256}, {network.bits} bits)",
+            path,
+        )
     return SessionBackend(session(path, threads))
 
 
