@@ -44,7 +44,7 @@ Weight storage (about ``bits`` bits per synapse; :mod:`targets.packing`):
 
 # The docstring above is every exported graph's doc_string (build_onnx): a change to it changes the
 # files written. The runner on onnxruntime is in onnx_session.py. One concept, the graph: one line per
-# ONNX node and initializer (:class:`Nodes`), in the order that keeps exports byte-identical.
+# ONNX node, the initializers a group per line (:class:`Nodes`), in the order that keeps exports byte-identical.
 
 from __future__ import annotations
 
