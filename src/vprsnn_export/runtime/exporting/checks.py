@@ -64,10 +64,10 @@ class ExportChecks(JsonDataclass):
     def rows(self) -> list[CheckRow]:
         """The exact checks (under their target, the label before ':'), then the measurements."""
         names = {label: target for target, label in target_labels().items()}
-        split = [(c, *c.check.partition(": ")) for c in self.comparisons]  # (comparison, prefix, ": ", what)
-        rows = [
-            CheckRow(names.get(p, p), f"{what or p}: {c.a} vs {c.b}", c.passed, c.detail) for c, p, _, what in split
-        ]
+        rows = []
+        for c in self.comparisons:
+            prefix, _, what = c.check.partition(": ")
+            rows.append(CheckRow(names.get(prefix, prefix), f"{what or prefix}: {c.a} vs {c.b}", c.passed, c.detail))
         return rows + list(self.measurements)
 
 
