@@ -133,8 +133,7 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     rebuilt = entry.read(Path(path))
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
         return Contender(target, entry.label, rebuilt)
-    simulator = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    runs_on = f"{entry.title} model on the {simulator}"
+    runs_on = f"{entry.title} model on the {'simulator' if isinstance(rebuilt, FixedPointModel) else 'float network'}"
     contender = Contender(target, entry.label, open_backend(rebuilt, device=device)[1], runs_on=runs_on)
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
         return dataclasses.replace(contender, written=written, read_back=rebuilt)
