@@ -21,7 +21,7 @@ from vprsnn_export.registry import Registry
 if TYPE_CHECKING:  # the registry is read by --help, which imports no torch: the implementations load when opened
     import torch
 
-    from vprsnn_export.network.runs import Backend, SpikeRun
+    from vprsnn_export.network.runs import Backend
 
 Network = Checkpoint | FixedPointModel
 #: open(network, exported file or None, device, threads, progress) -> a backend running that network
@@ -42,38 +42,6 @@ class BackendKind:
     tags: frozenset[str] = frozenset()  # what it is: FLOAT, EXACT (the model's integers, bit for bit), SLOW, FILE
 
 
-@dataclass(frozen=True)
-class SessionBackend:
-    """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame)."""
-
-    session: object
-    name: str = "onnxruntime"
-
-    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        import numpy as np
-        import torch
-
-        from vprsnn_export.network.runs import SpikeRun
-        from vprsnn_export.targets.onnx_session import run_session
-
-        out = run_session(self.session, spikes)
-        counts = torch.from_numpy(np.asarray(out.counts, dtype=np.int64))
-        return SpikeRun(counts=counts, saturations=int(out.saturations.sum()), wprob=out.wprob)
-
-
-def check_graph(model: FixedPointModel, path: str | Path) -> None:
-    """ModelFileError unless the ONNX graph was exported from ``model`` (its source and bit width)."""
-    from vprsnn_export.targets.onnx_session import read_onnx
-
-    props = {p.key: p.value for p in read_onnx(path).metadata_props}
-    if props.get("vprsnn.source_sha256") != model.source_sha256 or props.get("vprsnn.bits") != str(model.bits):
-        raise ModelFileError(
-            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
-            f"{props.get('vprsnn.bits')} bits; model: source {model.source_sha256}, {model.bits} bits)",
-            path,
-        )
-
-
 def _float(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.network.dynamics import FloatNetwork
 
@@ -91,10 +59,17 @@ def _integer(network: Network, path: Path | None, device: torch.device, threads:
 
 
 def _onnx(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
-    from vprsnn_export.targets.onnx_session import session
+    """One session on the graph; ModelFileError unless it was exported from ``network`` (its source and bit width)."""
+    from vprsnn_export.targets.onnx_session import SessionBackend, read_onnx, session
 
     assert isinstance(network, FixedPointModel) and path is not None
-    check_graph(network, path)
+    props = {p.key: p.value for p in read_onnx(path).metadata_props}
+    if props.get("vprsnn.source_sha256") != network.source_sha256 or props.get("vprsnn.bits") != str(network.bits):
+        raise ModelFileError(
+            f"this graph was not exported from the given model (graph: source {props.get('vprsnn.source_sha256')}, "
+            f"{props.get('vprsnn.bits')} bits; model: source {network.source_sha256}, {network.bits} bits)",
+            path,
+        )
     return SessionBackend(session(path, threads))
 
 
@@ -113,27 +88,20 @@ def _reference(
 FLOAT, EXACT, BASELINE, SLOW, FILE = "float", "exact integer", "baseline", "slow", "file"
 
 BACKENDS: Registry[BackendKind] = Registry("--backend")
-for kind in (
-    BackendKind("float", Checkpoint, _float, "the float network (a checkpoint)", tags=frozenset({FLOAT})),
-    BackendKind(
-        "integer",
-        FixedPointModel,
-        _integer,
-        "the integer simulator (a fixed-point model)",
-        tags=frozenset({EXACT, BASELINE}),
-    ),
-    BackendKind(
+for name, runs, opener, description, needs, tags in (
+    ("float", Checkpoint, _float, "the float network (a checkpoint)", None, {FLOAT}),
+    ("integer", FixedPointModel, _integer, "the integer simulator (a fixed-point model)", None, {EXACT, BASELINE}),
+    (
         "reference",
         FixedPointModel,
         _reference,
         "the reference stepper: the slow oracle, one step at a time",
-        tags=frozenset({EXACT, SLOW}),
-    ),  # fmt: skip
-    BackendKind(
-        "onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx", frozenset({EXACT, FILE})
+        None,
+        {EXACT, SLOW},
     ),
+    ("onnx", FixedPointModel, _onnx, "the graph exported from the model", "--onnx", {EXACT, FILE}),
 ):
-    BACKENDS.register(kind)
+    BACKENDS.register(BackendKind(name, runs, opener, description, needs, frozenset(tags)))
 
 
 def tagged(*tags: str) -> tuple[BackendKind, ...]:

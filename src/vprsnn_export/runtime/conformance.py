@@ -30,14 +30,8 @@ from vprsnn_export.targets.registry import TARGETS, WriteOptions
 from .backends import BASELINE, EXACT, SLOW, Network, open_backend, tagged
 from .results import Comparison, ConformanceResult
 
-#: The SpikeRun fields compared exactly, and the name each has in the check's label.
-RUN_FIELDS = {
-    "raster": "raster",
-    "counts": "counts",
-    "candidates_per_step": "candidates",
-    "final_voltage": "final_voltage",
-    "saturations": "saturations",
-}
+#: The SpikeRun fields compared exactly (named in the check's label without "_per_step").
+RUN_FIELDS = ("raster", "counts", "candidates_per_step", "final_voltage", "saturations")
 
 
 def as_array(value: Any) -> np.ndarray:
@@ -84,8 +78,10 @@ def distribution_comparison(
 def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun) -> list[Comparison]:
     """Exact comparisons of every SpikeRun field both runs report; the W+Prob distributions within rounding."""
     checks = [
-        exact_comparison(f"{prefix}: {label}", a_name, getattr(a, name), b_name, getattr(b, name))
-        for name, label in RUN_FIELDS.items()
+        exact_comparison(
+            f"{prefix}: {name.removesuffix('_per_step')}", a_name, getattr(a, name), b_name, getattr(b, name)
+        )
+        for name in RUN_FIELDS
         if getattr(a, name) is not None and getattr(b, name) is not None
     ]
     if a.wprob is not None and b.wprob is not None:
@@ -117,7 +113,8 @@ def wprob_readout(source: Network) -> Callable[[np.ndarray], np.ndarray]:
 class Contender:
     """A backend checked against the baseline, under the label its checks carry: on the first ``n_queries``
     presentations only (the slow reference stepper); ``written``/``read_back``, the model written to a file and
-    the one read back, are compared integer by integer first."""
+    the one read back, are compared integer by integer first; ``runs_on`` names the backend in its checks (None:
+    the backend's own name; a read-back model runs on the project's simulators)."""
 
     target: str  # "reference" or a registered target's name
     label: str
@@ -125,6 +122,7 @@ class Contender:
     n_queries: int | None = None
     written: FixedPointModel | None = None
     read_back: FixedPointModel | None = None
+    runs_on: str | None = None
 
 
 def read_back(target: str, path: Path, written: Network | None, device: torch.device | None = None) -> Contender:
@@ -135,22 +133,11 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     rebuilt = entry.read(Path(path))
     if not isinstance(rebuilt, (Checkpoint, FixedPointModel)):
         return Contender(target, entry.label, rebuilt)
-    runs_on = "simulator" if isinstance(rebuilt, FixedPointModel) else "float network"
-    backend = _Renamed(open_backend(rebuilt, device=device)[1], f"{entry.title} model on the {runs_on}")
+    runs_on = f"{entry.title} model on the {'simulator' if isinstance(rebuilt, FixedPointModel) else 'float network'}"
+    contender = Contender(target, entry.label, open_backend(rebuilt, device=device)[1], runs_on=runs_on)
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
-        return Contender(target, entry.label, backend, written=written, read_back=rebuilt)
-    return Contender(target, entry.label, backend)
-
-
-@dataclass(frozen=True)
-class _Renamed:
-    """A backend under another name (the read-back models run on the project's simulators)."""
-
-    inner: Backend
-    name: str
-
-    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        return self.inner.run(spikes, record=record)
+        return dataclasses.replace(contender, written=written, read_back=rebuilt)
+    return contender
 
 
 def compare_backends(
@@ -182,7 +169,7 @@ def compare_backends(
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
             base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))
-        checks += compare_runs(contender.label, baseline.name, base, contender.backend.name, run)
+        checks += compare_runs(contender.label, baseline.name, base, contender.runs_on or contender.backend.name, run)
     return checks
 
 

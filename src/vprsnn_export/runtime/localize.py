@@ -150,21 +150,11 @@ def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, con
 
 def network_part(network: Checkpoint | FixedPointModel, neurons: slice) -> Checkpoint | FixedPointModel:
     """The network of some consecutive modules' neurons alone (their weights, thresholds and S^R rows)."""
-    if isinstance(network, Checkpoint):
-        return dataclasses.replace(
-            network,
-            weights=network.weights[:, neurons],
-            thresholds=network.thresholds[neurons],
-            calibration=network.calibration[neurons],
-        )
-    return dataclasses.replace(
-        network,
-        weight_mantissa=network.weight_mantissa[:, neurons],
-        scale_multiplier=network.scale_multiplier[neurons],
-        threshold=network.threshold[neurons],
-        calibration=network.calibration[neurons],
-        float_calibration=network.float_calibration[neurons],
-    )
+    is_float = isinstance(network, Checkpoint)
+    weights = "weights" if is_float else "weight_mantissa"  # (inputs, neurons): the columns
+    rows = ("thresholds",) if is_float else ("scale_multiplier", "threshold", "float_calibration")
+    part = {name: getattr(network, name)[neurons] for name in (*rows, "calibration")}
+    return dataclasses.replace(network, **part, **{weights: getattr(network, weights)[:, neurons]})
 
 
 class Localizer:
@@ -579,16 +569,31 @@ def tracking_rows(
     """The tracking protocol beside the global one, per k of ``options``, on preprocessed frames (N, inputs) in
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
+
+    def row(protocol: str, k: int, decisions: list[Decision], events: float, seconds: float) -> TrackingRow:
+        """One protocol's row from its decisions (R@100P: the recall at precision 1 of their curve)."""
+        curve = calibration_curve(decisions, place_ids, truth)
+        index = curve.index_for(1.0)
+        return TrackingRow(
+            protocol=protocol,
+            k=k,
+            accuracy=float(np.mean(truth.correct(predicted_places(decisions), np.asarray(place_ids)))),
+            r_at_100p=0.0 if index is None else float(curve.recall[index]),
+            events_per_frame=float(events),
+            relocalisations=max(sum(d.search == "global" for d in decisions) - 1, 0),
+            ms_per_frame=1000 * seconds / max(len(decisions), 1),
+        )
+
     rows = []
     for k in options.ks:
         at_k = dataclasses.replace(options, ks=(k,))
         whole = Localizer(network, options=at_k, **backend)
         began = time.perf_counter()
-        point, decisions, curve = operating_point(whole, images, place_ids, precision=precision, truth=truth)
+        point, decisions, _ = operating_point(whole, images, place_ids, precision=precision, truth=truth)
         seconds = time.perf_counter() - began
         spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
         events = float(spikes) * network.calibration.shape[0] / max(len(decisions), 1)
-        rows.append(tracking_row("global", k, decisions, place_ids, truth, events, seconds))
+        rows.append(row("global", k, decisions, events, seconds))
         if point.threshold is None:
             raise InvalidValueError(
                 f"no confidence reaches precision {precision} at k={k} on these queries: the search window has no "
@@ -599,28 +604,5 @@ def tracking_rows(
         decisions = tracked.run_inputs(images)
         seconds = time.perf_counter() - began
         events = float(np.mean([d.events or 0 for d in decisions]))
-        rows.append(tracking_row(f"window {search.places}", k, decisions, place_ids, truth, events, seconds))
+        rows.append(row(f"window {search.places}", k, decisions, events, seconds))
     return rows
-
-
-def tracking_row(
-    protocol: str,
-    k: int,
-    decisions: list[Decision],
-    place_ids: np.ndarray,
-    truth: Truth,
-    events: float,
-    seconds: float,
-) -> TrackingRow:
-    """One protocol's :class:`TrackingRow` from its decisions (R@100P: the recall at precision 1 of their curve)."""
-    curve = calibration_curve(decisions, place_ids, truth)
-    index = curve.index_for(1.0)
-    return TrackingRow(
-        protocol=protocol,
-        k=k,
-        accuracy=float(np.mean(truth.correct(predicted_places(decisions), np.asarray(place_ids)))),
-        r_at_100p=0.0 if index is None else float(curve.recall[index]),
-        events_per_frame=float(events),
-        relocalisations=max(sum(d.search == "global" for d in decisions) - 1, 0),
-        ms_per_frame=1000 * seconds / max(len(decisions), 1),
-    )

@@ -164,6 +164,17 @@ class ModuleRow(JsonDataclass):
         return self.accuracy_k - self.float_accuracy_k
 
 
+def _family(data: Mapping[str, Any]) -> str:
+    """A comparison's family, from the keys its JSON object holds."""
+    return "distribution" if "max_abs_difference" in data else "array" if "n_elements" in data else "config"
+
+
+def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
+    """An older file's tolerance row: its kind ``decision agreement >= 95.0%`` (exact rows: None)."""
+    match = re.fullmatch(r"decision agreement >= ([0-9.]+)%", str(data.get("kind", "")))
+    return None if match is None else float(match.group(1)) / 100
+
+
 @dataclass(frozen=True)
 class Comparison(JsonDataclass):
     """One comparison of two implementations' outputs (``kind`` says how: "exact" or a bound).
@@ -189,10 +200,8 @@ class Comparison(JsonDataclass):
     max_abs_difference: float | None = field(
         default=None, metadata=json_options(omit=lambda c: c.family != "distribution")
     )
-    family: str = field(default="array", metadata=json_options(write=False, missing_from=lambda data: _family(data)))
-    tolerance: float | None = field(
-        default=None, metadata=json_options(omit="none", missing_from=lambda data: _stated_tolerance(data))
-    )
+    family: str = field(default="array", metadata=json_options(write=False, missing_from=_family))
+    tolerance: float | None = field(default=None, metadata=json_options(omit="none", missing_from=_stated_tolerance))
 
     # the keys each family writes, in this order
     __json_extra__ = ("passed",)
@@ -232,17 +241,6 @@ def _tolerance_row_identical(row: Comparison) -> bool:
     (``n_differences`` = 0) and its detail names no differing raster entry."""
     counted = _RASTER_DIFFERENCES.search(row.detail)
     return bool(row.n_elements) and row.n_differences == 0 and (counted is None or counted.group(1) == "0")
-
-
-def _family(data: Mapping[str, Any]) -> str:
-    """A comparison's family, from the keys its JSON object holds."""
-    return "distribution" if "max_abs_difference" in data else "array" if "n_elements" in data else "config"
-
-
-def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
-    """An older file's tolerance row: its kind ``decision agreement >= 95.0%`` (exact rows: None)."""
-    match = re.fullmatch(r"decision agreement >= ([0-9.]+)%", str(data.get("kind", "")))
-    return None if match is None else float(match.group(1)) / 100
 
 
 @dataclass(frozen=True)

@@ -88,8 +88,7 @@ class Predictions:
         writer = csv.DictWriter(buffer, fieldnames=FIELDS, lineterminator="\n")
         writer.writeheader()
         for row in self.rows():
-            truth = row["truth"]
-            row["truth"] = None if truth is None else " ".join(map(str, truth))
+            row["truth"] = None if row["truth"] is None else " ".join(map(str, row["truth"]))
             writer.writerow({k: "" if v is None else v for k, v in row.items()})
         return buffer.getvalue()
 

@@ -30,6 +30,7 @@ and the clip is skipped; otherwise every clip is counted.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,20 +48,12 @@ QUERY_CHUNK = 128  # presentations per chunk: bounds the (T, chunk, neurons) cur
 FLOAT32_EXACT = 1 << 24  # float32 holds every integer below 2**24 exactly
 
 
-def current_bound(model: FixedPointModel) -> int:
-    """Largest possible shifted current: max_j sum_i q_ij << shift (every input spiking)."""
-    return int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) << model.voltage_shift
-
-
 def matmul_dtype(model: FixedPointModel, device: torch.device) -> torch.dtype:
     """float32 when every current sum is below 2**24 on the CPU; float64 otherwise (exact below 2**53, beyond any
-    model that fits in memory: 2**47 / 255 inputs).
-
-    On CUDA float32 matmuls may run in TF32 (10-bit mantissa), so float64 is used there.
-    """
-    if current_bound(model) < FLOAT32_EXACT and device.type == "cpu":
-        return torch.float32
-    return torch.float64
+    model that fits in memory: 2**47 / 255 inputs), and on CUDA, where float32 matmuls may run in TF32 (10-bit
+    mantissa). The largest current: max_j sum_i q_ij << shift (every input spiking)."""
+    bound = int(model.weight_mantissa.astype(np.int64).sum(axis=0).max()) << model.voltage_shift
+    return torch.float32 if bound < FLOAT32_EXACT and device.type == "cpu" else torch.float64
 
 
 @dataclass(frozen=True)
@@ -142,10 +135,7 @@ class IntegerNetwork:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
         check_spikes(spikes, self.model.n_inputs)
-
-        def whole(part: torch.Tensor) -> SpikeRun:
-            return run_prepared(self.prepared, part, isolation=isolation, record=record)
-
+        whole = functools.partial(run_prepared, self.prepared, isolation=isolation, record=record)
         # chunks only when isolated: each presentation then starts from V = 0 (run_in_chunks)
         run = run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress and isolation, desc=self.name)
         self.saturations += run.saturations

@@ -144,9 +144,8 @@ def budget_table(modules: int, neurons: int, inputs: int, bits: tuple[int, ...])
 
 def model_budgets(model: FixedPointModel) -> list[CoreBudget]:
     """The budget of ``model`` itself (its modules, neurons per module, inputs and bits) on each chip family."""
-    group = model.config.network.n_neurons
     modules = module_count(len(model.reference_place_ids), model.config.train.module_size)
-    return budget_table(modules, group, model.n_inputs, (model.bits,))
+    return budget_table(modules, model.config.network.n_neurons, model.n_inputs, (model.bits,))
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vprsnn_export.config import Config
 from vprsnn_export.errors import ModelFileError
 from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, model_from_header
 from vprsnn_export.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
-from vprsnn_export.io.checkpoint import Checkpoint, validate_checkpoint
+from vprsnn_export.io.checkpoint import Checkpoint, check_header, validate_checkpoint
 from vprsnn_export.io.fileio import parse_json
 from vprsnn_export.targets.nir_target import EDGES, FORMAT, FORMAT_VERSION, NODES, PLAIN_EDGES, Source, effective_beta
 from vprsnn_export.targets.registry import load_file
@@ -45,10 +44,8 @@ def graph_to_source(graph, path: Path) -> Source:
         raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
     if int(meta.get("format_version", -1)) != FORMAT_VERSION:
         raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
-    edges = sorted(map(tuple, graph.edges))
-    expected = EDGES if "wta" in graph.nodes else PLAIN_EDGES
     missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
-    if missing or edges != sorted(expected):
+    if missing or sorted(map(tuple, graph.edges)) != sorted(EDGES if "wta" in graph.nodes else PLAIN_EDGES):
         raise ModelFileError(
             f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
         )
@@ -56,10 +53,8 @@ def graph_to_source(graph, path: Path) -> Source:
     if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
         raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
     header = parse_json(str(meta["header_json"]), "header_json")
-    weight = np.asarray(linear.weight).T
-    thresholds = np.asarray(lif.v_threshold)
     rebuild = fixed_point_from_graph if str(meta["kind"]) == "fixed-point" else checkpoint_from_graph
-    source = rebuild(header, meta, weight, thresholds, path)
+    source = rebuild(header, meta, np.asarray(linear.weight).T, np.asarray(lif.v_threshold), path)
     check_dynamics(lif, effective_beta(source), float(meta["dt"]), path)
     return source
 
@@ -103,16 +98,12 @@ def checkpoint_from_graph(
 ) -> Checkpoint:
     if header.get("format") != CHECKPOINT_FORMAT:
         raise ModelFileError(f"the embedded header is not a checkpoint header ({header.get('format')!r})", path)
+    config, traversals, data, history = check_header(header, path)  # the checkpoint reader's own checks
+    calibration, ids = (np.asarray(meta[name]).astype(np.int64) for name in ("calibration", "reference_place_ids"))
+    weights = np.ascontiguousarray(weight.astype(np.float32))
+    version = str(header.get("package_version", "unknown"))
     ckpt = Checkpoint(
-        config=Config.from_dict(header["config"]),
-        weights=np.ascontiguousarray(weight.astype(np.float32)),
-        thresholds=thresholds.astype(np.float32),
-        calibration=np.asarray(meta["calibration"]).astype(np.int64),
-        reference_place_ids=np.asarray(meta["reference_place_ids"]).astype(np.int64),
-        reference_traversals=list(header["reference_traversals"]),
-        data=dict(header.get("data", {})),
-        history=list(header.get("history", [])),
-        version=str(header.get("package_version", "unknown")),
+        config, weights, thresholds.astype(np.float32), calibration, ids, traversals, data, history, version
     )
     validate_checkpoint(ckpt, path)
     return ckpt

@@ -104,9 +104,7 @@ def wta_rule(source: Source) -> str:
     if not source.config.network.wta:
         return "off: every neuron over threshold spikes"
     score = (
-        "a_j * m_j (integer current times the neuron's scale multiplier)"
-        if isinstance(source, FixedPointModel)
-        else "I_j"
+        "I_j" if isinstance(source, Checkpoint) else "a_j * m_j (integer current times the neuron's scale multiplier)"
     )
     return (
         f"hard WTA: of the neurons with v_j > v_threshold_j at a step, only the one with the largest {score} "
@@ -132,25 +130,20 @@ def populations(source: Source) -> list[dict[str, Any]]:
     linear / lif pair, trained on the reference places [region start, region stop) (indices into
     metadata['reference_place_ids']); a single network is one population.
     """
-    n_places = len(source.reference_place_ids)
     group = source.config.network.n_neurons  # one module's neurons
-    regions = module_regions(n_places, source.config.train.module_size)
+    regions = module_regions(len(source.reference_place_ids), source.config.train.module_size)
     thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)
-    rows = []
-    for m, (start, stop) in enumerate(regions.tolist()):
-        own = thresholds[m * group : (m + 1) * group]
-        rows.append(
-            {
-                "name": f"module_{m}",
-                "neurons": [m * group, (m + 1) * group],
-                "places": [int(start), int(stop)],
-                "place_ids": [int(source.reference_place_ids[start]), int(source.reference_place_ids[stop - 1])]
-                if stop > start
-                else [],
-                "v_threshold_range": [float(own.min()), float(own.max())],
-            }
-        )
-    return rows
+    ids = source.reference_place_ids
+    return [
+        {
+            "name": f"module_{m}",
+            "neurons": [m * group, (m + 1) * group],
+            "places": [int(start), int(stop)],
+            "place_ids": [int(ids[start]), int(ids[stop - 1])] if stop > start else [],
+            "v_threshold_range": [float(f(thresholds[m * group : (m + 1) * group])) for f in (np.min, np.max)],
+        }
+        for m, (start, stop) in enumerate(regions.tolist())
+    ]
 
 
 def readout_rule(source: Source) -> dict[str, Any]:
@@ -253,8 +246,8 @@ def inhibition_weights(thresholds: np.ndarray, strength: float) -> np.ndarray:
     Each other neuron's spike at step t - 1 lowers neuron j's input at step t by ``strength``
     of j's own threshold, so the strength means the same in float and mantissa units.
     """
-    n = thresholds.shape[0]
-    return (-strength * np.asarray(thresholds, dtype=np.float64)[:, None] * (1.0 - np.eye(n))).astype(np.float32)
+    off_diagonal = 1.0 - np.eye(thresholds.shape[0])
+    return (-strength * np.asarray(thresholds, dtype=np.float64)[:, None] * off_diagonal).astype(np.float32)
 
 
 def build_graph(
@@ -285,7 +278,6 @@ def build_graph(
     else:
         raise InvalidValueError(f"cannot export a {type(source).__name__} to NIR")
     n_out, n_in = weight.shape
-    inhibition = inhibition_weights(thresholds, wta_inhibition)
     nodes = {
         "input": nir.Input(input_type=np.array([n_in])),
         "linear": nir.Linear(weight=weight),
@@ -293,7 +285,7 @@ def build_graph(
         "output": nir.Output(output_type=np.array([n_out])),
     }
     if wta_node:
-        nodes["wta"] = nir.Linear(weight=inhibition)
+        nodes["wta"] = nir.Linear(weight=inhibition_weights(thresholds, wta_inhibition))
     metadata = graph_metadata(source, source_sha256, wta_inhibition if wta_node else None, dt)
     return nir.NIRGraph(nodes=nodes, edges=list(EDGES if wta_node else PLAIN_EDGES), metadata=metadata)
 

@@ -121,14 +121,8 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         for name, value in zip(names, values, strict=True):
             pieces[name].append(value)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
-    raster = joined.get("raster")
-    return OnnxRun(
-        counts=joined["counts"],
-        saturations=joined["saturations"],
-        wprob=joined.get("wprob"),
-        raster=None if raster is None else raster.transpose(1, 0, 2),
-        seconds=seconds,
-    )
+    raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
+    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster, seconds)
 
 
 def run_onnx_outputs(
@@ -144,13 +138,32 @@ def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class OnnxBackend:
-    """An exported graph on onnxruntime as a :class:`~vprsnn_export.network.runs.Backend`.
+class SessionBackend:
+    """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame), as a
+    :class:`~vprsnn_export.network.runs.Backend`.
 
     The run carries the counts, the total saturations, the W+Prob distribution when the
     graph has that head, and the raster when it has that output (``record`` cannot add
     an output the graph lacks).
     """
+
+    session: object
+    batch: int = 128
+    name: str = "onnxruntime"
+
+    def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
+        out = run_session(self.session, spikes, self.batch)
+        return SpikeRun(
+            counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
+            raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),
+            saturations=int(out.saturations.sum()),
+            wprob=out.wprob,
+        )
+
+
+@dataclass
+class OnnxBackend:
+    """An exported graph on onnxruntime, opened for each run (:class:`SessionBackend`)."""
 
     path: Path
     threads: int | None = None
@@ -158,10 +171,4 @@ class OnnxBackend:
     name: str = "onnxruntime"
 
     def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        out = run_onnx_outputs(self.path, spikes, batch=self.batch, threads=self.threads)
-        return SpikeRun(
-            counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
-            raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),
-            saturations=int(out.saturations.sum()),
-            wprob=out.wprob,
-        )
+        return SessionBackend(session(self.path, self.threads), self.batch, self.name).run(spikes)

@@ -54,13 +54,12 @@ def float_consumer_note(network: Network) -> str:
 def nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
     """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
     wta_node, inhibition = options.wta_node, options.inhibition
-    is_float = isinstance(network, Checkpoint)
     thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
     uniform = bool(np.all(thresholds == thresholds[0]))
     ensemble = ensemble_sentence(network)
     arithmetic = (
         "the float network's own arithmetic"
-        if is_float
+        if isinstance(network, Checkpoint)
         else "float arithmetic on integer mantissas (no round-toward-zero decay, no 24-bit saturation)"
     )
     inhibit = (

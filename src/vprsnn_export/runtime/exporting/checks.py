@@ -92,9 +92,8 @@ def check_presentations(
         if not origin:
             raise InvalidValueError("the model names no data source: give --data")
         dataset = load_dataset(origin, [query], cfg.preprocess, subset=subset, places=places, progress=progress)
-        images, ids = dataset.traversal(query), dataset.place_ids
-        if samples > 0:
-            images, ids = images[:samples], ids[:samples]
+        first = slice(samples if samples > 0 else None)  # the first ``samples`` queries (0: all)
+        images, ids = dataset.traversal(query)[first], dataset.place_ids[first]
         return query_spikes(images, ids, query, cfg), f"{len(ids)} '{query}' queries from {dataset.source}"
     n = samples if samples > 0 else 16
     rng = np.random.default_rng(cfg.seed)

@@ -128,10 +128,12 @@ def export_and_check(
     return result
 
 
-def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
+def contained_file(folder: Path, entry: WrittenFile, recorded_folder: str) -> WrittenFile:
     """The file export.json lists, inside ``folder``: a path relative to the folder (or, as export.json files
-    of earlier versions recorded it, to the working directory, starting with the recorded folder).
-    ModelFileError for an absolute path, a ``..`` part, or a path (symbolic links followed) outside ``folder``."""
+    of earlier versions recorded it, to the working directory, starting with the recorded folder), checked against
+    its sha256. ModelFileError for an absolute path, a ``..`` part, a path (symbolic links followed) outside
+    ``folder``, a missing file or one that differs from what export wrote."""
+    listed = entry.path
     base = Path(recorded_folder)  # pathlib drops "." parts: a relative base starts with a name or ".."
     earlier = base.parts and base.parts[0] != ".." and not base.is_absolute()
     if earlier and listed.parts[: len(base.parts)] == base.parts:
@@ -147,8 +149,12 @@ def contained_file(folder: Path, listed: Path, recorded_folder: str) -> Path:
         wrong = f"{listed}, which leaves its folder"
     elif not inside:
         wrong = f"{listed}, which resolves outside its folder"
+    elif not path.is_file():
+        wrong = f"{entry.path}, which is missing"
+    elif sha256_file(path) != entry.sha256:
+        raise ModelFileError(f"{entry.path} differs from what export wrote (sha256 mismatch)", folder)
     else:
-        return path
+        return WrittenFile(path, entry.sha256)
     raise ModelFileError(f"{MANIFEST_NAME} lists {wrong}", folder)
 
 
@@ -190,16 +196,6 @@ def read_export(folder: str | Path) -> ExportResult:
     except MANIFEST_ERRORS as exc:
         raise ModelFileError(f"corrupt {MANIFEST_NAME} ({exc})", manifest) from None
     recorded = str(data.get("folder", ""))
-    checked: dict[str, tuple[WrittenFile, ...]] = {}
-    for target, entries in files.items():
-        paths = []
-        for entry in entries:
-            path = contained_file(folder, entry.path, recorded)
-            if not path.is_file():
-                raise ModelFileError(f"{MANIFEST_NAME} lists {entry.path}, which is missing", folder)
-            if sha256_file(path) != entry.sha256:
-                raise ModelFileError(f"{entry.path} differs from what export wrote (sha256 mismatch)", folder)
-            paths.append(WrittenFile(path, entry.sha256))
-        checked[target] = tuple(paths)
+    checked = {target: tuple(contained_file(folder, e, recorded) for e in entries) for target, entries in files.items()}
     # the paths returned are the files just checked, under the folder as given here (not as recorded)
     return replace(result, folder=folder, files=checked)

@@ -116,9 +116,8 @@ def consumer_statements(
     source: ExportSource, model: FixedPointModel | None, targets: Sequence[str], wta_node: bool, inhibition: float
 ) -> dict[str, str]:
     """What each consumer of each written file computes, in one sentence or three (each target's ``statement``)."""
-    options = WriteOptions(source.sha256, inhibition, wta_node)
     notes = {
-        entry.name: entry.statement(source.network, model, options)
+        entry.name: entry.statement(source.network, model, WriteOptions(source.sha256, inhibition, wta_node))
         for entry in TARGETS.values()
         if entry.name in targets and (model is not None or not entry.integer_only)
     }

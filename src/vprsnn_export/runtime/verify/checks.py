@@ -25,27 +25,20 @@ from ..measurements import (
     WeightHistogram,
 )
 
-#: Default tolerances: a *drop* of at most this much from float (fractions, 0.01 = 1 point).
-DEFAULT_TOLERANCES: dict[str, float | None] = {
-    "accuracy": 0.02,  # accuracy of Standard, Weighted and W+Prob at k=1
-    "r_at_100p": 0.01,  # R@100P of W+Prob at every k (k > 1 only on consecutive queries)
-    "auc_pr": None,  # AUC-PR of W+Prob at the largest k (off by default)
-    "p_at_100r": None,  # P@100R of every strategy at k=1 (equals accuracy; off by default)
-    "winner_agreement": None,  # minimum fraction of steps with the float winner (off by default)
-    "top1_agreement": None,  # minimum W+Prob k=1 top-1 agreement with float (off by default)
-    "saturations": None,  # maximum saturation events on the queries (off by default)
-    "query_slack": 1,  # a metric drop worth at most this many queries (n / Q) always passes
+#: Each tolerance's default (a *drop* of at most this much from float: fractions, 0.01 = 1 point; None: off) and
+#: what it means (the report's words).
+TOLERANCES: dict[str, tuple[float | None, str]] = {
+    "accuracy": (0.02, "accuracy drop of every strategy at k=1"),  # Standard, Weighted and W+Prob
+    "r_at_100p": (0.01, "R@100P drop of W+Prob at every k (k > 1 only on consecutive queries)"),
+    "auc_pr": (None, "AUC-PR drop of W+Prob at the largest k (k = 1 on non-consecutive queries)"),
+    "p_at_100r": (None, "P@100R drop of every strategy at k=1"),  # equals accuracy
+    "winner_agreement": (None, "fraction of time steps with the float winner, at least"),
+    "top1_agreement": (None, "W+Prob k=1 top-1 agreement with float, at least"),
+    "saturations": (None, "voltage saturation events on the queries, at most"),
+    "query_slack": (1, "metric drops of at most this many queries' worth (n / Q) pass whatever the limit"),
 }
-TOLERANCE_MEANING = {
-    "accuracy": "accuracy drop of every strategy at k=1",
-    "r_at_100p": "R@100P drop of W+Prob at every k (k > 1 only on consecutive queries)",
-    "auc_pr": "AUC-PR drop of W+Prob at the largest k (k = 1 on non-consecutive queries)",
-    "p_at_100r": "P@100R drop of every strategy at k=1",
-    "winner_agreement": "fraction of time steps with the float winner, at least",
-    "top1_agreement": "W+Prob k=1 top-1 agreement with float, at least",
-    "saturations": "voltage saturation events on the queries, at most",
-    "query_slack": "metric drops of at most this many queries' worth (n / Q) pass whatever the limit",
-}
+DEFAULT_TOLERANCES: dict[str, float | None] = {key: default for key, (default, _) in TOLERANCES.items()}
+TOLERANCE_MEANING = {key: meaning for key, (_, meaning) in TOLERANCES.items()}
 OFF = ("off", "none", "")
 
 
@@ -157,9 +150,9 @@ def module_rows(
     largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
     n_modules = len(regions)
     top = max(float_scored.ks)
-    accuracy = {
-        name: [side.regions(regions, k) for k in (1, top)] for name, side in (("float", float_scored), ("int", scored))
-    }
+    (float_1, float_k), (int_1, int_k) = (
+        [side.regions(regions, k) for k in (1, top)] for side in (float_scored, scored)
+    )
     n, timesteps, _ = float_raster.shape
     a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
@@ -172,15 +165,15 @@ def module_rows(
             last_place=region.last_place,
             n_queries=region.n_queries,
             k=int(top),
-            float_accuracy=accuracy["float"][0][m].accuracy,
-            accuracy=accuracy["int"][0][m].accuracy,
-            float_accuracy_k=accuracy["float"][1][m].accuracy,
-            accuracy_k=accuracy["int"][1][m].accuracy,
+            float_accuracy=region.accuracy,
+            accuracy=int_1[m].accuracy,
+            float_accuracy_k=float_k[m].accuracy,
+            accuracy_k=int_k[m].accuracy,
             winner_agreement=float(agreement[m]),
             spikes_float=int(spikes_float[m]),
             spikes=int(spikes[m]),
         )
-        for m, region in enumerate(accuracy["float"][0])
+        for m, region in enumerate(float_1)
     )
 
 
