@@ -80,12 +80,10 @@ class Nodes(NamedTuple):
     nodes: list[onnx.NodeProto]
     inits: list[TensorProto]
 
-    def const(self, **values: np.ndarray | np.floating | int | np.integer | list[int]) -> None:
-        """Initializers, in the order given: an array or a float as it is, an integer an int64 scalar, a list an int64
-        vector."""
-        for name, value in values.items():
-            array = value if isinstance(value, np.ndarray | np.floating) else np.asarray(value, dtype=np.int64)
-            self.inits.append(numpy_helper.from_array(np.asarray(array), name=name))
+    def const(self, name: str, value: np.ndarray | np.floating | int | np.integer | list[int]) -> None:
+        """An initializer: an array or a float as it is, an integer an int64 scalar, a list an int64 vector."""
+        array = value if isinstance(value, np.ndarray | np.floating) else np.asarray(value, dtype=np.int64)
+        self.inits.append(numpy_helper.from_array(np.asarray(array), name=name))
 
     def op(self, op_type: str, inputs: list[str], output: str, **attributes: Any) -> None:
         self.nodes.append(helper.make_node(op_type, inputs, [output], **attributes))
@@ -130,12 +128,15 @@ def neuron_nodes(model: FixedPointModel) -> Nodes:
     the index of a neuron within its WTA group (config.wta_group: the ensemble, or one module's n neurons)
     """
     g = Nodes([], [])
-    g.const(threshold_stored=smallest_unsigned(model.threshold), vth_scale=1 << model.voltage_shift)
+    g.const("threshold_stored", smallest_unsigned(model.threshold))
+    g.const("vth_scale", 1 << model.voltage_shift)
     g.op("Cast", ["threshold_stored"], "threshold_wide", to=INT64)
     g.op("Mul", ["threshold_wide", "vth_scale"], "vth")
     if model.config.network.wta:
-        g.const(multiplier_stored=smallest_unsigned(model.scale_multiplier), index_start=0)
-        g.const(index_limit=wta_group(model.config, model.n_neurons), index_step=1)
+        g.const("multiplier_stored", smallest_unsigned(model.scale_multiplier))
+        g.const("index_start", 0)
+        g.const("index_limit", wta_group(model.config, model.n_neurons))
+        g.const("index_step", 1)
         g.op("Cast", ["multiplier_stored"], "multiplier", to=INT64)
         g.op("Range", ["index_start", "index_limit", "index_step"], "neuron_index")
     return g
@@ -148,8 +149,13 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     """
     n = model.n_neurons
     g = Nodes([], [])
-    g.const(keep=(1 << DECAY_BITS) - model.decay_dv, unity=1 << DECAY_BITS, shift=1 << model.voltage_shift)
-    g.const(vmin=-model.voltage_limit, vmax=model.voltage_limit, zero=0, axis1=[1])
+    g.const("keep", (1 << DECAY_BITS) - model.decay_dv)
+    g.const("unity", 1 << DECAY_BITS)
+    g.const("shift", 1 << model.voltage_shift)
+    g.const("vmin", -model.voltage_limit)
+    g.const("vmax", model.voltage_limit)
+    g.const("zero", 0)
+    g.const("axis1", [1])
     g.op("Cast", ["a_t"], "a", to=INT64)
     g.op("Mul", ["v_in", "keep"], "v_keep")
     g.op("Div", ["v_keep", "unity"], "v_decayed")
@@ -165,7 +171,9 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     g.op("Where", ["cand", "zero", "v_clip"], "v_out")
     if model.config.network.wta:
         group = wta_group(model.config, n)
-        g.const(minus_one=-1, group_shape=[0, n // group, group], flat_state=[0, n])  # group_shape: (batch, M, n)
+        g.const("minus_one", -1)
+        g.const("group_shape", [0, n // group, group])  # (batch, M, n)
+        g.const("flat_state", [0, n])
         g.op("Mul", ["a", "multiplier"], "score")
         g.op("Where", ["cand", "score", "minus_one"], "masked")
         g.op("Reshape", ["masked", "group_shape"], "grouped")
@@ -201,7 +209,7 @@ def weight_nodes(model: FixedPointModel) -> Nodes:
     q, bits = model.weight_mantissa, model.bits
     g = Nodes([], [])
     if bits == 8:
-        g.const(weight_mantissa=q.astype(np.uint8))
+        g.const("weight_mantissa", q.astype(np.uint8))
         return g
     packed = pack_bits(q, bits)
     if bits in NATIVE_SUB_BYTE:
@@ -210,10 +218,15 @@ def weight_nodes(model: FixedPointModel) -> Nodes:
         )
         g.op("Cast", ["weight_packed"], "weight_mantissa", to=TensorProto.UINT8)
         return g
-    g.const(weight_packed=packed[:, None], bit_positions=np.arange(8, dtype=np.uint8)[None, :])
-    g.const(bit_one=np.array(1, dtype=np.uint8), stream_flat=[-1], stream_start=[0], stream_end=[q.size * bits])
-    g.const(digit_shape=[q.size, bits], place_values=(1 << np.arange(bits, dtype=np.uint8))[:, None].astype(np.uint8))
-    g.const(weight_shape=list(q.shape))
+    g.const("weight_packed", packed[:, None])
+    g.const("bit_positions", np.arange(8, dtype=np.uint8)[None, :])
+    g.const("bit_one", np.array(1, dtype=np.uint8))
+    g.const("stream_flat", [-1])
+    g.const("stream_start", [0])
+    g.const("stream_end", [q.size * bits])
+    g.const("digit_shape", [q.size, bits])
+    g.const("place_values", (1 << np.arange(bits, dtype=np.uint8))[:, None].astype(np.uint8))
+    g.const("weight_shape", list(q.shape))
     g.op("BitShift", ["weight_packed", "bit_positions"], "bit_shifted", direction="RIGHT")
     g.op("BitwiseAnd", ["bit_shifted", "bit_one"], "bit_plane")
     g.op("Reshape", ["bit_plane", "stream_flat"], "bit_stream")
@@ -228,7 +241,11 @@ def weight_nodes(model: FixedPointModel) -> Nodes:
 def currents_nodes(model: FixedPointModel) -> Nodes:
     """A[T, batch, neurons] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q); initial state zeros."""
     g = weight_nodes(model)
-    g.const(flat_shape=[-1, model.n_inputs], neurons=[model.n_neurons], first_two=[0], two=[2], one=[1])
+    g.const("flat_shape", [-1, model.n_inputs])
+    g.const("neurons", [model.n_neurons])
+    g.const("first_two", [0])
+    g.const("two", [2])
+    g.const("one", [1])
     g.op("Shape", [INPUT], "spike_shape")
     g.op("Slice", ["spike_shape", "first_two", "two"], "time_batch")
     g.op("Slice", ["spike_shape", "one", "two"], "batch")
@@ -261,10 +278,13 @@ def calibration_nodes(counts: np.ndarray) -> Nodes:
     where = np.flatnonzero(flat)
     values, positions = smallest_unsigned(flat[where]), smallest_unsigned(where)
     if dense.nbytes <= values.nbytes + positions.nbytes:
-        g.const(s_r_counts=dense)
+        g.const("s_r_counts", dense)
         g.op("Cast", ["s_r_counts"], "s_r", to=DOUBLE)
         return g
-    g.const(s_r_values=values, s_r_positions=positions[:, None], s_r_size=[flat.size], s_r_shape=list(counts.shape))
+    g.const("s_r_values", values)
+    g.const("s_r_positions", positions[:, None])
+    g.const("s_r_size", [flat.size])
+    g.const("s_r_shape", list(counts.shape))
     g.op("ConstantOfShape", ["s_r_size"], "s_r_zeros", value=zeros(np.float64))
     g.op("Cast", ["s_r_values"], "s_r_nonzero", to=DOUBLE)
     g.op("Cast", ["s_r_positions"], "s_r_index", to=INT64)
@@ -297,10 +317,13 @@ def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> Nodes:
         g = calibration_nodes(np.round(matrix).astype(np.int64))
     else:
         g = Nodes([], [])
-        g.const(s_r_weighted=matrix)
+        g.const("s_r_weighted", matrix)
         g.op("Identity", ["s_r_weighted"], "s_r")
-    g.const(involvement=np.float64(float(model.config.assignment.gamma) * model.calibration.shape[1]), axis0_outer=[0])
-    g.const(f_zero=np.float64(0.0), f_one=np.float64(1.0), axis1_outer=[1])
+    g.const("involvement", np.float64(float(model.config.assignment.gamma) * model.calibration.shape[1]))
+    g.const("axis0_outer", [0])
+    g.const("f_zero", np.float64(0.0))
+    g.const("f_one", np.float64(1.0))
+    g.const("axis1_outer", [1])
     g.op("Greater", ["s_r", "f_zero"], "s_r_positive")
     g.op("Cast", ["s_r_positive"], "s_r_involved", to=DOUBLE)
     g.op("ReduceSum", ["s_r_involved", "axis1_outer"], "omega", keepdims=1)
@@ -328,10 +351,11 @@ def wprob_nodes(model: FixedPointModel) -> Nodes:
     """
     matrix, keep = readout_calibration(model)
     g = readout_matrix_nodes(model, matrix)
-    g.const(uniform=np.float64(1.0 / model.calibration.shape[1]), i_zero=0)
+    g.const("uniform", np.float64(1.0 / model.calibration.shape[1]))
+    g.const("i_zero", 0)
     counts = "counts"
     if keep is not None:  # an ensemble: the silenced neurons' counts do not reach the readout
-        g.const(readout_keep=keep.astype(np.int64))
+        g.const("readout_keep", keep.astype(np.int64))
         g.op("Mul", ["counts", "readout_keep"], "readout_counts")
         counts = "readout_counts"
     g.op("Cast", [counts], "sq", to=DOUBLE)
