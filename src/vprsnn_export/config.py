@@ -203,22 +203,25 @@ class Config:
 
     def __post_init__(self) -> None:
         _check_ranges(self, "")
-        side = self.preprocess.image_size
-        if self.preprocess.channels not in CHANNELS:
-            raise InvalidValueError(
-                f"config.preprocess.channels: {self.preprocess.channels!r} is not one of {', '.join(CHANNELS)}"
-            )
-        if self.preprocess.dog_sigma_centre >= self.preprocess.dog_sigma_surround:
+        pre, home = self.preprocess, self.homeostasis
+        for key, value, allowed in (
+            ("preprocess.channels", pre.channels, CHANNELS.names()),
+            ("encoder.generator", self.encoder.generator, GENERATORS),
+            ("network.wta_scope", self.network.wta_scope, WTA_SCOPES),
+        ):
+            if value not in allowed:
+                raise InvalidValueError(f"config.{key}: {value!r} is not one of {', '.join(allowed)}")
+        if pre.dog_sigma_centre >= pre.dog_sigma_surround:
             raise InvalidValueError("config.preprocess.dog_sigma_centre must be below dog_sigma_surround")
-        if side % self.preprocess.patch_size:
+        if pre.image_size % pre.patch_size:
             raise InvalidValueError(
-                f"preprocess.image_size {side} is not a multiple of preprocess.patch_size {self.preprocess.patch_size}"
+                f"preprocess.image_size {pre.image_size} is not a multiple of preprocess.patch_size {pre.patch_size}"
             )
-        inputs = self.preprocess.n_inputs
+        inputs = pre.n_inputs
         if self.network.n_inputs != inputs:
             raise InvalidValueError(
-                f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "
-                f"image_size**2 = {inputs} (preprocess.channels = {self.preprocess.channels!r})"
+                f"network.n_inputs {self.network.n_inputs} must equal {pre.n_channels} channel(s) x "
+                f"image_size**2 = {inputs} (preprocess.channels = {pre.channels!r})"
             )
         gain = self.encoder.input_gain
         if gain and (len(gain) != inputs or not all(math.isfinite(g) and g >= 0 for g in gain) or not any(gain)):
@@ -226,18 +229,8 @@ class Config:
                 f"config.encoder.input_gain: expected {inputs} finite non-negative gains, not all 0, got {len(gain)} "
                 "values" + ("" if len(gain) != inputs else " with a negative, non-finite or all-zero gain")
             )
-        if self.encoder.generator not in GENERATORS:
-            raise InvalidValueError(
-                f"config.encoder.generator: {self.encoder.generator!r} is not one of {', '.join(GENERATORS)}"
-            )
-        if self.network.wta_scope not in WTA_SCOPES:
-            raise InvalidValueError(
-                f"config.network.wta_scope: {self.network.wta_scope!r} is not one of {', '.join(WTA_SCOPES)}"
-            )
-        if self.homeostasis.theta_min > self.homeostasis.theta_max:
-            raise InvalidValueError(
-                f"homeostasis.theta_min {self.homeostasis.theta_min} exceeds theta_max {self.homeostasis.theta_max}"
-            )
+        if home.theta_min > home.theta_max:
+            raise InvalidValueError(f"homeostasis.theta_min {home.theta_min} exceeds theta_max {home.theta_max}")
 
     def to_dict(self) -> dict[str, Any]:
         """Every section, except an :data:`OPTIONAL_SECTIONS` one at its defaults (left out, read back as them)."""
