@@ -24,12 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arguments import (
-    MAX_PLACE_ID,
-    ascii_uint,
-    check_place_ids,
-    require_type,
-)  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
+# MAX_PLACE_ID: ids beyond 2**53 are lost in float64
+from ..arguments import MAX_PLACE_ID, ascii_uint, check_place_ids, require_type
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes

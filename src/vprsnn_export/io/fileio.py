@@ -157,14 +157,10 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     folder = next((p for p in target.absolute().parents if p.is_dir()), Path("/"))  # the nearest existing one
     lock_path = folder / f".{target.name or 'output'}.lock"
     keyed = _keyed_lock(target)  # the same file whichever of the output's folders exist yet
-    fd = _acquire(lock_path, target)
-    try:
+    with contextlib.ExitStack() as descriptors:  # closed last, the keyed one first
+        descriptors.callback(os.close, _acquire(lock_path, target))
         keyed.parent.mkdir(mode=0o700, exist_ok=True)
-        keyed_fd = _acquire(keyed, target)
-    except BaseException:
-        os.close(fd)
-        raise
-    try:
+        descriptors.callback(os.close, _acquire(keyed, target))
         if target.parent.is_dir():  # what a killed run left beside the output
             for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
                 for leftover in target.parent.glob(pattern):
@@ -177,9 +173,6 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
             for held in (keyed, lock_path):
                 with contextlib.suppress(OSError):
                     os.unlink(held)
-    finally:
-        os.close(keyed_fd)
-        os.close(fd)
 
 
 def _keyed_lock(target: Path) -> Path:
