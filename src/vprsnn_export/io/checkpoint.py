@@ -80,11 +80,10 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     arrays: dict[str, np.ndarray] = {}
     for name, dtype in ARRAYS.items():  # in order: a dense checkpoint's bytes do not depend on the sparse case
         value = getattr(ckpt, name)
-        if name == "calibration" and sparse.issparse(value):
-            parts = (value.data, value.indices, value.indptr)
-            arrays.update(
-                (key, np.asarray(a, dtype=np.int64)) for key, a in zip(SPARSE_CALIBRATION, parts, strict=True)
-            )
+        if name == "calibration" and sparse.issparse(value):  # its data, indices and indptr
+            arrays |= {
+                key: getattr(value, key.removeprefix("calibration_")).astype(np.int64) for key in SPARSE_CALIBRATION
+            }
         else:
             arrays[name] = value.astype(dtype)
     return write_container(path, meta, arrays)
@@ -102,9 +101,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
     weights, thresholds, calibration, ids = (arrays[name] for name in ARRAYS)
     version = str(meta.get("package_version", "unknown"))
-    ckpt = Checkpoint(
-        config, weights, thresholds, calibration, ids, list(traversals), dict(data), list(history), version
-    )
+    ckpt = Checkpoint(config, weights, thresholds, calibration, ids, traversals, data, history, version)
     validate_checkpoint(ckpt, path)
     return ckpt
 
