@@ -336,29 +336,24 @@ def wta_group(cfg: Config, n_neurons: int) -> int:
     return n_neurons if cfg.network.wta_scope == "ensemble" else cfg.network.n_neurons
 
 
-def check_range(key: str, value: Any) -> None:
-    """InvalidValueError naming ``key`` when a numeric setting is NaN, infinite or outside :data:`RANGES`."""
-    if isinstance(value, bool) or key not in RANGES:
-        return
-    low, high, low_ok, high_ok = RANGES[key]
-    number = float(value)
-    if math.isnan(number) or math.isinf(number):
-        raise InvalidValueError(f"config.{key}: expected a finite number, got {value!r}")
-    below = number < low or (number == low and not low_ok)
-    above = number > high or (number == high and not high_ok)
-    if below or above:
-        interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
-        raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
-
-
-def _check_ranges(value: Any, prefix: str) -> None:
-    """:func:`check_range` of every field of the dataclass ``value``, a section's fields as ``section.key``."""
-    for item in fields(value):
-        section = getattr(value, item.name)
-        if is_dataclass(section):
-            _check_ranges(section, f"{prefix}{item.name}.")
-        else:
-            check_range(prefix + item.name, section)
+def _check_ranges(section: Any, prefix: str) -> None:
+    """InvalidValueError naming the key when a numeric setting of the dataclass ``section`` (a nested section's
+    as ``section.key``) is NaN, infinite or outside :data:`RANGES`."""
+    for item in fields(section):
+        key, value = prefix + item.name, getattr(section, item.name)
+        if is_dataclass(value):
+            _check_ranges(value, f"{key}.")
+        if isinstance(value, bool) or key not in RANGES:  # a section's name is not in it
+            continue
+        low, high, low_ok, high_ok = RANGES[key]
+        number = float(value)
+        if math.isnan(number) or math.isinf(number):
+            raise InvalidValueError(f"config.{key}: expected a finite number, got {value!r}")
+        below = number < low or (number == low and not low_ok)
+        above = number > high or (number == high and not high_ok)
+        if below or above:
+            interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
+            raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
 
 
 #: What a setting of each type must be, in the words of the error that names it.
