@@ -102,9 +102,7 @@ def parse_ground_truth(raw: bytes, path: Path, n_reference: int, n_query: int, r
     if path.suffix.lower() == ".csv":
         return _csv_matrix(raw, path, n_reference, n_query, reference_first)
     array = parse_npy(raw, path, "ground truth")
-    if array.dtype.hasobject:
-        return _object_matrix(array, path, n_reference, n_query)
-    return _numeric_matrix(array, path, n_reference, n_query)
+    return (_object_matrix if array.dtype.hasobject else _numeric_matrix)(array, path, n_reference, n_query)
 
 
 def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:

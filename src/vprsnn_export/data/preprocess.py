@@ -185,9 +185,7 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
 def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """The paper's one channel: patch min-max normalisation, or without ``patch_norm`` (an ablation) the whole
     image scaled, ``R_hat = R / 255``; (N, S, S) float32."""
-    if cfg.patch_norm:
-        return patch_normalise(resized, cfg.patch_size)
-    return resized.astype(np.float32) / np.float32(255.0)
+    return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else resized.astype(np.float32) / np.float32(255)
 
 
 @dataclass(frozen=True)
@@ -227,10 +225,8 @@ def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
 def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
     size = cfg.image_size
-    resized = np.empty((len(_image_stack(grey)), size, size), dtype=np.uint8)
-    for index, image in enumerate(grey):
-        resized[index] = resize_image(image, size)
-    return normalise_resized(resized, cfg)
+    resized = np.asarray([resize_image(image, size) for image in _image_stack(grey)], dtype=np.uint8)
+    return normalise_resized(resized.reshape(-1, size, size), cfg)
 
 
 def _image_stack(images: np.ndarray) -> np.ndarray:
