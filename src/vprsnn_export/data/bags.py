@@ -58,11 +58,6 @@ def image_grey(msg, where: str) -> np.ndarray:
     return cv2.cvtColor(np.ascontiguousarray(pixels), getattr(cv2, code))
 
 
-def compressed_grey(msg, where: str) -> np.ndarray:
-    """A deserialised ``sensor_msgs/CompressedImage`` decoded as grey (header size checked first)."""
-    return decode_checked(bytes(np.asarray(msg.data, dtype=np.uint8)), where, f"{msg.format!r} image")
-
-
 def bag_frames(path: str | Path, topic: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
     """The frames of ``topic`` (or the bag's one image topic) in ``path``; the bag is opened and the topic
     chosen now, so a bad bag or topic fails before the first frame is asked for."""
@@ -105,10 +100,10 @@ def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]
             except Exception as exc:  # a message that does not deserialise
                 raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
             where = f"{path}#{index}"
-            yield (
-                f"{path.name}#{index}",
-                image_grey(msg, where) if connection.msgtype == IMAGE else compressed_grey(msg, where),
-            )
+            if connection.msgtype == IMAGE:
+                yield f"{path.name}#{index}", image_grey(msg, where)
+            else:  # a CompressedImage, decoded like an image file
+                yield f"{path.name}#{index}", decode_checked(bytes(msg.data), where, f"{msg.format!r} image")
         if index == 0:
             raise DataError(f"the topic {topic} holds no message", path)
         listed = sum(int(c.msgcount) for c in connections)

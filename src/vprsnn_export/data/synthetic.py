@@ -83,13 +83,6 @@ def synthetic_route(
     n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0
 ) -> dict[str, np.ndarray]:
     """Render ``n_places`` places of every traversal: name -> ``(n_places, 32, 64)`` uint8 images."""
-    _check_arguments(n_places, traversals, seed)
-    width = (n_places - 1) * STRIDE + IMAGE_WIDTH + 2 * _PAD
-    base = _render_base(width, seed)
-    return {name: _render_traversal(base, SEASONS[name], n_places, seed) for name in traversals}
-
-
-def _check_arguments(n_places: int, traversals: tuple[str, ...], seed: int) -> None:
     if isinstance(n_places, bool) or not isinstance(n_places, (int, np.integer)) or n_places < 1:
         raise InvalidValueError(f"the synthetic route needs a positive number of places, got {n_places!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -99,6 +92,8 @@ def _check_arguments(n_places: int, traversals: tuple[str, ...], seed: int) -> N
         raise InvalidValueError(
             f"unknown synthetic traversal(s) {unknown}; available: {', '.join(SYNTHETIC_TRAVERSALS)}"
         )
+    base = _render_base((n_places - 1) * STRIDE + IMAGE_WIDTH + 2 * _PAD, seed)
+    return {name: _render_traversal(base, SEASONS[name], n_places, seed) for name in traversals}
 
 
 @dataclass(frozen=True)
