@@ -349,9 +349,7 @@ def load_dataset(
     require_traversals(
         names, manifest.columns, "traversal column(s) {} not in the manifest; its columns are: {}", manifest.path
     )
-    selected = _select(
-        np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
-    )
+    selected = _select(np.array([*manifest.rows], dtype=np.int64), subset, places, str(manifest.path))
     images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
     return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
@@ -437,7 +435,7 @@ def _select(available: np.ndarray, subset: Selection, places: str | None, source
     if isinstance(subset, str | Path):  # a subset CSV's place_id column, in file order
         missing = "no such subset file (a CSV with a place_id column)"
         _, _, rows = _read_csv(Path(subset), "subset file", missing, "empty selection: the subset file lists no places")
-        selected = np.fromiter(rows, dtype=np.int64, count=len(rows))
+        selected = np.array([*rows], dtype=np.int64)
         where = f"subset file {subset}"
     elif subset is not None:
         selected = np.asarray(subset, dtype=np.int64).reshape(-1)

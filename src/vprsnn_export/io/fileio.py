@@ -195,11 +195,9 @@ def _acquire(lock_path: Path, target: Path) -> int:
             raise OutputError(
                 "another vprsnn-export run is writing it now: wait for it or give another output", target
             ) from None
-        try:
+        with contextlib.suppress(FileNotFoundError):
             if os.stat(lock_path).st_ino == os.fstat(fd).st_ino:
                 return fd
-        except FileNotFoundError:
-            pass
         os.close(fd)  # the holder unlinked this file as we took it: take the new one
     raise OutputError("could not take the output lock (a run keeps replacing it)", target)
 
