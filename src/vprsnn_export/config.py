@@ -234,15 +234,12 @@ class Config:
 
     def to_dict(self) -> dict[str, Any]:
         """Every section, except an :data:`OPTIONAL_SECTIONS` one at its defaults (left out, read back as them)."""
-        data = dataclasses.asdict(self)
+        data, default = dataclasses.asdict(self), dataclasses.asdict(Config())
         for name in OPTIONAL_SECTIONS:
-            if getattr(self, name) == type(getattr(self, name))():
+            if data[name] == default[name]:
                 del data[name]
         for name, keys in OPTIONAL_KEYS.items():
-            default = type(getattr(self, name))()
-            for key in keys:
-                if getattr(getattr(self, name), key) == getattr(default, key):
-                    del data[name][key]
+            data[name] = {k: v for k, v in data[name].items() if k not in keys or v != default[name][k]}
         return data
 
     @property
