@@ -91,18 +91,14 @@ def read_ground_truth(path: Path, n_reference: int, n_query: int, reference_firs
     if shape not in matrices:
         if raw is None:
             raw = path.read_bytes()  # the same version, read for another shape (a rare second pairing)
-        matrix = parse_ground_truth(raw, path, n_reference, n_query, reference_first)
+        if path.suffix.lower() == ".csv":
+            matrix = _csv_matrix(raw, path, n_reference, n_query, reference_first)
+        else:
+            array = parse_npy(raw, path, "ground truth")
+            matrix = (_object_matrix if array.dtype.hasobject else _numeric_matrix)(array, path, n_reference, n_query)
         matrix.setflags(write=False)
         matrices[shape] = matrix
     return matrices[shape]
-
-
-def parse_ground_truth(raw: bytes, path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
-    """:func:`read_ground_truth` of the file's bytes."""
-    if path.suffix.lower() == ".csv":
-        return _csv_matrix(raw, path, n_reference, n_query, reference_first)
-    array = parse_npy(raw, path, "ground truth")
-    return (_object_matrix if array.dtype.hasobject else _numeric_matrix)(array, path, n_reference, n_query)
 
 
 def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
