@@ -215,22 +215,14 @@ CHANNELS.register(
 
 
 def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
-    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
-    if len(_image_stack(resized)) == 0:
-        raise DataError("no images to preprocess")
+    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images, N >= 1: the input channels, flattened row-major."""
     scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 
 def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
-    size = cfg.image_size
-    resized = np.asarray([resize_image(image, size) for image in _image_stack(grey)], dtype=np.uint8)
-    return normalise_resized(resized.reshape(-1, size, size), cfg)
-
-
-def _image_stack(images: np.ndarray) -> np.ndarray:
-    """``images`` when they are ``(N, H, W)`` uint8; DataError otherwise."""
-    if images.ndim != 3 or images.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {images.shape} dtype {images.dtype}")
-    return images
+    if grey.ndim != 3 or grey.dtype != np.uint8 or not len(grey):
+        raise DataError(f"expected (N, H, W) uint8 images, N >= 1, got shape {grey.shape} dtype {grey.dtype}")
+    resized = np.asarray([resize_image(image, cfg.image_size) for image in grey], dtype=np.uint8)
+    return normalise_resized(resized, cfg)
