@@ -462,12 +462,9 @@ def _select(available: np.ndarray, subset: Selection, places: str | None, source
 
 def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tuple[Path, str]]:
     """Image path and a context string for every selected place of one traversal; DataError on an empty cell."""
-    folder = manifest.path.parent
-    paths = []
     for place in selected.tolist():
         line, record = manifest.rows[place]
-        cell = record.get(name, "")
-        if not cell:
+        if not record.get(name):
             raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
-        paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
-    return paths
+    where = f"traversal {name!r} of {manifest.path}"
+    return [(manifest.path.parent / manifest.rows[p][1][name], f"place_id {p}, {where}") for p in selected.tolist()]

@@ -146,14 +146,12 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
         items = [value]
     if len(items) > high:
         raise DataError(f"{what} names {len(items)} references, more than the {high} of the traversal", path)
-    indices = []
     for item in items:
         if isinstance(item, bool | np.bool_) or not isinstance(item, Integral):
             raise DataError(f"{what} holds {brief(item)} ({type(item).__name__}), expected integer indices", path)
         if not 0 <= int(item) < high:
             raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
-        indices.append(int(item))
-    return np.asarray(indices, dtype=np.int64)
+    return np.asarray([int(item) for item in items], dtype=np.int64)
 
 
 def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
