@@ -151,20 +151,17 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
             raise DataError(f"{what} holds {brief(item)} ({type(item).__name__}), expected integer indices", path)
         if not 0 <= int(item) < high:
             raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
-    return np.asarray([int(item) for item in items], dtype=np.int64)
-
-
-def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
-    if isinstance(value, bool | np.bool_) or not isinstance(value, Integral) or not 0 <= int(value) < n_query:
-        raise DataError(f"row {row}: query index {brief(value)} is not an integer in 0..{n_query - 1}", path)
-    return int(value)
+    return np.asarray(items, dtype=np.int64)  # every item an integer index, checked above
 
 
 def _object_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
     """VPR-Bench's (N, 2) [query, references] rows, or one list of references per query."""
     matrix = np.zeros((n_reference, n_query), dtype=bool)
     if raw.ndim == 2 and raw.shape[1] == 2:
-        queries = [_query_index(q, row, path, n_query) for row, q in enumerate(raw[:, 0])]
+        for row, query in enumerate(raw[:, 0]):
+            if isinstance(query, bool | np.bool_) or not isinstance(query, Integral) or not 0 <= int(query) < n_query:
+                raise DataError(f"row {row}: query index {brief(query)} is not an integer in 0..{n_query - 1}", path)
+        queries = [int(query) for query in raw[:, 0]]
         if len(set(queries)) != len(queries):
             raise DataError("the query column lists a query index twice", path)
         lists = raw[:, 1]
