@@ -32,6 +32,9 @@ FORMAT_VERSION = 1
 ARRAYS = {"weights": np.float32, "thresholds": np.float32, "calibration": np.int64, "reference_place_ids": np.int64}
 #: A sparse S^R's arrays (CSR), in place of ``calibration``.
 SPARSE_CALIBRATION = ("calibration_data", "calibration_indices", "calibration_indptr")
+#: History fields that measure the machine, not the network: left out of files so that two
+#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
+TIMING_FIELDS = ("seconds",)
 
 
 @dataclass
@@ -57,18 +60,8 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
         "seed": ckpt.config.seed,
         "reference_traversals": list(ckpt.reference_traversals),
         "data": ckpt.data,
-        "history": [reproducible(entry) for entry in ckpt.history],
+        "history": [{k: v for k, v in entry.items() if k not in TIMING_FIELDS} for entry in ckpt.history],
     }
-
-
-#: History fields that measure the machine, not the network: left out of files so that two
-#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
-TIMING_FIELDS = ("seconds",)
-
-
-def reproducible(entry: dict[str, Any]) -> dict[str, Any]:
-    """One epoch's history entry without its wall-clock timings."""
-    return {key: value for key, value in entry.items() if key not in TIMING_FIELDS}
 
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
