@@ -196,5 +196,4 @@ def event_frames(
             f"{MAX_FRAMES}: a wider --event-window-us or --event-count, or a recording without a clock jump, would do",
             path,
         )
-    frames = bin_frames(events, window, shape)
-    return ((f"{path.name}#{index}", frame) for index, frame in enumerate(frames))
+    return ((f"{path.name}#{index}", frame) for index, frame in enumerate(bin_frames(events, window, shape)))

@@ -39,8 +39,7 @@ _DIGITS = re.compile(r"(\d+)")
 
 def natural_key(name: str) -> tuple:
     """Sort key that orders the digit runs of a name by value: ``f2`` < ``f10`` (ties: the plain name)."""
-    parts = _DIGITS.split(name)
-    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p.lower()) for p in parts if p), name
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p.lower()) for p in _DIGITS.split(name) if p), name
 
 
 def image_files(folder: str | Path) -> list[Path]:

@@ -224,5 +224,4 @@ def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
     if grey.ndim != 3 or grey.dtype != np.uint8 or not len(grey):
         raise DataError(f"expected (N, H, W) uint8 images, N >= 1, got shape {grey.shape} dtype {grey.dtype}")
-    resized = np.asarray([resize_image(image, cfg.image_size) for image in grey], dtype=np.uint8)
-    return normalise_resized(resized, cfg)
+    return normalise_resized(np.asarray([resize_image(image, cfg.image_size) for image in grey], dtype=np.uint8), cfg)

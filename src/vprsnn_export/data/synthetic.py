@@ -122,9 +122,8 @@ def _knot_chunks(width: int, spacing: int) -> int:
 
 def _knots_1d(seed: int, stream: int, spacing: int, width: int, scale: float) -> np.ndarray:
     """Smooth 1-D noise: N(0, scale) knots every ``spacing`` px, smoothstep-interpolated, sampled at x = 0..width-1."""
-    per_chunk = _CHUNK // spacing
     knots = np.concatenate(
-        [_chunk_rng(seed, stream, c).normal(0.0, scale, per_chunk) for c in range(_knot_chunks(width, spacing))]
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, _CHUNK // spacing) for c in range(_knot_chunks(width, spacing))]
     )
     x = np.arange(width) / spacing
     left = np.floor(x).astype(np.int64)
@@ -135,14 +134,11 @@ def _knots_1d(seed: int, stream: int, spacing: int, width: int, scale: float) ->
 def _knots_2d(seed: int, stream: int, spacing: tuple[int, int], width: int, scale: float) -> np.ndarray:
     """Smooth 2-D noise on a (_HEIGHT, width) grid: N(0, scale) knots, separable smoothstep interpolation."""
     sy, sx = spacing
-    rows = _HEIGHT // sy + 2
-    per_chunk = _CHUNK // sx
+    shape = (_HEIGHT // sy + 2, _CHUNK // sx)  # (knot rows, knots per random stream)
     knots = np.concatenate(
-        [_chunk_rng(seed, stream, c).normal(0.0, scale, (rows, per_chunk)) for c in range(_knot_chunks(width, sx))],
-        axis=1,
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, shape) for c in range(_knot_chunks(width, sx))], axis=1
     )
-    y = np.arange(_HEIGHT) / sy
-    x = np.arange(width) / sx
+    y, x = np.arange(_HEIGHT) / sy, np.arange(width) / sx
     top, left = np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
     ty, tx = _smoothstep(y - top)[:, None], _smoothstep(x - left)[None, :]
     upper = knots[top][:, left] * (1.0 - tx) + knots[top][:, left + 1] * tx
