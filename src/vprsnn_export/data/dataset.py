@@ -209,11 +209,10 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Gr
             )
         return None
     truth = query_truth(folder, _check_traversals(references), query)
-    if truth is None:
-        return None
-    matrix, path = truth
-    check_every_query_matched(matrix, dataset.place_ids, path)
-    return GroundTruth(matrix, str(path))
+    if truth is not None:
+        check_every_query_matched(truth[0], dataset.place_ids, truth[1])
+        return GroundTruth(truth[0], str(truth[1]))
+    return None
 
 
 def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:
