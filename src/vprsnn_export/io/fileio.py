@@ -309,10 +309,8 @@ def _json_int(literal: str, what: str) -> int:
 
 
 def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
-    """Write arrays plus a JSON header into one ``.npz`` atomically."""
-    require_path("path", path)
-    if META_KEY in arrays:
-        raise InvalidValueError(f"array name {META_KEY!r} is reserved")
+    """Write arrays plus a JSON header into one ``.npz`` atomically (the savers checked the path and name the
+    arrays, never :data:`META_KEY`)."""
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
     members: dict[str, Any] = {META_KEY: header, **arrays}
