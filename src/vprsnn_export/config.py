@@ -39,10 +39,8 @@ class EncoderConfig:
     generator: str = "mt19937"
 
 
-#: The encoder's uniform generators (``encoder.generator``).
+#: The encoder's uniform generators (``encoder.generator``) and the hard WTA's scopes (``network.wta_scope``).
 GENERATORS = ("mt19937", "philox")
-
-
 WTA_SCOPES = ("ensemble", "module")
 
 
