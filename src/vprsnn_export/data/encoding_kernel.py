@@ -64,8 +64,7 @@ def _bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int,
             _mt_mantissas(state, draws[start : start + MT_N])
         limit = thresholds[r]
         for t in range(timesteps):
-            row = draws[t * n_inputs : (t + 1) * n_inputs]
-            target = out[r, t]
+            row, target = draws[t * n_inputs : (t + 1) * n_inputs], out[r, t]
             for i in range(n_inputs):
                 target[i] = row[i] < limit[i]
 

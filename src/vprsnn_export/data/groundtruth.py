@@ -122,10 +122,8 @@ def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int)
             "(<reference>_<query>_GT.csv with columns query,reference)",
             path,
         )
-    if forward:
-        return matrix
-    if backward:
-        return matrix.T
+    if forward or backward:
+        return matrix if forward else matrix.T
     raise DataError(
         f"matrix of shape {raw.shape}, expected (references, queries) = {(n_reference, n_query)} "
         f"or (queries, references) = {(n_query, n_reference)}",
