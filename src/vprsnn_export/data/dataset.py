@@ -154,14 +154,8 @@ def parse_places(spec: str) -> tuple[int, int, int]:
     """
     numbers = [ascii_uint(part.strip()) for part in str(spec).strip().split(":")]
     start, count, stride = (number or 0 for number in [*numbers, 1, 1][:3])  # STRIDE defaults to 1
-    last = start + (count - 1) * stride
-    if (
-        len(numbers) not in (2, 3)
-        or None in numbers
-        or not 1 <= count <= MAX_PLACES
-        or stride < 1
-        or last > MAX_PLACE_ID
-    ):
+    malformed = len(numbers) not in (2, 3) or None in numbers
+    if malformed or not 1 <= count <= MAX_PLACES or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID:
         raise InvalidValueError(
             f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
         )

@@ -149,12 +149,8 @@ def _header_defects(meta: dict[str, Any]) -> Iterator[str]:
     if not isinstance(meta.get("package_version", "unknown"), str):
         yield f"package_version must be a version string, got {meta['package_version']!r}"
     traversals = meta.get("reference_traversals", [])
-    if (
-        not isinstance(traversals, list)
-        or not traversals
-        or not all(isinstance(t, str) and t for t in traversals)
-        or len(set(traversals)) != len(traversals)
-    ):
+    names = traversals if isinstance(traversals, list) and all(isinstance(t, str) and t for t in traversals) else []
+    if not names or len(set(names)) != len(names):
         yield "reference_traversals must be a non-empty list of distinct traversal names"
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
