@@ -39,10 +39,8 @@ class EncoderConfig:
     generator: str = "mt19937"
 
 
-#: The encoder's uniform generators (``encoder.generator``).
+#: The encoder's uniform generators (``encoder.generator``) and the hard WTA's scopes (``network.wta_scope``).
 GENERATORS = ("mt19937", "philox")
-
-
 WTA_SCOPES = ("ensemble", "module")
 
 
@@ -203,22 +201,25 @@ class Config:
 
     def __post_init__(self) -> None:
         _check_ranges(self, "")
-        side = self.preprocess.image_size
-        if self.preprocess.channels not in CHANNELS:
-            raise InvalidValueError(
-                f"config.preprocess.channels: {self.preprocess.channels!r} is not one of {', '.join(CHANNELS)}"
-            )
-        if self.preprocess.dog_sigma_centre >= self.preprocess.dog_sigma_surround:
+        pre, home = self.preprocess, self.homeostasis
+        for key, value, allowed in (
+            ("preprocess.channels", pre.channels, CHANNELS.names()),
+            ("encoder.generator", self.encoder.generator, GENERATORS),
+            ("network.wta_scope", self.network.wta_scope, WTA_SCOPES),
+        ):
+            if value not in allowed:
+                raise InvalidValueError(f"config.{key}: {value!r} is not one of {', '.join(allowed)}")
+        if pre.dog_sigma_centre >= pre.dog_sigma_surround:
             raise InvalidValueError("config.preprocess.dog_sigma_centre must be below dog_sigma_surround")
-        if side % self.preprocess.patch_size:
+        if pre.image_size % pre.patch_size:
             raise InvalidValueError(
-                f"preprocess.image_size {side} is not a multiple of preprocess.patch_size {self.preprocess.patch_size}"
+                f"preprocess.image_size {pre.image_size} is not a multiple of preprocess.patch_size {pre.patch_size}"
             )
-        inputs = self.preprocess.n_inputs
+        inputs = pre.n_inputs
         if self.network.n_inputs != inputs:
             raise InvalidValueError(
-                f"network.n_inputs {self.network.n_inputs} must equal {self.preprocess.n_channels} channel(s) x "
-                f"image_size**2 = {inputs} (preprocess.channels = {self.preprocess.channels!r})"
+                f"network.n_inputs {self.network.n_inputs} must equal {pre.n_channels} channel(s) x "
+                f"image_size**2 = {inputs} (preprocess.channels = {pre.channels!r})"
             )
         gain = self.encoder.input_gain
         if gain and (len(gain) != inputs or not all(math.isfinite(g) and g >= 0 for g in gain) or not any(gain)):
@@ -226,30 +227,17 @@ class Config:
                 f"config.encoder.input_gain: expected {inputs} finite non-negative gains, not all 0, got {len(gain)} "
                 "values" + ("" if len(gain) != inputs else " with a negative, non-finite or all-zero gain")
             )
-        if self.encoder.generator not in GENERATORS:
-            raise InvalidValueError(
-                f"config.encoder.generator: {self.encoder.generator!r} is not one of {', '.join(GENERATORS)}"
-            )
-        if self.network.wta_scope not in WTA_SCOPES:
-            raise InvalidValueError(
-                f"config.network.wta_scope: {self.network.wta_scope!r} is not one of {', '.join(WTA_SCOPES)}"
-            )
-        if self.homeostasis.theta_min > self.homeostasis.theta_max:
-            raise InvalidValueError(
-                f"homeostasis.theta_min {self.homeostasis.theta_min} exceeds theta_max {self.homeostasis.theta_max}"
-            )
+        if home.theta_min > home.theta_max:
+            raise InvalidValueError(f"homeostasis.theta_min {home.theta_min} exceeds theta_max {home.theta_max}")
 
     def to_dict(self) -> dict[str, Any]:
         """Every section, except an :data:`OPTIONAL_SECTIONS` one at its defaults (left out, read back as them)."""
-        data = dataclasses.asdict(self)
+        data, default = dataclasses.asdict(self), dataclasses.asdict(Config())
         for name in OPTIONAL_SECTIONS:
-            if getattr(self, name) == type(getattr(self, name))():
+            if data[name] == default[name]:
                 del data[name]
         for name, keys in OPTIONAL_KEYS.items():
-            default = type(getattr(self, name))()
-            for key in keys:
-                if getattr(getattr(self, name), key) == getattr(default, key):
-                    del data[name][key]
+            data[name] = {k: v for k, v in data[name].items() if k not in keys or v != default[name][k]}
         return data
 
     @property
@@ -343,29 +331,24 @@ def wta_group(cfg: Config, n_neurons: int) -> int:
     return n_neurons if cfg.network.wta_scope == "ensemble" else cfg.network.n_neurons
 
 
-def check_range(key: str, value: Any) -> None:
-    """InvalidValueError naming ``key`` when a numeric setting is NaN, infinite or outside :data:`RANGES`."""
-    if isinstance(value, bool) or key not in RANGES:
-        return
-    low, high, low_ok, high_ok = RANGES[key]
-    number = float(value)
-    if math.isnan(number) or math.isinf(number):
-        raise InvalidValueError(f"config.{key}: expected a finite number, got {value!r}")
-    below = number < low or (number == low and not low_ok)
-    above = number > high or (number == high and not high_ok)
-    if below or above:
-        interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
-        raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
-
-
-def _check_ranges(value: Any, prefix: str) -> None:
-    """:func:`check_range` of every field of the dataclass ``value``, a section's fields as ``section.key``."""
-    for item in fields(value):
-        section = getattr(value, item.name)
-        if is_dataclass(section):
-            _check_ranges(section, f"{prefix}{item.name}.")
-        else:
-            check_range(prefix + item.name, section)
+def _check_ranges(section: Any, prefix: str) -> None:
+    """InvalidValueError naming the key when a numeric setting of the dataclass ``section`` (a nested section's
+    as ``section.key``) is NaN, infinite or outside :data:`RANGES`."""
+    for item in fields(section):
+        key, value = prefix + item.name, getattr(section, item.name)
+        if is_dataclass(value):
+            _check_ranges(value, f"{key}.")
+        if isinstance(value, bool) or key not in RANGES:  # a section's name is not in it
+            continue
+        low, high, low_ok, high_ok = RANGES[key]
+        number = float(value)
+        if math.isnan(number) or math.isinf(number):
+            raise InvalidValueError(f"config.{key}: expected a finite number, got {value!r}")
+        below = number < low or (number == low and not low_ok)
+        above = number > high or (number == high and not high_ok)
+        if below or above:
+            interval = f"{'[' if low_ok else '('}{low:g}, {high:g}{']' if high_ok else ')'}"
+            raise InvalidValueError(f"config.{key}: {value!r} is outside {interval}")
 
 
 #: What a setting of each type must be, in the words of the error that names it.

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import os
 
-from .arguments import ascii_uint
-from .errors import InvalidValueError
+from .arguments import ascii_uint, require_integer
 from .startup import InterruptsHeld
 
 DEFAULT_THREADS = 1
@@ -24,9 +23,7 @@ def default_threads() -> int:
 
 def set_threads(threads: int | None = None) -> int:
     """Use ``threads`` CPU threads for torch (the default when None); returns the number in use."""
-    count = default_threads() if threads is None else threads
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1 or count > 1024:
-        raise InvalidValueError(f"--threads: expected an integer from 1 to 1024, got {threads!r}")
+    count = require_integer("--threads", default_threads() if threads is None else threads, 1, 1024)
     with InterruptsHeld():  # a Ctrl-C inside torch's C++ start-up would abort: it arrives after the import
         import torch  # here, not at module top: the CLI imports this module before it can catch an interrupt
 

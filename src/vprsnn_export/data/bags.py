@@ -7,7 +7,7 @@ the bag's one image topic (with several, ``topic`` names one), named ``<bag>#<in
   padding dropped; colour to grey with OpenCV's weights), its size checked against the memory limit before it
   is deserialised (``2 n`` bytes for a message of ``n``: its data, then the converted pixels);
 * ``sensor_msgs/msg/CompressedImage`` (PNG or JPEG bytes), decoded like an image file, its header checked
-  first (:func:`~vprsnn_export.data.preprocess.check_decodable`).
+  first (:func:`~vprsnn_export.data.preprocess.decode_checked`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..resources import check_memory, single_need
-from .preprocess import DATA_LOSS, check_decodable, decode_grey, decoder_said
+from .preprocess import decode_checked
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
@@ -56,19 +56,6 @@ def image_grey(msg, where: str) -> np.ndarray:
     import cv2
 
     return cv2.cvtColor(np.ascontiguousarray(pixels), getattr(cv2, code))
-
-
-def compressed_grey(msg, where: str) -> np.ndarray:
-    """A deserialised ``sensor_msgs/CompressedImage`` decoded as grey (header size checked first)."""
-    data = bytes(np.asarray(msg.data, dtype=np.uint8))
-    check_decodable(data, where)
-    image, noise = decode_grey(data)
-    if image is None or image.size == 0:
-        raise DataError(f"{where}: OpenCV could not decode this {msg.format!r} image{decoder_said(noise)}")
-    lost = [line for line in noise if DATA_LOSS in line.lower()]
-    if lost:
-        raise DataError(f"{where}: truncated or corrupt {msg.format!r} image (the decoder said: {lost[0]})")
-    return image
 
 
 def bag_frames(path: str | Path, topic: str | None = None) -> Iterator[tuple[str, np.ndarray]]:
@@ -113,10 +100,10 @@ def _messages(reader, path: Path, topic: str) -> Iterator[tuple[str, np.ndarray]
             except Exception as exc:  # a message that does not deserialise
                 raise DataError(f"message {index} of {topic} cannot be read ({type(exc).__name__})", path) from None
             where = f"{path}#{index}"
-            yield (
-                f"{path.name}#{index}",
-                image_grey(msg, where) if connection.msgtype == IMAGE else compressed_grey(msg, where),
-            )
+            if connection.msgtype == IMAGE:
+                yield f"{path.name}#{index}", image_grey(msg, where)
+            else:  # a CompressedImage, decoded like an image file
+                yield f"{path.name}#{index}", decode_checked(bytes(msg.data), where, f"{msg.format!r} image")
         if index == 0:
             raise DataError(f"the topic {topic} holds no message", path)
         listed = sum(int(c.msgcount) for c in connections)

@@ -24,12 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..arguments import (
-    MAX_PLACE_ID,
-    ascii_uint,
-    check_place_ids,
-    require_type,
-)  # MAX_PLACE_ID: ids beyond 2**53 are lost in float64
+# MAX_PLACE_ID: ids beyond 2**53 are lost in float64
+from ..arguments import MAX_PLACE_ID, ascii_uint, check_place_ids, require_type
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError
 from ..io.fileio import is_readable_file, sha256_bytes
@@ -158,14 +154,8 @@ def parse_places(spec: str) -> tuple[int, int, int]:
     """
     numbers = [ascii_uint(part.strip()) for part in str(spec).strip().split(":")]
     start, count, stride = (number or 0 for number in [*numbers, 1, 1][:3])  # STRIDE defaults to 1
-    last = start + (count - 1) * stride
-    if (
-        len(numbers) not in (2, 3)
-        or None in numbers
-        or not 1 <= count <= MAX_PLACES
-        or stride < 1
-        or last > MAX_PLACE_ID
-    ):
+    malformed = len(numbers) not in (2, 3) or None in numbers
+    if malformed or not 1 <= count <= MAX_PLACES or stride < 1 or start + (count - 1) * stride > MAX_PLACE_ID:
         raise InvalidValueError(
             f"--places {spec!r}: expected START:COUNT[:STRIDE] with integers START >= 0, COUNT >= 1, STRIDE >= 1"
         )
@@ -213,11 +203,10 @@ def scoring_truth(dataset: Dataset, references: Sequence[str], query: str) -> Gr
             )
         return None
     truth = query_truth(folder, _check_traversals(references), query)
-    if truth is None:
-        return None
-    matrix, path = truth
-    check_every_query_matched(matrix, dataset.place_ids, path)
-    return GroundTruth(matrix, str(path))
+    if truth is not None:
+        check_every_query_matched(truth[0], dataset.place_ids, truth[1])
+        return GroundTruth(truth[0], str(truth[1]))
+    return None
 
 
 def dataset_files(dataset: Dataset, *subsets: object) -> tuple[Path, ...]:
@@ -353,9 +342,7 @@ def load_dataset(
     require_traversals(
         names, manifest.columns, "traversal column(s) {} not in the manifest; its columns are: {}", manifest.path
     )
-    selected = _select(
-        np.fromiter(manifest.rows, dtype=np.int64, count=len(manifest.rows)), subset, places, str(manifest.path)
-    )
+    selected = _select(np.array([*manifest.rows], dtype=np.int64), subset, places, str(manifest.path))
     images = decode_images({name: _image_paths(manifest, name, selected) for name in names}, cfg, progress)
     # stored resolved, so a checkpoint made here still finds its data when used from another directory
     return Dataset(str(manifest.path.resolve()), manifest.sha256, selected, images)
@@ -441,7 +428,7 @@ def _select(available: np.ndarray, subset: Selection, places: str | None, source
     if isinstance(subset, str | Path):  # a subset CSV's place_id column, in file order
         missing = "no such subset file (a CSV with a place_id column)"
         _, _, rows = _read_csv(Path(subset), "subset file", missing, "empty selection: the subset file lists no places")
-        selected = np.fromiter(rows, dtype=np.int64, count=len(rows))
+        selected = np.array([*rows], dtype=np.int64)
         where = f"subset file {subset}"
     elif subset is not None:
         selected = np.asarray(subset, dtype=np.int64).reshape(-1)
@@ -468,12 +455,9 @@ def _select(available: np.ndarray, subset: Selection, places: str | None, source
 
 def _image_paths(manifest: Manifest, name: str, selected: np.ndarray) -> list[tuple[Path, str]]:
     """Image path and a context string for every selected place of one traversal; DataError on an empty cell."""
-    folder = manifest.path.parent
-    paths = []
     for place in selected.tolist():
         line, record = manifest.rows[place]
-        cell = record.get(name, "")
-        if not cell:
+        if not record.get(name):
             raise DataError(f"line {line}: empty {name!r} image cell for place_id {place}", manifest.path)
-        paths.append((folder / cell, f"place_id {place}, traversal {name!r} of {manifest.path}"))
-    return paths
+    where = f"traversal {name!r} of {manifest.path}"
+    return [(manifest.path.parent / manifest.rows[p][1][name], f"place_id {p}, {where}") for p in selected.tolist()]

@@ -100,8 +100,7 @@ def encode_presentations(
 ) -> torch.Tensor:
     """Encode a traversal's images under their presentation keys (see module docstring)."""
     place_ids = check_place_ids(place_ids)
-    if not isinstance(traversal, str):
-        raise InvalidValueError(f"traversal must be a name (str), got {type(traversal).__name__}")
+    require_type("traversal", traversal, str)
     return encode(images, [presentation_seed(seed, stream, traversal, int(p), epoch) for p in place_ids], cfg)
 
 

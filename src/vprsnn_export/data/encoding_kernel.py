@@ -39,14 +39,9 @@ def _mt_mantissas(state: np.ndarray, out: np.ndarray) -> None:
     lower = np.uint32(0x7FFFFFFF)
     matrix = np.uint32(0x9908B0DF)
     one = np.uint32(1)
-    for j in range(MT_N - MT_M):
-        y = (state[j] & upper) | (state[j + 1] & lower)
-        state[j] = state[j + MT_M] ^ (y >> one) ^ (matrix * (y & one))
-    for j in range(MT_N - MT_M, MT_N - 1):
-        y = (state[j] & upper) | (state[j + 1] & lower)
-        state[j] = state[j + MT_M - MT_N] ^ (y >> one) ^ (matrix * (y & one))
-    y = (state[MT_N - 1] & upper) | (state[0] & lower)
-    state[MT_N - 1] = state[MT_M - 1] ^ (y >> one) ^ (matrix * (y & one))
+    for j in range(MT_N):  # in place: from j = N - M on, the words it reads are already twisted ones
+        y = (state[j] & upper) | (state[(j + 1) % MT_N] & lower)
+        state[j] = state[(j + MT_M) % MT_N] ^ (y >> one) ^ (matrix * (y & one))
     for j in range(MT_N):
         y = state[j]
         y ^= y >> np.uint32(11)
@@ -69,8 +64,7 @@ def _bernoulli_kernel(thresholds: np.ndarray, seeds: np.ndarray, timesteps: int,
             _mt_mantissas(state, draws[start : start + MT_N])
         limit = thresholds[r]
         for t in range(timesteps):
-            row = draws[t * n_inputs : (t + 1) * n_inputs]
-            target = out[r, t]
+            row, target = draws[t * n_inputs : (t + 1) * n_inputs], out[r, t]
             for i in range(n_inputs):
                 target[i] = row[i] < limit[i]
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError, InvalidValueError
+from ..errors import DataError, InvalidValueError, VprError
 from ..resources import MemoryNeed, check_memory, format_size, single_need
 
 EVENT_SUFFIXES = frozenset({".npy", ".npz", ".txt"})
@@ -117,14 +117,12 @@ def read_events(path: str | Path) -> Events:
     """The events of ``path`` (``.npy``, ``.npz`` or ``.txt``, module docstring), checked; DataError naming it."""
     path = Path(path)
     try:
-        need = load_need(path)
-    except (OSError, zipfile.BadZipFile) as exc:
-        raise DataError(f"cannot read events ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
-    check_memory(need, f"reading {path}", "a shorter recording would")
-    try:
+        check_memory(load_need(path), f"reading {path}", "a shorter recording would")
         columns = _columns(path)
+    except VprError:  # over the memory limit (an InvalidValueError, also a ValueError), or a defect named already
+        raise
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise DataError(f"cannot read events ({type(exc).__name__}: {exc})".replace("\n", " "), path) from None
+        raise DataError(f"cannot read events ({type(exc).__name__}: {exc})", path) from None
     sizes = {name: np.shape(columns[name]) for name in FIELDS}
     if len(set(sizes.values())) != 1 or len(sizes["t"]) != 1:
         raise DataError(f"the event fields must be 1-D and of one length, got {sizes}", path)
@@ -198,5 +196,4 @@ def event_frames(
             f"{MAX_FRAMES}: a wider --event-window-us or --event-count, or a recording without a clock jump, would do",
             path,
         )
-    frames = bin_frames(events, window, shape)
-    return ((f"{path.name}#{index}", frame) for index, frame in enumerate(frames))
+    return ((f"{path.name}#{index}", frame) for index, frame in enumerate(bin_frames(events, window, shape)))

@@ -39,8 +39,7 @@ _DIGITS = re.compile(r"(\d+)")
 
 def natural_key(name: str) -> tuple:
     """Sort key that orders the digit runs of a name by value: ``f2`` < ``f10`` (ties: the plain name)."""
-    parts = _DIGITS.split(name)
-    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p.lower()) for p in parts if p), name
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p.lower()) for p in _DIGITS.split(name) if p), name
 
 
 def image_files(folder: str | Path) -> list[Path]:
@@ -104,20 +103,19 @@ def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:
 def stdin_frames(stream: TextIO) -> Iterator[tuple[str, np.ndarray]]:
     """One image path per line of ``stream``, decoded as it arrives (blank lines skipped); a line of more than
     :data:`MAX_LINE` characters is refused once that many are read (memory stays bounded)."""
-    while line := _stdin_line(stream):
+    while True:
+        try:
+            line = stream.readline(MAX_LINE + 1)
+        except UnicodeDecodeError as exc:
+            raise DataError(
+                f"stdin is not text in its encoding ({exc.encoding}): give one image path per line"
+            ) from None
+        if not line:
+            return
         if len(line) > MAX_LINE:
             raise DataError(f"a line on stdin is longer than {MAX_LINE} characters: give one image path per line")
-        path = line.strip()
-        if path:
+        if path := line.strip():
             yield path, read_grey_image(Path(path), "a frame path read from stdin")
-
-
-def _stdin_line(stream: TextIO) -> str:
-    """The next line of ``stream``, at most ``MAX_LINE + 1`` characters; DataError when it is not text."""
-    try:
-        return stream.readline(MAX_LINE + 1)
-    except UnicodeDecodeError as exc:
-        raise DataError(f"stdin is not text in its encoding ({exc.encoding}): give one image path per line") from None
 
 
 def iter_frames(

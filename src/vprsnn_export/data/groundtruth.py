@@ -91,20 +91,14 @@ def read_ground_truth(path: Path, n_reference: int, n_query: int, reference_firs
     if shape not in matrices:
         if raw is None:
             raw = path.read_bytes()  # the same version, read for another shape (a rare second pairing)
-        matrix = parse_ground_truth(raw, path, n_reference, n_query, reference_first)
+        if path.suffix.lower() == ".csv":
+            matrix = _csv_matrix(raw, path, n_reference, n_query, reference_first)
+        else:
+            array = parse_npy(raw, path, "ground truth")
+            matrix = (_object_matrix if array.dtype.hasobject else _numeric_matrix)(array, path, n_reference, n_query)
         matrix.setflags(write=False)
         matrices[shape] = matrix
     return matrices[shape]
-
-
-def parse_ground_truth(raw: bytes, path: Path, n_reference: int, n_query: int, reference_first: bool) -> np.ndarray:
-    """:func:`read_ground_truth` of the file's bytes."""
-    if path.suffix.lower() == ".csv":
-        return _csv_matrix(raw, path, n_reference, n_query, reference_first)
-    array = parse_npy(raw, path, "ground truth")
-    if array.dtype.hasobject:
-        return _object_matrix(array, path, n_reference, n_query)
-    return _numeric_matrix(array, path, n_reference, n_query)
 
 
 def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
@@ -128,10 +122,8 @@ def _numeric_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int)
             "(<reference>_<query>_GT.csv with columns query,reference)",
             path,
         )
-    if forward:
-        return matrix
-    if backward:
-        return matrix.T
+    if forward or backward:
+        return matrix if forward else matrix.T
     raise DataError(
         f"matrix of shape {raw.shape}, expected (references, queries) = {(n_reference, n_query)} "
         f"or (queries, references) = {(n_query, n_reference)}",
@@ -152,27 +144,22 @@ def _index_list(value: object, what: str, path: Path, high: int) -> np.ndarray:
         items = [value]
     if len(items) > high:
         raise DataError(f"{what} names {len(items)} references, more than the {high} of the traversal", path)
-    indices = []
     for item in items:
         if isinstance(item, bool | np.bool_) or not isinstance(item, Integral):
             raise DataError(f"{what} holds {brief(item)} ({type(item).__name__}), expected integer indices", path)
         if not 0 <= int(item) < high:
             raise DataError(f"{what} names index {int(item)}, outside 0..{high - 1}", path)
-        indices.append(int(item))
-    return np.asarray(indices, dtype=np.int64)
-
-
-def _query_index(value: object, row: int, path: Path, n_query: int) -> int:
-    if isinstance(value, bool | np.bool_) or not isinstance(value, Integral) or not 0 <= int(value) < n_query:
-        raise DataError(f"row {row}: query index {brief(value)} is not an integer in 0..{n_query - 1}", path)
-    return int(value)
+    return np.asarray(items, dtype=np.int64)  # every item an integer index, checked above
 
 
 def _object_matrix(raw: np.ndarray, path: Path, n_reference: int, n_query: int) -> np.ndarray:
     """VPR-Bench's (N, 2) [query, references] rows, or one list of references per query."""
     matrix = np.zeros((n_reference, n_query), dtype=bool)
     if raw.ndim == 2 and raw.shape[1] == 2:
-        queries = [_query_index(q, row, path, n_query) for row, q in enumerate(raw[:, 0])]
+        for row, query in enumerate(raw[:, 0]):
+            if isinstance(query, bool | np.bool_) or not isinstance(query, Integral) or not 0 <= int(query) < n_query:
+                raise DataError(f"row {row}: query index {brief(query)} is not an integer in 0..{n_query - 1}", path)
+        queries = [int(query) for query in raw[:, 0]]
         if len(set(queries)) != len(queries):
             raise DataError("the query column lists a query index twice", path)
         lists = raw[:, 1]

@@ -2,7 +2,7 @@
 
 A decoder allocates the whole image before it can say anything about it (a 20000 x 20000 PNG of a few kilobytes
 decodes to over a gigabyte), so the memory a decode needs is checked against the limit from the header first
-(:func:`vprsnn_export.data.preprocess.check_decodable`). Read here:
+(:func:`vprsnn_export.data.preprocess.decode_checked`). Read here:
 
 * PNG: the IHDR chunk, big-endian width and height at bytes 16 and 20;
 * JPEG: the first start-of-frame marker (SOF0-SOF15 but DHT C4, JPG C8, DAC CC), height then width;

@@ -33,7 +33,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Protocol
+from typing import IO, TYPE_CHECKING
 
 import numpy as np
 
@@ -42,23 +42,8 @@ from ..registry import Registry
 from ..resources import check_memory, single_need
 from .imageheader import image_dimensions
 
-
-class PreprocessSettings(Protocol):
-    """What preprocessing reads of the config (:class:`vprsnn_export.config.PreprocessConfig`): named here, not
-    imported, so that the config checks its channel against :data:`CHANNELS` with no import circle."""
-
-    @property
-    def image_size(self) -> int: ...
-    @property
-    def patch_size(self) -> int: ...
-    @property
-    def patch_norm(self) -> bool: ...
-    @property
-    def channels(self) -> str: ...
-    @property
-    def dog_sigma_centre(self) -> float: ...
-    @property
-    def dog_sigma_surround(self) -> float: ...
+if TYPE_CHECKING:  # the config imports CHANNELS from here: its type only, no import circle
+    from ..config import PreprocessConfig
 
 
 DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time
@@ -97,17 +82,6 @@ def captured_stderr() -> Iterator[list[str]]:
                 lines.extend(OPENCV_LOG.sub("", line.strip()) for line in text.splitlines() if line.strip())
 
 
-def check_decodable(data: bytes, where: object) -> None:
-    """InvalidValueError (one line) when the image ``data``'s header names more pixels than the memory limit
-    lets a decode allocate (``4 W H`` bytes: up to 4 uint8 channels before the grey copy): refused before any
-    pixel is decoded."""
-    size = image_dimensions(data)
-    if size is not None:
-        width, height = size
-        need = single_need(f"decoded image {width} x {height}", 4 * width * height)
-        check_memory(need, f"decoding {where}", "a smaller image would")
-
-
 def decode_grey(data: bytes) -> tuple[np.ndarray | None, list[str]]:
     """``cv2.imdecode(data, IMREAD_GRAYSCALE)`` with the decoder's stderr lines captured; None if undecodable."""
     import cv2  # here, not at import: OpenCV takes 70 ms to load, and `--help` never decodes
@@ -144,13 +118,26 @@ def read_grey_image(path: Path, context: str = "") -> np.ndarray:
         raise DataError(f"image file not found{suffix}", path)
     if not data:
         raise DataError(f"empty image file{suffix}", path)
-    check_decodable(data, path)
+    return decode_checked(data, path, "image", suffix)
+
+
+def decode_checked(data: bytes, where: str | Path, kind: str, suffix: str = "") -> np.ndarray:
+    """The encoded image ``data`` (``kind``: "image", "'png' image") as 2-D uint8 grey; a DataError at ``where``
+    when OpenCV cannot decode it or the decoder reports it cut short (libjpeg's "premature end"), quoting the
+    decoder, then ``suffix``. An InvalidValueError first when its header names more pixels than the memory limit
+    lets a decode allocate (``4 W H`` bytes: up to 4 uint8 channels before the grey copy)."""
+    size = image_dimensions(data)
+    if size is not None:
+        need = single_need(f"decoded image {size[0]} x {size[1]}", 4 * size[0] * size[1])
+        check_memory(need, f"decoding {where}", "a smaller image would")
     image, noise = decode_grey(data)
     if image is None or image.size == 0:
-        raise DataError(f"unreadable or corrupt image (OpenCV could not decode it{decoder_said(noise)}){suffix}", path)
+        raise DataError(
+            f"unreadable or corrupt {kind} (OpenCV could not decode it{decoder_said(noise)}){suffix}", where
+        )
     lost = [line for line in noise if DATA_LOSS in line.lower()]
     if lost:
-        raise DataError(f"truncated or corrupt image (the decoder said: {lost[0]}){suffix}", path)
+        raise DataError(f"truncated or corrupt {kind} (the decoder said: {lost[0]}){suffix}", where)
     return image
 
 
@@ -195,12 +182,10 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
     return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
 
 
-def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
+def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """The paper's one channel: patch min-max normalisation, or without ``patch_norm`` (an ablation) the whole
     image scaled, ``R_hat = R / 255``; (N, S, S) float32."""
-    if cfg.patch_norm:
-        return patch_normalise(resized, cfg.patch_size)
-    return resized.astype(np.float32) / np.float32(255.0)
+    return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else resized.astype(np.float32) / np.float32(255)
 
 
 @dataclass(frozen=True)
@@ -213,7 +198,7 @@ class Channel:
 
     name: str
     n_channels: int
-    normalise: Callable[[np.ndarray, PreprocessSettings], np.ndarray]
+    normalise: Callable[[np.ndarray, PreprocessConfig], np.ndarray]
     label: str
 
 
@@ -229,25 +214,14 @@ CHANNELS.register(
 )
 
 
-def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
-    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images: the input channels, flattened row-major."""
-    if len(_image_stack(resized)) == 0:
-        raise DataError("no images to preprocess")
+def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+    """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images, N >= 1: the input channels, flattened row-major."""
     scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 
-def preprocess_images(grey: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
+def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
-    size = cfg.image_size
-    resized = np.empty((len(_image_stack(grey)), size, size), dtype=np.uint8)
-    for index, image in enumerate(grey):
-        resized[index] = resize_image(image, size)
-    return normalise_resized(resized, cfg)
-
-
-def _image_stack(images: np.ndarray) -> np.ndarray:
-    """``images`` when they are ``(N, H, W)`` uint8; DataError otherwise."""
-    if images.ndim != 3 or images.dtype != np.uint8:
-        raise DataError(f"expected (N, H, W) uint8 images, got shape {images.shape} dtype {images.dtype}")
-    return images
+    if grey.ndim != 3 or grey.dtype != np.uint8 or not len(grey):
+        raise DataError(f"expected (N, H, W) uint8 images, N >= 1, got shape {grey.shape} dtype {grey.dtype}")
+    return normalise_resized(np.asarray([resize_image(image, cfg.image_size) for image in grey], dtype=np.uint8), cfg)

@@ -83,13 +83,6 @@ def synthetic_route(
     n_places: int = DEFAULT_PLACES, traversals: tuple[str, ...] = DEFAULT_TRAVERSALS, seed: int = 0
 ) -> dict[str, np.ndarray]:
     """Render ``n_places`` places of every traversal: name -> ``(n_places, 32, 64)`` uint8 images."""
-    _check_arguments(n_places, traversals, seed)
-    width = (n_places - 1) * STRIDE + IMAGE_WIDTH + 2 * _PAD
-    base = _render_base(width, seed)
-    return {name: _render_traversal(base, SEASONS[name], n_places, seed) for name in traversals}
-
-
-def _check_arguments(n_places: int, traversals: tuple[str, ...], seed: int) -> None:
     if isinstance(n_places, bool) or not isinstance(n_places, (int, np.integer)) or n_places < 1:
         raise InvalidValueError(f"the synthetic route needs a positive number of places, got {n_places!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -99,6 +92,8 @@ def _check_arguments(n_places: int, traversals: tuple[str, ...], seed: int) -> N
         raise InvalidValueError(
             f"unknown synthetic traversal(s) {unknown}; available: {', '.join(SYNTHETIC_TRAVERSALS)}"
         )
+    base = _render_base((n_places - 1) * STRIDE + IMAGE_WIDTH + 2 * _PAD, seed)
+    return {name: _render_traversal(base, SEASONS[name], n_places, seed) for name in traversals}
 
 
 @dataclass(frozen=True)
@@ -127,9 +122,8 @@ def _knot_chunks(width: int, spacing: int) -> int:
 
 def _knots_1d(seed: int, stream: int, spacing: int, width: int, scale: float) -> np.ndarray:
     """Smooth 1-D noise: N(0, scale) knots every ``spacing`` px, smoothstep-interpolated, sampled at x = 0..width-1."""
-    per_chunk = _CHUNK // spacing
     knots = np.concatenate(
-        [_chunk_rng(seed, stream, c).normal(0.0, scale, per_chunk) for c in range(_knot_chunks(width, spacing))]
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, _CHUNK // spacing) for c in range(_knot_chunks(width, spacing))]
     )
     x = np.arange(width) / spacing
     left = np.floor(x).astype(np.int64)
@@ -140,14 +134,11 @@ def _knots_1d(seed: int, stream: int, spacing: int, width: int, scale: float) ->
 def _knots_2d(seed: int, stream: int, spacing: tuple[int, int], width: int, scale: float) -> np.ndarray:
     """Smooth 2-D noise on a (_HEIGHT, width) grid: N(0, scale) knots, separable smoothstep interpolation."""
     sy, sx = spacing
-    rows = _HEIGHT // sy + 2
-    per_chunk = _CHUNK // sx
+    shape = (_HEIGHT // sy + 2, _CHUNK // sx)  # (knot rows, knots per random stream)
     knots = np.concatenate(
-        [_chunk_rng(seed, stream, c).normal(0.0, scale, (rows, per_chunk)) for c in range(_knot_chunks(width, sx))],
-        axis=1,
+        [_chunk_rng(seed, stream, c).normal(0.0, scale, shape) for c in range(_knot_chunks(width, sx))], axis=1
     )
-    y = np.arange(_HEIGHT) / sy
-    x = np.arange(width) / sx
+    y, x = np.arange(_HEIGHT) / sy, np.arange(width) / sx
     top, left = np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
     ty, tx = _smoothstep(y - top)[:, None], _smoothstep(x - left)[None, :]
     upper = knots[top][:, left] * (1.0 - tx) + knots[top][:, left + 1] * tx

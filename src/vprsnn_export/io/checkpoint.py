@@ -32,6 +32,9 @@ FORMAT_VERSION = 1
 ARRAYS = {"weights": np.float32, "thresholds": np.float32, "calibration": np.int64, "reference_place_ids": np.int64}
 #: A sparse S^R's arrays (CSR), in place of ``calibration``.
 SPARSE_CALIBRATION = ("calibration_data", "calibration_indices", "calibration_indptr")
+#: History fields that measure the machine, not the network: left out of files so that two
+#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
+TIMING_FIELDS = ("seconds",)
 
 
 @dataclass
@@ -57,18 +60,8 @@ def checkpoint_header(ckpt: Checkpoint) -> dict[str, Any]:
         "seed": ckpt.config.seed,
         "reference_traversals": list(ckpt.reference_traversals),
         "data": ckpt.data,
-        "history": [reproducible(entry) for entry in ckpt.history],
+        "history": [{k: v for k, v in entry.items() if k not in TIMING_FIELDS} for entry in ckpt.history],
     }
-
-
-#: History fields that measure the machine, not the network: left out of files so that two
-#: runs of the same seed and data write byte-identical checkpoints (and identical sha256).
-TIMING_FIELDS = ("seconds",)
-
-
-def reproducible(entry: dict[str, Any]) -> dict[str, Any]:
-    """One epoch's history entry without its wall-clock timings."""
-    return {key: value for key, value in entry.items() if key not in TIMING_FIELDS}
 
 
 def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
@@ -80,11 +73,10 @@ def save_checkpoint(path: str | Path, ckpt: Checkpoint) -> Path:
     arrays: dict[str, np.ndarray] = {}
     for name, dtype in ARRAYS.items():  # in order: a dense checkpoint's bytes do not depend on the sparse case
         value = getattr(ckpt, name)
-        if name == "calibration" and sparse.issparse(value):
-            parts = (value.data, value.indices, value.indptr)
-            arrays.update(
-                (key, np.asarray(a, dtype=np.int64)) for key, a in zip(SPARSE_CALIBRATION, parts, strict=True)
-            )
+        if name == "calibration" and sparse.issparse(value):  # its data, indices and indptr
+            arrays |= {
+                key: getattr(value, key.removeprefix("calibration_")).astype(np.int64) for key in SPARSE_CALIBRATION
+            }
         else:
             arrays[name] = value.astype(dtype)
     return write_container(path, meta, arrays)
@@ -102,9 +94,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
     weights, thresholds, calibration, ids = (arrays[name] for name in ARRAYS)
     version = str(meta.get("package_version", "unknown"))
-    ckpt = Checkpoint(
-        config, weights, thresholds, calibration, ids, list(traversals), dict(data), list(history), version
-    )
+    ckpt = Checkpoint(config, weights, thresholds, calibration, ids, traversals, data, history, version)
     validate_checkpoint(ckpt, path)
     return ckpt
 
@@ -159,12 +149,8 @@ def _header_defects(meta: dict[str, Any]) -> Iterator[str]:
     if not isinstance(meta.get("package_version", "unknown"), str):
         yield f"package_version must be a version string, got {meta['package_version']!r}"
     traversals = meta.get("reference_traversals", [])
-    if (
-        not isinstance(traversals, list)
-        or not traversals
-        or not all(isinstance(t, str) and t for t in traversals)
-        or len(set(traversals)) != len(traversals)
-    ):
+    names = traversals if isinstance(traversals, list) and all(isinstance(t, str) and t for t in traversals) else []
+    if not names or len(set(names)) != len(names):
         yield "reference_traversals must be a non-empty list of distinct traversal names"
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):

@@ -157,14 +157,10 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
     folder = next((p for p in target.absolute().parents if p.is_dir()), Path("/"))  # the nearest existing one
     lock_path = folder / f".{target.name or 'output'}.lock"
     keyed = _keyed_lock(target)  # the same file whichever of the output's folders exist yet
-    fd = _acquire(lock_path, target)
-    try:
+    with contextlib.ExitStack() as descriptors:  # closed last, the keyed one first
+        descriptors.callback(os.close, _acquire(lock_path, target))
         keyed.parent.mkdir(mode=0o700, exist_ok=True)
-        keyed_fd = _acquire(keyed, target)
-    except BaseException:
-        os.close(fd)
-        raise
-    try:
+        descriptors.callback(os.close, _acquire(keyed, target))
         if target.parent.is_dir():  # what a killed run left beside the output
             for pattern in (f".{target.name}.*.tmp", f".{target.name}.staging-*", f".{target.name}.old-*"):
                 for leftover in target.parent.glob(pattern):
@@ -177,9 +173,6 @@ def output_lock(path: str | Path | None) -> Iterator[None]:
             for held in (keyed, lock_path):
                 with contextlib.suppress(OSError):
                     os.unlink(held)
-    finally:
-        os.close(keyed_fd)
-        os.close(fd)
 
 
 def _keyed_lock(target: Path) -> Path:
@@ -202,11 +195,9 @@ def _acquire(lock_path: Path, target: Path) -> int:
             raise OutputError(
                 "another vprsnn-export run is writing it now: wait for it or give another output", target
             ) from None
-        try:
+        with contextlib.suppress(FileNotFoundError):
             if os.stat(lock_path).st_ino == os.fstat(fd).st_ino:
                 return fd
-        except FileNotFoundError:
-            pass
         os.close(fd)  # the holder unlinked this file as we took it: take the new one
     raise OutputError("could not take the output lock (a run keeps replacing it)", target)
 
@@ -318,10 +309,8 @@ def _json_int(literal: str, what: str) -> int:
 
 
 def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Path:
-    """Write arrays plus a JSON header into one ``.npz`` atomically."""
-    require_path("path", path)
-    if META_KEY in arrays:
-        raise InvalidValueError(f"array name {META_KEY!r} is reserved")
+    """Write arrays plus a JSON header into one ``.npz`` atomically (the savers checked the path and name the
+    arrays, never :data:`META_KEY`)."""
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
     buffer = io.BytesIO()
     members: dict[str, Any] = {META_KEY: header, **arrays}

@@ -165,9 +165,7 @@ def _rebuild(root: object) -> object:
             continue
         items = [done[id(child)] for child in children]
         if isinstance(node, _ArrayRecipe):
-            array = np.empty(len(items), dtype=object)
-            for index, item in enumerate(items):
-                array[index] = item
+            array = np.fromiter(items, dtype=object, count=len(items))  # elements as they are (lists stay lists)
             done[id(node)] = array.reshape(shape, order="F" if fortran else "C")
         else:
             done[id(node)] = items if isinstance(node, list) else tuple(items)

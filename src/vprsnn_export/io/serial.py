@@ -55,8 +55,7 @@ def json_options(
     write: bool = True,
 ) -> dict[str, Any]:
     """A field's JSON options (see the module docstring), as ``dataclasses.field(metadata=json_options(...))``."""
-    options = {"key": key, "flatten": flatten, "omit": omit, "missing": missing, "missing_from": missing_from}
-    return {"json": {**options, "write": write}}
+    return {"json": dict(key=key, flatten=flatten, omit=omit, missing=missing, missing_from=missing_from, write=write)}
 
 
 @functools.cache
