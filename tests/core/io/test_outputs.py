@@ -82,9 +82,16 @@ def test_sigint_exits_130_with_one_line_and_no_temp_file(tmp_path):
         # a job started in the background inherits SIGINT ignored; a user's Ctrl-C reaches a foreground process
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
-    time.sleep(4)
-    process.send_signal(signal.SIGINT)
-    _, err = process.communicate(timeout=60)
+    lock = tmp_path / ".net.npz.lock"  # taken by main() after the handlers are set, before the training
+    began = time.monotonic()
+    while not lock.exists() and process.poll() is None and time.monotonic() - began < 120:
+        time.sleep(0.1)
+    time.sleep(1)  # into the training
+    try:
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:  # a run that outlives the test (a loaded machine) must not keep training
+        process.kill()
     assert process.returncode == 130, err
     assert err.strip().splitlines()[-1] == "error: interrupted" and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
