@@ -39,9 +39,14 @@ def _mt_mantissas(state: np.ndarray, out: np.ndarray) -> None:
     lower = np.uint32(0x7FFFFFFF)
     matrix = np.uint32(0x9908B0DF)
     one = np.uint32(1)
-    for j in range(MT_N):  # in place: from j = N - M on, the words it reads are already twisted ones
-        y = (state[j] & upper) | (state[(j + 1) % MT_N] & lower)
-        state[j] = state[(j + MT_M) % MT_N] ^ (y >> one) ^ (matrix * (y & one))
+    for j in range(MT_N - MT_M):
+        y = (state[j] & upper) | (state[j + 1] & lower)
+        state[j] = state[j + MT_M] ^ (y >> one) ^ (matrix * (y & one))
+    for j in range(MT_N - MT_M, MT_N - 1):
+        y = (state[j] & upper) | (state[j + 1] & lower)
+        state[j] = state[j + MT_M - MT_N] ^ (y >> one) ^ (matrix * (y & one))
+    y = (state[MT_N - 1] & upper) | (state[0] & lower)
+    state[MT_N - 1] = state[MT_M - 1] ^ (y >> one) ^ (matrix * (y & one))
     for j in range(MT_N):
         y = state[j]
         y ^= y >> np.uint32(11)
