@@ -137,10 +137,8 @@ def _shift_rows(
     i0 = np.clip(x0, 0, n_places - 1).astype(np.intp)
     i1 = np.clip(x0 + 1, 0, n_places - 1).astype(np.intp)
     rows = frames_safe[:, :, None]
-    left = prob[rows, i0]
-    right = prob[rows, i1]
     # frac == 0 exactly for an integral shift, so the right neighbour drops out
-    shifted = (1.0 - frac) * left + frac * right
+    shifted = (1.0 - frac) * prob[rows, i0] + frac * prob[rows, i1]
     shifted[~inside] = 0.0
     return shifted, valid
 
@@ -190,7 +188,6 @@ def _summed_terms(
             target[:, :d] += source[:, -d:]
         if not ok.all():
             total[rows] = target
-            total[~ok] += outside * 0.0
     return total
 
 

@@ -210,13 +210,11 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
     """
     s = finite_matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
-    hi = s.max(axis=1, keepdims=True)
-    span = hi - lo
-    flat = span[:, 0] <= 0
+    span = s.max(axis=1, keepdims=True) - lo
     norm = (s - lo) / np.where(span > 0, span, 1.0)
     total = norm.sum(axis=1, keepdims=True)
     out = norm / np.where(total > 0, total, 1.0)
-    out[flat, :] = 1.0 / s.shape[1]
+    out[span[:, 0] <= 0, :] = 1.0 / s.shape[1]
     return out
 
 
@@ -231,18 +229,16 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     if np.any(s < 0):
         raise InvalidValueError("share_confidence needs non-negative scores")
     total = s.sum(axis=1)
-    top = s.max(axis=1)
-    return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)
+    return np.where(total > 0, s.max(axis=1) / np.where(total > 0, total, 1.0), 0.0)
 
 
 def share_decision(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """No-match mask and confidence of score rows (Standard, Weighted).
+    """No-match mask and confidence of score rows (Standard, Weighted), checked by :func:`~.strategies.decide`.
 
     .. math:: \\mathrm{no\\ match}_q = [\\forall l: \\mathrm{Score}_{ql} = 0], \\qquad
               c_q = \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql}
     """
-    s = finite_matrix("scores", scores)
-    return np.all(s == 0, axis=1), share_confidence(s)
+    return np.all(scores == 0, axis=1), share_confidence(scores)
 
 
 def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -251,8 +247,7 @@ def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndar
     .. math:: \\mathrm{no\\ match}_q = [\\max_l P(l \\mid Q_q) = \\min_l P(l \\mid Q_q)], \\qquad
               c_q = \\max_l P(l \\mid Q_q)
 
-    (a flat row is a no-match).
+    (a flat row is a no-match; the rows come checked from :func:`~.strategies.decide`).
     """
-    s = finite_matrix("scores", distribution)
-    top = s.max(axis=1)
-    return top == s.min(axis=1), top.copy()
+    top = distribution.max(axis=1)
+    return top == distribution.min(axis=1), top

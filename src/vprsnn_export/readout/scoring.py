@@ -59,11 +59,11 @@ def baseline_rows(
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
-    rows = []
-    for k in sorted(set(options.ks)):
-        dist = options.aggregate(distribution, k, frame_positions)
-        rows.append(metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)))
-    return rows
+    aggregates = {k: options.aggregate(distribution, k, frame_positions) for k in sorted(set(options.ks))}
+    return [
+        metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth))
+        for k, dist in aggregates.items()
+    ]
 
 
 def nearest_neighbour_rows(
@@ -106,11 +106,8 @@ def check_readout_arrays(
     """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
     id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
     arrays = {"calibration": calibration, "query_counts": query_counts}
-    for name, value in {
-        **arrays,
-        "reference_place_ids": reference_place_ids,
-        "query_place_ids": query_place_ids,
-    }.items():
+    ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
+    for name, value in {**arrays, **ids}.items():
         if np.ndim(value) != (2 if name in arrays else 1):
             raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
     (neurons, places), (n_references,), (n_queries,) = map(

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final, Protocol
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -19,29 +19,14 @@ from vprsnn_export.registry import Registry
 
 from .aggregation import estimate_velocity, smooth_velocity, track_velocity
 
-
-class SequenceOptions(Protocol):
-    """What an estimator reads of :class:`vprsnn_export.readout.sequence.SequenceOptions` (a protocol, so that
-    the options' module, which validates against this registry, is not imported back)."""
-
-    @property
-    def rule(self) -> str: ...
-    @property
-    def velocity_span(self) -> int: ...
-    @property
-    def velocity_length(self) -> int | None: ...
-    @property
-    def velocity_memory(self) -> int: ...
-    @property
-    def velocity_lag(self) -> int | None: ...
-
+if TYPE_CHECKING:  # the options' module validates against this registry: not imported back
+    from .sequence import SequenceOptions
 
 #: estimate(prob (Q, places), k, candidates, frame_positions, options: SequenceOptions)
 #: -> (velocity (Q,), aggregated (Q, places))
 EstimateFunction = Callable[
     [np.ndarray, int, np.ndarray, "np.ndarray | None", "SequenceOptions"], tuple[np.ndarray, np.ndarray]
 ]
-
 
 #: stream(k, options) -> (trajectory length, span, memory) of the causal tracker that gives the same velocity
 #: one frame at a time (:meth:`vprsnn_export.readout.scoring.Readout.push`)
