@@ -1,20 +1,15 @@
 """Neuron-to-place assignment and per-query place scores (paper Sec. III-E).
 
-Notation (paper Sec. III-E):
-
-* ``sr`` = S^R, shape ``(n_neurons, n_places)``: calibration spike counts, the
-  training set re-presented with plasticity off; ``S^R[i, l]`` is the number of
-  spikes neuron ``i`` emitted for place ``l``.
-* ``sq`` = S^Q, shape ``(n_queries, n_neurons)``: spike counts of every neuron
-  for every query image.
+* ``sr`` = S^R, shape ``(n_neurons, n_places)``: calibration spike counts, the training set re-presented with
+  plasticity off; ``S^R[i, l]`` is the number of spikes neuron ``i`` emitted for place ``l``.
+* ``sq`` = S^Q, shape ``(n_queries, n_neurons)``: spike counts of every neuron for every query image.
 
 Three strategies turn them into one row of place scores per query:
 
 * ``"standard"`` -- each neuron votes for its best calibration place.
-* ``"weighted"`` -- eq. 9-11: involvement regularisation, response-strength
-  normalisation and the missing-spikes penalty.
-* ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then
-  L1-normalised into a distribution P(l | Q).
+* ``"weighted"`` -- eq. 9-11: involvement regularisation, response-strength normalisation and the missing-spikes
+  penalty.
+* ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then L1-normalised into a distribution P(l | Q).
 
 :mod:`readout.strategies` registers them. S^R, S'' and S^Q are float64 CSR arrays and every product runs over
 their stored entries; the scores come out dense, (queries, places).
