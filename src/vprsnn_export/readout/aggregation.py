@@ -1,20 +1,16 @@
 """Velocity-compensated sequence aggregation over a sliding window (paper Sec. V).
 
-Input: one distribution per query frame over the reference places
-(``prob``, shape ``(n_queries, n_places)``, places in reference order, i.e.
-consecutive places along the route), in the order the robot saw the frames.
-The window of query ``j`` is the ``k`` most recent frames ``j-k+1 .. j`` in
-stream order (fewer at the start of the stream). Frame ``m`` of the window lies
-``d = t_j - t_m >= 0`` frame units in the past (``t`` = ``frame_positions``:
-frame index, timestamp or odometry, whatever the robot knows at query time),
-so at ``v`` places per frame unit the robot has since moved ``v * d`` places
-forward; its distribution is shifted by that much before combining:
+Input: one distribution per query frame over the reference places (``prob``, shape ``(n_queries, n_places)``, places in
+reference order, i.e. consecutive places along the route), in the order the robot saw the frames. The window of query
+``j`` is the ``k`` most recent frames ``j-k+1 .. j`` in stream order (fewer at the start of the stream). Frame ``m`` of
+the window lies ``d = t_j - t_m >= 0`` frame units in the past (``t`` = ``frame_positions``: frame index, timestamp or
+odometry, whatever the robot knows at query time), so at ``v`` places per frame unit the robot has since moved ``v * d``
+places forward; its distribution is shifted by that much before combining:
 
 .. math:: \\tilde P_m(l) = P_m(l - v d)
 
-evaluated with linear interpolation between the two neighbouring places (no
-rounding). Windows come from the stream order and ``frame_positions`` only, never from
-ground-truth labels (unlike the paper's code, field notes Sec. 1).
+evaluated with linear interpolation between the two neighbouring places (no rounding). Windows come from the stream
+order and ``frame_positions`` only, never from ground-truth labels (unlike the paper's code, field notes Sec. 1).
 """
 
 from __future__ import annotations

@@ -114,10 +114,9 @@ def diagonal_sums(
     .. math:: A_j(l) = \\sum_{m \\in W_j} S_m\\big(l - v (t_j - t_m)\\big)
 
     with the window ``W_j`` and the shift (linear interpolation, 0 beyond the map) of
-    :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores).
-    A frame whose shifted place lies beyond the map adds 0, so the scores must be non-negative
-    similarities (cosine of non-negative images; SAD through :func:`sad_similarities`).
-    ``k == 1`` returns a copy of ``scores``.
+    :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores). A frame whose shifted
+    place lies beyond the map adds 0, so the scores must be non-negative similarities (cosine of non-negative images;
+    SAD through :func:`sad_similarities`). ``k == 1`` returns a copy of ``scores``.
     """
     s = np.asarray(scores, dtype=np.float64)
     if s.ndim != 2 or not np.all(np.isfinite(s)):

@@ -14,12 +14,11 @@ per module). Two stop rules (``config.early``), the earliest that fires wins:
   leader can then no longer be overtaken nor tied, so the Standard decision at t is the one at T;
 * **spikes** = K > 0: stop at the first t with  sum_{t' < t} sum_j z_j[t'] >= K.
 
-T_q = that t (the number of steps run), or T when no rule fires. The query's counts are those of its
-first T_q steps, c_j = sum_{t < T_q} z_j[t], and every readout (W+Prob, aggregation) runs on them. The
-raster is a pure function of the spike train, bit for bit the same in every backend (the integer simulator,
-ONNX, the files read back), so the stop step and the decision computed from any backend's raster are the
-same: the rule needs no second implementation per backend. Running only the first T_q steps gives the
-same counts (state isolation: a step never depends on later ones).
+T_q = that t (the number of steps run), or T when no rule fires. The query's counts are those of its first T_q steps,
+c_j = sum_{t < T_q} z_j[t], and every readout (W+Prob, aggregation) runs on them. The raster is a pure function of the
+spike train, bit for bit the same in every backend (the integer simulator, ONNX, the files read back), so the stop step
+and the decision computed from any backend's raster are the same: the rule needs no second implementation per backend.
+Running only the first T_q steps gives the same counts (state isolation: a step never depends on later ones).
 """
 
 from __future__ import annotations

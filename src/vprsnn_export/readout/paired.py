@@ -131,8 +131,7 @@ def accuracy_interval(b: int, c: int, n_queries: int, level: float) -> tuple[flo
 def bootstrap_indices(n_queries: int, resamples: int, block: int, rng: np.random.Generator) -> np.ndarray:
     """Query indices of ``resamples`` moving-block bootstrap samples, (resamples, Q) int64.
 
-    Each sample joins ceil(Q / L) blocks of L consecutive queries whose starts are uniform on
-    {0, ..., Q - L}, cut to Q:
+    Each sample joins ceil(Q / L) blocks of L consecutive queries whose starts are uniform on {0, ..., Q - L}, cut to Q:
 
     .. math:: s_{b,j} \\sim U\\{0, \\dots, Q - L\\}, \\qquad
               \\text{idx}_b = (s_{b,1}, \\dots, s_{b,1} + L - 1, s_{b,2}, \\dots)_{1..Q}
@@ -249,9 +248,8 @@ def verdict(low: float, high: float, limit: float, eps: float = 1e-12) -> str:
 
 
 def degenerate(metric: str, float_value: float) -> str | None:
-    """Why a metric difference is not judged, or None: a float value of 0 leaves nothing to lose, and an
-    interval around 0 - 0 says nothing about the deployed network (float R@100P = 0: no decision is accepted
-    at 100 % precision)."""
+    """Why a metric difference is not judged, or None: a float value of 0 leaves nothing to lose, and an interval around
+    0 - 0 says nothing about the deployed network (float R@100P = 0: no decision is accepted at 100 % precision)."""
     if float_value > 0:
         return None
     if metric == "r_at_100p":

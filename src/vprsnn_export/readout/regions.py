@@ -1,12 +1,11 @@
 """Region regularisation of an ensemble: region-specific assignment and silencing of hyperactive neurons.
 
-An ensemble of modules (``src/vprsnn_export/network/modules.py``) applies the hard WTA within each module, so
-every module has a winner for every image, including the images of the other modules' regions. The
-calibration S^R spans every module's neurons over every reference place, so it shows which neurons
-also respond outside their own module's region. Hussaini et al. (RA-L 2022, "Ensembles of compact,
-region-specific & regularized SNNs") call the neurons that respond to many places outside their region
-*hyperactive* and silence them at deployment, and assign each module's neurons to the places of
-its own region; both use the reference (calibration) responses only. Here:
+An ensemble of modules (``src/vprsnn_export/network/modules.py``) applies the hard WTA within each module, so every
+module has a winner for every image, including the images of the other modules' regions. The calibration S^R spans every
+module's neurons over every reference place, so it shows which neurons also respond outside their own module's region.
+Hussaini et al. (RA-L 2022, "Ensembles of compact, region-specific & regularized SNNs") call the neurons that respond to
+many places outside their region *hyperactive* and silence them at deployment, and assign each module's neurons to the
+places of its own region; both use the reference (calibration) responses only. Here:
 
     R(i)      = the region (consecutive reference places) of neuron i's module        modules.region_mask
     S~[i, l]  = S^R[i, l] if l in R(i), else lambda S^R[i, l]                         region_weighting
@@ -15,13 +14,12 @@ its own region; both use the reference (calibration) responses only. Here:
     S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silenced_counts
 
 and the readout (Standard, Weighted, W+Prob, aggregation) then runs on S~ in place of S^R.
-lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1];
-lambda = 0 is Hussaini's region-specific assignment (a neuron votes only for places of its region),
-lambda = 1 the whole-route assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one
-module: no place lies outside its region, o_i = 0) is never changed. A silenced neuron neither votes
-nor counts as active in the missing-spikes penalty (eq. 11): it is removed from the readout as if it
-had not been there; its module's WTA is unchanged. Everything is computed on the stored entries of S^R (CSR),
-without a loop over neurons or modules.
+lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1]; lambda = 0 is
+Hussaini's region-specific assignment (a neuron votes only for places of its region), lambda = 1 the whole-route
+assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one module: no place lies outside its region,
+o_i = 0) is never changed. A silenced neuron neither votes nor counts as active in the missing-spikes penalty (eq. 11):
+it is removed from the readout as if it had not been there; its module's WTA is unchanged. Everything is computed on
+the stored entries of S^R (CSR), without a loop over neurons or modules.
 """
 
 from __future__ import annotations

@@ -126,9 +126,8 @@ class Readout:
     """One network's readout: S^R, gamma, its module layout and the sequence options.
 
     ``score(counts, ...)`` reads a batch out (Q x neurons), every column decided once; ``stream()`` gives a
-    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob
-    distributions bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream
-    state.
+    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob distributions
+    bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream state.
     """
 
     def __init__(

@@ -112,10 +112,9 @@ class SequenceOptions:
     def aggregate(self, distribution: np.ndarray, k: int, frame_positions: np.ndarray | None = None) -> np.ndarray:
         """A distribution (Q, places) aggregated over k frames at the given velocity or at one estimated from it.
 
-        With ``velocity_candidates`` the registered estimator ``velocity_estimate`` chooses the velocity per
-        frame (``"window"``: per window; ``"track"``: over the ``velocity_span`` recent windows; ``"smooth"``,
-        the default: over those and the next ``velocity_lag``); otherwise ``velocity``. ``k == 1`` returns
-        ``distribution`` itself.
+        With ``velocity_candidates`` the registered estimator ``velocity_estimate`` chooses the velocity per frame
+        (``"window"``: per window; ``"track"``: over the ``velocity_span`` recent windows; ``"smooth"``, the default:
+        over those and the next ``velocity_lag``); otherwise ``velocity``. ``k == 1`` returns ``distribution`` itself.
         """
         if k == 1:
             return distribution

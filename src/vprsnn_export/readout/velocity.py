@@ -1,10 +1,9 @@
 """The velocity estimators' registry: how a velocity is estimated from the query stream (paper Sec. V).
 
-Each :class:`VelocityEstimator` wraps one search of :mod:`readout.aggregation` behind one
-signature; the CLI's ``--velocity-estimate`` and ``SequenceOptions.velocity_estimate``
-choose among :data:`VELOCITY_ESTIMATES` and share one default,
-:data:`DEFAULT_VELOCITY_ESTIMATE` (``smooth``, the CLI's default before the two were one).
-Adding one is a function and one ``VELOCITY_ESTIMATES.register`` line (docs/architecture.md).
+Each :class:`VelocityEstimator` wraps one search of :mod:`readout.aggregation` behind one signature; the CLI's
+``--velocity-estimate`` and ``SequenceOptions.velocity_estimate`` choose among :data:`VELOCITY_ESTIMATES` and share one
+default, :data:`DEFAULT_VELOCITY_ESTIMATE` (``smooth``, the CLI's default before the two were one). Adding one is a
+function and one ``VELOCITY_ESTIMATES.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations
