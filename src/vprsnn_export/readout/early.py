@@ -78,8 +78,7 @@ def first_true(flags: np.ndarray, default: int) -> np.ndarray:
 
 def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.ndarray:
     """T_q of the margin rule: the first t with V_(1)(t) - V_(2)(t) > (T - t) c, else T (the module docstring)."""
-    z = raster
-    n, timesteps, neurons = z.shape
+    n, timesteps, neurons = raster.shape
     a = np.asarray(assignment, dtype=np.float64)
     if a.shape[0] != neurons or a.shape[1] < 1:
         raise InvalidValueError(f"assignment must be ({neurons}, places >= 1), got shape {a.shape}")
@@ -87,7 +86,7 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
     remaining = (timesteps - np.arange(1, timesteps + 1)) * bound  # after t = 1..T steps
     stops = np.empty(n, dtype=np.int64)
     for start in range(0, n, CHUNK):  # a (chunk, T, places) trajectory at a time
-        part = z[start : start + CHUNK]
+        part = raster[start : start + CHUNK]
         q, t, j = np.nonzero(part)
         increments = np.zeros((part.shape[0], timesteps, a.shape[1]), dtype=np.float64)
         np.add.at(increments, (q, t), a[j])

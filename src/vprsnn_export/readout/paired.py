@@ -33,9 +33,6 @@ HOLDS, FAILS, UNDECIDED, NOT_JUDGED = "holds", "fails", "undecided", "not judged
 CHUNK_ENTRIES = 1 << 22
 
 
-# ---------------------------------------------------------------------------- flips and McNemar
-
-
 def flips(float_correct: np.ndarray, deployed_correct: np.ndarray) -> tuple[int, int]:
     """The discordant pairs (b, c) of two per-query correctness vectors.
 
@@ -123,9 +120,6 @@ def accuracy_interval(b: int, c: int, n_queries: int, level: float) -> tuple[flo
         return 0.0, 0.0
     low, high = clopper_pearson(c, n, level)
     return n / n_queries * (2 * low - 1), n / n_queries * (2 * high - 1)
-
-
-# ---------------------------------------------------------------------------- the paired bootstrap
 
 
 def bootstrap_indices(n_queries: int, resamples: int, block: int, rng: np.random.Generator) -> np.ndarray:
@@ -224,9 +218,6 @@ def paired_bootstrap(
     alpha = 1.0 - level
     quantiles = {m: np.quantile(np.concatenate(deltas[m]), [alpha / 2, 1 - alpha / 2]) for m in PAIRED_METRICS}
     return {m: (float(low), float(high)) for m, (low, high) in quantiles.items()}
-
-
-# ---------------------------------------------------------------------------- the verdict
 
 
 def verdict(low: float, high: float, limit: float, eps: float = 1e-12) -> str:

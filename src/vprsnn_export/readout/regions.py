@@ -139,8 +139,7 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
     0 for a neuron whose region covers every place (a single network).
     """
     sr_ = sparse_counts("sr", sr)
-    rows = entry_rows(sr_)
-    fires_outside = np.bincount(rows[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
+    fires_outside = np.bincount(entry_rows(sr_)[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
     regions_ = check_regions(regions)
     outside = (sr_.shape[1] - (regions_[:, 1] - regions_[:, 0]))[neuron_modules(sr_.shape[0], group)]
     return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
@@ -240,14 +239,8 @@ def module_accuracy(
     hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
     inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
     share, routed = np.divide([hits, inside], totals, out=np.zeros((2, n_modules)), where=totals > 0)
+    first, last = reference[regions_[:, 0]].tolist(), reference[regions_[:, 1] - 1].tolist()
     return [
-        ModuleAccuracy(
-            module=m,
-            first_place=int(reference[regions_[m, 0]]),
-            last_place=int(reference[regions_[m, 1] - 1]),
-            n_queries=int(totals[m]),
-            accuracy=float(share[m]),
-            in_region=float(routed[m]),
-        )
+        ModuleAccuracy(m, first[m], last[m], int(totals[m]), float(share[m]), float(routed[m]))
         for m in range(n_modules)
     ]

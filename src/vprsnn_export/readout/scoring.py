@@ -153,8 +153,6 @@ class Readout:
         layout = ensemble_layout(config, np.shape(calibration)[1]) if np.ndim(calibration) == 2 else None
         return cls(calibration, config.assignment.gamma, options, layout)
 
-    # ------------------------------------------------------------------------ batch
-
     def scores(self, counts: np.ndarray) -> dict[str, np.ndarray]:
         """The k=1 scores of every registered strategy (``readout.strategies.STRATEGIES``), (Q, places) each.
 
@@ -202,9 +200,8 @@ class Readout:
         frame_positions: np.ndarray | None = None,
     ) -> Scored:
         """Every readout column of the queries, each decided once (:class:`~.scored.Scored`): every strategy at
-        k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1, judged by ``truth`` (None: the options' match window).
-
-        InvalidValueError when the arrays do not fit, a k exceeds the queries or no query can match a reference.
+        k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1, judged by ``truth`` (None: the options' match window);
+        InvalidValueError as :meth:`judge`.
         """
         truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
         scores = self.scores(counts)
@@ -261,8 +258,6 @@ class Readout:
     ) -> list[MetricRow]:
         """The metric rows of :meth:`score` (by the options' match window)."""
         return self.score(counts, reference_place_ids, query_place_ids, None, frame_positions).rows
-
-    # ------------------------------------------------------------------------ stream
 
     def wprob(self, counts: np.ndarray, places: slice | None = None) -> np.ndarray:
         """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.
