@@ -53,7 +53,7 @@ def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
 
 
 def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
-    if isinstance(velocity, bool | np.bool_) or np.asarray(velocity).dtype.kind == "b":
+    if np.asarray(velocity).dtype.kind == "b":
         raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
     v = real_array("velocity", velocity)
     if v.ndim == 0:
@@ -374,8 +374,7 @@ def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
 
     ``lag`` L = 0 is the causal sum over the S most recent rows.
     """
-    e = np.asarray(scores, dtype=np.float64)
-    padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
+    padded = np.concatenate([np.zeros((span - 1,) + scores.shape[1:]), scores, np.zeros((lag,) + scores.shape[1:])])
     return np.lib.stride_tricks.sliding_window_view(padded, span + lag, axis=0).sum(axis=-1)
 
 
@@ -386,10 +385,8 @@ def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
     Velocities that round to the same whole-place shifts tie exactly; their centre is unbiased, the first is not.
     """
-    e = np.asarray(totals, dtype=np.float64)
-    cands = np.asarray(candidates, dtype=np.float64)
-    best = e == e.max(axis=1, keepdims=True)
-    return (best * cands[None, :]).sum(axis=1) / best.sum(axis=1)
+    best = totals == totals.max(axis=1, keepdims=True)
+    return (best * candidates[None, :]).sum(axis=1) / best.sum(axis=1)
 
 
 def track_velocity(

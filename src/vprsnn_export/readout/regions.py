@@ -100,8 +100,8 @@ def module_layout(
 
 
 def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray:
-    """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries)."""
-    regions = check_regions(regions)
+    """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries); the
+    regions already checked."""
     shape = (len(regions) * group, int(regions[-1, 1]))
     if shape != sr.shape:
         raise InvalidValueError(
@@ -128,7 +128,7 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
     lam = float(outside_weight)
     if not 0.0 <= lam <= 1.0:
         raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
-    return like_input(_scaled(sr_, np.where(_inside(sr_, regions, group), 1.0, lam)), sr)
+    return like_input(_scaled(sr_, np.where(_inside(sr_, check_regions(regions), group), 1.0, lam)), sr)
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -138,9 +138,8 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
 
     0 for a neuron whose region covers every place (a single network).
     """
-    sr_ = sparse_counts("sr", sr)
-    fires_outside = np.bincount(entry_rows(sr_)[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
-    regions_ = check_regions(regions)
+    sr_, regions_ = sparse_counts("sr", sr), check_regions(regions)
+    fires_outside = np.bincount(entry_rows(sr_)[~_inside(sr_, regions_, group)], minlength=sr_.shape[0])
     outside = (sr_.shape[1] - (regions_[:, 1] - regions_[:, 0]))[neuron_modules(sr_.shape[0], group)]
     return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
 
