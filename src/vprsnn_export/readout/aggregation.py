@@ -41,17 +41,6 @@ def _prob2d(prob: np.ndarray) -> np.ndarray:
     return p
 
 
-def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
-    if frame_positions is None:
-        return np.arange(n, dtype=np.float64)
-    t = real_array("frame_positions", frame_positions)
-    if t.shape != (n,):
-        raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
-    if np.any(np.diff(finite_array("frame_positions", t)) < 0):
-        raise InvalidValueError("frame_positions must be non-decreasing in stream order")
-    return t
-
-
 def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
     if np.asarray(velocity).dtype.kind == "b":
         raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
@@ -83,8 +72,16 @@ def _checked(
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """The checked ``prob``, the window length that matters (:func:`_window`) and the frame positions."""
     p = _prob2d(prob)
-    k = _window(_check_args(k, rule, eps), p.shape[0])
-    return p, k, _positions(frame_positions, p.shape[0])
+    n = p.shape[0]
+    k = _window(_check_args(k, rule, eps), n)
+    if frame_positions is None:
+        return p, k, np.arange(n, dtype=np.float64)
+    t = real_array("frame_positions", frame_positions)
+    if t.shape != (n,):
+        raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
+    if np.any(np.diff(finite_array("frame_positions", t)) < 0):
+        raise InvalidValueError("frame_positions must be non-decreasing in stream order")
+    return p, k, t
 
 
 def _window(k: int, n_queries: int) -> int:

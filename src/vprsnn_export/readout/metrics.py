@@ -82,7 +82,8 @@ def is_correct(
     return ok & (diff <= tolerance)
 
 
-def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c = np.asarray(correct)
     conf = real_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
@@ -93,12 +94,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
         if not np.all((c == 0) | (c == 1)):
             raise InvalidValueError("correct must be boolean (or 0/1)")
         c = c.astype(bool)
-    return c, finite_array("confidence", conf)
-
-
-def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
-    c, conf = _check(correct, confidence)
+    conf = finite_array("confidence", conf)
     order = np.argsort(-conf, kind="stable")
     conf_sorted = conf[order]
     tp_cum = np.cumsum(c[order], dtype=np.int64)
