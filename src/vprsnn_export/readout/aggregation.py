@@ -90,11 +90,7 @@ def _window(k: int, n_queries: int) -> int:
 
 
 def shift_window(
-    prob: np.ndarray,
-    queries: np.ndarray,
-    k: int,
-    velocity: np.ndarray,
-    frame_positions: np.ndarray,
+    prob: np.ndarray, queries: np.ndarray, k: int, velocity: np.ndarray, frame_positions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Shifted window distributions ``(len(queries), k, n_places)``; offset ``o`` holds frame ``m = j - o``:
 
@@ -233,12 +229,7 @@ def aggregate(
 
 
 def _aggregate_scored(
-    prob: np.ndarray,
-    k: int,
-    velocity: float | np.ndarray,
-    rule: str,
-    frame_positions: np.ndarray | None,
-    eps: float,
+    prob: np.ndarray, k: int, velocity: float | np.ndarray, rule: str, frame_positions: np.ndarray | None, eps: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`aggregate` plus each window's score max_l A_j(l) of the un-normalised aggregate (the registered rule's
     ``combine``, :data:`RULES`), which the velocity search maximises."""

@@ -159,11 +159,7 @@ def silenced_counts(sq: sparse.csr_array, silent: np.ndarray | None) -> sparse.c
     return sq if silent is None or not silent.any() else _scaled(sq, np.where(silent[sq.indices], 0.0, 1.0))
 
 
-def regularise(
-    sr: np.ndarray,
-    sq: np.ndarray,
-    layout: ModuleLayout | None,
-) -> tuple[np.ndarray, np.ndarray]:
+def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
     """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
     (both unchanged when ``layout`` is None), each dense or CSR as given.
 

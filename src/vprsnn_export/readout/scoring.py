@@ -39,11 +39,7 @@ def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
 
 
 def decision_metrics(
-    distribution: np.ndarray,
-    strategy: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    truth: Truth,
+    distribution: np.ndarray, strategy: str, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, truth: Truth
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
     column = judged_column(strategy, 1, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)

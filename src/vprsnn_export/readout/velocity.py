@@ -82,9 +82,4 @@ def causal_estimates() -> tuple[str, ...]:
     return tuple(e.name for e in VELOCITY_ESTIMATES.values() if e.stream is not None)
 
 
-__all__ = [
-    "DEFAULT_VELOCITY_ESTIMATE",
-    "VELOCITY_ESTIMATES",
-    "VelocityEstimator",
-    "causal_estimates",
-]
+__all__ = ["DEFAULT_VELOCITY_ESTIMATE", "VELOCITY_ESTIMATES", "VelocityEstimator", "causal_estimates"]
