@@ -72,10 +72,7 @@ def sad_distribution(distances: np.ndarray) -> np.ndarray:
     The farthest place gets probability 0 and the nearest the largest. A query at equal distance from every place
     gets the uniform distribution, which ``decide(..., "wprob")`` reports as a no-match.
     """
-    d = real_array("distances", distances)
-    if d.ndim != 2:
-        raise InvalidValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
-    return wprob_distribution(-d)
+    return wprob_distribution(-finite_matrix("distances", distances))
 
 
 def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -118,9 +115,7 @@ def diagonal_sums(
     place lies beyond the map adds 0, so the scores must be non-negative similarities (cosine of non-negative images;
     SAD through :func:`sad_similarities`). ``k == 1`` returns a copy of ``scores``.
     """
-    s = np.asarray(scores, dtype=np.float64)
-    if s.ndim != 2 or not np.all(np.isfinite(s)):
-        raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
+    s = finite_matrix("scores", scores)
     k = count_at_least("k", k, 1)
     if np.any(s < 0):
         raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")

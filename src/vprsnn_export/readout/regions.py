@@ -35,6 +35,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
+from .aggregation import count_at_least
 from .assignment import entry_rows, like_input, sparse_counts
 
 
@@ -53,8 +54,7 @@ class ModuleLayout:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "regions", check_regions(self.regions))
-        if isinstance(self.group, bool) or not isinstance(self.group, int | np.integer) or self.group < 1:
-            raise InvalidValueError(f"module layout: group must be an integer >= 1, got {self.group!r}")
+        count_at_least("module layout: group", self.group, 1)
         for name in ("hyperactive_share", "outside_weight"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
