@@ -100,7 +100,8 @@ def like_input(result: sparse.csr_array, original: object) -> np.ndarray | spars
     return result if sparse.issparse(original) else result.toarray()
 
 
-def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_array]:
+def count_pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_array]:
+    """S^R and S^Q as :func:`sparse_counts`, S^Q with one column per neuron of S^R."""
     sr_ = sparse_counts("sr", sr)
     sq_ = sparse_counts("sq", sq)
     if sq_.shape[1] != sr_.shape[0]:
@@ -125,7 +126,7 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     with ``A = standard_assignment(sr)``, a sparse product (integer counts: exact sums).
     """
-    sr_, sq_ = _pair(sr, sq)
+    sr_, sq_ = count_pair(sr, sq)
     votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
     return (sq_ @ votes).toarray()
 
@@ -170,7 +171,7 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     ``Active_q``: the neurons that spiked in query q; 0 for a place whose calibration column sums to 0.
     """
-    return _penalty(*_pair(sr, sq))
+    return _penalty(*count_pair(sr, sq))
 
 
 def _penalty(sr: sparse.csr_array, sq: sparse.csr_array) -> np.ndarray:
@@ -188,7 +189,7 @@ def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
     with S'' from :func:`weighted_matrix` and the penalty of :func:`missing_spikes_penalty`; a query with no
     spike scores 0 everywhere.
     """
-    sr_, sq_ = _pair(sr, sq)
+    sr_, sq_ = count_pair(sr, sq)
     weighting = once_per_calibration("weighted", sr, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
     return (sq_ @ weighting).toarray() * _penalty(sr_, sq_)
 

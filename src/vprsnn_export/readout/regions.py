@@ -36,7 +36,7 @@ from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
 from .aggregation import count_at_least
-from .assignment import entry_rows, like_input, sparse_counts
+from .assignment import count_pair, entry_rows, like_input, sparse_counts
 
 
 @dataclass(frozen=True)
@@ -171,9 +171,7 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
     weighted, silent = calibrated_half(sr, layout)
-    sq_ = sparse_counts("sq", sq)
-    if sq_.shape[1] != weighted.shape[0]:
-        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {weighted.shape[0]} neurons")
+    sq_ = count_pair(weighted, sq)[1]
     return like_input(weighted, sr), like_input(silenced_counts(sq_, silent), sq)
 
 
