@@ -42,8 +42,7 @@ class Column:
 
     def curve(self) -> tuple[np.ndarray, np.ndarray]:
         """The exact PR operating points (precision, recall) of these decisions (:func:`~.metrics.pr_curve`)."""
-        precision, recall, _ = pr_curve(*self.decisions)
-        return precision, recall
+        return pr_curve(*self.decisions)[:2]
 
 
 def judged_column(

@@ -145,8 +145,7 @@ class SequenceOptions:
         if "k" in data:  # localize's form before SequenceOptions: one k, the velocity always tracked
             data["ks"] = (data.pop("k"),)
             data.setdefault("velocity_estimate", "track")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(set(data) - {f.name for f in fields(cls)})
         if unknown:
             raise InvalidValueError(f"unknown sequence options {', '.join(unknown)}")
         return cls(**data)  # lists become tuples when the options are built
