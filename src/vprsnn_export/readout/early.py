@@ -35,7 +35,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.runs import SpikeRun
 
 from .assignment import standard_assignment
-from .regions import module_layout, regularised_calibration
+from .regions import calibrated_half, ensemble_layout
 
 #: Queries whose (steps, places) vote trajectories are held at once.
 CHUNK = 16
@@ -151,10 +151,7 @@ def early_in_chunks(
 
 def vote_matrix(calibration: np.ndarray, cfg: Config) -> np.ndarray:
     """A = Standard assignment of the readout's S~ (an ensemble's region regularisation applied, silenced rows 0)."""
-    sr = np.asarray(calibration)
-    if cfg.train.module_size > 0:
-        sr = regularised_calibration(sr, module_layout(cfg, sr.shape[1]))[0]
-    return standard_assignment(sr)
+    return standard_assignment(calibrated_half(calibration, ensemble_layout(cfg, np.shape(calibration)[1]))[0])
 
 
 def early_queries(

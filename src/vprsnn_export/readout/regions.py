@@ -99,6 +99,11 @@ def module_layout(
     return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
 
 
+def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
+    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
+    return module_layout(config, n_places) if config.train.module_size > 0 else None
+
+
 def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray:
     """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries); the
     regions already checked."""

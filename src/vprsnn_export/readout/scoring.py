@@ -23,7 +23,7 @@ from vprsnn_export.errors import InvalidValueError
 from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, metric_row, pr_metrics, predicted_place_ids
-from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
+from .regions import ModuleLayout, calibrated_half, ensemble_layout, silenced_counts
 from .scored import Scored, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
@@ -31,11 +31,6 @@ from .stream import ReadoutStream
 
 #: Queries read out at once by :meth:`Readout.score_in_blocks` (its default).
 READOUT_BLOCK = 1024
-
-
-def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
-    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
-    return module_layout(config, n_places) if config.train.module_size > 0 else None
 
 
 def decision_metrics(
