@@ -91,28 +91,6 @@ def nearest_neighbour_decisions(
     return out
 
 
-def check_readout_arrays(
-    calibration: np.ndarray, query_counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
-) -> None:
-    """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
-    id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
-    arrays = {"calibration": calibration, "query_counts": query_counts}
-    ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
-    for name, value in {**arrays, **ids}.items():
-        if np.ndim(value) != (2 if name in arrays else 1):
-            raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
-    (neurons, places), (n_references,), (n_queries,) = map(
-        np.shape, (calibration, reference_place_ids, query_place_ids)
-    )
-    if places != n_references:
-        raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
-    if np.shape(query_counts) != (n_queries, neurons):
-        raise InvalidValueError(
-            f"query_counts has shape {np.shape(query_counts)}, expected ({n_queries}, {neurons}): one row per query "
-            "id, one column per neuron of the calibration"
-        )
-
-
 class Readout:
     """One network's readout: S^R, gamma, its module layout and the sequence options.
 
@@ -170,11 +148,27 @@ class Readout:
     def judge(
         self, counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, truth: Truth | None
     ) -> Truth:
-        """The truth the queries are judged by (None: the options' match window), once the arrays are checked:
-        InvalidValueError when they do not fit, a k exceeds the queries or no query can match a reference."""
+        """The truth the queries are judged by (None: the options' match window), once the arrays are checked: S^R
+        (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query id (else
+        decisions would name the wrong places). InvalidValueError naming the argument that does not fit, or when a k
+        exceeds the queries or no query can match a reference."""
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
-        check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
+        arrays = {"calibration": self.calibration, "query_counts": counts}
+        ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
+        for name, value in {**arrays, **ids}.items():
+            if np.ndim(value) != (2 if name in arrays else 1):
+                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
+        (neurons, places), (n_references,), (n_queries,) = map(
+            np.shape, (self.calibration, reference_place_ids, query_place_ids)
+        )
+        if places != n_references:
+            raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
+        if np.shape(counts) != (n_queries, neurons):
+            raise InvalidValueError(
+                f"query_counts has shape {np.shape(counts)}, expected ({n_queries}, {neurons}): one row per query "
+                "id, one column per neuron of the calibration"
+            )
         if max(self.options.ks) > len(query_place_ids):  # no full window exists
             raise InvalidValueError(
                 f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
