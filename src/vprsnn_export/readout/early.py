@@ -1,17 +1,17 @@
 """Early decision: stop a query when its outcome is settled, as a readout rule a chip can run.
 
-Every output neuron j votes for one place (its Standard assignment, ``A = standard_assignment(S~)``:
-a one-hot row, or none for a neuron silent in calibration or silenced by the region regularisation).
-A chip keeps one vote counter per place and adds A_j to it on each spike of j. After t steps
+Every output neuron j votes for one place (its Standard assignment, ``A = standard_assignment(S~)``: a one-hot row,
+or none for a neuron silent in calibration or silenced by the region regularisation). A chip keeps one vote counter
+per place and adds A_j to it on each spike of j. After t steps
 
     V_l(t) = sum_{t' < t} sum_j z_j[t'] A_jl                     (z: the raster, WTA applied)
 
-Each step adds at most c = sum over WTA groups g of max_{j in g, l} A_jl to any one place (one spike per
-group per step under the hard WTA: c = 1 with one WTA over the ensemble, the number of modules with one
-per module). Two stop rules (``config.early``), the earliest that fires wins:
+Each step adds at most c = sum over WTA groups g of max_{j in g, l} A_jl to any one place (one spike per group per
+step under the hard WTA: c = 1 with one WTA over the ensemble, the number of modules with one per module). Two stop
+rules (``config.early``), the earliest that fires wins:
 
-* **margin**: stop at the first t with  V_(1)(t) - V_(2)(t) > (T - t) c   (leader minus runner-up); the
-  leader can then no longer be overtaken nor tied, so the Standard decision at t is the one at T;
+* **margin**: stop at the first t with  V_(1)(t) - V_(2)(t) > (T - t) c   (leader minus runner-up); the leader can
+  then no longer be overtaken nor tied, so the Standard decision at t is the one at T;
 * **spikes** = K > 0: stop at the first t with  sum_{t' < t} sum_j z_j[t'] >= K.
 
 T_q = that t (the number of steps run), or T when no rule fires. The query's counts are those of its first T_q steps,

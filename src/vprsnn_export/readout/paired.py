@@ -1,17 +1,17 @@
 """Paired statistics of two readouts of the same queries: flips, exact McNemar, paired bootstrap, a verdict.
 
-The float network and a deployed (quantised) one see the *same* spike tensor, so every query is a
-pair (float decision, deployed decision). Judging a metric difference with two independent samples
-would throw that pairing away; here every interval is paired:
+The float network and a deployed (quantised) one see the *same* spike tensor, so every query is a pair (float
+decision, deployed decision). Judging a metric difference with two independent samples would throw that pairing away;
+here every interval is paired:
 
-* **accuracy at k = 1**: only the discordant queries carry information. With
-  b = #(float right, deployed wrong) and c = #(float wrong, deployed right), the exact McNemar test
-  and an exact interval of the accuracy difference conditional on n = b + c (:func:`accuracy_interval`).
-* **every metric, every k** (accuracy, P@100R, R@100P, AUC-PR): the paired bootstrap, both readouts
-  resampled with the same query indices; for k > 1 the windows overlap, so the queries are resampled
-  as moving blocks of length k (:func:`bootstrap_indices`). Vectorised over resamples.
-* **the verdict** of a difference against a tolerance on its drop (:func:`verdict`): *holds*, *fails*,
-  *undecided* (with :func:`queries_to_decide`), or *not judged* for a degenerate float metric.
+* **accuracy at k = 1**: only the discordant queries carry information. With b = #(float right, deployed wrong) and
+  c = #(float wrong, deployed right), the exact McNemar test and an exact interval of the accuracy difference
+  conditional on n = b + c (:func:`accuracy_interval`).
+* **every metric, every k** (accuracy, P@100R, R@100P, AUC-PR): the paired bootstrap, both readouts resampled with the
+  same query indices; for k > 1 the windows overlap, so the queries are resampled as moving blocks of length k
+  (:func:`bootstrap_indices`). Vectorised over resamples.
+* **the verdict** of a difference against a tolerance on its drop (:func:`verdict`): *holds*, *fails*, *undecided*
+  (with :func:`queries_to_decide`), or *not judged* for a degenerate float metric.
 """
 
 from __future__ import annotations
@@ -38,8 +38,7 @@ def flips(float_correct: np.ndarray, deployed_correct: np.ndarray) -> tuple[int,
 
     .. math:: b = \\#\\{q : F_q \\wedge \\neg D_q\\}, \\qquad c = \\#\\{q : \\neg F_q \\wedge D_q\\}
 
-    b: float right and deployed wrong; c: float wrong and deployed right. The accuracy difference
-    (deployed - float) is (c - b) / Q.
+    (the module docstring's b and c): the accuracy difference (deployed - float) is (c - b) / Q.
     """
     f, d = _pair(float_correct, deployed_correct)
     return int(np.sum(f & ~d)), int(np.sum(~f & d))
