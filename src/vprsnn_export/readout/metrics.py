@@ -62,12 +62,8 @@ def is_correct(
     """
     if tolerance < 0 or not np.isfinite(tolerance):
         raise InvalidValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
-    ok = np.ones(np.shape(pred_place_ids), dtype=bool)
-    if isinstance(pred_place_ids, np.ma.MaskedArray):
-        ok &= ~np.ma.getmaskarray(pred_place_ids)
-        pred = np.asarray(pred_place_ids.filled(0))
-    else:
-        pred = np.asarray(pred_place_ids)
+    ok = ~np.ma.getmaskarray(pred_place_ids)  # all True for a plain array
+    pred = np.asarray(np.ma.filled(pred_place_ids, 0))
     true = np.asarray(true_place_ids)
     if pred.ndim != 1 or pred.shape != true.shape:
         raise InvalidValueError(
