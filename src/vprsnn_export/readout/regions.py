@@ -176,8 +176,7 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
     weighted, silent = calibrated_half(sr, layout)
-    sq_ = count_pair(weighted, sq)[1]
-    return like_input(weighted, sr), like_input(silenced_counts(sq_, silent), sq)
+    return like_input(weighted, sr), like_input(silenced_counts(count_pair(weighted, sq)[1], silent), sq)
 
 
 def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[sparse.csr_array, np.ndarray | None]:
@@ -192,8 +191,7 @@ def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.nd
     (bool, (neurons,)), the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
     sr_ = sparse_counts("sr", sr)
     silent = hyperactive_neurons(sr_, layout)
-    rows = entry_rows(sr_)
-    factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[rows]
+    factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[entry_rows(sr_)]
     return like_input(_scaled(sr_, factor), sr), silent
 
 
