@@ -114,18 +114,16 @@ def _shift_rows(
     """:func:`shift_window` with one velocity per row (a query may stand in several rows, as in
     :func:`window_scores`); ``nearest`` rounds each displacement to whole places (half to even), so ``f = 0``."""
     n_places = prob.shape[1]
-    frames_safe, valid, displacement, shift = _window_frames(
-        queries, k, row_velocity, frame_positions, n_places, nearest
-    )
+    frames, valid, displacement, shift = _window_frames(queries, k, row_velocity, frame_positions, n_places, nearest)
     if shift is not None:
-        return _shifted_by_whole_places(prob, frames_safe, valid, shift), valid
+        return _shifted_by_whole_places(prob, frames, valid, shift), valid
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
     inside = (x >= 0) & (x <= n_places - 1) & valid[:, :, None]
     i0 = np.clip(x0, 0, n_places - 1).astype(np.intp)
     i1 = np.clip(x0 + 1, 0, n_places - 1).astype(np.intp)
-    rows = frames_safe[:, :, None]
+    rows = frames[:, :, None]
     # frac == 0 exactly for an integral shift, so the right neighbour drops out
     shifted = (1.0 - frac) * prob[rows, i0] + frac * prob[rows, i1]
     shifted[~inside] = 0.0
@@ -149,9 +147,8 @@ def _window_frames(
     if nearest:
         displacement = np.rint(displacement)
     common = np.where(valid[-1], displacement[-1], 0.0)  # the last row reaches every offset any row reaches
-    if np.all((displacement == common) | ~valid) and np.all(common == np.rint(common)):
-        return frames_safe, valid, displacement, np.clip(common, -n_places, n_places).astype(np.intp)
-    return frames_safe, valid, displacement, None
+    whole = np.all((displacement == common) | ~valid) and np.all(common == np.rint(common))
+    return frames_safe, valid, displacement, np.clip(common, -n_places, n_places).astype(np.intp) if whole else None
 
 
 def _summed_terms(
@@ -261,10 +258,10 @@ def aggregate_newest(
 ) -> np.ndarray:
     """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
     k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
-    n_queries = len(prob)
-    window = _window(k, n_queries)
-    positions = np.arange(n_queries, dtype=np.float64)
-    shifted, valid = shift_window(prob, np.array([n_queries - 1]), window, np.full(n_queries, velocity), positions)
+    n = len(prob)
+    shifted, valid = shift_window(
+        prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(n, dtype=float)
+    )
     return RULES.get(rule).combine(shifted, valid, eps)[0]
 
 
