@@ -259,9 +259,7 @@ def aggregate_newest(
     """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
     k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
     n = len(prob)
-    shifted, valid = shift_window(
-        prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(n, dtype=float)
-    )
+    shifted, valid = shift_window(prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(float(n)))
     return RULES.get(rule).combine(shifted, valid, eps)[0]
 
 
@@ -407,9 +405,8 @@ def track_velocity(
     span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
-    scores = window_scores(
-        stream_contrast(prob, memory), 2 * k if length is None else length, cands, rule, frame_positions, eps
-    )
+    length = 2 * k if length is None else length
+    scores = window_scores(stream_contrast(prob, memory), length, cands, rule, frame_positions, eps)
     velocity = cands[np.argmax(lagged_sum(scores, span, 0), axis=1)]
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
 
@@ -448,9 +445,7 @@ def smooth_velocity(
     k = _check_args(k, rule, eps)
     lag = count_at_least("velocity lag", 2 * k - 1 if lag is None else lag, 0)
     cands = _candidates(candidates)
-    contrast = stream_contrast(prob, memory, lag)
-    scores = window_scores(
-        contrast, 3 * k if length is None else length, cands, rule, frame_positions, eps, nearest=True
-    )
+    length = 3 * k if length is None else length
+    scores = window_scores(stream_contrast(prob, memory, lag), length, cands, rule, frame_positions, eps, nearest=True)
     velocity = centre_of_best(lagged_sum(scores, span, lag), cands)
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
