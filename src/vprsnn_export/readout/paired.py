@@ -24,9 +24,10 @@ import numpy as np
 from vprsnn_export.errors import InvalidValueError
 
 from .assignment import finite_array
+from .metrics import METRICS
 
 #: The metrics the bootstrap measures on each resample (readout.metrics.pr_metrics' keys).
-PAIRED_METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
+PAIRED_METRICS = METRICS
 #: The verdicts of one check.
 HOLDS, FAILS, UNDECIDED, NOT_JUDGED = "holds", "fails", "undecided", "not judged"
 #: Most index entries (resamples x queries) one vectorised bootstrap chunk holds (about 32 MB per array).
