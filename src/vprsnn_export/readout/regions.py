@@ -222,20 +222,18 @@ def module_accuracy(
 
     ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the decisions'
     correctness; ``true_index`` and ``known`` each query's true reference index and whether it has one, by the
-    truth that judged it (:meth:`vprsnn_export.data.truth.Truth.first_true`). One ``bincount`` per quantity.
+    truth that judged it (:meth:`vprsnn_export.data.truth.Truth.first_true`), all arrays (the regions checked). One
+    ``bincount`` per quantity.
     """
-    regions_ = np.asarray(regions, dtype=np.int64)
-    reference = np.asarray(reference_place_ids, dtype=np.int64)
-    n_modules = len(regions_)
-    true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
-    pred = np.asarray(pred_index, dtype=np.int64)
-    pred_module = np.where(pred >= 0, np.searchsorted(regions_[:, 1], np.maximum(pred, 0), side="right"), -1)
+    n_modules = len(regions)
+    true_module = np.searchsorted(regions[:, 1], true_index, side="right")
+    pred_module = np.where(pred_index >= 0, np.searchsorted(regions[:, 1], np.maximum(pred_index, 0), side="right"), -1)
     modules = true_module[known]
     totals = np.bincount(modules, minlength=n_modules)
-    hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
-    inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
+    hits = np.bincount(modules, weights=correct[known], minlength=n_modules)
+    inside = np.bincount(modules, weights=(pred_module == true_module)[known], minlength=n_modules)
     share, routed = np.divide([hits, inside], totals, out=np.zeros((2, n_modules)), where=totals > 0)
-    first, last = reference[regions_[:, 0]].tolist(), reference[regions_[:, 1] - 1].tolist()
+    first, last = reference_place_ids[regions[:, 0]].tolist(), reference_place_ids[regions[:, 1] - 1].tolist()
     return [
         ModuleAccuracy(m, first[m], last[m], int(totals[m]), float(share[m]), float(routed[m]))
         for m in range(n_modules)
