@@ -174,6 +174,7 @@ def _summed_terms(
             target[:, :d] += source[:, -d:]
         if not ok.all():
             total[rows] = target
+            total[~ok] += outside * 0.0  # the 0 that combine adds for a missing frame (so -0.0 becomes 0.0 alike)
     return total
 
 

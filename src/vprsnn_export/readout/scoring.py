@@ -50,11 +50,11 @@ def baseline_rows(
     frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
-    aggregates = {k: options.aggregate(distribution, k, frame_positions) for k in sorted(set(options.ks))}
-    return [
-        metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth))
-        for k, dist in aggregates.items()
-    ]
+    rows = []
+    for k in sorted(set(options.ks)):
+        dist = options.aggregate(distribution, k, frame_positions)
+        rows.append(metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)))
+    return rows
 
 
 def nearest_neighbour_rows(
