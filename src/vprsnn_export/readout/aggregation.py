@@ -1,20 +1,16 @@
 """Velocity-compensated sequence aggregation over a sliding window (paper Sec. V).
 
-Input: one distribution per query frame over the reference places
-(``prob``, shape ``(n_queries, n_places)``, places in reference order, i.e.
-consecutive places along the route), in the order the robot saw the frames.
-The window of query ``j`` is the ``k`` most recent frames ``j-k+1 .. j`` in
-stream order (fewer at the start of the stream). Frame ``m`` of the window lies
-``d = t_j - t_m >= 0`` frame units in the past (``t`` = ``frame_positions``:
-frame index, timestamp or odometry, whatever the robot knows at query time),
-so at ``v`` places per frame unit the robot has since moved ``v * d`` places
-forward; its distribution is shifted by that much before combining:
+Input: one distribution per query frame over the reference places (``prob``, shape ``(n_queries, n_places)``, places in
+reference order, i.e. consecutive places along the route), in the order the robot saw the frames. The window of query
+``j`` is the ``k`` most recent frames ``j-k+1 .. j`` in stream order (fewer at the start of the stream). Frame ``m`` of
+the window lies ``d = t_j - t_m >= 0`` frame units in the past (``t`` = ``frame_positions``: frame index, timestamp or
+odometry, whatever the robot knows at query time), so at ``v`` places per frame unit the robot has since moved ``v * d``
+places forward; its distribution is shifted by that much before combining:
 
 .. math:: \\tilde P_m(l) = P_m(l - v d)
 
-evaluated with linear interpolation between the two neighbouring places (no
-rounding). Windows come from the stream order and ``frame_positions`` only, never from
-ground-truth labels (unlike the paper's code, field notes Sec. 1).
+evaluated with linear interpolation between the two neighbouring places (no rounding). Windows come from the stream
+order and ``frame_positions`` only, never from ground-truth labels (unlike the paper's code, field notes Sec. 1).
 """
 
 from __future__ import annotations
@@ -45,19 +41,8 @@ def _prob2d(prob: np.ndarray) -> np.ndarray:
     return p
 
 
-def _positions(frame_positions: np.ndarray | None, n: int) -> np.ndarray:
-    if frame_positions is None:
-        return np.arange(n, dtype=np.float64)
-    t = real_array("frame_positions", frame_positions)
-    if t.shape != (n,):
-        raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
-    if np.any(np.diff(finite_array("frame_positions", t)) < 0):
-        raise InvalidValueError("frame_positions must be non-decreasing in stream order")
-    return t
-
-
 def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
-    if isinstance(velocity, bool | np.bool_) or np.asarray(velocity).dtype.kind == "b":
+    if np.asarray(velocity).dtype.kind == "b":
         raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
     v = real_array("velocity", velocity)
     if v.ndim == 0:
@@ -87,8 +72,16 @@ def _checked(
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """The checked ``prob``, the window length that matters (:func:`_window`) and the frame positions."""
     p = _prob2d(prob)
-    k = _window(_check_args(k, rule, eps), p.shape[0])
-    return p, k, _positions(frame_positions, p.shape[0])
+    n = p.shape[0]
+    k = _window(_check_args(k, rule, eps), n)
+    if frame_positions is None:
+        return p, k, np.arange(n, dtype=np.float64)
+    t = real_array("frame_positions", frame_positions)
+    if t.shape != (n,):
+        raise InvalidValueError(f"frame_positions must have shape ({n},), got {t.shape}")
+    if np.any(np.diff(finite_array("frame_positions", t)) < 0):
+        raise InvalidValueError("frame_positions must be non-decreasing in stream order")
+    return p, k, t
 
 
 def _window(k: int, n_queries: int) -> int:
@@ -97,11 +90,7 @@ def _window(k: int, n_queries: int) -> int:
 
 
 def shift_window(
-    prob: np.ndarray,
-    queries: np.ndarray,
-    k: int,
-    velocity: np.ndarray,
-    frame_positions: np.ndarray,
+    prob: np.ndarray, queries: np.ndarray, k: int, velocity: np.ndarray, frame_positions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Shifted window distributions ``(len(queries), k, n_places)``; offset ``o`` holds frame ``m = j - o``:
 
@@ -125,22 +114,18 @@ def _shift_rows(
     """:func:`shift_window` with one velocity per row (a query may stand in several rows, as in
     :func:`window_scores`); ``nearest`` rounds each displacement to whole places (half to even), so ``f = 0``."""
     n_places = prob.shape[1]
-    frames_safe, valid, displacement, shift = _window_frames(
-        queries, k, row_velocity, frame_positions, n_places, nearest
-    )
+    frames, valid, displacement, shift = _window_frames(queries, k, row_velocity, frame_positions, n_places, nearest)
     if shift is not None:
-        return _shifted_by_whole_places(prob, frames_safe, valid, shift), valid
+        return _shifted_by_whole_places(prob, frames, valid, shift), valid
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
     inside = (x >= 0) & (x <= n_places - 1) & valid[:, :, None]
     i0 = np.clip(x0, 0, n_places - 1).astype(np.intp)
     i1 = np.clip(x0 + 1, 0, n_places - 1).astype(np.intp)
-    rows = frames_safe[:, :, None]
-    left = prob[rows, i0]
-    right = prob[rows, i1]
+    rows = frames[:, :, None]
     # frac == 0 exactly for an integral shift, so the right neighbour drops out
-    shifted = (1.0 - frac) * left + frac * right
+    shifted = (1.0 - frac) * prob[rows, i0] + frac * prob[rows, i1]
     shifted[~inside] = 0.0
     return shifted, valid
 
@@ -162,9 +147,8 @@ def _window_frames(
     if nearest:
         displacement = np.rint(displacement)
     common = np.where(valid[-1], displacement[-1], 0.0)  # the last row reaches every offset any row reaches
-    if np.all((displacement == common) | ~valid) and np.all(common == np.rint(common)):
-        return frames_safe, valid, displacement, np.clip(common, -n_places, n_places).astype(np.intp)
-    return frames_safe, valid, displacement, None
+    whole = np.all((displacement == common) | ~valid) and np.all(common == np.rint(common))
+    return frames_safe, valid, displacement, np.clip(common, -n_places, n_places).astype(np.intp) if whole else None
 
 
 def _summed_terms(
@@ -190,7 +174,7 @@ def _summed_terms(
             target[:, :d] += source[:, -d:]
         if not ok.all():
             total[rows] = target
-            total[~ok] += outside * 0.0
+            total[~ok] += outside * 0.0  # the 0 that combine adds for a missing frame (so -0.0 becomes 0.0 alike)
     return total
 
 
@@ -243,12 +227,7 @@ def aggregate(
 
 
 def _aggregate_scored(
-    prob: np.ndarray,
-    k: int,
-    velocity: float | np.ndarray,
-    rule: str,
-    frame_positions: np.ndarray | None,
-    eps: float,
+    prob: np.ndarray, k: int, velocity: float | np.ndarray, rule: str, frame_positions: np.ndarray | None, eps: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`aggregate` plus each window's score max_l A_j(l) of the un-normalised aggregate (the registered rule's
     ``combine``, :data:`RULES`), which the velocity search maximises."""
@@ -280,10 +259,8 @@ def aggregate_newest(
 ) -> np.ndarray:
     """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
     k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
-    n_queries = len(prob)
-    window = _window(k, n_queries)
-    positions = np.arange(n_queries, dtype=np.float64)
-    shifted, valid = shift_window(prob, np.array([n_queries - 1]), window, np.full(n_queries, velocity), positions)
+    n = len(prob)
+    shifted, valid = shift_window(prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(float(n)))
     return RULES.get(rule).combine(shifted, valid, eps)[0]
 
 
@@ -381,8 +358,7 @@ def lagged_sum(scores: np.ndarray, span: int, lag: int) -> np.ndarray:
 
     ``lag`` L = 0 is the causal sum over the S most recent rows.
     """
-    e = np.asarray(scores, dtype=np.float64)
-    padded = np.concatenate([np.zeros((span - 1,) + e.shape[1:]), e, np.zeros((lag,) + e.shape[1:])])
+    padded = np.concatenate([np.zeros((span - 1,) + scores.shape[1:]), scores, np.zeros((lag,) + scores.shape[1:])])
     return np.lib.stride_tricks.sliding_window_view(padded, span + lag, axis=0).sum(axis=-1)
 
 
@@ -393,10 +369,8 @@ def centre_of_best(totals: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
     Velocities that round to the same whole-place shifts tie exactly; their centre is unbiased, the first is not.
     """
-    e = np.asarray(totals, dtype=np.float64)
-    cands = np.asarray(candidates, dtype=np.float64)
-    best = e == e.max(axis=1, keepdims=True)
-    return (best * cands[None, :]).sum(axis=1) / best.sum(axis=1)
+    best = totals == totals.max(axis=1, keepdims=True)
+    return (best * candidates[None, :]).sum(axis=1) / best.sum(axis=1)
 
 
 def track_velocity(
@@ -432,9 +406,8 @@ def track_velocity(
     span = count_at_least("velocity span", span, 1)
     k = _check_args(k, rule, eps)
     cands = _candidates(candidates)
-    scores = window_scores(
-        stream_contrast(prob, memory), 2 * k if length is None else length, cands, rule, frame_positions, eps
-    )
+    length = 2 * k if length is None else length
+    scores = window_scores(stream_contrast(prob, memory), length, cands, rule, frame_positions, eps)
     velocity = cands[np.argmax(lagged_sum(scores, span, 0), axis=1)]
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)
 
@@ -473,9 +446,7 @@ def smooth_velocity(
     k = _check_args(k, rule, eps)
     lag = count_at_least("velocity lag", 2 * k - 1 if lag is None else lag, 0)
     cands = _candidates(candidates)
-    contrast = stream_contrast(prob, memory, lag)
-    scores = window_scores(
-        contrast, 3 * k if length is None else length, cands, rule, frame_positions, eps, nearest=True
-    )
+    length = 3 * k if length is None else length
+    scores = window_scores(stream_contrast(prob, memory, lag), length, cands, rule, frame_positions, eps, nearest=True)
     velocity = centre_of_best(lagged_sum(scores, span, lag), cands)
     return velocity, aggregate(prob, k, velocity, rule, frame_positions, eps)

@@ -1,20 +1,15 @@
 """Neuron-to-place assignment and per-query place scores (paper Sec. III-E).
 
-Notation (paper Sec. III-E):
-
-* ``sr`` = S^R, shape ``(n_neurons, n_places)``: calibration spike counts, the
-  training set re-presented with plasticity off; ``S^R[i, l]`` is the number of
-  spikes neuron ``i`` emitted for place ``l``.
-* ``sq`` = S^Q, shape ``(n_queries, n_neurons)``: spike counts of every neuron
-  for every query image.
+* ``sr`` = S^R, shape ``(n_neurons, n_places)``: calibration spike counts, the training set re-presented with
+  plasticity off; ``S^R[i, l]`` is the number of spikes neuron ``i`` emitted for place ``l``.
+* ``sq`` = S^Q, shape ``(n_queries, n_neurons)``: spike counts of every neuron for every query image.
 
 Three strategies turn them into one row of place scores per query:
 
 * ``"standard"`` -- each neuron votes for its best calibration place.
-* ``"weighted"`` -- eq. 9-11: involvement regularisation, response-strength
-  normalisation and the missing-spikes penalty.
-* ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then
-  L1-normalised into a distribution P(l | Q).
+* ``"weighted"`` -- eq. 9-11: involvement regularisation, response-strength normalisation and the missing-spikes
+  penalty.
+* ``"wprob"`` -- eq. 12-13: the weighted scores min-max normalised and then L1-normalised into a distribution P(l | Q).
 
 :mod:`readout.strategies` registers them. S^R, S'' and S^Q are float64 CSR arrays and every product runs over
 their stored entries; the scores come out dense, (queries, places).
@@ -105,7 +100,8 @@ def like_input(result: sparse.csr_array, original: object) -> np.ndarray | spars
     return result if sparse.issparse(original) else result.toarray()
 
 
-def _pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_array]:
+def count_pair(sr: np.ndarray, sq: np.ndarray) -> tuple[sparse.csr_array, sparse.csr_array]:
+    """S^R and S^Q as :func:`sparse_counts`, S^Q with one column per neuron of S^R."""
     sr_ = sparse_counts("sr", sr)
     sq_ = sparse_counts("sq", sq)
     if sq_.shape[1] != sr_.shape[0]:
@@ -130,7 +126,7 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     with ``A = standard_assignment(sr)``, a sparse product (integer counts: exact sums).
     """
-    sr_, sq_ = _pair(sr, sq)
+    sr_, sq_ = count_pair(sr, sq)
     votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
     return (sq_ @ votes).toarray()
 
@@ -175,7 +171,7 @@ def missing_spikes_penalty(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
 
     ``Active_q``: the neurons that spiked in query q; 0 for a place whose calibration column sums to 0.
     """
-    return _penalty(*_pair(sr, sq))
+    return _penalty(*count_pair(sr, sq))
 
 
 def _penalty(sr: sparse.csr_array, sq: sparse.csr_array) -> np.ndarray:
@@ -193,7 +189,7 @@ def weighted_scores(sr: np.ndarray, sq: np.ndarray, gamma: float) -> np.ndarray:
     with S'' from :func:`weighted_matrix` and the penalty of :func:`missing_spikes_penalty`; a query with no
     spike scores 0 everywhere.
     """
-    sr_, sq_ = _pair(sr, sq)
+    sr_, sq_ = count_pair(sr, sq)
     weighting = once_per_calibration("weighted", sr, (float(gamma),), lambda: weighted_matrix(sr_, gamma))
     return (sq_ @ weighting).toarray() * _penalty(sr_, sq_)
 
@@ -210,13 +206,11 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
     """
     s = finite_matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
-    hi = s.max(axis=1, keepdims=True)
-    span = hi - lo
-    flat = span[:, 0] <= 0
+    span = s.max(axis=1, keepdims=True) - lo
     norm = (s - lo) / np.where(span > 0, span, 1.0)
     total = norm.sum(axis=1, keepdims=True)
     out = norm / np.where(total > 0, total, 1.0)
-    out[flat, :] = 1.0 / s.shape[1]
+    out[span[:, 0] <= 0, :] = 1.0 / s.shape[1]
     return out
 
 
@@ -231,18 +225,16 @@ def share_confidence(scores: np.ndarray) -> np.ndarray:
     if np.any(s < 0):
         raise InvalidValueError("share_confidence needs non-negative scores")
     total = s.sum(axis=1)
-    top = s.max(axis=1)
-    return np.where(total > 0, top / np.where(total > 0, total, 1.0), 0.0)
+    return np.where(total > 0, s.max(axis=1) / np.where(total > 0, total, 1.0), 0.0)
 
 
 def share_decision(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """No-match mask and confidence of score rows (Standard, Weighted).
+    """No-match mask and confidence of score rows (Standard, Weighted), checked by :func:`~.strategies.decide`.
 
     .. math:: \\mathrm{no\\ match}_q = [\\forall l: \\mathrm{Score}_{ql} = 0], \\qquad
               c_q = \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql}
     """
-    s = finite_matrix("scores", scores)
-    return np.all(s == 0, axis=1), share_confidence(s)
+    return np.all(scores == 0, axis=1), share_confidence(scores)
 
 
 def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -251,8 +243,7 @@ def distribution_decision(distribution: np.ndarray) -> tuple[np.ndarray, np.ndar
     .. math:: \\mathrm{no\\ match}_q = [\\max_l P(l \\mid Q_q) = \\min_l P(l \\mid Q_q)], \\qquad
               c_q = \\max_l P(l \\mid Q_q)
 
-    (a flat row is a no-match).
+    (a flat row is a no-match; the rows come checked from :func:`~.strategies.decide`).
     """
-    s = finite_matrix("scores", distribution)
-    top = s.max(axis=1)
-    return top == s.min(axis=1), top.copy()
+    top = distribution.max(axis=1)
+    return top == distribution.min(axis=1), top

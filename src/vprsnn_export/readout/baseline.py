@@ -24,7 +24,7 @@ from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
 from .aggregation import count_at_least, shift_window
-from .assignment import NO_MATCH, finite_array, wprob_distribution
+from .assignment import NO_MATCH, finite_array, finite_matrix, wprob_distribution
 
 #: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
 _MAX_ELEMENTS: Final[int] = 4_000_000
@@ -49,9 +49,8 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
 
     .. math:: D_{ql} = \\sum_{p=1}^{D} |Q_{qp} - R_{lp}|
 
-    ``reference``: ``(n_places, D)``, ``queries``: ``(n_queries, D)``, both the
-    flattened preprocessed images. Computed over chunks of queries so that the
-    ``(chunk, n_places, D)`` difference array stays below ~4M elements.
+    ``reference``: ``(n_places, D)``, ``queries``: ``(n_queries, D)``, both the flattened preprocessed images.
+    Computed over chunks of queries so that the ``(chunk, n_places, D)`` difference array stays below ~4M elements.
     """
     ref, qry = _images(reference, queries)
     out = np.empty((qry.shape[0], ref.shape[0]), dtype=np.float64)
@@ -64,20 +63,16 @@ def sad_distances(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
 def sad_distribution(distances: np.ndarray) -> np.ndarray:
     """Per-query distribution over places from SAD distances, shape ``(n_queries, n_places)``.
 
-    The similarity is the negated distance, ``s_l = -D_l``; it is min-max
-    normalised and L1-normalised exactly like W+Prob (eq. 12-13):
+    The similarity is the negated distance, ``s_l = -D_l``; it is min-max normalised and L1-normalised exactly like
+    W+Prob (eq. 12-13):
 
     .. math:: P(l \\mid Q) = \\frac{(\\max_m D_m - D_l)/(\\max_m D_m - \\min_m D_m)}
                                    {\\sum_{l'} (\\max_m D_m - D_{l'})/(\\max_m D_m - \\min_m D_m)}
 
-    The farthest place gets probability 0 and the nearest the largest. A
-    query at equal distance from every place gets the uniform distribution,
-    which ``decide(..., "wprob")`` reports as a no-match.
+    The farthest place gets probability 0 and the nearest the largest. A query at equal distance from every place
+    gets the uniform distribution, which ``decide(..., "wprob")`` reports as a no-match.
     """
-    d = real_array("distances", distances)
-    if d.ndim != 2:
-        raise InvalidValueError(f"distances must be 2-D (n_queries, n_places), got shape {d.shape}")
-    return wprob_distribution(-d)
+    return wprob_distribution(-finite_matrix("distances", distances))
 
 
 def cosine_similarities(reference: np.ndarray, queries: np.ndarray) -> np.ndarray:
@@ -104,15 +99,8 @@ def sad_similarities(distances: np.ndarray) -> np.ndarray:
     :func:`nearest_neighbour` are those of ``-D``; but a window that reaches beyond the map adds 0 for
     the missing frame, which must not beat a real (negative) score.
     """
-    d = _similarities("distances", distances)
+    d = finite_matrix("distances", distances)
     return d.max(axis=1, keepdims=True) - d
-
-
-def _similarities(name: str, values: np.ndarray) -> np.ndarray:
-    s = np.asarray(values, dtype=np.float64)
-    if s.ndim != 2 or s.shape[1] == 0 or not np.all(np.isfinite(s)):
-        raise InvalidValueError(f"{name} must be a finite 2-D array with at least one place, got shape {s.shape}")
-    return s
 
 
 def diagonal_sums(
@@ -123,14 +111,11 @@ def diagonal_sums(
     .. math:: A_j(l) = \\sum_{m \\in W_j} S_m\\big(l - v (t_j - t_m)\\big)
 
     with the window ``W_j`` and the shift (linear interpolation, 0 beyond the map) of
-    :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores).
-    A frame whose shifted place lies beyond the map adds 0, so the scores must be non-negative
-    similarities (cosine of non-negative images; SAD through :func:`sad_similarities`).
-    ``k == 1`` returns a copy of ``scores``.
+    :func:`vprsnn_export.readout.aggregation.aggregate`; un-normalised (SeqSLAM's sum of scores). A frame whose shifted
+    place lies beyond the map adds 0, so the scores must be non-negative similarities (cosine of non-negative images;
+    SAD through :func:`sad_similarities`). ``k == 1`` returns a copy of ``scores``.
     """
-    s = np.asarray(scores, dtype=np.float64)
-    if s.ndim != 2 or not np.all(np.isfinite(s)):
-        raise InvalidValueError(f"scores must be a finite 2-D array, got shape {s.shape}")
+    s = finite_matrix("scores", scores)
     k = count_at_least("k", k, 1)
     if np.any(s < 0):
         raise InvalidValueError("diagonal_sums needs non-negative similarities (a frame beyond the map adds 0)")
@@ -156,7 +141,7 @@ def nearest_neighbour(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Ties go to the lowest index; a query whose scores are all equal is a no-match (index -1,
     confidence 0); with one place the confidence is 0.
     """
-    s = _similarities("scores", scores)
+    s = finite_matrix("scores", scores)
     pred = np.argmax(s, axis=1).astype(np.int64)
     if s.shape[1] == 1:
         return pred, np.zeros(s.shape[0])

@@ -1,25 +1,24 @@
 """Early decision: stop a query when its outcome is settled, as a readout rule a chip can run.
 
-Every output neuron j votes for one place (its Standard assignment, ``A = standard_assignment(S~)``:
-a one-hot row, or none for a neuron silent in calibration or silenced by the region regularisation).
-A chip keeps one vote counter per place and adds A_j to it on each spike of j. After t steps
+Every output neuron j votes for one place (its Standard assignment, ``A = standard_assignment(S~)``: a one-hot row,
+or none for a neuron silent in calibration or silenced by the region regularisation). A chip keeps one vote counter
+per place and adds A_j to it on each spike of j. After t steps
 
     V_l(t) = sum_{t' < t} sum_j z_j[t'] A_jl                     (z: the raster, WTA applied)
 
-Each step adds at most c = sum over WTA groups g of max_{j in g, l} A_jl to any one place (one spike per
-group per step under the hard WTA: c = 1 with one WTA over the ensemble, the number of modules with one
-per module). Two stop rules (``config.early``), the earliest that fires wins:
+Each step adds at most c = sum over WTA groups g of max_{j in g, l} A_jl to any one place (one spike per group per
+step under the hard WTA: c = 1 with one WTA over the ensemble, the number of modules with one per module). Two stop
+rules (``config.early``), the earliest that fires wins:
 
-* **margin**: stop at the first t with  V_(1)(t) - V_(2)(t) > (T - t) c   (leader minus runner-up); the
-  leader can then no longer be overtaken nor tied, so the Standard decision at t is the one at T;
+* **margin**: stop at the first t with  V_(1)(t) - V_(2)(t) > (T - t) c   (leader minus runner-up); the leader can
+  then no longer be overtaken nor tied, so the Standard decision at t is the one at T;
 * **spikes** = K > 0: stop at the first t with  sum_{t' < t} sum_j z_j[t'] >= K.
 
-T_q = that t (the number of steps run), or T when no rule fires. The query's counts are those of its
-first T_q steps, c_j = sum_{t < T_q} z_j[t], and every readout (W+Prob, aggregation) runs on them. The
-raster is a pure function of the spike train, bit for bit the same in every backend (the integer simulator,
-ONNX, the files read back), so the stop step and the decision computed from any backend's raster are the
-same: the rule needs no second implementation per backend. Running only the first T_q steps gives the
-same counts (state isolation: a step never depends on later ones).
+T_q = that t (the number of steps run), or T when no rule fires. The query's counts are those of its first T_q steps,
+c_j = sum_{t < T_q} z_j[t], and every readout (W+Prob, aggregation) runs on them. The raster is a pure function of the
+spike train, bit for bit the same in every backend (the integer simulator, ONNX, the files read back), so the stop step
+and the decision computed from any backend's raster are the same: the rule needs no second implementation per backend.
+Running only the first T_q steps gives the same counts (state isolation: a step never depends on later ones).
 """
 
 from __future__ import annotations
@@ -36,7 +35,7 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.runs import SpikeRun
 
 from .assignment import standard_assignment
-from .regions import module_layout, regularised_calibration
+from .regions import calibrated_half, ensemble_layout
 
 #: Queries whose (steps, places) vote trajectories are held at once.
 CHUNK = 16
@@ -79,8 +78,7 @@ def first_true(flags: np.ndarray, default: int) -> np.ndarray:
 
 def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.ndarray:
     """T_q of the margin rule: the first t with V_(1)(t) - V_(2)(t) > (T - t) c, else T (the module docstring)."""
-    z = raster
-    n, timesteps, neurons = z.shape
+    n, timesteps, neurons = raster.shape
     a = np.asarray(assignment, dtype=np.float64)
     if a.shape[0] != neurons or a.shape[1] < 1:
         raise InvalidValueError(f"assignment must be ({neurons}, places >= 1), got shape {a.shape}")
@@ -88,7 +86,7 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
     remaining = (timesteps - np.arange(1, timesteps + 1)) * bound  # after t = 1..T steps
     stops = np.empty(n, dtype=np.int64)
     for start in range(0, n, CHUNK):  # a (chunk, T, places) trajectory at a time
-        part = z[start : start + CHUNK]
+        part = raster[start : start + CHUNK]
         q, t, j = np.nonzero(part)
         increments = np.zeros((part.shape[0], timesteps, a.shape[1]), dtype=np.float64)
         np.add.at(increments, (q, t), a[j])
@@ -153,10 +151,7 @@ def early_in_chunks(
 
 def vote_matrix(calibration: np.ndarray, cfg: Config) -> np.ndarray:
     """A = Standard assignment of the readout's S~ (an ensemble's region regularisation applied, silenced rows 0)."""
-    sr = np.asarray(calibration)
-    if cfg.train.module_size > 0:
-        sr = regularised_calibration(sr, module_layout(cfg, sr.shape[1]))[0]
-    return standard_assignment(sr)
+    return standard_assignment(calibrated_half(calibration, ensemble_layout(cfg, np.shape(calibration)[1]))[0])
 
 
 def early_queries(

@@ -1,12 +1,10 @@
 """Exact precision-recall metrics for single-match place recognition.
 
-Every query has exactly one true place in the reference map and receives one
-prediction (or a no-match). A confidence threshold tau accepts the queries with
-confidence >= tau; a query is a true positive when it is accepted and correct.
-Instead of sweeping a fixed grid of thresholds (which can under-estimate
-R@100P, field notes Sec. 1), every distinct confidence value is one operating
-point, computed exactly from the queries sorted by confidence. Equal
-confidences are never split: they are accepted or rejected together.
+Every query has exactly one true place in the reference map and receives one prediction (or a no-match). A
+confidence threshold tau accepts the queries with confidence >= tau; a query is a true positive when it is accepted
+and correct. Instead of sweeping a fixed grid of thresholds (which can under-estimate R@100P, field notes Sec. 1),
+every distinct confidence value is one operating point, computed exactly from the queries sorted by confidence.
+Equal confidences are never split: they are accepted or rejected together.
 """
 
 from __future__ import annotations
@@ -30,9 +28,8 @@ def predicted_place_ids(pred_index: np.ndarray, place_ids: np.ndarray) -> np.ma.
 
     .. math:: \\mathrm{id}_q = \\mathrm{place\\_ids}[\\hat l_q] \\text{ if } \\hat l_q \\ge 0, \\text{ else masked}
 
-    The result can be passed straight to :func:`is_correct`, which never counts
-    a masked (no-match) entry as correct. This avoids the classic bug of
-    ``place_ids[-1]`` silently turning a no-match into the last place.
+    The result can be passed straight to :func:`is_correct`, which never counts a masked (no-match) entry as
+    correct. This avoids the classic bug of ``place_ids[-1]`` silently turning a no-match into the last place.
     """
     idx = np.asarray(pred_index)
     ids = np.asarray(place_ids)
@@ -59,21 +56,14 @@ def is_correct(
     .. math:: \\mathrm{correct}_q = \\mathrm{matched}_q \\wedge |\\mathrm{pred}_q - \\mathrm{true}_q| \\le \\mathrm{tolerance}
 
     ``tolerance`` is in place-id units (0 = exact match); a data set's ground truth judges through
-    :class:`vprsnn_export.data.truth.GroundTruth` instead. A no-match is never
-    correct. Mark no-matches either by passing a masked array (see
-    :func:`predicted_place_ids`; masked entries are no-matches) or with the
-    boolean ``matched`` mask (False = no-match; the value of
-    ``pred_place_ids`` there is ignored). Both may be given; they combine with
-    AND. With neither, every prediction counts as a match.
+    :class:`vprsnn_export.data.truth.GroundTruth` instead. A no-match is never correct. Mark no-matches either by
+    passing a masked array (:func:`predicted_place_ids`) or with the boolean ``matched`` mask (False = no-match; the
+    value of ``pred_place_ids`` there is ignored); both combine with AND. With neither, every prediction is a match.
     """
     if tolerance < 0 or not np.isfinite(tolerance):
         raise InvalidValueError(f"tolerance must be a finite value >= 0, got {tolerance}")
-    ok = np.ones(np.shape(pred_place_ids), dtype=bool)
-    if isinstance(pred_place_ids, np.ma.MaskedArray):
-        ok &= ~np.ma.getmaskarray(pred_place_ids)
-        pred = np.asarray(pred_place_ids.filled(0))
-    else:
-        pred = np.asarray(pred_place_ids)
+    ok = ~np.ma.getmaskarray(pred_place_ids)  # all True for a plain array
+    pred = np.asarray(np.ma.filled(pred_place_ids, 0))
     true = np.asarray(true_place_ids)
     if pred.ndim != 1 or pred.shape != true.shape:
         raise InvalidValueError(
@@ -88,7 +78,8 @@ def is_correct(
     return ok & (diff <= tolerance)
 
 
-def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c = np.asarray(correct)
     conf = real_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
@@ -99,12 +90,7 @@ def _check(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.
         if not np.all((c == 0) | (c == 1)):
             raise InvalidValueError("correct must be boolean (or 0/1)")
         c = c.astype(bool)
-    return c, finite_array("confidence", conf)
-
-
-def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
-    c, conf = _check(correct, confidence)
+    conf = finite_array("confidence", conf)
     order = np.argsort(-conf, kind="stable")
     conf_sorted = conf[order]
     tp_cum = np.cumsum(c[order], dtype=np.int64)
@@ -116,19 +102,16 @@ def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.n
 def pr_curve(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact precision-recall operating points, one per distinct confidence value.
 
-    Sort queries by confidence, descending. For each distinct value tau_k
-    (descending), accept every query with confidence >= tau_k:
+    For each distinct confidence tau_k (descending), accept every query with confidence >= tau_k:
 
     .. math:: P_k = \\frac{TP_k}{\\#\\{q : c_q \\ge \\tau_k\\}}, \\qquad
               R_k = \\frac{TP_k}{N_{queries}}, \\qquad
               TP_k = \\#\\{q : c_q \\ge \\tau_k \\wedge \\mathrm{correct}_q\\}
 
-    Recall divides by the number of queries because every query has a true
-    match in the reference map. Ties are never split. No-matches (confidence 0,
-    never correct) are ordinary queries accepted only at the lowest thresholds.
-    Returns ``(precision, recall, thresholds)``, all float64 of equal length,
-    thresholds strictly decreasing, recall non-decreasing; the last point
-    accepts every query.
+    Recall divides by the number of queries because every query has a true match in the reference map. Ties are
+    never split. No-matches (confidence 0, never correct) are ordinary queries accepted only at the lowest
+    thresholds. Returns ``(precision, recall, thresholds)``, float64 of equal length, thresholds strictly
+    decreasing, recall non-decreasing; the last point accepts every query.
     """
     tp, accepted, thresholds, n = _operating_points(correct, confidence)
     return tp / accepted, tp / n, thresholds
@@ -144,28 +127,20 @@ def pr_metrics(correct: np.ndarray, confidence: np.ndarray) -> dict[str, float |
 
         \\mathrm{AUC\\text{-}PR} = \\sum_k (R_k - R_{k-1})\\, P_k, \\quad R_0 = 0
 
-    over the operating points of :func:`pr_curve` (the exact area under the
-    step curve, i.e. average precision). With single-match VPR every query
-    has one true place and one prediction, so accepting all queries gives
-    precision = #correct / N: **P@100R always equals accuracy** (field notes
-    Sec. 1); it is reported for comparison with the literature. Precision 1 is
-    tested exactly in integers (TP == accepted). Returns floats in [0, 1]
-    under keys ``accuracy``, ``p_at_100r``, ``r_at_100p``, ``auc_pr`` and
-    ``n_queries`` (the latter an int). Empty input raises ``ValueError``.
+    over the operating points of :func:`pr_curve` (the exact area under the step curve, i.e. average precision).
+    With single-match VPR every query has one true place and one prediction, so accepting all queries gives
+    precision = #correct / N: **P@100R always equals accuracy** (field notes Sec. 1); it is reported for comparison
+    with the literature. Returns floats in [0, 1] and ``n_queries`` (an int); empty input raises ``ValueError``.
     """
     tp, accepted, _, n = _operating_points(correct, confidence)
     precision = tp / accepted
     recall = tp / n
-    perfect = tp == accepted
-    r_at_100p = float(recall[perfect].max()) if np.any(perfect) else 0.0
-    recall_prev = np.concatenate(([0.0], recall[:-1]))
-    auc = float(np.sum((recall - recall_prev) * precision))
-    n_correct = int(tp[-1])  # the last point accepts every query
+    perfect = tp == accepted  # precision 1, tested exactly in integers
     return {
-        "accuracy": n_correct / n,
+        "accuracy": int(tp[-1]) / n,  # the last point accepts every query
         "p_at_100r": float(precision[-1]),
-        "r_at_100p": r_at_100p,
-        "auc_pr": auc,
+        "r_at_100p": float(recall[perfect].max()) if np.any(perfect) else 0.0,
+        "auc_pr": float(np.sum(np.diff(recall, prepend=0.0) * precision)),
         "n_queries": n,
     }
 

@@ -1,17 +1,17 @@
 """Paired statistics of two readouts of the same queries: flips, exact McNemar, paired bootstrap, a verdict.
 
-The float network and a deployed (quantised) one see the *same* spike tensor, so every query is a
-pair (float decision, deployed decision). Judging a metric difference with two independent samples
-would throw that pairing away; here every interval is paired:
+The float network and a deployed (quantised) one see the *same* spike tensor, so every query is a pair (float
+decision, deployed decision). Judging a metric difference with two independent samples would throw that pairing away;
+here every interval is paired:
 
-* **accuracy at k = 1**: only the discordant queries carry information. With
-  b = #(float right, deployed wrong) and c = #(float wrong, deployed right), the exact McNemar test
-  and an exact interval of the accuracy difference conditional on n = b + c (:func:`accuracy_interval`).
-* **every metric, every k** (accuracy, P@100R, R@100P, AUC-PR): the paired bootstrap, both readouts
-  resampled with the same query indices; for k > 1 the windows overlap, so the queries are resampled
-  as moving blocks of length k (:func:`bootstrap_indices`). Vectorised over resamples.
-* **the verdict** of a difference against a tolerance on its drop (:func:`verdict`): *holds*, *fails*,
-  *undecided* (with :func:`queries_to_decide`), or *not judged* for a degenerate float metric.
+* **accuracy at k = 1**: only the discordant queries carry information. With b = #(float right, deployed wrong) and
+  c = #(float wrong, deployed right), the exact McNemar test and an exact interval of the accuracy difference
+  conditional on n = b + c (:func:`accuracy_interval`).
+* **every metric, every k** (accuracy, P@100R, R@100P, AUC-PR): the paired bootstrap, both readouts resampled with the
+  same query indices; for k > 1 the windows overlap, so the queries are resampled as moving blocks of length k
+  (:func:`bootstrap_indices`). Vectorised over resamples.
+* **the verdict** of a difference against a tolerance on its drop (:func:`verdict`): *holds*, *fails*, *undecided*
+  (with :func:`queries_to_decide`), or *not judged* for a degenerate float metric.
 """
 
 from __future__ import annotations
@@ -24,16 +24,14 @@ import numpy as np
 from vprsnn_export.errors import InvalidValueError
 
 from .assignment import finite_array
+from .metrics import METRICS
 
 #: The metrics the bootstrap measures on each resample (readout.metrics.pr_metrics' keys).
-PAIRED_METRICS = ("accuracy", "p_at_100r", "r_at_100p", "auc_pr")
+PAIRED_METRICS = METRICS
 #: The verdicts of one check.
 HOLDS, FAILS, UNDECIDED, NOT_JUDGED = "holds", "fails", "undecided", "not judged"
 #: Most index entries (resamples x queries) one vectorised bootstrap chunk holds (about 32 MB per array).
 CHUNK_ENTRIES = 1 << 22
-
-
-# ---------------------------------------------------------------------------- flips and McNemar
 
 
 def flips(float_correct: np.ndarray, deployed_correct: np.ndarray) -> tuple[int, int]:
@@ -41,8 +39,7 @@ def flips(float_correct: np.ndarray, deployed_correct: np.ndarray) -> tuple[int,
 
     .. math:: b = \\#\\{q : F_q \\wedge \\neg D_q\\}, \\qquad c = \\#\\{q : \\neg F_q \\wedge D_q\\}
 
-    b: float right and deployed wrong; c: float wrong and deployed right. The accuracy difference
-    (deployed - float) is (c - b) / Q.
+    (the module docstring's b and c): the accuracy difference (deployed - float) is (c - b) / Q.
     """
     f, d = _pair(float_correct, deployed_correct)
     return int(np.sum(f & ~d)), int(np.sum(~f & d))
@@ -125,14 +122,10 @@ def accuracy_interval(b: int, c: int, n_queries: int, level: float) -> tuple[flo
     return n / n_queries * (2 * low - 1), n / n_queries * (2 * high - 1)
 
 
-# ---------------------------------------------------------------------------- the paired bootstrap
-
-
 def bootstrap_indices(n_queries: int, resamples: int, block: int, rng: np.random.Generator) -> np.ndarray:
     """Query indices of ``resamples`` moving-block bootstrap samples, (resamples, Q) int64.
 
-    Each sample joins ceil(Q / L) blocks of L consecutive queries whose starts are uniform on
-    {0, ..., Q - L}, cut to Q:
+    Each sample joins ceil(Q / L) blocks of L consecutive queries whose starts are uniform on {0, ..., Q - L}, cut to Q:
 
     .. math:: s_{b,j} \\sim U\\{0, \\dots, Q - L\\}, \\qquad
               \\text{idx}_b = (s_{b,1}, \\dots, s_{b,1} + L - 1, s_{b,2}, \\dots)_{1..Q}
@@ -227,9 +220,6 @@ def paired_bootstrap(
     return {m: (float(low), float(high)) for m, (low, high) in quantiles.items()}
 
 
-# ---------------------------------------------------------------------------- the verdict
-
-
 def verdict(low: float, high: float, limit: float, eps: float = 1e-12) -> str:
     """Three-way verdict of the interval [low, high] of a difference (deployed - float) against a drop limit.
 
@@ -249,9 +239,8 @@ def verdict(low: float, high: float, limit: float, eps: float = 1e-12) -> str:
 
 
 def degenerate(metric: str, float_value: float) -> str | None:
-    """Why a metric difference is not judged, or None: a float value of 0 leaves nothing to lose, and an
-    interval around 0 - 0 says nothing about the deployed network (float R@100P = 0: no decision is accepted
-    at 100 % precision)."""
+    """Why a metric difference is not judged, or None: a float value of 0 leaves nothing to lose, and an interval around
+    0 - 0 says nothing about the deployed network (float R@100P = 0: no decision is accepted at 100 % precision)."""
     if float_value > 0:
         return None
     if metric == "r_at_100p":

@@ -1,12 +1,11 @@
 """Region regularisation of an ensemble: region-specific assignment and silencing of hyperactive neurons.
 
-An ensemble of modules (``src/vprsnn_export/network/modules.py``) applies the hard WTA within each module, so
-every module has a winner for every image, including the images of the other modules' regions. The
-calibration S^R spans every module's neurons over every reference place, so it shows which neurons
-also respond outside their own module's region. Hussaini et al. (RA-L 2022, "Ensembles of compact,
-region-specific & regularized SNNs") call the neurons that respond to many places outside their region
-*hyperactive* and silence them at deployment, and assign each module's neurons to the places of
-its own region; both use the reference (calibration) responses only. Here:
+An ensemble of modules (``src/vprsnn_export/network/modules.py``) applies the hard WTA within each module, so every
+module has a winner for every image, including the images of the other modules' regions. The calibration S^R spans every
+module's neurons over every reference place, so it shows which neurons also respond outside their own module's region.
+Hussaini et al. (RA-L 2022, "Ensembles of compact, region-specific & regularized SNNs") call the neurons that respond to
+many places outside their region *hyperactive* and silence them at deployment, and assign each module's neurons to the
+places of its own region; both use the reference (calibration) responses only. Here:
 
     R(i)      = the region (consecutive reference places) of neuron i's module        modules.region_mask
     S~[i, l]  = S^R[i, l] if l in R(i), else lambda S^R[i, l]                         region_weighting
@@ -15,13 +14,12 @@ its own region; both use the reference (calibration) responses only. Here:
     S~[i, :] = 0 and S^Q[:, i] = 0 for every silent neuron i                          silenced_counts
 
 and the readout (Standard, Weighted, W+Prob, aggregation) then runs on S~ in place of S^R.
-lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1];
-lambda = 0 is Hussaini's region-specific assignment (a neuron votes only for places of its region),
-lambda = 1 the whole-route assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one
-module: no place lies outside its region, o_i = 0) is never changed. A silenced neuron neither votes
-nor counts as active in the missing-spikes penalty (eq. 11): it is removed from the readout as if it
-had not been there; its module's WTA is unchanged. Everything is computed on the stored entries of S^R (CSR),
-without a loop over neurons or modules.
+lambda = ``assignment.outside_weight`` and rho = ``assignment.hyperactive_share``, both in [0, 1]; lambda = 0 is
+Hussaini's region-specific assignment (a neuron votes only for places of its region), lambda = 1 the whole-route
+assignment; rho = 1 silences no neuron (o_i <= 1). A single network (one module: no place lies outside its region,
+o_i = 0) is never changed. A silenced neuron neither votes nor counts as active in the missing-spikes penalty (eq. 11):
+it is removed from the readout as if it had not been there; its module's WTA is unchanged. Everything is computed on
+the stored entries of S^R (CSR), without a loop over neurons or modules.
 """
 
 from __future__ import annotations
@@ -37,7 +35,8 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass
 from vprsnn_export.network.modules import module_regions, neuron_modules
 
-from .assignment import entry_rows, like_input, sparse_counts
+from .aggregation import count_at_least
+from .assignment import count_pair, entry_rows, like_input, sparse_counts
 
 
 @dataclass(frozen=True)
@@ -55,8 +54,7 @@ class ModuleLayout:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "regions", check_regions(self.regions))
-        if isinstance(self.group, bool) or not isinstance(self.group, int | np.integer) or self.group < 1:
-            raise InvalidValueError(f"module layout: group must be an integer >= 1, got {self.group!r}")
+        count_at_least("module layout: group", self.group, 1)
         for name in ("hyperactive_share", "outside_weight"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
@@ -101,9 +99,14 @@ def module_layout(
     return ModuleLayout(module_regions(n_places, cfg.train.module_size), cfg.network.n_neurons, float(rho), float(lam))
 
 
+def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
+    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
+    return module_layout(config, n_places) if config.train.module_size > 0 else None
+
+
 def _inside(sr: sparse.csr_array, regions: np.ndarray, group: int) -> np.ndarray:
-    """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries)."""
-    regions = check_regions(regions)
+    """Per stored entry (i, l) of ``sr``: whether l lies in R(i) (``modules.region_mask`` at those entries); the
+    regions already checked."""
     shape = (len(regions) * group, int(regions[-1, 1]))
     if shape != sr.shape:
         raise InvalidValueError(
@@ -130,7 +133,7 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
     lam = float(outside_weight)
     if not 0.0 <= lam <= 1.0:
         raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
-    return like_input(_scaled(sr_, np.where(_inside(sr_, regions, group), 1.0, lam)), sr)
+    return like_input(_scaled(sr_, np.where(_inside(sr_, check_regions(regions), group), 1.0, lam)), sr)
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -140,10 +143,8 @@ def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.n
 
     0 for a neuron whose region covers every place (a single network).
     """
-    sr_ = sparse_counts("sr", sr)
-    rows = entry_rows(sr_)
-    fires_outside = np.bincount(rows[~_inside(sr_, regions, group)], minlength=sr_.shape[0])
-    regions_ = check_regions(regions)
+    sr_, regions_ = sparse_counts("sr", sr), check_regions(regions)
+    fires_outside = np.bincount(entry_rows(sr_)[~_inside(sr_, regions_, group)], minlength=sr_.shape[0])
     outside = (sr_.shape[1] - (regions_[:, 1] - regions_[:, 0]))[neuron_modules(sr_.shape[0], group)]
     return np.where(outside > 0, fires_outside / np.maximum(outside, 1), 0.0)
 
@@ -163,11 +164,7 @@ def silenced_counts(sq: sparse.csr_array, silent: np.ndarray | None) -> sparse.c
     return sq if silent is None or not silent.any() else _scaled(sq, np.where(silent[sq.indices], 0.0, 1.0))
 
 
-def regularise(
-    sr: np.ndarray,
-    sq: np.ndarray,
-    layout: ModuleLayout | None,
-) -> tuple[np.ndarray, np.ndarray]:
+def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
     """S~ (region-weighted S^R) and S^Q with the hyperactive neurons of ``layout`` silenced
     (both unchanged when ``layout`` is None), each dense or CSR as given.
 
@@ -179,10 +176,7 @@ def regularise(
     """
     require_type("layout", layout, (ModuleLayout, type(None)))
     weighted, silent = calibrated_half(sr, layout)
-    sq_ = sparse_counts("sq", sq)
-    if sq_.shape[1] != weighted.shape[0]:
-        raise InvalidValueError(f"sq has {sq_.shape[1]} neurons per query but sr has {weighted.shape[0]} neurons")
-    return like_input(weighted, sr), like_input(silenced_counts(sq_, silent), sq)
+    return like_input(weighted, sr), like_input(silenced_counts(count_pair(weighted, sq)[1], silent), sq)
 
 
 def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[sparse.csr_array, np.ndarray | None]:
@@ -197,8 +191,7 @@ def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.nd
     (bool, (neurons,)), the half of :func:`regularise` that needs no query (the ONNX head embeds it)."""
     sr_ = sparse_counts("sr", sr)
     silent = hyperactive_neurons(sr_, layout)
-    rows = entry_rows(sr_)
-    factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[rows]
+    factor = np.where(_inside(sr_, layout.regions, layout.group), 1.0, layout.outside_weight) * ~silent[entry_rows(sr_)]
     return like_input(_scaled(sr_, factor), sr), silent
 
 
@@ -229,27 +222,19 @@ def module_accuracy(
 
     ``pred_index`` are predicted indices into the reference places (-1: no match), ``correct`` the decisions'
     correctness; ``true_index`` and ``known`` each query's true reference index and whether it has one, by the
-    truth that judged it (:meth:`vprsnn_export.data.truth.Truth.first_true`). One ``bincount`` per quantity.
+    truth that judged it (:meth:`vprsnn_export.data.truth.Truth.first_true`), all arrays (the regions checked). One
+    ``bincount`` per quantity.
     """
-    regions_ = np.asarray(regions, dtype=np.int64)
-    reference = np.asarray(reference_place_ids, dtype=np.int64)
-    n_modules = len(regions_)
-    true_module = np.searchsorted(regions_[:, 1], true_index, side="right")
-    pred = np.asarray(pred_index, dtype=np.int64)
-    pred_module = np.where(pred >= 0, np.searchsorted(regions_[:, 1], np.maximum(pred, 0), side="right"), -1)
+    n_modules = len(regions)
+    true_module = np.searchsorted(regions[:, 1], true_index, side="right")
+    pred_module = np.where(pred_index >= 0, np.searchsorted(regions[:, 1], np.maximum(pred_index, 0), side="right"), -1)
     modules = true_module[known]
     totals = np.bincount(modules, minlength=n_modules)
-    hits = np.bincount(modules, weights=np.asarray(correct, dtype=np.float64)[known], minlength=n_modules)
-    inside = np.bincount(modules, weights=(pred_module == true_module)[known].astype(np.float64), minlength=n_modules)
+    hits = np.bincount(modules, weights=correct[known], minlength=n_modules)
+    inside = np.bincount(modules, weights=(pred_module == true_module)[known], minlength=n_modules)
     share, routed = np.divide([hits, inside], totals, out=np.zeros((2, n_modules)), where=totals > 0)
+    first, last = reference_place_ids[regions[:, 0]].tolist(), reference_place_ids[regions[:, 1] - 1].tolist()
     return [
-        ModuleAccuracy(
-            module=m,
-            first_place=int(reference[regions_[m, 0]]),
-            last_place=int(reference[regions_[m, 1] - 1]),
-            n_queries=int(totals[m]),
-            accuracy=float(share[m]),
-            in_region=float(routed[m]),
-        )
+        ModuleAccuracy(m, first[m], last[m], int(totals[m]), float(share[m]), float(routed[m]))
         for m in range(n_modules)
     ]

@@ -42,8 +42,7 @@ class Column:
 
     def curve(self) -> tuple[np.ndarray, np.ndarray]:
         """The exact PR operating points (precision, recall) of these decisions (:func:`~.metrics.pr_curve`)."""
-        precision, recall, _ = pr_curve(*self.decisions)
-        return precision, recall
+        return pr_curve(*self.decisions)[:2]
 
 
 def judged_column(
@@ -56,10 +55,9 @@ def judged_column(
     truth: Truth | None,
 ) -> Column:
     """The column of decisions already made (predicted index per query, -1: no match; confidence), judged by
-    ``truth``: each query's place id, correctness and the metric row of them all."""
-    index = np.asarray(index, dtype=np.int64)
-    ids = predicted_place_ids(index, np.asarray(reference_place_ids))
-    confidence = np.asarray(confidence, dtype=np.float64)
+    ``truth``: each query's place id, correctness and the metric row of them all (index and confidence as
+    :func:`~.strategies.decide` gives them)."""
+    ids = predicted_place_ids(index, reference_place_ids)
     if query_place_ids is None or truth is None:
         return Column(strategy, k, index, ids, confidence, None, None)
     correct = truth.correct(ids, query_place_ids)

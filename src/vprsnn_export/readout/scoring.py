@@ -23,7 +23,7 @@ from vprsnn_export.errors import InvalidValueError
 from .assignment import sparse_counts, weighted_matrix, wprob_distribution
 from .baseline import diagonal_sums, nearest_neighbour
 from .metrics import MetricRow, metric_row, pr_metrics, predicted_place_ids
-from .regions import ModuleLayout, calibrated_half, module_layout, silenced_counts
+from .regions import ModuleLayout, calibrated_half, ensemble_layout, silenced_counts
 from .scored import Scored, judged_column, readout_columns
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, all_scores, decide
@@ -33,17 +33,8 @@ from .stream import ReadoutStream
 READOUT_BLOCK = 1024
 
 
-def ensemble_layout(config: Config, n_places: int) -> ModuleLayout | None:
-    """The module layout of an ensemble's config (None for a single network, ``train.module_size`` 0)."""
-    return module_layout(config, n_places) if config.train.module_size > 0 else None
-
-
 def decision_metrics(
-    distribution: np.ndarray,
-    strategy: str,
-    reference_place_ids: np.ndarray,
-    query_place_ids: np.ndarray,
-    truth: Truth,
+    distribution: np.ndarray, strategy: str, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, truth: Truth
 ) -> dict:
     """Accuracy, P@100R, R@100P, AUC-PR of one score matrix (Q, places) under ``strategy``, judged by ``truth``."""
     column = judged_column(strategy, 1, *decide(distribution, strategy), reference_place_ids, query_place_ids, truth)
@@ -100,38 +91,12 @@ def nearest_neighbour_decisions(
     return out
 
 
-def check_readout_arrays(
-    calibration: np.ndarray, query_counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray
-) -> None:
-    """S^R (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query
-    id; InvalidValueError naming the argument that does not fit (else decisions would name the wrong places)."""
-    arrays = {"calibration": calibration, "query_counts": query_counts}
-    for name, value in {
-        **arrays,
-        "reference_place_ids": reference_place_ids,
-        "query_place_ids": query_place_ids,
-    }.items():
-        if np.ndim(value) != (2 if name in arrays else 1):
-            raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
-    (neurons, places), (n_references,), (n_queries,) = map(
-        np.shape, (calibration, reference_place_ids, query_place_ids)
-    )
-    if places != n_references:
-        raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
-    if np.shape(query_counts) != (n_queries, neurons):
-        raise InvalidValueError(
-            f"query_counts has shape {np.shape(query_counts)}, expected ({n_queries}, {neurons}): one row per query "
-            "id, one column per neuron of the calibration"
-        )
-
-
 class Readout:
     """One network's readout: S^R, gamma, its module layout and the sequence options.
 
     ``score(counts, ...)`` reads a batch out (Q x neurons), every column decided once; ``stream()`` gives a
-    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob
-    distributions bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream
-    state.
+    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob distributions
+    bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream state.
     """
 
     def __init__(
@@ -156,8 +121,6 @@ class Readout:
         require_type("config", config, Config)
         layout = ensemble_layout(config, np.shape(calibration)[1]) if np.ndim(calibration) == 2 else None
         return cls(calibration, config.assignment.gamma, options, layout)
-
-    # ------------------------------------------------------------------------ batch
 
     def scores(self, counts: np.ndarray) -> dict[str, np.ndarray]:
         """The k=1 scores of every registered strategy (``readout.strategies.STRATEGIES``), (Q, places) each.
@@ -185,11 +148,27 @@ class Readout:
     def judge(
         self, counts: np.ndarray, reference_place_ids: np.ndarray, query_place_ids: np.ndarray, truth: Truth | None
     ) -> Truth:
-        """The truth the queries are judged by (None: the options' match window), once the arrays are checked:
-        InvalidValueError when they do not fit, a k exceeds the queries or no query can match a reference."""
+        """The truth the queries are judged by (None: the options' match window), once the arrays are checked: S^R
+        (neurons, places) with one column per reference id and S^Q (queries, neurons) with one row per query id (else
+        decisions would name the wrong places). InvalidValueError naming the argument that does not fit, or when a k
+        exceeds the queries or no query can match a reference."""
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
-        check_readout_arrays(self.calibration, counts, reference_place_ids, query_place_ids)
+        arrays = {"calibration": self.calibration, "query_counts": counts}
+        ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
+        for name, value in {**arrays, **ids}.items():
+            if np.ndim(value) != (2 if name in arrays else 1):
+                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
+        (neurons, places), (n_references,), (n_queries,) = map(
+            np.shape, (self.calibration, reference_place_ids, query_place_ids)
+        )
+        if places != n_references:
+            raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
+        if np.shape(counts) != (n_queries, neurons):
+            raise InvalidValueError(
+                f"query_counts has shape {np.shape(counts)}, expected ({n_queries}, {neurons}): one row per query "
+                "id, one column per neuron of the calibration"
+            )
         if max(self.options.ks) > len(query_place_ids):  # no full window exists
             raise InvalidValueError(
                 f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
@@ -206,9 +185,8 @@ class Readout:
         frame_positions: np.ndarray | None = None,
     ) -> Scored:
         """Every readout column of the queries, each decided once (:class:`~.scored.Scored`): every strategy at
-        k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1, judged by ``truth`` (None: the options' match window).
-
-        InvalidValueError when the arrays do not fit, a k exceeds the queries or no query can match a reference.
+        k=1, then :data:`SEQUENCE_STRATEGY` at each k > 1, judged by ``truth`` (None: the options' match window);
+        InvalidValueError as :meth:`judge`.
         """
         truth = self.judge(counts, reference_place_ids, query_place_ids, truth)
         scores = self.scores(counts)
@@ -265,8 +243,6 @@ class Readout:
     ) -> list[MetricRow]:
         """The metric rows of :meth:`score` (by the options' match window)."""
         return self.score(counts, reference_place_ids, query_place_ids, None, frame_positions).rows
-
-    # ------------------------------------------------------------------------ stream
 
     def wprob(self, counts: np.ndarray, places: slice | None = None) -> np.ndarray:
         """W+Prob P(l | Q) of one frame's spike counts (neurons,), over the active neurons only.

@@ -20,10 +20,9 @@ DEFAULT_PATIENCE = 3
 
 @dataclass(frozen=True)
 class SearchWindow:
-    """Localise within ``places`` reference places around the last confident place: only the modules whose
-    places lie in the window run (one WTA over them) and the frame is decided among their places; after
-    ``patience`` frames in a row without an accepted decision the next frame runs the whole route (a global
-    re-localisation), as does the first.
+    """Localise within ``places`` reference places around the last confident place: only the modules whose places lie in
+    the window run (one WTA over them) and the frame is decided among their places; after ``patience`` frames in a row
+    without an accepted decision the next frame runs the whole route (a global re-localisation), as does the first.
 
     .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\\\ c_j + v_j & \\text{otherwise}
               \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -

@@ -56,16 +56,16 @@ def _velocities(values: object) -> tuple[float, ...]:
 @dataclass(frozen=True)
 class SequenceOptions:
     """How decisions are aggregated over a sequence and scored (the CLI's sequence options, generated from these
-    fields: ``ks`` is ``--k``, ``velocity_candidates`` ``--velocity-search``, ``tolerance`` ``--match-window``).
+    fields, their flags in :data:`FLAGS`).
 
     ``ks``: sequence lengths (W+Prob aggregated over k frames for k > 1); ``rule``: the aggregation rule
-    (:data:`~vprsnn_export.readout.rules.RULES`); ``velocity``: places per frame, or with
-    ``velocity_candidates`` the velocity estimated over that grid by the registered estimator
-    ``velocity_estimate`` (:data:`~vprsnn_export.readout.velocity.VELOCITY_ESTIMATES`) with its settings
-    ``velocity_span`` (windows summed), ``velocity_length`` (frames per scored trajectory; None: the
-    estimator's), ``velocity_memory`` (frames of stream contrast; 0: none) and ``velocity_lag`` (frames each
-    "smooth" decision waits for; None: 2k - 1); ``tolerance``: on index-aligned data, a prediction within +-tolerance places of the
-    query's own is correct (the default :class:`~vprsnn_export.data.truth.MatchWindow`). Gamma is not here: it is the config's ``assignment.gamma``.
+    (:data:`~vprsnn_export.readout.rules.RULES`); ``velocity``: places per frame, or with ``velocity_candidates`` the
+    velocity estimated over that grid by the registered estimator ``velocity_estimate``
+    (:data:`~vprsnn_export.readout.velocity.VELOCITY_ESTIMATES`) with its settings ``velocity_span`` (windows summed),
+    ``velocity_length`` (frames per scored trajectory; None: the estimator's), ``velocity_memory`` (frames of stream
+    contrast; 0: none) and ``velocity_lag`` (frames each "smooth" decision waits for; None: 2k - 1); ``tolerance``: on
+    index-aligned data, a prediction within +-tolerance places of the query's own is correct (the default
+    :class:`~vprsnn_export.data.truth.MatchWindow`). Gamma is not here: it is the config's ``assignment.gamma``.
     """
 
     ks: tuple[int, ...] = (1,)
@@ -112,10 +112,9 @@ class SequenceOptions:
     def aggregate(self, distribution: np.ndarray, k: int, frame_positions: np.ndarray | None = None) -> np.ndarray:
         """A distribution (Q, places) aggregated over k frames at the given velocity or at one estimated from it.
 
-        With ``velocity_candidates`` the registered estimator ``velocity_estimate`` chooses the velocity per
-        frame (``"window"``: per window; ``"track"``: over the ``velocity_span`` recent windows; ``"smooth"``,
-        the default: over those and the next ``velocity_lag``); otherwise ``velocity``. ``k == 1`` returns
-        ``distribution`` itself.
+        With ``velocity_candidates`` the registered estimator ``velocity_estimate`` chooses the velocity per frame
+        (``"window"``: per window; ``"track"``: over the ``velocity_span`` recent windows; ``"smooth"``, the default:
+        over those and the next ``velocity_lag``); otherwise ``velocity``. ``k == 1`` returns ``distribution`` itself.
         """
         if k == 1:
             return distribution
@@ -146,8 +145,7 @@ class SequenceOptions:
         if "k" in data:  # localize's form before SequenceOptions: one k, the velocity always tracked
             data["ks"] = (data.pop("k"),)
             data.setdefault("velocity_estimate", "track")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(set(data) - {f.name for f in fields(cls)})
         if unknown:
             raise InvalidValueError(f"unknown sequence options {', '.join(unknown)}")
         return cls(**data)  # lists become tuples when the options are built

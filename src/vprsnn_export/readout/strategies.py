@@ -1,11 +1,9 @@
 """The assignment strategies' registry: scores, confidence and title of each (paper Sec. III-E).
 
-A :class:`Strategy` turns the calibration counts S^R and the query counts S^Q into one
-row of place scores per query (:mod:`readout.assignment` holds the equations) and says
-how a row becomes a decision (its no-match rule and confidence). Every readout row,
-report table and per-strategy agreement iterates :data:`STRATEGIES` in registration
-order; adding a strategy is one function and one ``STRATEGIES.register`` line
-(docs/architecture.md).
+A :class:`Strategy` turns the calibration counts S^R and the query counts S^Q into one row of place scores per query
+(:mod:`readout.assignment` holds the equations) and says how a row becomes a decision (its no-match rule and
+confidence). Every readout row, report table and per-strategy agreement iterates :data:`STRATEGIES` in registration
+order; adding a strategy is one function and one ``STRATEGIES.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations
@@ -93,15 +91,12 @@ def decide(scores: np.ndarray, strategy: str) -> tuple[np.ndarray, np.ndarray]:
                      \\max_l \\mathrm{Score}_{ql} / \\sum_l \\mathrm{Score}_{ql} & \\text{standard, weighted}
                      \\end{cases}
 
-    Returns ``(pred, confidence)``: ``pred`` int64 of shape ``(n_queries,)``,
-    ties to the lowest place index; ``confidence`` float64. A query is a
-    no-match (``pred == -1``, confidence 0) when the strategy's decision says so:
-    all scores zero (standard / weighted) or a flat distribution, every entry
-    equal (wprob; this covers the uniform distribution of
-    :func:`~vprsnn_export.readout.assignment.wprob_distribution` and any flat aggregated
-    distribution). For ``"wprob"`` pass the distribution (``wprob_distribution``, an
-    aggregated distribution or ``baseline.sad_distribution``) as ``scores``.
-    InvalidValueError for a strategy that is not registered.
+    Returns ``(pred, confidence)``: ``pred`` int64 of shape ``(n_queries,)``, ties to the lowest place index;
+    ``confidence`` float64. A query is a no-match (``pred == -1``, confidence 0) when the strategy's decision says so:
+    all scores zero (standard / weighted) or a flat distribution, every entry equal (wprob; this covers the uniform
+    distribution of :func:`~vprsnn_export.readout.assignment.wprob_distribution` and any flat aggregated distribution).
+    For ``"wprob"`` pass the distribution (``wprob_distribution``, an aggregated distribution or
+    ``baseline.sad_distribution``) as ``scores``. InvalidValueError for a strategy that is not registered.
     """
     entry = STRATEGIES.get(require_strategy(strategy))
     s = finite_matrix("scores", scores)

@@ -86,7 +86,6 @@ class ReadoutStream:
             velocity = float(candidates[int(np.argmax(total))])
             if span > 1:
                 scores.append(newest)
-        window = np.asarray(recent)[-k:]
-        final = aggregate_newest(window, k, velocity, options.rule) if k > 1 else row[None]
+        final = aggregate_newest(np.asarray(recent)[-k:], k, velocity, options.rule) if k > 1 else row[None]
         index, confidence = decide(final, SEQUENCE_STRATEGY)
         return int(index[0]), float(confidence[0]), float(velocity)

@@ -1,17 +1,16 @@
 """The velocity estimators' registry: how a velocity is estimated from the query stream (paper Sec. V).
 
-Each :class:`VelocityEstimator` wraps one search of :mod:`readout.aggregation` behind one
-signature; the CLI's ``--velocity-estimate`` and ``SequenceOptions.velocity_estimate``
-choose among :data:`VELOCITY_ESTIMATES` and share one default,
-:data:`DEFAULT_VELOCITY_ESTIMATE` (``smooth``, the CLI's default before the two were one).
-Adding one is a function and one ``VELOCITY_ESTIMATES.register`` line (docs/architecture.md).
+Each :class:`VelocityEstimator` wraps one search of :mod:`readout.aggregation` behind one signature; the CLI's
+``--velocity-estimate`` and ``SequenceOptions.velocity_estimate`` choose among :data:`VELOCITY_ESTIMATES` and share one
+default, :data:`DEFAULT_VELOCITY_ESTIMATE` (``smooth``, the CLI's default before the two were one). Adding one is a
+function and one ``VELOCITY_ESTIMATES.register`` line (docs/architecture.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final, Protocol
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -19,29 +18,14 @@ from vprsnn_export.registry import Registry
 
 from .aggregation import estimate_velocity, smooth_velocity, track_velocity
 
-
-class SequenceOptions(Protocol):
-    """What an estimator reads of :class:`vprsnn_export.readout.sequence.SequenceOptions` (a protocol, so that
-    the options' module, which validates against this registry, is not imported back)."""
-
-    @property
-    def rule(self) -> str: ...
-    @property
-    def velocity_span(self) -> int: ...
-    @property
-    def velocity_length(self) -> int | None: ...
-    @property
-    def velocity_memory(self) -> int: ...
-    @property
-    def velocity_lag(self) -> int | None: ...
-
+if TYPE_CHECKING:  # the options' module validates against this registry: not imported back
+    from .sequence import SequenceOptions
 
 #: estimate(prob (Q, places), k, candidates, frame_positions, options: SequenceOptions)
 #: -> (velocity (Q,), aggregated (Q, places))
 EstimateFunction = Callable[
     [np.ndarray, int, np.ndarray, "np.ndarray | None", "SequenceOptions"], tuple[np.ndarray, np.ndarray]
 ]
-
 
 #: stream(k, options) -> (trajectory length, span, memory) of the causal tracker that gives the same velocity
 #: one frame at a time (:meth:`vprsnn_export.readout.scoring.Readout.push`)
@@ -98,9 +82,4 @@ def causal_estimates() -> tuple[str, ...]:
     return tuple(e.name for e in VELOCITY_ESTIMATES.values() if e.stream is not None)
 
 
-__all__ = [
-    "DEFAULT_VELOCITY_ESTIMATE",
-    "VELOCITY_ESTIMATES",
-    "VelocityEstimator",
-    "causal_estimates",
-]
+__all__ = ["DEFAULT_VELOCITY_ESTIMATE", "VELOCITY_ESTIMATES", "VelocityEstimator", "causal_estimates"]
