@@ -33,7 +33,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, Protocol
 
 import numpy as np
 
@@ -42,8 +42,23 @@ from ..registry import Registry
 from ..resources import check_memory, single_need
 from .imageheader import image_dimensions
 
-if TYPE_CHECKING:  # the config imports CHANNELS from here: its type only, no import circle
-    from ..config import PreprocessConfig
+
+class PreprocessSettings(Protocol):
+    """What preprocessing reads of the config (:class:`vprsnn_export.config.PreprocessConfig`): named here, not
+    imported, so that the config checks its channel against :data:`CHANNELS` with no import circle."""
+
+    @property
+    def image_size(self) -> int: ...
+    @property
+    def patch_size(self) -> int: ...
+    @property
+    def patch_norm(self) -> bool: ...
+    @property
+    def channels(self) -> str: ...
+    @property
+    def dog_sigma_centre(self) -> float: ...
+    @property
+    def dog_sigma_surround(self) -> float: ...
 
 
 DECODE_LOCK = threading.Lock()  # file descriptor 2 is process-wide: one decode captures it at a time
@@ -182,7 +197,7 @@ def dog_on_off(resized: np.ndarray, sigma_centre: float, sigma_surround: float) 
     return (both / np.where(top > 0, top, 1)[:, None, None]).astype(np.float32)
 
 
-def intensity_channel(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """The paper's one channel: patch min-max normalisation, or without ``patch_norm`` (an ablation) the whole
     image scaled, ``R_hat = R / 255``; (N, S, S) float32."""
     return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else resized.astype(np.float32) / np.float32(255)
@@ -198,7 +213,7 @@ class Channel:
 
     name: str
     n_channels: int
-    normalise: Callable[[np.ndarray, PreprocessConfig], np.ndarray]
+    normalise: Callable[[np.ndarray, PreprocessSettings], np.ndarray]
     label: str
 
 
@@ -214,13 +229,13 @@ CHANNELS.register(
 )
 
 
-def normalise_resized(resized: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """Steps 2-3 on already-resized ``(N, S, S)`` uint8 images, N >= 1: the input channels, flattened row-major."""
     scaled = CHANNELS.get(cfg.channels).normalise(resized, cfg)
     return np.ascontiguousarray(scaled.reshape(len(resized), -1), dtype=np.float32)
 
 
-def preprocess_images(grey: np.ndarray, cfg: PreprocessConfig) -> np.ndarray:
+def preprocess_images(grey: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
     """``(N, H, W)`` uint8 greyscale -> ``(N, S*S)`` float32 in [0, 1] (module docstring, steps 1-3)."""
     if grey.ndim != 3 or grey.dtype != np.uint8 or not len(grey):
         raise DataError(f"expected (N, H, W) uint8 images, N >= 1, got shape {grey.shape} dtype {grey.dtype}")

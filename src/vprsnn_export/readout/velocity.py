@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Final, Protocol
 
 import numpy as np
 
@@ -18,8 +18,22 @@ from vprsnn_export.registry import Registry
 
 from .aggregation import estimate_velocity, smooth_velocity, track_velocity
 
-if TYPE_CHECKING:  # the options' module validates against this registry: not imported back
-    from .sequence import SequenceOptions
+
+class SequenceOptions(Protocol):
+    """What an estimator reads of :class:`vprsnn_export.readout.sequence.SequenceOptions` (a protocol, so that
+    the options' module, which validates against this registry, is not imported back)."""
+
+    @property
+    def rule(self) -> str: ...
+    @property
+    def velocity_span(self) -> int: ...
+    @property
+    def velocity_length(self) -> int | None: ...
+    @property
+    def velocity_memory(self) -> int: ...
+    @property
+    def velocity_lag(self) -> int | None: ...
+
 
 #: estimate(prob (Q, places), k, candidates, frame_positions, options: SequenceOptions)
 #: -> (velocity (Q,), aggregated (Q, places))
