@@ -24,11 +24,10 @@ The operating point ``theta`` comes from a labelled calibration run (:func:`oper
 with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
 decision was right. It is stored beside the model (:func:`save_operating_point`).
 
-Backends: the registered ones (:data:`vprsnn_export.runtime.backends.BACKENDS`): ``float`` (a checkpoint),
-``integer`` (a fixed-point model, the integer simulator) and ``onnx`` (the graph exported from that
-fixed-point model, one onnxruntime session), each run with state isolation. Every backend returns the
-spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
-which agree count for count, give the same decisions.
+Backends: the registered ones (:data:`vprsnn_export.runtime.backends.BACKENDS`), e.g. ``float`` (a checkpoint),
+``integer`` (the integer simulator) and ``onnx`` (the graph exported from the fixed-point model), each run with
+state isolation. Each returns the spike counts and the readout above runs on them, so the integer simulator and
+the ONNX graph, which agree count for count, give the same decisions.
 """
 
 from __future__ import annotations
@@ -83,7 +82,6 @@ class Decision(JsonDataclass):
     accepted: bool
     velocity: float
     latency_ms: float
-    # JSON: reason only on a frame without a decision, events and search only with a search window
     reason: str | None = field(default=None, metadata=json_options(omit="none"))
     # with a search window: synaptic events of the frame (input spikes x neurons run), and "window" or "global"
     events: int | None = field(default=None, metadata=json_options(omit="none"))
@@ -194,29 +192,26 @@ class Localizer:
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
         self.search, self._parts = search, OrderedDict[tuple[int, int], Callable[[torch.Tensor], np.ndarray]]()
         if search is not None:
-            self._check_search(search)
+            require_type("search", search, SearchWindow)
+            if self.backend not in ("float", "integer"):
+                raise InvalidValueError(
+                    f"--search-window runs the float network or the integer simulator, not {self.backend} "
+                    "(an exported file holds the whole route)"
+                )
+            if self.readout.modules is None or len(self.readout.modules.regions) < 2:
+                raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
+            self._regions = self.readout.modules.regions
+            if threshold is None:
+                raise InvalidValueError(
+                    "--search-window needs an operating point: it tracks the last accepted place "
+                    "(run `localize MODEL --calibrate QUERY` first)"
+                )
             self._open_part = lambda part: open_backend(part, self.backend, None, device, threads)[1]
         self._isolated = isolated
         self.stream = self.readout.stream()
         self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
-
-    def _check_search(self, search: SearchWindow) -> None:
-        require_type("search", search, SearchWindow)
-        if self.backend not in ("float", "integer"):
-            raise InvalidValueError(
-                f"--search-window runs the float network or the integer simulator, not {self.backend} "
-                "(an exported file holds the whole route)"
-            )
-        if self.readout.modules is None or len(self.readout.modules.regions) < 2:
-            raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
-        self._regions = self.readout.modules.regions
-        if self.threshold is None:
-            raise InvalidValueError(
-                "--search-window needs an operating point: it tracks the last accepted place "
-                "(run `localize MODEL --calibrate QUERY` first)"
-            )
 
     def reset(self) -> None:
         """Forget the stream: the next frame is frame 0 (and global, with a search window)."""
