@@ -56,6 +56,7 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.readout.early import early_run
+from vprsnn_export.readout.metrics import _operating_points
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.search import SearchWindow
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -372,14 +373,11 @@ class PrecisionRecallCurve:
     @classmethod
     def of(cls, confidence: np.ndarray, correct: np.ndarray) -> PrecisionRecallCurve:
         c = np.asarray(confidence, dtype=np.float64)
-        ok = np.asarray(correct, dtype=bool)
         keep = c > 0
-        order = np.argsort(-c[keep], kind="stable")
-        c, ok = c[keep][order], ok[keep][order]
-        end = np.r_[c[1:] != c[:-1], True] if c.size else np.zeros(0, bool)  # last of each run of equal confidences
-        hits = np.cumsum(ok)[end]
-        accepted = np.arange(1, c.size + 1)[end]
-        return cls(c[end], hits / accepted, hits / max(len(keep), 1), accepted, len(keep))
+        if not keep.any():
+            return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64), len(keep))
+        hits, accepted, threshold, _ = _operating_points(np.asarray(correct, dtype=bool)[keep], c[keep])
+        return cls(threshold, hits / accepted, hits / len(keep), accepted, len(keep))
 
     def index_for(self, precision: float) -> int | None:
         """The point of the lowest threshold whose precision reaches ``precision`` (None: no point does)."""
