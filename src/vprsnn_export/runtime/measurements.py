@@ -175,6 +175,10 @@ def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
     return None if match is None else float(match.group(1)) / 100
 
 
+#: How a float consumer's row says how many raster entries differ ("...; 2940 of 40960 raster entries differ ...").
+_RASTER_DIFFERENCES = re.compile(r"\b(\d+) of \d+ raster entries differ")
+
+
 @dataclass(frozen=True)
 class Comparison(JsonDataclass):
     """One comparison of two implementations' outputs (``kind`` says how: "exact" or a bound).
@@ -212,8 +216,11 @@ class Comparison(JsonDataclass):
 
     def __post_init__(self) -> None:
         """A tolerance row claims ``equal`` only for what it measured identical (report_v1 wrote ``equal: true``
-        for "passed", a consumer that refused the file included): see :func:`_tolerance_row_identical`."""
-        if self.tolerance is not None and self.equal and not _tolerance_row_identical(self):
+        for "passed", a consumer that refused the file included): it compared decisions (``n_elements`` > 0), none
+        differ (``n_differences`` = 0) and its detail names no differing raster entry."""
+        counted = _RASTER_DIFFERENCES.search(self.detail)
+        identical = bool(self.n_elements) and self.n_differences == 0 and (counted is None or counted.group(1) == "0")
+        if self.tolerance is not None and self.equal and not identical:
             object.__setattr__(self, "equal", False)
 
     @property
@@ -230,17 +237,6 @@ class Comparison(JsonDataclass):
     def difference(self) -> float | None:
         """A tolerance row's measured difference: the share of decisions that differ (None when none compared)."""
         return None if not self.n_elements else (self.n_differences or 0) / self.n_elements
-
-
-#: How a float consumer's row says how many raster entries differ ("...; 2940 of 40960 raster entries differ ...").
-_RASTER_DIFFERENCES = re.compile(r"\b(\d+) of \d+ raster entries differ")
-
-
-def _tolerance_row_identical(row: Comparison) -> bool:
-    """A tolerance row's outputs are identical when it compared decisions (``n_elements`` > 0), none differ
-    (``n_differences`` = 0) and its detail names no differing raster entry."""
-    counted = _RASTER_DIFFERENCES.search(row.detail)
-    return bool(row.n_elements) and row.n_differences == 0 and (counted is None or counted.group(1) == "0")
 
 
 @dataclass(frozen=True)
