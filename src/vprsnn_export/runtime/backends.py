@@ -103,7 +103,6 @@ for name, runs, opener, description, needs, tags in (
 
 
 def tagged(*tags: str) -> tuple[BackendKind, ...]:
-    """The registered kinds carrying every one of ``tags``, in registration order."""
     return tuple(kind for kind in BACKENDS.values() if set(tags) <= kind.tags)
 
 

@@ -160,7 +160,6 @@ class ModuleRow(JsonDataclass):
 
     @property
     def delta_k(self) -> float:
-        """Accuracy at the largest k, quantised minus float."""
         return self.accuracy_k - self.float_accuracy_k
 
 
@@ -275,7 +274,6 @@ class ConformanceResult(JsonDataclass):
 
     @property
     def n_identical(self) -> int:
-        """Exact rows whose outputs are identical."""
         return sum(c.equal for c in self.comparisons if c.tolerance is None)
 
     @property
@@ -291,5 +289,4 @@ class ConformanceResult(JsonDataclass):
         return tuple(c for c in self.comparisons if not c.passed)
 
     def with_files(self, name: str, paths: Sequence[str]) -> ConformanceResult:
-        """This result with one more entry in ``files``."""
         return dataclasses.replace(self, files={**self.files, name: tuple(paths)})
