@@ -68,6 +68,7 @@ PARTS_KEPT = 16  # the search window's networks kept open (the most recent windo
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
 CURVE_FORMAT = "vprsnn-precision-recall/1"
+CURVE_POINT = ("threshold", "precision", "recall", "accepted")  # a curve point's keys in the curve's JSON
 
 
 @dataclass(frozen=True)
@@ -387,17 +388,12 @@ class PrecisionRecallCurve:
     def rows(self, around: int, n: int = 3) -> list[tuple[float, float, float, int]]:
         """(threshold, precision, recall, accepted) of the ``n`` points either side of point ``around``."""
         lo, hi = max(around - n, 0), min(around + n + 1, len(self.threshold))
-        columns = (self.threshold, self.precision, self.recall, self.accepted)
-        return [(float(t), float(p), float(r), int(a)) for t, p, r, a in zip(*(c[lo:hi] for c in columns), strict=True)]
+        columns = (getattr(self, name)[lo:hi] for name in CURVE_POINT)
+        return [(float(t), float(p), float(r), int(a)) for t, p, r, a in zip(*columns, strict=True)]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "n_queries": self.n_queries,
-            "points": [
-                dict(zip(("threshold", "precision", "recall", "accepted"), row, strict=True))
-                for row in self.rows(0, len(self.threshold))
-            ],
-        }
+        points = [dict(zip(CURVE_POINT, row, strict=True)) for row in self.rows(0, len(self.threshold))]
+        return {"n_queries": self.n_queries, "points": points}
 
 
 def precision_threshold(confidence: np.ndarray, correct: np.ndarray, precision: float) -> float | None:
