@@ -73,9 +73,7 @@ def _onnx(network: Network, path: Path | None, device: torch.device, threads: in
     return SessionBackend(session(path, threads))
 
 
-def _reference(
-    network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool
-) -> Backend:
+def _stepper(network: Network, path: Path | None, device: torch.device, threads: int | None, progress: bool) -> Backend:
     from vprsnn_export.targets.reference_stepper import ReferenceStepper
 
     assert isinstance(network, FixedPointModel)
@@ -94,7 +92,7 @@ for name, runs, opener, description, needs, tags in (
     (
         "reference",
         FixedPointModel,
-        _reference,
+        _stepper,
         "the reference stepper: the slow oracle, one step at a time",
         None,
         {EXACT, SLOW},
@@ -105,7 +103,6 @@ for name, runs, opener, description, needs, tags in (
 
 
 def tagged(*tags: str) -> tuple[BackendKind, ...]:
-    """The registered kinds carrying every one of ``tags``, in registration order."""
     return tuple(kind for kind in BACKENDS.values() if set(tags) <= kind.tags)
 
 

@@ -37,17 +37,16 @@ def recalibrate(
     """
     require_type("model", model, FixedPointModel)
     if reuse_float_calibration:
-        report = dataclasses.replace(model.quantisation, calibration="float (reused)", calibration_saturations=None)
-        return dataclasses.replace(model, calibration=model.float_calibration.copy(), quantisation=report)
-    check_reference_places(place_ids, model.reference_place_ids)
-    if missing := [name for name in model.reference_traversals if name not in reference_images]:
-        raise InvalidValueError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
-    network = IntegerNetwork(model, device=device, progress=progress)
-    images = {name: reference_images[name] for name in model.reference_traversals}
-    calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
-    report = dataclasses.replace(
-        model.quantisation, calibration="deployed (integer simulator)", calibration_saturations=network.saturations
-    )
+        calibration, how, saturations = model.float_calibration.copy(), "float (reused)", None
+    else:
+        check_reference_places(place_ids, model.reference_place_ids)
+        if missing := [name for name in model.reference_traversals if name not in reference_images]:
+            raise InvalidValueError(f"calibration needs the reference traversal(s) {', '.join(missing)}")
+        network = IntegerNetwork(model, device=device, progress=progress)
+        images = {name: reference_images[name] for name in model.reference_traversals}
+        calibration = calibrate(network.counts, images, model.reference_place_ids, model.config)
+        how, saturations = "deployed (integer simulator)", network.saturations
+    report = dataclasses.replace(model.quantisation, calibration=how, calibration_saturations=saturations)
     return dataclasses.replace(model, calibration=calibration, quantisation=report)
 
 

@@ -28,7 +28,7 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.network.cost import CostSummary, joined_costs, query_cost
 from vprsnn_export.network.dynamics import check_run_memory
-from vprsnn_export.network.runs import Backend, SpikeRun, joined_runs
+from vprsnn_export.network.runs import SpikeRun, joined_runs
 from vprsnn_export.readout.baseline import cosine_similarities, sad_distances, sad_distribution
 from vprsnn_export.readout.early import early_queries, is_off
 from vprsnn_export.readout.metrics import MetricRow
@@ -283,8 +283,23 @@ def _run_queries(
     without the whole route's spike trains (None) or a dense (queries, neurons) array."""
     long_route = sparse_query_counts(network, len(place_ids), record)
     runner = open_backend(network, backend, device=device, progress=progress and not long_route)[1]
+    places = len(network.reference_place_ids)
     if long_route:
-        return _long_route_run(runner, network, images, place_ids, traversal, progress)
+        runs, blocks, costs = [], [], []
+        with tqdm(
+            total=len(place_ids), desc=runner.name, unit="query", file=sys.stderr, leave=False, disable=not progress
+        ) as bar:
+            for start in range(0, len(place_ids), LONG_ROUTE_BLOCK):
+                block = slice(start, start + LONG_ROUTE_BLOCK)
+                spikes = query_spikes(images[block], place_ids[block], traversal, network.config)
+                run = runner.run(spikes)
+                blocks.append(sparse.csr_array(run.counts.numpy().astype(np.int64)))
+                # the joined run keeps no counts (N, 0), final voltages or W+Prob rows, each (queries, neurons or
+                # places): 2.9 GB of float32 voltages at 27k
+                runs.append(replace(run, counts=run.counts[:, :0].clone(), final_voltage=None, wprob=None))
+                costs.append(query_cost(spikes, int(run.counts.shape[1]), places=places, images=images[block]))
+                bar.update(len(spikes))
+        return joined_runs(runs), sparse.vstack(blocks, format="csr"), joined_costs(costs).summary(), None
     spikes = query_spikes(images, place_ids, traversal, network.config)
     steps = None
     if is_off(network.config.early):
@@ -292,31 +307,8 @@ def _run_queries(
     else:  # each chunk run once: the rule's counts, and the whole presentations' candidates and saturations
         parts, early = early_queries(runner.run, spikes, network.calibration, network.config, keep_raster=record)
         run, steps = replace(joined_runs(parts), counts=torch.from_numpy(early.counts)), early.steps
-    places = len(network.reference_place_ids)
     cost = query_cost(spikes, int(run.counts.shape[1]), places=places, images=images, steps=steps)
     return run, run.counts.numpy(), cost.summary(), spikes
-
-
-def _long_route_run(
-    runner: Backend, network: Network, images: np.ndarray, place_ids: np.ndarray, traversal: str, progress: bool
-) -> tuple[SpikeRun, sparse.csr_array, CostSummary, None]:
-    """:func:`_run_queries` of a long route, :data:`LONG_ROUTE_BLOCK` queries encoded and run at a time: the
-    joined run (its counts (N, 0): they are the second value, int64 CSR; no final voltages or W+Prob rows, each
-    (queries, neurons or places): 2.9 GB of float32 voltages at 27k), the cost, no spike trains."""
-    runs, counts, costs = [], [], []
-    places = len(network.reference_place_ids)
-    with tqdm(
-        total=len(place_ids), desc=runner.name, unit="query", file=sys.stderr, leave=False, disable=not progress
-    ) as bar:
-        for start in range(0, len(place_ids), LONG_ROUTE_BLOCK):
-            block = slice(start, start + LONG_ROUTE_BLOCK)
-            spikes = query_spikes(images[block], place_ids[block], traversal, network.config)
-            run = runner.run(spikes)
-            counts.append(sparse.csr_array(run.counts.numpy().astype(np.int64)))
-            runs.append(replace(run, counts=run.counts[:, :0].clone(), final_voltage=None, wprob=None))
-            costs.append(query_cost(spikes, int(run.counts.shape[1]), places=places, images=images[block]))
-            bar.update(len(spikes))
-    return joined_runs(runs), sparse.vstack(counts, format="csr"), joined_costs(costs).summary(), None
 
 
 def sparse_query_counts(network: Network, queries: int, record: bool = False) -> bool:

@@ -24,11 +24,10 @@ The operating point ``theta`` comes from a labelled calibration run (:func:`oper
 with ``precision = 1.0`` the lowest confidence threshold at which every accepted calibration
 decision was right. It is stored beside the model (:func:`save_operating_point`).
 
-Backends: the registered ones (:data:`vprsnn_export.runtime.backends.BACKENDS`): ``float`` (a checkpoint),
-``integer`` (a fixed-point model, the integer simulator) and ``onnx`` (the graph exported from that
-fixed-point model, one onnxruntime session), each run with state isolation. Every backend returns the
-spike counts and the readout above runs on them, so the integer simulator and the ONNX graph,
-which agree count for count, give the same decisions.
+Backends: the registered ones (:data:`vprsnn_export.runtime.backends.BACKENDS`), e.g. ``float`` (a checkpoint),
+``integer`` (the integer simulator) and ``onnx`` (the graph exported from the fixed-point model), each run with
+state isolation. Each returns the spike counts and the readout above runs on them, so the integer simulator and
+the ONNX graph, which agree count for count, give the same decisions.
 """
 
 from __future__ import annotations
@@ -57,6 +56,7 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.readout.early import early_run
+from vprsnn_export.readout.metrics import _operating_points
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.search import SearchWindow
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -68,6 +68,7 @@ PARTS_KEPT = 16  # the search window's networks kept open (the most recent windo
 OPERATING_POINT_FORMAT = "vprsnn-operating-point/1"
 OPERATING_POINT_SUFFIX = ".operating-point.json"
 CURVE_FORMAT = "vprsnn-precision-recall/1"
+CURVE_POINT = ("threshold", "precision", "recall", "accepted")  # a curve point's keys in the curve's JSON
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,6 @@ class Decision(JsonDataclass):
     accepted: bool
     velocity: float
     latency_ms: float
-    # JSON: reason only on a frame without a decision, events and search only with a search window
     reason: str | None = field(default=None, metadata=json_options(omit="none"))
     # with a search window: synaptic events of the frame (input spikes x neurons run), and "window" or "global"
     events: int | None = field(default=None, metadata=json_options(omit="none"))
@@ -194,29 +194,26 @@ class Localizer:
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
         self.search, self._parts = search, OrderedDict[tuple[int, int], Callable[[torch.Tensor], np.ndarray]]()
         if search is not None:
-            self._check_search(search)
+            require_type("search", search, SearchWindow)
+            if self.backend not in ("float", "integer"):
+                raise InvalidValueError(
+                    f"--search-window runs the float network or the integer simulator, not {self.backend} "
+                    "(an exported file holds the whole route)"
+                )
+            if self.readout.modules is None or len(self.readout.modules.regions) < 2:
+                raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
+            self._regions = self.readout.modules.regions
+            if threshold is None:
+                raise InvalidValueError(
+                    "--search-window needs an operating point: it tracks the last accepted place "
+                    "(run `localize MODEL --calibrate QUERY` first)"
+                )
             self._open_part = lambda part: open_backend(part, self.backend, None, device, threads)[1]
         self._isolated = isolated
         self.stream = self.readout.stream()
         self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
         self.reset()  # the silent presentation above compiled the kernels: the first frame's latency is its own
-
-    def _check_search(self, search: SearchWindow) -> None:
-        require_type("search", search, SearchWindow)
-        if self.backend not in ("float", "integer"):
-            raise InvalidValueError(
-                f"--search-window runs the float network or the integer simulator, not {self.backend} "
-                "(an exported file holds the whole route)"
-            )
-        if self.readout.modules is None or len(self.readout.modules.regions) < 2:
-            raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
-        self._regions = self.readout.modules.regions
-        if self.threshold is None:
-            raise InvalidValueError(
-                "--search-window needs an operating point: it tracks the last accepted place "
-                "(run `localize MODEL --calibrate QUERY` first)"
-            )
 
     def reset(self) -> None:
         """Forget the stream: the next frame is frame 0 (and global, with a search window)."""
@@ -377,14 +374,11 @@ class PrecisionRecallCurve:
     @classmethod
     def of(cls, confidence: np.ndarray, correct: np.ndarray) -> PrecisionRecallCurve:
         c = np.asarray(confidence, dtype=np.float64)
-        ok = np.asarray(correct, dtype=bool)
         keep = c > 0
-        order = np.argsort(-c[keep], kind="stable")
-        c, ok = c[keep][order], ok[keep][order]
-        end = np.r_[c[1:] != c[:-1], True] if c.size else np.zeros(0, bool)  # last of each run of equal confidences
-        hits = np.cumsum(ok)[end]
-        accepted = np.arange(1, c.size + 1)[end]
-        return cls(c[end], hits / accepted, hits / max(len(keep), 1), accepted, len(keep))
+        if not keep.any():
+            return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64), len(keep))
+        hits, accepted, threshold, _ = _operating_points(np.asarray(correct, dtype=bool)[keep], c[keep])
+        return cls(threshold, hits / accepted, hits / len(keep), accepted, len(keep))
 
     def index_for(self, precision: float) -> int | None:
         """The point of the lowest threshold whose precision reaches ``precision`` (None: no point does)."""
@@ -394,17 +388,12 @@ class PrecisionRecallCurve:
     def rows(self, around: int, n: int = 3) -> list[tuple[float, float, float, int]]:
         """(threshold, precision, recall, accepted) of the ``n`` points either side of point ``around``."""
         lo, hi = max(around - n, 0), min(around + n + 1, len(self.threshold))
-        columns = (self.threshold, self.precision, self.recall, self.accepted)
-        return [(float(t), float(p), float(r), int(a)) for t, p, r, a in zip(*(c[lo:hi] for c in columns), strict=True)]
+        columns = (getattr(self, name)[lo:hi] for name in CURVE_POINT)
+        return [(float(t), float(p), float(r), int(a)) for t, p, r, a in zip(*columns, strict=True)]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "n_queries": self.n_queries,
-            "points": [
-                dict(zip(("threshold", "precision", "recall", "accepted"), row, strict=True))
-                for row in self.rows(0, len(self.threshold))
-            ],
-        }
+        points = [dict(zip(CURVE_POINT, row, strict=True)) for row in self.rows(0, len(self.threshold))]
+        return {"n_queries": self.n_queries, "points": points}
 
 
 def precision_threshold(confidence: np.ndarray, correct: np.ndarray, precision: float) -> float | None:

@@ -160,7 +160,6 @@ class ModuleRow(JsonDataclass):
 
     @property
     def delta_k(self) -> float:
-        """Accuracy at the largest k, quantised minus float."""
         return self.accuracy_k - self.float_accuracy_k
 
 
@@ -173,6 +172,10 @@ def _stated_tolerance(data: Mapping[str, Any]) -> float | None:
     """An older file's tolerance row: its kind ``decision agreement >= 95.0%`` (exact rows: None)."""
     match = re.fullmatch(r"decision agreement >= ([0-9.]+)%", str(data.get("kind", "")))
     return None if match is None else float(match.group(1)) / 100
+
+
+#: How a float consumer's row says how many raster entries differ ("...; 2940 of 40960 raster entries differ ...").
+_RASTER_DIFFERENCES = re.compile(r"\b(\d+) of \d+ raster entries differ")
 
 
 @dataclass(frozen=True)
@@ -212,8 +215,11 @@ class Comparison(JsonDataclass):
 
     def __post_init__(self) -> None:
         """A tolerance row claims ``equal`` only for what it measured identical (report_v1 wrote ``equal: true``
-        for "passed", a consumer that refused the file included): see :func:`_tolerance_row_identical`."""
-        if self.tolerance is not None and self.equal and not _tolerance_row_identical(self):
+        for "passed", a consumer that refused the file included): it compared decisions (``n_elements`` > 0), none
+        differ (``n_differences`` = 0) and its detail names no differing raster entry."""
+        counted = _RASTER_DIFFERENCES.search(self.detail)
+        identical = bool(self.n_elements) and self.n_differences == 0 and (counted is None or counted.group(1) == "0")
+        if self.tolerance is not None and self.equal and not identical:
             object.__setattr__(self, "equal", False)
 
     @property
@@ -230,17 +236,6 @@ class Comparison(JsonDataclass):
     def difference(self) -> float | None:
         """A tolerance row's measured difference: the share of decisions that differ (None when none compared)."""
         return None if not self.n_elements else (self.n_differences or 0) / self.n_elements
-
-
-#: How a float consumer's row says how many raster entries differ ("...; 2940 of 40960 raster entries differ ...").
-_RASTER_DIFFERENCES = re.compile(r"\b(\d+) of \d+ raster entries differ")
-
-
-def _tolerance_row_identical(row: Comparison) -> bool:
-    """A tolerance row's outputs are identical when it compared decisions (``n_elements`` > 0), none differ
-    (``n_differences`` = 0) and its detail names no differing raster entry."""
-    counted = _RASTER_DIFFERENCES.search(row.detail)
-    return bool(row.n_elements) and row.n_differences == 0 and (counted is None or counted.group(1) == "0")
 
 
 @dataclass(frozen=True)
@@ -279,7 +274,6 @@ class ConformanceResult(JsonDataclass):
 
     @property
     def n_identical(self) -> int:
-        """Exact rows whose outputs are identical."""
         return sum(c.equal for c in self.comparisons if c.tolerance is None)
 
     @property
@@ -295,5 +289,4 @@ class ConformanceResult(JsonDataclass):
         return tuple(c for c in self.comparisons if not c.passed)
 
     def with_files(self, name: str, paths: Sequence[str]) -> ConformanceResult:
-        """This result with one more entry in ``files``."""
         return dataclasses.replace(self, files={**self.files, name: tuple(paths)})

@@ -282,8 +282,7 @@ def _non_finite(data: Any, where: str = "") -> str | None:
 def _fractions(report: VerifyReport) -> Iterable[tuple[str, float | None]]:
     """Every stored fraction of ``report`` (metric values, accuracies, agreements) with its name; each lies in [0, 1]."""
     for run in report.runs:
-        results = (("float", run.float.metrics), *((f"{r.bits} bits", r.metrics) for r in run.bits))
-        for name, rows in results:
+        for name, rows in (("float", run.float.metrics), *((f"{r.bits} bits", r.metrics) for r in run.bits)):
             for row in rows:
                 for values in (row.values, row.float_values):
                     if values is not None:
