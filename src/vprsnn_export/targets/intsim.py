@@ -254,10 +254,8 @@ def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, re
         torch.gt(voltage, threshold, out=candidates)
         torch.sum(candidates, dim=1, out=n_candidates[t])
         if prep.wta:
-            if multipliers is None:
-                torch.where(candidates, current, minus_one, out=score)
-            else:
-                torch.where(candidates, torch.mul(current, multipliers, out=score), minus_one, out=score)
+            scored = current if multipliers is None else torch.mul(current, multipliers, out=score)
+            torch.where(candidates, scored, minus_one, out=score)
             value, index = score.view(batch, -1, prep.group).max(dim=2)  # one winner per module
             best.append(value)
             winner.append(index + group_offsets)

@@ -110,17 +110,15 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         raise InvalidValueError(
             f"expected spikes (N, T, inputs) = (N, {timesteps}, {inputs}) for this graph, got {array.shape}"
         )
-    names = [o.name for o in sess.get_outputs()]
-    pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
+    runs: list[list[np.ndarray]] = []  # per chunk: every output, in the graph's order
     seconds = 0.0
     for start in range(0, array.shape[0], batch):
         chunk = np.ascontiguousarray(array[start : start + batch].astype(np.uint8).transpose(1, 0, 2))
         began = time.perf_counter()
-        values = sess.run(None, {INPUT: chunk})
+        runs.append(sess.run(None, {INPUT: chunk}))
         seconds += time.perf_counter() - began
-        for name, value in zip(names, values, strict=True):
-            pieces[name].append(value)
-    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
+    outputs = zip((o.name for o in sess.get_outputs()), *runs, strict=True)
+    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, *parts in outputs if parts}
     raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
     return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster, seconds)
 
