@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +23,6 @@ class OnnxRun:
     saturations: np.ndarray  # (N,) int64
     wprob: np.ndarray | None  # (N, places) float64
     raster: np.ndarray | None  # (N, T, neurons) bool
-    seconds: float  # wall time of the session.run calls
 
 
 def checked_onnx(path: Path) -> onnx.ModelProto:
@@ -110,17 +108,12 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         raise InvalidValueError(
             f"expected spikes (N, T, inputs) = (N, {timesteps}, {inputs}) for this graph, got {array.shape}"
         )
-    runs: list[list[np.ndarray]] = []  # per chunk: every output, in the graph's order
-    seconds = 0.0
-    for start in range(0, array.shape[0], batch):
-        chunk = np.ascontiguousarray(array[start : start + batch].astype(np.uint8).transpose(1, 0, 2))
-        began = time.perf_counter()
-        runs.append(sess.run(None, {INPUT: chunk}))
-        seconds += time.perf_counter() - began
+    chunks = (array[start : start + batch].astype(np.uint8).transpose(1, 0, 2) for start in range(0, len(array), batch))
+    runs = [sess.run(None, {INPUT: np.ascontiguousarray(chunk)}) for chunk in chunks]  # every output, per chunk
     outputs = zip((o.name for o in sess.get_outputs()), *runs, strict=True)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, *parts in outputs if parts}
     raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
-    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster, seconds)
+    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster)
 
 
 def run_onnx_outputs(
