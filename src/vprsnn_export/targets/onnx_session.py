@@ -47,8 +47,7 @@ def read_onnx(path: str | Path) -> onnx.ModelProto:
 #: files (an edited or foreign graph could loop or allocate without bound).
 WRITER_OPS = frozenset(
     "Add And ArgMax BitShift BitwiseAnd Cast Clip Concat ConstantOfShape Div Equal Greater Identity MatMul "
-    "MatMulInteger Mul Not Range "
-    "ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
+    "MatMulInteger Mul Not Range ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
 )
 REQUIRED_OUTPUTS = ("counts", "saturations")
 
