@@ -66,8 +66,11 @@ def axon_synapse_bits(limits: CoreLimits, neurons: int, bits: int) -> int:
     if limits.charge == "dense":
         return neurons * bits
     b = 8 if bits == 7 else bits
-    groups = (min(LOIHI1_GROUP, neurons - start) for start in range(0, neurons, LOIHI1_GROUP))  # c synapses each
-    return sum(LOIHI1_WORD_BITS * -(-(c * b + LOIHI1_GROUP_HEADER_BITS) // LOIHI1_WORD_BITS) for c in groups)
+    total = 0
+    for start in range(0, neurons, LOIHI1_GROUP):
+        count = min(LOIHI1_GROUP, neurons - start)
+        total += LOIHI1_WORD_BITS * -(-(count * b + LOIHI1_GROUP_HEADER_BITS) // LOIHI1_WORD_BITS)
+    return total
 
 
 def neurons_per_core(limits: CoreLimits, inputs: int, bits: int) -> int:
