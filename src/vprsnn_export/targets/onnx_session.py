@@ -52,18 +52,6 @@ WRITER_OPS = frozenset(
 REQUIRED_OUTPUTS = ("counts", "saturations")
 
 
-def graph_ops(graph) -> set[str]:
-    """Every operator of ``graph`` and of the subgraphs of its nodes (a Scan's body), iteratively."""
-    found: set[str] = set()
-    pending = [graph]
-    while pending:
-        for node in pending.pop().node:
-            found.add(node.op_type)
-            pending.extend(a.g for a in node.attribute if a.HasField("g"))
-            pending.extend(g for a in node.attribute for g in a.graphs)
-    return found
-
-
 def check_interface(loaded, path: Path) -> None:
     """ModelFileError unless the graph has the writer's interface: one input ``spikes`` [T, batch, inputs] with T
     and inputs fixed, the outputs counts and saturations, and only :data:`WRITER_OPS`."""
@@ -74,7 +62,14 @@ def check_interface(loaded, path: Path) -> None:
         raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
     if missing := [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]:
         raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
-    if foreign := sorted(graph_ops(loaded.graph) - WRITER_OPS):
+    ops: set[str] = set()
+    pending = [loaded.graph]
+    while pending:  # every node's operator, and those of its subgraphs (a Scan's body)
+        for node in pending.pop().node:
+            ops.add(node.op_type)
+            pending.extend(a.g for a in node.attribute if a.HasField("g"))
+            pending.extend(g for a in node.attribute for g in a.graphs)
+    if foreign := sorted(ops - WRITER_OPS):
         raise ModelFileError(f"the graph uses operators export never writes ({', '.join(foreign[:5])})", path)
 
 
