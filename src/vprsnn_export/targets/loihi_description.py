@@ -144,9 +144,8 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
             "scope": cfg.network.wta_scope,
             "rule": (
                 "per step and per group of group_size consecutive exc neurons (the whole ensemble, or one module), "
-                "of the neurons that spiked "
-                "in Lava (all candidates, all reset), emit only the one with the largest a_j * m_j, ties to the "
-                "lowest index; a_j = sum_i q_ij s_i of the same step"
+                "of the neurons that spiked in Lava (all candidates, all reset), emit only the one with the largest "
+                "a_j * m_j, ties to the lowest index; a_j = sum_i q_ij s_i of the same step"
             ),
             "score_multiplier": "wta_score_multiplier",
             "in_lava": "not expressible with Dense/LIF: a readout process that reads exc.s_out and the Dense "

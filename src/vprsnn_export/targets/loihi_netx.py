@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from vprsnn_export.export.model import FixedPointModel
-from vprsnn_export.io.fileio import atomic_write
+from vprsnn_export.io.fileio import atomic_write_bytes
 from vprsnn_export.targets.loihi_description import DU_NO_CURRENT_MEMORY
 
 
@@ -42,4 +42,4 @@ def write_netx(model: FixedPointModel, path: str | Path) -> Path:
         neuron.create_dataset("vThMant", data=vth)
         neuron.create_dataset("refDelay", data=np.int64(1))
         neuron.create_dataset("gradedSpike", data=np.bool_(False))
-    return atomic_write(path, lambda handle: handle.write(buffer.getvalue()))
+    return atomic_write_bytes(path, buffer.getvalue())

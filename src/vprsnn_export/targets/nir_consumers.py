@@ -120,8 +120,7 @@ def available(consumer: str) -> bool:
 
 
 def run_consumer(consumer: str, graph, spikes: torch.Tensor) -> torch.Tensor:
-    """The WTA-off raster of ``consumer`` (a name of :data:`MATRIX_CONSUMERS`); raises what the consumer raises when
-    it refuses the file."""
+    """The WTA-off raster of ``consumer`` (:data:`MATRIX_CONSUMERS`); raises what it raises when it refuses the file."""
     if not available(consumer):
         raise ConsumerUnavailable(f"{PACKAGES[consumer.removesuffix('-default')]} is not installed")
     return MATRIX_CONSUMERS[consumer][0](graph, spikes)

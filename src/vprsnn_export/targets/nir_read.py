@@ -28,34 +28,30 @@ def load_graph(path: str | Path):
 
 def read_nir(path: str | Path) -> Source:
     """Rebuild the exported network: a Checkpoint (float) or a FixedPointModel (fixed point) (module docstring)."""
+    import nir
+
     path = Path(path)
     graph = load_graph(path)
     try:
-        return graph_to_source(graph, path)
+        meta = graph.metadata
+        if meta.get("format") != FORMAT:
+            raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
+        if int(meta.get("format_version", -1)) != FORMAT_VERSION:
+            raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
+        missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
+        if missing or sorted(map(tuple, graph.edges)) != sorted(EDGES if "wta" in graph.nodes else PLAIN_EDGES):
+            raise ModelFileError(
+                f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
+            )
+        linear, lif = graph.nodes["linear"], graph.nodes["lif"]
+        if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
+            raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
+        header = parse_json(str(meta["header_json"]), "header_json")
+        rebuild = fixed_point_from_graph if str(meta["kind"]) == "fixed-point" else checkpoint_from_graph
+        source = rebuild(header, meta, np.asarray(linear.weight).T, np.asarray(lif.v_threshold), path)
+        check_dynamics(lif, effective_beta(source), float(meta["dt"]), path)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a ModelFileError passes as it is
         raise ModelFileError(f"not a vprsnn NIR export ({type(exc).__name__}: {exc})", path) from None
-
-
-def graph_to_source(graph, path: Path) -> Source:
-    import nir
-
-    meta = graph.metadata
-    if meta.get("format") != FORMAT:
-        raise ModelFileError(f"not a vprsnn NIR export (metadata format {meta.get('format')!r})", path)
-    if int(meta.get("format_version", -1)) != FORMAT_VERSION:
-        raise ModelFileError(f"unsupported vprsnn NIR format version {meta.get('format_version')!r}", path)
-    missing = [name for name in NODES if name not in graph.nodes and name != "wta"]
-    if missing or sorted(map(tuple, graph.edges)) != sorted(EDGES if "wta" in graph.nodes else PLAIN_EDGES):
-        raise ModelFileError(
-            f"the graph is not the exported network (nodes missing: {missing}; edges {graph.edges})", path
-        )
-    linear, lif = graph.nodes["linear"], graph.nodes["lif"]
-    if not isinstance(linear, nir.Linear) or not isinstance(lif, (nir.LIF, nir.IF)):
-        raise ModelFileError("node 'linear' must be a Linear and 'lif' a LIF or IF", path)
-    header = parse_json(str(meta["header_json"]), "header_json")
-    rebuild = fixed_point_from_graph if str(meta["kind"]) == "fixed-point" else checkpoint_from_graph
-    source = rebuild(header, meta, np.asarray(linear.weight).T, np.asarray(lif.v_threshold), path)
-    check_dynamics(lif, effective_beta(source), float(meta["dt"]), path)
     return source
 
 

@@ -72,11 +72,10 @@ def generic_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECON
 def step_module(module, spikes: torch.Tensor, read: Callable[..., torch.Tensor] = lambda z, _: z) -> torch.Tensor:
     """Feed (N, T, inputs) one step at a time to a stateful torch module returning (z, state); the raster
     (N, T, neurons) bool of ``read(z, state)`` (default: z)."""
-    _, timesteps, _ = spikes.shape
     state = None
     outputs = []
     with torch.no_grad():
-        for t in range(timesteps):
+        for t in range(spikes.shape[1]):
             z, state = module(spikes[:, t].to(torch.float32), state)
             outputs.append(read(z, state).detach().to(torch.bool))
     return torch.stack(outputs, dim=1)

@@ -117,12 +117,6 @@ READOUT_RULE_VERSION = 2  # 2: the WTA runs within each group of group_size cons
 READABLE_RULE_VERSIONS = (1, 2)  # 1: one group of all neurons
 
 
-def readout_group(source: Source) -> int:
-    """The WTA group of the readout rule: every neuron (``network.wta_scope`` = ensemble, or a single
-    network), or one module's n = network.n_neurons (scope = module); :func:`vprsnn_export.config.wta_group`."""
-    return wta_group(source.config, source.calibration.shape[0])
-
-
 def populations(source: Source) -> list[dict[str, Any]]:
     """One entry per module of the lif node: its neurons [start, stop), its region of reference places, thresholds.
 
@@ -150,7 +144,7 @@ def readout_rule(source: Source) -> dict[str, Any]:
     """The hard WTA as a machine-readable rule over the lif node's WTA-off spikes (stored as JSON)."""
     if not source.config.network.wta:
         return {"name": "none", "version": READOUT_RULE_VERSION, "output": "the lif node's spikes as they are"}
-    group = readout_group(source)
+    group = wta_group(source.config, len(source.calibration))  # every neuron, or one module's (wta_scope)
     return {
         "name": READOUT_RULE,
         "version": READOUT_RULE_VERSION,
@@ -207,7 +201,7 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_rule": wta_rule(source),
         "readout_rule": json.dumps(readout_rule(source), sort_keys=True),
         "modules": module_count(len(source.reference_place_ids), cfg.train.module_size),
-        "wta_group": readout_group(source),
+        "wta_group": wta_group(cfg, len(source.calibration)),
         "populations": json.dumps(populations(source), sort_keys=True),
         "consumer_settings": json.dumps(consumer_settings(dt), sort_keys=True),
         "integer_semantics": json.dumps(integer_semantics(source), sort_keys=True),
@@ -291,8 +285,7 @@ def build_graph(
 
 
 def write_nir(source: Source, path: str | Path, **options: Any) -> Path:
-    """Build the graph (``options``: :func:`build_graph`'s), serialise it with ``nir.write`` into memory, write it
-    atomically."""
+    """:func:`build_graph` (``options``: its keywords) serialised by ``nir.write`` in memory, written atomically."""
     import nir
 
     path = require_path("path", path)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +23,6 @@ class OnnxRun:
     saturations: np.ndarray  # (N,) int64
     wprob: np.ndarray | None  # (N, places) float64
     raster: np.ndarray | None  # (N, T, neurons) bool
-    seconds: float  # wall time of the session.run calls
 
 
 def checked_onnx(path: Path) -> onnx.ModelProto:
@@ -49,22 +47,9 @@ def read_onnx(path: str | Path) -> onnx.ModelProto:
 #: files (an edited or foreign graph could loop or allocate without bound).
 WRITER_OPS = frozenset(
     "Add And ArgMax BitShift BitwiseAnd Cast Clip Concat ConstantOfShape Div Equal Greater Identity MatMul "
-    "MatMulInteger Mul Not Range "
-    "ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
+    "MatMulInteger Mul Not Range ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
 )
 REQUIRED_OUTPUTS = ("counts", "saturations")
-
-
-def graph_ops(graph) -> set[str]:
-    """Every operator of ``graph`` and of the subgraphs of its nodes (a Scan's body), iteratively."""
-    found: set[str] = set()
-    pending = [graph]
-    while pending:
-        for node in pending.pop().node:
-            found.add(node.op_type)
-            pending.extend(a.g for a in node.attribute if a.HasField("g"))
-            pending.extend(g for a in node.attribute for g in a.graphs)
-    return found
 
 
 def check_interface(loaded, path: Path) -> None:
@@ -77,7 +62,14 @@ def check_interface(loaded, path: Path) -> None:
         raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
     if missing := [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]:
         raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
-    if foreign := sorted(graph_ops(loaded.graph) - WRITER_OPS):
+    ops: set[str] = set()
+    pending = [loaded.graph]
+    while pending:  # every node's operator, and those of its subgraphs (a Scan's body)
+        for node in pending.pop().node:
+            ops.add(node.op_type)
+            pending.extend(a.g for a in node.attribute if a.HasField("g"))
+            pending.extend(g for a in node.attribute for g in a.graphs)
+    if foreign := sorted(ops - WRITER_OPS):
         raise ModelFileError(f"the graph uses operators export never writes ({', '.join(foreign[:5])})", path)
 
 
@@ -110,19 +102,12 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
         raise InvalidValueError(
             f"expected spikes (N, T, inputs) = (N, {timesteps}, {inputs}) for this graph, got {array.shape}"
         )
-    names = [o.name for o in sess.get_outputs()]
-    pieces: dict[str, list[np.ndarray]] = {name: [] for name in names}
-    seconds = 0.0
-    for start in range(0, array.shape[0], batch):
-        chunk = np.ascontiguousarray(array[start : start + batch].astype(np.uint8).transpose(1, 0, 2))
-        began = time.perf_counter()
-        values = sess.run(None, {INPUT: chunk})
-        seconds += time.perf_counter() - began
-        for name, value in zip(names, values, strict=True):
-            pieces[name].append(value)
-    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, parts in pieces.items() if parts}
+    chunks = (array[start : start + batch].astype(np.uint8).transpose(1, 0, 2) for start in range(0, len(array), batch))
+    runs = [sess.run(None, {INPUT: np.ascontiguousarray(chunk)}) for chunk in chunks]  # every output, per chunk
+    outputs = zip((o.name for o in sess.get_outputs()), *runs, strict=True)
+    joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, *parts in outputs if parts}
     raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
-    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster, seconds)
+    return OnnxRun(joined["counts"], joined["saturations"], joined.get("wprob"), raster)
 
 
 def run_onnx_outputs(

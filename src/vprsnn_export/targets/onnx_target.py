@@ -428,8 +428,7 @@ def input_layout(model: FixedPointModel) -> str:
 
 
 def metadata_props(model: FixedPointModel, *, with_wprob: bool = True) -> dict[str, str]:
-    """Key facts as ONNX metadata_props (strings): widths, scales, encoder, T, source hash, and what a user needs
-    to decide without the project: reference place ids, input layout, encoder contract, decision rule (JSON)."""
+    """Key facts as ONNX metadata_props (strings), with what a user needs to decide without the project (JSON)."""
     cfg = model.config
     props = {
         "vprsnn.format": "vprsnn-onnx/1",
