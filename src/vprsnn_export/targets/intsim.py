@@ -40,7 +40,7 @@ from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
-from vprsnn_export.network.runs import SpikeRun, joined_runs, run_in_chunks
+from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
 from .intsim_kernel import KernelWeights, integer_run, kernel_weights
 
@@ -175,6 +175,18 @@ def shifted_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tenso
     return torch.matmul(dense.view(timesteps * n, n_inputs), weights).view(timesteps, n, -1).to(torch.int32)
 
 
+@dataclass
+class ChunkRun:
+    """What :func:`recur` returns for one chunk (laid out time-major)."""
+
+    voltage: torch.Tensor  # (B, neurons) int64 after the last step
+    counts: torch.Tensor  # (B, neurons) int64
+    candidates: torch.Tensor  # (T, B) int32
+    raster: torch.Tensor | None  # (T, B, neurons) bool
+    saturations: int
+    max_current: int  # shifted
+
+
 def run_prepared(
     prep: PreparedModel, spikes: torch.Tensor, *, isolation: bool, record: bool, compiled: bool = True
 ) -> SpikeRun:
@@ -187,32 +199,41 @@ def run_prepared(
             spikes, prep.mantissas, prep.threshold.numpy(), multipliers, shift=prep.shift, keep=prep.keep,
             limit=prep.limit, wta=prep.wta, isolation=isolation, record=record, group=prep.group,
         )  # fmt: skip
-    n_neurons, device = prep.threshold.shape[0], prep.threshold.device
-    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)  # carried over when not isolated
+    n, timesteps, _ = spikes.shape
+    n_neurons = prep.threshold.shape[0]
+    device = prep.threshold.device
+    counts = torch.zeros((n, n_neurons), dtype=torch.int64)
+    n_candidates = torch.zeros((n, timesteps), dtype=torch.int32)
+    raster = torch.zeros((n, timesteps, n_neurons), dtype=torch.bool) if record else None
+    final_voltage = torch.zeros((n, n_neurons), dtype=torch.int64)
+    saturations = max_current = 0
+    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)
     chunk = QUERY_CHUNK if isolation else 1
-    runs = []
-    for start in range(0, spikes.shape[0], chunk):
-        part = spikes[start : start + chunk]
+    for start in range(0, n, chunk):
+        stop = min(start + chunk, n)
         if isolation:
-            voltage = torch.zeros((part.shape[0], n_neurons), dtype=torch.int64, device=device)
-        runs.append(recur(prep, shifted_currents(part, prep.weights), voltage, record))
-    if runs:
-        return joined_runs(runs)
-    timesteps = spikes.shape[1]  # no presentations: the run's empty arrays
-    empty = torch.zeros((0, n_neurons), dtype=torch.int64)
-    raster = torch.zeros((0, timesteps, n_neurons), dtype=torch.bool) if record else None
-    return SpikeRun(empty, torch.zeros((0, timesteps), dtype=torch.int32), raster, empty.clone())
+            voltage = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
+        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), voltage, record)
+        voltage = step.voltage
+        counts[start:stop] = step.counts.cpu()
+        n_candidates[start:stop] = step.candidates.T.cpu()
+        final_voltage[start:stop] = voltage.cpu()
+        saturations += step.saturations
+        max_current = max(max_current, step.max_current >> prep.shift)
+        if raster is not None and step.raster is not None:
+            raster[start:stop] = step.raster.transpose(0, 1).cpu()
+    return SpikeRun(counts, n_candidates, raster, final_voltage, saturations, max_current)
 
 
-def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> SpikeRun:
-    """The loop over t (module docstring, step 2) for shifted currents (T, B, neurons) int32, updating voltage
-    (B, neurons) int64 in place; a WTA winner fires iff its score is >= 0, and the winners are gathered after the
-    loop. The chunk's run on the CPU, presentations first."""
+def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:
+    """The loop over t (module docstring, step 2) for shifted currents (T, B, neurons) int32, starting from voltage
+    (B, neurons) int64; a WTA winner fires iff its score is >= 0, and the winners are gathered after the loop."""
     timesteps, batch, n_neurons = currents.shape
     device = currents.device
     threshold, limit, multipliers = prep.threshold, prep.limit, prep.multipliers
     peak = currents.amax(dim=(0, 1)).to(torch.int64) if timesteps and batch else torch.zeros_like(threshold)
     may_saturate = bool((peak + threshold > limit).any())
+    voltage = voltage.clone()
     candidates = torch.empty((batch, n_neurons), dtype=torch.bool, device=device)
     n_candidates = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
     score_dtype = torch.int32 if multipliers is None else torch.int64
@@ -250,14 +271,7 @@ def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, re
         )
         if raster is not None:
             raster.scatter_(2, winners, fired)
-    return SpikeRun(
-        counts.cpu(),
-        n_candidates.T.to(torch.int32).cpu(),
-        None if raster is None else raster.transpose(0, 1).cpu(),
-        voltage.to("cpu", copy=True),
-        int(saturations),
-        int(peak.max()) >> prep.shift,
-    )
+    return ChunkRun(voltage, counts, n_candidates.to(torch.int32), raster, int(saturations), int(peak.max()))
 
 
 def step_agreement(raster_a: torch.Tensor, raster_b: torch.Tensor) -> dict[str, float]:
