@@ -78,7 +78,7 @@ def is_correct(
     return ok & (diff <= tolerance)
 
 
-def _operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c = np.asarray(correct)
     conf = real_array("confidence", confidence)
@@ -113,7 +113,7 @@ def pr_curve(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, n
     thresholds. Returns ``(precision, recall, thresholds)``, float64 of equal length, thresholds strictly
     decreasing, recall non-decreasing; the last point accepts every query.
     """
-    tp, accepted, thresholds, n = _operating_points(correct, confidence)
+    tp, accepted, thresholds, n = operating_points(correct, confidence)
     return tp / accepted, tp / n, thresholds
 
 
@@ -132,7 +132,7 @@ def pr_metrics(correct: np.ndarray, confidence: np.ndarray) -> dict[str, float |
     precision = #correct / N: **P@100R always equals accuracy** (field notes Sec. 1); it is reported for comparison
     with the literature. Returns floats in [0, 1] and ``n_queries`` (an int); empty input raises ``ValueError``.
     """
-    tp, accepted, _, n = _operating_points(correct, confidence)
+    tp, accepted, _, n = operating_points(correct, confidence)
     precision = tp / accepted
     recall = tp / n
     perfect = tp == accepted  # precision 1, tested exactly in integers

@@ -56,7 +56,7 @@ from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.fileio import atomic_write_bytes, atomic_write_text, is_readable_file, parse_json
 from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.readout.early import early_run
-from vprsnn_export.readout.metrics import _operating_points
+from vprsnn_export.readout.metrics import operating_points
 from vprsnn_export.readout.scoring import Readout
 from vprsnn_export.readout.search import SearchWindow
 from vprsnn_export.readout.sequence import SequenceOptions
@@ -377,7 +377,7 @@ class PrecisionRecallCurve:
         keep = c > 0
         if not keep.any():
             return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, np.int64), len(keep))
-        hits, accepted, threshold, _ = _operating_points(np.asarray(correct, dtype=bool)[keep], c[keep])
+        hits, accepted, threshold, _ = operating_points(np.asarray(correct, dtype=bool)[keep], c[keep])
         return cls(threshold, hits / accepted, hits / len(keep), accepted, len(keep))
 
     def index_for(self, precision: float) -> int | None:
