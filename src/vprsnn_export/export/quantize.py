@@ -99,14 +99,6 @@ def mse_scales(weights: np.ndarray, bits: int) -> np.ndarray:
     return MSE_GRID[np.argmin(errors, axis=0)] * top
 
 
-def module_columns(n_neurons: int, group: int | None) -> int:
-    """The neurons per module (WTA group) n; ``None`` or 0: one module of all neurons."""
-    group = n_neurons if not group else group
-    if n_neurons % group:
-        raise InvalidValueError(f"{n_neurons} neurons do not split into modules of {group}")
-    return group
-
-
 def desired_scales(
     weights: np.ndarray, bits: int, method: str, per_neuron: bool, group: int | None = None
 ) -> np.ndarray:
@@ -120,7 +112,7 @@ def desired_scales(
     """
     choose = max_abs_scales if method == "max" else mse_scales
     n_inputs, n_neurons = weights.shape
-    group = module_columns(n_neurons, group)
+    group = group or n_neurons
     whole = float(choose(weights.reshape(-1, 1), bits)[0])
     whole = whole if whole > 0 else 1.0
     per_module = weights.reshape(n_inputs, -1, group).transpose(0, 2, 1).reshape(n_inputs * group, -1)
@@ -183,7 +175,9 @@ def quantise_arrays(
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if fold and np.any(thresholds <= 0):
         raise InvalidValueError("threshold folding needs positive float thresholds")
-    group = module_columns(weights.shape[1], group)
+    group = group or weights.shape[1]  # None or 0: one module of all neurons
+    if weights.shape[1] % group:
+        raise InvalidValueError(f"{weights.shape[1]} neurons do not split into modules of {group}")
     scales = desired_scales(weights, bits, method, options.per_neuron, group)
     theta_shared = None
     if fold:

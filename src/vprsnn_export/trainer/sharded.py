@@ -184,10 +184,8 @@ def float_runs_on_cluster(
     for k, traversal in enumerate(presentations):
         parts = done[k * parts_per_traversal : (k + 1) * parts_per_traversal]
         counts = np.concatenate([c for c, _ in parts], axis=axis)
-        if axis == 1:
-            candidates = np.sum([c.astype(np.int64) for _, c in parts], axis=0).astype(np.int32)
-        else:
-            candidates = np.concatenate([c for _, c in parts], axis=0)
+        steps = [c for _, c in parts]  # |C[t]|: the module groups' add up, the presentation slices' follow on
+        candidates = np.sum(steps, axis=0, dtype=np.int64).astype(np.int32) if axis == 1 else np.concatenate(steps)
         runs[traversal] = SpikeRun(torch.from_numpy(counts), torch.from_numpy(candidates))
     return runs
 
@@ -204,19 +202,7 @@ def calibrate_on_cluster(
     progress: bool = False,
 ) -> np.ndarray:
     """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network."""
-    runs = float_runs_on_cluster(
-        weights,
-        thresholds,
-        cfg,
-        reference_images,
-        place_ids,
-        "calibrate",
-        cluster,
-        modules_per_task=modules_per_task,
-        progress=progress,
-    )
-    total = np.zeros((0, 0), dtype=np.int64)
-    for traversal in reference_images:
-        counts = runs[traversal].counts.numpy().astype(np.int64)
-        total = counts.T if total.size == 0 else total + counts.T
-    return total
+    args = (weights, thresholds, cfg, reference_images, place_ids, "calibrate", cluster)
+    runs = float_runs_on_cluster(*args, modules_per_task=modules_per_task, progress=progress)
+    counts = [runs[traversal].counts.numpy().astype(np.int64).T for traversal in reference_images]
+    return sum(counts[1:], counts[0]) if counts else np.zeros((0, 0), dtype=np.int64)
