@@ -158,11 +158,7 @@ def _stdp_window(
                     trace = post_trace[b]
                     for j in range(n_neurons):
                         sums[j] += trace[j]
-        n_columns = 0
-        for j in range(n_neurons):
-            if traced[j] or (weight_norm and not settled[j]):
-                n_columns += 1
-        if n_columns > 0:
+        if np.any(traced) or (weight_norm and not np.all(settled)):  # some column changes
             squares[:] = zero
             for i in range(n_inputs):
                 for q in range(n_win):
