@@ -118,25 +118,22 @@ def run_network(
     raster = torch.zeros((n_presentations, timesteps, n_neurons), dtype=torch.bool) if record else None
     final_voltage = torch.zeros((n_presentations, n_neurons), dtype=weights.dtype)
     for start in range(0, n_presentations, QUERY_CHUNK):
-        stop = min(start + QUERY_CHUNK, n_presentations)
-        currents = input_currents(spikes[start:stop].to(device), weights)
-        voltage = torch.zeros((stop - start, n_neurons), dtype=weights.dtype, device=device)
-        chunk_counts = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
-        chunk_candidates = torch.zeros((stop - start, timesteps), dtype=torch.int32, device=device)
-        chunk_raster = (
-            torch.zeros((stop - start, timesteps, n_neurons), dtype=torch.bool, device=device) if record else None
-        )
+        rows = slice(start, start + QUERY_CHUNK)
+        currents = input_currents(spikes[rows].to(device), weights)  # (chunk, T, neurons)
+        voltage = torch.zeros((len(currents), n_neurons), dtype=weights.dtype, device=device)
+        chunk_counts = torch.zeros_like(voltage, dtype=torch.int64)
+        chunk_candidates = torch.zeros(currents.shape[:2], dtype=torch.int32, device=device)
+        chunk_raster = torch.zeros_like(currents, dtype=torch.bool) if raster is not None else None
         for t in range(timesteps):
             voltage, fired, candidates = wta_step(voltage, currents[:, t], theta, beta, wta, group)
             chunk_counts += fired
             chunk_candidates[:, t] = candidates.sum(dim=1, dtype=torch.int32)
             if chunk_raster is not None:
                 chunk_raster[:, t] = fired
-        counts[start:stop] = chunk_counts.cpu()
-        n_candidates[start:stop] = chunk_candidates.cpu()
-        final_voltage[start:stop] = voltage.cpu()
+        counts[rows], n_candidates[rows] = chunk_counts.cpu(), chunk_candidates.cpu()
+        final_voltage[rows] = voltage.cpu()
         if raster is not None and chunk_raster is not None:
-            raster[start:stop] = chunk_raster.cpu()
+            raster[rows] = chunk_raster.cpu()
     return SpikeRun(counts, n_candidates, raster, final_voltage)
 
 
