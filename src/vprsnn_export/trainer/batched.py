@@ -31,7 +31,7 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
-from vprsnn_export.data.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.data.encoding import encode, firing_probabilities
 from vprsnn_export.data.encoding_kernel import bernoulli_limits, generator_seeds
 from vprsnn_export.data.philox import philox_spikes
 from vprsnn_export.errors import InvalidValueError
@@ -39,9 +39,8 @@ from vprsnn_export.network.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update
-from .stdp import initial_weights
 from .stdp_kernel import stdp_windows
-from .train import Presentation, TrainedNetwork, epoch_order, train_batch, training_seeds
+from .train import Presentation, TrainedNetwork, epoch_order, initial_state, train_batch, training_seeds
 
 
 def module_training_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
@@ -176,15 +175,6 @@ def module_epochs(
                 )
             fired += batch_fired
         yield EpochState(epoch, time.perf_counter() - started, fired, theta, weights)
-
-
-def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """Every module starts from initial_weights(seed) (M, inputs, n) and theta_init (M, n)."""
-    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
-    start = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator)
-    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
-    theta = torch.full((n_modules, cfg.network.n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
-    return weights, theta
 
 
 def check_training_memory(cfg: Config, n_modules: int, most_rows: int, threads: int | None) -> None:

@@ -90,6 +90,15 @@ def epoch_order(seed: int, epoch: int, n_rows: int) -> torch.Tensor:
     return torch.randperm(n_rows, generator=generator)
 
 
+def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every module starts from initial_weights(seed) (M, inputs, n) and theta_init (M, n)."""
+    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
+    start = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator)
+    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
+    theta = torch.full((n_modules, cfg.network.n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
+    return weights, theta
+
+
 def train_network(
     images: np.ndarray,
     presentations: Sequence[Presentation],
@@ -109,9 +118,7 @@ def train_network(
     """
     if len(images) == 0:
         raise InvalidValueError("no training images")
-    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
-    weights = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator).to(device)
-    theta = torch.full((cfg.network.n_neurons,), cfg.network.theta_init, dtype=torch.float32, device=device)
+    weights, theta = (state[0] for state in initial_state(cfg, 1, device))
     history: list[dict] = []
     epochs = tqdm(range(cfg.train.epochs), desc="train", unit="epoch", disable=not progress, leave=False)
     for epoch in epochs:
