@@ -72,15 +72,11 @@ def run_in_chunks(
 
 def joined_runs(runs: list[SpikeRun]) -> SpikeRun:
     """The runs of consecutive chunks of presentations as one run (saturations summed, max_current the largest)."""
-    return SpikeRun(
-        counts=torch.cat([r.counts for r in runs]),
-        candidates_per_step=_joined([r.candidates_per_step for r in runs]),
-        raster=_joined([r.raster for r in runs]),
-        final_voltage=_joined([r.final_voltage for r in runs]),
-        saturations=sum(r.saturations for r in runs),
-        max_current=max(r.max_current for r in runs),
-        wprob=_joined([r.wprob for r in runs], np.concatenate),
-    )
+    rows = {
+        name: _joined([getattr(r, name) for r in runs], np.concatenate if name == "wprob" else torch.cat)
+        for name in PER_PRESENTATION
+    }
+    return SpikeRun(**rows, saturations=sum(r.saturations for r in runs), max_current=max(r.max_current for r in runs))
 
 
 @runtime_checkable

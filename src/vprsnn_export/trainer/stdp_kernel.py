@@ -103,23 +103,20 @@ def _stdp_window(
                 row_voltage[j] = zero if candidate else v
                 n_cand += candidate
             n_winners[b] = 0
-            if n_cand > 0 and wta:  # the first candidate with the largest current fires
-                best = -1
-                best_current = np.float32(-np.inf)
-                for j in range(n_neurons):
-                    if row_fired[j]:
-                        row_fired[j] = False
-                        if best < 0 or row_current[j] > best_current:
-                            best_current = row_current[j]
-                            best = j
-                row_fired[best] = True
-                winners[b, 0] = best
-                n_winners[b] = 1
-            elif n_cand > 0:
+            if n_cand > 0:
                 for j in range(n_neurons):
                     if row_fired[j]:
                         winners[b, n_winners[b]] = j
                         n_winners[b] += 1
+            if n_cand > 0 and wta:  # the first candidate with the largest current fires
+                best = winners[b, 0]
+                for w in range(n_winners[b]):
+                    j = winners[b, w]
+                    row_fired[j] = False
+                    best = j if row_current[j] > row_current[best] else best
+                row_fired[best] = True
+                winners[b, 0] = best
+                n_winners[b] = 1
         for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
@@ -351,13 +348,11 @@ def kernel_scalars(cfg: Config) -> Scalars:
 def stdp_window(
     weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
 ) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``.
+    """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``
+    (STDP eq. 7 summed over the batch in row order; the float32 order: the module docstring).
 
-    Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
-    and column normalisation, each float32 operation in torch's order but the currents' sums
-    (increasing input order, :func:`_row_sum`). Returns (new weights, spikes
-    per neuron in the batch as float32), or ``None`` when the tensors are not float32 on the CPU:
-    the caller then runs the torch loop. Homeostasis is the caller's.
+    Returns (new weights, spikes per neuron in the batch as float32), or ``None`` when the tensors are not float32
+    on the CPU: the caller then runs the torch loop. Homeostasis is the caller's.
     """
     if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
         return None
