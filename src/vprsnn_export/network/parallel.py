@@ -12,11 +12,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
 from ..errors import InvalidValueError
 
+T = TypeVar("T")
 TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default size
 #: The bytes of presentations' currents (T x tile float32 each) a wide tile sums before their steps, in column
 #: blocks of :data:`TILE_NEURONS`: a tile wider than that (one WTA over a whole
@@ -57,14 +59,18 @@ def run_parts(
     return [(slice(0, n_presentations), 0, n_neurons)]
 
 
-def run_threads(tasks: Sequence[Callable[[], object]]) -> None:
-    """Run the (GIL-releasing) tasks, on a pool of Python threads when there are several."""
-    if len(tasks) == 1:
-        tasks[0]()
-        return
-    with ThreadPoolExecutor(max_workers=len(tasks)) as pool:
-        for future in [pool.submit(task) for task in tasks]:
-            future.result()
+def run_threads(tasks: Sequence[Callable[[], T]], workers: int | None = None) -> list[T]:
+    """The results of the (GIL-releasing) tasks in order, on a pool of ``workers`` Python threads (None: one per
+    task) when there are several of both. An interrupt or SIGTERM waits for the tasks in flight only: the queued
+    ones never start."""
+    threads = len(tasks) if workers is None else workers
+    if threads < 2 or len(tasks) == 1:
+        return [task() for task in tasks]
+    pool = ThreadPoolExecutor(max_workers=threads)
+    try:
+        return list(pool.map(lambda task: task(), tasks))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def check_group(n_neurons: int, group: int | None) -> int:

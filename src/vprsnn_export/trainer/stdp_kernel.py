@@ -16,7 +16,7 @@ compiled kernel has its checked entry point (the kernel guard tests call them wi
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,7 @@ from vprsnn_export.data.encoding_kernel import _encode_rows
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.kernel_checks import require_array, require_int
 from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _active_inputs, _row_sum, as_spike_array, compiled
-from vprsnn_export.network.parallel import module_slices
+from vprsnn_export.network.parallel import module_slices, run_threads
 
 
 @compiled
@@ -390,14 +390,9 @@ def stdp_windows(
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
-    def run(part: slice) -> np.ndarray:
-        return stdp_windows_kernel(limits[part], seeds[part], sizes[part], timesteps, weights[part], theta[part], *args)
-
     parts = module_slices(n_modules, max(threads, -(-n_modules // MODULES_PER_CALL)))
-    if threads < 2 or len(parts) == 1:
-        return np.concatenate([run(part) for part in parts])
-    pool = ThreadPoolExecutor(max_workers=threads)
-    try:
-        return np.concatenate(list(pool.map(run, parts)))
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)  # on an interrupt: the queued slices never start
+    tasks = [
+        partial(stdp_windows_kernel, limits[p], seeds[p], sizes[p], timesteps, weights[p], theta[p], *args)
+        for p in parts
+    ]
+    return np.concatenate(run_threads(tasks, threads))
