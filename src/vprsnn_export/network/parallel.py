@@ -12,13 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidValueError
 
-T = TypeVar("T")
 TILE_NEURONS = 400  # neurons per tile of the kernels: one module of the default size
 #: The bytes of presentations' currents (T x tile float32 each) a wide tile sums before their steps, in column
 #: blocks of :data:`TILE_NEURONS`: a tile wider than that (one WTA over a whole
@@ -59,10 +58,9 @@ def run_parts(
     return [(slice(0, n_presentations), 0, n_neurons)]
 
 
-def run_threads(tasks: Sequence[Callable[[], T]], workers: int | None = None) -> list[T]:
-    """The results of the (GIL-releasing) tasks in order, on a pool of ``workers`` Python threads (None: one per
-    task) when there are several of both. An interrupt or SIGTERM waits for the tasks in flight only: the queued
-    ones never start."""
+def run_threads(tasks: Sequence[Callable[[], Any]], workers: int | None = None) -> list[Any]:
+    """The tasks' results in order, on ``workers`` Python threads (None: one per task) when there are several; an
+    interrupt or SIGTERM waits for the tasks in flight only (the queued ones never start)."""
     threads = len(tasks) if workers is None else workers
     if threads < 2 or len(tasks) == 1:
         return [task() for task in tasks]
