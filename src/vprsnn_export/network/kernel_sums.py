@@ -93,13 +93,8 @@ def _step_lists(spikes: np.ndarray, index: np.ndarray, offsets: np.ndarray) -> N
 @compiled
 def _all_step_lists(spikes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every presentation's per-step lists: step (p, t)'s active inputs are index[offsets[p, t]:offsets[p, t + 1]]."""
-    n, timesteps, n_inputs = spikes.shape
-    total = 0
-    for p in range(n):
-        for t in range(timesteps):
-            for i in range(n_inputs):
-                total += spikes[p, t, i] != 0
-    index = np.empty(total + 1, dtype=np.int32)
+    n, timesteps, _ = spikes.shape
+    index = np.empty(np.count_nonzero(spikes) + 1, dtype=np.int32)
     offsets = np.empty((n, timesteps + 1), dtype=np.int64)
     k = 0
     for p in range(n):

@@ -64,22 +64,14 @@ def train_group(
     images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
 ) -> GroupTraining:
     """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
-    weights, theta = initial_state(cfg, len(rows), CPU)
-    fired: list[np.ndarray] = []
-    thetas: list[np.ndarray] = []
-    seconds: list[float] = []
+    weights = initial_state(cfg, len(rows), CPU)[0]
+    epochs: list[tuple[np.ndarray, np.ndarray, float]] = []
     for state in module_epochs(images, presentations, rows, cfg, device=CPU):
         weights = state.weights
-        fired.append(state.fired.numpy().copy())
-        thetas.append(state.theta.numpy().copy())
-        seconds.append(state.seconds)
-    shape = (0, len(rows), cfg.network.n_neurons)
-    return GroupTraining(
-        weights=weights.numpy().copy(),
-        fired=np.stack(fired) if fired else np.zeros(shape, np.float32),
-        theta=np.stack(thetas) if thetas else np.zeros(shape, np.float32),
-        seconds=np.asarray(seconds, dtype=np.float64),
-    )
+        epochs.append((state.fired.numpy().copy(), state.theta.numpy().copy(), state.seconds))
+    empty = np.zeros((0, len(rows), cfg.network.n_neurons), np.float32)
+    fired, theta = (np.stack([epoch[k] for epoch in epochs]) if epochs else empty for k in (0, 1))
+    return GroupTraining(weights.numpy().copy(), fired, theta, np.asarray([e[2] for e in epochs], dtype=np.float64))
 
 
 def train_modules_on_cluster(
