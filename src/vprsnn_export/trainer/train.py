@@ -127,13 +127,9 @@ def train_network(
         fired = torch.zeros(cfg.network.n_neurons, dtype=torch.float32, device=device)
         for start in range(0, len(order), cfg.train.batch_size):
             rows = order[start : start + cfg.train.batch_size]
-            spikes = encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.training_encoder).to(
-                device
-            )
-            if compiled:
-                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
-            else:
-                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=False)
+            seeds = training_seeds(cfg, presentations, rows, epoch)
+            spikes = encode(images[rows], seeds, cfg.training_encoder).to(device)
+            weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=compiled)
             fired += batch_fired
         entry = {
             "epoch": epoch + 1,
