@@ -178,14 +178,10 @@ def _stdp_window(
                         scale[j] = max(np.sqrt(squares[j]), tiny)
                         settled[j] = scale[j] == one
                         dividing = dividing or not settled[j]
-                if dividing and t + 1 < timesteps:
-                    _divide_and_sum(weights, scale, spikes[:, t + 1], index, n_active, current, starts, members)
+                if dividing:  # after the last step the currents it sums go unused
+                    following = spikes[:, min(t + 1, timesteps - 1)]
+                    _divide_and_sum(weights, scale, following, index, n_active, current, starts, members)
                     ready = True
-                elif dividing:
-                    for i in range(n_inputs):
-                        row = weights[i]
-                        for j in range(n_neurons):
-                            row[j] = row[j] / scale[j]
         for q in range(n_win):
             win_slot[win_cols[q]] = -1
         for u in range(n_used):
