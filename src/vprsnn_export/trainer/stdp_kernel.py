@@ -182,10 +182,8 @@ def _stdp_window(
                     following = spikes[:, min(t + 1, timesteps - 1)]
                     _divide_and_sum(weights, scale, following, index, n_active, current, starts, members)
                     ready = True
-        for q in range(n_win):
-            win_slot[win_cols[q]] = -1
-        for u in range(n_used):
-            input_slot[inputs_used[u]] = -1
+        win_slot[win_cols[:n_win]] = -1
+        input_slot[inputs_used[:n_used]] = -1
     return fired_total
 
 
@@ -220,8 +218,7 @@ def _divide_and_sum(
             i = index[b, a]
             members[starts[i]] = b
             starts[i] += 1
-    for i in range(n_inputs - 1, 0, -1):
-        starts[i] = starts[i - 1]
+    starts[1:n_inputs] = starts[: n_inputs - 1].copy()
     starts[0] = 0
     current[:] = 0
     for i in range(n_inputs):
