@@ -207,10 +207,8 @@ def float_run(
     the neurons in tiles of whole groups (:func:`neuron_tile`) so that a tile's weights stay
     in cache across the presentations.
 
-    Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`. Each step's currents are the
-    active inputs' weight rows summed in float32 in increasing input order (:func:`_row_sum`), the
-    same on every CPU; ``run_network``'s torch loop agrees to float32 rounding. ``final_voltage`` is reported
-    with and without isolation.
+    Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`, the currents summed as the module
+    docstring says. ``final_voltage`` is reported with and without isolation.
     """
     array = as_spike_array(spikes)
     w = np.ascontiguousarray(_numpy(weights), dtype=np.float32)

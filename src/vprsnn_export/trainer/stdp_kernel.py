@@ -8,10 +8,6 @@ on every machine.
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
 encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
-
-Over 400 lines because it is one concept: the training window and its fused normalisation pass keep
-every float32 operation in the torch loop's order (so checkpoints stay bit for bit the same), and each
-compiled kernel has its checked entry point (the kernel guard tests call them with bad arrays).
 """
 
 from __future__ import annotations
