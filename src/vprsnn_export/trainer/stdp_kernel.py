@@ -374,12 +374,11 @@ def stdp_windows(
     only, not the whole batch (at 27k places a thread's half of a batch is 135 modules, ~30 s). Returns the spikes
     per neuron (M, n) float32.
     """
-    n_modules = limits.shape[0]
     args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
-    parts = module_slices(n_modules, max(threads, -(-n_modules // MODULES_PER_CALL)))
+    parts = module_slices(len(limits), max(threads, -(-len(limits) // MODULES_PER_CALL)))
     tasks = [
         partial(stdp_windows_kernel, limits[p], seeds[p], sizes[p], timesteps, weights[p], theta[p], *args)
         for p in parts
