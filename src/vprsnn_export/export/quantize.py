@@ -274,11 +274,10 @@ class QuantiseOptions:
     non_leaky: bool = False
 
     def __post_init__(self) -> None:
-        require_bool("per_neuron", self.per_neuron)
+        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
+            object.__setattr__(self, name, require_bool(name, getattr(self, name)))
         require_choice("scale_method (--scale)", self.scale_method, SCALE_METHODS)
-        require_bool("fold_thresholds", self.fold_thresholds)
         require_choice("calibration", self.calibration, CALIBRATIONS)
-        require_bool("non_leaky", self.non_leaky)
         if self.fold_thresholds and not self.per_neuron:
             raise InvalidValueError(
                 "fold_thresholds (--fold-thresholds) needs per-neuron scales: per_neuron=True (drop --per-tensor)"
@@ -288,8 +287,6 @@ class QuantiseOptions:
                 "non_leaky (--non-leaky) needs the deployed calibration: calibration='deployed' (drop "
                 "--reuse-float-calibration); the float S^R was measured with the leak"
             )
-        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
-            object.__setattr__(self, name, bool(getattr(self, name)))
 
 
 #: quantize's defaults: per-neuron max-abs scales, no folding, the deployed calibration, the leak kept.
