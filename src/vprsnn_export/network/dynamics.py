@@ -90,12 +90,10 @@ def run_network(
 
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
-    On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the currents summed in increasing input order, the
-    same on every CPU; the torch loop agrees to float32 rounding);
-    ``compiled=False`` (and any GPU) runs the torch loop below,
-    one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
-    moved to ``weights.device`` chunk by chunk.
+    On the CPU (float32 weights) the compiled event-driven kernel runs it (:func:`.dynamics_kernel.float_run`: the
+    currents summed in increasing input order, the same on every CPU; the torch loop agrees to float32 rounding);
+    ``compiled=False`` (and any GPU) runs the torch loop below, one matmul for all currents and a loop over t. The
+    spikes may live on the CPU; they are moved to ``weights.device`` chunk by chunk.
     """
     check_network(spikes, weights, theta)
     if compiled and weights.device.type == "cpu" and weights.dtype == torch.float32:

@@ -163,8 +163,8 @@ def float_runs_on_cluster(
         ]
         axis, parts_per_traversal = 1, len(groups)
     else:
-        slices = [np.arange(len(place_ids))] if not isolated else np.array_split(np.arange(len(place_ids)), len(groups))
-        slices = [piece for piece in slices if len(piece)]
+        split = np.array_split(np.arange(len(place_ids)), len(groups) if isolated else 1)
+        slices = [piece for piece in split if len(piece)]
         tasks = [
             (weights, thresholds, cfg, images[piece], place_ids[piece], traversal, stream, state_isolation)
             for traversal, images in presentations.items()

@@ -369,10 +369,9 @@ def stdp_windows(
     (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
     kernel exactly as :func:`bernoulli_spikes` encodes them with the config's generator, so module m's weights are
     those of ``stdp_window`` on its own batch bit for bit. Each kernel call trains a contiguous slice of at most
-    :data:`MODULES_PER_CALL` modules; ``threads`` > 1 runs the slices on a pool of Python threads (the kernel
-    releases the GIL; numba's threading layer is not used). An interrupt or SIGTERM waits for the slices in flight
-    only, not the whole batch (at 27k places a thread's half of a batch is 135 modules, ~30 s). Returns the spikes
-    per neuron (M, n) float32.
+    :data:`MODULES_PER_CALL` modules, on ``threads`` Python threads (:func:`~vprsnn_export.network.parallel.run_threads`:
+    an interrupt waits for the slices in flight only, not the whole batch; at 27k places a thread's half of a batch
+    is 135 modules, ~30 s). Returns the spikes per neuron (M, n) float32.
     """
     args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
     timesteps = int(cfg.training_encoder.timesteps)
