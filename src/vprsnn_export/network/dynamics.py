@@ -13,10 +13,9 @@ Per time step t, for a batch of presentations (rows) and neurons j:
     WTA off: S_j[t] = 1 for every j in C[t]
     V_j[t] <- 0 for every j in C[t]                        (reset to zero)
 
-State is zeroed at t = 0 of every presentation (state isolation); with
-isolation off the presentations run one after another and V carries over.
-The input currents of all steps are one matrix product; only the recurrence
-over t is a loop, vectorised over presentations and neurons.
+State is zeroed at t = 0 of every presentation (state isolation); with isolation off the presentations run
+one after another and V carries over. The input currents of all steps are one matrix product; only the
+recurrence over t is a loop, vectorised over presentations and neurons.
 """
 
 from __future__ import annotations
