@@ -100,8 +100,7 @@ def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any,
     import torch  # a worker process starts bare
 
     torch.set_num_threads(threads)
-    result = function(*args)
-    return result, time.perf_counter() - started
+    return function(*args), time.perf_counter() - started
 
 
 def task_bar(tasks: Sequence[Any], desc: str | None) -> tqdm:

@@ -228,7 +228,7 @@ def error_report(
 
     error = weights - mantissas * scales
     rms = float(np.sqrt(np.mean(weights * weights))) or 1.0
-    ratio = weights / scales
+    ratio, theta_ratio = weights / scales, thresholds / scales
     module_error = by_module(error)
     power = np.sqrt(np.mean(by_module(weights) ** 2, axis=1))
     module_rmse = np.sqrt(np.mean(module_error * module_error, axis=1)) / np.where(power > 0, power, 1.0)
@@ -241,9 +241,7 @@ def error_report(
         "threshold_max_relative_error": float(
             np.max(np.abs(theta_int * scales - thresholds) / np.maximum(np.abs(thresholds), 1e-12))
         ),
-        "thresholds_clipped": int(
-            np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))
-        ),
+        "thresholds_clipped": int(np.sum((theta_ratio >= (1 << THRESHOLD_BITS) - 0.5) | (theta_ratio < 0.5))),
         "max_current": int(sums.max()),
         "module_weight_relative_rmse": [float(x) for x in module_rmse],
         "module_weights_clipped": [int(x) for x in np.sum(by_module(ratio) >= levels(bits) + 0.5, axis=1)],
