@@ -1,13 +1,12 @@
 """What every compiled kernel shares: the numba decorator, spike arrays, per-step lists of the
 active inputs and the ordered sum of their weight rows.
 
-The input is sparse (about 98 of 784 inputs spike per step), so instead of a dense matmul each
-step sums only the weight rows of the inputs that spiked (:func:`_row_sum`), and the whole
-recurrence over presentations, steps and neurons runs in one numba-compiled loop (no Python call
-per step). The sums run in increasing input order on every CPU and at every thread count, so a
-seed fixes every weight and spike whatever the machine; a BLAS matmul (the torch loop: GPU,
-``compiled=False``) blocks its sums in an order of its own that differs between builds, CPUs and
-shapes, and agrees with the kernels to float32 rounding.
+The input is sparse (about 98 of 784 inputs spike per step), so instead of a dense matmul each step sums only
+the weight rows of the inputs that spiked (:func:`_row_sum`), and the whole recurrence over presentations, steps
+and neurons runs in one numba-compiled loop (no Python call per step). The sums run in increasing input order on
+every CPU and at every thread count, so a seed fixes every weight and spike whatever the machine; a BLAS matmul
+(the torch loop: GPU, ``compiled=False``) blocks its sums in an order of its own that differs between builds,
+CPUs and shapes, and agrees with the kernels to float32 rounding.
 
 The kernels, each beside its caller with its checked entry point: the Bernoulli encoder
 (:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.network.dynamics_kernel`),
