@@ -45,7 +45,7 @@ def best_of(run: Callable[[], object], repeats: int) -> tuple[float, object]:
     return best, result
 
 
-def torch_loop_batch(weights, theta, spikes, cfg):
+def torch_loop_batch(weights, theta, spikes, cfg, compiled=True):
     return train_batch(weights, theta, spikes, cfg, compiled=False)
 
 

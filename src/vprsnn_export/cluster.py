@@ -51,10 +51,6 @@ class Cluster:
     workers: int | None = None  # local: worker processes (None: the CPU count)
     threads: int = 1  # torch threads in each task
 
-    @property
-    def is_local(self) -> bool:
-        return self.address == "local"
-
 
 def parse_cluster(text: str, *, threads: int | None = None, option: str = "--cluster") -> Cluster:
     """'local', 'local:N', 'auto' or 'ray://HOST:PORT' -> Cluster; InvalidValueError naming ``option`` otherwise."""
@@ -104,13 +100,12 @@ def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any,
     import torch  # a worker process starts bare
 
     torch.set_num_threads(threads)
-    result = function(*args)
-    return result, time.perf_counter() - started
+    return function(*args), time.perf_counter() - started
 
 
-def task_bar(total: int, desc: str | None) -> tqdm:
+def task_bar(tasks: Sequence[Any], desc: str | None) -> tqdm:
     """A bar on stderr over finished tasks (none when ``desc`` is None); closed on any exception (``leave=False``)."""
-    return tqdm(total=total, desc=desc, unit="task", file=sys.stderr, leave=False, disable=desc is None)
+    return tqdm(tasks, total=len(tasks), desc=desc, unit="task", file=sys.stderr, leave=False, disable=desc is None)
 
 
 def map_tasks(
@@ -130,11 +125,8 @@ def map_tasks(
     """
     started = time.perf_counter()
     if cluster is None:
-        pairs = []
-        with task_bar(len(tasks), progress) as bar:
-            for task in tasks:
-                pairs.append(_timed(torch_threads(), function, *task))
-                bar.update(1)
+        with task_bar(tasks, progress) as bar:
+            pairs = [_timed(torch_threads(), function, *task) for task in bar]
     else:
         pairs = _ray_map(cluster, function, tasks, progress)
     if timing is not None:
@@ -153,7 +145,7 @@ def _ray_map(
 ) -> list[tuple[Any, float]]:
     ray = _ray()
     started_here = not ray.is_initialized()
-    watchdog = start_watchdog() if started_here and cluster.is_local else None
+    watchdog = start_watchdog() if started_here and cluster.address == "local" else None
     try:
         if started_here:
             connect(cluster)
@@ -169,7 +161,7 @@ def _ray_map(
             return shared[id(value)]
 
         refs = [remote.remote(cluster.threads, function, *(stored(a) for a in task)) for task in tasks]
-        with task_bar(len(refs), progress) as bar:
+        with task_bar(refs, progress) as bar:
             pending = list(refs)
             while pending:  # as tasks finish, in any order; the results below keep the tasks' order
                 ready, pending = ray.wait(pending, num_returns=1)
@@ -185,7 +177,7 @@ def connect(cluster: Cluster) -> None:
     """Start (local) or join (auto, ray://) a Ray runtime for this process."""
     ray = _ray()
     try:
-        if cluster.is_local:
+        if cluster.address == "local":
             keep_ray_notices_back()  # nothing above a later one-line error
             ray.init(
                 num_cpus=cluster.workers or max(os.cpu_count() or 1, cluster.threads),

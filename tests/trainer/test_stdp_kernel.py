@@ -79,7 +79,7 @@ def test_training_through_the_kernel_is_the_torch_loops_to_float32_rounding(monk
     images = rng.random((10, 16)).astype(np.float32)
     presentations = [Presentation("summer", p) for p in range(10)]
 
-    def torch_batch(weights, theta, spikes, cfg):
+    def torch_batch(weights, theta, spikes, cfg, compiled=True):
         return train_batch(weights, theta, spikes, cfg, compiled=False)
 
     monkeypatch.setattr(train_module, "train_batch", torch_batch)

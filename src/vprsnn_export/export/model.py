@@ -130,11 +130,8 @@ class QuantisationReport:
             if values.get(name) is not None:
                 low, high = values[name]
                 values[name] = (int(low), int(high))
-        for name, kind in (
-            ("module_weight_relative_rmse", float),
-            ("module_weights_clipped", int),
-            ("module_max_current", int),
-        ):
+        kinds = {"module_weight_relative_rmse": float, "module_weights_clipped": int, "module_max_current": int}
+        for name, kind in kinds.items():
             if values.get(name) is not None:
                 values[name] = tuple(kind(value) for value in values[name])
         extra = {key: value for key, value in data.items() if key not in known}

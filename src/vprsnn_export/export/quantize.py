@@ -99,14 +99,6 @@ def mse_scales(weights: np.ndarray, bits: int) -> np.ndarray:
     return MSE_GRID[np.argmin(errors, axis=0)] * top
 
 
-def module_columns(n_neurons: int, group: int | None) -> int:
-    """The neurons per module (WTA group) n; ``None`` or 0: one module of all neurons."""
-    group = n_neurons if not group else group
-    if n_neurons % group:
-        raise InvalidValueError(f"{n_neurons} neurons do not split into modules of {group}")
-    return group
-
-
 def desired_scales(
     weights: np.ndarray, bits: int, method: str, per_neuron: bool, group: int | None = None
 ) -> np.ndarray:
@@ -120,7 +112,7 @@ def desired_scales(
     """
     choose = max_abs_scales if method == "max" else mse_scales
     n_inputs, n_neurons = weights.shape
-    group = module_columns(n_neurons, group)
+    group = group or n_neurons
     whole = float(choose(weights.reshape(-1, 1), bits)[0])
     whole = whole if whole > 0 else 1.0
     per_module = weights.reshape(n_inputs, -1, group).transpose(0, 2, 1).reshape(n_inputs * group, -1)
@@ -183,7 +175,9 @@ def quantise_arrays(
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if fold and np.any(thresholds <= 0):
         raise InvalidValueError("threshold folding needs positive float thresholds")
-    group = module_columns(weights.shape[1], group)
+    group = group or weights.shape[1]  # None or 0: one module of all neurons
+    if weights.shape[1] % group:
+        raise InvalidValueError(f"{weights.shape[1]} neurons do not split into modules of {group}")
     scales = desired_scales(weights, bits, method, options.per_neuron, group)
     theta_shared = None
     if fold:
@@ -234,7 +228,7 @@ def error_report(
 
     error = weights - mantissas * scales
     rms = float(np.sqrt(np.mean(weights * weights))) or 1.0
-    ratio = weights / scales
+    ratio, theta_ratio = weights / scales, thresholds / scales
     module_error = by_module(error)
     power = np.sqrt(np.mean(by_module(weights) ** 2, axis=1))
     module_rmse = np.sqrt(np.mean(module_error * module_error, axis=1)) / np.where(power > 0, power, 1.0)
@@ -247,9 +241,7 @@ def error_report(
         "threshold_max_relative_error": float(
             np.max(np.abs(theta_int * scales - thresholds) / np.maximum(np.abs(thresholds), 1e-12))
         ),
-        "thresholds_clipped": int(
-            np.sum((thresholds / scales >= (1 << THRESHOLD_BITS) - 0.5) | (thresholds / scales < 0.5))
-        ),
+        "thresholds_clipped": int(np.sum((theta_ratio >= (1 << THRESHOLD_BITS) - 0.5) | (theta_ratio < 0.5))),
         "max_current": int(sums.max()),
         "module_weight_relative_rmse": [float(x) for x in module_rmse],
         "module_weights_clipped": [int(x) for x in np.sum(by_module(ratio) >= levels(bits) + 0.5, axis=1)],
@@ -280,11 +272,10 @@ class QuantiseOptions:
     non_leaky: bool = False
 
     def __post_init__(self) -> None:
-        require_bool("per_neuron", self.per_neuron)
+        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
+            object.__setattr__(self, name, require_bool(name, getattr(self, name)))
         require_choice("scale_method (--scale)", self.scale_method, SCALE_METHODS)
-        require_bool("fold_thresholds", self.fold_thresholds)
         require_choice("calibration", self.calibration, CALIBRATIONS)
-        require_bool("non_leaky", self.non_leaky)
         if self.fold_thresholds and not self.per_neuron:
             raise InvalidValueError(
                 "fold_thresholds (--fold-thresholds) needs per-neuron scales: per_neuron=True (drop --per-tensor)"
@@ -294,8 +285,6 @@ class QuantiseOptions:
                 "non_leaky (--non-leaky) needs the deployed calibration: calibration='deployed' (drop "
                 "--reuse-float-calibration); the float S^R was measured with the leak"
             )
-        for name in ("per_neuron", "fold_thresholds", "non_leaky"):  # a numpy bool becomes a bool
-            object.__setattr__(self, name, bool(getattr(self, name)))
 
 
 #: quantize's defaults: per-neuron max-abs scales, no folding, the deployed calibration, the leak kept.

@@ -86,11 +86,7 @@ class QueryCost:
 
     def summary(self) -> CostSummary:
         """The means over queries (0 for no query)."""
-
-        def mean(values: np.ndarray) -> float:
-            return float(values.mean()) if values.size else 0.0
-
-        means = {name: mean(getattr(self, name)) for name in PER_QUERY}
+        means = {name: float(getattr(self, name).mean()) if self.steps.size else 0.0 for name in PER_QUERY}
         return CostSummary(
             int(self.steps.size), snn_weights=self.snn_weights, template_weights=self.template_weights, **means
         )
@@ -100,15 +96,6 @@ def joined_costs(costs: list[QueryCost]) -> QueryCost:
     """The costs of consecutive blocks of queries of one network as one: their per-query arrays concatenated."""
     joined: dict[str, Any] = {name: np.concatenate([getattr(cost, name) for cost in costs]) for name in PER_QUERY}
     return replace(costs[0], **joined)
-
-
-def _spikes(spikes: object) -> np.ndarray:
-    arr = np.asarray(spikes)
-    if arr.ndim != 3:
-        raise InvalidValueError(f"spikes must be (N, T, inputs), got shape {arr.shape}")
-    if arr.dtype != np.bool_ and not np.issubdtype(arr.dtype, np.integer):
-        raise InvalidValueError(f"spikes must be 0/1 integers, got {arr.dtype}")
-    return arr
 
 
 def used_steps(steps: object, n_queries: int, timesteps: int) -> np.ndarray:
@@ -144,7 +131,11 @@ def query_cost(
     neurons). ``images``: the query images x_q (N, I) the template matcher compares (None: the inputs that
     spiked at least once stand in for the non-zero ones, a lower bound on nnz(x_q)). ``places``: L.
     """
-    arr = _spikes(spikes)
+    arr = np.asarray(spikes)
+    if arr.ndim != 3:
+        raise InvalidValueError(f"spikes must be (N, T, inputs), got shape {arr.shape}")
+    if arr.dtype != np.bool_ and not np.issubdtype(arr.dtype, np.integer):
+        raise InvalidValueError(f"spikes must be 0/1 integers, got {arr.dtype}")
     n_queries, timesteps, n_inputs = arr.shape
     if neurons < 1 or places < 0:
         raise InvalidValueError(f"neurons must be >= 1 and places >= 0, got {neurons} and {places}")

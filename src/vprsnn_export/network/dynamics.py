@@ -13,10 +13,9 @@ Per time step t, for a batch of presentations (rows) and neurons j:
     WTA off: S_j[t] = 1 for every j in C[t]
     V_j[t] <- 0 for every j in C[t]                        (reset to zero)
 
-State is zeroed at t = 0 of every presentation (state isolation); with
-isolation off the presentations run one after another and V carries over.
-The input currents of all steps are one matrix product; only the recurrence
-over t is a loop, vectorised over presentations and neurons.
+State is zeroed at t = 0 of every presentation (state isolation); with isolation off the presentations run
+one after another and V carries over. The input currents of all steps are one matrix product; only the
+recurrence over t is a loop, vectorised over presentations and neurons.
 """
 
 from __future__ import annotations
@@ -90,12 +89,10 @@ def run_network(
 
     ``group``: neurons per WTA group (one module of an ensemble); ``None``: one group.
 
-    On the CPU (float32 weights) the compiled event-driven kernel runs it
-    (:func:`vprsnn_export.network.dynamics_kernel.float_run`: the currents summed in increasing input order, the
-    same on every CPU; the torch loop agrees to float32 rounding);
-    ``compiled=False`` (and any GPU) runs the torch loop below,
-    one matmul for all currents and a loop over t. The spikes may live on the CPU; they are
-    moved to ``weights.device`` chunk by chunk.
+    On the CPU (float32 weights) the compiled event-driven kernel runs it (:func:`.dynamics_kernel.float_run`: the
+    currents summed in increasing input order, the same on every CPU; the torch loop agrees to float32 rounding);
+    ``compiled=False`` (and any GPU) runs the torch loop below, one matmul for all currents and a loop over t. The
+    spikes may live on the CPU; they are moved to ``weights.device`` chunk by chunk.
     """
     check_network(spikes, weights, theta)
     if compiled and weights.device.type == "cpu" and weights.dtype == torch.float32:
@@ -118,25 +115,22 @@ def run_network(
     raster = torch.zeros((n_presentations, timesteps, n_neurons), dtype=torch.bool) if record else None
     final_voltage = torch.zeros((n_presentations, n_neurons), dtype=weights.dtype)
     for start in range(0, n_presentations, QUERY_CHUNK):
-        stop = min(start + QUERY_CHUNK, n_presentations)
-        currents = input_currents(spikes[start:stop].to(device), weights)
-        voltage = torch.zeros((stop - start, n_neurons), dtype=weights.dtype, device=device)
-        chunk_counts = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
-        chunk_candidates = torch.zeros((stop - start, timesteps), dtype=torch.int32, device=device)
-        chunk_raster = (
-            torch.zeros((stop - start, timesteps, n_neurons), dtype=torch.bool, device=device) if record else None
-        )
+        rows = slice(start, start + QUERY_CHUNK)
+        currents = input_currents(spikes[rows].to(device), weights)  # (chunk, T, neurons)
+        voltage = torch.zeros((len(currents), n_neurons), dtype=weights.dtype, device=device)
+        chunk_counts = torch.zeros_like(voltage, dtype=torch.int64)
+        chunk_candidates = torch.zeros(currents.shape[:2], dtype=torch.int32, device=device)
+        chunk_raster = torch.zeros_like(currents, dtype=torch.bool) if raster is not None else None
         for t in range(timesteps):
             voltage, fired, candidates = wta_step(voltage, currents[:, t], theta, beta, wta, group)
             chunk_counts += fired
             chunk_candidates[:, t] = candidates.sum(dim=1, dtype=torch.int32)
             if chunk_raster is not None:
                 chunk_raster[:, t] = fired
-        counts[start:stop] = chunk_counts.cpu()
-        n_candidates[start:stop] = chunk_candidates.cpu()
-        final_voltage[start:stop] = voltage.cpu()
+        counts[rows], n_candidates[rows] = chunk_counts.cpu(), chunk_candidates.cpu()
+        final_voltage[rows] = voltage.cpu()
         if raster is not None and chunk_raster is not None:
-            raster[start:stop] = chunk_raster.cpu()
+            raster[rows] = chunk_raster.cpu()
     return SpikeRun(counts, n_candidates, raster, final_voltage)
 
 

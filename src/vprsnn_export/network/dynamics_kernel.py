@@ -122,9 +122,8 @@ def _first_argmax(values: np.ndarray, start: int, stop: int, lane_value: np.ndar
     and the tail (indices above every lane's) replaces it only when strictly greater.
     """
     lowest = np.float32(-np.inf)
-    for lane in range(LANES):
-        lane_value[lane] = lowest
-        lane_index[lane] = -1
+    lane_value[:] = lowest
+    lane_index[:] = -1
     j = start
     while j + LANES <= stop:
         for lane in range(LANES):
@@ -202,15 +201,12 @@ def float_run(
     """The float network's run (plasticity off), event-driven and compiled, on the CPU.
 
     ``group``: neurons per WTA group (:mod:`vprsnn_export.network.modules`); ``None``: one group.
-    ``threads`` (default: torch's thread count): Python threads sharing the run, by whole WTA
-    groups of neurons (an ensemble) or by presentations (:func:`run_parts`); the kernel runs
-    the neurons in tiles of whole groups (:func:`neuron_tile`) so that a tile's weights stay
-    in cache across the presentations.
+    ``threads`` (default: torch's thread count): Python threads sharing the run, by whole WTA groups of neurons
+    (an ensemble) or by presentations (:func:`run_parts`); the kernel runs the neurons in tiles of whole groups
+    (:func:`neuron_tile`) so that a tile's weights stay in cache across the presentations.
 
-    Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`. Each step's currents are the
-    active inputs' weight rows summed in float32 in increasing input order (:func:`_row_sum`), the
-    same on every CPU; ``run_network``'s torch loop agrees to float32 rounding. ``final_voltage`` is reported
-    with and without isolation.
+    Same dynamics as :func:`vprsnn_export.network.dynamics.run_network`, the currents summed as the module
+    docstring says. ``final_voltage`` is reported with and without isolation.
     """
     array = as_spike_array(spikes)
     w = np.ascontiguousarray(_numpy(weights), dtype=np.float32)

@@ -21,9 +21,8 @@ def require_array(
 ) -> np.ndarray:
     """``array`` itself if it is a C-contiguous numpy array of one of ``dtypes`` with ``shape``; else refuse it."""
     allowed = [np.dtype(d) for d in dtypes]
-    expected = (
-        f"a C-contiguous {'/'.join(str(d) for d in allowed)} array of shape ({', '.join(_axis(a) for a in shape)})"
-    )
+    axes = ", ".join("*" if length is None else str(length) for length in shape)
+    expected = f"a C-contiguous {'/'.join(str(d) for d in allowed)} array of shape ({axes})"
     if not isinstance(array, np.ndarray):
         raise InvalidValueError(f"{kernel}: {name} must be {expected}, got {type(array).__name__}")
     if array.dtype not in allowed:
@@ -61,7 +60,3 @@ def require_groups(kernel: str, n_neurons: int, group: object, start: object, st
     for name, value in (("start", first), ("stop", last), ("tile", width)):
         if value % size:
             raise InvalidValueError(f"{kernel}: {name} must be a multiple of the WTA group ({size}), got {value}")
-
-
-def _axis(length: int | None) -> str:
-    return "*" if length is None else str(length)

@@ -1,13 +1,12 @@
 """What every compiled kernel shares: the numba decorator, spike arrays, per-step lists of the
 active inputs and the ordered sum of their weight rows.
 
-The input is sparse (about 98 of 784 inputs spike per step), so instead of a dense matmul each
-step sums only the weight rows of the inputs that spiked (:func:`_row_sum`), and the whole
-recurrence over presentations, steps and neurons runs in one numba-compiled loop (no Python call
-per step). The sums run in increasing input order on every CPU and at every thread count, so a
-seed fixes every weight and spike whatever the machine; a BLAS matmul (the torch loop: GPU,
-``compiled=False``) blocks its sums in an order of its own that differs between builds, CPUs and
-shapes, and agrees with the kernels to float32 rounding.
+The input is sparse (about 98 of 784 inputs spike per step), so instead of a dense matmul each step sums only
+the weight rows of the inputs that spiked (:func:`_row_sum`), and the whole recurrence over presentations, steps
+and neurons runs in one numba-compiled loop (no Python call per step). The sums run in increasing input order on
+every CPU and at every thread count, so a seed fixes every weight and spike whatever the machine; a BLAS matmul
+(the torch loop: GPU, ``compiled=False``) blocks its sums in an order of its own that differs between builds,
+CPUs and shapes, and agrees with the kernels to float32 rounding.
 
 The kernels, each beside its caller with its checked entry point: the Bernoulli encoder
 (:mod:`vprsnn_export.data.encoding_kernel`), the float network (:mod:`vprsnn_export.network.dynamics_kernel`),
@@ -93,13 +92,8 @@ def _step_lists(spikes: np.ndarray, index: np.ndarray, offsets: np.ndarray) -> N
 @compiled
 def _all_step_lists(spikes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every presentation's per-step lists: step (p, t)'s active inputs are index[offsets[p, t]:offsets[p, t + 1]]."""
-    n, timesteps, n_inputs = spikes.shape
-    total = 0
-    for p in range(n):
-        for t in range(timesteps):
-            for i in range(n_inputs):
-                total += spikes[p, t, i] != 0
-    index = np.empty(total + 1, dtype=np.int32)
+    n, timesteps, _ = spikes.shape
+    index = np.empty(np.count_nonzero(spikes) + 1, dtype=np.int32)
     offsets = np.empty((n, timesteps + 1), dtype=np.int64)
     k = 0
     for p in range(n):

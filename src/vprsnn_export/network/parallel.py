@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 import numpy as np
 
@@ -57,14 +58,17 @@ def run_parts(
     return [(slice(0, n_presentations), 0, n_neurons)]
 
 
-def run_threads(tasks: Sequence[Callable[[], object]]) -> None:
-    """Run the (GIL-releasing) tasks, on a pool of Python threads when there are several."""
-    if len(tasks) == 1:
-        tasks[0]()
-        return
-    with ThreadPoolExecutor(max_workers=len(tasks)) as pool:
-        for future in [pool.submit(task) for task in tasks]:
-            future.result()
+def run_threads(tasks: Sequence[Callable[[], Any]], workers: int | None = None) -> list[Any]:
+    """The tasks' results in order, on ``workers`` Python threads (None: one per task) when there are several; an
+    interrupt or SIGTERM waits for the tasks in flight only (the queued ones never start)."""
+    threads = len(tasks) if workers is None else workers
+    if threads < 2 or len(tasks) == 1:
+        return [task() for task in tasks]
+    pool = ThreadPoolExecutor(max_workers=threads)
+    try:
+        return list(pool.map(lambda task: task(), tasks))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def check_group(n_neurons: int, group: int | None) -> int:

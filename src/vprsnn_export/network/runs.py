@@ -45,10 +45,6 @@ class SpikeRun:
 PER_PRESENTATION = ("counts", "candidates_per_step", "raster", "final_voltage", "wprob")
 
 
-def _joined(parts: list[Any], cat: Callable[[list[Any]], Any] = torch.cat) -> Any:
-    return None if any(p is None for p in parts) else cat(parts)
-
-
 def run_in_chunks(
     run: Callable[[torch.Tensor], SpikeRun], spikes: torch.Tensor, *, chunk: int, progress: bool, desc: str
 ) -> SpikeRun:
@@ -72,15 +68,12 @@ def run_in_chunks(
 
 def joined_runs(runs: list[SpikeRun]) -> SpikeRun:
     """The runs of consecutive chunks of presentations as one run (saturations summed, max_current the largest)."""
-    return SpikeRun(
-        counts=torch.cat([r.counts for r in runs]),
-        candidates_per_step=_joined([r.candidates_per_step for r in runs]),
-        raster=_joined([r.raster for r in runs]),
-        final_voltage=_joined([r.final_voltage for r in runs]),
-        saturations=sum(r.saturations for r in runs),
-        max_current=max(r.max_current for r in runs),
-        wprob=_joined([r.wprob for r in runs], np.concatenate),
-    )
+    rows: dict[str, Any] = {}
+    for name in PER_PRESENTATION:
+        values = [getattr(r, name) for r in runs]
+        cat = np.concatenate if name == "wprob" else torch.cat  # the others are tensors
+        rows[name] = None if any(v is None for v in values) else cat(values)
+    return SpikeRun(**rows, saturations=sum(r.saturations for r in runs), max_current=max(r.max_current for r in runs))
 
 
 @runtime_checkable

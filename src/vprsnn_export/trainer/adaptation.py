@@ -137,26 +137,22 @@ def adapt_config(
         raise InvalidValueError(f"--adapt-places: {len(rows)} of the selected places; adaptation needs 2 or more")
     reference = np.mean([dataset.traversal(name) for name in references], axis=0)
     frames = dataset.traversal(traversal)[rows]
-    if pairing == "truth":
-        paired = rows if truth is None else truth_pairs(truth, ids, ids[rows])
-    else:
+    if pairing == "sequence":
         paired = sequence_pairs(reference, frames, ids[rows], PAIRING_FRAMES)
-    adapted = learner.learn(reference[paired], frames, cfg)
+        how = f"sequence matching, k = {PAIRING_FRAMES}"
+    elif truth is None:
+        paired, how = rows, "place ids (index-aligned)"
+    else:
+        paired, how = truth_pairs(truth, ids, ids[rows]), f"ground truth {Path(truth.source).name}"
     record = {
         "mechanism": mechanism,
         "traversal": traversal,
         "frames": int(len(rows)),
         "places": place_ranges(ids[rows]),
-        "pairing": (
-            f"sequence matching, k = {PAIRING_FRAMES}"
-            if pairing == "sequence"
-            else "place ids (index-aligned)"
-            if truth is None
-            else f"ground truth {Path(truth.source).name}"
-        ),
+        "pairing": how,
         "pairs_at_own_place": round(float(np.mean(paired == rows)), 4),
     }
-    return Adaptation(adapted, record)
+    return Adaptation(learner.learn(reference[paired], frames, cfg), record)
 
 
 def truth_pairs(truth: GroundTruth, ids: np.ndarray, frame_ids: np.ndarray) -> np.ndarray:

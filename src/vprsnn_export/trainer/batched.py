@@ -31,7 +31,7 @@ import torch
 from tqdm.auto import tqdm
 
 from vprsnn_export.config import Config
-from vprsnn_export.data.encoding import encode, firing_probabilities, presentation_seed
+from vprsnn_export.data.encoding import encode, firing_probabilities
 from vprsnn_export.data.encoding_kernel import bernoulli_limits, generator_seeds
 from vprsnn_export.data.philox import philox_spikes
 from vprsnn_export.errors import InvalidValueError
@@ -39,9 +39,8 @@ from vprsnn_export.network.modules import module_regions
 from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update
-from .stdp import initial_weights
 from .stdp_kernel import stdp_windows
-from .train import Presentation, TrainedNetwork, epoch_order, train_batch, training_seeds
+from .train import Presentation, TrainedNetwork, epoch_order, initial_state, train_batch, training_seeds
 
 
 def module_training_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
@@ -65,8 +64,8 @@ def _kernel_batch(
     cfg: Config,
     epoch: int,
     threads: int,
-) -> torch.Tensor:
-    """Every module's batch through the compiled kernel (weights updated in place)."""
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Every module's batch through the compiled kernel (weights updated in place), then its homeostasis."""
     sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
     limits = np.zeros((len(batch_rows), int(sizes.max()), images.shape[1]), dtype=np.int32)
     seeds = np.zeros(limits.shape[:2], dtype=np.int64)
@@ -76,7 +75,8 @@ def _kernel_batch(
             seeds[m, : len(rows)] = generator_seeds(
                 training_seeds(cfg, presentations, rows, epoch), cfg.encoder.generator
             )
-    return torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
+    fired = torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
+    return weights, _homeostasis(theta, fired, sizes, cfg), fired
 
 
 def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cfg: Config) -> torch.Tensor:
@@ -97,6 +97,7 @@ def _torch_batch(
     batch_rows: Sequence[np.ndarray],
     cfg: Config,
     epoch: int,
+    threads: int,  # the kernel's (this loop runs on torch's threads)
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The torch loop for all modules with the same batch size at once (one batched matmul per step)."""
     sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
@@ -158,7 +159,7 @@ def module_epochs(
     n_modules, n_neurons, batch = len(rows), cfg.network.n_neurons, cfg.train.batch_size
     threads = torch.get_num_threads() if threads is None else max(1, int(threads))
     weights, theta = initial_state(cfg, n_modules, device)
-    use_kernel = compiled and device.type == "cpu"
+    step = _kernel_batch if compiled and device.type == "cpu" else _torch_batch
     n_rows = np.array([len(r) for r in rows])
     for epoch in range(cfg.train.epochs):
         started = time.perf_counter()
@@ -166,25 +167,9 @@ def module_epochs(
         fired = torch.zeros((n_modules, n_neurons), dtype=torch.float32, device=device)
         for first in range(0, int(n_rows.max()), batch):
             batch_rows = [r[orders[len(r)][first : first + batch]] for r in rows]
-            sizes = np.array([len(b) for b in batch_rows], dtype=np.int64)
-            if use_kernel:
-                batch_fired = _kernel_batch(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
-                theta = _homeostasis(theta, batch_fired, sizes, cfg)
-            else:
-                weights, theta, batch_fired = _torch_batch(
-                    weights, theta, images, presentations, batch_rows, cfg, epoch
-                )
+            weights, theta, batch_fired = step(weights, theta, images, presentations, batch_rows, cfg, epoch, threads)
             fired += batch_fired
         yield EpochState(epoch, time.perf_counter() - started, fired, theta, weights)
-
-
-def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """Every module starts from initial_weights(seed) (M, inputs, n) and theta_init (M, n)."""
-    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
-    start = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator)
-    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
-    theta = torch.full((n_modules, cfg.network.n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
-    return weights, theta
 
 
 def check_training_memory(cfg: Config, n_modules: int, most_rows: int, threads: int | None) -> None:

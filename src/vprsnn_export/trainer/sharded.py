@@ -29,8 +29,8 @@ from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import SpikeRun
 
-from .batched import history_entry, initial_state, module_epochs, side_by_side
-from .train import Presentation, TrainedNetwork
+from .batched import history_entry, module_epochs, side_by_side
+from .train import Presentation, TrainedNetwork, initial_state
 
 STREAMS = {"query": query_spikes, "calibrate": calibration_spikes}
 CPU = torch.device("cpu")
@@ -64,22 +64,14 @@ def train_group(
     images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
 ) -> GroupTraining:
     """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
-    weights, theta = initial_state(cfg, len(rows), CPU)
-    fired: list[np.ndarray] = []
-    thetas: list[np.ndarray] = []
-    seconds: list[float] = []
+    weights = initial_state(cfg, len(rows), CPU)[0]
+    epochs: list[tuple[np.ndarray, np.ndarray, float]] = []
     for state in module_epochs(images, presentations, rows, cfg, device=CPU):
         weights = state.weights
-        fired.append(state.fired.numpy().copy())
-        thetas.append(state.theta.numpy().copy())
-        seconds.append(state.seconds)
-    shape = (0, len(rows), cfg.network.n_neurons)
-    return GroupTraining(
-        weights=weights.numpy().copy(),
-        fired=np.stack(fired) if fired else np.zeros(shape, np.float32),
-        theta=np.stack(thetas) if thetas else np.zeros(shape, np.float32),
-        seconds=np.asarray(seconds, dtype=np.float64),
-    )
+        epochs.append((state.fired.numpy().copy(), state.theta.numpy().copy(), state.seconds))
+    empty = np.zeros((0, len(rows), cfg.network.n_neurons), np.float32)
+    fired, theta = (np.stack([epoch[k] for epoch in epochs]) if epochs else empty for k in (0, 1))
+    return GroupTraining(weights.numpy().copy(), fired, theta, np.asarray([e[2] for e in epochs], dtype=np.float64))
 
 
 def train_modules_on_cluster(
@@ -171,8 +163,8 @@ def float_runs_on_cluster(
         ]
         axis, parts_per_traversal = 1, len(groups)
     else:
-        slices = [np.arange(len(place_ids))] if not isolated else np.array_split(np.arange(len(place_ids)), len(groups))
-        slices = [piece for piece in slices if len(piece)]
+        split = np.array_split(np.arange(len(place_ids)), len(groups) if isolated else 1)
+        slices = [piece for piece in split if len(piece)]
         tasks = [
             (weights, thresholds, cfg, images[piece], place_ids[piece], traversal, stream, state_isolation)
             for traversal, images in presentations.items()
@@ -184,10 +176,8 @@ def float_runs_on_cluster(
     for k, traversal in enumerate(presentations):
         parts = done[k * parts_per_traversal : (k + 1) * parts_per_traversal]
         counts = np.concatenate([c for c, _ in parts], axis=axis)
-        if axis == 1:
-            candidates = np.sum([c.astype(np.int64) for _, c in parts], axis=0).astype(np.int32)
-        else:
-            candidates = np.concatenate([c for _, c in parts], axis=0)
+        steps = [c for _, c in parts]  # |C[t]|: the module groups' add up, the presentation slices' follow on
+        candidates = np.sum(steps, axis=0, dtype=np.int64).astype(np.int32) if axis == 1 else np.concatenate(steps)
         runs[traversal] = SpikeRun(torch.from_numpy(counts), torch.from_numpy(candidates))
     return runs
 
@@ -204,19 +194,7 @@ def calibrate_on_cluster(
     progress: bool = False,
 ) -> np.ndarray:
     """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network."""
-    runs = float_runs_on_cluster(
-        weights,
-        thresholds,
-        cfg,
-        reference_images,
-        place_ids,
-        "calibrate",
-        cluster,
-        modules_per_task=modules_per_task,
-        progress=progress,
-    )
-    total = np.zeros((0, 0), dtype=np.int64)
-    for traversal in reference_images:
-        counts = runs[traversal].counts.numpy().astype(np.int64)
-        total = counts.T if total.size == 0 else total + counts.T
-    return total
+    args = (weights, thresholds, cfg, reference_images, place_ids, "calibrate", cluster)
+    runs = float_runs_on_cluster(*args, modules_per_task=modules_per_task, progress=progress)
+    counts = [runs[traversal].counts.numpy().astype(np.int64).T for traversal in reference_images]
+    return sum(counts[1:], counts[0]) if counts else np.zeros((0, 0), dtype=np.int64)

@@ -8,15 +8,11 @@ on every machine.
 :func:`stdp_windows` runs that window for M independent modules of an ensemble in one call,
 encoding each module's batch inside it (:mod:`vprsnn_export.data.encoding_kernel`), on threads over
 contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slices`).
-
-Over 400 lines because it is one concept: the training window and its fused normalisation pass keep
-every float32 operation in the torch loop's order (so checkpoints stay bit for bit the same), and each
-compiled kernel has its checked entry point (the kernel guard tests call them with bad arrays).
 """
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -27,7 +23,7 @@ from vprsnn_export.data.encoding_kernel import _encode_rows
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.kernel_checks import require_array, require_int
 from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _active_inputs, _row_sum, as_spike_array, compiled
-from vprsnn_export.network.parallel import module_slices
+from vprsnn_export.network.parallel import module_slices, run_threads
 
 
 @compiled
@@ -103,23 +99,20 @@ def _stdp_window(
                 row_voltage[j] = zero if candidate else v
                 n_cand += candidate
             n_winners[b] = 0
-            if n_cand > 0 and wta:  # the first candidate with the largest current fires
-                best = -1
-                best_current = np.float32(-np.inf)
-                for j in range(n_neurons):
-                    if row_fired[j]:
-                        row_fired[j] = False
-                        if best < 0 or row_current[j] > best_current:
-                            best_current = row_current[j]
-                            best = j
-                row_fired[best] = True
-                winners[b, 0] = best
-                n_winners[b] = 1
-            elif n_cand > 0:
+            if n_cand > 0:
                 for j in range(n_neurons):
                     if row_fired[j]:
                         winners[b, n_winners[b]] = j
                         n_winners[b] += 1
+            if n_cand > 0 and wta:  # the first candidate with the largest current fires
+                best = winners[b, 0]
+                for w in range(n_winners[b]):
+                    j = winners[b, w]
+                    row_fired[j] = False
+                    best = j if row_current[j] > row_current[best] else best
+                row_fired[best] = True
+                winners[b, 0] = best
+                n_winners[b] = 1
         for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
@@ -158,11 +151,7 @@ def _stdp_window(
                     trace = post_trace[b]
                     for j in range(n_neurons):
                         sums[j] += trace[j]
-        n_columns = 0
-        for j in range(n_neurons):
-            if traced[j] or (weight_norm and not settled[j]):
-                n_columns += 1
-        if n_columns > 0:
+        if np.any(traced) or (weight_norm and not np.all(settled)):  # some column changes
             squares[:] = zero
             for i in range(n_inputs):
                 for q in range(n_win):
@@ -185,18 +174,12 @@ def _stdp_window(
                         scale[j] = max(np.sqrt(squares[j]), tiny)
                         settled[j] = scale[j] == one
                         dividing = dividing or not settled[j]
-                if dividing and t + 1 < timesteps:
-                    _divide_and_sum(weights, scale, spikes[:, t + 1], index, n_active, current, starts, members)
+                if dividing:  # after the last step the currents it sums go unused
+                    following = spikes[:, min(t + 1, timesteps - 1)]
+                    _divide_and_sum(weights, scale, following, index, n_active, current, starts, members)
                     ready = True
-                elif dividing:
-                    for i in range(n_inputs):
-                        row = weights[i]
-                        for j in range(n_neurons):
-                            row[j] = row[j] / scale[j]
-        for q in range(n_win):
-            win_slot[win_cols[q]] = -1
-        for u in range(n_used):
-            input_slot[inputs_used[u]] = -1
+        win_slot[win_cols[:n_win]] = -1
+        input_slot[inputs_used[:n_used]] = -1
     return fired_total
 
 
@@ -231,8 +214,7 @@ def _divide_and_sum(
             i = index[b, a]
             members[starts[i]] = b
             starts[i] += 1
-    for i in range(n_inputs - 1, 0, -1):
-        starts[i] = starts[i - 1]
+    starts[1:n_inputs] = starts[: n_inputs - 1].copy()
     starts[0] = 0
     current[:] = 0
     for i in range(n_inputs):
@@ -355,13 +337,11 @@ def kernel_scalars(cfg: Config) -> Scalars:
 def stdp_window(
     weights: torch.Tensor, theta: torch.Tensor, spikes: torch.Tensor, cfg: Config
 ) -> tuple[torch.Tensor, torch.Tensor] | None:
-    """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``.
+    """One training batch (B, T, inputs) with plasticity on, compiled: the step loop of ``train.train_batch``
+    (STDP eq. 7 summed over the batch in row order; the float32 order: the module docstring).
 
-    Per step: the WTA step, trace decay, STDP (eq. 7, summed over the batch in row order), clip
-    and column normalisation, each float32 operation in torch's order but the currents' sums
-    (increasing input order, :func:`_row_sum`). Returns (new weights, spikes
-    per neuron in the batch as float32), or ``None`` when the tensors are not float32 on the CPU:
-    the caller then runs the torch loop. Homeostasis is the caller's.
+    Returns (new weights, spikes per neuron in the batch as float32), or ``None`` when the tensors are not float32
+    on the CPU: the caller then runs the torch loop. Homeostasis is the caller's.
     """
     if weights.device.type != "cpu" or weights.dtype != torch.float32 or theta.dtype != torch.float32:
         return None
@@ -389,24 +369,17 @@ def stdp_windows(
     (:func:`bernoulli_limits`) and ``seeds`` (M, B) (:func:`generator_seeds`), encoded inside the
     kernel exactly as :func:`bernoulli_spikes` encodes them with the config's generator, so module m's weights are
     those of ``stdp_window`` on its own batch bit for bit. Each kernel call trains a contiguous slice of at most
-    :data:`MODULES_PER_CALL` modules; ``threads`` > 1 runs the slices on a pool of Python threads (the kernel
-    releases the GIL; numba's threading layer is not used). An interrupt or SIGTERM waits for the slices in flight
-    only, not the whole batch (at 27k places a thread's half of a batch is 135 modules, ~30 s). Returns the spikes
-    per neuron (M, n) float32.
+    :data:`MODULES_PER_CALL` modules, on ``threads`` Python threads (:func:`~vprsnn_export.network.parallel.run_threads`:
+    an interrupt waits for the slices in flight only, not the whole batch; at 27k places a thread's half of a batch
+    is 135 modules, ~30 s). Returns the spikes per neuron (M, n) float32.
     """
-    n_modules = limits.shape[0]
     args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
-    def run(part: slice) -> np.ndarray:
-        return stdp_windows_kernel(limits[part], seeds[part], sizes[part], timesteps, weights[part], theta[part], *args)
-
-    parts = module_slices(n_modules, max(threads, -(-n_modules // MODULES_PER_CALL)))
-    if threads < 2 or len(parts) == 1:
-        return np.concatenate([run(part) for part in parts])
-    pool = ThreadPoolExecutor(max_workers=threads)
-    try:
-        return np.concatenate(list(pool.map(run, parts)))
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)  # on an interrupt: the queued slices never start
+    parts = module_slices(len(limits), max(threads, -(-len(limits) // MODULES_PER_CALL)))
+    tasks = [
+        partial(stdp_windows_kernel, limits[p], seeds[p], sizes[p], timesteps, weights[p], theta[p], *args)
+        for p in parts
+    ]
+    return np.concatenate(run_threads(tasks, threads))

@@ -90,6 +90,15 @@ def epoch_order(seed: int, epoch: int, n_rows: int) -> torch.Tensor:
     return torch.randperm(n_rows, generator=generator)
 
 
+def initial_state(cfg: Config, n_modules: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every module starts from initial_weights(seed) (M, inputs, n) and theta_init (M, n)."""
+    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
+    start = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator)
+    weights = start.unsqueeze(0).repeat(n_modules, 1, 1).contiguous().to(device)
+    theta = torch.full((n_modules, cfg.network.n_neurons), cfg.network.theta_init, dtype=torch.float32, device=device)
+    return weights, theta
+
+
 def train_network(
     images: np.ndarray,
     presentations: Sequence[Presentation],
@@ -109,9 +118,7 @@ def train_network(
     """
     if len(images) == 0:
         raise InvalidValueError("no training images")
-    generator = torch.Generator().manual_seed(presentation_seed(cfg.seed, "init", "", 0))
-    weights = initial_weights(cfg.network.n_inputs, cfg.network.n_neurons, generator).to(device)
-    theta = torch.full((cfg.network.n_neurons,), cfg.network.theta_init, dtype=torch.float32, device=device)
+    weights, theta = (state[0] for state in initial_state(cfg, 1, device))
     history: list[dict] = []
     epochs = tqdm(range(cfg.train.epochs), desc="train", unit="epoch", disable=not progress, leave=False)
     for epoch in epochs:
@@ -120,13 +127,9 @@ def train_network(
         fired = torch.zeros(cfg.network.n_neurons, dtype=torch.float32, device=device)
         for start in range(0, len(order), cfg.train.batch_size):
             rows = order[start : start + cfg.train.batch_size]
-            spikes = encode(images[rows], training_seeds(cfg, presentations, rows, epoch), cfg.training_encoder).to(
-                device
-            )
-            if compiled:
-                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg)
-            else:
-                weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=False)
+            seeds = training_seeds(cfg, presentations, rows, epoch)
+            spikes = encode(images[rows], seeds, cfg.training_encoder).to(device)
+            weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=compiled)
             fired += batch_fired
         entry = {
             "epoch": epoch + 1,
