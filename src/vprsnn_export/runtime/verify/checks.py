@@ -192,33 +192,28 @@ def curves(scored: Scored, ks: Sequence[int]) -> dict[str, PrCurve]:
     }
 
 
-def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:
-    """The readouts (strategy, k) each metric tolerance judges, in this order: accuracy and P@100R of every
-    strategy at k=1, R@100P of W+Prob at every ``judged`` k, AUC-PR of W+Prob at the largest."""
-    return {
+def judged_limits(
+    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
+) -> dict[tuple[str, str, int], float]:
+    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on, in this order:
+    accuracy and P@100R of every strategy at k=1, R@100P of W+Prob at every judged k of ``ks`` (k = 1 and, on
+    consecutive queries (``sequences``), every k > 1), AUC-PR of W+Prob at the largest. A metric moves in steps of
+    1/Q, so the limit applied is max(limit, query_slack / Q) (with 30 queries a "1 point" limit would mean "no query
+    may change").
+    """
+    judged = sorted(k for k in set(ks) if k == 1 or sequences)
+    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
+    readouts = {
         "accuracy": [(s, 1) for s in STRATEGIES],
         "p_at_100r": [(s, 1) for s in STRATEGIES],
         "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
         "auc_pr": [(SEQUENCE_STRATEGY, max(judged))],
     }
-
-
-def judged_limits(
-    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
-) -> dict[tuple[str, str, int], float]:
-    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on.
-
-    The readouts of :func:`metric_readouts` at the judged k of ``ks``: k = 1 and, on consecutive queries
-    (``sequences``), every k > 1. A metric moves in steps of 1/Q, so the limit applied is max(limit, query_slack / Q)
-    (with 30 queries a "1 point" limit would mean "no query may change").
-    """
-    judged = sorted(k for k in set(ks) if k == 1 or sequences)
-    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
     return {
         (metric, strategy, k): max(float(limit), slack)
-        for metric, readouts in metric_readouts(judged).items()
+        for metric, pairs in readouts.items()
         if (limit := tolerances.get(metric)) is not None
-        for strategy, k in readouts
+        for strategy, k in pairs
     }
 
 
