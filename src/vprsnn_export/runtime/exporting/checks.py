@@ -23,7 +23,7 @@ from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, target_labels
 
 from ..backends import open_backend
-from ..conformance import Contender, compare_backends, read_back, wprob_readout
+from ..conformance import compare_backends, read_back, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -170,9 +170,7 @@ def check_exports(
                     path, network, base_run.raster, spikes, tolerance=nir_tolerance, label=stage.label
                 )
         elif model is not None:
-            contenders: list[Contender] = [
-                read_back(t, TARGETS.get(t).reader_path(written[t]), model, device) for t in integer
-            ]
+            contenders = [read_back(t, TARGETS.get(t).reader_path(written[t]), model, device) for t in integer]
             comparisons += compare_backends(
                 open_backend(model, device=device)[1], contenders, spikes, wprob=wprob_readout(model)
             )

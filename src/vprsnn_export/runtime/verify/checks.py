@@ -46,11 +46,10 @@ OFF = ("off", "none", "")
 COUNTED = ("saturations", "query_slack")
 
 
-def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
+def parse_tolerances(text: str | None) -> dict[str, float | None]:
     """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else: an
     unknown or repeated key, a fraction outside [0, 1], a count (:data:`COUNTED`) that is not a whole number."""
-    tolerances = dict(DEFAULT_TOLERANCES if base is None else base)
-    seen: set[str] = set()
+    given: dict[str, float | None] = {}
     for item in (text or "").split(","):
         if not item.strip():
             continue
@@ -61,11 +60,10 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
                 f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
                 f"(VALUE a number or off), got {item[:80]!r}"
             )
-        if key in seen:
+        if key in given:
             raise InvalidValueError(f"--tolerance {key}: given twice; give each key once")
-        seen.add(key)
         if raw in OFF:
-            tolerances[key] = None
+            given[key] = None
             continue
         try:
             value, counted = float(raw), key in COUNTED
@@ -75,8 +73,8 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
             fits, expected = False, "a number or off"
         if not fits:
             raise InvalidValueError(f"--tolerance {key}: expected {expected}, got {raw[:40]!r}")
-        tolerances[key] = value
-    return tolerances
+        given[key] = value
+    return {**DEFAULT_TOLERANCES, **given}
 
 
 def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.ndarray:
