@@ -35,10 +35,7 @@ RUN_FIELDS = ("raster", "counts", "candidates_per_step", "final_voltage", "satur
 
 
 def as_array(value: Any) -> np.ndarray:
-    """A tensor, array or number as a numpy array."""
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)
+    return value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
 
 
 def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Comparison:

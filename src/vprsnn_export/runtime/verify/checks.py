@@ -83,8 +83,7 @@ def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.n
     Where a vector is constant the correlation is undefined: two identical vectors (e.g. both
     silent) count as 1, otherwise 0.
     """
-    a = np.asarray(float_counts, dtype=np.float64)
-    b = np.asarray(int_counts, dtype=np.float64)
+    a, b = (np.asarray(counts, dtype=np.float64) for counts in (float_counts, int_counts))
     da, db = a - a.mean(axis=1, keepdims=True), b - b.mean(axis=1, keepdims=True)
     na, nb = np.sqrt((da * da).sum(axis=1)), np.sqrt((db * db).sum(axis=1))
     defined = (na > 0) & (nb > 0)
@@ -146,16 +145,14 @@ def module_rows(
 ) -> tuple[ModuleRow, ...]:
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1 and the
     largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
-    n_modules = len(regions)
     top = max(float_scored.ks)
     (float_1, float_k), (int_1, int_k) = (
         [side.regions(regions, k) for k in (1, top)] for side in (float_scored, scored)
     )
     n, timesteps, _ = float_raster.shape
-    a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
+    a, b = (torch.as_tensor(raster).reshape(n, timesteps, len(regions), group) for raster in (float_raster, int_raster))
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
-    spikes_float = a.sum(dim=(0, 1, 3)).numpy()
-    spikes = b.sum(dim=(0, 1, 3)).numpy()
+    spikes_float, spikes = (side.sum(dim=(0, 1, 3)).numpy() for side in (a, b))
     return tuple(
         ModuleRow(
             module=region.module,
