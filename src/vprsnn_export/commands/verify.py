@@ -36,7 +36,6 @@ from ._common import (
 
 #: `--strict`: the exit code of a run in which nothing fails but a paired check is undecided.
 EXIT_UNDECIDED = 3
-ALL_TARGETS = ",".join(TARGETS)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -78,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     checks.add_argument(
         "--targets",
         type=non_empty,
-        default=ALL_TARGETS,
+        default=",".join(TARGETS),
         help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
     add_quantise_options(parser)

@@ -235,12 +235,11 @@ def tolerance_checks(
         assert limit is not None  # judged_limits: the tolerances that are on
         what = f"{metric} drop, {strategy} k={k}"
         checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))
-    bounds = (
+    for name, what, value, at_least in (
         ("winner_agreement", "steps with the float winner", spike.winner_agreement, True),
         ("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True),
         ("saturations", "saturation events on the queries", spike.saturations, False),
-    )
-    for name, what, value, at_least in bounds:
+    ):
         if (limit := tolerances[name]) is not None:
             passed = value >= limit if at_least else value <= limit
             checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))
