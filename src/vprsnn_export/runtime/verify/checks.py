@@ -103,8 +103,7 @@ def spike_level(
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
     agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
     corr = count_correlations(float_counts, int_counts)
-    float_total = np.asarray(float_counts).sum(axis=1)
-    int_total = np.asarray(int_counts).sum(axis=1)
+    float_total, int_total = (np.asarray(counts).sum(axis=1) for counts in (float_counts, int_counts))
     return SpikeLevel(
         winner_agreement=agreement["all_steps"],
         winner_agreement_active=agreement["active_steps"],
