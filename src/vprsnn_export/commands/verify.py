@@ -12,7 +12,6 @@ import sys
 import time
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from ..data.dataset import MAX_PLACES, data_selection
 from ..errors import EXIT_CHECK_FAILED, InvalidValueError
@@ -35,12 +34,8 @@ from ._common import (
     sequence_options,
 )
 
-if TYPE_CHECKING:
-    from ..runtime.verify import VerifyOptions
-
 #: `--strict`: the exit code of a run in which nothing fails but a paired check is undecided.
 EXIT_UNDECIDED = 3
-ALL_TARGETS = ",".join(TARGETS)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -82,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     checks.add_argument(
         "--targets",
         type=non_empty,
-        default=ALL_TARGETS,
+        default=",".join(TARGETS),
         help=f"exported targets to read back and run: some of {TARGETS.choices()} (default: %(default)s; or none)",
     )
     add_quantise_options(parser)
@@ -98,20 +93,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", action="store_true", help="print the verdict and summary as JSON instead of a table")
     add_runtime_options(parser)
     parser.set_defaults(handler=run)
-
-
-def verify_options(args: argparse.Namespace) -> VerifyOptions:
-    """The VerifyOptions of the command line (every option validated; InvalidValueError otherwise)."""
-    from ..runtime.verify import VerifyOptions, parse_tolerances
-
-    return VerifyOptions(
-        bits=tuple(dict.fromkeys(bit_widths(args))),  # first: a bad --bits is the error reported
-        readout=sequence_options(args),
-        quantise=quantise_options(args),
-        reference_queries=args.reference_queries,
-        targets=TARGETS.parse_list(args.targets, "--targets", allow_none=True),
-        tolerances=parse_tolerances(args.tolerance),
-    )
 
 
 def folder_name(label: str, index: int) -> str:
@@ -167,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.report import write_report
     from ..runtime.report.labels import PAIRED_COLUMNS, VERDICT_COLUMNS
-    from ..runtime.verify import Runtime, VerifiedNetwork, build_report, verify_checkpoint
+    from ..runtime.verify import Runtime, VerifiedNetwork, VerifyOptions, build_report, verify_checkpoint
+    from ..runtime.verify.checks import parse_tolerances
     from ..runtime.verify.networks import seed_networks, verify_data
 
     started = time.perf_counter()
@@ -187,7 +169,14 @@ def run(args: argparse.Namespace) -> int:
     ]
     template = templates[0][1]
     networks: Iterable[tuple[str, Checkpoint, Path]] = templates
-    options = verify_options(args)
+    options = VerifyOptions(
+        bits=tuple(dict.fromkeys(bit_widths(args))),  # first: a bad --bits is the error reported
+        readout=sequence_options(args),
+        quantise=quantise_options(args),
+        reference_queries=args.reference_queries,
+        targets=TARGETS.parse_list(args.targets, "--targets", allow_none=True),
+        tolerances=parse_tolerances(args.tolerance),
+    )
     source, subset, places = data_selection(template.data, args.data, args.subset, args.places)
     refuse_window_beside_truth(args.match_window, source, template.reference_traversals, args.query)
     cache: dict = {}

@@ -9,9 +9,8 @@ back from a file is compared with the one written, integer by integer. Used by `
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,10 +34,7 @@ RUN_FIELDS = ("raster", "counts", "candidates_per_step", "final_voltage", "satur
 
 
 def as_array(value: Any) -> np.ndarray:
-    """A tensor, array or number as a numpy array."""
-    if isinstance(value, torch.Tensor):
-        return value.detach().cpu().numpy()
-    return np.asarray(value)
+    return value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
 
 
 def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Comparison:
@@ -136,7 +132,7 @@ def read_back(target: str, path: Path, written: Network | None, device: torch.de
     runs_on = f"{entry.title} model on the {'simulator' if isinstance(rebuilt, FixedPointModel) else 'float network'}"
     contender = Contender(target, entry.label, open_backend(rebuilt, device=device)[1], runs_on=runs_on)
     if isinstance(written, FixedPointModel) and isinstance(rebuilt, FixedPointModel):
-        return dataclasses.replace(contender, written=written, read_back=rebuilt)
+        return replace(contender, written=written, read_back=rebuilt)
     return contender
 
 
@@ -165,10 +161,10 @@ def compare_backends(
             continue
         base = full
         if n < spikes.shape[0]:  # the first n rows of the baseline's run; saturations are a total: a run of its own
-            base = dataclasses.replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
+            base = replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
-            base = dataclasses.replace(base, wprob=wprob(as_array(base.counts)))
+            base = replace(base, wprob=wprob(as_array(base.counts)))
         checks += compare_runs(contender.label, baseline.name, base, contender.runs_on or contender.backend.name, run)
     return checks
 

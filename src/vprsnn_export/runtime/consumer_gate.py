@@ -15,7 +15,6 @@ where place is the W+Prob decision (k = 1) with the network's own calibration, a
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +53,6 @@ def consumer_gate(
     spikes: torch.Tensor,
     *,
     tolerance: float | None = None,
-    consumers: Sequence[str] = GATE_CONSUMERS,
     label: str = TARGETS.get("nir").label,
 ) -> tuple[Comparison, ...]:
     """One comparison per installed consumer: decisions of consumer + readout rule vs the network's.
@@ -72,7 +70,7 @@ def consumer_gate(
     places = decided_places(network, truth.sum(dim=1).numpy())
     rows: list[Comparison] = []
     kind = f"decision agreement >= {limit:.1%}"
-    for consumer in filter(available, consumers):
+    for consumer in filter(available, GATE_CONSUMERS):
         check = f"{label}: {consumer} + readout rule"
         try:
             candidates = run_consumer(consumer, graph, spikes)

@@ -11,9 +11,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from vprsnn_export.data.dataset import load_dataset
+from vprsnn_export.data.dataset import load_selection
 from vprsnn_export.data.encoding import encode, query_spikes
-from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import FixedPointModel
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.io.serial import JsonDataclass, json_options
@@ -23,7 +22,7 @@ from vprsnn_export.targets.nir_target import apply_readout_rule
 from vprsnn_export.targets.registry import TARGETS, target_labels
 
 from ..backends import open_backend
-from ..conformance import Contender, compare_backends, read_back, wprob_readout
+from ..conformance import compare_backends, read_back, wprob_readout
 from ..consumer_gate import consumer_gate, decided_places
 from ..results import Comparison
 from .source import ExportSource
@@ -86,12 +85,9 @@ def check_presentations(
     network = source.network
     cfg = network.config
     if query:
-        if subset is None and places is None:
-            subset, places = network.data.get("subset"), network.data.get("places")
-        origin = data or network.data.get("source")
-        if not origin:
-            raise InvalidValueError("the model names no data source: give --data")
-        dataset = load_dataset(origin, [query], cfg.preprocess, subset=subset, places=places, progress=progress)
+        dataset = load_selection(
+            network.data, [query], cfg.preprocess, source=data, subset=subset, places=places, progress=progress
+        )
         first = slice(samples if samples > 0 else None)  # the first ``samples`` queries (0: all)
         images, ids = dataset.traversal(query)[first], dataset.place_ids[first]
         return query_spikes(images, ids, query, cfg), f"{len(ids)} '{query}' queries from {dataset.source}"
@@ -170,9 +166,7 @@ def check_exports(
                     path, network, base_run.raster, spikes, tolerance=nir_tolerance, label=stage.label
                 )
         elif model is not None:
-            contenders: list[Contender] = [
-                read_back(t, TARGETS.get(t).reader_path(written[t]), model, device) for t in integer
-            ]
+            contenders = [read_back(t, TARGETS.get(t).reader_path(written[t]), model, device) for t in integer]
             comparisons += compare_backends(
                 open_backend(model, device=device)[1], contenders, spikes, wprob=wprob_readout(model)
             )

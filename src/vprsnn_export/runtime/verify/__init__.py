@@ -11,17 +11,14 @@ The checks are :mod:`.checks` and :mod:`.paired`, the run over every width :mod:
 a command's networks and data :mod:`.networks`, the mean ± std over runs and the report :mod:`.summary`.
 """
 
-from .checks import DEFAULT_TOLERANCES, parse_tolerances
 from .run import Runtime, VerifiedNetwork, VerifyOptions, verify_checkpoint
 from .summary import build_report, summarise_runs
 
 __all__ = [
-    "DEFAULT_TOLERANCES",
     "Runtime",
     "VerifiedNetwork",
     "VerifyOptions",
     "build_report",
-    "parse_tolerances",
     "summarise_runs",
     "verify_checkpoint",
 ]

@@ -46,11 +46,10 @@ OFF = ("off", "none", "")
 COUNTED = ("saturations", "query_slack")
 
 
-def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None = None) -> dict[str, float | None]:
+def parse_tolerances(text: str | None) -> dict[str, float | None]:
     """``"r_at_100p=0.01,accuracy=0.02,auc_pr=off"`` over the defaults; InvalidValueError on anything else: an
     unknown or repeated key, a fraction outside [0, 1], a count (:data:`COUNTED`) that is not a whole number."""
-    tolerances = dict(DEFAULT_TOLERANCES if base is None else base)
-    seen: set[str] = set()
+    given: dict[str, float | None] = {}
     for item in (text or "").split(","):
         if not item.strip():
             continue
@@ -61,11 +60,10 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
                 f"--tolerance expects KEY=VALUE with KEY one of {', '.join(DEFAULT_TOLERANCES)} "
                 f"(VALUE a number or off), got {item[:80]!r}"
             )
-        if key in seen:
+        if key in given:
             raise InvalidValueError(f"--tolerance {key}: given twice; give each key once")
-        seen.add(key)
         if raw in OFF:
-            tolerances[key] = None
+            given[key] = None
             continue
         try:
             value, counted = float(raw), key in COUNTED
@@ -75,8 +73,8 @@ def parse_tolerances(text: str | None, base: Mapping[str, float | None] | None =
             fits, expected = False, "a number or off"
         if not fits:
             raise InvalidValueError(f"--tolerance {key}: expected {expected}, got {raw[:40]!r}")
-        tolerances[key] = value
-    return tolerances
+        given[key] = value
+    return {**DEFAULT_TOLERANCES, **given}
 
 
 def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.ndarray:
@@ -85,8 +83,7 @@ def count_correlations(float_counts: np.ndarray, int_counts: np.ndarray) -> np.n
     Where a vector is constant the correlation is undefined: two identical vectors (e.g. both
     silent) count as 1, otherwise 0.
     """
-    a = np.asarray(float_counts, dtype=np.float64)
-    b = np.asarray(int_counts, dtype=np.float64)
+    a, b = (np.asarray(counts, dtype=np.float64) for counts in (float_counts, int_counts))
     da, db = a - a.mean(axis=1, keepdims=True), b - b.mean(axis=1, keepdims=True)
     na, nb = np.sqrt((da * da).sum(axis=1)), np.sqrt((db * db).sum(axis=1))
     defined = (na > 0) & (nb > 0)
@@ -106,8 +103,7 @@ def spike_level(
     """Winner agreement per step, spike-count correlation per query, total spikes, saturations."""
     agreement = step_agreement(torch.as_tensor(float_raster), torch.as_tensor(int_raster))
     corr = count_correlations(float_counts, int_counts)
-    float_total = np.asarray(float_counts).sum(axis=1)
-    int_total = np.asarray(int_counts).sum(axis=1)
+    float_total, int_total = (np.asarray(counts).sum(axis=1) for counts in (float_counts, int_counts))
     return SpikeLevel(
         winner_agreement=agreement["all_steps"],
         winner_agreement_active=agreement["active_steps"],
@@ -148,16 +144,14 @@ def module_rows(
 ) -> tuple[ModuleRow, ...]:
     """Per module of an ensemble: whole-route accuracy on its region's queries (float and quantised, k=1 and the
     largest k), its winner agreement and its spikes (:class:`~runtime.results.ModuleRow`), vectorised over modules."""
-    n_modules = len(regions)
     top = max(float_scored.ks)
     (float_1, float_k), (int_1, int_k) = (
         [side.regions(regions, k) for k in (1, top)] for side in (float_scored, scored)
     )
     n, timesteps, _ = float_raster.shape
-    a, b = (torch.as_tensor(raster).reshape(n, timesteps, n_modules, group) for raster in (float_raster, int_raster))
+    a, b = (torch.as_tensor(raster).reshape(n, timesteps, len(regions), group) for raster in (float_raster, int_raster))
     agreement = (a == b).all(dim=3).double().mean(dim=(0, 1)).numpy()
-    spikes_float = a.sum(dim=(0, 1, 3)).numpy()
-    spikes = b.sum(dim=(0, 1, 3)).numpy()
+    spikes_float, spikes = (side.sum(dim=(0, 1, 3)).numpy() for side in (a, b))
     return tuple(
         ModuleRow(
             module=region.module,
@@ -192,33 +186,28 @@ def curves(scored: Scored, ks: Sequence[int]) -> dict[str, PrCurve]:
     }
 
 
-def metric_readouts(judged: Sequence[int]) -> dict[str, list[tuple[str, int]]]:
-    """The readouts (strategy, k) each metric tolerance judges, in this order: accuracy and P@100R of every
-    strategy at k=1, R@100P of W+Prob at every ``judged`` k, AUC-PR of W+Prob at the largest."""
-    return {
+def judged_limits(
+    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
+) -> dict[tuple[str, str, int], float]:
+    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on, in this order:
+    accuracy and P@100R of every strategy at k=1, R@100P of W+Prob at every judged k of ``ks`` (k = 1 and, on
+    consecutive queries (``sequences``), every k > 1), AUC-PR of W+Prob at the largest. A metric moves in steps of
+    1/Q, so the limit applied is max(limit, query_slack / Q) (with 30 queries a "1 point" limit would mean "no query
+    may change").
+    """
+    judged = sorted(k for k in set(ks) if k == 1 or sequences)
+    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
+    readouts = {
         "accuracy": [(s, 1) for s in STRATEGIES],
         "p_at_100r": [(s, 1) for s in STRATEGIES],
         "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
         "auc_pr": [(SEQUENCE_STRATEGY, max(judged))],
     }
-
-
-def judged_limits(
-    tolerances: Mapping[str, float | None], ks: Sequence[int], n_queries: int, *, sequences: bool = True
-) -> dict[tuple[str, str, int], float]:
-    """(metric, strategy, k) -> the drop limit applied, for every metric tolerance that is on.
-
-    The readouts of :func:`metric_readouts` at the judged k of ``ks``: k = 1 and, on consecutive queries
-    (``sequences``), every k > 1. A metric moves in steps of 1/Q, so the limit applied is max(limit, query_slack / Q)
-    (with 30 queries a "1 point" limit would mean "no query may change").
-    """
-    judged = sorted(k for k in set(ks) if k == 1 or sequences)
-    slack = float(tolerances.get("query_slack") or 0) / max(n_queries, 1)
     return {
         (metric, strategy, k): max(float(limit), slack)
-        for metric, readouts in metric_readouts(judged).items()
+        for metric, pairs in readouts.items()
         if (limit := tolerances.get(metric)) is not None
-        for strategy, k in readouts
+        for strategy, k in pairs
     }
 
 
@@ -245,12 +234,11 @@ def tolerance_checks(
         assert limit is not None  # judged_limits: the tolerances that are on
         what = f"{metric} drop, {strategy} k={k}"
         checks.append(ToleranceCheck(metric, what, value, limit, applied, bool(value <= applied + 1e-12)))
-    bounds = (
+    for name, what, value, at_least in (
         ("winner_agreement", "steps with the float winner", spike.winner_agreement, True),
         ("top1_agreement", "W+Prob k=1 top-1 agreement", decision.top1_agreement[SEQUENCE_STRATEGY], True),
         ("saturations", "saturation events on the queries", spike.saturations, False),
-    )
-    for name, what, value, at_least in bounds:
+    ):
         if (limit := tolerances[name]) is not None:
             passed = value >= limit if at_least else value <= limit
             checks.append(ToleranceCheck(name, what, value, limit, limit, bool(passed)))

@@ -29,13 +29,11 @@ def verify_data(
             cache[key] = load(traversals, ckpt.config.preprocess)
         except DataError:  # a folder whose query traversal has another length than the references': alone
             cache[key] = load([query], ckpt.config.preprocess)
-    dataset = cache[key]
-    if np.array_equal(dataset.place_ids, ckpt.reference_place_ids):
-        return dataset, {name: dataset.traversal(name) for name in ckpt.reference_traversals}
-    # the queries are not the reference places: load the reference places on their own
-    reference = load_dataset(
-        source, ckpt.reference_traversals, ckpt.config.preprocess, subset=ckpt.reference_place_ids, progress=progress
-    )
+    dataset = reference = cache[key]
+    if not np.array_equal(dataset.place_ids, ckpt.reference_place_ids):  # load the reference places on their own
+        reference = load(
+            ckpt.reference_traversals, ckpt.config.preprocess, subset=ckpt.reference_place_ids, places=None
+        )
     return dataset, {name: reference.traversal(name) for name in ckpt.reference_traversals}
 
 

@@ -46,8 +46,7 @@ def paired_checks(
         )
         b, c = paired.flips(floats[0], deployed[0])
         n = row.n_queries
-        metrics = [*TABLE_METRICS, *(["p_at_100r"] if ("p_at_100r", strategy, k) in limits else [])]
-        for metric in metrics:
+        for metric in [*TABLE_METRICS, *(["p_at_100r"] if ("p_at_100r", strategy, k) in limits else [])]:
             exact = metric == "accuracy" and k == 1
             low, high = paired.accuracy_interval(b, c, n, settings.confidence) if exact else boot[metric]
             estimate = row.delta.get(metric)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import tempfile
 import time
 from collections.abc import Mapping
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -71,7 +70,7 @@ class VerifyOptions:
     def to_dict(self, config: Config) -> dict[str, Any]:
         """The settings of a report: the quantisation options beside the bit widths (per_neuron, scale_method,
         fold_thresholds, calibration, non_leaky), the readout with the gamma of ``config`` (the networks' config)."""
-        data = dataclasses.asdict(self)
+        data = asdict(self)
         readout = {"gamma": config.assignment.gamma, **data.pop("readout")}
         return {"readout": readout, "bits": data.pop("bits"), **data.pop("quantise"), **data}
 

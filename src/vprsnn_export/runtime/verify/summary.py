@@ -22,9 +22,8 @@ from ..results import BitsResult, BitsSummary, RunSummary, SummaryRow, VerifiedR
 def summary_rows(rows_per_run: Sequence[Sequence[MetricRow]], with_delta: bool) -> tuple[SummaryRow, ...]:
     """Mean ± std of each (strategy, k) row over runs, in the order the rows first appear."""
     groups: dict[tuple[str, int], list[MetricRow]] = {}
-    for rows in rows_per_run:
-        for row in rows:
-            groups.setdefault((row.strategy, row.k), []).append(row)
+    for row in (row for rows in rows_per_run for row in rows):
+        groups.setdefault((row.strategy, row.k), []).append(row)
     return tuple(
         SummaryRow(
             strategy,
@@ -59,9 +58,8 @@ def summarise_bits(bits: int, results: Sequence[BitsResult]) -> BitsSummary:
 def summarise_runs(runs: Sequence[VerifiedRun]) -> RunSummary:
     """Mean ± std over runs (independently trained networks) of every metric and check, per bit width."""
     per_bits: dict[int, list[BitsResult]] = {}
-    for run in runs:
-        for result in run.bits:
-            per_bits.setdefault(result.bits, []).append(result)
+    for result in (result for run in runs for result in run.bits):
+        per_bits.setdefault(result.bits, []).append(result)
     return RunSummary(
         n_runs=len(runs),
         float=summary_rows([run.float.metrics for run in runs], with_delta=False),
