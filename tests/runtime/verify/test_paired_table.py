@@ -44,6 +44,8 @@ def test_judged_limits_follow_the_tolerances():
     assert not any(m in ("auc_pr", "p_at_100r") for m, _, _ in limits)  # off by default
     scattered = judged_limits(DEFAULT_TOLERANCES, (1, 3, 5), 100, sequences=False)
     assert {k for (m, s, k) in scattered if m == "r_at_100p"} == {1}
+    no_one = judged_limits(parse_tolerances("auc_pr=0"), (3, 5), 100, sequences=False)  # verify --k 3,5, scattered
+    assert {k for (m, s, k) in no_one if m == "r_at_100p"} == set() and ("auc_pr", "wprob", 1) in no_one
     slack = judged_limits(parse_tolerances("auc_pr=0"), (1, 3), 40)
     assert slack[("auc_pr", "wprob", 3)] == pytest.approx(1 / 40)  # query_slack: one query's worth
 

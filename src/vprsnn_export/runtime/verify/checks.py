@@ -201,7 +201,7 @@ def judged_limits(
         "accuracy": [(s, 1) for s in STRATEGIES],
         "p_at_100r": [(s, 1) for s in STRATEGIES],
         "r_at_100p": [(SEQUENCE_STRATEGY, k) for k in judged],
-        "auc_pr": [(SEQUENCE_STRATEGY, max(judged))],
+        "auc_pr": [(SEQUENCE_STRATEGY, max(judged, default=1))],  # k = 1 is always read out
     }
     return {
         (metric, strategy, k): max(float(limit), slack)
