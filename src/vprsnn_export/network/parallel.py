@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
+from typing import TypeVar
 
 import numpy as np
 
@@ -58,7 +58,10 @@ def run_parts(
     return [(slice(0, n_presentations), 0, n_neurons)]
 
 
-def run_threads(tasks: Sequence[Callable[[], Any]], workers: int | None = None) -> list[Any]:
+Result = TypeVar("Result")
+
+
+def run_threads(tasks: Sequence[Callable[[], Result]], workers: int | None = None) -> list[Result]:
     """The tasks' results in order, on ``workers`` Python threads (None: one per task) when there are several; an
     interrupt or SIGTERM waits for the tasks in flight only (the queued ones never start)."""
     threads = len(tasks) if workers is None else workers
