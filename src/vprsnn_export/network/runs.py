@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from typing import Any, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
@@ -37,12 +37,19 @@ class SpikeRun:
 
     def head(self, n: int) -> SpikeRun:
         """The first n presentations (saturations and max_current are totals: kept as they are)."""
-        heads: dict[str, Any] = {name: getattr(self, name) for name in PER_PRESENTATION}
-        return replace(self, **{name: value[:n] for name, value in heads.items() if value is not None})
+        return SpikeRun(
+            counts=self.counts[:n],
+            candidates_per_step=None if self.candidates_per_step is None else self.candidates_per_step[:n],
+            raster=None if self.raster is None else self.raster[:n],
+            final_voltage=None if self.final_voltage is None else self.final_voltage[:n],
+            saturations=self.saturations,
+            max_current=self.max_current,
+            wprob=None if self.wprob is None else self.wprob[:n],
+        )
 
 
-#: The fields of a SpikeRun with one row per presentation (the others are totals).
-PER_PRESENTATION = ("counts", "candidates_per_step", "raster", "final_voltage", "wprob")
+def _joined(parts: list[torch.Tensor | None]) -> torch.Tensor | None:
+    return None if any(p is None for p in parts) else torch.cat([p for p in parts if p is not None])
 
 
 def run_in_chunks(
@@ -68,12 +75,17 @@ def run_in_chunks(
 
 def joined_runs(runs: list[SpikeRun]) -> SpikeRun:
     """The runs of consecutive chunks of presentations as one run (saturations summed, max_current the largest)."""
-    rows: dict[str, Any] = {}
-    for name in PER_PRESENTATION:
-        values = [getattr(r, name) for r in runs]
-        cat = np.concatenate if name == "wprob" else torch.cat  # the others are tensors
-        rows[name] = None if any(v is None for v in values) else cat(values)
-    return SpikeRun(**rows, saturations=sum(r.saturations for r in runs), max_current=max(r.max_current for r in runs))
+    return SpikeRun(
+        counts=torch.cat([r.counts for r in runs]),
+        candidates_per_step=_joined([r.candidates_per_step for r in runs]),
+        raster=_joined([r.raster for r in runs]),
+        final_voltage=_joined([r.final_voltage for r in runs]),
+        saturations=sum(r.saturations for r in runs),
+        max_current=max(r.max_current for r in runs),
+        wprob=None
+        if any(r.wprob is None for r in runs)
+        else np.concatenate([r.wprob for r in runs if r.wprob is not None]),
+    )
 
 
 @runtime_checkable

@@ -150,11 +150,21 @@ def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, con
 
 def network_part(network: Checkpoint | FixedPointModel, neurons: slice) -> Checkpoint | FixedPointModel:
     """The network of some consecutive modules' neurons alone (their weights, thresholds and S^R rows)."""
-    is_float = isinstance(network, Checkpoint)
-    weights = "weights" if is_float else "weight_mantissa"  # (inputs, neurons): the columns
-    rows = ("thresholds",) if is_float else ("scale_multiplier", "threshold", "float_calibration")
-    part = {name: getattr(network, name)[neurons] for name in (*rows, "calibration")}
-    return dataclasses.replace(network, **part, **{weights: getattr(network, weights)[:, neurons]})
+    if isinstance(network, Checkpoint):
+        return dataclasses.replace(
+            network,
+            weights=network.weights[:, neurons],
+            thresholds=network.thresholds[neurons],
+            calibration=network.calibration[neurons],
+        )
+    return dataclasses.replace(
+        network,
+        weight_mantissa=network.weight_mantissa[:, neurons],
+        scale_multiplier=network.scale_multiplier[neurons],
+        threshold=network.threshold[neurons],
+        calibration=network.calibration[neurons],
+        float_calibration=network.float_calibration[neurons],
+    )
 
 
 class Localizer:
