@@ -22,7 +22,6 @@ Pure numpy, vectorised over queries and steps.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
@@ -30,7 +29,6 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass
 
 CHUNK = 64  # queries whose spikes are widened to int64 at once for a per-input fan-out
-PER_QUERY = ("input_spikes", "steps", "synaptic_events", "neuron_updates", "template_macs")  # QueryCost's arrays
 
 
 @dataclass(frozen=True)
@@ -86,16 +84,36 @@ class QueryCost:
 
     def summary(self) -> CostSummary:
         """The means over queries (0 for no query)."""
-        means = {name: float(getattr(self, name).mean()) if self.steps.size else 0.0 for name in PER_QUERY}
+
+        def mean(values: np.ndarray) -> float:
+            return float(values.mean()) if values.size else 0.0
+
         return CostSummary(
-            int(self.steps.size), snn_weights=self.snn_weights, template_weights=self.template_weights, **means
+            queries=int(self.steps.size),
+            steps=mean(self.steps),
+            input_spikes=mean(self.input_spikes),
+            synaptic_events=mean(self.synaptic_events),
+            neuron_updates=mean(self.neuron_updates),
+            template_macs=mean(self.template_macs),
+            snn_weights=self.snn_weights,
+            template_weights=self.template_weights,
         )
 
 
 def joined_costs(costs: list[QueryCost]) -> QueryCost:
     """The costs of consecutive blocks of queries of one network as one: their per-query arrays concatenated."""
-    joined: dict[str, Any] = {name: np.concatenate([getattr(cost, name) for cost in costs]) for name in PER_QUERY}
-    return replace(costs[0], **joined)
+
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([getattr(cost, name) for cost in costs])
+
+    return replace(
+        costs[0],
+        input_spikes=joined("input_spikes"),
+        steps=joined("steps"),
+        synaptic_events=joined("synaptic_events"),
+        neuron_updates=joined("neuron_updates"),
+        template_macs=joined("template_macs"),
+    )
 
 
 def used_steps(steps: object, n_queries: int, timesteps: int) -> np.ndarray:
