@@ -247,24 +247,22 @@ def integer_run(
     tile = neuron_tile(n_neurons, size)
     parts = run_parts(n, n_neurons, size, torch.get_num_threads() if threads is None else threads, isolation)
     candidates = [np.zeros((len(range(n)[rows]), timesteps), dtype=np.int32) for rows, _, _ in parts]
-    extremes: list[tuple[int, int]] = [(0, 0)] * len(parts)
 
-    def task(k: int) -> Callable[[], None]:
+    def task(k: int) -> Callable[[], tuple[int, np.int64]]:
         rows, start, stop = parts[k]
 
-        def run() -> None:
+        def run() -> tuple[int, np.int64]:
             column, chunk = current_blocks(timesteps, tile, len(range(n)[rows]))
             current_store = np.zeros(chunk * timesteps * tile, dtype=np.int32 if bound <= INT32_SAFE else np.int64)
-            saturations, peak = integer_kernel(
+            return integer_kernel(
                 array[rows], weights, int(shift), thresholds, scores, multipliers is not None, int(keep), int(limit),
                 bool(wta), size, bool(isolation), bool(record), current_store, start, stop, tile, column, chunk,
                 counts[rows], candidates[k], raster[rows] if record else raster, final[rows],
             )  # fmt: skip
-            extremes[k] = (int(saturations), int(peak))
 
         return run
 
-    run_threads([task(k) for k in range(len(parts))])
+    extremes = run_threads([task(k) for k in range(len(parts))])  # (saturations, shifted peak) per part
     n_candidates = np.zeros((n, timesteps), dtype=np.int32)
     for (rows, _, _), part in zip(parts, candidates, strict=True):
         n_candidates[rows] += part
@@ -273,6 +271,6 @@ def integer_run(
         candidates_per_step=torch.from_numpy(n_candidates),
         raster=torch.from_numpy(raster) if record else None,
         final_voltage=torch.from_numpy(final),
-        saturations=sum(e[0] for e in extremes),
-        max_current=max(e[1] for e in extremes) >> shift,
+        saturations=sum(int(e[0]) for e in extremes),
+        max_current=max(int(e[1]) for e in extremes) >> shift,
     )

@@ -171,9 +171,9 @@ def lava_weight_matrix(desc: LoihiDescription) -> np.ndarray:
     return mantissas << -int(conn["weight_exp"])
 
 
-def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi description>") -> FixedPointModel:
-    """Rebuild the fixed-point model from the Lava parameters (the round trip of the export)."""
-    path = Path(path)
+def read_loihi_model(path: str | Path) -> FixedPointModel:
+    """:func:`read_loihi`, then the fixed-point model rebuilt from the Lava parameters (the round trip of the export)."""
+    desc, path = read_loihi(path), header_path(path)
     try:
         fixed = desc.header["fixed_point_model"]
         conn = desc.header["connections"][0]
@@ -192,8 +192,3 @@ def description_to_model(desc: LoihiDescription, path: str | Path = "<Loihi desc
     if int(exc["du"]) != DU_NO_CURRENT_MEMORY:  # dv: model_from_header validated it
         raise ModelFileError("du must be 4095 and dv a 12-bit decay", path)
     return model
-
-
-def read_loihi_model(path: str | Path) -> FixedPointModel:
-    """read_loihi + description_to_model."""
-    return description_to_model(read_loihi(path), header_path(path))

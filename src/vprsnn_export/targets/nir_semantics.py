@@ -51,7 +51,7 @@ def integer_semantics(source: Checkpoint | FixedPointModel) -> dict[str, Any]:
     """The update, spike, reset and saturation rules of the network, as numbers a reader can apply."""
     reset = {"value": 0, "who": "every neuron over threshold, whether or not it wins the WTA"}
     if isinstance(source, FixedPointModel):
-        limit = (1 << (source.voltage_bits - 1)) - 1
+        limit = source.voltage_limit
         return {
             "arithmetic": "integer",
             "decay": {

@@ -136,9 +136,4 @@ for name, title, label, integer_only, filename, write, reader, reads_folder in (
     )
 
 
-def target_labels() -> dict[str, str]:
-    """{name: label} of every target (the check tables' first column)."""
-    return {entry.name: entry.label for entry in TARGETS.values()}
-
-
-__all__ = ["TARGETS", "Network", "Target", "WriteOptions", "integer", "target_labels"]
+__all__ = ["TARGETS", "Network", "Target", "WriteOptions", "integer"]

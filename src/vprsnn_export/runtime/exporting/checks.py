@@ -19,7 +19,7 @@ from vprsnn_export.io.serial import JsonDataclass, json_options
 from vprsnn_export.targets.nir_read import load_graph
 from vprsnn_export.targets.nir_runners import CONSUMERS, spike_agreement
 from vprsnn_export.targets.nir_target import apply_readout_rule
-from vprsnn_export.targets.registry import TARGETS, target_labels
+from vprsnn_export.targets.registry import TARGETS
 
 from ..backends import open_backend
 from ..conformance import compare_backends, read_back, wprob_readout
@@ -62,7 +62,7 @@ class ExportChecks(JsonDataclass):
     @property
     def rows(self) -> list[CheckRow]:
         """The exact checks (under their target, the label before ':'), then the measurements."""
-        names = {label: target for target, label in target_labels().items()}
+        names = {entry.label: entry.name for entry in TARGETS.values()}  # the check tables' first column
         rows = []
         for c in self.comparisons:
             prefix, _, what = c.check.partition(": ")
