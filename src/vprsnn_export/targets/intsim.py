@@ -71,9 +71,10 @@ class PreparedModel:
     mantissas: KernelWeights  # (inputs, neurons) the unshifted q_ij as the compiled CPU kernel reads them
 
 
-def check_arrays(model: FixedPointModel) -> None:
-    """The arrays the simulator indexes: mantissas (inputs, neurons) and thresholds and multipliers
-    (neurons,), all integers, neurons in whole WTA groups; InvalidValueError naming the array otherwise."""
+def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
+    """The model on ``device``, once the arrays the simulator indexes are checked: mantissas (inputs, neurons) and
+    thresholds and multipliers (neurons,), all integers, neurons in whole WTA groups (InvalidValueError naming the
+    array otherwise)."""
     arrays = {name: getattr(model, name) for name in ("weight_mantissa", "threshold", "scale_multiplier")}
     for name, array in arrays.items():
         if not isinstance(array, np.ndarray) or not np.issubdtype(array.dtype, np.integer):
@@ -90,10 +91,6 @@ def check_arrays(model: FixedPointModel) -> None:
         raise InvalidValueError(
             f"fixed-point model: {model.n_neurons} neurons are not whole modules of network.n_neurons = {group}"
         )
-
-
-def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
-    check_arrays(model)
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
