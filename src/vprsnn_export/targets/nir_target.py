@@ -170,24 +170,10 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
     if isinstance(source, FixedPointModel):
         kind, header, recorded_sha256 = "fixed-point", source.header(), source.source_sha256
         multipliers = source.scale_multiplier.astype(np.int64)
-        fixed_point = dict(
-            bits=source.bits,
-            scale_exponent=source.scale_exponent,
-            decay_dv=source.decay_dv,
-            voltage_shift=source.voltage_shift,
-            voltage_bits=source.voltage_bits,
-            units=(
-                "linear.weight = q_ij (float weight ~ q_ij m_j 2**scale_exponent); lif.v_threshold = theta_int_j; "
-                "v is the 24-bit Loihi voltage / 2**voltage_shift; the integer decay rounds toward zero and "
-                "the voltage saturates at +-(2**23 - 1), which a float consumer does not do"
-            ),
-            float_calibration=source.float_calibration.astype(np.int64),
-        )
     else:
         kind, header, recorded_sha256 = "float", checkpoint_header(source), "unknown"
         multipliers = np.ones(source.weights.shape[1], dtype=np.int64)
-        fixed_point = {}
-    return {
+    meta: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
@@ -230,8 +216,22 @@ def graph_metadata(source: Source, source_sha256: str | None, inhibition: float 
         "wta_score_multiplier": multipliers,
         "calibration": source.calibration.astype(np.int64),
         "reference_place_ids": source.reference_place_ids.astype(np.int64),
-        **fixed_point,
     }
+    if isinstance(source, FixedPointModel):
+        meta.update(
+            bits=source.bits,
+            scale_exponent=source.scale_exponent,
+            decay_dv=source.decay_dv,
+            voltage_shift=source.voltage_shift,
+            voltage_bits=source.voltage_bits,
+            units=(
+                "linear.weight = q_ij (float weight ~ q_ij m_j 2**scale_exponent); lif.v_threshold = theta_int_j; "
+                "v is the 24-bit Loihi voltage / 2**voltage_shift; the integer decay rounds toward zero and "
+                "the voltage saturates at +-(2**23 - 1), which a float consumer does not do"
+            ),
+            float_calibration=source.float_calibration.astype(np.int64),
+        )
+    return meta
 
 
 def inhibition_weights(thresholds: np.ndarray, strength: float) -> np.ndarray:
