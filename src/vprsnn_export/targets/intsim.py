@@ -204,13 +204,11 @@ def run_prepared(
     raster = torch.zeros((n, timesteps, n_neurons), dtype=torch.bool) if record else None
     final_voltage = torch.zeros((n, n_neurons), dtype=torch.int64)
     saturations = max_current = 0
-    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)
+    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)  # the stream's, carried
     chunk = QUERY_CHUNK if isolation else 1
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
-        if isolation:
-            voltage = torch.zeros((stop - start, n_neurons), dtype=torch.int64, device=device)
-        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), voltage, record)
+        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), None if isolation else voltage, record)
         voltage = step.voltage
         counts[start:stop] = step.counts.cpu()
         n_candidates[start:stop] = step.candidates.T.cpu()
@@ -222,15 +220,15 @@ def run_prepared(
     return SpikeRun(counts, n_candidates, raster, final_voltage, saturations, max_current)
 
 
-def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor, record: bool) -> ChunkRun:
+def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor | None, record: bool) -> ChunkRun:
     """The loop over t (module docstring, step 2) for shifted currents (T, B, neurons) int32, starting from voltage
-    (B, neurons) int64; a WTA winner fires iff its score is >= 0, and the winners are gathered after the loop."""
+    (B, neurons) int64 or zeros (None); a WTA winner fires iff its score is >= 0, gathered after the loop."""
     timesteps, batch, n_neurons = currents.shape
     device = currents.device
     threshold, limit, multipliers = prep.threshold, prep.limit, prep.multipliers
     peak = currents.amax(dim=(0, 1)).to(torch.int64) if timesteps and batch else torch.zeros_like(threshold)
     may_saturate = bool((peak + threshold > limit).any())
-    voltage = voltage.clone()
+    voltage = torch.zeros((batch, n_neurons), dtype=torch.int64, device=device) if voltage is None else voltage.clone()
     candidates = torch.empty((batch, n_neurons), dtype=torch.bool, device=device)
     n_candidates = torch.empty((timesteps, batch), dtype=torch.int64, device=device)
     score_dtype = torch.int32 if multipliers is None else torch.int64
