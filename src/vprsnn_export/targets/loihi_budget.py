@@ -66,11 +66,8 @@ def axon_synapse_bits(limits: CoreLimits, neurons: int, bits: int) -> int:
     if limits.charge == "dense":
         return neurons * bits
     b = 8 if bits == 7 else bits
-    total = 0
-    for start in range(0, neurons, LOIHI1_GROUP):
-        count = min(LOIHI1_GROUP, neurons - start)
-        total += LOIHI1_WORD_BITS * -(-(count * b + LOIHI1_GROUP_HEADER_BITS) // LOIHI1_WORD_BITS)
-    return total
+    counts = (min(LOIHI1_GROUP, neurons - start) for start in range(0, neurons, LOIHI1_GROUP))
+    return sum(LOIHI1_WORD_BITS * -(-(count * b + LOIHI1_GROUP_HEADER_BITS) // LOIHI1_WORD_BITS) for count in counts)
 
 
 def neurons_per_core(limits: CoreLimits, inputs: int, bits: int) -> int:
@@ -79,11 +76,9 @@ def neurons_per_core(limits: CoreLimits, inputs: int, bits: int) -> int:
         raise InvalidValueError(
             f"{inputs} inputs exceed {limits.chip}'s fan-in of {limits.fan_in_per_core} axons per core"
         )
-    best = 0
-    for k in range(1, limits.neurons_per_core + 1):
-        if inputs * axon_synapse_bits(limits, k, bits) > limits.synapse_bits_per_core:
-            break
-        best = k
+    sizes = range(1, limits.neurons_per_core + 1)
+    over = (k for k in sizes if inputs * axon_synapse_bits(limits, k, bits) > limits.synapse_bits_per_core)
+    best = next(over, sizes.stop) - 1  # the last k before the first that does not fit
     if best == 0:
         raise InvalidValueError(f"one neuron with {inputs} {bits}-bit inputs does not fit a {limits.chip} core")
     return best
