@@ -174,22 +174,19 @@ def module_populations(model: FixedPointModel) -> list[dict[str, Any]]:
     """
     group = model.config.network.n_neurons
     regions = module_regions(len(model.reference_place_ids), model.config.train.module_size)
-    sums = model.weight_mantissa.astype(np.int64).sum(axis=0)
-    rows = []
-    for m, (start, stop) in enumerate(regions.tolist()):
-        own = slice(m * group, (m + 1) * group)
-        vth, multipliers = model.threshold[own], model.scale_multiplier[own]
-        rows.append(
-            {
-                "name": f"exc_{m}",
-                "kind": "LIF",
-                "neurons": [m * group, (m + 1) * group],
-                "places": [int(start), int(stop)],
-                "vth_range": [int(vth.min()), int(vth.max())],
-                "vth_uniform": bool(np.all(vth == vth[0])),
-                "score_multiplier_range": [int(multipliers.min()), int(multipliers.max())],
-                "current_bound": int(sums[own].max()),
-                "synapses": int(model.n_inputs * group),
-            }
-        )
-    return rows
+    vth, multipliers = model.threshold.reshape(-1, group), model.scale_multiplier.reshape(-1, group)  # per module
+    sums = model.weight_mantissa.astype(np.int64).sum(axis=0).reshape(-1, group)
+    return [
+        {
+            "name": f"exc_{m}",
+            "kind": "LIF",
+            "neurons": [m * group, (m + 1) * group],
+            "places": [int(start), int(stop)],
+            "vth_range": [int(vth[m].min()), int(vth[m].max())],
+            "vth_uniform": bool(np.all(vth[m] == vth[m, 0])),
+            "score_multiplier_range": [int(multipliers[m].min()), int(multipliers[m].max())],
+            "current_bound": int(sums[m].max()),
+            "synapses": int(model.n_inputs * group),
+        }
+        for m, (start, stop) in enumerate(regions.tolist())
+    ]
