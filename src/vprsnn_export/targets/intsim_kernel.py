@@ -165,8 +165,7 @@ def integer_kernel(
     require_array(k, "current_store", current_store, (np.int32, np.int64), (None,), writable=True)
     require_int(k, "column", column, 1)
     require_int(k, "chunk", chunk, 1)
-    if current_store.shape[0] < chunk * timesteps * tile:
-        need = chunk * timesteps * tile
+    if current_store.shape[0] < (need := chunk * timesteps * tile):
         raise InvalidValueError(f"{k}: current_store holds {current_store.shape[0]} values, needs {need}")
     require_array(k, "counts", counts, (np.int64,), (n, n_neurons), writable=True)
     require_array(k, "n_candidates", n_candidates, (np.int32,), (n, timesteps), writable=True)

@@ -117,12 +117,11 @@ def consumer_graph(graph, consumer: str, dt: float = DT_SECONDS):
     adjusted = copy.deepcopy(graph)
     lif = adjusted.nodes["lif"]
     threshold32 = torch.as_tensor(np.asarray(lif.v_threshold), dtype=torch.float32)
-    if consumer == "norse":
-        if isinstance(lif, nir.LIF):
-            gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
-            lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
-    else:
+    if consumer != "norse":
         lif.v_threshold = np.nextafter(threshold32.numpy(), np.float32(np.inf)).astype(np.float64)
+    elif isinstance(lif, nir.LIF):  # an IF node (no tau) keeps its threshold
+        gain = dt * (1 / torch.as_tensor(np.asarray(lif.tau), dtype=torch.float32))
+        lif.v_threshold = (gain * threshold32).numpy().astype(np.float64)
     return adjusted
 
 
