@@ -133,7 +133,6 @@ def core_budget(modules: int, neurons: int, inputs: int, bits: int, limits: Core
 
 
 def budget_table(modules: int, neurons: int, inputs: int, bits: tuple[int, ...]) -> list[CoreBudget]:
-    """:func:`core_budget` for every chip family in LOIHI_CHIPS and every width in ``bits``."""
     return [core_budget(modules, neurons, inputs, b, limits) for limits in LOIHI_CHIPS for b in bits]
 
 

@@ -26,7 +26,6 @@ class OnnxRun:
 
 
 def checked_onnx(path: Path) -> onnx.ModelProto:
-    """``onnx.load`` and the checker's verdict on what it loaded."""
     loaded = onnx.load(str(path))
     onnx.checker.check_model(loaded)
     return loaded

@@ -67,7 +67,6 @@ class Target:
     float_consumers: bool = False
 
     def reader_path(self, files: Sequence[Path]) -> Path:
-        """What the reader takes: the (first) file written, or their folder."""
         return Path(files[0]).parent if self.reads_folder else Path(files[0])
 
 
