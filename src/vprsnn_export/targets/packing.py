@@ -53,9 +53,7 @@ def unpack_bits(packed: np.ndarray, bits: int, shape: Sequence[int]) -> np.ndarr
     plane = np.unpackbits(stream, bitorder="little")
     if plane[count * bits :].any():
         raise InvalidValueError("the padding bits after the last packed value are not zero")
-    digits = plane[: count * bits].reshape(count, bits).astype(np.uint8)
-    weights = (1 << np.arange(bits)).astype(np.uint8)
-    return (digits * weights).sum(axis=1, dtype=np.uint8).reshape(tuple(shape))
+    return np.packbits(plane[: count * bits].reshape(count, bits), axis=1, bitorder="little").reshape(tuple(shape))
 
 
 def describe_packing(bits: int, shape: Sequence[int], layout: str) -> dict[str, Any]:
