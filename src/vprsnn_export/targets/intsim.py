@@ -222,7 +222,7 @@ def run_prepared(
 
 def recur(prep: PreparedModel, currents: torch.Tensor, voltage: torch.Tensor | None, record: bool) -> ChunkRun:
     """The loop over t (module docstring, step 2) for shifted currents (T, B, neurons) int32, starting from voltage
-    (B, neurons) int64 or zeros (None); a WTA winner fires iff its score is >= 0, gathered after the loop."""
+    (B, neurons) int64 or zeros (None); a WTA winner fires iff its score is >= 0 (winners gathered after the loop)."""
     timesteps, batch, n_neurons = currents.shape
     device = currents.device
     threshold, limit, multipliers = prep.threshold, prep.limit, prep.multipliers

@@ -172,7 +172,7 @@ def lava_weight_matrix(desc: LoihiDescription) -> np.ndarray:
 
 
 def read_loihi_model(path: str | Path) -> FixedPointModel:
-    """:func:`read_loihi`, then the fixed-point model rebuilt from the Lava parameters (the round trip of the export)."""
+    """:func:`read_loihi`, then the fixed-point model rebuilt from its Lava parameters (the export's round trip)."""
     desc, path = read_loihi(path), header_path(path)
     try:
         fixed = desc.header["fixed_point_model"]
