@@ -24,7 +24,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from .data.preprocess import captured_stderr
 from .errors import InvalidValueError
 
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
@@ -230,23 +230,13 @@ def keep_ray_notices_back() -> None:
 
 @contextlib.contextmanager
 def stderr_kept_back() -> Iterator[None]:
-    """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
-    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as caught:
-        os.dup2(caught.fileno(), 2)
-        try:
-            yield
-        finally:
-            sys.stderr.flush()
-            os.dup2(saved, 2)
-            os.close(saved)
-        caught.seek(0)
-        text = caught.read()
-        if text:
-            sys.stderr.buffer.write(text)
-            sys.stderr.flush()
+    """File descriptor 2 held back while the block runs (Ray logs from C++ and Python alike:
+    :func:`~vprsnn_export.data.preprocess.captured_stderr`); what it caught is written to stderr after a block that
+    succeeds, dropped after one that raises."""
+    with captured_stderr() as caught:
+        yield
+    for line in caught:
+        print(line, file=sys.stderr)
 
 
 # ---------------------------------------------------------------------------- a local cluster ends with the command
