@@ -176,6 +176,8 @@ def _ray_map(
 def connect(cluster: Cluster) -> None:
     """Start (local) or join (auto, ray://) a Ray runtime for this process."""
     ray = _ray()
+    if cluster.address.startswith("ray://"):
+        reachable(cluster.address)
     try:
         if cluster.address == "local":
             keep_ray_notices_back()  # nothing above a later one-line error
@@ -186,12 +188,8 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            if cluster.address.startswith("ray://"):
-                reachable(cluster.address)
             with stderr_kept_back():  # Ray Client's warnings and retries: nothing above the one-line error
                 ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
-    except InvalidValueError:
-        raise
     except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({reason})") from None

@@ -42,8 +42,7 @@ def load_lab() -> ModuleType | None:
         spec = importlib.util.spec_from_file_location(
             LAB, folder / "__init__.py", submodule_search_locations=[str(folder)]
         )
-        if spec is None or spec.loader is None:
-            return None
+        assert spec is not None and spec.loader is not None  # a .py file: the source loader always serves it
         loaded = sys.modules[LAB] = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(loaded)
     elif not (Path(loaded.__file__ or "").parent / "command.py").is_file():
