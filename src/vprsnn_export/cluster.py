@@ -66,12 +66,10 @@ def parse_cluster(text: str, *, threads: int | None = None, option: str = "--clu
                 f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
             )
         return Cluster("local", workers, count)
-    if value == "auto":
-        return Cluster(value, None, count)
     match = re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:(\d{1,5})", value)
-    if match:
-        if not 1 <= int(match.group(1)) <= 65535:
-            raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
+    if match and not 1 <= int(match.group(1)) <= 65535:
+        raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
+    if match or value == "auto":
         return Cluster(value, None, count)
     raise InvalidValueError(f"{option}: expected {CLUSTER_HELP}, got {text!r}")
 
