@@ -25,8 +25,7 @@ MISSING = (
 
 def lab_folder() -> Path | None:
     """The lab's folder: beside this package's source in a checkout, else under the working folder, else None."""
-    beside = Path(__file__).resolve().parents[3] / LAB
-    for folder in (beside, Path.cwd() / LAB):
+    for folder in (Path(__file__).resolve().parents[3] / LAB, Path.cwd() / LAB):
         if (folder / "command.py").is_file() and (folder / "__init__.py").is_file():
             return folder
     return None
