@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -138,8 +137,6 @@ def run(args: argparse.Namespace) -> int:
         if args.search_window is not None or args.patience is not None:
             raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
         return calibrate(args, source, point_path, onnx, device)
-    if args.threshold is not None and not math.isfinite(args.threshold):
-        raise InvalidValueError(f"--threshold expects a finite confidence, got {args.threshold}")
     stored: OperatingPoint | None = None
     if args.threshold is None and (args.precision is not None or point_path.is_file()):
         stored = load_operating_point(point_path, source.sha256)
