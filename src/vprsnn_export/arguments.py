@@ -45,7 +45,7 @@ def require_integer(name: str, value: object, low: int, high: int) -> int:
     return number
 
 
-MAX_PLACE_ID = 1 << 53
+MAX_PLACE_ID = 1 << 53  # ids beyond 2**53 are lost in float64
 
 
 def check_place_ids(place_ids: Sequence[int] | np.ndarray, name: str = "place_ids") -> np.ndarray:

@@ -24,7 +24,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from .data.preprocess import captured_stderr
 from .errors import InvalidValueError
 
 CLUSTER_HELP = "local, local:N (N worker processes here), ray://HOST:PORT or auto (a running Ray cluster)"
@@ -66,12 +66,10 @@ def parse_cluster(text: str, *, threads: int | None = None, option: str = "--clu
                 f"{option}: each task takes --threads {count} CPU slots, more than the {workers} of {value!r}"
             )
         return Cluster("local", workers, count)
-    if value == "auto":
-        return Cluster(value, None, count)
     match = re.fullmatch(r"ray://[A-Za-z0-9._\-\[\]:]+:(\d{1,5})", value)
-    if match:
-        if not 1 <= int(match.group(1)) <= 65535:
-            raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
+    if match and not 1 <= int(match.group(1)) <= 65535:
+        raise InvalidValueError(f"{option}: the port of {value!r} is not from 1 to 65535")
+    if match or value == "auto":
         return Cluster(value, None, count)
     raise InvalidValueError(f"{option}: expected {CLUSTER_HELP}, got {text!r}")
 
@@ -176,6 +174,8 @@ def _ray_map(
 def connect(cluster: Cluster) -> None:
     """Start (local) or join (auto, ray://) a Ray runtime for this process."""
     ray = _ray()
+    if cluster.address.startswith("ray://"):
+        reachable(cluster.address)
     try:
         if cluster.address == "local":
             keep_ray_notices_back()  # nothing above a later one-line error
@@ -186,12 +186,8 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            if cluster.address.startswith("ray://"):
-                reachable(cluster.address)
             with stderr_kept_back():  # Ray Client's warnings and retries: nothing above the one-line error
                 ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
-    except InvalidValueError:
-        raise
     except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({reason})") from None
@@ -230,23 +226,13 @@ def keep_ray_notices_back() -> None:
 
 @contextlib.contextmanager
 def stderr_kept_back() -> Iterator[None]:
-    """File descriptor 2 held in a temporary file while the block runs (Ray logs from C++ and Python alike);
-    what it caught is written to stderr after a block that succeeds, dropped after one that raises."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as caught:
-        os.dup2(caught.fileno(), 2)
-        try:
-            yield
-        finally:
-            sys.stderr.flush()
-            os.dup2(saved, 2)
-            os.close(saved)
-        caught.seek(0)
-        text = caught.read()
-        if text:
-            sys.stderr.buffer.write(text)
-            sys.stderr.flush()
+    """File descriptor 2 held back while the block runs (Ray logs from C++ and Python alike:
+    :func:`~vprsnn_export.data.preprocess.captured_stderr`); what it caught is written to stderr after a block that
+    succeeds, dropped after one that raises."""
+    with captured_stderr() as caught:
+        yield
+    for line in caught:
+        print(line, file=sys.stderr)
 
 
 # ---------------------------------------------------------------------------- a local cluster ends with the command

@@ -13,9 +13,9 @@ DEVICE_CHOICES = ("auto", "cpu", "cuda")
 def resolve_device(name: str) -> torch.device:
     if require_choice("--device", name, DEVICE_CHOICES) == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cuda" and not torch.cuda.is_available():
-        raise InvalidValueError("--device cuda was requested but torch sees no CUDA GPU")
-    return torch.device(name)
+    device = check_device("--device", name)  # cpu, or cuda refused without a GPU
+    assert device is not None
+    return device
 
 
 def check_device(name: str, value: object) -> torch.device | None:

@@ -164,13 +164,10 @@ SEQUENCE_HELP = {
 #: The help a causal stream (localize) shows instead: one k, the causal estimates only (the fixed-lag one and its
 #: --velocity-lag wait for later frames, so a stream does not offer them).
 STREAM_HELP = {
-    **SEQUENCE_HELP,
+    **{name: text.replace("smooth, track: ", "track: ") for name, text in SEQUENCE_HELP.items()},
     "ks": "the sequence length of every decision (one k; the sequence strategy aggregated for k > 1)",
     "velocity_estimate": "with --velocity-search: "
     + "; ".join(f"{name}: {VELOCITY_ESTIMATES.get(name).description}" for name in causal_estimates()),
-    "velocity_span": "track: recent windows whose scores are summed",
-    "velocity_length": "track: frames per scored trajectory (default 3k, 2k)",
-    "velocity_memory": "track: recent frames whose mean is divided out (0: none)",
     "velocity_lag": argparse.SUPPRESS,
 }
 

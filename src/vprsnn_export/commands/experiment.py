@@ -25,8 +25,7 @@ MISSING = (
 
 def lab_folder() -> Path | None:
     """The lab's folder: beside this package's source in a checkout, else under the working folder, else None."""
-    beside = Path(__file__).resolve().parents[3] / LAB
-    for folder in (beside, Path.cwd() / LAB):
+    for folder in (Path(__file__).resolve().parents[3] / LAB, Path.cwd() / LAB):
         if (folder / "command.py").is_file() and (folder / "__init__.py").is_file():
             return folder
     return None
@@ -42,8 +41,7 @@ def load_lab() -> ModuleType | None:
         spec = importlib.util.spec_from_file_location(
             LAB, folder / "__init__.py", submodule_search_locations=[str(folder)]
         )
-        if spec is None or spec.loader is None:
-            return None
+        assert spec is not None and spec.loader is not None  # a .py file: the source loader always serves it
         loaded = sys.modules[LAB] = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(loaded)
     elif not (Path(loaded.__file__ or "").parent / "command.py").is_file():

@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Iterator
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -104,16 +102,16 @@ def calibration_output(args: argparse.Namespace) -> str | None:
 
 
 def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
-    """The given options over the stored (or default) ones; a stored point's options cannot be changed."""
-    base = asdict(SequenceOptions() if stored is None else stored)
+    """The given options over the defaults, or the stored ones, which a given option cannot change."""
+    if stored is None:
+        return SequenceOptions(**given)
     for name, value in given.items():
-        if stored is not None and value != base[name]:
+        if value != getattr(stored, name):
             raise InvalidValueError(
-                f"{option_flag(name)} differs from the operating point's {base[name]!r} ({where}): its threshold "
-                "holds for its own options; recalibrate or give --threshold"
+                f"{option_flag(name)} differs from the operating point's {getattr(stored, name)!r} ({where}): its "
+                "threshold holds for its own options; recalibrate or give --threshold"
             )
-        base[name] = value
-    return SequenceOptions.from_dict(base)
+    return stored
 
 
 def run(args: argparse.Namespace) -> int:
@@ -126,9 +124,8 @@ def run(args: argparse.Namespace) -> int:
     expected = reference_frame_shape(source.network.data, source.network.reference_traversals)
     events = args.event_window_us is not None or args.event_count is not None
     window = EventWindow(window_us=args.event_window_us, count=args.event_count) if events else None
-    frames = None  # a bad source fails before any output; a bag's --topic, an event recording's window
-    if args.frames is not None:
-        frames = iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
+    # a bad source fails before any output; a bag's --topic, an event recording's window
+    frames = None if args.frames is None else iter_frames(args.frames, topic=args.topic, events=window, shape=expected)
     point_path = Path(args.operating_point) if args.operating_point else operating_point_path(args.model)
     onnx = None if args.onnx is None else Path(args.onnx)
     if onnx is not None:  # a deploy folder's graph, or a file checked against its folder's manifest
@@ -140,8 +137,6 @@ def run(args: argparse.Namespace) -> int:
         if args.search_window is not None or args.patience is not None:
             raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
         return calibrate(args, source, point_path, onnx, device)
-    if args.threshold is not None and not math.isfinite(args.threshold):
-        raise InvalidValueError(f"--threshold expects a finite confidence, got {args.threshold}")
     stored: OperatingPoint | None = None
     if args.threshold is None and (args.precision is not None or point_path.is_file()):
         stored = load_operating_point(point_path, source.sha256)
@@ -157,8 +152,7 @@ def run(args: argparse.Namespace) -> int:
     elif stored is not None and not args.quiet:
         print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
     backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
-    search = search_window(args)
-    localizer = Localizer(source.network, options=options, threshold=threshold, search=search, **backend)
+    localizer = Localizer(source.network, options=options, threshold=threshold, search=search_window(args), **backend)
     assert frames is not None
     for decision in localizer.run(sized_frames(frames, expected)):
         sys.stdout.write(json.dumps(decision.to_dict()) + "\n")

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-# MAX_PLACE_ID: ids beyond 2**53 are lost in float64
 from ..arguments import MAX_PLACE_ID, ascii_uint, check_place_ids, require_type
 from ..config import PreprocessConfig
 from ..errors import DataError, InvalidValueError, VprError

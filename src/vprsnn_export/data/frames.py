@@ -54,15 +54,13 @@ def image_files(folder: str | Path) -> list[Path]:
 
 
 def to_grey(frame: np.ndarray) -> np.ndarray:
-    """A decoded frame (H, W) or (H, W, 3) BGR, uint8, as 2-D uint8 greyscale."""
-    array = np.asarray(frame)
-    if array.dtype != np.uint8 or array.ndim not in (2, 3):
-        raise DataError(f"expected a uint8 image (H, W) or (H, W, 3), got shape {array.shape} dtype {array.dtype}")
-    if array.ndim == 3:
-        import cv2
+    """A frame OpenCV decoded, (H, W) grey or (H, W, 3|4) BGR(A), as 2-D greyscale (the localiser refuses one
+    that is not uint8)."""
+    if frame.ndim == 2:
+        return frame
+    import cv2
 
-        return cv2.cvtColor(array, cv2.COLOR_BGR2GRAY if array.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    return array
+    return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY if frame.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
 
 
 def video_frames(path: str | Path) -> Iterator[tuple[str, np.ndarray]]:

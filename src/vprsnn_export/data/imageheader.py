@@ -72,6 +72,4 @@ def image_dimensions(data: bytes) -> tuple[int, int] | None:
     if data.startswith(b"RIFF") and data[8:12] == b"WEBP":
         return _webp(data)
     found = _PNM.match(data[:1024])
-    if found:
-        return int(found.group(1)), int(found.group(2))
-    return None
+    return (int(found.group(1)), int(found.group(2))) if found else None

@@ -37,7 +37,7 @@ from typing import IO, Protocol
 
 import numpy as np
 
-from ..errors import DataError, InvalidValueError
+from ..errors import DataError
 from ..registry import Registry
 from ..resources import check_memory, single_need
 from .imageheader import image_dimensions
@@ -168,9 +168,7 @@ def resize_image(grey: np.ndarray, size: int) -> np.ndarray:
 def patch_normalise(resized: np.ndarray, patch_size: int) -> np.ndarray:
     """Min-max normalise every ``p x p`` patch of every ``(N, S, S)`` image independently, float32 ``(N, S, S)``:
     ``P_hat = (P - min P) / (max P - min P)`` per patch, and ``P_hat = 0`` where ``max P == min P``."""
-    n, height, width = resized.shape
-    if height % patch_size or width % patch_size:
-        raise InvalidValueError(f"image size {height}x{width} is not a multiple of patch_size {patch_size}")
+    n, height, width = resized.shape  # multiples of patch_size: the config checks image_size
     rows, cols = height // patch_size, width // patch_size
     patches = resized.astype(np.float32).reshape(n, rows, patch_size, cols, patch_size)
     low = patches.min(axis=(2, 4), keepdims=True)
