@@ -159,7 +159,6 @@ def early_queries(
     spikes: torch.Tensor,
     calibration: np.ndarray,
     cfg: Config,
-    chunk: int = 64,
     *,
     keep_raster: bool = False,
     isolated: bool | None = None,
@@ -182,7 +181,7 @@ def early_queries(
         runs.append(part if keep_raster else dataclasses.replace(part, raster=None))
         return part.raster.numpy()
 
-    return runs, early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early, chunk)
+    return runs, early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early)
 
 
 def early_run(
@@ -190,12 +189,9 @@ def early_run(
     spikes: torch.Tensor,
     calibration: np.ndarray,
     cfg: Config,
-    chunk: int = 64,
     *,
     isolated: bool | None = None,
 ) -> EarlyDecision | None:
     """``config.early``'s decision for the queries ``spikes`` on a backend (:func:`early_queries`, chunk by chunk:
     the rasters of a whole route need not fit in memory); None when the rule is off."""
-    if is_off(cfg.early):
-        return None
-    return early_queries(run, spikes, calibration, cfg, chunk, isolated=isolated)[1]
+    return None if is_off(cfg.early) else early_queries(run, spikes, calibration, cfg, isolated=isolated)[1]
