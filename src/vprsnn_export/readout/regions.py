@@ -127,13 +127,10 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
 
     .. math:: \\tilde S_{il} = \\begin{cases} S^R_{il} & l \\in R(i) \\\\ \\lambda\\, S^R_{il} & l \\notin R(i) \\end{cases}
 
-    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged. Dense or CSR, as given.
+    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged. Dense or CSR, as given:
+    :func:`regularised_calibration` with rho = 1, which silences no neuron.
     """
-    sr_ = sparse_counts("sr", sr)
-    lam = float(outside_weight)
-    if not 0.0 <= lam <= 1.0:
-        raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
-    return like_input(_scaled(sr_, np.where(_inside(sr_, check_regions(regions), group), 1.0, lam)), sr)
+    return regularised_calibration(sr, ModuleLayout(regions, group, 1.0, outside_weight))[0]
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
