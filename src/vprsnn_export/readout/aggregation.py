@@ -45,8 +45,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
     if np.asarray(velocity).dtype.kind == "b":
         raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
     v = real_array("velocity", velocity)
-    if v.ndim == 0:
-        v = np.full(n, float(v))
+    v = np.full(n, float(v)) if v.ndim == 0 else v
     if v.shape != (n,):
         raise InvalidValueError(f"velocity must be a float or have shape ({n},), got {v.shape}")
     return finite_array("velocity", v)

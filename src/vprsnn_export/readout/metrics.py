@@ -74,8 +74,7 @@ def is_correct(
         if m.dtype != np.bool_ or m.shape != pred.shape:
             raise InvalidValueError("matched must be a boolean array with one entry per query")
         ok &= m
-    diff = np.abs(pred.astype(np.float64) - true.astype(np.float64))
-    return ok & (diff <= tolerance)
+    return ok & (np.abs(pred.astype(np.float64) - true.astype(np.float64)) <= tolerance)
 
 
 def operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
