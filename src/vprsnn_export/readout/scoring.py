@@ -47,12 +47,11 @@ def baseline_rows(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
     rows = []
     for k in sorted(set(options.ks)):
-        dist = options.aggregate(distribution, k, frame_positions)
+        dist = options.aggregate(distribution, k)
         rows.append(metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)))
     return rows
 
@@ -64,14 +63,11 @@ def nearest_neighbour_rows(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    decisions = nearest_neighbour_decisions(
-        similarities, reference_place_ids, query_place_ids, options, truth, frame_positions
-    )
+    decisions = nearest_neighbour_decisions(similarities, reference_place_ids, query_place_ids, options, truth)
     return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
 
 
@@ -81,12 +77,11 @@ def nearest_neighbour_decisions(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
     out = {}
     for k in sorted(set(options.ks)):
-        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions))
+        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity))
         out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
     return out
 
