@@ -107,7 +107,7 @@ class Readout:
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
         self._prepared: tuple[np.ndarray, np.ndarray] | None = None  # the stream's S'' and S^R column sums
-        self._calibrated: tuple[np.ndarray, np.ndarray | None] | None = None  # S~ and the silenced neurons
+        self._calibrated: tuple[np.ndarray, np.ndarray] | None = None  # S~ and the silenced neurons
 
     @classmethod
     def of(cls, calibration: np.ndarray, config: Config, options: SequenceOptions | None = None) -> Readout:
@@ -129,8 +129,8 @@ class Readout:
             raise InvalidValueError(f"counts has {sq.shape[1]} neurons per query but the calibration {sr.shape[0]}")
         return all_scores(sr, silenced_counts(sq, silent), self.gamma)
 
-    def calibrated(self) -> tuple[sparse.csr_array, np.ndarray | None]:
-        """S~ (S^R for a single network; float64 CSR) and the silenced neurons (None: none), computed once: the
+    def calibrated(self) -> tuple[sparse.csr_array, np.ndarray]:
+        """S~ (S^R for a single network; float64 CSR) and the silenced neurons (a mask), computed once: the
         query-independent half of every batch, block and frame read out (:func:`~.regions.calibrated_half`)."""
         if self._calibrated is None:
             self._calibrated = calibrated_half(self.calibration, self.modules)
@@ -256,10 +256,7 @@ class Readout:
             self._prepared = (np.asarray(weighted_matrix(sr, self.gamma).data), np.asarray(sr.sum(axis=0)).ravel())
         weights, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
-        active = sq > 0
-        if silent is not None:
-            active &= ~silent
-        rows = np.flatnonzero(active)
+        rows = np.flatnonzero((sq > 0) & ~silent)  # the active neurons
         first, last, _ = (slice(None) if places is None else places).indices(len(column_sum))
         starts, lengths = sr.indptr[rows], np.diff(sr.indptr)[rows]
         entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
