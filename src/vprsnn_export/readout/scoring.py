@@ -164,10 +164,8 @@ class Readout:
                 f"query_counts has shape {np.shape(counts)}, expected ({n_queries}, {neurons}): one row per query "
                 "id, one column per neuron of the calibration"
             )
-        if max(self.options.ks) > len(query_place_ids):  # no full window exists
-            raise InvalidValueError(
-                f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
-            )
+        if max(self.options.ks) > n_queries:  # no full window exists
+            raise InvalidValueError(f"--k {max(self.options.ks)} exceeds the number of queries ({n_queries})")
         truth.check_overlap(reference_place_ids, query_place_ids)
         return truth
 
