@@ -159,10 +159,6 @@ class MetricValues(JsonDataclass):
             raise KeyError(metric)
         return float(getattr(self, metric))
 
-    def minus(self, other: MetricValues) -> MetricValues:
-        """self - other, metric by metric."""
-        return MetricValues(*(self.get(m) - other.get(m) for m in METRICS))
-
 
 @dataclass(frozen=True)
 class MetricRow(JsonDataclass):
@@ -192,10 +188,9 @@ class MetricRow(JsonDataclass):
         return self.values.auc_pr
 
     def with_float(self, base: MetricRow) -> MetricRow:
-        """This row with the float row's values and the differences (this - float)."""
-        return MetricRow(
-            self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
-        )
+        """This row with the float row's values and the differences (this - float), metric by metric."""
+        delta = MetricValues(*(self.values.get(m) - base.values.get(m) for m in METRICS))
+        return MetricRow(self.strategy, self.k, self.values, self.n_queries, base.values, delta)
 
 
 def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:
