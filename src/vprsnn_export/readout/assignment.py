@@ -129,8 +129,7 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     with ``A = standard_assignment(sr)``, a sparse product (integer counts: exact sums).
     """
     sr_, sq_ = count_pair(sr, sq)
-    votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
-    return (sq_ @ votes).toarray()
+    return (sq_ @ once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))).toarray()
 
 
 def standard_voters(sr: sparse.csr_array) -> sparse.csr_array:

@@ -59,9 +59,7 @@ def step_bound(assignment: np.ndarray, group: int) -> float:
     a = np.asarray(assignment, dtype=np.float64)
     if a.ndim != 2 or group < 1 or a.shape[0] % group:
         raise InvalidValueError(f"assignment (neurons, places) must hold whole WTA groups of {group}, got {a.shape}")
-    if a.size == 0:
-        return 0.0
-    return float(a.reshape(a.shape[0] // group, group * a.shape[1]).max(axis=1).sum())
+    return 0.0 if a.size == 0 else float(a.reshape(a.shape[0] // group, group * a.shape[1]).max(axis=1).sum())
 
 
 def _raster(raster: object) -> np.ndarray:
