@@ -149,14 +149,12 @@ class Readout:
         exceeds the queries or no query can match a reference."""
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
-        arrays = {"calibration": self.calibration, "query_counts": counts}
-        ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
-        for name, value in {**arrays, **ids}.items():
-            if np.ndim(value) != (2 if name in arrays else 1):
-                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
-        (neurons, places), (n_references,), (n_queries,) = map(
-            np.shape, (self.calibration, reference_place_ids, query_place_ids)
-        )
+        values = (self.calibration, counts, reference_place_ids, query_place_ids)
+        names = ("calibration", "query_counts", "reference_place_ids", "query_place_ids")
+        for name, value, ndim in zip(names, values, (2, 2, 1, 1), strict=True):
+            if np.ndim(value) != ndim:
+                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {ndim}-D")
+        (neurons, places), _, (n_references,), (n_queries,) = map(np.shape, values)
         if places != n_references:
             raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
         if np.shape(counts) != (n_queries, neurons):
