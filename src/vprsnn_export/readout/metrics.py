@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass, json_options
 
@@ -80,16 +79,14 @@ def is_correct(
 def operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c = np.asarray(correct)
-    conf = real_array("confidence", confidence)
+    conf = finite_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
         raise InvalidValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
     if c.shape[0] == 0:
         raise InvalidValueError("no queries: precision and recall are undefined")
-    if c.dtype != np.bool_:
-        if not np.all((c == 0) | (c == 1)):
-            raise InvalidValueError("correct must be boolean (or 0/1)")
-        c = c.astype(bool)
-    conf = finite_array("confidence", conf)
+    if c.dtype != np.bool_ and not np.all((c == 0) | (c == 1)):
+        raise InvalidValueError("correct must be boolean (or 0/1)")
+    c = c.astype(bool, copy=False)
     order = np.argsort(-conf, kind="stable")
     conf_sorted = conf[order]
     tp_cum = np.cumsum(c[order], dtype=np.int64)
