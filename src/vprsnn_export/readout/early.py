@@ -80,8 +80,7 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
     a = np.asarray(assignment, dtype=np.float64)
     if a.shape[0] != neurons or a.shape[1] < 1:
         raise InvalidValueError(f"assignment must be ({neurons}, places >= 1), got shape {a.shape}")
-    bound = step_bound(a, group)
-    remaining = (timesteps - np.arange(1, timesteps + 1)) * bound  # after t = 1..T steps
+    remaining = (timesteps - np.arange(1, timesteps + 1)) * step_bound(a, group)  # (T - t) c after t = 1..T steps
     stops = np.empty(n, dtype=np.int64)
     for start in range(0, n, CHUNK):  # a (chunk, T, places) trajectory at a time
         part = raster[start : start + CHUNK]
