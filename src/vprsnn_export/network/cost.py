@@ -116,18 +116,6 @@ def joined_costs(costs: list[QueryCost]) -> QueryCost:
     )
 
 
-def used_steps(steps: object, n_queries: int, timesteps: int) -> np.ndarray:
-    """T_q per query: ``None`` -> T for all; else (N,) integers in [0, T] (InvalidValueError naming ``steps``)."""
-    if steps is None:
-        return np.full(n_queries, timesteps, dtype=np.int64)
-    arr = np.asarray(steps)
-    if arr.shape != (n_queries,) or not np.issubdtype(arr.dtype, np.integer):
-        raise InvalidValueError(f"steps must be ({n_queries},) integers, got {arr.dtype} of shape {arr.shape}")
-    if arr.size and (arr.min() < 0 or arr.max() > timesteps):
-        raise InvalidValueError(f"steps must lie in [0, {timesteps}], got {arr.min()}..{arr.max()}")
-    return arr.astype(np.int64)
-
-
 def prefix_sums(per_step: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """sum_{t < T_q} a[q, t] for a (N, T) array and T_q per query: the cumulative sum read at T_q (0 for T_q = 0)."""
     cumulative = np.concatenate([np.zeros((per_step.shape[0], 1), np.int64), np.cumsum(per_step, axis=1)], axis=1)
@@ -157,7 +145,12 @@ def query_cost(
     n_queries, timesteps, n_inputs = arr.shape
     if neurons < 1 or places < 0:
         raise InvalidValueError(f"neurons must be >= 1 and places >= 0, got {neurons} and {places}")
-    used = used_steps(steps, n_queries, timesteps)
+    used = np.full(n_queries, timesteps, dtype=np.int64) if steps is None else np.asarray(steps)
+    if used.shape != (n_queries,) or not np.issubdtype(used.dtype, np.integer):
+        raise InvalidValueError(f"steps must be ({n_queries},) integers, got {used.dtype} of shape {used.shape}")
+    if used.size and (used.min() < 0 or used.max() > timesteps):
+        raise InvalidValueError(f"steps must lie in [0, {timesteps}], got {used.min()}..{used.max()}")
+    used = used.astype(np.int64)
     per_step = arr.sum(axis=2, dtype=np.int64)
     if fan_out is None:
         events_per_step = per_step * neurons

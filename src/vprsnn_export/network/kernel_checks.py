@@ -27,9 +27,7 @@ def require_array(
         raise InvalidValueError(f"{kernel}: {name} must be {expected}, got {type(array).__name__}")
     if array.dtype not in allowed:
         raise InvalidValueError(f"{kernel}: {name} must be {expected}, got dtype {array.dtype}")
-    if array.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(array.shape, shape, strict=True)
-    ):
+    if array.ndim != len(shape) or any(want not in (None, have) for have, want in zip(array.shape, shape, strict=True)):
         raise InvalidValueError(f"{kernel}: {name} must be {expected}, got shape {array.shape}")
     if not array.flags.c_contiguous:
         raise InvalidValueError(f"{kernel}: {name} must be {expected}, got a non-contiguous array")

@@ -32,9 +32,7 @@ def module_count(n_places: int, module_size: int) -> int:
     """M = ceil(places / P); 1 when P = 0 (one network) or when there are no places yet."""
     n_places = require_integer("n_places", n_places, 0, MAX_COUNT)
     module_size = require_integer("module_size", module_size, 0, MAX_COUNT)
-    if module_size <= 0 or n_places <= 0:
-        return 1
-    return -(-n_places // module_size)
+    return 1 if module_size <= 0 or n_places <= 0 else -(-n_places // module_size)
 
 
 def module_regions(n_places: int, module_size: int) -> np.ndarray:

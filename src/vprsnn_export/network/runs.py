@@ -95,8 +95,6 @@ class Backend(Protocol):
     @property
     def name(self) -> str:
         """A short human-readable name ("float", "integer simulator", "onnxruntime", ...)."""
-        ...
 
     def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
         """Present spikes (N, T, inputs) uint8; ``record`` asks for the raster and final voltages."""
-        ...

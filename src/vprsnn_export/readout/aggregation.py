@@ -45,8 +45,7 @@ def _velocities(velocity: float | np.ndarray, n: int) -> np.ndarray:
     if np.asarray(velocity).dtype.kind == "b":
         raise InvalidValueError(f"velocity must be places per frame (a number or one per query), got {velocity!r}")
     v = real_array("velocity", velocity)
-    if v.ndim == 0:
-        v = np.full(n, float(v))
+    v = np.full(n, float(v)) if v.ndim == 0 else v
     if v.shape != (n,):
         raise InvalidValueError(f"velocity must be a float or have shape ({n},), got {v.shape}")
     return finite_array("velocity", v)
@@ -316,12 +315,11 @@ def estimate_velocity(
     frame_positions: np.ndarray | None = None,
     eps: float = 1e-6,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-window velocity search over a candidate grid; returns ``(velocity, aggregated)``.
+    """Per-window velocity search over a candidate grid; returns ``(velocity (Q,), aggregated (Q, places))``.
 
     .. math:: \\hat v_j = \\arg\\max_{v \\in \\mathcal{V}} e_j(v) = \\arg\\max_{v} \\max_l A_j^{(v)}(l)
 
     (:func:`window_scores`; ties: the first candidate). Each window decides alone (see :func:`track_velocity`).
-    Returns the velocity per query ``(n_queries,)`` and the aggregate at it ``(n_queries, n_places)``.
     """
     return track_velocity(prob, k, candidates, 1, rule, frame_positions, eps, length=k, memory=0)
 

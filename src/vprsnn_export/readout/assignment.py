@@ -27,6 +27,8 @@ from scipy import sparse
 from vprsnn_export.arguments import real_array, real_number
 from vprsnn_export.errors import InvalidValueError
 
+from .rules import l1_finish
+
 #: Predicted place index that means "no match" (the query is rejected).
 NO_MATCH: Final[int] = -1
 
@@ -127,8 +129,7 @@ def standard_scores(sr: np.ndarray, sq: np.ndarray) -> np.ndarray:
     with ``A = standard_assignment(sr)``, a sparse product (integer counts: exact sums).
     """
     sr_, sq_ = count_pair(sr, sq)
-    votes = once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))
-    return (sq_ @ votes).toarray()
+    return (sq_ @ once_per_calibration("voters", sr, (), lambda: standard_voters(sr_))).toarray()
 
 
 def standard_voters(sr: sparse.csr_array) -> sparse.csr_array:
@@ -207,11 +208,7 @@ def wprob_distribution(scores: np.ndarray) -> np.ndarray:
     s = finite_matrix("scores", scores)
     lo = s.min(axis=1, keepdims=True)
     span = s.max(axis=1, keepdims=True) - lo
-    norm = (s - lo) / np.where(span > 0, span, 1.0)
-    total = norm.sum(axis=1, keepdims=True)
-    out = norm / np.where(total > 0, total, 1.0)
-    out[span[:, 0] <= 0, :] = 1.0 / s.shape[1]
-    return out
+    return l1_finish((s - lo) / np.where(span > 0, span, 1.0))[0]  # a flat row is 0 everywhere: uniform
 
 
 def share_confidence(scores: np.ndarray) -> np.ndarray:

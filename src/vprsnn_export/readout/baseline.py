@@ -103,9 +103,7 @@ def sad_similarities(distances: np.ndarray) -> np.ndarray:
     return d.max(axis=1, keepdims=True) - d
 
 
-def diagonal_sums(
-    scores: np.ndarray, k: int, velocity: float = 1.0, frame_positions: np.ndarray | None = None
-) -> np.ndarray:
+def diagonal_sums(scores: np.ndarray, k: int, velocity: float = 1.0) -> np.ndarray:
     """Sequence scores of the k most recent frames summed along the velocity-shifted diagonal, ``(n_queries, n_places)``.
 
     .. math:: A_j(l) = \\sum_{m \\in W_j} S_m\\big(l - v (t_j - t_m)\\big)
@@ -122,7 +120,7 @@ def diagonal_sums(
     if k == 1:
         return s.copy()
     n_queries, n_places = s.shape
-    t = np.arange(n_queries, dtype=np.float64) if frame_positions is None else np.asarray(frame_positions, np.float64)
+    t = np.arange(n_queries, dtype=np.float64)  # t_j = j, the frame index
     v = np.full(n_queries, float(velocity))
     out = np.empty_like(s)
     chunk = max(1, _MAX_ELEMENTS // (k * max(1, n_places)))

@@ -59,9 +59,7 @@ def step_bound(assignment: np.ndarray, group: int) -> float:
     a = np.asarray(assignment, dtype=np.float64)
     if a.ndim != 2 or group < 1 or a.shape[0] % group:
         raise InvalidValueError(f"assignment (neurons, places) must hold whole WTA groups of {group}, got {a.shape}")
-    if a.size == 0:
-        return 0.0
-    return float(a.reshape(a.shape[0] // group, group * a.shape[1]).max(axis=1).sum())
+    return 0.0 if a.size == 0 else float(a.reshape(a.shape[0] // group, group * a.shape[1]).max(axis=1).sum())
 
 
 def _raster(raster: object) -> np.ndarray:
@@ -82,8 +80,7 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
     a = np.asarray(assignment, dtype=np.float64)
     if a.shape[0] != neurons or a.shape[1] < 1:
         raise InvalidValueError(f"assignment must be ({neurons}, places >= 1), got shape {a.shape}")
-    bound = step_bound(a, group)
-    remaining = (timesteps - np.arange(1, timesteps + 1)) * bound  # after t = 1..T steps
+    remaining = (timesteps - np.arange(1, timesteps + 1)) * step_bound(a, group)  # (T - t) c after t = 1..T steps
     stops = np.empty(n, dtype=np.int64)
     for start in range(0, n, CHUNK):  # a (chunk, T, places) trajectory at a time
         part = raster[start : start + CHUNK]
@@ -159,7 +156,6 @@ def early_queries(
     spikes: torch.Tensor,
     calibration: np.ndarray,
     cfg: Config,
-    chunk: int = 64,
     *,
     keep_raster: bool = False,
     isolated: bool | None = None,
@@ -182,7 +178,7 @@ def early_queries(
         runs.append(part if keep_raster else dataclasses.replace(part, raster=None))
         return part.raster.numpy()
 
-    return runs, early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early, chunk)
+    return runs, early_in_chunks(raster, int(spikes.shape[0]), votes, group, cfg.early)
 
 
 def early_run(
@@ -190,12 +186,9 @@ def early_run(
     spikes: torch.Tensor,
     calibration: np.ndarray,
     cfg: Config,
-    chunk: int = 64,
     *,
     isolated: bool | None = None,
 ) -> EarlyDecision | None:
     """``config.early``'s decision for the queries ``spikes`` on a backend (:func:`early_queries`, chunk by chunk:
     the rasters of a whole route need not fit in memory); None when the rule is off."""
-    if is_off(cfg.early):
-        return None
-    return early_queries(run, spikes, calibration, cfg, chunk, isolated=isolated)[1]
+    return None if is_off(cfg.early) else early_queries(run, spikes, calibration, cfg, isolated=isolated)[1]

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.serial import JsonDataclass, json_options
 
@@ -74,23 +73,20 @@ def is_correct(
         if m.dtype != np.bool_ or m.shape != pred.shape:
             raise InvalidValueError("matched must be a boolean array with one entry per query")
         ok &= m
-    diff = np.abs(pred.astype(np.float64) - true.astype(np.float64))
-    return ok & (diff <= tolerance)
+    return ok & (np.abs(pred.astype(np.float64) - true.astype(np.float64)) <= tolerance)
 
 
 def operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(TP_k, accepted_k, tau_k, N) for every distinct confidence tau_k, descending."""
     c = np.asarray(correct)
-    conf = real_array("confidence", confidence)
+    conf = finite_array("confidence", confidence)
     if c.ndim != 1 or conf.shape != c.shape:
         raise InvalidValueError(f"correct {c.shape} and confidence {conf.shape} must be 1-D of equal length")
     if c.shape[0] == 0:
         raise InvalidValueError("no queries: precision and recall are undefined")
-    if c.dtype != np.bool_:
-        if not np.all((c == 0) | (c == 1)):
-            raise InvalidValueError("correct must be boolean (or 0/1)")
-        c = c.astype(bool)
-    conf = finite_array("confidence", conf)
+    if c.dtype != np.bool_ and not np.all((c == 0) | (c == 1)):
+        raise InvalidValueError("correct must be boolean (or 0/1)")
+    c = c.astype(bool, copy=False)
     order = np.argsort(-conf, kind="stable")
     conf_sorted = conf[order]
     tp_cum = np.cumsum(c[order], dtype=np.int64)
@@ -160,10 +156,6 @@ class MetricValues(JsonDataclass):
             raise KeyError(metric)
         return float(getattr(self, metric))
 
-    def minus(self, other: MetricValues) -> MetricValues:
-        """self - other, metric by metric."""
-        return MetricValues(*(self.get(m) - other.get(m) for m in METRICS))
-
 
 @dataclass(frozen=True)
 class MetricRow(JsonDataclass):
@@ -193,10 +185,9 @@ class MetricRow(JsonDataclass):
         return self.values.auc_pr
 
     def with_float(self, base: MetricRow) -> MetricRow:
-        """This row with the float row's values and the differences (this - float)."""
-        return MetricRow(
-            self.strategy, self.k, self.values, self.n_queries, base.values, self.values.minus(base.values)
-        )
+        """This row with the float row's values and the differences (this - float), metric by metric."""
+        delta = MetricValues(*(self.values.get(m) - base.values.get(m) for m in METRICS))
+        return MetricRow(self.strategy, self.k, self.values, self.n_queries, base.values, delta)
 
 
 def metric_row(strategy: str, k: int, metrics: Mapping) -> MetricRow:

@@ -159,8 +159,7 @@ def resampled_metrics(correct: np.ndarray, confidence: np.ndarray, indices: np.n
     """
     c, conf = _pair(correct, confidence, second_real=True)
     order = np.argsort(-conf, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
+    rank = np.argsort(order)  # the inverse permutation: query -> its rank
     idx = np.asarray(indices)
     resamples, n = idx.shape
     flat = (np.arange(resamples)[:, None] * c.size + rank[idx]).ravel()

@@ -127,13 +127,10 @@ def region_weighting(sr: np.ndarray, regions: np.ndarray, group: int, outside_we
 
     .. math:: \\tilde S_{il} = \\begin{cases} S^R_{il} & l \\in R(i) \\\\ \\lambda\\, S^R_{il} & l \\notin R(i) \\end{cases}
 
-    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged. Dense or CSR, as given.
+    lambda = 0: region-specific assignment (Hussaini et al.); lambda = 1: S^R unchanged. Dense or CSR, as given:
+    :func:`regularised_calibration` with rho = 1, which silences no neuron.
     """
-    sr_ = sparse_counts("sr", sr)
-    lam = float(outside_weight)
-    if not 0.0 <= lam <= 1.0:
-        raise InvalidValueError(f"outside_weight must lie in [0, 1], got {lam}")
-    return like_input(_scaled(sr_, np.where(_inside(sr_, check_regions(regions), group), 1.0, lam)), sr)
+    return regularised_calibration(sr, ModuleLayout(regions, group, 1.0, outside_weight))[0]
 
 
 def outside_involvement(sr: np.ndarray, regions: np.ndarray, group: int) -> np.ndarray:
@@ -159,9 +156,9 @@ def hyperactive_neurons(sr: np.ndarray, layout: ModuleLayout) -> np.ndarray:
     return outside_involvement(sr, layout.regions, layout.group) > float(layout.hyperactive_share)
 
 
-def silenced_counts(sq: sparse.csr_array, silent: np.ndarray | None) -> sparse.csr_array:
+def silenced_counts(sq: sparse.csr_array, silent: np.ndarray) -> sparse.csr_array:
     """S^Q without the silent neurons' counts: :math:`S^Q_{\\cdot i} \\leftarrow 0` for every silent i (CSR)."""
-    return sq if silent is None or not silent.any() else _scaled(sq, np.where(silent[sq.indices], 0.0, 1.0))
+    return sq if not silent.any() else _scaled(sq, np.where(silent[sq.indices], 0.0, 1.0))
 
 
 def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> tuple[np.ndarray, np.ndarray]:
@@ -179,11 +176,11 @@ def regularise(sr: np.ndarray, sq: np.ndarray, layout: ModuleLayout | None) -> t
     return like_input(weighted, sr), like_input(silenced_counts(count_pair(weighted, sq)[1], silent), sq)
 
 
-def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[sparse.csr_array, np.ndarray | None]:
-    """S^R as float64 CSR, or S~ and the silenced neurons of ``layout`` (:func:`regularised_calibration`; None:
-    none): the query-independent half of a readout."""
+def calibrated_half(sr: np.ndarray, layout: ModuleLayout | None) -> tuple[sparse.csr_array, np.ndarray]:
+    """S^R as float64 CSR and no neuron silenced, or S~ and the silenced neurons of ``layout``
+    (:func:`regularised_calibration`): the query-independent half of a readout."""
     sr_ = sparse_counts("sr", sr)
-    return (sr_, None) if layout is None else regularised_calibration(sr_, layout)
+    return (sr_, np.zeros(sr_.shape[0], dtype=bool)) if layout is None else regularised_calibration(sr_, layout)
 
 
 def regularised_calibration(sr: np.ndarray, layout: ModuleLayout) -> tuple[np.ndarray, np.ndarray]:

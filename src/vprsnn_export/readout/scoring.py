@@ -47,12 +47,11 @@ def baseline_rows(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """The SAD baseline's distribution (Q, places) read out like W+Prob at every k of ``options`` (strategy "sad")."""
     rows = []
     for k in sorted(set(options.ks)):
-        dist = options.aggregate(distribution, k, frame_positions)
+        dist = options.aggregate(distribution, k)
         rows.append(metric_row("sad", k, decision_metrics(dist, "wprob", reference_place_ids, query_place_ids, truth)))
     return rows
 
@@ -64,14 +63,11 @@ def nearest_neighbour_rows(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> list[MetricRow]:
     """A no-learning baseline read out as nearest neighbour at every k of ``options``: the best place, the margin
     between the best and second-best score as confidence, k frames summed along the diagonal at the given velocity
     (:func:`vprsnn_export.readout.baseline.diagonal_sums`). Rows with strategy ``name``."""
-    decisions = nearest_neighbour_decisions(
-        similarities, reference_place_ids, query_place_ids, options, truth, frame_positions
-    )
+    decisions = nearest_neighbour_decisions(similarities, reference_place_ids, query_place_ids, options, truth)
     return [metric_row(name, k, pr_metrics(*decided)) for k, decided in decisions.items()]
 
 
@@ -81,12 +77,11 @@ def nearest_neighbour_decisions(
     query_place_ids: np.ndarray,
     options: SequenceOptions,
     truth: Truth,
-    frame_positions: np.ndarray | None = None,
 ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """Per k of ``options``: each query's (correct, confidence) under :func:`nearest_neighbour_rows`' rule."""
     out = {}
     for k in sorted(set(options.ks)):
-        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity, frame_positions))
+        predicted, confidence = nearest_neighbour(diagonal_sums(similarities, k, options.velocity))
         out[k] = (truth.correct(predicted_place_ids(predicted, reference_place_ids), query_place_ids), confidence)
     return out
 
@@ -112,7 +107,7 @@ class Readout:
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
         self._prepared: tuple[np.ndarray, np.ndarray] | None = None  # the stream's S'' and S^R column sums
-        self._calibrated: tuple[np.ndarray, np.ndarray | None] | None = None  # S~ and the silenced neurons
+        self._calibrated: tuple[np.ndarray, np.ndarray] | None = None  # S~ and the silenced neurons
 
     @classmethod
     def of(cls, calibration: np.ndarray, config: Config, options: SequenceOptions | None = None) -> Readout:
@@ -134,8 +129,8 @@ class Readout:
             raise InvalidValueError(f"counts has {sq.shape[1]} neurons per query but the calibration {sr.shape[0]}")
         return all_scores(sr, silenced_counts(sq, silent), self.gamma)
 
-    def calibrated(self) -> tuple[sparse.csr_array, np.ndarray | None]:
-        """S~ (S^R for a single network; float64 CSR) and the silenced neurons (None: none), computed once: the
+    def calibrated(self) -> tuple[sparse.csr_array, np.ndarray]:
+        """S~ (S^R for a single network; float64 CSR) and the silenced neurons (a mask), computed once: the
         query-independent half of every batch, block and frame read out (:func:`~.regions.calibrated_half`)."""
         if self._calibrated is None:
             self._calibrated = calibrated_half(self.calibration, self.modules)
@@ -154,14 +149,12 @@ class Readout:
         exceeds the queries or no query can match a reference."""
         truth = window(self.options.tolerance) if truth is None else truth
         require_type("truth", truth, Truth)
-        arrays = {"calibration": self.calibration, "query_counts": counts}
-        ids = {"reference_place_ids": reference_place_ids, "query_place_ids": query_place_ids}
-        for name, value in {**arrays, **ids}.items():
-            if np.ndim(value) != (2 if name in arrays else 1):
-                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {2 if name in arrays else 1}-D")
-        (neurons, places), (n_references,), (n_queries,) = map(
-            np.shape, (self.calibration, reference_place_ids, query_place_ids)
-        )
+        values = (self.calibration, counts, reference_place_ids, query_place_ids)
+        names = ("calibration", "query_counts", "reference_place_ids", "query_place_ids")
+        for name, value, ndim in zip(names, values, (2, 2, 1, 1), strict=True):
+            if np.ndim(value) != ndim:
+                raise InvalidValueError(f"{name} has shape {np.shape(value)}, expected {ndim}-D")
+        (neurons, places), _, (n_references,), (n_queries,) = map(np.shape, values)
         if places != n_references:
             raise InvalidValueError(f"calibration covers {places} places but reference_place_ids names {n_references}")
         if np.shape(counts) != (n_queries, neurons):
@@ -169,10 +162,8 @@ class Readout:
                 f"query_counts has shape {np.shape(counts)}, expected ({n_queries}, {neurons}): one row per query "
                 "id, one column per neuron of the calibration"
             )
-        if max(self.options.ks) > len(query_place_ids):  # no full window exists
-            raise InvalidValueError(
-                f"--k {max(self.options.ks)} exceeds the number of queries ({len(query_place_ids)})"
-            )
+        if max(self.options.ks) > n_queries:  # no full window exists
+            raise InvalidValueError(f"--k {max(self.options.ks)} exceeds the number of queries ({n_queries})")
         truth.check_overlap(reference_place_ids, query_place_ids)
         return truth
 
@@ -261,10 +252,7 @@ class Readout:
             self._prepared = (np.asarray(weighted_matrix(sr, self.gamma).data), np.asarray(sr.sum(axis=0)).ravel())
         weights, column_sum = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
-        active = sq > 0
-        if silent is not None:
-            active &= ~silent
-        rows = np.flatnonzero(active)
+        rows = np.flatnonzero((sq > 0) & ~silent)  # the active neurons
         first, last, _ = (slice(None) if places is None else places).indices(len(column_sum))
         starts, lengths = sr.indptr[rows], np.diff(sr.indptr)[rows]
         entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())

@@ -35,19 +35,6 @@ class ReadoutStream:
             raise InvalidValueError(f"a stream decides at one k (--k), got {', '.join(map(str, self.options.ks))}")
         return self.options.ks[0]
 
-    def _tracking(self) -> tuple[int, int, int] | None:
-        """(trajectory length, span, memory) of the causal velocity tracker, None at a given velocity."""
-        options, k = self.options, self.k
-        if options.velocity_candidates is None or k == 1:
-            return None
-        stream = VELOCITY_ESTIMATES.get(options.velocity_estimate).stream
-        if stream is None:
-            raise InvalidValueError(
-                f"--velocity-estimate {options.velocity_estimate} waits for later frames; a stream decides "
-                f"causally: choose {' or '.join(causal_estimates())}"
-            )
-        return stream(k, options)
-
     def reset(self) -> None:
         """Forget the stream: the next frame pushed is frame 0."""
         self._stream = None
@@ -69,15 +56,21 @@ class ReadoutStream:
         (the previous windows' e rows kept, at most S - 1; ties to the first candidate).
         """
         options, k = self.options, self.k
-        tracking = self._tracking()
-        length, span, memory = tracking if tracking is not None else (1, 1, 0)
+        tracking = options.velocity_candidates is not None and k > 1  # else at the given velocity
+        causal = VELOCITY_ESTIMATES.get(options.velocity_estimate).stream
+        if tracking and causal is None:
+            raise InvalidValueError(
+                f"--velocity-estimate {options.velocity_estimate} waits for later frames; a stream decides "
+                f"causally: choose {' or '.join(causal_estimates())}"
+            )
+        length, span, memory = causal(k, options) if tracking and causal is not None else (1, 1, 0)
         if self._stream is None:  # the recent W+Prob rows, stream-contrast rows and window scores
             self._stream = (deque(maxlen=max(k, length, memory)), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
         recent, contrast, scores = self._stream
         row = self.wprob(counts, places)
         recent.append(row)
         velocity = options.velocity
-        if tracking is not None:
+        if tracking:
             contrast.append(stream_contrast(np.asarray(recent)[-max(memory, 1) :], memory)[-1])
             candidates = np.asarray(options.velocity_candidates)
             last = np.array([len(contrast) - 1])  # the contrast deque holds the last T rows
