@@ -29,8 +29,8 @@ from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import SpikeRun
 
-from .batched import history_entry, module_epochs, side_by_side
-from .train import Presentation, TrainedNetwork, initial_state
+from .batched import module_epochs, side_by_side
+from .train import Presentation, TrainedNetwork, history_entry, initial_state
 
 STREAMS = {"query": query_spikes, "calibrate": calibration_spikes}
 CPU = torch.device("cpu")
