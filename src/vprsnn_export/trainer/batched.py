@@ -65,7 +65,8 @@ def _kernel_batch(
     epoch: int,
     threads: int,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Every module's batch through the compiled kernel (weights updated in place), then its homeostasis."""
+    """Every module's batch through the compiled kernel (weights updated in place), then its homeostasis:
+    theta_m <- homeostasis_update(theta_m, fired_m / (B_m T)) for every module with a batch (B_m > 0)."""
     sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
     limits = np.zeros((len(batch_rows), int(sizes.max()), images.shape[1]), dtype=np.int32)
     seeds = np.zeros(limits.shape[:2], dtype=np.int64)
@@ -76,17 +77,12 @@ def _kernel_batch(
                 training_seeds(cfg, presentations, rows, epoch), cfg.encoder.generator
             )
     fired = torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
-    return weights, _homeostasis(theta, fired, sizes, cfg), fired
-
-
-def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cfg: Config) -> torch.Tensor:
-    """theta_m <- homeostasis_update(theta_m, fired_m / (B_m T)) for every module with a batch (B_m > 0)."""
     theta = theta.clone()
     for size in sorted({int(s) for s in sizes if s > 0}):
         index = torch.from_numpy(np.flatnonzero(sizes == size)).to(theta.device)
         rate = fired[index] / (size * cfg.training_encoder.timesteps)
         theta[index] = homeostasis_update(theta[index], rate, cfg.homeostasis)
-    return theta
+    return weights, theta, fired
 
 
 def _torch_batch(
