@@ -99,9 +99,7 @@ def to_json_dict(obj: Any) -> dict[str, Any]:
     return {k: data[k] for k in order if k in data} | {k: v for k, v in data.items() if k not in order}
 
 
-@functools.cache
-def _hints(cls: Any) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
+_hints = functools.cache(typing.get_type_hints)
 
 
 def _encode(hint: Any, value: Any) -> Any:

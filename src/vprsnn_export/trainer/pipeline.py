@@ -60,7 +60,6 @@ def train_and_calibrate(
     if cluster is not None:
         trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
         arrays = (trained.weights.numpy(), trained.thresholds.numpy())
-        network = FloatNetwork.from_arrays(*arrays, cfg, torch.device("cpu"))
         calibration = calibrate_on_cluster(
             *arrays, cfg, reference_images, dataset.place_ids, cluster, progress=progress
         )
@@ -70,8 +69,8 @@ def train_and_calibrate(
         calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg, progress=progress)
     return Checkpoint(
         config=cfg,
-        weights=network.weights.cpu().numpy(),
-        thresholds=network.thresholds.cpu().numpy(),
+        weights=trained.weights.numpy(),  # float32 on the CPU (TrainedNetwork)
+        thresholds=trained.thresholds.numpy(),
         calibration=calibration,
         reference_place_ids=np.asarray(dataset.place_ids, dtype=np.int64),
         reference_traversals=list(references),
