@@ -85,7 +85,8 @@ def _stdp_window(
                 n_active[b] = _active_inputs(spikes[b, t], index[b])
                 _row_sum(weights, index[b], n_active[b], current[b])
         ready = False
-        for b in range(batch):
+        n_win = n_used = 0
+        for b in range(batch):  # row by row: the rows share only sums taken in row order (fired_total, P^T, D)
             row_voltage, row_current, row_fired = voltage[b], current[b], fired[b]
             n_cand = 0
             for j in range(n_neurons):  # branch-free: vectorised
@@ -109,7 +110,6 @@ def _stdp_window(
                 row_fired[best] = True
                 winners[b, 0] = best
                 n_winners[b] = 1
-        for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
             if n_winners[b] > 0 or row_traced[b]:  # y_bj = 0 keep + 0 = 0 in a row that has never fired
@@ -120,8 +120,6 @@ def _stdp_window(
                 fired_total[j] += one
                 traced[j] = True
                 row_traced[b] = True
-        n_win = n_used = 0
-        for b in range(batch):
             n_win = _add_trace(winners[b, : n_winners[b]], win_slot, win_cols, n_win, potentiation, pre_trace[b])
             if row_traced[b]:
                 n_used = _add_trace(index[b, : n_active[b]], input_slot, inputs_used, n_used, depression, post_trace[b])
