@@ -200,7 +200,6 @@ class JsonDataclass:
     """Mixin for a frozen dataclass: ``to_dict()`` and ``from_dict()`` by this module."""
 
     def to_dict(self) -> dict[str, Any]:
-        """This value's JSON object."""
         return to_json_dict(self)
 
     @classmethod

@@ -73,8 +73,7 @@ def train_batch(
         post_trace = decay_trace(post_trace, post, cfg.stdp.tau_post)
         weights = apply_update(weights, stdp_delta(weights, pre_trace, pre, post_trace, post, cfg.stdp), cfg.stdp)
         fired_total += post.sum(dim=-2)
-    theta = homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis)
-    return weights, theta, fired_total
+    return weights, homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis), fired_total
 
 
 def training_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.ndarray, epoch: int) -> list[int]:
