@@ -49,8 +49,7 @@ def input_gain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def stretches(place_ids: np.ndarray) -> list[np.ndarray]:
     """The positions of ``place_ids`` cut where consecutive ids are not consecutive (each stretch pairs on its own)."""
-    cuts = np.flatnonzero(np.diff(place_ids) != 1) + 1
-    return np.split(np.arange(len(place_ids)), cuts)
+    return np.split(np.arange(len(place_ids)), np.flatnonzero(np.diff(place_ids) != 1) + 1)
 
 
 def sequence_pairs(reference: np.ndarray, frames: np.ndarray, frame_ids: np.ndarray, k: int) -> np.ndarray:
