@@ -10,10 +10,9 @@ int64 instead of ``calibration``), and a JSON header holding the config, the see
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 from scipy import sparse
@@ -137,31 +136,28 @@ def check_header(
 def reference_header(meta: dict[str, Any], path: str | Path) -> tuple[list[str], dict[str, str | None]]:
     """The header's reference traversals (a non-empty list of names) and data record (a mapping of strings), for
     checkpoints and fixed-point models (which also need a string ``package_version``); ModelFileError naming ``path``
-    otherwise."""
-    problem = next(_header_defects(meta), None)
-    if problem is not None:
-        raise ModelFileError(problem, path)
-    return list(meta.get("reference_traversals", [])), dict(meta.get("data", {}))
+    otherwise, for the first defect in the order checked."""
 
+    def fail(problem: str) -> NoReturn:
+        raise ModelFileError(problem, path) from None
 
-def _header_defects(meta: dict[str, Any]) -> Iterator[str]:
-    """What is wrong with a header's version, reference traversals and data record, in the order checked."""
     if not isinstance(meta.get("package_version", "unknown"), str):
-        yield f"package_version must be a version string, got {meta['package_version']!r}"
+        fail(f"package_version must be a version string, got {meta['package_version']!r}")
     traversals = meta.get("reference_traversals", [])
     names = traversals if isinstance(traversals, list) and all(isinstance(t, str) and t for t in traversals) else []
     if not names or len(set(names)) != len(names):
-        yield "reference_traversals must be a non-empty list of distinct traversal names"
+        fail("reference_traversals must be a non-empty list of distinct traversal names")
     data = meta.get("data", {})
     if not isinstance(data, dict) or not all(v is None or isinstance(v, str) for v in data.values()):
-        yield "data must be a mapping of names to strings (source, selection)"
+        fail("data must be a mapping of names to strings (source, selection)")
     try:
         if data.get("places"):
             parse_places(data["places"])
         if str(data.get("source", "")).startswith("synthetic"):
             parse_synthetic(data["source"])
     except InvalidValueError as exc:
-        yield f"the data record is invalid ({exc})"
+        fail(f"the data record is invalid ({exc})")
+    return list(names), dict(data)
 
 
 def validate_reference_ids(ids: np.ndarray, path: str | Path) -> int:
@@ -180,42 +176,40 @@ def checkpoint_sha256(path: str | Path) -> str:
 
 
 def validate_checkpoint(ckpt: Checkpoint, path: str | Path = "<checkpoint>") -> None:
-    """Shapes agree with the config, dtypes are numeric, values finite and in range (ModelFileError naming ``path``)."""
+    """Shapes agree with the config, dtypes are numeric, values finite and in range: ModelFileError naming ``path``
+    for the first defect in the order checked (each check may assume the ones before it passed)."""
     path = Path(path)
-    problem = next(_checkpoint_defects(ckpt, path), None)
-    if problem is not None:
+
+    def fail(problem: str) -> NoReturn:
         raise ModelFileError(problem, path)
 
-
-def _checkpoint_defects(ckpt: Checkpoint, path: Path) -> Iterator[str]:
-    """What is wrong with ``ckpt``, in the order checked (each check may assume the ones before it passed)."""
     if not isinstance(ckpt, Checkpoint):
-        yield f"not a Checkpoint: a {type(ckpt).__name__}"
+        fail(f"not a Checkpoint: a {type(ckpt).__name__}")
     if isinstance(ckpt.reference_traversals, str) or not isinstance(ckpt.reference_traversals, list | tuple):
-        yield f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}"
+        fail(f"reference_traversals must be a list of traversal names, got {ckpt.reference_traversals!r}")
     n_places = validate_reference_ids(ckpt.reference_place_ids, path)
     n_neurons = ensemble_neurons(ckpt.config, n_places)  # M n: every module's neurons side by side
     for name, shape in (("weights", (ckpt.config.network.n_inputs, n_neurons)), ("thresholds", (n_neurons,))):
         array = getattr(ckpt, name)
         if array.shape != shape:
-            yield f"{name} has shape {array.shape}, expected {shape} from its config"
+            fail(f"{name} has shape {array.shape}, expected {shape} from its config")
         if not np.issubdtype(array.dtype, np.floating):
-            yield f"{name} has dtype {array.dtype}, expected float32"
+            fail(f"{name} has dtype {array.dtype}, expected float32")
         if not np.all(np.isfinite(array)):
-            yield f"{name} contains NaN or infinite values"
+            fail(f"{name} contains NaN or infinite values")
     if np.any(ckpt.weights < 0):
-        yield "weights contain negative values (STDP weights are non-negative)"
+        fail("weights contain negative values (STDP weights are non-negative)")
     if np.any(ckpt.weights > ckpt.config.stdp.w_max * (1 + 1e-6)):
-        yield f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}"
+        fail(f"weights exceed the config's w_max = {ckpt.config.stdp.w_max}")
     if np.any(ckpt.thresholds <= 0):
-        yield "thresholds must be positive"
+        fail("thresholds must be positive")
     ceiling = max(ckpt.config.homeostasis.theta_max, ckpt.config.network.theta_init)
     if np.any(ckpt.thresholds > ceiling * (1 + 1e-6)):
-        yield f"thresholds exceed the config's theta_max / theta_init ({ceiling})"
+        fail(f"thresholds exceed the config's theta_max / theta_init ({ceiling})")
     if ckpt.calibration.shape != (n_neurons, n_places):
-        yield f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}"
+        fail(f"calibration has shape {ckpt.calibration.shape}, expected {(n_neurons, n_places)}")
     values = np.asarray(ckpt.calibration.data if sparse.issparse(ckpt.calibration) else ckpt.calibration)
     if not np.issubdtype(ckpt.calibration.dtype, np.integer) or np.any(values < 0):
-        yield "calibration must hold non-negative integer spike counts"
+        fail("calibration must hold non-negative integer spike counts")
     if not ckpt.reference_traversals:
-        yield "checkpoint names no reference traversal"
+        fail("checkpoint names no reference traversal")

@@ -99,9 +99,7 @@ def to_json_dict(obj: Any) -> dict[str, Any]:
     return {k: data[k] for k in order if k in data} | {k: v for k, v in data.items() if k not in order}
 
 
-@functools.cache
-def _hints(cls: Any) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
+_hints = functools.cache(typing.get_type_hints)
 
 
 def _encode(hint: Any, value: Any) -> Any:
@@ -202,7 +200,6 @@ class JsonDataclass:
     """Mixin for a frozen dataclass: ``to_dict()`` and ``from_dict()`` by this module."""
 
     def to_dict(self) -> dict[str, Any]:
-        """This value's JSON object."""
         return to_json_dict(self)
 
     @classmethod

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vprsnn_export.arguments import require_choice
 from vprsnn_export.config import Config
 from vprsnn_export.data.dataset import Dataset, parse_places
 from vprsnn_export.data.truth import GroundTruth
@@ -48,8 +49,7 @@ def input_gain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def stretches(place_ids: np.ndarray) -> list[np.ndarray]:
     """The positions of ``place_ids`` cut where consecutive ids are not consecutive (each stretch pairs on its own)."""
-    cuts = np.flatnonzero(np.diff(place_ids) != 1) + 1
-    return np.split(np.arange(len(place_ids)), cuts)
+    return np.split(np.arange(len(place_ids)), np.flatnonzero(np.diff(place_ids) != 1) + 1)
 
 
 def sequence_pairs(reference: np.ndarray, frames: np.ndarray, frame_ids: np.ndarray, k: int) -> np.ndarray:
@@ -123,8 +123,7 @@ def adapt_config(
         raise InvalidValueError(f"--adapt-from: {traversal!r} is a reference traversal; name a second traversal")
     if traversal not in dataset.images:
         raise InvalidValueError(f"--adapt-from: no traversal {traversal!r} in the data ({', '.join(dataset.images)})")
-    if pairing not in ("sequence", "truth"):
-        raise InvalidValueError(f"pairing: expected 'sequence' or 'truth', got {pairing!r}")
+    require_choice("pairing", pairing, ("sequence", "truth"))
     ids = np.asarray(dataset.place_ids, dtype=np.int64)
     chosen = ids if places is None else np.asarray(places, dtype=np.int64)
     absent = np.setdiff1d(chosen, ids)

@@ -40,7 +40,7 @@ from vprsnn_export.resources import LOWER_TRAINING, check_memory, training_need
 
 from .homeostasis import homeostasis_update
 from .stdp_kernel import stdp_windows
-from .train import Presentation, TrainedNetwork, epoch_order, initial_state, train_batch, training_seeds
+from .train import Presentation, TrainedNetwork, epoch_order, history_entry, initial_state, train_batch, training_seeds
 
 
 def module_training_rows(n_places: int, module_size: int, n_traversals: int) -> list[np.ndarray]:
@@ -65,7 +65,8 @@ def _kernel_batch(
     epoch: int,
     threads: int,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Every module's batch through the compiled kernel (weights updated in place), then its homeostasis."""
+    """Every module's batch through the compiled kernel (weights updated in place), then its homeostasis:
+    theta_m <- homeostasis_update(theta_m, fired_m / (B_m T)) for every module with a batch (B_m > 0)."""
     sizes = np.array([len(rows) for rows in batch_rows], dtype=np.int64)
     limits = np.zeros((len(batch_rows), int(sizes.max()), images.shape[1]), dtype=np.int32)
     seeds = np.zeros(limits.shape[:2], dtype=np.int64)
@@ -76,17 +77,12 @@ def _kernel_batch(
                 training_seeds(cfg, presentations, rows, epoch), cfg.encoder.generator
             )
     fired = torch.from_numpy(stdp_windows(weights.numpy(), theta.numpy(), limits, seeds, sizes, cfg, threads=threads))
-    return weights, _homeostasis(theta, fired, sizes, cfg), fired
-
-
-def _homeostasis(theta: torch.Tensor, fired: torch.Tensor, sizes: np.ndarray, cfg: Config) -> torch.Tensor:
-    """theta_m <- homeostasis_update(theta_m, fired_m / (B_m T)) for every module with a batch (B_m > 0)."""
     theta = theta.clone()
     for size in sorted({int(s) for s in sizes if s > 0}):
         index = torch.from_numpy(np.flatnonzero(sizes == size)).to(theta.device)
         rate = fired[index] / (size * cfg.training_encoder.timesteps)
         theta[index] = homeostasis_update(theta[index], rate, cfg.homeostasis)
-    return theta
+    return weights, theta, fired
 
 
 def _torch_batch(
@@ -228,21 +224,3 @@ def side_by_side(weights: torch.Tensor) -> torch.Tensor:
     """(M, inputs, n) -> (inputs, M n): module m's columns [m n, (m + 1) n)."""
     n_modules, n_inputs, n_neurons = weights.shape
     return weights.permute(1, 0, 2).reshape(n_inputs, n_modules * n_neurons).contiguous()
-
-
-def history_entry(epoch: int, seconds: float, fired: torch.Tensor, theta: torch.Tensor, n_rows: np.ndarray) -> dict:
-    """One epoch over all modules; with M > 1 also each module's spikes per presentation and active neurons."""
-    counts = fired.cpu().to(torch.float64)
-    entry: dict = {
-        "epoch": epoch + 1,
-        "seconds": seconds,
-        "spikes_per_presentation": float(counts.sum()) / int(n_rows.sum()),
-        "active_neurons": int((counts > 0).sum()),
-        "theta_mean": float(theta.reshape(-1).mean()),
-    }
-    if len(n_rows) > 1:
-        entry["module_spikes_per_presentation"] = [
-            round(float(c) / int(r), 4) for c, r in zip(counts.sum(dim=1), n_rows, strict=True)
-        ]
-        entry["module_active_neurons"] = [int(a) for a in (counts > 0).sum(dim=1)]
-    return entry

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from vprsnn_export.config import Config
 from vprsnn_export.data.encoding import calibration_spikes
-from vprsnn_export.resources import LOWER_RUN, MemoryNeed, check_memory
+from vprsnn_export.resources import MemoryNeed
 
 CountRunner = Callable[[torch.Tensor], torch.Tensor]
 """Any network implementation: spikes (N, T, inputs) uint8 -> output spike counts (N, neurons)."""
@@ -87,8 +87,3 @@ def calibration_need(cfg: Config, presentations: int, n_neurons: int, places: in
             (f"S^R {n_neurons} x {places}", sr),
         )
     )
-
-
-def check_calibration_memory(cfg: Config, presentations: int, n_neurons: int, places: int) -> None:
-    """InvalidValueError (one line) when :func:`calibration_need` exceeds the memory limit."""
-    check_memory(calibration_need(cfg, presentations, n_neurons, places), "calibration", LOWER_RUN)

@@ -14,9 +14,10 @@ from vprsnn_export.data.dataset import Dataset
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.io.checkpoint import Checkpoint
 from vprsnn_export.network.dynamics import FloatNetwork
+from vprsnn_export.resources import LOWER_RUN, check_memory
 
 from .batched import check_training_memory, module_training_rows, train_modules
-from .calibrate import calibrate, check_calibration_memory
+from .calibrate import calibrate, calibration_need
 from .sharded import calibrate_on_cluster, train_modules_on_cluster
 from .train import Presentation
 
@@ -55,12 +56,11 @@ def train_and_calibrate(
     rows = module_training_rows(len(dataset.place_ids), cfg.train.module_size, len(references))
     check_training_memory(cfg, len(rows), max(len(r) for r in rows), threads)
     n_places = len(dataset.place_ids)
-    check_calibration_memory(cfg, n_places, len(rows) * cfg.network.n_neurons, n_places)
+    check_memory(calibration_need(cfg, n_places, len(rows) * cfg.network.n_neurons, n_places), "calibration", LOWER_RUN)
     reference_images = {name: dataset.traversal(name) for name in references}
     if cluster is not None:
         trained = train_modules_on_cluster(images, presentations, rows, cfg, cluster, progress=progress)
         arrays = (trained.weights.numpy(), trained.thresholds.numpy())
-        network = FloatNetwork.from_arrays(*arrays, cfg, torch.device("cpu"))
         calibration = calibrate_on_cluster(
             *arrays, cfg, reference_images, dataset.place_ids, cluster, progress=progress
         )
@@ -70,8 +70,8 @@ def train_and_calibrate(
         calibration = calibrate(network.counts, reference_images, dataset.place_ids, cfg, progress=progress)
     return Checkpoint(
         config=cfg,
-        weights=network.weights.cpu().numpy(),
-        thresholds=network.thresholds.cpu().numpy(),
+        weights=trained.weights.numpy(),  # float32 on the CPU (TrainedNetwork)
+        thresholds=trained.thresholds.numpy(),
         calibration=calibration,
         reference_place_ids=np.asarray(dataset.place_ids, dtype=np.int64),
         reference_traversals=list(references),

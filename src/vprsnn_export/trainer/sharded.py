@@ -29,8 +29,8 @@ from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import SpikeRun
 
-from .batched import history_entry, module_epochs, side_by_side
-from .train import Presentation, TrainedNetwork, initial_state
+from .batched import module_epochs, side_by_side
+from .train import Presentation, TrainedNetwork, history_entry, initial_state
 
 STREAMS = {"query": query_spikes, "calibrate": calibration_spikes}
 CPU = torch.device("cpu")
@@ -153,30 +153,27 @@ def float_runs_on_cluster(
     n = cfg.network.n_neurons
     groups = module_groups(weights.shape[1] // n, modules_per_task)
     isolated = cfg.network.state_isolation if state_isolation is None else state_isolation
+    parts: list[tuple[np.ndarray, np.ndarray, slice | np.ndarray]]  # weights, thresholds, presentations of a task
     if wta_group(cfg, weights.shape[1]) == n or len(groups) == 1:
         columns = [slice(group.start * n, group.stop * n) for group in groups]
-        parts = [(np.ascontiguousarray(weights[:, c]), np.ascontiguousarray(thresholds[c])) for c in columns]
-        tasks = [
-            (*part, cfg, images, place_ids, traversal, stream, state_isolation)
-            for traversal, images in presentations.items()
-            for part in parts
-        ]
-        axis, parts_per_traversal = 1, len(groups)
+        every = slice(None)  # each task runs every presentation on its modules
+        parts = [(np.ascontiguousarray(weights[:, c]), np.ascontiguousarray(thresholds[c]), every) for c in columns]
+        axis = 1
     else:
         split = np.array_split(np.arange(len(place_ids)), len(groups) if isolated else 1)
-        slices = [piece for piece in split if len(piece)]
-        tasks = [
-            (weights, thresholds, cfg, images[piece], place_ids[piece], traversal, stream, state_isolation)
-            for traversal, images in presentations.items()
-            for piece in slices
-        ]
-        axis, parts_per_traversal = 0, len(slices)
+        parts = [(weights, thresholds, piece) for piece in split if len(piece)]
+        axis = 0
+    tasks = [
+        (w, t, cfg, images[rows], place_ids[rows], traversal, stream, state_isolation)
+        for traversal, images in presentations.items()
+        for w, t, rows in parts
+    ]
     done = map_tasks(cluster, run_group, tasks, timing=timing, progress=f"{stream} runs" if progress else None)
     runs: dict[str, SpikeRun] = {}
     for k, traversal in enumerate(presentations):
-        parts = done[k * parts_per_traversal : (k + 1) * parts_per_traversal]
-        counts = np.concatenate([c for c, _ in parts], axis=axis)
-        steps = [c for _, c in parts]  # |C[t]|: the module groups' add up, the presentation slices' follow on
+        results = done[k * len(parts) : (k + 1) * len(parts)]
+        counts = np.concatenate([c for c, _ in results], axis=axis)
+        steps = [c for _, c in results]  # |C[t]|: the module groups' add up, the presentation slices' follow on
         candidates = np.sum(steps, axis=0, dtype=np.int64).astype(np.int32) if axis == 1 else np.concatenate(steps)
         runs[traversal] = SpikeRun(torch.from_numpy(counts), torch.from_numpy(candidates))
     return runs

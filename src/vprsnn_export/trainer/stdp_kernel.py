@@ -13,7 +13,6 @@ contiguous slices of modules (:func:`vprsnn_export.network.parallel.module_slice
 from __future__ import annotations
 
 from functools import partial
-from typing import Any
 
 import numpy as np
 import torch
@@ -25,20 +24,16 @@ from vprsnn_export.network.kernel_checks import require_array, require_int
 from vprsnn_export.network.kernel_sums import ANY3, SPIKES, _active_inputs, _row_sum, as_spike_array, compiled
 from vprsnn_export.network.parallel import module_slices, run_threads
 
+#: The kernels' scalar parameters (:func:`kernel_scalars`).
+Scalars = tuple[np.float32, bool, np.float32, np.float32, np.float32, np.float32, np.float32, bool]
+
 
 @compiled
 def _stdp_window(
     spikes: np.ndarray,  # (B, T, inputs) uint8
     weights: np.ndarray,  # (inputs, neurons) float32, updated in place
     theta: np.ndarray,  # (neurons,) float32
-    beta: np.float32,
-    wta: bool,
-    pre_keep: np.float32,
-    post_keep: np.float32,
-    a_plus: np.float32,
-    a_minus: np.float32,
-    w_max: np.float32,
-    weight_norm: bool,
+    scalars: Scalars,  # kernel_scalars
 ) -> np.ndarray:
     """The training window, each float32 operation in the torch loop's order, in one pass over W per step.
 
@@ -52,6 +47,7 @@ def _stdp_window(
     ("untraced") whose norm was exactly 1.0f ("settled") keeps its weights (the division is the
     identity) and is divided by 1.
     """
+    beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm = scalars
     batch, timesteps, n_inputs = spikes.shape
     n_neurons = weights.shape[1]
     zero = np.float32(0)
@@ -89,7 +85,8 @@ def _stdp_window(
                 n_active[b] = _active_inputs(spikes[b, t], index[b])
                 _row_sum(weights, index[b], n_active[b], current[b])
         ready = False
-        for b in range(batch):
+        n_win = n_used = 0
+        for b in range(batch):  # row by row: the rows share only sums taken in row order (fired_total, P^T, D)
             row_voltage, row_current, row_fired = voltage[b], current[b], fired[b]
             n_cand = 0
             for j in range(n_neurons):  # branch-free: vectorised
@@ -113,7 +110,6 @@ def _stdp_window(
                 row_fired[best] = True
                 winners[b, 0] = best
                 n_winners[b] = 1
-        for b in range(batch):
             for i in range(n_inputs):
                 pre_trace[b, i] = pre_trace[b, i] * pre_keep + np.float32(spikes[b, t, i])
             if n_winners[b] > 0 or row_traced[b]:  # y_bj = 0 keep + 0 = 0 in a row that has never fired
@@ -124,33 +120,9 @@ def _stdp_window(
                 fired_total[j] += one
                 traced[j] = True
                 row_traced[b] = True
-        n_win = 0
-        for b in range(batch):
-            for w in range(n_winners[b]):
-                j = winners[b, w]
-                if win_slot[j] < 0:
-                    win_slot[j] = n_win
-                    win_cols[n_win] = j
-                    potentiation[n_win] = zero
-                    n_win += 1
-                sums = potentiation[win_slot[j]]
-                trace = pre_trace[b]
-                for i in range(n_inputs):
-                    sums[i] += trace[i]
-        n_used = 0
-        for b in range(batch):
+            n_win = _add_trace(winners[b, : n_winners[b]], win_slot, win_cols, n_win, potentiation, pre_trace[b])
             if row_traced[b]:
-                for a in range(n_active[b]):
-                    i = index[b, a]
-                    if input_slot[i] < 0:
-                        input_slot[i] = n_used
-                        inputs_used[n_used] = i
-                        depression[n_used] = zero
-                        n_used += 1
-                    sums = depression[input_slot[i]]
-                    trace = post_trace[b]
-                    for j in range(n_neurons):
-                        sums[j] += trace[j]
+                n_used = _add_trace(index[b, : n_active[b]], input_slot, inputs_used, n_used, depression, post_trace[b])
         if np.any(traced) or (weight_norm and not np.all(settled)):  # some column changes
             squares[:] = zero
             for i in range(n_inputs):
@@ -181,6 +153,24 @@ def _stdp_window(
         win_slot[win_cols[:n_win]] = -1
         input_slot[inputs_used[:n_used]] = -1
     return fired_total
+
+
+@compiled
+def _add_trace(
+    keys: np.ndarray, slot: np.ndarray, used: np.ndarray, n_used: int, sums: np.ndarray, trace: np.ndarray
+) -> int:
+    """sums[slot[k]] += trace (in order) for each key k, a key without a row taking the next one (zeroed) and
+    listed in ``used``; returns the rows in use. P^T: keys a row's winners, traces x_b; D: its active inputs, y_b."""
+    for k in keys:
+        if slot[k] < 0:
+            slot[k] = n_used
+            used[n_used] = k
+            sums[n_used] = 0
+            n_used += 1
+        row = sums[slot[k]]
+        for i in range(trace.size):
+            row[i] += trace[i]
+    return n_used
 
 
 @compiled
@@ -235,14 +225,7 @@ def _stdp_windows(
     timesteps: int,
     weights: np.ndarray,  # (M, inputs, neurons) float32, updated in place
     theta: np.ndarray,  # (M, neurons) float32
-    beta: np.float32,
-    wta: bool,
-    pre_keep: np.float32,
-    post_keep: np.float32,
-    a_plus: np.float32,
-    a_minus: np.float32,
-    w_max: np.float32,
-    weight_norm: bool,
+    scalars: Scalars,  # kernel_scalars
     philox: bool,
 ) -> np.ndarray:
     """One training batch of every module: encode module m's rows (MT19937, or Philox4x32-10 with ``philox``), then
@@ -258,34 +241,17 @@ def _stdp_windows(
         rows = sizes[m]
         if rows > 0:
             _encode_rows(limits[m, :rows], seeds[m, :rows], timesteps, spikes[:rows], philox)
-            fired[m] = _stdp_window(
-                spikes[:rows], weights[m], theta[m], beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max,
-                weight_norm,
-            )  # fmt: skip
+            fired[m] = _stdp_window(spikes[:rows], weights[m], theta[m], scalars)
     return fired
 
 
-def stdp_window_kernel(
-    spikes: np.ndarray,
-    weights: np.ndarray,
-    theta: np.ndarray,
-    beta: np.float32,
-    wta: bool,
-    pre_keep: np.float32,
-    post_keep: np.float32,
-    a_plus: np.float32,
-    a_minus: np.float32,
-    w_max: np.float32,
-    weight_norm: bool,
-) -> np.ndarray:
+def stdp_window_kernel(spikes: np.ndarray, weights: np.ndarray, theta: np.ndarray, scalars: Scalars) -> np.ndarray:
     """:func:`_stdp_window` once every array it indexes is checked (InvalidValueError naming it)."""
     k = "STDP window kernel"
     require_array(k, "spikes", spikes, SPIKES, ANY3)
     require_array(k, "weights", weights, (np.float32,), (spikes.shape[2], None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (weights.shape[1],))
-    return _stdp_window(
-        spikes, weights, theta, beta, bool(wta), pre_keep, post_keep, a_plus, a_minus, w_max, bool(weight_norm)
-    )
+    return _stdp_window(spikes, weights, theta, scalars)
 
 
 def stdp_windows_kernel(
@@ -295,13 +261,11 @@ def stdp_windows_kernel(
     timesteps: int,
     weights: np.ndarray,
     theta: np.ndarray,
-    *args: Any,
+    scalars: Scalars,
+    philox: bool,
 ) -> np.ndarray:
-    """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it).
-
-    ``args``: beta, wta, pre_keep, post_keep, a_plus, a_minus, w_max, weight_norm and philox (the encoder's
-    generator: Philox4x32-10, else MT19937).
-    """
+    """:func:`_stdp_windows` once every array it indexes is checked (InvalidValueError naming it); ``philox``: the
+    encoder's generator is Philox4x32-10, else MT19937."""
     k = "STDP windows kernel"
     require_array(k, "limits", limits, (np.int32,), ANY3)
     n_modules, batch, n_inputs = limits.shape
@@ -312,17 +276,11 @@ def stdp_windows_kernel(
     steps = require_int(k, "timesteps", timesteps, 0)
     require_array(k, "weights", weights, (np.float32,), (n_modules, n_inputs, None), writable=True)
     require_array(k, "theta", theta, (np.float32,), (n_modules, weights.shape[2]))
-    if len(args) != 9:
-        raise InvalidValueError(f"{k}: expected 9 scalar parameters, got {len(args)}")
-    scalars = (*args[:8], bool(args[8]))
-    return _stdp_windows(limits, seeds, sizes, steps, weights, theta, *scalars)
+    return _stdp_windows(limits, seeds, sizes, steps, weights, theta, scalars, bool(philox))
 
 
 #: Modules one call of the training kernel trains (:func:`stdp_windows`): what an interrupt waits for, per thread.
 MODULES_PER_CALL = 8
-
-#: The kernels' scalar parameters (:func:`kernel_scalars`).
-Scalars = tuple[np.float32, bool, np.float32, np.float32, np.float32, np.float32, np.float32, bool]
 
 
 def kernel_scalars(cfg: Config) -> Scalars:
@@ -347,7 +305,7 @@ def stdp_window(
         return None
     updated = weights.detach().clone().contiguous()
     fired = stdp_window_kernel(
-        as_spike_array(spikes), updated.numpy(), np.ascontiguousarray(theta.detach().numpy()), *kernel_scalars(cfg)
+        as_spike_array(spikes), updated.numpy(), np.ascontiguousarray(theta.detach().numpy()), kernel_scalars(cfg)
     )
     return updated, torch.from_numpy(fired)
 
@@ -373,13 +331,14 @@ def stdp_windows(
     an interrupt waits for the slices in flight only, not the whole batch; at 27k places a thread's half of a batch
     is 135 modules, ~30 s). Returns the spikes per neuron (M, n) float32.
     """
-    args = (*kernel_scalars(cfg), cfg.encoder.generator == "philox")
+    scalars = kernel_scalars(cfg)
+    philox = cfg.encoder.generator == "philox"
     timesteps = int(cfg.training_encoder.timesteps)
     sizes = np.ascontiguousarray(sizes, dtype=np.int64)
 
     parts = module_slices(len(limits), max(threads, -(-len(limits) // MODULES_PER_CALL)))
     tasks = [
-        partial(stdp_windows_kernel, limits[p], seeds[p], sizes[p], timesteps, weights[p], theta[p], *args)
+        partial(stdp_windows_kernel, limits[p], seeds[p], sizes[p], timesteps, weights[p], theta[p], scalars, philox)
         for p in parts
     ]
     return np.concatenate(run_threads(tasks, threads))

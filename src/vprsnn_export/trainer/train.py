@@ -73,8 +73,7 @@ def train_batch(
         post_trace = decay_trace(post_trace, post, cfg.stdp.tau_post)
         weights = apply_update(weights, stdp_delta(weights, pre_trace, pre, post_trace, post, cfg.stdp), cfg.stdp)
         fired_total += post.sum(dim=-2)
-    theta = homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis)
-    return weights, theta, fired_total
+    return weights, homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis), fired_total
 
 
 def training_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.ndarray, epoch: int) -> list[int]:
@@ -131,15 +130,27 @@ def train_network(
             spikes = encode(images[rows], seeds, cfg.training_encoder).to(device)
             weights, theta, batch_fired = train_batch(weights, theta, spikes, cfg, compiled=compiled)
             fired += batch_fired
-        entry = {
-            "epoch": epoch + 1,
-            "seconds": time.perf_counter() - started,
-            "spikes_per_presentation": float(fired.sum()) / len(images),
-            "active_neurons": int((fired > 0).sum()),
-            "theta_mean": float(theta.mean()),
-        }
+        entry = history_entry(epoch, time.perf_counter() - started, fired, theta, np.array([len(images)]))
         if on_epoch is not None:
             entry.update(on_epoch(epoch + 1, weights, theta) or {})
         history.append(entry)
         epochs.set_postfix(active=entry["active_neurons"], theta=f"{entry['theta_mean']:.3f}")
     return TrainedNetwork(weights.cpu(), theta.cpu(), history)
+
+
+def history_entry(epoch: int, seconds: float, fired: torch.Tensor, theta: torch.Tensor, n_rows: np.ndarray) -> dict:
+    """One epoch over all modules; with M > 1 also each module's spikes per presentation and active neurons."""
+    counts = fired.cpu().to(torch.float64)
+    entry: dict = {
+        "epoch": epoch + 1,
+        "seconds": seconds,
+        "spikes_per_presentation": float(counts.sum()) / int(n_rows.sum()),
+        "active_neurons": int((counts > 0).sum()),
+        "theta_mean": float(theta.reshape(-1).mean()),
+    }
+    if len(n_rows) > 1:
+        entry["module_spikes_per_presentation"] = [
+            round(float(c) / int(r), 4) for c, r in zip(counts.sum(dim=1), n_rows, strict=True)
+        ]
+        entry["module_active_neurons"] = [int(a) for a in (counts > 0).sum(dim=1)]
+    return entry

@@ -88,14 +88,7 @@ def stdp_args() -> dict[str, Any]:
         spikes=_spikes((N, T, D)),
         weights=np.full((D, NEURONS), 0.3, dtype=F32),
         theta=np.full(NEURONS, 0.5, dtype=F32),
-        beta=F32(0.9),
-        wta=True,
-        pre_keep=F32(0.8),
-        post_keep=F32(0.8),
-        a_plus=F32(0.01),
-        a_minus=F32(0.01),
-        w_max=F32(1.0),
-        weight_norm=True,
+        scalars=(F32(0.9), True, F32(0.8), F32(0.8), F32(0.01), F32(0.01), F32(1.0), True),
     )
 
 
@@ -124,7 +117,7 @@ def stdp_windows_args() -> dict[str, Any]:
 def call_stdp_windows(scalars: tuple, **arrays: Any) -> Any:
     """:func:`stdp_kernel.stdp_windows_kernel` with its arrays by name (its scalars are positional)."""
     order = ("limits", "seeds", "sizes", "timesteps", "weights", "theta")
-    return stdp_kernel.stdp_windows_kernel(*(arrays[name] for name in order), *scalars)
+    return stdp_kernel.stdp_windows_kernel(*(arrays[name] for name in order), scalars[:8], scalars[8])
 
 
 #: kernel -> (checked entry point, valid arguments, arguments written, arguments that set the sizes)
