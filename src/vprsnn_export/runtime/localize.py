@@ -33,10 +33,10 @@ the ONNX graph, which agree count for count, give the same decisions.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -202,7 +202,7 @@ class Localizer:
         isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
         self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
-        self.search, self._parts = search, OrderedDict[tuple[int, int], Callable[[torch.Tensor], np.ndarray]]()
+        self.search = search
         if search is not None:
             require_type("search", search, SearchWindow)
             if self.backend not in ("float", "integer"):
@@ -218,8 +218,15 @@ class Localizer:
                     "--search-window needs an operating point: it tracks the last accepted place "
                     "(run `localize MODEL --calibrate QUERY` first)"
                 )
-            self._open_part = lambda part: open_backend(part, self.backend, None, device, threads)[1]
-        self._isolated = isolated
+
+            @functools.lru_cache(PARTS_KEPT)
+            def window_counts(start: int, stop: int) -> Callable[[torch.Tensor], np.ndarray]:
+                """The counts of neurons ``start:stop`` (some consecutive modules) alone, their network opened once."""
+                part = network_part(isolated, slice(start, stop))
+                runner = open_backend(part, self.backend, None, device, threads)[1]
+                return lambda s: frame_counts(runner, s, part.calibration, part.config)
+
+            self._window_counts = window_counts
         self.stream = self.readout.stream()
         self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
@@ -241,15 +248,8 @@ class Localizer:
             return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
         regions, group = self._regions, self.config.network.n_neurons
         first, last = self.search.modules(self.centre, regions)
-        if (first, last) not in self._parts:
-            if len(self._parts) >= PARTS_KEPT:
-                self._parts.popitem(last=False)
-            part = network_part(self._isolated, slice(first * group, last * group))
-            runner = self._open_part(part)
-            self._parts[first, last] = lambda s: frame_counts(runner, s, part.calibration, part.config)
-        self._parts.move_to_end((first, last))
         counts = np.zeros((len(spikes), self.network.calibration.shape[0]), dtype=np.int64)
-        counts[:, first * group : last * group] = self._parts[first, last](spikes)
+        counts[:, first * group : last * group] = self._window_counts(first * group, last * group)(spikes)
         places = slice(int(regions[first, 0]), int(regions[last - 1, 1]))
         return counts, places, inputs * (last - first) * group, "window"
 
@@ -569,8 +569,9 @@ def tracking_rows(
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
 
-    def row(protocol: str, k: int, decisions: list[Decision], events: float, seconds: float) -> TrackingRow:
-        """One protocol's row from its decisions (R@100P: the recall at precision 1 of their curve)."""
+    def row(protocol: str, k: int, decisions: list[Decision], events: float, began: float) -> TrackingRow:
+        """One protocol's row from its decisions since ``began`` (R@100P: the recall at precision 1 of their curve)."""
+        seconds = time.perf_counter() - began
         curve = calibration_curve(decisions, place_ids, truth)
         index = curve.index_for(1.0)
         return TrackingRow(
@@ -587,12 +588,11 @@ def tracking_rows(
     for k in options.ks:
         at_k = dataclasses.replace(options, ks=(k,))
         whole = Localizer(network, options=at_k, **backend)
+        spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
         began = time.perf_counter()
         point, decisions, _ = operating_point(whole, images, place_ids, precision=precision, truth=truth)
-        seconds = time.perf_counter() - began
-        spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
         events = float(spikes) * network.calibration.shape[0] / max(len(decisions), 1)
-        rows.append(row("global", k, decisions, events, seconds))
+        rows.append(row("global", k, decisions, events, began))
         if point.threshold is None:
             raise InvalidValueError(
                 f"no confidence reaches precision {precision} at k={k} on these queries: the search window has no "
@@ -601,7 +601,6 @@ def tracking_rows(
         tracked = Localizer(network, options=at_k, threshold=point.threshold, search=search, **backend)
         began = time.perf_counter()
         decisions = tracked.run_inputs(images)
-        seconds = time.perf_counter() - began
         events = float(np.mean([d.events or 0 for d in decisions]))
-        rows.append(row(f"window {search.places}", k, decisions, events, seconds))
+        rows.append(row(f"window {search.places}", k, decisions, events, began))
     return rows
