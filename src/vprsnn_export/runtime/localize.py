@@ -240,9 +240,9 @@ class Localizer:
         self.misses = 0  # frames in a row without an accepted decision
 
     def _frame_counts(self, spikes: torch.Tensor, inputs: int) -> tuple[np.ndarray, slice | None, int, str | None]:
-        """One frame's counts over every neuron, the places it is decided among (None: all), its synaptic events
-        (``inputs`` spikes in) and its search (None: no search window): the whole network, or the window's modules
-        alone."""
+        """The frames' counts over every neuron, the places they are decided among (None: all), the synaptic events
+        (``inputs`` spikes in) and the search (None: no search window): the whole network, or (one frame) the
+        window's modules alone."""
         if self.search is None or self.centre is None:
             search = None if self.search is None else "global"
             return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
@@ -281,14 +281,7 @@ class Localizer:
         began = time.perf_counter()
         resized = self._resized(np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
-        return self._present(spikes, np.ptp(resized)[None] == 0, name, began)
-
-    def _present(self, spikes: torch.Tensor, flat: np.ndarray, name: str, began: float) -> Decision:
-        """One frame's spike train (1, T, inputs) run and decided (``flat``: :func:`no_place_reasons`)."""
-        inputs = input_spikes(spikes)
-        counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))
-        reason = no_place_reasons(flat, inputs, counts)[0]
-        return self._decide(counts[0], name, began, reason, places, events, search)
+        return self._present(spikes, np.ptp(resized)[None] == 0, [name], began)[0]
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
@@ -316,52 +309,46 @@ class Localizer:
         spikes = self.spikes(np.asarray(inputs, dtype=np.float32), 0)
         flat = np.zeros(len(spikes), bool) if flat is None else flat
         labels = names if names is not None else [str(i) for i in range(len(spikes))]
-        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
-            return [
-                self._present(spikes[j : j + 1], flat[j : j + 1], name, time.perf_counter())
-                for j, name in zip(range(len(spikes)), labels, strict=True)
-            ]
-        counts = self._counts(spikes)
-        reasons = no_place_reasons(flat, input_spikes(spikes), counts)
-        share = (time.perf_counter() - began) / max(len(counts), 1)
-        return [
-            self._decide(row, name, time.perf_counter() - share, reason)
-            for row, name, reason in zip(counts, labels, reasons, strict=True)
-        ]
+        if self.search is None:
+            return self._present(spikes, flat, labels, began)
+        # each frame's window follows the decisions before it: one frame at a time
+        frames = (slice(j, j + 1) for j in range(len(spikes)))
+        return [self._present(spikes[j], flat[j], labels[j], time.perf_counter())[0] for j in frames]
 
-    def _decide(
-        self,
-        counts: np.ndarray,
-        name: str,
-        began: float,
-        reason: str | None = None,
-        places: slice | None = None,
-        events: int | None = None,
-        search: str | None = None,
-    ) -> Decision:
-        """The readout's causal decision on one frame's counts; none (place None, not accepted) with ``reason``
-        for a frame that carries no place (the frame still enters the readout's window, as in a batch). With a
-        search window the decision moves it (:class:`SearchWindow`)."""
-        index, conf, velocity = self.stream.push(counts, places)
-        place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
-        accepted = self.threshold is not None and place is not None and conf >= self.threshold
-        if self.search is not None:
-            found = index if place is not None else None
-            self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
-        decision = Decision(
-            frame=self.frame,
-            name=name,
-            place_id=place,
-            confidence=0.0 if place is None else conf,
-            accepted=accepted,
-            velocity=float(velocity),
-            latency_ms=1000 * (time.perf_counter() - began),
-            reason=reason,
-            events=None if search is None else events,
-            search=search,
-        )
-        self.frame += 1
-        return decision
+    def _present(self, spikes: torch.Tensor, flat: np.ndarray, names: list[str], began: float) -> list[Decision]:
+        """Frames' spike trains (N, T, inputs) run at once from ``began`` (with a search window: one frame) and
+        decided in order, each latency with its share of the run (``flat``: :func:`no_place_reasons`).
+
+        The readout's causal decision on each frame's counts; none (place None, not accepted) with its reason for
+        a frame that carries no place (the frame still enters the readout's window, as in a batch). With a search
+        window the decision moves it (:class:`SearchWindow`)."""
+        inputs = input_spikes(spikes)
+        counts, places, events, search = self._frame_counts(spikes, int(inputs.sum()))
+        share = (time.perf_counter() - began) / max(len(counts), 1)
+        decisions = []
+        for row, name, reason in zip(counts, names, no_place_reasons(flat, inputs, counts), strict=True):
+            start = time.perf_counter() - share
+            index, conf, velocity = self.stream.push(row, places)
+            place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
+            accepted = self.threshold is not None and place is not None and conf >= self.threshold
+            if self.search is not None:
+                found = index if place is not None else None
+                self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
+            decision = Decision(
+                frame=self.frame,
+                name=name,
+                place_id=place,
+                confidence=0.0 if place is None else conf,
+                accepted=accepted,
+                velocity=float(velocity),
+                latency_ms=1000 * (time.perf_counter() - start),
+                reason=reason,
+                events=None if search is None else events,
+                search=search,
+            )
+            decisions.append(decision)
+            self.frame += 1
+        return decisions
 
 
 @dataclass(frozen=True, eq=False)
