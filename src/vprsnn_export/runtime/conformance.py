@@ -85,12 +85,13 @@ def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun
     return checks
 
 
-def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b: FixedPointModel) -> list[Comparison]:
-    """A fixed-point model read back from a file against the one written: every integer and the config."""
+def compare_models(prefix: str, a: FixedPointModel, b: FixedPointModel) -> list[Comparison]:
+    """A fixed-point model read back from a file (``b``) against the one written: every integer and the config."""
     arrays = ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
     scalars = [[m.bits, m.scale_exponent, m.decay_dv, m.voltage_shift, m.voltage_bits] for m in (a, b)]
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
+    a_name, b_name = "written model", "read back"
     return [
         *(exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name)) for name in arrays),
         exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1]),
@@ -153,9 +154,7 @@ def compare_backends(
     checks: list[Comparison] = []
     for contender in contenders:
         if contender.written is not None and contender.read_back is not None:
-            checks += compare_models(
-                contender.label, "written model", contender.written, "read back", contender.read_back
-            )
+            checks += compare_models(contender.label, contender.written, contender.read_back)
         n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
         if n == 0:
             continue
