@@ -53,19 +53,17 @@ def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Co
     return Comparison(check, a_name, b_name, "exact", False, detail, n_diff, int(a_arr.size), first)
 
 
-def distribution_comparison(
-    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
-) -> Comparison:
-    """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
+def distribution_comparison(check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray) -> Comparison:
+    """Two W+Prob distributions: identical decisions and max |a - b| <= ``WPROB_ROUNDING`` (float64 rounding)."""
     a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    kind = f"decisions exact, |diff| <= {limit:g}"
+    kind = f"decisions exact, |diff| <= {WPROB_ROUNDING:g}"
     if a_arr.shape != b_arr.shape:
         detail = f"shapes differ: {a_arr.shape} vs {b_arr.shape}"
         return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
     n_decisions = int(np.count_nonzero(decide(a_arr, SEQUENCE_STRATEGY)[0] != decide(b_arr, SEQUENCE_STRATEGY)[0]))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
     detail = f"{n_decisions} decisions differ; max |diff| {largest:.2e}"
-    passed = n_decisions == 0 and largest <= limit
+    passed = n_decisions == 0 and largest <= WPROB_ROUNDING
     return Comparison(
         check, a_name, b_name, kind, passed, detail, n_decisions, max_abs_difference=largest, family="distribution"
     )
