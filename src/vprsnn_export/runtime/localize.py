@@ -105,9 +105,8 @@ def no_place_reasons(flat: np.ndarray, inputs: np.ndarray, counts: np.ndarray) -
     scene), its spike train holds no spike (``inputs``: :func:`input_spikes` = 0) or the network answered with none
     (``sum_n c_n = 0``). Such a frame is no evidence of any place, so it gets no decision, whatever the
     recent frames say."""
-    n = len(counts)
     silent_input = np.asarray(inputs) == 0
-    silent_output = np.asarray(counts).reshape(n, -1).sum(axis=1) == 0
+    silent_output = np.asarray(counts).reshape(len(counts), -1).sum(axis=1) == 0
     reason = np.select([np.asarray(flat, dtype=bool), silent_input, silent_output], list(NO_PLACE), default="")
     return [str(r) or None for r in reason]
 
