@@ -187,14 +187,11 @@ def write_targets(
 def exact_contenders(model: FixedPointModel, slow_queries: int, device: torch.device | None) -> list[Contender]:
     """Every registered exact-integer backend that runs the model alone (no exported file) and is not the
     baseline; a slow one on the first ``slow_queries`` presentations only (none when 0)."""
-    contenders = []
-    for kind in tagged(EXACT):
-        if BASELINE in kind.tags or kind.needs is not None or (SLOW in kind.tags and not slow_queries):
-            continue
-        backend = open_backend(model, kind.name, device=device)[1]
-        limit = slow_queries if SLOW in kind.tags else None
-        contenders.append(Contender(kind.name, getattr(backend, "name", kind.name), backend, n_queries=limit))
-    return contenders
+    kinds = [
+        k for k in tagged(EXACT) if BASELINE not in k.tags and k.needs is None and (slow_queries or SLOW not in k.tags)
+    ]
+    opened = [(kind, open_backend(model, kind.name, device=device)[1]) for kind in kinds]
+    return [Contender(k.name, b.name, b, n_queries=slow_queries if SLOW in k.tags else None) for k, b in opened]
 
 
 def cross_implementation(
