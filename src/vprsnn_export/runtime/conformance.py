@@ -156,9 +156,8 @@ def compare_backends(
         n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
         if n == 0:
             continue
-        base = full
-        if n < spikes.shape[0]:  # the first n rows of the baseline's run; saturations are a total: a run of its own
-            base = replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
+        # fewer: the first n rows of the baseline's run; saturations are a total: a run of its own
+        base = full if n == spikes.shape[0] else replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
             base = replace(base, wprob=wprob(as_array(base.counts)))
