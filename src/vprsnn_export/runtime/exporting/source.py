@@ -133,13 +133,12 @@ def export_all(
     InvalidValueError for a target that is not registered, or an integer-only one without ``model``.
     """
     wanted = {TARGETS.get(name).name for name in targets}
-    integer = [name for name in TARGETS if name in wanted and TARGETS.get(name).integer_only]
-    if integer and model is None:
+    entries = [entry for entry in TARGETS.values() if entry.name in wanted]  # in the registry's order
+    if model is None and (integer := [entry.name for entry in entries if entry.integer_only]):
         raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
     options = WriteOptions(source.sha256, inhibition, wta_node)
     written: dict[str, list[Path]] = {}
-    for entry in TARGETS.values():
-        if entry.name in wanted:
-            network = model if entry.integer_only and model is not None else source.network
-            written[entry.name] = entry.write(network, out / entry.filename, options)
+    for entry in entries:
+        network = model if entry.integer_only and model is not None else source.network
+        written[entry.name] = entry.write(network, out / entry.filename, options)
     return written
