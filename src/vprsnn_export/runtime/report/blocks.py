@@ -14,6 +14,7 @@ from vprsnn_export.readout.strategies import STRATEGIES
 from ..measurements import ConformanceResult
 from ..results import METRICS, BitsResult, RunSummary, VerifiedRun, VerifyReport
 from ..verify.checks import TOLERANCE_MEANING
+from ..verify.paired import PAIRED_TOLERANCES
 from .labels import (
     METRIC_TITLES,
     PAIRED_COLUMNS,
@@ -91,18 +92,15 @@ def section(title: str, *parts: Block | str) -> list[Block]:
     return [Block("h2", title), *(Block("p", part) if isinstance(part, str) else part for part in parts)]
 
 
-#: Tolerances judged on one measured number (the metric tolerances are judged on the paired table).
-POINT_CHECKS = ("winner_agreement", "top1_agreement", "saturations")
-
-
 def failed_points(result: BitsResult, sep: str = " =") -> list[str]:
-    """A width's cross-implementation differences and missed point limits (``what{sep} value (limit L)``)."""
+    """A width's cross-implementation differences and missed point limits (``what{sep} value (limit L)``): the
+    tolerances judged on one measured number (the metric tolerances are judged on the paired table)."""
     cross = result.cross_implementation
     failed = [] if cross.passed else [f"{cross.n_failed} cross-implementation differences"]
     return failed + [
         f"{c.what}{sep} {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
         for c in result.tolerance_checks
-        if not c.passed and c.check in POINT_CHECKS
+        if not c.passed and c.check not in PAIRED_TOLERANCES
     ]
 
 
