@@ -53,19 +53,17 @@ def exact_comparison(check: str, a_name: str, a: Any, b_name: str, b: Any) -> Co
     return Comparison(check, a_name, b_name, "exact", False, detail, n_diff, int(a_arr.size), first)
 
 
-def distribution_comparison(
-    check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray, limit: float = WPROB_ROUNDING
-) -> Comparison:
-    """Two W+Prob distributions: identical decisions and max |a - b| <= limit (float64 rounding)."""
+def distribution_comparison(check: str, a_name: str, a: np.ndarray, b_name: str, b: np.ndarray) -> Comparison:
+    """Two W+Prob distributions: identical decisions and max |a - b| <= ``WPROB_ROUNDING`` (float64 rounding)."""
     a_arr, b_arr = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    kind = f"decisions exact, |diff| <= {limit:g}"
+    kind = f"decisions exact, |diff| <= {WPROB_ROUNDING:g}"
     if a_arr.shape != b_arr.shape:
         detail = f"shapes differ: {a_arr.shape} vs {b_arr.shape}"
         return Comparison(check, a_name, b_name, kind, False, detail, family="distribution")
     n_decisions = int(np.count_nonzero(decide(a_arr, SEQUENCE_STRATEGY)[0] != decide(b_arr, SEQUENCE_STRATEGY)[0]))
     largest = float(np.abs(a_arr - b_arr).max()) if a_arr.size else 0.0
     detail = f"{n_decisions} decisions differ; max |diff| {largest:.2e}"
-    passed = n_decisions == 0 and largest <= limit
+    passed = n_decisions == 0 and largest <= WPROB_ROUNDING
     return Comparison(
         check, a_name, b_name, kind, passed, detail, n_decisions, max_abs_difference=largest, family="distribution"
     )
@@ -85,12 +83,13 @@ def compare_runs(prefix: str, a_name: str, a: SpikeRun, b_name: str, b: SpikeRun
     return checks
 
 
-def compare_models(prefix: str, a_name: str, a: FixedPointModel, b_name: str, b: FixedPointModel) -> list[Comparison]:
-    """A fixed-point model read back from a file against the one written: every integer and the config."""
+def compare_models(prefix: str, a: FixedPointModel, b: FixedPointModel) -> list[Comparison]:
+    """A fixed-point model read back from a file (``b``) against the one written: every integer and the config."""
     arrays = ("weight_mantissa", "threshold", "scale_multiplier", "calibration", "reference_place_ids")
     scalars = [[m.bits, m.scale_exponent, m.decay_dv, m.voltage_shift, m.voltage_bits] for m in (a, b)]
     same = a.config.to_dict() == b.config.to_dict()
     detail = "identical" if same else "configs differ"
+    a_name, b_name = "written model", "read back"
     return [
         *(exact_comparison(f"{prefix}: {name}", a_name, getattr(a, name), b_name, getattr(b, name)) for name in arrays),
         exact_comparison(f"{prefix}: bits, exponent, decay, shift, width", a_name, scalars[0], b_name, scalars[1]),
@@ -153,15 +152,12 @@ def compare_backends(
     checks: list[Comparison] = []
     for contender in contenders:
         if contender.written is not None and contender.read_back is not None:
-            checks += compare_models(
-                contender.label, "written model", contender.written, "read back", contender.read_back
-            )
+            checks += compare_models(contender.label, contender.written, contender.read_back)
         n = spikes.shape[0] if contender.n_queries is None else min(contender.n_queries, spikes.shape[0])
         if n == 0:
             continue
-        base = full
-        if n < spikes.shape[0]:  # the first n rows of the baseline's run; saturations are a total: a run of its own
-            base = replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
+        # fewer: the first n rows of the baseline's run; saturations are a total: a run of its own
+        base = full if n == spikes.shape[0] else replace(full.head(n), saturations=baseline.run(spikes[:n]).saturations)
         run = contender.backend.run(spikes[:n], record=True)
         if run.wprob is not None and base.wprob is None and wprob is not None:
             base = replace(base, wprob=wprob(as_array(base.counts)))
@@ -190,14 +186,11 @@ def write_targets(
 def exact_contenders(model: FixedPointModel, slow_queries: int, device: torch.device | None) -> list[Contender]:
     """Every registered exact-integer backend that runs the model alone (no exported file) and is not the
     baseline; a slow one on the first ``slow_queries`` presentations only (none when 0)."""
-    contenders = []
-    for kind in tagged(EXACT):
-        if BASELINE in kind.tags or kind.needs is not None or (SLOW in kind.tags and not slow_queries):
-            continue
-        backend = open_backend(model, kind.name, device=device)[1]
-        limit = slow_queries if SLOW in kind.tags else None
-        contenders.append(Contender(kind.name, getattr(backend, "name", kind.name), backend, n_queries=limit))
-    return contenders
+    kinds = [
+        k for k in tagged(EXACT) if BASELINE not in k.tags and k.needs is None and (slow_queries or SLOW not in k.tags)
+    ]
+    opened = [(kind, open_backend(model, kind.name, device=device)[1]) for kind in kinds]
+    return [Contender(k.name, b.name, b, n_queries=slow_queries if SLOW in k.tags else None) for k, b in opened]
 
 
 def cross_implementation(

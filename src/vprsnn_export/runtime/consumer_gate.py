@@ -94,10 +94,7 @@ def consumer_gate(
 
 
 def with_consumer_gate(
-    result: ConformanceResult,
-    model: FixedPointModel,
-    raster: torch.Tensor | None,
-    spikes: torch.Tensor,
+    result: ConformanceResult, model: FixedPointModel, raster: torch.Tensor | None, spikes: torch.Tensor
 ) -> ConformanceResult:
     """``result`` (a verification's cross-implementation checks) plus the gate on each written file that the field's
     float consumers read (:attr:`~vprsnn_export.targets.registry.Target.float_consumers`: NIR)."""

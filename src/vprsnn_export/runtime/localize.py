@@ -33,10 +33,10 @@ the ONNX graph, which agree count for count, give the same decisions.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -105,9 +105,8 @@ def no_place_reasons(flat: np.ndarray, inputs: np.ndarray, counts: np.ndarray) -
     scene), its spike train holds no spike (``inputs``: :func:`input_spikes` = 0) or the network answered with none
     (``sum_n c_n = 0``). Such a frame is no evidence of any place, so it gets no decision, whatever the
     recent frames say."""
-    n = len(counts)
     silent_input = np.asarray(inputs) == 0
-    silent_output = np.asarray(counts).reshape(n, -1).sum(axis=1) == 0
+    silent_output = np.asarray(counts).reshape(len(counts), -1).sum(axis=1) == 0
     reason = np.select([np.asarray(flat, dtype=bool), silent_input, silent_output], list(NO_PLACE), default="")
     return [str(r) or None for r in reason]
 
@@ -202,7 +201,7 @@ class Localizer:
         isolated = dataclasses.replace(network, config=network.config.replace(**{"network.state_isolation": True}))
         self.backend, runner = open_backend(isolated, backend, onnx_path, device, threads)
         self._counts = lambda spikes: frame_counts(runner, spikes, network.calibration, isolated.config)
-        self.search, self._parts = search, OrderedDict[tuple[int, int], Callable[[torch.Tensor], np.ndarray]]()
+        self.search = search
         if search is not None:
             require_type("search", search, SearchWindow)
             if self.backend not in ("float", "integer"):
@@ -218,8 +217,15 @@ class Localizer:
                     "--search-window needs an operating point: it tracks the last accepted place "
                     "(run `localize MODEL --calibrate QUERY` first)"
                 )
-            self._open_part = lambda part: open_backend(part, self.backend, None, device, threads)[1]
-        self._isolated = isolated
+
+            @functools.lru_cache(PARTS_KEPT)
+            def window_counts(start: int, stop: int) -> Callable[[torch.Tensor], np.ndarray]:
+                """The counts of neurons ``start:stop`` (some consecutive modules) alone, their network opened once."""
+                part = network_part(isolated, slice(start, stop))
+                runner = open_backend(part, self.backend, None, device, threads)[1]
+                return lambda s: frame_counts(runner, s, part.calibration, part.config)
+
+            self._window_counts = window_counts
         self.stream = self.readout.stream()
         self.stream.push(np.zeros(network.calibration.shape[0]))  # checks the options before any frame
         self._counts(torch.zeros((1, self.config.encoder.timesteps, self.config.network.n_inputs), dtype=torch.uint8))
@@ -233,23 +239,16 @@ class Localizer:
         self.misses = 0  # frames in a row without an accepted decision
 
     def _frame_counts(self, spikes: torch.Tensor, inputs: int) -> tuple[np.ndarray, slice | None, int, str | None]:
-        """One frame's counts over every neuron, the places it is decided among (None: all), its synaptic events
-        (``inputs`` spikes in) and its search (None: no search window): the whole network, or the window's modules
-        alone."""
+        """The frames' counts over every neuron, the places they are decided among (None: all), the synaptic events
+        (``inputs`` spikes in) and the search (None: no search window): the whole network, or (one frame) the
+        window's modules alone."""
         if self.search is None or self.centre is None:
             search = None if self.search is None else "global"
             return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
         regions, group = self._regions, self.config.network.n_neurons
         first, last = self.search.modules(self.centre, regions)
-        if (first, last) not in self._parts:
-            if len(self._parts) >= PARTS_KEPT:
-                self._parts.popitem(last=False)
-            part = network_part(self._isolated, slice(first * group, last * group))
-            runner = self._open_part(part)
-            self._parts[first, last] = lambda s: frame_counts(runner, s, part.calibration, part.config)
-        self._parts.move_to_end((first, last))
         counts = np.zeros((len(spikes), self.network.calibration.shape[0]), dtype=np.int64)
-        counts[:, first * group : last * group] = self._parts[first, last](spikes)
+        counts[:, first * group : last * group] = self._window_counts(first * group, last * group)(spikes)
         places = slice(int(regions[first, 0]), int(regions[last - 1, 1]))
         return counts, places, inputs * (last - first) * group, "window"
 
@@ -281,14 +280,7 @@ class Localizer:
         began = time.perf_counter()
         resized = self._resized(np.asarray(grey))
         spikes = self.spikes(normalise_resized(resized[None], self.config.preprocess), self.frame)
-        return self._present(spikes, np.ptp(resized)[None] == 0, name, began)
-
-    def _present(self, spikes: torch.Tensor, flat: np.ndarray, name: str, began: float) -> Decision:
-        """One frame's spike train (1, T, inputs) run and decided (``flat``: :func:`no_place_reasons`)."""
-        inputs = input_spikes(spikes)
-        counts, places, events, search = self._frame_counts(spikes, int(inputs[0]))
-        reason = no_place_reasons(flat, inputs, counts)[0]
-        return self._decide(counts[0], name, began, reason, places, events, search)
+        return self._present(spikes, np.ptp(resized)[None] == 0, [name], began)[0]
 
     def run(self, frames: Iterable[tuple[str, np.ndarray]]) -> Iterator[Decision]:
         """``push`` over ``(name, grey)`` frames as they come."""
@@ -316,52 +308,46 @@ class Localizer:
         spikes = self.spikes(np.asarray(inputs, dtype=np.float32), 0)
         flat = np.zeros(len(spikes), bool) if flat is None else flat
         labels = names if names is not None else [str(i) for i in range(len(spikes))]
-        if self.search is not None:  # each frame's window follows the decisions before it: one frame at a time
-            return [
-                self._present(spikes[j : j + 1], flat[j : j + 1], name, time.perf_counter())
-                for j, name in zip(range(len(spikes)), labels, strict=True)
-            ]
-        counts = self._counts(spikes)
-        reasons = no_place_reasons(flat, input_spikes(spikes), counts)
-        share = (time.perf_counter() - began) / max(len(counts), 1)
-        return [
-            self._decide(row, name, time.perf_counter() - share, reason)
-            for row, name, reason in zip(counts, labels, reasons, strict=True)
-        ]
+        if self.search is None:
+            return self._present(spikes, flat, labels, began)
+        # each frame's window follows the decisions before it: one frame at a time
+        frames = (slice(j, j + 1) for j in range(len(spikes)))
+        return [self._present(spikes[j], flat[j], labels[j], time.perf_counter())[0] for j in frames]
 
-    def _decide(
-        self,
-        counts: np.ndarray,
-        name: str,
-        began: float,
-        reason: str | None = None,
-        places: slice | None = None,
-        events: int | None = None,
-        search: str | None = None,
-    ) -> Decision:
-        """The readout's causal decision on one frame's counts; none (place None, not accepted) with ``reason``
-        for a frame that carries no place (the frame still enters the readout's window, as in a batch). With a
-        search window the decision moves it (:class:`SearchWindow`)."""
-        index, conf, velocity = self.stream.push(counts, places)
-        place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
-        accepted = self.threshold is not None and place is not None and conf >= self.threshold
-        if self.search is not None:
-            found = index if place is not None else None
-            self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
-        decision = Decision(
-            frame=self.frame,
-            name=name,
-            place_id=place,
-            confidence=0.0 if place is None else conf,
-            accepted=accepted,
-            velocity=float(velocity),
-            latency_ms=1000 * (time.perf_counter() - began),
-            reason=reason,
-            events=None if search is None else events,
-            search=search,
-        )
-        self.frame += 1
-        return decision
+    def _present(self, spikes: torch.Tensor, flat: np.ndarray, names: list[str], began: float) -> list[Decision]:
+        """Frames' spike trains (N, T, inputs) run at once from ``began`` (with a search window: one frame) and
+        decided in order, each latency with its share of the run (``flat``: :func:`no_place_reasons`).
+
+        The readout's causal decision on each frame's counts; none (place None, not accepted) with its reason for
+        a frame that carries no place (the frame still enters the readout's window, as in a batch). With a search
+        window the decision moves it (:class:`SearchWindow`)."""
+        inputs = input_spikes(spikes)
+        counts, places, events, search = self._frame_counts(spikes, int(inputs.sum()))
+        share = (time.perf_counter() - began) / max(len(counts), 1)
+        decisions = []
+        for row, name, reason in zip(counts, names, no_place_reasons(flat, inputs, counts), strict=True):
+            start = time.perf_counter() - share
+            index, conf, velocity = self.stream.push(row, places)
+            place = None if index < 0 or reason is not None else int(self.network.reference_place_ids[index])
+            accepted = self.threshold is not None and place is not None and conf >= self.threshold
+            if self.search is not None:
+                found = index if place is not None else None
+                self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
+            decision = Decision(
+                frame=self.frame,
+                name=name,
+                place_id=place,
+                confidence=0.0 if place is None else conf,
+                accepted=accepted,
+                velocity=float(velocity),
+                latency_ms=1000 * (time.perf_counter() - start),
+                reason=reason,
+                events=None if search is None else events,
+                search=search,
+            )
+            decisions.append(decision)
+            self.frame += 1
+        return decisions
 
 
 @dataclass(frozen=True, eq=False)
@@ -569,8 +555,9 @@ def tracking_rows(
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
 
-    def row(protocol: str, k: int, decisions: list[Decision], events: float, seconds: float) -> TrackingRow:
-        """One protocol's row from its decisions (R@100P: the recall at precision 1 of their curve)."""
+    def row(protocol: str, k: int, decisions: list[Decision], events: float, began: float) -> TrackingRow:
+        """One protocol's row from its decisions since ``began`` (R@100P: the recall at precision 1 of their curve)."""
+        seconds = time.perf_counter() - began
         curve = calibration_curve(decisions, place_ids, truth)
         index = curve.index_for(1.0)
         return TrackingRow(
@@ -587,12 +574,11 @@ def tracking_rows(
     for k in options.ks:
         at_k = dataclasses.replace(options, ks=(k,))
         whole = Localizer(network, options=at_k, **backend)
+        spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
         began = time.perf_counter()
         point, decisions, _ = operating_point(whole, images, place_ids, precision=precision, truth=truth)
-        seconds = time.perf_counter() - began
-        spikes = input_spikes(whole.spikes(np.asarray(images, dtype=np.float32), 0)).sum()
         events = float(spikes) * network.calibration.shape[0] / max(len(decisions), 1)
-        rows.append(row("global", k, decisions, events, seconds))
+        rows.append(row("global", k, decisions, events, began))
         if point.threshold is None:
             raise InvalidValueError(
                 f"no confidence reaches precision {precision} at k={k} on these queries: the search window has no "
@@ -601,7 +587,6 @@ def tracking_rows(
         tracked = Localizer(network, options=at_k, threshold=point.threshold, search=search, **backend)
         began = time.perf_counter()
         decisions = tracked.run_inputs(images)
-        seconds = time.perf_counter() - began
         events = float(np.mean([d.events or 0 for d in decisions]))
-        rows.append(row(f"window {search.places}", k, decisions, events, seconds))
+        rows.append(row(f"window {search.places}", k, decisions, events, began))
     return rows

@@ -228,9 +228,7 @@ class Comparison(JsonDataclass):
         tolerance (a row that compared nothing, a consumer refusing the file, is not gated)."""
         if self.tolerance is None:
             return self.equal
-        if not self.n_elements:
-            return True
-        return 1.0 - (self.n_differences or 0) / self.n_elements >= self.tolerance - 1e-12
+        return self.difference is None or 1.0 - self.difference >= self.tolerance - 1e-12
 
     @property
     def difference(self) -> float | None:

@@ -21,30 +21,24 @@ from ..deployment import deploy
 
 @dataclass(frozen=True)
 class ExportSource:
-    """A model file read for export: exactly one of a float checkpoint and a fixed-point model."""
+    """A model file read for export: a float checkpoint or a fixed-point model."""
 
     path: Path
     sha256: str
-    checkpoint: Checkpoint | None = None
-    fixed_point: FixedPointModel | None = None
-
-    def __post_init__(self) -> None:
-        if (self.checkpoint is None) == (self.fixed_point is None):
-            raise InvalidValueError("an ExportSource holds exactly one of a checkpoint and a fixed-point model")
+    network: Checkpoint | FixedPointModel  # what NIR exports and what the project's own simulator runs
 
     @classmethod
     def of(cls, network: Checkpoint | FixedPointModel, sha256: str, path: str | Path = "<in memory>") -> ExportSource:
         """A network held in memory (``sha256`` names it in the exported files' provenance)."""
-        if isinstance(network, FixedPointModel):
-            return cls(Path(path), sha256, fixed_point=network)
-        return cls(Path(path), sha256, checkpoint=network)
+        return cls(Path(path), sha256, network)
 
     @property
-    def network(self) -> Checkpoint | FixedPointModel:
-        """What NIR exports and what the project's own simulator runs."""
-        network = self.checkpoint if self.checkpoint is not None else self.fixed_point
-        assert network is not None  # __post_init__
-        return network
+    def checkpoint(self) -> Checkpoint | None:
+        return self.network if isinstance(self.network, Checkpoint) else None
+
+    @property
+    def fixed_point(self) -> FixedPointModel | None:
+        return self.network if isinstance(self.network, FixedPointModel) else None
 
     @property
     def kind(self) -> str:
@@ -88,9 +82,9 @@ def load_source(path: str | Path) -> ExportSource:
     check_against_manifest(path, digest)  # before the file is read: a damaged one is refused for what it is
     kind = read_container(path, "model")[0].get("format")
     if kind == CHECKPOINT_FORMAT:
-        return ExportSource(path, digest, checkpoint=load_checkpoint(path))
+        return ExportSource(path, digest, load_checkpoint(path))
     if kind == FIXED_FORMAT:
-        return ExportSource(path, digest, fixed_point=load_fixed_point(path))
+        return ExportSource(path, digest, load_fixed_point(path))
     raise ModelFileError(f"neither a checkpoint nor a fixed-point model (format {kind!r})", path)
 
 
@@ -139,13 +133,12 @@ def export_all(
     InvalidValueError for a target that is not registered, or an integer-only one without ``model``.
     """
     wanted = {TARGETS.get(name).name for name in targets}
-    integer = [name for name in TARGETS if name in wanted and TARGETS.get(name).integer_only]
-    if integer and model is None:
+    entries = [entry for entry in TARGETS.values() if entry.name in wanted]  # in the registry's order
+    if model is None and (integer := [entry.name for entry in entries if entry.integer_only]):
         raise InvalidValueError(f"{' and '.join(integer)} need a fixed-point model")
     options = WriteOptions(source.sha256, inhibition, wta_node)
     written: dict[str, list[Path]] = {}
-    for entry in TARGETS.values():
-        if entry.name in wanted:
-            network = model if entry.integer_only and model is not None else source.network
-            written[entry.name] = entry.write(network, out / entry.filename, options)
+    for entry in entries:
+        network = model if entry.integer_only and model is not None else source.network
+        written[entry.name] = entry.write(network, out / entry.filename, options)
     return written

@@ -14,6 +14,7 @@ from vprsnn_export.readout.strategies import STRATEGIES
 from ..measurements import ConformanceResult
 from ..results import METRICS, BitsResult, RunSummary, VerifiedRun, VerifyReport
 from ..verify.checks import TOLERANCE_MEANING
+from ..verify.paired import PAIRED_TOLERANCES
 from .labels import (
     METRIC_TITLES,
     PAIRED_COLUMNS,
@@ -86,18 +87,20 @@ def figure(title: str, name: str, image: bytes, caption: str) -> Block:
     return Block("figure", title=title, name=name, image=image, text=caption)
 
 
-#: Tolerances judged on one measured number (the metric tolerances are judged on the paired table).
-POINT_CHECKS = ("winner_agreement", "top1_agreement", "saturations")
+def section(title: str, *parts: Block | str) -> list[Block]:
+    """A section: its heading, then its parts in order (a string is a paragraph)."""
+    return [Block("h2", title), *(Block("p", part) if isinstance(part, str) else part for part in parts)]
 
 
 def failed_points(result: BitsResult, sep: str = " =") -> list[str]:
-    """A width's cross-implementation differences and missed point limits (``what{sep} value (limit L)``)."""
+    """A width's cross-implementation differences and missed point limits (``what{sep} value (limit L)``): the
+    tolerances judged on one measured number (the metric tolerances are judged on the paired table)."""
     cross = result.cross_implementation
     failed = [] if cross.passed else [f"{cross.n_failed} cross-implementation differences"]
     return failed + [
         f"{c.what}{sep} {points(c.check, c.value)} (limit {points(c.check, c.applied_limit)})"
         for c in result.tolerance_checks
-        if not c.passed and c.check in POINT_CHECKS
+        if not c.passed and c.check not in PAIRED_TOLERANCES
     ]
 
 
@@ -204,16 +207,13 @@ def verdict_blocks(report: VerifyReport) -> list[Block]:
     cells = [(verdict_cells(*item), item[2]) for item in results(report)]
     columns: Columns = {title: partial(lambda key, item: item[0][key], key) for key, title in VERDICT_COLUMNS}
     limits = ", ".join(f"{k} {v:g}" for k, v in report.settings.get("tolerances", {}).items() if v is not None)
-    return [
-        Block("h2", "Verdict per bit width"),
+    return section(
+        "Verdict per bit width",
         table(columns, cells, lambda item: VERDICT_STATUS.get(item[1].verdict)),
-        Block(
-            "p",
-            f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
-            "Δ = quantised - float, in percentage points; negative is worse. Exact rows: implementations that "
-            "must agree bit for bit; tolerance rows: float consumers judged on their stated decision agreement.",
-        ),
-    ]
+        f"Tolerances: {limits or 'none'} (drops from float, in fractions; see docs/verify.md). "
+        "Δ = quantised - float, in percentage points; negative is worse. Exact rows: implementations that "
+        "must agree bit for bit; tolerance rows: float consumers judged on their stated decision agreement.",
+    )
 
 
 def paired_blocks(report: VerifyReport) -> list[Block]:
@@ -226,21 +226,18 @@ def paired_blocks(report: VerifyReport) -> list[Block]:
         f"{n}, {r.bits} bits: {verdict_counts(r.paired) or 'nothing judged'}" for n, _, r in results(report)
     )
     columns = WHERE | {title: partial(lambda key, i: paired_cells(i[2])[key], key) for key, title in PAIRED_COLUMNS}
-    return [
-        Block("h2", "Paired verdict"),
-        Block(
-            "p",
-            "Float and deployed see the same spikes, so each query is a pair. Flips: queries the float network "
-            "gets right and the deployed one wrong / the reverse. Δ = deployed - float, in points, with its "
-            f"{100 * float(stats.get('confidence', 0.95)):g} % paired interval: exact McNemar for accuracy at k=1, "
-            f"the paired bootstrap otherwise ({stats.get('resamples', '?')} resamples, seed {stats.get('seed', '?')};"
-            " blocks of k consecutive queries for k > 1). A check **holds** when the whole interval lies inside "
-            "its drop limit, **fails** when it lies entirely beyond it, and is **undecided** when it straddles "
-            "the limit (with roughly how many queries would decide it); a float R@100P of 0 is **not judged**. "
-            f"Checks without a limit are reported only. {counts}.",
-        ),
+    return section(
+        "Paired verdict",
+        "Float and deployed see the same spikes, so each query is a pair. Flips: queries the float network "
+        "gets right and the deployed one wrong / the reverse. Δ = deployed - float, in points, with its "
+        f"{100 * float(stats.get('confidence', 0.95)):g} % paired interval: exact McNemar for accuracy at k=1, "
+        f"the paired bootstrap otherwise ({stats.get('resamples', '?')} resamples, seed {stats.get('seed', '?')};"
+        " blocks of k consecutive queries for k > 1). A check **holds** when the whole interval lies inside "
+        "its drop limit, **fails** when it lies entirely beyond it, and is **undecided** when it straddles "
+        "the limit (with roughly how many queries would decide it); a float R@100P of 0 is **not judged**. "
+        f"Checks without a limit are reported only. {counts}.",
         table(columns, checks, lambda i: VERDICT_STATUS.get(i[2].verdict or "")),
-    ]
+    )
 
 
 def metric_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
@@ -281,16 +278,13 @@ def spike_blocks(summary: RunSummary, runs: Sequence[VerifiedRun]) -> list[Block
         if cut
         else ""
     )
-    return [
-        Block("h2", "Spike level"),
-        Block(
-            "p",
-            "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
-            "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
-            "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries." + recorded,
-        ),
+    return section(
+        "Spike level",
+        "Same float and quantised input spikes; per time step, do both networks emit the same spike (the "
+        "WTA winner, or both silent)? Per query, how well do the two spike-count vectors correlate? "
+        "Spike ratio = quantised / float total spikes. Saturations: voltage clips on the queries." + recorded,
         table(columns, summary.bits),
-    ]
+    )
 
 
 def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
@@ -300,17 +294,14 @@ def decision_blocks(summary: RunSummary, ks: Sequence[int]) -> list[Block]:
     }
     columns["W+Prob TV distance"] = lambda b: ms(b.wprob_tv_mean, percent=False, digits=3)
     columns |= {f"agreement k={k} %": partial(lambda k, b: ms(b.aggregated_agreement.get(k)), k) for k in ks if k > 1}
-    return [
-        Block("h2", "Decision level"),
-        Block(
-            "p",
-            "Top-1 agreement: share of queries where the quantised network picks the same place as the float "
-            "one (or both reject). TV distance: mean total variation between the float and quantised W+Prob "
-            "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
-            "sequence aggregation.",
-        ),
+    return section(
+        "Decision level",
+        "Top-1 agreement: share of queries where the quantised network picks the same place as the float "
+        "one (or both reject). TV distance: mean total variation between the float and quantised W+Prob "
+        "distributions (0 = identical, 1 = disjoint). Aggregated: the same agreement after k-frame "
+        "sequence aggregation.",
         table(columns, summary.bits),
-    ]
+    )
 
 
 def cross_blocks(report: VerifyReport) -> list[Block]:
@@ -326,22 +317,19 @@ def cross_blocks(report: VerifyReport) -> list[Block]:
         "reference-stepper queries": lambda i: str(i[2].reference_queries),
         "implementations": lambda i: implementations(i[2]),
     }
-    blocks = [
-        Block("h2", "Cross-implementation (exact)"),
-        Block(
-            "p",
-            "Integer simulator vs ONNX on onnxruntime vs the NIR and Loihi-style files read back and re-run vs "
-            "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
-            "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
-            "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
-            "difference fails. Tolerance rows (float NIR consumers + the file's readout rule, judged on their "
-            "stated decision agreement) are counted on their own, with their measured difference: never as "
-            "exact.",
-        ),
+    blocks = section(
+        "Cross-implementation (exact)",
+        "Integer simulator vs ONNX on onnxruntime vs the NIR and Loihi-style files read back and re-run vs "
+        "the slow reference stepper (on the first queries only: it is a per-neuron Python loop). Rasters, "
+        "counts, candidate counts, final voltages, saturations and every integer array are compared bit "
+        "for bit; the ONNX W+Prob head must give identical decisions (float64, |diff| <= 1e-12). Any "
+        "difference fails. Tolerance rows (float NIR consumers + the file's readout rule, judged on their "
+        "stated decision agreement) are counted on their own, with their measured difference: never as "
+        "exact.",
         table(
             columns, per_result(report, lambda r: [r.cross_implementation]), lambda i: "pass" if i[2].passed else "fail"
         ),
-    ]
+    )
     if failures := per_result(report, lambda r: r.cross_implementation.failures):
         columns = WHERE | {"check": lambda f: f[2].check, "detail": lambda f: f[2].detail}
         blocks += [Block("h3", "Differences found"), table(columns, failures, lambda _: "fail")]
@@ -374,15 +362,12 @@ def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
             f"{signed_pct(low.delta_k)} pts at k={k}, {100 * low.winner_agreement:.1f} % same winner)"
         )
     which = f" (network {run.label or 1} of {n_runs})" if n_runs > 1 else ""
-    return [
-        Block("h2", f"Modules of the ensemble{which}"),
-        Block(
-            "p",
-            f"{len(first)} modules. Accuracy is the whole-route W+Prob decision (every module's neurons, every "
-            "place) scored on the queries whose true place lies in the module's region; same winner: the share "
-            "of time steps on which the module's WTA picks the float module's winner. The module that degrades "
-            "most: " + "; ".join(worst) + ".",
-        ),
+    return section(
+        f"Modules of the ensemble{which}",
+        f"{len(first)} modules. Accuracy is the whole-route W+Prob decision (every module's neurons, every "
+        "place) scored on the queries whose true place lies in the module's region; same winner: the share "
+        "of time steps on which the module's WTA picks the float module's winner. The module that degrades "
+        "most: " + "; ".join(worst) + ".",
         table(columns, range(len(first))),
         figure(
             "Accuracy per module",
@@ -390,7 +375,7 @@ def module_blocks(run: VerifiedRun, n_runs: int) -> list[Block]:
             plot_modules(run),
             f"Whole-route W+Prob accuracy at k={k} on each module's region, float (black) vs each bit width.",
         ),
-    ]
+    )
 
 
 def quantisation_blocks(run: VerifiedRun) -> list[Block]:
@@ -407,7 +392,7 @@ def quantisation_blocks(run: VerifiedRun) -> list[Block]:
         "calibration": lambda r: str(r.quantisation.calibration),
         "calibration saturations": lambda r: str(r.quantisation.calibration_saturations),
     }
-    return [Block("h2", "Quantisation"), table(columns, run.bits)]
+    return section("Quantisation", table(columns, run.bits))
 
 
 def tolerance_blocks(report: VerifyReport) -> list[Block]:
@@ -422,16 +407,13 @@ def tolerance_blocks(report: VerifyReport) -> list[Block]:
         "verdict": lambda i: verdict(i[2].passed),
     }
     meaning = "; ".join(f"{k}: {TOLERANCE_MEANING[k]}" for k in TOLERANCE_MEANING)
-    return [
-        Block("h2", "Tolerance checks"),
-        Block(
-            "p",
-            "Values and limits in percentage points (drops) or percent (agreements). A metric moves in steps of "
-            "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
-            f"Keys — {meaning}.",
-        ),
+    return section(
+        "Tolerance checks",
+        "Values and limits in percentage points (drops) or percent (agreements). A metric moves in steps of "
+        "one query (100/Q points), so a drop limit below query_slack queries is raised to it. "
+        f"Keys — {meaning}.",
         table(columns, per_result(report, lambda r: r.tolerance_checks), lambda i: "pass" if i[2].passed else "fail"),
-    ]
+    )
 
 
 def summarised(config: dict) -> dict:

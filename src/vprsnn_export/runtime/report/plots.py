@@ -35,14 +35,9 @@ def png(fig: Any) -> bytes:
 
 def merged(series: Sequence[tuple[str, Any]]) -> list[tuple[str, Any, int]]:
     """``(label, data)`` series with identical data once, labelled "A = B": ``(label, data, first index)``."""
-    groups: list[tuple[list[str], Any, int]] = []
-    for index, (label, data) in enumerate(series):
-        same = next((group for group in groups if group[1] == data), None)
-        if same is None:
-            groups.append(([label], data, index))
-        else:
-            same[0].append(label)
-    return [(" = ".join(labels), data, index) for labels, data, index in groups]
+    datas = [data for _, data in series]
+    firsts = [(index, data) for index, data in enumerate(datas) if data not in datas[:index]]
+    return [(" = ".join(label for label, other in series if other == data), data, index) for index, data in firsts]
 
 
 def percent(value: MeanStd) -> tuple[float, float]:
@@ -164,13 +159,11 @@ def window_share(edges: np.ndarray, counts: np.ndarray, x: np.ndarray, width: fl
 def plot_weights(run: VerifiedRun) -> bytes:
     """Per bit width: the share of weights on each level q / L (bars) over :func:`window_share` (line)."""
     plt = pyplot()
-    results = run.bits
-    fig, axes = plt.subplots(1, len(results), figsize=(3.3 * len(results), 3.0), squeeze=False)
-    hist = run.float.weights
-    edges = np.asarray(hist.edges, dtype=np.float64)
-    counts = np.asarray(hist.counts, dtype=np.float64)
+    fig, axes = plt.subplots(1, len(run.bits), figsize=(3.3 * len(run.bits), 3.0), squeeze=False)
+    edges = np.asarray(run.float.weights.edges, dtype=np.float64)
+    counts = np.asarray(run.float.weights.counts, dtype=np.float64)
     x = np.linspace(edges[0], edges[-1], 401)
-    for ax, result in zip(axes[0], results, strict=True):
+    for ax, result in zip(axes[0], run.bits, strict=True):
         levels = result.weight_levels
         top = levels.levels
         share = np.asarray(levels.counts, dtype=np.float64) / max(sum(levels.counts), 1)

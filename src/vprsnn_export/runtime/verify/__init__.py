@@ -14,11 +14,4 @@ a command's networks and data :mod:`.networks`, the mean ± std over runs and th
 from .run import Runtime, VerifiedNetwork, VerifyOptions, verify_checkpoint
 from .summary import build_report, summarise_runs
 
-__all__ = [
-    "Runtime",
-    "VerifiedNetwork",
-    "VerifyOptions",
-    "build_report",
-    "summarise_runs",
-    "verify_checkpoint",
-]
+__all__ = ["Runtime", "VerifiedNetwork", "VerifyOptions", "build_report", "summarise_runs", "verify_checkpoint"]

@@ -82,11 +82,6 @@ class VerifyOptions:
 RASTER_BUDGET = 1 << 29
 
 
-def recorded_queries(n_queries: int, timesteps: int, n_neurons: int, budget: int = RASTER_BUDGET) -> int:
-    """How many of the first queries the step-level checks record: all, or as many as ``budget`` holds (>= 1)."""
-    return int(min(n_queries, max(1, budget // max(1, timesteps * n_neurons))))
-
-
 @dataclass(frozen=True, eq=False)
 class VerifiedNetwork:
     """The float network `verify` checks: its checkpoint, the sha256 of its file, the images of its reference
@@ -200,10 +195,10 @@ def verified_run(
 
 
 def float_side(ckpt: Checkpoint, query: Query, readout: SequenceOptions, runtime: Runtime) -> FloatSide:
-    """The float network run on the queries' spikes (the first queries the raster budget holds recorded) and read
-    out once."""
+    """The float network run on the queries' spikes (the first queries the raster budget holds recorded, at least
+    one) and read out once."""
     spikes = query_spikes(query.images, query.place_ids, query.traversal, ckpt.config)
-    recorded = recorded_queries(spikes.shape[0], spikes.shape[1], ckpt.weights.shape[1], RASTER_BUDGET)
+    recorded = int(min(spikes.shape[0], max(1, RASTER_BUDGET // max(1, spikes.shape[1] * ckpt.weights.shape[1]))))
     # a bar over the query chunks of each network run below
     network = open_backend(ckpt, "float", device=runtime.device, progress=runtime.progress)[1]
     run = network.run(spikes[:recorded], record=True)
