@@ -122,12 +122,8 @@ def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
 @dataclass
 class SessionBackend:
     """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame), as a
-    :class:`~vprsnn_export.network.runs.Backend`.
-
-    The run carries the counts, the total saturations, the W+Prob distribution when the
-    graph has that head, and the raster when it has that output (``record`` cannot add
-    an output the graph lacks).
-    """
+    :class:`~vprsnn_export.network.runs.Backend`; its runs carry the W+Prob distribution and the raster when the
+    graph has those outputs (``record`` cannot add an output the graph lacks)."""
 
     session: object
     batch: int = 128
