@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -39,7 +40,7 @@ import torch
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
 from .intsim_kernel import KernelWeights, integer_run, kernel_weights
@@ -72,25 +73,9 @@ class PreparedModel:
 
 
 def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
-    """The model on ``device``, once the arrays the simulator indexes are checked: mantissas (inputs, neurons) and
-    thresholds and multipliers (neurons,), all integers, neurons in whole WTA groups (InvalidValueError naming the
-    array otherwise)."""
-    arrays = {name: getattr(model, name) for name in ("weight_mantissa", "threshold", "scale_multiplier")}
-    for name, array in arrays.items():
-        if not isinstance(array, np.ndarray) or not np.issubdtype(array.dtype, np.integer):
-            raise InvalidValueError(f"fixed-point model: {name} must be an integer numpy array")
-    if model.weight_mantissa.ndim != 2:
-        raise InvalidValueError(f"fixed-point model: weight_mantissa has shape {model.weight_mantissa.shape}, not 2-D")
-    for name in ("threshold", "scale_multiplier"):
-        if arrays[name].shape != (model.n_neurons,):
-            raise InvalidValueError(
-                f"fixed-point model: {name} has shape {arrays[name].shape}, expected ({model.n_neurons},)"
-            )
-    group = model.config.network.n_neurons
-    if model.n_neurons == 0 or model.n_neurons % group:
-        raise InvalidValueError(
-            f"fixed-point model: {model.n_neurons} neurons are not whole modules of network.n_neurons = {group}"
-        )
+    """The model on ``device``, once :func:`validate` has checked its arrays' shapes, dtypes and ranges (a
+    ModelFileError otherwise): neurons in whole WTA groups, non-negative mantissas."""
+    validate(model, Path("<fixed-point model>"))
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
@@ -111,10 +96,8 @@ def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
 
 @dataclass
 class IntegerNetwork:
-    """A fixed-point model prepared for the fast simulator on one device.
-
-    ``saturations`` accumulates over every call (e.g. all calibration runs).
-    """
+    """A fixed-point model prepared for the fast simulator on one device; ``saturations`` accumulates over every
+    call (e.g. all calibration runs)."""
 
     model: FixedPointModel
     device: torch.device | None = None
@@ -131,7 +114,13 @@ class IntegerNetwork:
     def run(self, spikes: torch.Tensor, *, record: bool = False, state_isolation: bool | None = None) -> SpikeRun:
         """Present N spike trains (N, T, inputs) of 0/1 uint8 (the float path's very tensors)."""
         isolation = self.model.config.network.state_isolation if state_isolation is None else state_isolation
-        check_spikes(spikes, self.model.n_inputs)
+        if spikes.ndim != 3 or spikes.shape[2] != self.model.n_inputs:
+            shape = f"(N, T, {self.model.n_inputs})"
+            raise InvalidValueError(f"spikes: expected spikes of shape {shape}, got {tuple(spikes.shape)}")
+        if spikes.dtype not in (torch.uint8, torch.bool):
+            raise InvalidValueError(f"spikes: expected uint8 or bool spikes, got {spikes.dtype}")
+        if spikes.numel() and spikes.dtype == torch.uint8 and int(spikes.max()) > 1:
+            raise InvalidValueError("spikes: spikes must be 0 or 1")
         whole = functools.partial(run_prepared, self.prepared, isolation=isolation, record=record)
         # chunks only when isolated: each presentation then starts from V = 0 (run_in_chunks)
         run = run_in_chunks(whole, spikes, chunk=QUERY_CHUNK, progress=self.progress and isolation, desc=self.name)
@@ -153,15 +142,6 @@ def simulate(
 ) -> SpikeRun:
     """Run the fixed-point model on spike trains (N, T, inputs) uint8."""
     return IntegerNetwork(model, device).run(spikes, record=record, state_isolation=state_isolation)
-
-
-def check_spikes(spikes: torch.Tensor, n_inputs: int) -> None:
-    if spikes.ndim != 3 or spikes.shape[2] != n_inputs:
-        raise InvalidValueError(f"spikes: expected spikes of shape (N, T, {n_inputs}), got {tuple(spikes.shape)}")
-    if spikes.dtype not in (torch.uint8, torch.bool):
-        raise InvalidValueError(f"spikes: expected uint8 or bool spikes, got {spikes.dtype}")
-    if spikes.numel() and spikes.dtype == torch.uint8 and int(spikes.max()) > 1:
-        raise InvalidValueError("spikes: spikes must be 0 or 1")
 
 
 def shifted_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
@@ -198,21 +178,20 @@ def run_prepared(
         )  # fmt: skip
     n, timesteps, _ = spikes.shape
     n_neurons = prep.threshold.shape[0]
-    device = prep.threshold.device
     counts = torch.zeros((n, n_neurons), dtype=torch.int64)
     n_candidates = torch.zeros((n, timesteps), dtype=torch.int32)
     raster = torch.zeros((n, timesteps, n_neurons), dtype=torch.bool) if record else None
     final_voltage = torch.zeros((n, n_neurons), dtype=torch.int64)
     saturations = max_current = 0
-    voltage = torch.zeros((1, n_neurons), dtype=torch.int64, device=device)  # the stream's, carried
+    voltage: torch.Tensor | None = None  # the stream's, carried (None: zeros)
     chunk = QUERY_CHUNK if isolation else 1
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
-        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), None if isolation else voltage, record)
-        voltage = step.voltage
+        step = recur(prep, shifted_currents(spikes[start:stop], prep.weights), voltage, record)
+        voltage = None if isolation else step.voltage
         counts[start:stop] = step.counts.cpu()
         n_candidates[start:stop] = step.candidates.T.cpu()
-        final_voltage[start:stop] = voltage.cpu()
+        final_voltage[start:stop] = step.voltage.cpu()
         saturations += step.saturations
         max_current = max(max_current, step.max_current >> prep.shift)
         if raster is not None and step.raster is not None:

@@ -167,11 +167,9 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
 
 
 def module_populations(model: FixedPointModel) -> list[dict[str, Any]]:
-    """One population per module: exc neurons [m n, (m + 1) n), its places, its own vth and current bound.
-
-    Each is what one module's Lava LIF would hold: ``vth`` = exc_vth[neurons], ``dv`` the
-    ensemble's, ``weights`` the rows [m n, (m + 1) n) of the connection's matrix.
-    """
+    """One population per module: exc neurons [m n, (m + 1) n), its places, its own vth and current bound, what one
+    module's Lava LIF would hold (``vth`` = exc_vth[neurons], ``dv`` the ensemble's, ``weights`` the rows
+    [m n, (m + 1) n) of the connection's matrix)."""
     group = model.config.network.n_neurons
     regions = module_regions(len(model.reference_place_ids), model.config.train.module_size)
     vth, multipliers = model.threshold.reshape(-1, group), model.scale_multiplier.reshape(-1, group)  # per module

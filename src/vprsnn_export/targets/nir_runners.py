@@ -142,10 +142,8 @@ def norse_consumer_raster(graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS
     return step_module(module, spikes, lambda _, state: state.cache["lif"])
 
 
-def spikingjelly_consumer_raster(
-    graph, spikes: torch.Tensor, *, dt: float = DT_SECONDS, plain: bool = False
-) -> torch.Tensor:
-    """Run a NIR graph through SpikingJelly's importer (``nir_exchange.import_from_nir``, optional) at ``dt``.
+def spikingjelly_consumer_raster(graph, spikes: torch.Tensor, *, plain: bool = False) -> torch.Tensor:
+    """Run a NIR graph through SpikingJelly's importer (``nir_exchange.import_from_nir``, optional) at DT_SECONDS.
 
     SpikingJelly 2.0 maps the LIF (r = tau/dt) to ``LIFNode(tau/dt, decay_input=False)``:
     v <- v - v dt/tau + I = beta v + I, and fires at v >= v_threshold; unless ``plain``, the
@@ -154,7 +152,7 @@ def spikingjelly_consumer_raster(
     """
     nir_exchange = consumer_package("spikingjelly.activation_based.nir_exchange", "SpikingJelly")
     consumer_package("spikingjelly.logger", "SpikingJelly").logger.disable("spikingjelly")
-    module = nir_exchange.import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly", dt), dt=dt)
+    module = nir_exchange.import_from_nir(graph if plain else consumer_graph(graph, "spikingjelly"), dt=DT_SECONDS)
     return step_module(module, spikes)
 
 

@@ -118,12 +118,9 @@ READABLE_RULE_VERSIONS = (1, 2)  # 1: one group of all neurons
 
 
 def populations(source: Source) -> list[dict[str, Any]]:
-    """One entry per module of the lif node: its neurons [start, stop), its region of reference places, thresholds.
-
-    The documented grouping: module m is the population of neurons [m n, (m + 1) n) of the one
+    """One entry per module m of the lif node (a single network is one): the neurons [m n, (m + 1) n) of the one
     linear / lif pair, trained on the reference places [region start, region stop) (indices into
-    metadata['reference_place_ids']); a single network is one population.
-    """
+    metadata['reference_place_ids']), and their thresholds."""
     group = source.config.network.n_neurons  # one module's neurons
     regions = module_regions(len(source.reference_place_ids), source.config.train.module_size)
     thresholds = np.asarray(source.threshold if isinstance(source, FixedPointModel) else source.thresholds)

@@ -25,7 +25,6 @@ def trunc_div(x: int, d: int) -> int:
 
 def reference_run(model: FixedPointModel, spikes: np.ndarray, *, state_isolation: bool | None = None) -> SpikeRun:
     isolation = model.config.network.state_isolation if state_isolation is None else state_isolation
-    spikes = np.asarray(spikes)
     n, timesteps, _ = spikes.shape
     q = model.weight_mantissa.astype(np.int64)
     m = [int(x) for x in model.scale_multiplier]

@@ -34,8 +34,12 @@ def ensemble_sentence(network: Network) -> str:
     )
 
 
-def float_consumer_note(network: Network) -> str:
-    """The file's float_consumers statement in words: exact or not, why, and the tolerance export --check applies."""
+def nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
+    """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
+    wta_node, inhibition = options.wta_node, options.inhibition
+    thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
+    uniform = bool(np.all(thresholds == thresholds[0]))
+    ensemble = ensemble_sentence(network)
     statement = float_consumers(network)
     verdict = (
         f"Float NIR consumers (NIR's LIF/IF in float32 or float64, Norse, SpikingJelly) compute this {statement['mode']} "
@@ -45,18 +49,6 @@ def float_consumer_note(network: Network) -> str:
         "(docs/targets.md section 1.4 gives the measured raster differences and decision agreement per bit width; "
         "quantize --non-leaky gives a file they compute exactly)"
     )
-    return (
-        f"{verdict}. export --check fails when a consumer's decisions (+ readout rule) agree with the network's on "
-        f"fewer than {statement['decision_tolerance']:.0%} of the queries (metadata['float_consumers'])."
-    )
-
-
-def nir_statement(network: Network, model: FixedPointModel | None, options: WriteOptions) -> str:
-    """NIR: read_nir rebuilds the network; a metadata-blind consumer computes what this sentence says."""
-    wta_node, inhibition = options.wta_node, options.inhibition
-    thresholds = network.thresholds if isinstance(network, Checkpoint) else network.threshold
-    uniform = bool(np.all(thresholds == thresholds[0]))
-    ensemble = ensemble_sentence(network)
     arithmetic = (
         "the float network's own arithmetic"
         if isinstance(network, Checkpoint)
@@ -89,7 +81,9 @@ def nir_statement(network: Network, model: FixedPointModel | None, options: Writ
             "the wta node's output instead of the spikes (the default graph, without --nir-wta-node, avoids both)"
         )
         + ". "
-        + float_consumer_note(network)
+        + verdict
+        + f". export --check fails when a consumer's decisions (+ readout rule) agree with the network's on fewer than "
+        f"{statement['decision_tolerance']:.0%} of the queries (metadata['float_consumers'])."
         + (
             ensemble
             and ensemble + " metadata['populations'] lists the modules; the readout rule's group_size is the WTA group."
