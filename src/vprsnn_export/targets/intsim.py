@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -40,7 +39,7 @@ import torch
 from vprsnn_export.arguments import require_type
 from vprsnn_export.config import wta_group
 from vprsnn_export.errors import InvalidValueError
-from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
+from vprsnn_export.export.model import DECAY_BITS, FixedPointModel
 from vprsnn_export.network.runs import SpikeRun, run_in_chunks
 
 from .intsim_kernel import KernelWeights, integer_run, kernel_weights
@@ -73,9 +72,25 @@ class PreparedModel:
 
 
 def prepare(model: FixedPointModel, device: torch.device) -> PreparedModel:
-    """The model on ``device``, once :func:`validate` has checked its arrays' shapes, dtypes and ranges (a
-    ModelFileError otherwise): neurons in whole WTA groups, non-negative mantissas."""
-    validate(model, Path("<fixed-point model>"))
+    """The model on ``device``, once the arrays the simulator indexes are checked: mantissas (inputs, neurons) and
+    thresholds and multipliers (neurons,), all integers, neurons in whole WTA groups (InvalidValueError naming the
+    array otherwise)."""
+    arrays = {name: getattr(model, name) for name in ("weight_mantissa", "threshold", "scale_multiplier")}
+    for name, array in arrays.items():
+        if not isinstance(array, np.ndarray) or not np.issubdtype(array.dtype, np.integer):
+            raise InvalidValueError(f"fixed-point model: {name} must be an integer numpy array")
+    if model.weight_mantissa.ndim != 2:
+        raise InvalidValueError(f"fixed-point model: weight_mantissa has shape {model.weight_mantissa.shape}, not 2-D")
+    for name in ("threshold", "scale_multiplier"):
+        if arrays[name].shape != (model.n_neurons,):
+            raise InvalidValueError(
+                f"fixed-point model: {name} has shape {arrays[name].shape}, expected ({model.n_neurons},)"
+            )
+    group = model.config.network.n_neurons
+    if model.n_neurons == 0 or model.n_neurons % group:
+        raise InvalidValueError(
+            f"fixed-point model: {model.n_neurons} neurons are not whole modules of network.n_neurons = {group}"
+        )
     multipliers = torch.as_tensor(model.scale_multiplier.astype(np.int64), device=device)
     return PreparedModel(
         weights=torch.as_tensor(
