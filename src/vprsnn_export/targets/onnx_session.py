@@ -89,15 +89,13 @@ def session(path: str | Path, threads: int | None = None):
 def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> OnnxRun:
     """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs].
 
-    InvalidValueError when T or inputs differ from the graph's fixed input shape (an older file with a
-    symbolic T accepts any T)."""
+    InvalidValueError when T or inputs differ from the graph's fixed input shape (:func:`session` opens only a
+    graph whose T and inputs are fixed)."""
     array = np.asarray(spikes.numpy() if isinstance(spikes, torch.Tensor) else spikes)
     if array.ndim != 3 or array.dtype not in (np.uint8, np.bool_):
         raise InvalidValueError(f"expected spikes (N, T, inputs) of uint8, got {array.shape} {array.dtype}")
     timesteps, _, inputs = sess.get_inputs()[0].shape
-    if any(
-        isinstance(want, int) and got != want for want, got in ((timesteps, array.shape[1]), (inputs, array.shape[2]))
-    ):
+    if (array.shape[1], array.shape[2]) != (timesteps, inputs):
         raise InvalidValueError(
             f"expected spikes (N, T, inputs) = (N, {timesteps}, {inputs}) for this graph, got {array.shape}"
         )
