@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, preset
-from ..data.dataset import Dataset, load_selection, window_beside_truth
+from ..data.dataset import Dataset, dataset_files, load_selection, window_beside_truth
 from ..data.groundtruth import ground_truth_files
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
-from ..io.fileio import parse_json
+from ..io.fileio import check_output, parse_json
 from ..readout.rules import RULES
 from ..readout.search import DEFAULT_PATIENCE, SearchWindow
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
@@ -387,12 +387,17 @@ def refuse_window_beside_truth(
         raise window_beside_truth(match_window, found[0])
 
 
-def query_data(args: argparse.Namespace, network: Network, query: str | None = None) -> Dataset:
-    """The data set of --data/--subset/--places, else the one ``network`` records: ``query``, else its references."""
+def query_data(
+    args: argparse.Namespace, network: Network, query: str | None = None, outputs: Sequence = (), inputs: tuple = ()
+) -> Dataset:
+    """The data set of --data/--subset/--places, else the one ``network`` records: ``query``, else its references;
+    ``outputs`` checked against ``inputs`` before any image loads, then against the data set's files too."""
+    for output in outputs:
+        check_output(output, inputs=inputs)
     if query is not None:
         source = args.data if args.data is not None else network.data.get("source")
         refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
-    return load_selection(
+    dataset = load_selection(
         network.data,
         list(network.reference_traversals) if query is None else [query],
         network.config.preprocess,
@@ -401,12 +406,17 @@ def query_data(args: argparse.Namespace, network: Network, query: str | None = N
         places=args.places,
         progress=not args.quiet,
     )
+    for output in outputs:
+        check_output(output, inputs=(*inputs, *dataset_files(dataset, args.subset, network.data.get("subset"))))
+    return dataset
 
 
-def load_query(args: argparse.Namespace, network: Network) -> tuple[SequenceOptions, Dataset, Query]:
+def load_query(
+    args: argparse.Namespace, network: Network, outputs: Sequence = (), inputs: tuple = ()
+) -> tuple[SequenceOptions, Dataset, Query]:
     """evaluate and simulate: the sequence options, the data and the --query of ``network`` (a warning printed)."""
     options = sequence_options(args)
-    dataset = query_data(args, network, args.query)
+    dataset = query_data(args, network, args.query, outputs, inputs)
     query = dataset.query(args.query, network.reference_traversals, args.match_window)
     if warning := options.warning(dataset.place_ids):
         print(f"warning: {warning}", file=sys.stderr)

@@ -15,11 +15,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..data.dataset import dataset_files, reference_frame_shape
+from ..data.dataset import reference_frame_shape
 from ..data.events import EventWindow
 from ..data.frames import iter_frames
 from ..errors import DataError, InvalidValueError
-from ..io.fileio import check_output
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ._common import (
@@ -182,13 +181,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network
     options = sequence_options(args)
-    outputs = (point_path, *curve_paths(point_path))
-    for output in outputs:
-        check_output(output, inputs=(args.model, onnx))
-    dataset = query_data(args, network, args.calibrate)
-    inputs = (args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
-    for output in outputs:
-        check_output(output, inputs=inputs)
+    dataset = query_data(args, network, args.calibrate, (point_path, *curve_paths(point_path)), (args.model, onnx))
     localizer = Localizer(
         network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
     )
