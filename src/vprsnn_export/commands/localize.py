@@ -100,19 +100,6 @@ def calibration_output(args: argparse.Namespace) -> str | None:
     return None if args.calibrate is None else args.operating_point or str(operating_point_path(args.model))
 
 
-def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
-    """The given options over the defaults, or the stored ones, which a given option cannot change."""
-    if stored is None:
-        return SequenceOptions(**given)
-    for name, value in given.items():
-        if value != getattr(stored, name):
-            raise InvalidValueError(
-                f"{option_flag(name)} differs from the operating point's {getattr(stored, name)!r} ({where}): its "
-                "threshold holds for its own options; recalibrate or give --threshold"
-            )
-    return stored
-
-
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.exporting import load_source, read_export
@@ -144,7 +131,14 @@ def run(args: argparse.Namespace) -> int:
                 f"--precision {args.precision}: the operating point {point_path} was calibrated for "
                 f"{stored.precision_target}; run --calibrate with --precision {args.precision}"
             )
-    options = options_from(given_sequence_options(args), None if stored is None else stored.options, point_path)
+    given = given_sequence_options(args)  # over the defaults, or the stored options, which none of them may change
+    options = SequenceOptions(**given) if stored is None else stored.options
+    for name, value in given.items() if stored is not None else ():
+        if value != getattr(options, name):
+            raise InvalidValueError(
+                f"{option_flag(name)} differs from the operating point's {getattr(options, name)!r} ({point_path}): "
+                "its threshold holds for its own options; recalibrate or give --threshold"
+            )
     threshold = args.threshold if stored is None else stored.threshold
     if args.threshold is None and stored is None:
         print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
