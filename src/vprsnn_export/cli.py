@@ -73,7 +73,6 @@ def join_negative_values(argv: Sequence[str]) -> list[str]:
 
 
 def command_names() -> list[str]:
-    """The subcommands: the public modules of :mod:`vprsnn_export.commands`, sorted."""
     return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
 
 

@@ -181,8 +181,7 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            # fd 2 held back (Ray Client logs its warnings and retries from C++ and Python alike): nothing above the
-            # one-line error; what it caught is written to stderr when the connection succeeds
+            # Ray Client logs its retries from C++ and Python alike: held back, written out once it succeeds
             with captured_stderr() as caught:
                 ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
             sys.stderr.writelines(f"{line}\n" for line in caught)

@@ -179,7 +179,6 @@ def training_need(
 
 
 def single_need(name: str, size: int) -> MemoryNeed:
-    """A need of one array: ``size`` bytes named ``name``."""
     return MemoryNeed(((name, size),))
 
 

@@ -63,7 +63,6 @@ def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) ->
 
 
 def add_query_options(parser: argparse.ArgumentParser) -> None:
-    """Data, --query, the sequence options and the spillover switch: what evaluate and simulate share."""
     add_data_options(parser, data_required=False)
     parser.add_argument("--query", required=True, help="query traversal name")
     add_sequence_options(parser)
@@ -76,7 +75,6 @@ DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 
 
 def add_bits_option(parser: argparse.ArgumentParser) -> None:
-    """--bits of quantize and verify; :func:`bit_widths` reads it."""
     parser.add_argument(
         "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
     )
@@ -102,7 +100,6 @@ QUANTISE_HELP = {
 
 
 def add_quantise_options(parser: argparse.ArgumentParser) -> None:
-    """The quantisation flags of quantize and verify (:data:`QUANTISE_HELP`); :func:`quantise_options` reads them."""
     group = parser.add_argument_group("quantisation")
     scales = group.add_mutually_exclusive_group()
     for flag in ("--per-tensor", "--per-neuron"):
