@@ -141,7 +141,7 @@ def _ray_map(
     watchdog = start_watchdog() if started_here and cluster.address == "local" else None
     try:
         if started_here:
-            connect(cluster)
+            connect(ray, cluster)
         remote = ray.remote(num_cpus=cluster.threads)(_timed)
         shared: dict[int, Any] = {}
 
@@ -166,9 +166,8 @@ def _ray_map(
         stop_watchdog(watchdog)
 
 
-def connect(cluster: Cluster) -> None:
-    """Start (local) or join (auto, ray://) a Ray runtime for this process."""
-    ray = _ray()
+def connect(ray: Any, cluster: Cluster) -> None:
+    """Start (local) or join (auto, ray://) a Ray runtime for this process (``ray``: the imported module)."""
     if cluster.address.startswith("ray://"):
         reachable(cluster.address)
     try:
