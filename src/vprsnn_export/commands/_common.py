@@ -373,15 +373,14 @@ RESULT_COLUMNS = (
 )
 
 
-def refuse_window_beside_truth(
-    match_window: int | None, source: str | None, references: Sequence[str], query: str
-) -> None:
+def refuse_window_beside_truth(args: argparse.Namespace, network: Network, query: str) -> None:
     """--match-window on a folder with a ground-truth file of (reference, query): refused before any image loads."""
+    source = args.data if args.data is not None else network.data.get("source")
     folder = Path(source) if source else None
-    if not match_window or folder is None or not folder.is_dir():
+    if not args.match_window or folder is None or not folder.is_dir():
         return
-    if found := [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]:
-        raise window_beside_truth(match_window, found[0])
+    if found := [p for ref in network.reference_traversals for p, _ in ground_truth_files(folder, ref, query)]:
+        raise window_beside_truth(args.match_window, found[0])
 
 
 def query_data(
@@ -392,8 +391,7 @@ def query_data(
     for output in outputs:
         check_output(output, inputs=inputs)
     if query is not None:
-        source = args.data if args.data is not None else network.data.get("source")
-        refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
+        refuse_window_beside_truth(args, network, query)
     dataset = load_selection(
         network.data,
         list(network.reference_traversals) if query is None else [query],
