@@ -117,12 +117,13 @@ def run(args: argparse.Namespace) -> int:
     if onnx is not None:  # a deploy folder's graph, or a file checked against its folder's manifest
         onnx = read_export(onnx).written("onnx") if onnx.is_dir() else check_against_manifest(onnx)
     device = resolve_device(args.device)
+    backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     if args.calibrate:
         if args.topic is not None or events:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
         if args.search_window is not None or args.patience is not None:
             raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
-        return calibrate(args, source, point_path, onnx, device)
+        return calibrate(args, source, point_path, onnx, backend)
     stored: OperatingPoint | None = None
     if args.threshold is None and (args.precision is not None or point_path.is_file()):
         stored = load_operating_point(point_path, source.sha256)
@@ -144,7 +145,6 @@ def run(args: argparse.Namespace) -> int:
         print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
     elif stored is not None and not args.quiet:
         print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
-    backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     localizer = Localizer(source.network, options=options, threshold=threshold, search=search_window(args), **backend)
     assert frames is not None
     for decision in localizer.run(sized_frames(frames, expected)):
@@ -167,7 +167,7 @@ def sized_frames(
         yield name, grey
 
 
-def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
+def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, backend: dict) -> int:
     from ..runtime.localize import Localizer, curve_paths, operating_point, save_curve, save_operating_point
     from ..runtime.report.plots import plot_precision_recall
 
@@ -176,9 +176,7 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
     network = source.network
     options = sequence_options(args)
     dataset = query_data(args, network, args.calibrate, (point_path, *curve_paths(point_path)), (args.model, onnx))
-    localizer = Localizer(
-        network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
-    )
+    localizer = Localizer(network, options=options, **backend)
     truth = dataset.query(args.calibrate, network.reference_traversals, args.match_window).truth
     point, _, curve = operating_point(
         localizer,
