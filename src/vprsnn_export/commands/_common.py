@@ -213,7 +213,7 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
     raw = {f.name: getattr(args, option_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
     given = {name: value for name, value in raw.items() if value is not None}
     if "ks" in given or args.default_k:
-        given["ks"] = parse_int_list(given.get("ks", args.default_k), "--k", MAX_K)
+        given["ks"] = parse_int_list(given.get("ks", args.default_k), "--k")
     if "velocity_candidates" in given:
         given["velocity_candidates"] = parse_velocity_grid(given["velocity_candidates"])
         if max(given.get("ks", (1,))) == 1:
@@ -302,16 +302,15 @@ def parse_value(raw: str) -> Any:
         return raw
 
 
-MAX_LIST_VALUE = MAX_K  # --bits and other lists: far above any meaningful value, low enough to fail before memory does
 MAX_VELOCITY_CANDIDATES = 10_000
 
 
-def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
-    """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
+def parse_int_list(raw: str, option: str) -> tuple[int, ...]:
+    """``"1,3,5"`` -> (1, 3, 5): integers from 1 to :data:`MAX_K`; InvalidValueError naming the option otherwise."""
     parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
     values = tuple(v for v in parsed if v is not None)
-    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > maximum:
-        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {maximum}"
+    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > MAX_K:
+        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {MAX_K}"
         raise InvalidValueError(f"{option} expects {expected}, got {raw!r}")
     return values
 
