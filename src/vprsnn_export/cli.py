@@ -73,7 +73,6 @@ def join_negative_values(argv: Sequence[str]) -> list[str]:
 
 
 def command_names() -> list[str]:
-    """The subcommands: the public modules of :mod:`vprsnn_export.commands`, sorted."""
     return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
 
 
@@ -149,12 +148,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = exc.filename if exc.filename is not None else "a file"
         print(f"error: {where}: permission denied ({exc.strerror or exc})", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
-    except Terminated:
-        print("error: terminated", file=sys.stderr)
-        return 143
+    except (KeyboardInterrupt, Terminated) as exc:  # exit 128 + SIGINT or SIGTERM
+        word, code = ("interrupted", 130) if isinstance(exc, KeyboardInterrupt) else ("terminated", 143)
+        print(f"error: {word}", file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -92,12 +92,13 @@ class TaskTiming:
     task_seconds: tuple[float, ...]
 
 
-def _timed(threads: int, function: Callable[..., Any], *args: Any) -> tuple[Any, float]:
-    """On a worker: fix the torch thread count, then run the task, timed."""
+def _timed(threads: int | None, function: Callable[..., Any], *args: Any) -> tuple[Any, float]:
+    """On a worker: fix the torch thread count (None: in this process, left as it is), then run the task, timed."""
     started = time.perf_counter()
-    import torch  # a worker process starts bare
+    if threads is not None:
+        import torch  # a worker process starts bare
 
-    torch.set_num_threads(threads)
+        torch.set_num_threads(threads)
     return function(*args), time.perf_counter() - started
 
 
@@ -124,18 +125,12 @@ def map_tasks(
     started = time.perf_counter()
     if cluster is None:
         with task_bar(tasks, progress) as bar:
-            pairs = [_timed(torch_threads(), function, *task) for task in bar]
+            pairs = [_timed(None, function, *task) for task in bar]
     else:
         pairs = _ray_map(cluster, function, tasks, progress)
     if timing is not None:
         timing.append(TaskTiming(time.perf_counter() - started, tuple(seconds for _, seconds in pairs)))
     return [result for result, _ in pairs]
-
-
-def torch_threads() -> int:
-    import torch
-
-    return torch.get_num_threads()
 
 
 def _ray_map(
@@ -146,7 +141,7 @@ def _ray_map(
     watchdog = start_watchdog() if started_here and cluster.address == "local" else None
     try:
         if started_here:
-            connect(cluster)
+            connect(ray, cluster)
         remote = ray.remote(num_cpus=cluster.threads)(_timed)
         shared: dict[int, Any] = {}
 
@@ -171,9 +166,8 @@ def _ray_map(
         stop_watchdog(watchdog)
 
 
-def connect(cluster: Cluster) -> None:
-    """Start (local) or join (auto, ray://) a Ray runtime for this process."""
-    ray = _ray()
+def connect(ray: Any, cluster: Cluster) -> None:
+    """Start (local) or join (auto, ray://) a Ray runtime for this process (``ray``: the imported module)."""
     if cluster.address.startswith("ray://"):
         reachable(cluster.address)
     try:
@@ -186,8 +180,10 @@ def connect(cluster: Cluster) -> None:
                 configure_logging=False,
             )
         else:
-            with stderr_kept_back():  # Ray Client's warnings and retries: nothing above the one-line error
+            # Ray Client logs its retries from C++ and Python alike: held back, written out once it succeeds
+            with captured_stderr() as caught:
                 ray.init(address=cluster.address, log_to_driver=False, configure_logging=False)
+            sys.stderr.writelines(f"{line}\n" for line in caught)
     except Exception as exc:  # Ray raises ConnectionError, RuntimeError, ValueError... for an unreachable cluster
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InvalidValueError(f"--cluster {cluster.address}: cannot start or reach Ray ({reason})") from None
@@ -222,17 +218,6 @@ def keep_ray_notices_back() -> None:
     notices = logging.getLogger(RAY_NOTICE_LOGGER)
     if not any(isinstance(f, _NoNotice) for f in notices.filters):
         notices.addFilter(_NoNotice())
-
-
-@contextlib.contextmanager
-def stderr_kept_back() -> Iterator[None]:
-    """File descriptor 2 held back while the block runs (Ray logs from C++ and Python alike:
-    :func:`~vprsnn_export.data.preprocess.captured_stderr`); what it caught is written to stderr after a block that
-    succeeds, dropped after one that raises."""
-    with captured_stderr() as caught:
-        yield
-    for line in caught:
-        print(line, file=sys.stderr)
 
 
 # ---------------------------------------------------------------------------- a local cluster ends with the command

@@ -12,10 +12,9 @@ DEVICE_CHOICES = ("auto", "cpu", "cuda")
 
 def resolve_device(name: str) -> torch.device:
     if require_choice("--device", name, DEVICE_CHOICES) == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    device = check_device("--device", name)  # cpu, or cuda refused without a GPU
-    assert device is not None
-    return device
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    check_device("--device", name)  # cuda refused without a GPU
+    return torch.device(name)
 
 
 def check_device(name: str, value: object) -> torch.device | None:

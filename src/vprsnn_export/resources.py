@@ -92,13 +92,19 @@ def set_memory_limit(limit: int | str | None) -> int | None:
 
 def memory_limit() -> int | None:
     """The limit in bytes: :func:`set_memory_limit`'s, else $VPRSNN_MEMORY_LIMIT, else 90 % of the available memory."""
+    return _limit_and_source()[0]
+
+
+def _limit_and_source() -> tuple[int | None, str]:
+    """:func:`memory_limit` and, for an error, what sets it."""
     if _explicit_limit is not None:
-        return _explicit_limit
+        return _explicit_limit, f"set by {OPTION}"
     text = os.environ.get(ENV_LIMIT, "").strip()
     if text:
-        return parse_size(text, ENV_LIMIT)
+        return parse_size(text, ENV_LIMIT), f"set by {ENV_LIMIT}"
     available = available_memory()
-    return None if available is None else int(available * AVAILABLE_SHARE)
+    share = f"{AVAILABLE_SHARE:.0%} of the available memory; {OPTION} or {ENV_LIMIT} sets it"
+    return None if available is None else int(available * AVAILABLE_SHARE), share
 
 
 @dataclass(frozen=True)
@@ -173,7 +179,6 @@ def training_need(
 
 
 def single_need(name: str, size: int) -> MemoryNeed:
-    """A need of one array: ``size`` bytes named ``name``."""
     return MemoryNeed(((name, size),))
 
 
@@ -188,15 +193,7 @@ def check_memory(need: MemoryNeed, what: str, lower: str, limit: int | None = No
 
     ``what``: the step (``train``, ``calibration``); ``lower``: the settings that make the need smaller.
     """
-    if limit is not None:
-        source = "given"
-    elif _explicit_limit is not None:
-        source = f"set by {OPTION}"
-    elif os.environ.get(ENV_LIMIT, "").strip():
-        source = f"set by {ENV_LIMIT}"
-    else:
-        source = f"{AVAILABLE_SHARE:.0%} of the available memory; {OPTION} or {ENV_LIMIT} sets it"
-    limit = memory_limit() if limit is None else limit
+    limit, source = _limit_and_source() if limit is None else (limit, "given")
     if limit is None or need.total <= limit:
         return
     name, size = max(need.terms, key=lambda term: term[1])

@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 from ..arguments import ascii_int
 from ..config import PRESETS, Config, preset
-from ..data.dataset import Dataset, load_selection, window_beside_truth
+from ..data.dataset import Dataset, dataset_files, load_selection, window_beside_truth
 from ..data.groundtruth import ground_truth_files
 from ..errors import InvalidValueError
 from ..export.model import DEFAULT_BITS, check_bits
 from ..export.quantize import SCALE_METHODS
-from ..io.fileio import parse_json
+from ..io.fileio import check_output, parse_json
 from ..readout.rules import RULES
 from ..readout.search import DEFAULT_PATIENCE, SearchWindow
 from ..readout.sequence import MAX_K, MAX_VELOCITY, SequenceOptions, option_flag
@@ -63,7 +63,6 @@ def add_data_options(parser: argparse.ArgumentParser, *, data_required: bool) ->
 
 
 def add_query_options(parser: argparse.ArgumentParser) -> None:
-    """Data, --query, the sequence options and the spillover switch: what evaluate and simulate share."""
     add_data_options(parser, data_required=False)
     parser.add_argument("--query", required=True, help="query traversal name")
     add_sequence_options(parser)
@@ -76,7 +75,6 @@ DEFAULT_BITS_TEXT = ",".join(map(str, DEFAULT_BITS))
 
 
 def add_bits_option(parser: argparse.ArgumentParser) -> None:
-    """--bits of quantize and verify; :func:`bit_widths` reads it."""
     parser.add_argument(
         "--bits", default=DEFAULT_BITS_TEXT, help=f"weight bit widths, each 2..8 (default {DEFAULT_BITS_TEXT})"
     )
@@ -102,7 +100,6 @@ QUANTISE_HELP = {
 
 
 def add_quantise_options(parser: argparse.ArgumentParser) -> None:
-    """The quantisation flags of quantize and verify (:data:`QUANTISE_HELP`); :func:`quantise_options` reads them."""
     group = parser.add_argument_group("quantisation")
     scales = group.add_mutually_exclusive_group()
     for flag in ("--per-tensor", "--per-neuron"):
@@ -216,7 +213,7 @@ def given_sequence_options(args: argparse.Namespace) -> dict[str, Any]:
     raw = {f.name: getattr(args, option_flag(f.name)[2:].replace("-", "_")) for f in fields(SequenceOptions)}
     given = {name: value for name, value in raw.items() if value is not None}
     if "ks" in given or args.default_k:
-        given["ks"] = parse_int_list(given.get("ks", args.default_k), "--k", MAX_K)
+        given["ks"] = parse_int_list(given.get("ks", args.default_k), "--k")
     if "velocity_candidates" in given:
         given["velocity_candidates"] = parse_velocity_grid(given["velocity_candidates"])
         if max(given.get("ks", (1,))) == 1:
@@ -305,16 +302,15 @@ def parse_value(raw: str) -> Any:
         return raw
 
 
-MAX_LIST_VALUE = MAX_K  # --bits and other lists: far above any meaningful value, low enough to fail before memory does
 MAX_VELOCITY_CANDIDATES = 10_000
 
 
-def parse_int_list(raw: str, option: str, maximum: int = MAX_LIST_VALUE) -> tuple[int, ...]:
-    """``"1,3,5"`` -> (1, 3, 5): integers from 1 to ``maximum``; InvalidValueError naming the option otherwise."""
+def parse_int_list(raw: str, option: str) -> tuple[int, ...]:
+    """``"1,3,5"`` -> (1, 3, 5): integers from 1 to :data:`MAX_K`; InvalidValueError naming the option otherwise."""
     parsed = tuple(ascii_int(v.strip()) for v in raw.split(",") if v.strip())
     values = tuple(v for v in parsed if v is not None)
-    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > maximum:
-        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {maximum}"
+    if len(values) < len(parsed) or not values or min(values) < 1 or max(values) > MAX_K:
+        expected = "comma-separated integers" if len(values) < len(parsed) else f"integers from 1 to {MAX_K}"
         raise InvalidValueError(f"{option} expects {expected}, got {raw!r}")
     return values
 
@@ -376,23 +372,26 @@ RESULT_COLUMNS = (
 )
 
 
-def refuse_window_beside_truth(
-    match_window: int | None, source: str | None, references: Sequence[str], query: str
-) -> None:
+def refuse_window_beside_truth(args: argparse.Namespace, network: Network, query: str) -> None:
     """--match-window on a folder with a ground-truth file of (reference, query): refused before any image loads."""
+    source = args.data if args.data is not None else network.data.get("source")
     folder = Path(source) if source else None
-    if not match_window or folder is None or not folder.is_dir():
+    if not args.match_window or folder is None or not folder.is_dir():
         return
-    if found := [path for reference in references for path, _ in ground_truth_files(folder, reference, query)]:
-        raise window_beside_truth(match_window, found[0])
+    if found := [p for ref in network.reference_traversals for p, _ in ground_truth_files(folder, ref, query)]:
+        raise window_beside_truth(args.match_window, found[0])
 
 
-def query_data(args: argparse.Namespace, network: Network, query: str | None = None) -> Dataset:
-    """The data set of --data/--subset/--places, else the one ``network`` records: ``query``, else its references."""
+def query_data(
+    args: argparse.Namespace, network: Network, query: str | None = None, outputs: Sequence = (), inputs: tuple = ()
+) -> Dataset:
+    """The data set of --data/--subset/--places, else the one ``network`` records: ``query``, else its references;
+    ``outputs`` checked against ``inputs`` before any image loads, then against the data set's files too."""
+    for output in outputs:
+        check_output(output, inputs=inputs)
     if query is not None:
-        source = args.data if args.data is not None else network.data.get("source")
-        refuse_window_beside_truth(getattr(args, "match_window", None), source, network.reference_traversals, query)
-    return load_selection(
+        refuse_window_beside_truth(args, network, query)
+    dataset = load_selection(
         network.data,
         list(network.reference_traversals) if query is None else [query],
         network.config.preprocess,
@@ -401,12 +400,17 @@ def query_data(args: argparse.Namespace, network: Network, query: str | None = N
         places=args.places,
         progress=not args.quiet,
     )
+    for output in outputs:
+        check_output(output, inputs=(*inputs, *dataset_files(dataset, args.subset, network.data.get("subset"))))
+    return dataset
 
 
-def load_query(args: argparse.Namespace, network: Network) -> tuple[SequenceOptions, Dataset, Query]:
+def load_query(
+    args: argparse.Namespace, network: Network, outputs: Sequence = (), inputs: tuple = ()
+) -> tuple[SequenceOptions, Dataset, Query]:
     """evaluate and simulate: the sequence options, the data and the --query of ``network`` (a warning printed)."""
     options = sequence_options(args)
-    dataset = query_data(args, network, args.query)
+    dataset = query_data(args, network, args.query, outputs, inputs)
     query = dataset.query(args.query, network.reference_traversals, args.match_window)
     if warning := options.warning(dataset.place_ids):
         print(f"warning: {warning}", file=sys.stderr)

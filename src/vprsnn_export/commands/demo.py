@@ -131,11 +131,9 @@ def conclusion(report: VerifyReport) -> list[str]:
 
 def hints(out: Path, data: str) -> list[str]:
     """Commands that rerun a step of the demo, exactly as printed (a test runs them)."""
-    bits = ",".join(map(str, DEMO_BITS))
-    ks = ",".join(map(str, DEMO_KS))
     return [
-        f"vprsnn-export verify {quote(str(out / 'float.npz'))} --data {data} --query {DEMO_QUERY} --bits {bits} "
-        f"--k {ks} --report {quote(str(out / 'verify'))}",
+        f"vprsnn-export verify {quote(str(out / 'float.npz'))} --data {data} --query {DEMO_QUERY} --bits "
+        f"{','.join(map(str, DEMO_BITS))} --k {','.join(map(str, DEMO_KS))} --report {quote(str(out / 'verify'))}",
         f"vprsnn-export report {quote(str(out / 'report'))}",
     ]
 

@@ -6,9 +6,8 @@ import argparse
 import sys
 
 from ..cluster import CLUSTER_HELP, parse_cluster
-from ..data.dataset import dataset_files, load_selection, select_places
+from ..data.dataset import load_selection, select_places
 from ..io.checkpoint import load_checkpoint
-from ..io.fileio import check_output
 from ..runtime.predictions import prediction_format, predictions
 from ._common import (
     RESULT_COLUMNS,
@@ -70,10 +69,10 @@ def run(args: argparse.Namespace) -> int:
     ckpt = load_checkpoint(args.checkpoint)
     if args.predictions is not None:
         prediction_format(args.predictions)
-        check_output(args.predictions, inputs=(args.checkpoint,))
     cluster = None if args.cluster is None else parse_cluster(args.cluster, threads=args.threads)
     search = search_window(args)
-    options, dataset, query = load_query(args, ckpt)
+    outputs = () if args.predictions is None else (args.predictions,)  # nor over a file of the data set
+    options, _, query = load_query(args, ckpt, outputs, (args.checkpoint,))
     truth = query.truth
     reference_images = None
     if args.baseline:  # the reference frames the network was trained on, loaded on their own (any traversal lengths)
@@ -82,10 +81,6 @@ def run(args: argparse.Namespace) -> int:
             ckpt.reference_place_ids,
         )
         reference_images = {t: references.traversal(t) for t in ckpt.reference_traversals}
-    if args.predictions is not None:  # nor over a file of the data set (manifest, subset, ground truth)
-        check_output(
-            args.predictions, inputs=(args.checkpoint, *dataset_files(dataset, args.subset, ckpt.data.get("subset")))
-        )
     result = evaluate_float(
         ckpt,
         query.images,

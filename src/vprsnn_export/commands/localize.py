@@ -15,11 +15,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..data.dataset import dataset_files, reference_frame_shape
+from ..data.dataset import reference_frame_shape
 from ..data.events import EventWindow
 from ..data.frames import iter_frames
 from ..errors import DataError, InvalidValueError
-from ..io.fileio import check_output
 from ..readout.sequence import SequenceOptions, option_flag
 from ..runtime.backends import BACKENDS
 from ._common import (
@@ -101,19 +100,6 @@ def calibration_output(args: argparse.Namespace) -> str | None:
     return None if args.calibrate is None else args.operating_point or str(operating_point_path(args.model))
 
 
-def options_from(given: dict, stored: SequenceOptions | None, where: Path | None) -> SequenceOptions:
-    """The given options over the defaults, or the stored ones, which a given option cannot change."""
-    if stored is None:
-        return SequenceOptions(**given)
-    for name, value in given.items():
-        if value != getattr(stored, name):
-            raise InvalidValueError(
-                f"{option_flag(name)} differs from the operating point's {getattr(stored, name)!r} ({where}): its "
-                "threshold holds for its own options; recalibrate or give --threshold"
-            )
-    return stored
-
-
 def run(args: argparse.Namespace) -> int:
     from ..device import resolve_device
     from ..runtime.exporting import load_source, read_export
@@ -131,12 +117,13 @@ def run(args: argparse.Namespace) -> int:
     if onnx is not None:  # a deploy folder's graph, or a file checked against its folder's manifest
         onnx = read_export(onnx).written("onnx") if onnx.is_dir() else check_against_manifest(onnx)
     device = resolve_device(args.device)
+    backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     if args.calibrate:
         if args.topic is not None or events:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
         if args.search_window is not None or args.patience is not None:
             raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
-        return calibrate(args, source, point_path, onnx, device)
+        return calibrate(args, source, point_path, onnx, backend)
     stored: OperatingPoint | None = None
     if args.threshold is None and (args.precision is not None or point_path.is_file()):
         stored = load_operating_point(point_path, source.sha256)
@@ -145,13 +132,19 @@ def run(args: argparse.Namespace) -> int:
                 f"--precision {args.precision}: the operating point {point_path} was calibrated for "
                 f"{stored.precision_target}; run --calibrate with --precision {args.precision}"
             )
-    options = options_from(given_sequence_options(args), None if stored is None else stored.options, point_path)
+    given = given_sequence_options(args)  # over the defaults, or the stored options, which none of them may change
+    options = SequenceOptions(**given) if stored is None else stored.options
+    for name, value in given.items() if stored is not None else ():
+        if value != getattr(options, name):
+            raise InvalidValueError(
+                f"{option_flag(name)} differs from the operating point's {getattr(options, name)!r} ({point_path}): "
+                "its threshold holds for its own options; recalibrate or give --threshold"
+            )
     threshold = args.threshold if stored is None else stored.threshold
     if args.threshold is None and stored is None:
         print("note: no operating point (run --calibrate QUERY first): no decision is accepted", file=sys.stderr)
     elif stored is not None and not args.quiet:
         print(f"operating point: {point_path} (threshold {stored.threshold})", file=sys.stderr)
-    backend = {"backend": args.backend, "onnx_path": onnx, "device": device, "threads": args.threads}
     localizer = Localizer(source.network, options=options, threshold=threshold, search=search_window(args), **backend)
     assert frames is not None
     for decision in localizer.run(sized_frames(frames, expected)):
@@ -174,7 +167,7 @@ def sized_frames(
         yield name, grey
 
 
-def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, device) -> int:
+def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | None, backend: dict) -> int:
     from ..runtime.localize import Localizer, curve_paths, operating_point, save_curve, save_operating_point
     from ..runtime.report.plots import plot_precision_recall
 
@@ -182,16 +175,8 @@ def calibrate(args: argparse.Namespace, source, point_path: Path, onnx: Path | N
         raise InvalidValueError("--threshold is for --frames; --calibrate chooses it from --precision")
     network = source.network
     options = sequence_options(args)
-    outputs = (point_path, *curve_paths(point_path))
-    for output in outputs:
-        check_output(output, inputs=(args.model, onnx))
-    dataset = query_data(args, network, args.calibrate)
-    inputs = (args.model, onnx, *dataset_files(dataset, args.subset, network.data.get("subset")))
-    for output in outputs:
-        check_output(output, inputs=inputs)
-    localizer = Localizer(
-        network, backend=args.backend, options=options, onnx_path=onnx, device=device, threads=args.threads
-    )
+    dataset = query_data(args, network, args.calibrate, (point_path, *curve_paths(point_path)), (args.model, onnx))
+    localizer = Localizer(network, options=options, **backend)
     truth = dataset.query(args.calibrate, network.reference_traversals, args.match_window).truth
     point, _, curve = operating_point(
         localizer,

@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
         tolerances=parse_tolerances(args.tolerance),
     )
     source, subset, places = data_selection(template.data, args.data, args.subset, args.places)
-    refuse_window_beside_truth(args.match_window, source, template.reference_traversals, args.query)
+    refuse_window_beside_truth(args, template, args.query)
     cache: dict = {}
     if args.seeds is not None:
         dataset, _ = verify_data(template, args.query, source, subset, places, progress, cache)  # training places

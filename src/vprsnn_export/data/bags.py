@@ -33,7 +33,6 @@ ROS2_METADATA = "metadata.yaml"
 
 
 def is_bag(path: Path) -> bool:
-    """A ROS 1 bag file (``.bag``) or a ROS 2 bag folder (holding ``metadata.yaml``)."""
     return (path.is_file() and path.suffix.lower() == BAG_SUFFIX) or (path / ROS2_METADATA).is_file()
 
 

@@ -226,18 +226,17 @@ def reference_frame_shape(record: Mapping[str, object], traversals: Sequence[str
     """(height, width) of the first reference image a network was trained on (its data ``record``): the size a
     stream of frames is expected to have. None when the data source is not readable here (nothing to compare)."""
     source = _optional_str(record.get("source"))
-    names = list(traversals)
-    if source is None or not names:
+    if source is None or not traversals:
         return None
     try:
         if parse_synthetic(source) is not None:
             return IMAGE_HEIGHT, IMAGE_WIDTH
         folder = Path(source)
         if _is_folders(folder):
-            first = image_files(folder / names[0])[0]
+            first = image_files(folder / traversals[0])[0]
         else:
             manifest = read_manifest(source)
-            first = manifest.path.parent / next(iter(manifest.rows.values()))[1].get(names[0], "")
+            first = manifest.path.parent / next(iter(manifest.rows.values()))[1].get(traversals[0], "")
         shape = read_grey_image(first).shape
     except (VprError, OSError, StopIteration):
         return None

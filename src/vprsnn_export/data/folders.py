@@ -135,14 +135,13 @@ def decode_images(
     cells: dict[str, list[tuple[Path, str]]], cfg: PreprocessConfig, progress: bool
 ) -> dict[str, np.ndarray]:
     """Each traversal's image files (with a context for errors) decoded and preprocessed, (N, inputs) float32."""
-    size = cfg.image_size
     images = {}
     total = sum(len(paths) for paths in cells.values())
     with tqdm(total=total, desc="decoding images", unit="img", file=sys.stderr, disable=not progress) as bar:
         for name, paths in cells.items():
-            resized = np.empty((len(paths), size, size), dtype=np.uint8)
+            resized = np.empty((len(paths), cfg.image_size, cfg.image_size), dtype=np.uint8)
             for row, (path, context) in enumerate(paths):
-                resized[row] = resize_image(read_grey_image(path, context), size)
+                resized[row] = resize_image(read_grey_image(path, context), cfg.image_size)
                 bar.update(1)
             images[name] = normalise_resized(resized, cfg)
     return images

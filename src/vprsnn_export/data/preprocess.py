@@ -201,6 +201,11 @@ def intensity_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarra
     return patch_normalise(resized, cfg.patch_size) if cfg.patch_norm else resized.astype(np.float32) / np.float32(255)
 
 
+def dog_channel(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
+    """The ON/OFF channels of :func:`dog_on_off` at the config's two sigmas; (N, S, 2S) float32."""
+    return dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround)
+
+
 @dataclass(frozen=True)
 class Channel:
     """One choice of input channels (``preprocess.channels``).
@@ -217,14 +222,7 @@ class Channel:
 
 CHANNELS: Registry[Channel] = Registry("config.preprocess.channels")
 CHANNELS.register(Channel("intensity", 1, intensity_channel, "patch-normalised"))
-CHANNELS.register(
-    Channel(
-        "dog_on_off",
-        2,
-        lambda resized, cfg: dog_on_off(resized, cfg.dog_sigma_centre, cfg.dog_sigma_surround),
-        "DoG ON/OFF",
-    )
-)
+CHANNELS.register(Channel("dog_on_off", 2, dog_channel, "DoG ON/OFF"))
 
 
 def normalise_resized(resized: np.ndarray, cfg: PreprocessSettings) -> np.ndarray:
