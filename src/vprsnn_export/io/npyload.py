@@ -172,20 +172,6 @@ def _rebuild(root: object) -> object:
     return done[id(root)]
 
 
-def _header(stream: io.BytesIO, what: str, path: Path) -> tuple[tuple[int, ...], bool, np.dtype]:
-    try:
-        version = np.lib.format.read_magic(stream)
-        if version not in ((1, 0), (2, 0)):
-            raise ValueError(f"format version {version[0]}.{version[1]} is not supported")
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read_header(stream)
-    except (ValueError, SyntaxError, TypeError, EOFError, OverflowError, MemoryError, RecursionError) as exc:
-        raise DataError(f"the {what} is not a .npy array file ({str(exc)[:120]})", path) from None
-    if dtype.fields is not None or dtype.subdtype is not None:
-        raise DataError(f"the {what} has a structured dtype ({str(dtype)[:80]}), expected a plain array", path)
-    return tuple(shape), bool(fortran), dtype
-
-
 def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
     """The array stored in the ``.npy`` file ``path``; an object array through the restricted unpickler.
 
@@ -207,7 +193,16 @@ def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
 def parse_npy(raw: bytes, path: Path, what: str = "array") -> np.ndarray:
     """:func:`load_npy` of a file's bytes already read (``path`` names it in errors)."""
     stream = io.BytesIO(raw)
-    shape, fortran, dtype = _header(stream, what, path)
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"format version {version[0]}.{version[1]} is not supported")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(stream)
+    except (ValueError, SyntaxError, TypeError, EOFError, OverflowError, MemoryError, RecursionError) as exc:
+        raise DataError(f"the {what} is not a .npy array file ({str(exc)[:120]})", path) from None
+    if dtype.fields is not None or dtype.subdtype is not None:
+        raise DataError(f"the {what} has a structured dtype ({str(dtype)[:80]}), expected a plain array", path)
     if not dtype.hasobject:
         body = len(raw) - stream.tell()
         if math.prod(shape) * dtype.itemsize != body:

@@ -64,14 +64,12 @@ def train_group(
     images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
 ) -> GroupTraining:
     """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
-    weights = initial_state(cfg, len(rows), CPU)[0]
-    epochs: list[tuple[np.ndarray, np.ndarray, float]] = []
-    for state in module_epochs(images, presentations, rows, cfg, device=CPU):
-        weights = state.weights
-        epochs.append((state.fired.numpy().copy(), state.theta.numpy().copy(), state.seconds))
-    empty = np.zeros((0, len(rows), cfg.network.n_neurons), np.float32)
-    fired, theta = (np.stack([epoch[k] for epoch in epochs]) if epochs else empty for k in (0, 1))
-    return GroupTraining(weights.numpy().copy(), fired, theta, np.asarray([e[2] for e in epochs], dtype=np.float64))
+    states = list(module_epochs(images, presentations, rows, cfg, device=CPU))  # each epoch's fired and theta its own
+    weights = states[-1].weights if states else initial_state(cfg, len(rows), CPU)[0]
+    shape = (len(states), len(rows), cfg.network.n_neurons)
+    fired = np.array([state.fired.numpy() for state in states], np.float32).reshape(shape)
+    theta = np.array([state.theta.numpy() for state in states], np.float32).reshape(shape)
+    return GroupTraining(weights.numpy().copy(), fired, theta, np.array([s.seconds for s in states], dtype=np.float64))
 
 
 def train_modules_on_cluster(
@@ -99,7 +97,7 @@ def train_modules_on_cluster(
     weights = torch.from_numpy(np.concatenate([g.weights for g in done]))
     fired = np.concatenate([g.fired for g in done], axis=1)
     theta = np.concatenate([g.theta for g in done], axis=1)
-    seconds = np.max(np.stack([g.seconds for g in done]), axis=0) if len(fired) else np.zeros(0)
+    seconds = np.max([g.seconds for g in done], axis=0)  # (epochs,): each epoch's slowest task
     n_rows = np.array([len(r) for r in rows])
     history = [
         history_entry(e, float(seconds[e]), torch.from_numpy(fired[e]), torch.from_numpy(theta[e]), n_rows)
