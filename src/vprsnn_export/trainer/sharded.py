@@ -115,11 +115,10 @@ def run_group(
     place_ids: np.ndarray,
     traversal: str,
     stream: str,
-    state_isolation: bool | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A task: encode the presentations, run a group of modules (float, CPU); (counts (N, neurons), |C[t]| (N, T))."""
     spikes = STREAMS[stream](images, place_ids, traversal, cfg)
-    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes, state_isolation=state_isolation)
+    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes)
     assert run.candidates_per_step is not None  # the float network always reports them
     return run.counts.numpy(), run.candidates_per_step.numpy()
 
@@ -133,9 +132,7 @@ def float_runs_on_cluster(
     stream: str,
     cluster: Cluster | None,
     *,
-    state_isolation: bool | None = None,
     modules_per_task: int = 1,
-    timing: list | None = None,
     progress: bool = False,
 ) -> dict[str, SpikeRun]:
     """The float ensemble on each traversal's images, split into tasks: one SpikeRun per traversal.
@@ -150,7 +147,6 @@ def float_runs_on_cluster(
     """
     n = cfg.network.n_neurons
     groups = module_groups(weights.shape[1] // n, modules_per_task)
-    isolated = cfg.network.state_isolation if state_isolation is None else state_isolation
     parts: list[tuple[np.ndarray, np.ndarray, slice | np.ndarray]]  # weights, thresholds, presentations of a task
     if wta_group(cfg, weights.shape[1]) == n or len(groups) == 1:
         columns = [slice(group.start * n, group.stop * n) for group in groups]
@@ -158,15 +154,15 @@ def float_runs_on_cluster(
         parts = [(np.ascontiguousarray(weights[:, c]), np.ascontiguousarray(thresholds[c]), every) for c in columns]
         axis = 1
     else:
-        split = np.array_split(np.arange(len(place_ids)), len(groups) if isolated else 1)
+        split = np.array_split(np.arange(len(place_ids)), len(groups) if cfg.network.state_isolation else 1)
         parts = [(weights, thresholds, piece) for piece in split if len(piece)]
         axis = 0
     tasks = [
-        (w, t, cfg, images[rows], place_ids[rows], traversal, stream, state_isolation)
+        (w, t, cfg, images[rows], place_ids[rows], traversal, stream)
         for traversal, images in presentations.items()
         for w, t, rows in parts
     ]
-    done = map_tasks(cluster, run_group, tasks, timing=timing, progress=f"{stream} runs" if progress else None)
+    done = map_tasks(cluster, run_group, tasks, progress=f"{stream} runs" if progress else None)
     runs: dict[str, SpikeRun] = {}
     for k, traversal in enumerate(presentations):
         results = done[k * len(parts) : (k + 1) * len(parts)]
