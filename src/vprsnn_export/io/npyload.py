@@ -125,13 +125,6 @@ class _ArrayUnpickler(pickle.Unpickler):
         raise pickle.UnpicklingError("refused persistent id")
 
 
-def _numeric_array(shape: tuple[int, ...], dtype: np.dtype, fortran: bool, data: object) -> np.ndarray:
-    """The array over ``data``, a buffer of exactly ``prod(shape) * itemsize`` bytes."""
-    if not isinstance(data, bytes) or len(data) != math.prod(shape) * dtype.itemsize:
-        raise ValueError(f"a {dtype} array of shape {shape} over a buffer of another length")
-    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()
-
-
 def _rebuild(root: object) -> object:
     """``root`` with every :class:`_ArrayRecipe` replaced by its array (an object array's elements: its list form)
     and containers rebuilt with their elements replaced, walked iteratively (each object once; the root keeps
@@ -146,8 +139,10 @@ def _rebuild(root: object) -> object:
             raise ValueError(f"objects nested more than {MAX_DEPTH} levels deep")
         if isinstance(node, _ArrayRecipe):
             shape, dtype, fortran, data = node.parts()
-            if dtype.kind != "O":
-                done[id(node)] = _numeric_array(shape, dtype, fortran, data)
+            if dtype.kind != "O":  # over a buffer of exactly prod(shape) * itemsize bytes
+                if not isinstance(data, bytes) or len(data) != math.prod(shape) * dtype.itemsize:
+                    raise ValueError(f"a {dtype} array of shape {shape} over a buffer of another length")
+                done[id(node)] = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()
                 continue
             if not isinstance(data, list) or len(data) != math.prod(shape):
                 raise ValueError(f"an object array of shape {shape} that is not its list of elements")
