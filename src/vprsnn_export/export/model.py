@@ -174,7 +174,6 @@ class FixedPointModel:
 
     @property
     def voltage_limit(self) -> int:
-        """Largest voltage magnitude: 2**(voltage_bits - 1) - 1."""
         return (1 << (self.voltage_bits - 1)) - 1
 
     def wta_description(self) -> str:
@@ -243,7 +242,6 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
 
 MODEL_ARRAYS: tuple[str, ...] = ("weight_mantissa", "scale_multiplier", "threshold", "calibration")
 MODEL_ARRAYS += ("float_calibration", "reference_place_ids")
-#: The header's integer fields.
 INTEGER_FIELDS = ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits")
 
 

@@ -46,7 +46,6 @@ def _writing(path: str | Path) -> Iterator[None]:
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temp file in the same folder, fsync, rename)."""
     return atomic_write(path, lambda handle: handle.write(data))
 
 
