@@ -95,9 +95,8 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
         except (ValueError, TypeError, OverflowError, VprError) as exc:
             raise ModelFileError(f"the sparse calibration arrays do not form a CSR array ({exc})", path) from None
         arrays["calibration"] = csr
-    missing = set(ARRAYS) - set(arrays)
-    if missing:
-        raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
+    if set(ARRAYS) - set(arrays):
+        raise ModelFileError(f"checkpoint lacks arrays {sorted(set(ARRAYS) - set(arrays))}", path)
     weights, thresholds, calibration, ids = (arrays[name] for name in ARRAYS)
     version = str(meta.get("package_version", "unknown"))
     ckpt = Checkpoint(config, weights, thresholds, calibration, ids, traversals, data, history, version)
