@@ -174,7 +174,6 @@ class FixedPointModel:
 
     @property
     def voltage_limit(self) -> int:
-        """Largest voltage magnitude: 2**(voltage_bits - 1) - 1."""
         return (1 << (self.voltage_bits - 1)) - 1
 
     def wta_description(self) -> str:
@@ -243,6 +242,7 @@ def load_fixed_point(path: str | Path) -> FixedPointModel:
 
 MODEL_ARRAYS: tuple[str, ...] = ("weight_mantissa", "scale_multiplier", "threshold", "calibration")
 MODEL_ARRAYS += ("float_calibration", "reference_place_ids")
+INTEGER_FIELDS = ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits")
 
 
 def model_from_header(
@@ -262,16 +262,12 @@ def model_from_header(
         raise ModelFileError(f"fixed-point model lacks arrays {sorted(set(MODEL_ARRAYS) - set(arrays))}", path)
     try:
         values: dict[str, Any] = {
-            "bits": int(meta["bits"]),
-            "scale_exponent": int(meta["scale_exponent"]),
-            "decay_dv": int(meta["decay_dv"]),
+            **{key: meta[key] for key in INTEGER_FIELDS},  # integers: check_header
             "config": Config.from_dict(meta["config"]),
             "reference_traversals": traversals,
             "quantisation": QuantisationReport.from_dict(meta["quantisation"]),
             "source_sha256": str(meta["source_sha256"]),
             "data": data,
-            "voltage_shift": int(meta["voltage_shift"]),
-            "voltage_bits": int(meta["voltage_bits"]),
             "version": str(meta.get("package_version", "unknown")),
         }
         values |= {name: arrays[name] for name in MODEL_ARRAYS} | fields
@@ -291,7 +287,7 @@ def check_header(meta: dict[str, Any], path: Path) -> tuple[list[str], dict[str,
     if meta.get("format_version") != FORMAT_VERSION:
         raise ModelFileError(f"unsupported fixed-point format version {meta.get('format_version')!r}", path)
     traversals, data = reference_header(meta, path)
-    for key in ("bits", "scale_exponent", "decay_dv", "voltage_shift", "voltage_bits"):
+    for key in INTEGER_FIELDS:
         if not isinstance(meta.get(key), int) or isinstance(meta.get(key), bool):
             raise ModelFileError(f"invalid fixed-point header: {key} must be an integer, got {meta.get(key)!r}", path)
     if meta["bits"] not in SUPPORTED_BITS:

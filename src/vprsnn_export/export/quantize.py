@@ -306,8 +306,7 @@ def quantize_checkpoint(ckpt: Checkpoint, ckpt_sha256: str, bits: int, options: 
     report = QuantisationReport.from_dict(
         dict(arrays.report, calibration="float (not recalibrated)", calibration_saturations=None)
     )
-    sr = ckpt.calibration
-    sr = sr.toarray() if isinstance(sr, sparse.csr_array) else sr  # a fixed-point model's S^R is dense
+    sr = ckpt.calibration.toarray() if isinstance(ckpt.calibration, sparse.csr_array) else ckpt.calibration  # dense
     model = FixedPointModel(
         bits=int(bits),
         weight_mantissa=arrays.weight_mantissa,

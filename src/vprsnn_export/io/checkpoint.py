@@ -87,28 +87,21 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     path = Path(path)
     config, traversals, data, history = check_header(meta, path)
     if "calibration" not in arrays and {*SPARSE_CALIBRATION, "reference_place_ids"} <= set(arrays):
-        arrays["calibration"] = _sparse_calibration(arrays, config, path)
-    missing = set(ARRAYS) - set(arrays)
-    if missing:
-        raise ModelFileError(f"checkpoint lacks arrays {sorted(missing)}", path)
+        values, indices, indptr = (arrays.pop(name) for name in SPARSE_CALIBRATION)  # a long route's CSR S^R
+        places = validate_reference_ids(arrays["reference_place_ids"], path)
+        try:  # (neurons, places) from its config and place ids, its structure checked in full
+            csr = sparse.csr_array((values, indices, indptr), shape=(ensemble_neurons(config, places), places))
+            csr.check_format(full_check=True)
+        except (ValueError, TypeError, OverflowError, VprError) as exc:
+            raise ModelFileError(f"the sparse calibration arrays do not form a CSR array ({exc})", path) from None
+        arrays["calibration"] = csr
+    if set(ARRAYS) - set(arrays):
+        raise ModelFileError(f"checkpoint lacks arrays {sorted(set(ARRAYS) - set(arrays))}", path)
     weights, thresholds, calibration, ids = (arrays[name] for name in ARRAYS)
     version = str(meta.get("package_version", "unknown"))
     ckpt = Checkpoint(config, weights, thresholds, calibration, ids, traversals, data, history, version)
     validate_checkpoint(ckpt, path)
     return ckpt
-
-
-def _sparse_calibration(arrays: dict[str, np.ndarray], config: Config, path: Path) -> sparse.csr_array:
-    """The CSR S^R of a long route's checkpoint, (neurons, places) from its config and place ids, its structure
-    checked in full; ModelFileError naming ``path`` otherwise."""
-    data, indices, indptr = (arrays.pop(name) for name in SPARSE_CALIBRATION)
-    places = validate_reference_ids(arrays["reference_place_ids"], path)
-    try:
-        csr = sparse.csr_array((data, indices, indptr), shape=(ensemble_neurons(config, places), places))
-        csr.check_format(full_check=True)
-    except (ValueError, TypeError, OverflowError, VprError) as exc:
-        raise ModelFileError(f"the sparse calibration arrays do not form a CSR array ({exc})", path) from None
-    return csr
 
 
 def check_header(

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
-import io
 import json
 import os
 import re
@@ -47,7 +46,6 @@ def _writing(path: str | Path) -> Iterator[None]:
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temp file in the same folder, fsync, rename)."""
     return atomic_write(path, lambda handle: handle.write(data))
 
 
@@ -312,10 +310,8 @@ def write_container(path: str | Path, meta: dict[str, Any], arrays: dict[str, np
     """Write arrays plus a JSON header into one ``.npz`` atomically (the savers checked the path and name the
     arrays, never :data:`META_KEY`)."""
     header = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-    buffer = io.BytesIO()
     members: dict[str, Any] = {META_KEY: header, **arrays}
-    np.savez_compressed(buffer, **members)
-    return atomic_write_bytes(path, buffer.getvalue())
+    return atomic_write(path, lambda handle: np.savez_compressed(handle, **members))
 
 
 def is_readable_file(path: str | Path) -> bool:

@@ -125,13 +125,6 @@ class _ArrayUnpickler(pickle.Unpickler):
         raise pickle.UnpicklingError("refused persistent id")
 
 
-def _numeric_array(shape: tuple[int, ...], dtype: np.dtype, fortran: bool, data: object) -> np.ndarray:
-    """The array over ``data``, a buffer of exactly ``prod(shape) * itemsize`` bytes."""
-    if not isinstance(data, bytes) or len(data) != math.prod(shape) * dtype.itemsize:
-        raise ValueError(f"a {dtype} array of shape {shape} over a buffer of another length")
-    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()
-
-
 def _rebuild(root: object) -> object:
     """``root`` with every :class:`_ArrayRecipe` replaced by its array (an object array's elements: its list form)
     and containers rebuilt with their elements replaced, walked iteratively (each object once; the root keeps
@@ -146,8 +139,10 @@ def _rebuild(root: object) -> object:
             raise ValueError(f"objects nested more than {MAX_DEPTH} levels deep")
         if isinstance(node, _ArrayRecipe):
             shape, dtype, fortran, data = node.parts()
-            if dtype.kind != "O":
-                done[id(node)] = _numeric_array(shape, dtype, fortran, data)
+            if dtype.kind != "O":  # over a buffer of exactly prod(shape) * itemsize bytes
+                if not isinstance(data, bytes) or len(data) != math.prod(shape) * dtype.itemsize:
+                    raise ValueError(f"a {dtype} array of shape {shape} over a buffer of another length")
+                done[id(node)] = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()
                 continue
             if not isinstance(data, list) or len(data) != math.prod(shape):
                 raise ValueError(f"an object array of shape {shape} that is not its list of elements")
@@ -172,20 +167,6 @@ def _rebuild(root: object) -> object:
     return done[id(root)]
 
 
-def _header(stream: io.BytesIO, what: str, path: Path) -> tuple[tuple[int, ...], bool, np.dtype]:
-    try:
-        version = np.lib.format.read_magic(stream)
-        if version not in ((1, 0), (2, 0)):
-            raise ValueError(f"format version {version[0]}.{version[1]} is not supported")
-        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, fortran, dtype = read_header(stream)
-    except (ValueError, SyntaxError, TypeError, EOFError, OverflowError, MemoryError, RecursionError) as exc:
-        raise DataError(f"the {what} is not a .npy array file ({str(exc)[:120]})", path) from None
-    if dtype.fields is not None or dtype.subdtype is not None:
-        raise DataError(f"the {what} has a structured dtype ({str(dtype)[:80]}), expected a plain array", path)
-    return tuple(shape), bool(fortran), dtype
-
-
 def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
     """The array stored in the ``.npy`` file ``path``; an object array through the restricted unpickler.
 
@@ -207,7 +188,16 @@ def load_npy(path: str | Path, what: str = "array") -> np.ndarray:
 def parse_npy(raw: bytes, path: Path, what: str = "array") -> np.ndarray:
     """:func:`load_npy` of a file's bytes already read (``path`` names it in errors)."""
     stream = io.BytesIO(raw)
-    shape, fortran, dtype = _header(stream, what, path)
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version not in ((1, 0), (2, 0)):
+            raise ValueError(f"format version {version[0]}.{version[1]} is not supported")
+        read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, fortran, dtype = read_header(stream)
+    except (ValueError, SyntaxError, TypeError, EOFError, OverflowError, MemoryError, RecursionError) as exc:
+        raise DataError(f"the {what} is not a .npy array file ({str(exc)[:120]})", path) from None
+    if dtype.fields is not None or dtype.subdtype is not None:
+        raise DataError(f"the {what} has a structured dtype ({str(dtype)[:80]}), expected a plain array", path)
     if not dtype.hasobject:
         body = len(raw) - stream.tell()
         if math.prod(shape) * dtype.itemsize != body:

@@ -72,7 +72,6 @@ class Mechanism:
 
 
 def gained_config(a: np.ndarray, b: np.ndarray, cfg: Config) -> Config:
-    """``cfg`` with ``encoder.input_gain`` = :func:`input_gain` of the pairs."""
     gain = input_gain(a, b).astype(np.float32)
     return replace(cfg, encoder=replace(cfg.encoder, input_gain=tuple(float(g) for g in gain)))
 

@@ -64,14 +64,12 @@ def train_group(
     images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
 ) -> GroupTraining:
     """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
-    weights = initial_state(cfg, len(rows), CPU)[0]
-    epochs: list[tuple[np.ndarray, np.ndarray, float]] = []
-    for state in module_epochs(images, presentations, rows, cfg, device=CPU):
-        weights = state.weights
-        epochs.append((state.fired.numpy().copy(), state.theta.numpy().copy(), state.seconds))
-    empty = np.zeros((0, len(rows), cfg.network.n_neurons), np.float32)
-    fired, theta = (np.stack([epoch[k] for epoch in epochs]) if epochs else empty for k in (0, 1))
-    return GroupTraining(weights.numpy().copy(), fired, theta, np.asarray([e[2] for e in epochs], dtype=np.float64))
+    states = list(module_epochs(images, presentations, rows, cfg, device=CPU))  # each epoch's fired and theta its own
+    weights = states[-1].weights if states else initial_state(cfg, len(rows), CPU)[0]
+    shape = (len(states), len(rows), cfg.network.n_neurons)
+    fired = np.array([state.fired.numpy() for state in states], np.float32).reshape(shape)
+    theta = np.array([state.theta.numpy() for state in states], np.float32).reshape(shape)
+    return GroupTraining(weights.numpy().copy(), fired, theta, np.array([s.seconds for s in states], dtype=np.float64))
 
 
 def train_modules_on_cluster(
@@ -99,7 +97,7 @@ def train_modules_on_cluster(
     weights = torch.from_numpy(np.concatenate([g.weights for g in done]))
     fired = np.concatenate([g.fired for g in done], axis=1)
     theta = np.concatenate([g.theta for g in done], axis=1)
-    seconds = np.max(np.stack([g.seconds for g in done]), axis=0) if len(fired) else np.zeros(0)
+    seconds = np.max([g.seconds for g in done], axis=0)  # (epochs,): each epoch's slowest task
     n_rows = np.array([len(r) for r in rows])
     history = [
         history_entry(e, float(seconds[e]), torch.from_numpy(fired[e]), torch.from_numpy(theta[e]), n_rows)
@@ -117,11 +115,10 @@ def run_group(
     place_ids: np.ndarray,
     traversal: str,
     stream: str,
-    state_isolation: bool | None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A task: encode the presentations, run a group of modules (float, CPU); (counts (N, neurons), |C[t]| (N, T))."""
     spikes = STREAMS[stream](images, place_ids, traversal, cfg)
-    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes, state_isolation=state_isolation)
+    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes)
     assert run.candidates_per_step is not None  # the float network always reports them
     return run.counts.numpy(), run.candidates_per_step.numpy()
 
@@ -135,9 +132,7 @@ def float_runs_on_cluster(
     stream: str,
     cluster: Cluster | None,
     *,
-    state_isolation: bool | None = None,
     modules_per_task: int = 1,
-    timing: list | None = None,
     progress: bool = False,
 ) -> dict[str, SpikeRun]:
     """The float ensemble on each traversal's images, split into tasks: one SpikeRun per traversal.
@@ -152,7 +147,6 @@ def float_runs_on_cluster(
     """
     n = cfg.network.n_neurons
     groups = module_groups(weights.shape[1] // n, modules_per_task)
-    isolated = cfg.network.state_isolation if state_isolation is None else state_isolation
     parts: list[tuple[np.ndarray, np.ndarray, slice | np.ndarray]]  # weights, thresholds, presentations of a task
     if wta_group(cfg, weights.shape[1]) == n or len(groups) == 1:
         columns = [slice(group.start * n, group.stop * n) for group in groups]
@@ -160,15 +154,15 @@ def float_runs_on_cluster(
         parts = [(np.ascontiguousarray(weights[:, c]), np.ascontiguousarray(thresholds[c]), every) for c in columns]
         axis = 1
     else:
-        split = np.array_split(np.arange(len(place_ids)), len(groups) if isolated else 1)
+        split = np.array_split(np.arange(len(place_ids)), len(groups) if cfg.network.state_isolation else 1)
         parts = [(weights, thresholds, piece) for piece in split if len(piece)]
         axis = 0
     tasks = [
-        (w, t, cfg, images[rows], place_ids[rows], traversal, stream, state_isolation)
+        (w, t, cfg, images[rows], place_ids[rows], traversal, stream)
         for traversal, images in presentations.items()
         for w, t, rows in parts
     ]
-    done = map_tasks(cluster, run_group, tasks, timing=timing, progress=f"{stream} runs" if progress else None)
+    done = map_tasks(cluster, run_group, tasks, progress=f"{stream} runs" if progress else None)
     runs: dict[str, SpikeRun] = {}
     for k, traversal in enumerate(presentations):
         results = done[k * len(parts) : (k + 1) * len(parts)]

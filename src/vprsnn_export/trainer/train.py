@@ -58,12 +58,11 @@ def train_batch(
     if window is not None:
         weights, fired_total = window
         return weights, homeostasis_update(theta, fired_total / (batch * timesteps), cfg.homeostasis), fired_total
-    n_neurons = weights.shape[-1]
     lead = tuple(spikes.shape[:-2])
-    voltage = torch.zeros((*lead, n_neurons), dtype=weights.dtype, device=weights.device)
+    voltage = torch.zeros((*lead, weights.shape[-1]), dtype=weights.dtype, device=weights.device)
     post_trace = torch.zeros_like(voltage)
     pre_trace = torch.zeros((*lead, n_inputs), dtype=weights.dtype, device=weights.device)
-    fired_total = torch.zeros((*lead[:-1], n_neurons), dtype=weights.dtype, device=weights.device)
+    fired_total = torch.zeros((*lead[:-1], weights.shape[-1]), dtype=weights.dtype, device=weights.device)
     row_theta = theta.unsqueeze(-2)
     for t in range(timesteps):
         pre = spikes[..., t, :].to(weights.dtype)
@@ -84,7 +83,6 @@ def training_seeds(cfg: Config, presentations: Sequence[Presentation], rows: np.
 
 
 def epoch_order(seed: int, epoch: int, n_rows: int) -> torch.Tensor:
-    """The seeded shuffle of the training rows for one epoch."""
     generator = torch.Generator().manual_seed(presentation_seed(seed, "shuffle", "", 0, epoch))
     return torch.randperm(n_rows, generator=generator)
 
