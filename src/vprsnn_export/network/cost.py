@@ -72,16 +72,6 @@ class QueryCost:
     inputs: int
     places: int
 
-    @property
-    def snn_weights(self) -> int:
-        """Synapses the network holds: I J."""
-        return self.inputs * self.neurons
-
-    @property
-    def template_weights(self) -> int:
-        """Weights the template matcher holds: L I."""
-        return self.places * self.inputs
-
     def summary(self) -> CostSummary:
         """The means over queries (0 for no query)."""
 
@@ -95,8 +85,8 @@ class QueryCost:
             synaptic_events=mean(self.synaptic_events),
             neuron_updates=mean(self.neuron_updates),
             template_macs=mean(self.template_macs),
-            snn_weights=self.snn_weights,
-            template_weights=self.template_weights,
+            snn_weights=self.inputs * self.neurons,  # the synapses the network holds: I J
+            template_weights=self.places * self.inputs,  # the weights the template matcher holds: L I
         )
 
 

@@ -55,17 +55,15 @@ def wta_step(
     """
     voltage = beta * voltage + current
     candidates = voltage > theta
-    if wta:
-        *lead, n_neurons = candidates.shape
-        size = n_neurons if group is None else group
-        grouped = candidates.reshape(*lead, n_neurons // size, size)
-        masked = current.reshape(grouped.shape).masked_fill(~grouped, float("-inf"))
-        winner = masked.argmax(dim=-1, keepdim=True)  # first index on ties
-        spikes = torch.zeros_like(grouped).scatter_(-1, winner, grouped.any(dim=-1, keepdim=True))
-        spikes = spikes.reshape(*lead, n_neurons)
-    else:
-        spikes = candidates
-    return voltage.masked_fill(candidates, 0.0), spikes, candidates
+    if not wta:
+        return voltage.masked_fill(candidates, 0.0), candidates, candidates
+    *lead, n_neurons = candidates.shape
+    size = n_neurons if group is None else group
+    grouped = candidates.reshape(*lead, n_neurons // size, size)
+    masked = current.reshape(grouped.shape).masked_fill(~grouped, float("-inf"))
+    winner = masked.argmax(dim=-1, keepdim=True)  # first index on ties
+    spikes = torch.zeros_like(grouped).scatter_(-1, winner, grouped.any(dim=-1, keepdim=True))
+    return voltage.masked_fill(candidates, 0.0), spikes.reshape(*lead, n_neurons), candidates
 
 
 def input_currents(spikes: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -37,13 +37,12 @@ class SpikeRun:
 
     def head(self, n: int) -> SpikeRun:
         """The first n presentations (saturations and max_current are totals: kept as they are)."""
-        return SpikeRun(
+        return replace(
+            self,
             counts=self.counts[:n],
             candidates_per_step=None if self.candidates_per_step is None else self.candidates_per_step[:n],
             raster=None if self.raster is None else self.raster[:n],
             final_voltage=None if self.final_voltage is None else self.final_voltage[:n],
-            saturations=self.saturations,
-            max_current=self.max_current,
             wprob=None if self.wprob is None else self.wprob[:n],
         )
 

@@ -114,8 +114,17 @@ def _shift_rows(
     :func:`window_scores`); ``nearest`` rounds each displacement to whole places (half to even), so ``f = 0``."""
     n_places = prob.shape[1]
     frames, valid, displacement, shift = _window_frames(queries, k, row_velocity, frame_positions, n_places, nearest)
-    if shift is not None:
-        return _shifted_by_whole_places(prob, frames, valid, shift), valid
+    if shift is not None:  # every row's offset o moves by the same whole places d_o: P_{j-o}(l - d_o) by slicing
+        shifted = np.zeros((len(frames), k, n_places))  # (the same numbers as the interpolation at f = 0)
+        for o, d in enumerate(shift.tolist()):  # k offsets, each a slice over every row and place
+            if abs(d) < n_places:
+                source = prob[frames[:, o]]
+                if d >= 0:
+                    shifted[:, o, d:] = source[:, : n_places - d]
+                else:
+                    shifted[:, o, :d] = source[:, -d:]
+        shifted[~valid] = 0.0
+        return shifted, valid
     x = np.arange(n_places, dtype=np.float64)[None, None, :] - displacement[:, :, None]  # (C, k, P)
     x0 = np.floor(x)
     frac = x - x0
@@ -175,22 +184,6 @@ def _summed_terms(
             total[rows] = target
             total[~ok] += outside * 0.0  # the 0 that combine adds for a missing frame (so -0.0 becomes 0.0 alike)
     return total
-
-
-def _shifted_by_whole_places(prob: np.ndarray, frames: np.ndarray, valid: np.ndarray, shift: np.ndarray) -> np.ndarray:
-    """:func:`_shift_rows` where every row's offset o moves by the same whole places ``shift[o]``, by slicing:
-    :math:`\\tilde P_{j,o}(l) = P_{j-o}(l - d_o)` (the same numbers as the interpolation at f = 0)."""
-    n_places = prob.shape[1]
-    shifted = np.zeros((len(frames), len(shift), n_places))
-    for o, d in enumerate(shift.tolist()):  # k offsets, each a slice over every row and place
-        if abs(d) < n_places:
-            source = prob[frames[:, o]]
-            if d >= 0:
-                shifted[:, o, d:] = source[:, : n_places - d]
-            else:
-                shifted[:, o, :d] = source[:, -d:]
-    shifted[~valid] = 0.0
-    return shifted
 
 
 def aggregate(

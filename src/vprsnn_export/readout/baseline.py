@@ -16,18 +16,14 @@ like W+Prob (:func:`sad_distribution`), the protocol of the earlier route pages.
 
 from __future__ import annotations
 
-from typing import Final
-
 import numpy as np
 
 from vprsnn_export.arguments import real_array
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import count_at_least, shift_window
+# the aggregation's bound on one chunk's working array: diagonal_sums' (chunk, k, places) windows, SAD's differences
+from .aggregation import _MAX_ELEMENTS, count_at_least, shift_window
 from .assignment import NO_MATCH, finite_array, finite_matrix, wprob_distribution
-
-#: Upper bound on the elements of the (chunk, n_places, n_pixels) difference array.
-_MAX_ELEMENTS: Final[int] = 4_000_000
 
 
 def _images(reference: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -88,11 +88,7 @@ def margin_stops(raster: np.ndarray, assignment: np.ndarray, group: int) -> np.n
         increments = np.zeros((part.shape[0], timesteps, a.shape[1]), dtype=np.float64)
         np.add.at(increments, (q, t), a[j])
         votes = np.cumsum(increments, axis=1)
-        top = (
-            np.partition(votes, -2, axis=2)[:, :, -2:]
-            if a.shape[1] > 1
-            else np.concatenate([np.zeros_like(votes), votes], axis=2)
-        )
+        top = np.partition(votes, -2, axis=2)[:, :, -2:] if a.shape[1] > 1 else np.pad(votes, ((0, 0), (0, 0), (1, 0)))
         stops[start : start + CHUNK] = first_true(top[:, :, 1] - top[:, :, 0] > remaining, timesteps)
     return stops
 

@@ -90,9 +90,8 @@ def operating_points(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.nd
     order = np.argsort(-conf, kind="stable")
     conf_sorted = conf[order]
     tp_cum = np.cumsum(c[order], dtype=np.int64)
-    # last position of each run of equal confidences (ties are never split)
-    ends = np.flatnonzero(np.append(conf_sorted[1:] != conf_sorted[:-1], True))
-    return tp_cum[ends], ends + 1, conf_sorted[ends].copy(), int(c.shape[0])
+    ends = np.flatnonzero(np.append(conf_sorted[1:] != conf_sorted[:-1], True))  # each run of ties' last position
+    return tp_cum[ends], ends + 1, conf_sorted[ends], int(c.shape[0])
 
 
 def pr_curve(correct: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -87,12 +87,8 @@ def nearest_neighbour_decisions(
 
 
 class Readout:
-    """One network's readout: S^R, gamma, its module layout and the sequence options.
-
-    ``score(counts, ...)`` reads a batch out (Q x neurons), every column decided once; ``stream()`` gives a
-    :class:`~.stream.ReadoutStream` whose ``push(counts)`` decides one frame at a time (the same W+Prob distributions
-    bit for bit: both sum each place's terms in neuron order). The readout itself keeps no stream state.
-    """
+    """One network's readout: S^R, gamma, its module layout and the sequence options; it keeps no stream state
+    (each :meth:`stream` does)."""
 
     def __init__(
         self,

@@ -110,12 +110,9 @@ class SequenceOptions:
         _count("tolerance", self.tolerance, 0, MAX_TOLERANCE)
 
     def aggregate(self, distribution: np.ndarray, k: int, frame_positions: np.ndarray | None = None) -> np.ndarray:
-        """A distribution (Q, places) aggregated over k frames at the given velocity or at one estimated from it.
-
-        With ``velocity_candidates`` the registered estimator ``velocity_estimate`` chooses the velocity per frame
-        (``"window"``: per window; ``"track"``: over the ``velocity_span`` recent windows; ``"smooth"``, the default:
-        over those and the next ``velocity_lag``); otherwise ``velocity``. ``k == 1`` returns ``distribution`` itself.
-        """
+        """A distribution (Q, places) aggregated over k frames at ``velocity``, or with ``velocity_candidates`` at the
+        velocity the registered estimator ``velocity_estimate`` chooses per frame (each one's description:
+        :data:`~.velocity.VELOCITY_ESTIMATES`); ``k == 1`` returns ``distribution`` itself."""
         if k == 1:
             return distribution
         if self.velocity_candidates is not None:
