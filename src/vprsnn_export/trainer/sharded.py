@@ -64,12 +64,14 @@ def train_group(
     images: np.ndarray, presentations: Sequence[Presentation], rows: Sequence[np.ndarray], cfg: Config
 ) -> GroupTraining:
     """A task: train a group of modules on the CPU (module m on ``images[rows[m]]``), keeping each epoch's state."""
-    states = list(module_epochs(images, presentations, rows, cfg, device=CPU))  # each epoch's fired and theta its own
-    weights = states[-1].weights if states else initial_state(cfg, len(rows), CPU)[0]
-    shape = (len(states), len(rows), cfg.network.n_neurons)
-    fired = np.array([state.fired.numpy() for state in states], np.float32).reshape(shape)
-    theta = np.array([state.theta.numpy() for state in states], np.float32).reshape(shape)
-    return GroupTraining(weights.numpy().copy(), fired, theta, np.array([s.seconds for s in states], dtype=np.float64))
+    weights = initial_state(cfg, len(rows), CPU)[0]
+    kept: list[tuple[np.ndarray, np.ndarray, float]] = []  # each epoch's fired and theta (its own), not its weights
+    for state in module_epochs(images, presentations, rows, cfg, device=CPU):
+        weights = state.weights
+        kept.append((state.fired.numpy(), state.theta.numpy(), state.seconds))
+    shape = (len(kept), len(rows), cfg.network.n_neurons)
+    fired, theta = (np.array([epoch[k] for epoch in kept], np.float32).reshape(shape) for k in (0, 1))
+    return GroupTraining(weights.numpy().copy(), fired, theta, np.array([e[2] for e in kept], dtype=np.float64))
 
 
 def train_modules_on_cluster(
