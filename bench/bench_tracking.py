@@ -1,7 +1,8 @@
 """The search window's tracking protocol beside the global localiser, and a kidnapped robot (issue 43).
 
     OMP_NUM_THREADS=1 python bench/bench_tracking.py CHECKPOINT [--query winter] [--k 1,5,10]
-                                                    [--search-window 300] [--patience 3] [--jump 1000]
+                                                    [--search-window 300] [--patience 3] [--follow-within P]
+                                                    [--jump 1000]
                                                     [--frames N]
 
 On the checkpoint's own data (or --data), the query traversal in stream order, per k: the localiser over the whole
@@ -46,6 +47,7 @@ def main() -> None:
     parser.add_argument("--k", default="1,5,10")
     parser.add_argument("--search-window", type=int, default=300)
     parser.add_argument("--patience", type=int, default=3)
+    parser.add_argument("--follow-within", type=int, help="an unaccepted decision this near the expected place is no miss")
     parser.add_argument("--jump", type=int, default=1000, help="places the kidnapped robot jumps ahead")
     parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
     parser.add_argument("--frames", type=int, help="the table on the first N frames (default: all)")
@@ -56,13 +58,13 @@ def main() -> None:
     dataset = load_selection(ckpt.data, [args.query], ckpt.config.preprocess, source=args.data)
     query = dataset.query(args.query, ckpt.reference_traversals)
     ks = tuple(int(k) for k in args.k.split(","))
-    search = SearchWindow(args.search_window, args.patience)
+    search = SearchWindow(args.search_window, args.patience, args.follow_within)
     n = len(query.place_ids)
     first = slice(0, args.frames)
     print(
         f"load average {os.getloadavg()[0]:.1f}; {args.checkpoint}: {ckpt.calibration.shape[0]} neurons, "
         f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames, the table on {len(query.place_ids[first])}); window {search.places} places, "
-        f"patience {search.patience}; {args.threads} thread(s)"
+        f"patience {search.patience}, follow within {search.near}; {args.threads} thread(s)"
     )
     began = time.perf_counter()
     rows = tracking_rows(ckpt, query.images[first], query.place_ids[first], query.truth, SequenceOptions(ks=ks), search)

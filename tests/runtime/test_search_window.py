@@ -61,6 +61,16 @@ def test_the_window_follows_accepted_places_and_widens_after_its_patience():
     assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3)  # the third miss in a row: the next frame is global
 
 
+def test_a_window_following_within_near_places_moves_to_an_unaccepted_decision_near_the_expected_place():
+    window = SearchWindow(300, patience=3, near=3)
+    assert window.follow(50.0, 1, 54, False, 1.5) == (54.0, 1)  # 2.5 from 51.5: on track, no miss
+    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3)  # 5.5 from 51.5: a miss, the third: global next
+    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0)  # accepted: as without near
+    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2)  # a global frame: as without near
+    with pytest.raises(InvalidValueError, match="near must be"):
+        SearchWindow(300, near=0)
+
+
 def test_a_window_over_the_whole_route_decides_as_the_global_localiser(route):
     ckpt, _, query, threshold = route
     whole = Localizer(ckpt, options=K3, threshold=threshold).run_inputs(query.images[:60])
@@ -170,7 +180,11 @@ def test_evaluate_scores_the_tracking_protocol_beside_the_global_one(route, tmp_
     assert main(argv) == 0
     assert "tracking within 100 places (patience 3)" in capsys.readouterr().out
     assert main(["evaluate", str(path), "--query", "winter", "--patience", "2"]) == 2
-    assert "--patience is for --search-window" in capsys.readouterr().err
+    assert "--patience and --follow-within are for --search-window" in capsys.readouterr().err
+    assert main([*argv, "--follow-within", "3"]) == 0
+    assert "tracking within 100 places (patience 3, following within 3)" in capsys.readouterr().out
+    assert main(["evaluate", str(path), "--query", "winter", "--follow-within", "3"]) == 2
+    assert "--patience and --follow-within are for --search-window" in capsys.readouterr().err
 
 
 def test_a_sparse_calibration_localises_as_the_dense_one(route):

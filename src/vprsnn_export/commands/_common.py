@@ -450,10 +450,19 @@ def add_search_options(parser: argparse.ArgumentParser) -> None:
         help="with --search-window: frames in a row without an accepted decision before the whole route runs "
         f"again (default {DEFAULT_PATIENCE})",
     )
+    search.add_argument(
+        "--follow-within",
+        type=positive_int,
+        metavar="PLACES",
+        help="with --search-window: an unaccepted decision within PLACES places of where the window expected it "
+        "moves the window there and is no miss (fewer re-localisations; a kidnapped robot is found later)",
+    )
 
 
 def search_window(args: argparse.Namespace) -> SearchWindow | None:
     """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
-    if args.search_window is None and args.patience is not None:
-        raise InvalidValueError("--patience is for --search-window")
-    return None if args.search_window is None else SearchWindow(args.search_window, args.patience or DEFAULT_PATIENCE)
+    if args.search_window is None and (args.patience is not None or args.follow_within is not None):
+        raise InvalidValueError("--patience and --follow-within are for --search-window")
+    if args.search_window is None:
+        return None
+    return SearchWindow(args.search_window, args.patience or DEFAULT_PATIENCE, args.follow_within)

@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"scored against the {truth.label}")
         if tracking is not None and search is not None:
             print(
-                f"\ntracking within {search.places} places (patience {search.patience}) beside the whole route, frame by "
+                f"\ntracking within {search.places} places (patience {search.patience}"
+                f"{'' if search.near is None else f', following within {search.near}'}) beside the whole route, frame by "
                 "frame in stream order, accepting at the whole route's precision-1 point on these queries:"
             )
             rows = [{**row.to_dict(), "events": f"{row.events_per_frame / 1e6:.2f} M"} for row in tracking]

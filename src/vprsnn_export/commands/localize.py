@@ -121,8 +121,10 @@ def run(args: argparse.Namespace) -> int:
     if args.calibrate:
         if args.topic is not None or events:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
-        if args.search_window is not None or args.patience is not None:
-            raise InvalidValueError("--search-window and --patience are for --frames; --calibrate runs the whole route")
+        if any(v is not None for v in (args.search_window, args.patience, args.follow_within)):
+            raise InvalidValueError(
+                "--search-window, --patience and --follow-within are for --frames; --calibrate runs the whole route"
+            )
         return calibrate(args, source, point_path, onnx, backend)
     stored: OperatingPoint | None = None
     if args.threshold is None and (args.precision is not None or point_path.is_file()):

@@ -23,18 +23,21 @@ class SearchWindow:
     """Localise within ``places`` reference places around the last confident place: only the modules whose places lie in
     the window run (one WTA over them) and the frame is decided among their places; after ``patience`` frames in a row
     without an accepted decision the next frame runs the whole route (a global re-localisation), as does the first.
+    With ``near`` (``--follow-within``), an unaccepted window decision within ``near`` places of where the window
+    expected it (``c_j + v_j``) moves the window there and is no miss: the robot is taken to be on track.
 
-    .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\\\ c_j + v_j & \\text{otherwise}
-              \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -
+    .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\text{ or } |\\hat l_j - (c_j + v_j)|
+              \\le \\text{near} \\\\ c_j + v_j & \\text{otherwise (a miss)} \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -
               \\lfloor w / 2 \\rfloor, 0), L - w), \\quad \\text{run} = \\{m : \\text{region}_m \\cap W_j \\ne
               \\emptyset\\}
     """
 
     places: int
     patience: int = DEFAULT_PATIENCE
+    near: int | None = None
 
     def __post_init__(self) -> None:
-        for name, value in (("search window", self.places), ("patience", self.patience)):
+        for name, value in (("search window", self.places), ("patience", self.patience), ("near", 1 if self.near is None else self.near)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise InvalidValueError(f"{name} must be a whole number of frames or places >= 1, got {value!r:.40}")
 
@@ -44,11 +47,14 @@ class SearchWindow:
         """The next frame's (centre, misses) after a frame decided at place index ``place`` (None: no place):
         ``centre`` None, a global frame, puts the window at its place (None: global again), and when it was not
         accepted one more miss looks at the whole route again; a window frame moves it to an accepted place, else
-        ``velocity`` places on, and after ``patience`` misses in a row the next frame is global (centre None)."""
+        ``velocity`` places on (or, within ``near`` of ``centre + velocity``, to its place without a miss), and after
+        ``patience`` misses in a row the next frame is global (centre None)."""
         if centre is None:
             return (None if place is None else float(place)), 0 if accepted else self.patience - 1
         if accepted and place is not None:
             return float(place), 0
+        if self.near is not None and place is not None and abs(place - (centre + velocity)) <= self.near:
+            return float(place), misses  # on track: the window follows, no miss
         return (None if misses + 1 >= self.patience else centre + velocity), misses + 1
 
     def modules(self, centre: float, regions: np.ndarray) -> tuple[int, int]:
