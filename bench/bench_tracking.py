@@ -47,7 +47,9 @@ def main() -> None:
     parser.add_argument("--k", default="1,5,10")
     parser.add_argument("--search-window", type=int, default=300)
     parser.add_argument("--patience", type=int, default=3)
-    parser.add_argument("--follow-within", type=int, help="an unaccepted decision this near the expected place is no miss")
+    parser.add_argument(
+        "--follow-within", type=int, help="an unaccepted decision this near the expected place is no miss"
+    )
     parser.add_argument("--jump", type=int, default=1000, help="places the kidnapped robot jumps ahead")
     parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
     parser.add_argument("--frames", type=int, help="the table on the first N frames (default: all)")

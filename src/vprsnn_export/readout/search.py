@@ -37,7 +37,11 @@ class SearchWindow:
     near: int | None = None
 
     def __post_init__(self) -> None:
-        for name, value in (("search window", self.places), ("patience", self.patience), ("near", 1 if self.near is None else self.near)):
+        for name, value in (
+            ("search window", self.places),
+            ("patience", self.patience),
+            ("near", 1 if self.near is None else self.near),
+        ):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise InvalidValueError(f"{name} must be a whole number of frames or places >= 1, got {value!r:.40}")
 
