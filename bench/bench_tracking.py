@@ -3,7 +3,7 @@
     OMP_NUM_THREADS=1 python bench/bench_tracking.py CHECKPOINT [--query winter] [--k 1,5,10]
                                                     [--search-window 300] [--patience 3] [--follow-within P]
                                                     [--jump 1000]
-                                                    [--frames N]
+                                                    [--frames N] [--backend integer|onnx --onnx FILE]
 
 On the checkpoint's own data (or --data), the query traversal in stream order, per k: the localiser over the whole
 route every frame ("global") and within the search window ("window W"; ``runtime.localize.tracking_rows``), the
@@ -13,7 +13,9 @@ first (re-localisations) and wall ms per frame. Then the kidnapped robot: 100 fr
 ahead (modulo the route), 100 frames; per jump, the frames from the jump to the first right decision and to the
 first right accepted one, for the window and the global localiser at the largest k (right: the query's truth).
 ``--frames N``: the table and the operating point on the stream's first N frames only (a long route, whose
-every global frame costs the whole route); the kidnappings still jump along the whole traversal.
+every global frame costs the whole route); the kidnappings still jump along the whole traversal. ``--backend integer``
+(CHECKPOINT a fixed-point model from ``quantize``) or ``--backend onnx --onnx FILE`` (the graph ``export`` wrote from
+it, its ``modules`` input fed the window's modules): the same protocol on a deployment target.
 """
 
 from __future__ import annotations
@@ -54,9 +56,12 @@ def main() -> None:
     parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
     parser.add_argument("--frames", type=int, help="the table on the first N frames (default: all)")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--backend", default="float", choices=("float", "integer", "onnx"))
+    parser.add_argument("--onnx", help="with --backend onnx: the graph exported from the fixed-point model")
     args = parser.parse_args()
     set_threads(args.threads)
-    ckpt = vx.load_checkpoint(args.checkpoint)
+    ckpt = (vx.load_checkpoint if args.backend == "float" else vx.load_fixed_point)(args.checkpoint)
+    backend = {"backend": args.backend, "onnx_path": args.onnx, "threads": args.threads}
     dataset = load_selection(ckpt.data, [args.query], ckpt.config.preprocess, source=args.data)
     query = dataset.query(args.query, ckpt.reference_traversals)
     ks = tuple(int(k) for k in args.k.split(","))
@@ -66,10 +71,12 @@ def main() -> None:
     print(
         f"load average {os.getloadavg()[0]:.1f}; {args.checkpoint}: {ckpt.calibration.shape[0]} neurons, "
         f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames, the table on {len(query.place_ids[first])}); window {search.places} places, "
-        f"patience {search.patience}, follow within {search.near}; {args.threads} thread(s)"
+        f"patience {search.patience}, follow within {search.near}; backend {args.backend}; {args.threads} thread(s)"
     )
     began = time.perf_counter()
-    rows = tracking_rows(ckpt, query.images[first], query.place_ids[first], query.truth, SequenceOptions(ks=ks), search)
+    rows = tracking_rows(
+        ckpt, query.images[first], query.place_ids[first], query.truth, SequenceOptions(ks=ks), search, **backend
+    )
     header = (
         f"{'protocol':<12} {'k':>3} {'acc %':>6} {'R@100P %':>9} {'events/frame M':>15} {'reloc':>6} {'ms/frame':>9}"
     )
@@ -81,10 +88,10 @@ def main() -> None:
         )
     print(f"({time.perf_counter() - began:.0f} s)")
     options = SequenceOptions(ks=(ks[-1],))
-    whole = Localizer(ckpt, options=options)
+    whole = Localizer(ckpt, options=options, **backend)
     point, _, _ = operating_point(whole, query.images[first], query.place_ids[first], truth=query.truth)
-    tracked = Localizer(ckpt, options=options, threshold=point.threshold, search=search)
-    whole = Localizer(ckpt, options=options, threshold=point.threshold)
+    tracked = Localizer(ckpt, options=options, threshold=point.threshold, search=search, **backend)
+    whole = Localizer(ckpt, options=options, threshold=point.threshold, **backend)
     print(f"\nkidnapped at k={ks[-1]}: 100 frames, a jump of {args.jump} places, 100 frames; frames to the first right")
     print("decision / the first right accepted one (window | global):")
     for start in np.linspace(100, n - 100, args.jumps, dtype=int):

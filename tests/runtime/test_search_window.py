@@ -7,6 +7,7 @@ import json
 from dataclasses import replace
 
 import numpy as np
+import onnx as onnx_lib
 import pytest
 from scipy import sparse
 
@@ -19,7 +20,10 @@ from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.runtime.localize import Localizer, SearchWindow, operating_point, tracking_rows
+from vprsnn_export.runtime.localize import Localizer, SearchWindow, network_part, operating_point, tracking_rows
+from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.onnx_session import run_session, session
+from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
 
 PLACES = 300
@@ -136,6 +140,34 @@ def test_the_integer_simulator_tracks_the_same_pushed_or_batched(route):
     assert {d.search for d in one} == {"global", "window"}
 
 
+def test_the_onnx_graph_tracks_as_the_integer_simulator_frame_for_frame(route, tmp_path):
+    """The exported graph runs the window's modules through its ``modules`` input: the same counts as the integer
+    simulator's part network, so the same decision, events and modules on every frame, a kidnap included."""
+    ckpt, data, query, _ = route
+    model = deploy(ckpt, "0" * 64, 8, reference_images={"summer": data.traversal("summer")})
+    graph = write_onnx(model, tmp_path / "net.onnx", with_raster=True)
+    jump = np.r_[np.arange(0, 40), np.arange(200, 240)]  # 160 places ahead after frame 39
+    search = SearchWindow(100)
+    integer = Localizer(model, options=K3, threshold=0.5, search=search).run_inputs(query.images[jump])
+    onnx = Localizer(model, options=K3, threshold=0.5, search=search, backend="onnx", onnx_path=graph)
+    tracked = onnx.run_inputs(query.images[jump])
+    assert answers(tracked) == answers(integer)
+    assert [(d.events, d.search, d.modules) for d in tracked] == [(d.events, d.search, d.modules) for d in integer]
+    assert {d.search for d in tracked} == {"global", "window"} and {d.modules for d in tracked} > {(0, 3)}
+    spikes = onnx.spikes(query.images[:5], 0)
+    run = run_session(session(graph), spikes, modules=(1, 3))
+    part = IntegerNetwork(network_part(model, slice(model.config.network.n_neurons, None))).run(spikes, record=True)
+    assert np.array_equal(run.counts, part.counts.numpy()) and np.array_equal(run.raster, part.raster.numpy())
+    old = onnx_lib.load(str(graph))  # a graph written before the modules input: its default a constant
+    old.graph.input.pop()
+    onnx_lib.save(old, str(tmp_path / "old.onnx"))
+    assert np.array_equal(
+        run_session(session(tmp_path / "old.onnx"), spikes).counts, run_session(session(graph), spikes).counts
+    )
+    with pytest.raises(InvalidValueError, match="needs a graph with the modules input"):
+        Localizer(model, threshold=0.5, search=search, backend="onnx", onnx_path=tmp_path / "old.onnx")
+
+
 def test_search_window_refusals(route, tmp_path, capsys):
     ckpt, _, _, threshold = route
     with pytest.raises(InvalidValueError, match="operating point"):
@@ -165,7 +197,8 @@ def test_a_decision_line_has_events_and_search_only_with_a_window(route):
     window = Localizer(ckpt, options=K3, threshold=threshold, search=SearchWindow(100)).run_inputs(query.images[:2])
     assert "events" not in plain and "search" not in plain
     line = json.loads(json.dumps(window[1].to_dict()))
-    assert set(line) - set(plain) == {"events", "search"}
+    assert set(line) - set(plain) == {"events", "search", "modules"}
+    assert window[0].modules == (0, 3) and line["modules"] == list(window[1].modules)  # the first frame: every module
 
 
 def test_evaluate_scores_the_tracking_protocol_beside_the_global_one(route, tmp_path, capsys):

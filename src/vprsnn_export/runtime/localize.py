@@ -85,9 +85,11 @@ class Decision(JsonDataclass):
     velocity: float
     latency_ms: float
     reason: str | None = field(default=None, metadata=json_options(omit="none"))
-    # with a search window: synaptic events of the frame (input spikes x neurons run), and "window" or "global"
+    # with a search window: synaptic events of the frame (input spikes x neurons run), "window" or "global", and the
+    # modules run [first, last) (on a Loihi-style deployment, the populations whose cores are powered for the frame)
     events: int | None = field(default=None, metadata=json_options(omit="none"))
     search: str | None = field(default=None, metadata=json_options(omit="none"))
+    modules: tuple[int, int] | None = field(default=None, metadata=json_options(omit="none"))
 
 
 #: Why a frame carries no place, in the order they are checked (:func:`no_place_reasons`).
@@ -204,14 +206,15 @@ class Localizer:
         self.search = search
         if search is not None:
             require_type("search", search, SearchWindow)
-            if self.backend not in ("float", "integer"):
-                raise InvalidValueError(
-                    f"--search-window runs the float network or the integer simulator, not {self.backend} "
-                    "(an exported file holds the whole route)"
-                )
             if self.readout.modules is None or len(self.readout.modules.regions) < 2:
                 raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
             self._regions = self.readout.modules.regions
+            if self.backend == "onnx" and "modules" not in {
+                i.name for i in runner.session.get_overridable_initializers()
+            }:
+                raise InvalidValueError(
+                    "--search-window needs a graph with the modules input: export it again with this version"
+                )
             if threshold is None:
                 raise InvalidValueError(
                     "--search-window needs an operating point: it tracks the last accepted place "
@@ -220,10 +223,15 @@ class Localizer:
 
             @functools.lru_cache(PARTS_KEPT)
             def window_counts(start: int, stop: int) -> Callable[[torch.Tensor], np.ndarray]:
-                """The counts of neurons ``start:stop`` (some consecutive modules) alone, their network opened once."""
+                """The counts of neurons ``start:stop`` (some consecutive modules) alone, their network opened once (an
+                ONNX graph runs them on its one session: its ``modules`` input)."""
                 part = network_part(isolated, slice(start, stop))
-                runner = open_backend(part, self.backend, None, device, threads)[1]
-                return lambda s: frame_counts(runner, s, part.calibration, part.config)
+                if self.backend == "onnx":
+                    group = self.config.network.n_neurons
+                    run = dataclasses.replace(runner, modules=(start // group, stop // group))
+                else:
+                    run = open_backend(part, self.backend, None, device, threads)[1]
+                return lambda s: frame_counts(run, s, part.calibration, part.config)
 
             self._window_counts = window_counts
         self.stream = self.readout.stream()
@@ -238,19 +246,21 @@ class Localizer:
         self.centre: float | None = None  # the search window's centre, a reference place index (None: global)
         self.misses = 0  # frames in a row without an accepted decision
 
-    def _frame_counts(self, spikes: torch.Tensor, inputs: int) -> tuple[np.ndarray, slice | None, int, str | None]:
-        """The frames' counts over every neuron, the places they are decided among (None: all), the synaptic events
-        (``inputs`` spikes in) and the search (None: no search window): the whole network, or (one frame) the
-        window's modules alone."""
+    def _frame_counts(
+        self, spikes: torch.Tensor
+    ) -> tuple[np.ndarray, slice | None, str | None, tuple[int, int] | None]:
+        """The frames' counts over every neuron, the places they are decided among (None: all), the search (None: no
+        search window) and the modules run (None: no search window): the whole network, or (one frame) the window's
+        modules alone."""
+        group = self.config.network.n_neurons
         if self.search is None or self.centre is None:
-            search = None if self.search is None else "global"
-            return self._counts(spikes), None, inputs * int(self.network.calibration.shape[0]), search
-        regions, group = self._regions, self.config.network.n_neurons
-        first, last = self.search.modules(self.centre, regions)
+            every = (0, self.network.calibration.shape[0] // group)
+            return self._counts(spikes), None, *((None, None) if self.search is None else ("global", every))
+        first, last = self.search.modules(self.centre, self._regions)
         counts = np.zeros((len(spikes), self.network.calibration.shape[0]), dtype=np.int64)
         counts[:, first * group : last * group] = self._window_counts(first * group, last * group)(spikes)
-        places = slice(int(regions[first, 0]), int(regions[last - 1, 1]))
-        return counts, places, inputs * (last - first) * group, "window"
+        places = slice(int(self._regions[first, 0]), int(self._regions[last - 1, 1]))
+        return counts, places, "window", (first, last)
 
     def preprocess(self, grey: np.ndarray) -> np.ndarray:
         """A greyscale uint8 frame (any size) -> the network's input vector, shape (1, inputs)."""
@@ -322,7 +332,8 @@ class Localizer:
         a frame that carries no place (the frame still enters the readout's window, as in a batch). With a search
         window the decision moves it (:class:`SearchWindow`)."""
         inputs = input_spikes(spikes)
-        counts, places, events, search = self._frame_counts(spikes, int(inputs.sum()))
+        counts, places, search, modules = self._frame_counts(spikes)
+        run = None if modules is None else (modules[1] - modules[0]) * self.config.network.n_neurons
         share = (time.perf_counter() - began) / max(len(counts), 1)
         decisions = []
         for row, name, reason in zip(counts, names, no_place_reasons(flat, inputs, counts), strict=True):
@@ -342,8 +353,9 @@ class Localizer:
                 velocity=float(velocity),
                 latency_ms=1000 * (time.perf_counter() - start),
                 reason=reason,
-                events=None if search is None else events,
+                events=None if run is None else int(inputs.sum()) * run,
                 search=search,
+                modules=modules,
             )
             decisions.append(decision)
             self.frame += 1

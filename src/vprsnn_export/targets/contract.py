@@ -10,6 +10,8 @@ of place id ``place_id`` in the traversal named ``traversal``, bit for bit
     w_k     = the k-th 32-bit word of MT19937 after init_genrand(g mod 2**32)        (k = t inputs + i)
     s[t, i] = (w_k mod 2**24) < ceil(p_i 2**24)
 
+The search rule (:func:`search_rule`): the modules a frame of a tracking localiser runs and how it follows.
+
 The decision rule (:func:`decision_rule`): the W+Prob distribution P(l | Q) of one frame (the
 ONNX ``wprob`` output) decides place ``reference_place_ids[argmax_l P]`` (first l on ties), none
 when P is flat (max == min), with confidence max_l P (:func:`vprsnn_export.readout.strategies.decide`).
@@ -73,6 +75,32 @@ def decision_rule(output: str) -> dict[str, Any]:
         "place": "reference_place_ids[argmax_l P[l]], the first l on ties",
         "no_match": "no decision (place -1, confidence 0) when every P[l] is equal (max == min)",
         "confidence": "max_l P[l]",
+    }
+
+
+def search_rule(module_size: int, places: int) -> dict[str, Any]:
+    """The tracking rule of ``localize --search-window`` (:class:`vprsnn_export.readout.search.SearchWindow`) on an
+    ensemble of ``module_size``-place modules over ``places`` reference places: which modules a frame runs, how
+    it is decided among their places and where the window goes next."""
+    return {
+        "version": CONTRACT_VERSION,
+        "parameters": "w places (--search-window), p frames (--patience, default 3), d places (--follow-within, "
+        "default none); theta, the operating point's confidence threshold",
+        "regions": f"module m holds places [m {module_size}, min((m + 1) {module_size}, {places}))",
+        "window": "b = min(max(round(c) - floor(w / 2), 0), max(L - w, 0)) (round: half to even), L places; run the "
+        "modules whose places meet [b, min(b + w, L)) "
+        "(first .. last - 1), one WTA over the neurons run; the first frame and a frame with c = none run every module",
+        "run": "ONNX: feed modules = [first, last); Loihi-style: power only the cores of populations exc_first .. "
+        "exc_{last - 1} (network.json modules); every other core is idle for the frame",
+        "decision": "the W+Prob distribution (eq. 9-13) of the run's counts, 0 for every other neuron, taken over the "
+        "places of modules first .. last - 1 alone (min-max and L1 normalised there; the uniform row, no match, "
+        "when flat), aggregated over the last k frames as in the batch readout: place argmax, confidence max, "
+        "accepted when confidence >= theta",
+        "follow": "c, misses after a frame at place l (index), velocity v: a global frame sets c = l (none: global "
+        "again), misses = 0 if accepted else p - 1; a window frame: accepted -> c = l, misses = 0; |l - (c + v)| <= d "
+        "-> c = l, misses unchanged; else misses + 1 and c = none (global) once misses reach p, c + v before",
+        "project_function": "vprsnn_export.readout.search.SearchWindow; vprsnn-export localize MODEL --search-window "
+        "w [--patience p] [--follow-within d] (each decision names its modules [first, last))",
     }
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from vprsnn_export.config import wta_group
 from vprsnn_export.export.model import MODEL_ARRAYS, FixedPointModel, validate
 from vprsnn_export.network.modules import module_regions
-from vprsnn_export.targets.contract import decision_rule, encoder_contract
+from vprsnn_export.targets.contract import decision_rule, encoder_contract, search_rule
 from vprsnn_export.targets.loihi_budget import model_budgets
 from vprsnn_export.targets.packing import describe_packing, pack_bits
 from vprsnn_export.version import __version__
@@ -137,6 +137,11 @@ def describe(model: FixedPointModel, *, source_sha256: str | None = None) -> Loi
             }
         ],
         "modules": module_populations(model),
+        **(
+            {"search": search_rule(cfg.train.module_size, len(model.reference_place_ids))}
+            if cfg.train.module_size > 0
+            else {}
+        ),
         "resources": [asdict(budget) for budget in model_budgets(model)],
         "wta": {
             "enabled": cfg.network.wta,

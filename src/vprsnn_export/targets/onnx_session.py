@@ -11,7 +11,7 @@ import torch
 
 from vprsnn_export.errors import InvalidValueError, ModelFileError
 from vprsnn_export.network.runs import SpikeRun
-from vprsnn_export.targets.onnx_target import INPUT
+from vprsnn_export.targets.onnx_target import INPUT, MODULES
 from vprsnn_export.targets.registry import load_file
 
 
@@ -46,18 +46,19 @@ def read_onnx(path: str | Path) -> onnx.ModelProto:
 #: files (an edited or foreign graph could loop or allocate without bound).
 WRITER_OPS = frozenset(
     "Add And ArgMax BitShift BitwiseAnd Cast Clip Concat ConstantOfShape Div Equal Greater Identity MatMul "
-    "MatMulInteger Mul Not Range ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
+    "MatMulInteger Mul Not Pad Range ReduceMax ReduceMin ReduceSum Reshape Scan ScatterND Shape Slice Sub Where".split()
 )
 REQUIRED_OUTPUTS = ("counts", "saturations")
 
 
 def check_interface(loaded, path: Path) -> None:
-    """ModelFileError unless the graph has the writer's interface: one input ``spikes`` [T, batch, inputs] with T
-    and inputs fixed, the outputs counts and saturations, and only :data:`WRITER_OPS`."""
+    """ModelFileError unless the graph has the writer's interface: the input ``spikes`` [T, batch, inputs] with T
+    and inputs fixed, then ``modules`` (the modules run, with a default; files written before the search window lack
+    it), the outputs counts and saturations, and only :data:`WRITER_OPS`."""
     inputs = list(loaded.graph.input)
     shape = inputs[0].type.tensor_type.shape.dim if inputs else []
     dims = [d.dim_value if d.HasField("dim_value") else None for d in shape]
-    if len(inputs) != 1 or inputs[0].name != INPUT or len(dims) != 3 or not (dims[0] and dims[2]):
+    if [i.name for i in inputs] not in ([INPUT], [INPUT, MODULES]) or len(dims) != 3 or not (dims[0] and dims[2]):
         raise ModelFileError(f"the graph's input is not {INPUT} [T, batch, inputs] with T and inputs fixed", path)
     if missing := [name for name in REQUIRED_OUTPUTS if name not in {o.name for o in loaded.graph.output}]:
         raise ModelFileError(f"the graph has no output {', '.join(missing)}: not a file export wrote", path)
@@ -78,6 +79,7 @@ def session(path: str | Path, threads: int | None = None):
 
     loaded = read_onnx(path)
     options = ort.SessionOptions()
+    options.log_severity_level = 3  # not the warning that the modules input (a default, fed to override) is no constant
     if threads is not None:
         options.intra_op_num_threads = threads
     try:
@@ -86,8 +88,11 @@ def session(path: str | Path, threads: int | None = None):
         raise ModelFileError(f"onnxruntime cannot load this graph ({exc})", path) from None
 
 
-def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> OnnxRun:
-    """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs].
+def run_session(
+    sess, spikes: torch.Tensor | np.ndarray, batch: int = 128, modules: tuple[int, int] | None = None
+) -> OnnxRun:
+    """Feed spikes (N, T, inputs) uint8 in chunks of ``batch`` presentations as [T, batch, inputs], with
+    ``modules`` [first, last) run alone (None: the graph's default, every module).
 
     InvalidValueError when T or inputs differ from the graph's fixed input shape (:func:`session` opens only a
     graph whose T and inputs are fixed)."""
@@ -100,7 +105,8 @@ def run_session(sess, spikes: torch.Tensor | np.ndarray, batch: int = 128) -> On
             f"expected spikes (N, T, inputs) = (N, {timesteps}, {inputs}) for this graph, got {array.shape}"
         )
     chunks = (array[start : start + batch].astype(np.uint8).transpose(1, 0, 2) for start in range(0, len(array), batch))
-    runs = [sess.run(None, {INPUT: np.ascontiguousarray(chunk)}) for chunk in chunks]  # every output, per chunk
+    window = {} if modules is None else {MODULES: np.asarray(modules, dtype=np.int64)}
+    runs = [sess.run(None, {INPUT: np.ascontiguousarray(chunk), **window}) for chunk in chunks]  # every output
     outputs = zip((o.name for o in sess.get_outputs()), *runs, strict=True)
     joined = {name: np.concatenate(parts, axis=1 if name == "raster" else 0) for name, *parts in outputs if parts}
     raster = None if "raster" not in joined else joined["raster"].transpose(1, 0, 2)  # (N, T, neurons)
@@ -123,14 +129,16 @@ def run_onnx(path: str | Path, spikes: torch.Tensor | np.ndarray) -> np.ndarray:
 class SessionBackend:
     """An ONNX graph in one onnxruntime session, opened once (a stream runs it frame by frame), as a
     :class:`~vprsnn_export.network.runs.Backend`; its runs carry the W+Prob distribution and the raster when the
-    graph has those outputs (``record`` cannot add an output the graph lacks)."""
+    graph has those outputs (``record`` cannot add an output the graph lacks). ``modules`` [first, last): run those
+    alone, their counts and raster (None: every module)."""
 
     session: object
     batch: int = 128
     name: str = "onnxruntime"
+    modules: tuple[int, int] | None = None
 
     def run(self, spikes: torch.Tensor, *, record: bool = False) -> SpikeRun:
-        out = run_session(self.session, spikes, self.batch)
+        out = run_session(self.session, spikes, self.batch, self.modules)
         return SpikeRun(
             counts=torch.from_numpy(np.asarray(out.counts, dtype=np.int64)),
             raster=None if out.raster is None else torch.from_numpy(out.raster.astype(bool)),

@@ -4,15 +4,18 @@ Graph inputs and outputs (T and inputs are fixed numbers: onnxruntime refuses an
 width, so a (batch, T, inputs) array fed by mistake fails its shape check unless batch = T):
 
     spikes       [T, batch, inputs]  uint8 (0/1)  time first (denotations DATA_TIME, DATA_BATCH, DATA_FEATURE)
-    counts       [batch, neurons]    int64   output spike counts
+    modules      [2]                 int64   [first, last): run modules first .. last - 1 alone, one WTA over
+                                             them (a search window); default [0, M], the whole network
+    counts       [batch, run]        int64   output spike counts of the neurons run, [first n, last n)
     saturations  [batch]             int64   voltage clips to +-(2**23 - 1)
-    wprob        [batch, places]     float64 W+Prob distribution P(l | Q)   (optional)
-    raster       [T, batch, neurons] bool    output spikes per step           (optional)
+    wprob        [batch, places]     float64 W+Prob distribution P(l | Q), 0 counts outside the run (optional)
+    raster       [T, batch, run]     bool    output spikes per step           (optional)
 
 What a user needs without the project is in metadata_props (:func:`metadata_props`): the reference
 place ids, the input layout, the encoder contract and the decision rule (:mod:`targets.contract`).
 
-Computation (every operation integer; the contract of :mod:`export.model`):
+Computation (every operation integer; the contract of :mod:`export.model`), on the neurons run
+(q, theta and m sliced to the columns [first n, last n), n neurons per module; every neuron by default):
 
     A[t, n, j] = MatMulInteger(s[t, n, :], q[:, j])          uint8 x uint8 -> int32, exact
     Scan over t with state (V, counts, saturations), V int64 starting at 0 per presentation:
@@ -20,8 +23,9 @@ Computation (every operation integer; the contract of :mod:`export.model`):
         Vn  = V + A[t] * 2**voltage_shift
         V   = Clip(Vn, -(2**23 - 1), 2**23 - 1);  saturations += #(Vn != V)
         C   = V > theta << voltage_shift
-        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/network/modules.py):
-                 w = ArgMax(Reshape(Where(C, A[t] m, -1), [batch, M, n]), axis 2) (first index on ties);
+        WTA on:  per module (group of n consecutive neurons, src/vprsnn_export/network/modules.py) or over
+                 every neuron run (the ensemble's scope):
+                 w = ArgMax(Reshape(Where(C, A[t] m, -1), [batch, groups, group]), axis 2) (first index on ties);
                  S = (j mod n == w of j's module) and C
         WTA off: S = C
         V   = Where(C, 0, V);  counts += S
@@ -60,13 +64,14 @@ from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.export.model import DECAY_BITS, FixedPointModel, validate
 from vprsnn_export.io.fileio import atomic_write_bytes
 from vprsnn_export.readout.regions import module_layout, regularised_calibration
-from vprsnn_export.targets.contract import as_json, decision_rule, encoder_contract
+from vprsnn_export.targets.contract import as_json, decision_rule, encoder_contract, search_rule
 from vprsnn_export.targets.packing import PACKING, pack_bits
 
 IR_VERSION = 10  # onnxruntime 1.31 refuses the IR 14 that onnx 1.23 writes by default
 OPSET = 21
 DOMAIN = "vprsnn-export"
 INPUT = "spikes"
+MODULES = "modules"  # the optional input [first, last): the modules run (a search window)
 INPUT_DENOTATION = ("DATA_TIME", "DATA_BATCH", "DATA_FEATURE")  # ONNX dimension denotations of [T, batch, inputs]
 NATIVE_SUB_BYTE = {4: TensorProto.UINT4}  # widths stored in an ONNX sub-byte type that onnxruntime casts (opset 21)
 WPROB_ROUNDING = 1e-12  # largest |P_onnx - P_readout| allowed for the float64 W+Prob head
@@ -121,24 +126,48 @@ def check_exportable(model: FixedPointModel) -> None:
         )
 
 
-def neuron_nodes(model: FixedPointModel) -> Nodes:
-    """The per-neuron int64 vectors the step reads from the outer graph, stored narrow and widened once.
+def window_nodes(model: FixedPointModel) -> Nodes:
+    """The neurons run, from the ``modules`` input [first, last): ``window_start`` = first n and ``window_stop`` =
+    last n ([1] each, n neurons per module) and ``window_size`` = their difference (a scalar)."""
+    g = Nodes([], [])
+    g.const("module_neurons", [model.config.network.n_neurons])
+    g.const("at_zero", [0])
+    g.const("at_one", [1])
+    g.const("at_two", [2])
+    g.op("Slice", [MODULES, "at_zero", "at_one"], "first_module")
+    g.op("Slice", [MODULES, "at_one", "at_two"], "last_module")
+    g.op("Mul", ["first_module", "module_neurons"], "window_start")
+    g.op("Mul", ["last_module", "module_neurons"], "window_stop")
+    g.op("Sub", ["window_stop", "window_start"], "window_span")
+    g.op("ReduceSum", ["window_span", "at_zero"], "window_size", keepdims=0)
+    return g
 
-    vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. n - 1 (Range),
-    the index of a neuron within its WTA group (config.wta_group: the ensemble, or one module's n neurons)
+
+def neuron_nodes(model: FixedPointModel) -> Nodes:
+    """The per-neuron int64 vectors the step reads from the outer graph, stored narrow, widened and sliced to the
+    neurons run once.
+
+    vth = theta << voltage_shift;  with WTA also multiplier = m and neuron_index = 0 .. group - 1 (Range),
+    the index of a neuron within its WTA group (config.wta_group: one module's n neurons, or every neuron run)
     """
     g = Nodes([], [])
     g.const("threshold_stored", smallest_unsigned(model.threshold))
     g.const("vth_scale", 1 << model.voltage_shift)
     g.op("Cast", ["threshold_stored"], "threshold_wide", to=INT64)
-    g.op("Mul", ["threshold_wide", "vth_scale"], "vth")
+    g.op("Mul", ["threshold_wide", "vth_scale"], "vth_all")
+    g.op("Slice", ["vth_all", "window_start", "window_stop", "at_zero"], "vth")
     if model.config.network.wta:
+        group = wta_group(model.config, model.n_neurons)
         g.const("multiplier_stored", smallest_unsigned(model.scale_multiplier))
         g.const("index_start", 0)
-        g.const("index_limit", wta_group(model.config, model.n_neurons))
         g.const("index_step", 1)
-        g.op("Cast", ["multiplier_stored"], "multiplier", to=INT64)
-        g.op("Range", ["index_start", "index_limit", "index_step"], "neuron_index")
+        g.op("Cast", ["multiplier_stored"], "multiplier_all", to=INT64)
+        g.op("Slice", ["multiplier_all", "window_start", "window_stop", "at_zero"], "multiplier")
+        limit = "window_size"
+        if group < model.n_neurons:  # one module's neurons: the same group whatever the window
+            g.const("index_limit", group)
+            limit = "index_limit"
+        g.op("Range", ["index_start", limit, "index_step"], "neuron_index")
     return g
 
 
@@ -148,6 +177,7 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     ``vth``, ``multiplier`` and ``neuron_index`` come from the outer graph (:func:`neuron_nodes`).
     """
     n = model.n_neurons
+    run = "neurons_run"  # the symbolic width of the neurons run
     g = Nodes([], [])
     g.const("keep", (1 << DECAY_BITS) - model.decay_dv)
     g.const("unity", 1 << DECAY_BITS)
@@ -172,8 +202,8 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
     if model.config.network.wta:
         group = wta_group(model.config, n)
         g.const("minus_one", -1)
-        g.const("group_shape", [0, n // group, group])  # (batch, M, n)
-        g.const("flat_state", [0, n])
+        g.const("group_shape", [0, -1, group] if group < n else [0, 1, -1])  # (batch, groups, group)
+        g.const("flat_state", [0, -1])
         g.op("Mul", ["a", "multiplier"], "score")
         g.op("Where", ["cand", "score", "minus_one"], "masked")
         g.op("Reshape", ["masked", "group_shape"], "grouped")
@@ -185,13 +215,13 @@ def step_body(model: FixedPointModel, with_raster: bool) -> onnx.GraphProto:
         g.op("Identity", ["cand"], "fired")
     g.op("Cast", ["fired"], "fired_i", to=INT64)
     g.op("Add", ["counts_in", "fired_i"], "counts_out")
-    state: dict[str, list[str | int]] = {"v": ["batch", n], "counts": ["batch", n], "sat": ["batch"]}  # int64
+    state: dict[str, list[str | int]] = {"v": ["batch", run], "counts": ["batch", run], "sat": ["batch"]}  # int64
     outputs = [helper.make_tensor_value_info(f"{name}_out", INT64, shape) for name, shape in state.items()]
     if with_raster:
         g.op("Identity", ["fired"], "fired_out")
-        outputs.append(helper.make_tensor_value_info("fired_out", BOOL, ["batch", n]))
+        outputs.append(helper.make_tensor_value_info("fired_out", BOOL, ["batch", run]))
     inputs = [helper.make_tensor_value_info(f"{name}_in", INT64, shape) for name, shape in state.items()]
-    inputs.append(helper.make_tensor_value_info("a_t", TensorProto.INT32, ["batch", n]))
+    inputs.append(helper.make_tensor_value_info("a_t", TensorProto.INT32, ["batch", run]))
     return helper.make_graph(g.nodes, "lif_wta_step", inputs, outputs, g.inits)
 
 
@@ -239,18 +269,18 @@ def weight_nodes(model: FixedPointModel) -> Nodes:
 
 
 def currents_nodes(model: FixedPointModel) -> Nodes:
-    """A[T, batch, neurons] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q); initial state zeros."""
+    """A[T, batch, run] int32 = MatMulInteger(spikes reshaped [T batch, inputs], q of the neurons run); initial
+    state zeros."""
     g = weight_nodes(model)
     g.const("flat_shape", [-1, model.n_inputs])
-    g.const("neurons", [model.n_neurons])
-    g.const("first_two", [0])
-    g.const("two", [2])
-    g.const("one", [1])
+    g.op("Slice", ["weight_mantissa", "window_start", "window_stop", "at_one"], "window_weights")
+    g.op("Shape", ["window_weights"], "window_shape")
+    g.op("Slice", ["window_shape", "at_one", "at_two"], "neurons")
     g.op("Shape", [INPUT], "spike_shape")
-    g.op("Slice", ["spike_shape", "first_two", "two"], "time_batch")
-    g.op("Slice", ["spike_shape", "one", "two"], "batch")
+    g.op("Slice", ["spike_shape", "at_zero", "at_two"], "time_batch")
+    g.op("Slice", ["spike_shape", "at_one", "at_two"], "batch")
     g.op("Reshape", [INPUT, "flat_shape"], "flat_spikes")
-    g.op("MatMulInteger", ["flat_spikes", "weight_mantissa"], "flat_currents")
+    g.op("MatMulInteger", ["flat_spikes", "window_weights"], "flat_currents")
     g.op("Concat", ["time_batch", "neurons"], "current_shape", axis=0)
     g.op("Reshape", ["flat_currents", "current_shape"], "currents")
     g.op("Concat", ["batch", "neurons"], "state_shape", axis=0)
@@ -344,7 +374,8 @@ def readout_matrix_nodes(model: FixedPointModel, matrix: np.ndarray) -> Nodes:
 def wprob_nodes(model: FixedPointModel) -> Nodes:
     """P(l | Q) from counts: eq. 9-11 scores, min-max normalised, L1 normalised (eq. 12-13).
 
-    An ensemble's head reads out with its region regularisation (:func:`readout_calibration`).
+    An ensemble's head reads out with its region regularisation (:func:`readout_calibration`), on the counts of
+    every neuron (Pad: 0 outside the neurons run).
 
     scores = (S^Q S'') * (([S^Q > 0] S^R) / colsum(S^R)),  0 where colsum = 0
     P      = (scores - min) / (max - min) / sum(...),     uniform where max == min
@@ -353,10 +384,14 @@ def wprob_nodes(model: FixedPointModel) -> Nodes:
     g = readout_matrix_nodes(model, matrix)
     g.const("uniform", np.float64(1.0 / model.calibration.shape[1]))
     g.const("i_zero", 0)
-    counts = "counts"
+    g.const("route_neurons", [model.n_neurons])
+    g.op("Sub", ["route_neurons", "window_stop"], "neurons_after")
+    g.op("Concat", ["at_zero", "window_start", "at_zero", "neurons_after"], "counts_pads", axis=0)
+    g.op("Pad", ["counts", "counts_pads"], "route_counts")
+    counts = "route_counts"
     if keep is not None:  # an ensemble: the silenced neurons' counts do not reach the readout
         g.const("readout_keep", keep.astype(np.int64))
-        g.op("Mul", ["counts", "readout_keep"], "readout_counts")
+        g.op("Mul", ["route_counts", "readout_keep"], "readout_counts")
         counts = "readout_counts"
     g.op("Cast", [counts], "sq", to=DOUBLE)
     g.op("MatMul", ["sq", "s_double_prime"], "raw")
@@ -381,22 +416,23 @@ def wprob_nodes(model: FixedPointModel) -> Nodes:
 def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: bool = False) -> onnx.ModelProto:
     """The ONNX model of ``model``'s integer inference (see the module docstring)."""
     check_exportable(model)
-    n, timesteps = model.n_neurons, model.config.encoder.timesteps
-    g = currents_nodes(model).extend(neuron_nodes(model))
+    timesteps, run = model.config.encoder.timesteps, "neurons_run"
+    g = window_nodes(model).extend(currents_nodes(model)).extend(neuron_nodes(model))
+    g.const(MODULES, [0, model.n_neurons // model.config.network.n_neurons])  # the input's default
     scan_outputs = ["v_final", "counts", "saturations"] + (["raster"] if with_raster else [])
     scan = helper.make_node(
         "Scan", ["v0", "v0", "sat0", "currents"], scan_outputs, body=step_body(model, with_raster), num_scan_inputs=1
     )
     g.nodes.append(scan)
     outputs = [
-        helper.make_tensor_value_info("counts", INT64, ["batch", n]),
+        helper.make_tensor_value_info("counts", INT64, ["batch", run]),
         helper.make_tensor_value_info("saturations", INT64, ["batch"]),
     ]
     if with_wprob:
         g.extend(wprob_nodes(model))
         outputs.append(helper.make_tensor_value_info("wprob", DOUBLE, ["batch", model.calibration.shape[1]]))
     if with_raster:
-        outputs.append(helper.make_tensor_value_info("raster", BOOL, [timesteps, "batch", n]))
+        outputs.append(helper.make_tensor_value_info("raster", BOOL, [timesteps, "batch", run]))
     spikes = helper.make_tensor_value_info(
         INPUT,
         TensorProto.UINT8,
@@ -404,7 +440,8 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
         doc_string=input_layout(model),
         shape_denotation=list(INPUT_DENOTATION),
     )
-    graph = helper.make_graph(g.nodes, "vprsnn_integer_inference", [spikes], outputs, g.inits)
+    modules = helper.make_tensor_value_info(MODULES, INT64, [2], doc_string=MODULES_LAYOUT)
+    graph = helper.make_graph(g.nodes, "vprsnn_integer_inference", [spikes, modules], outputs, g.inits)
     onnx_model = helper.make_model(
         graph,
         opset_imports=[helper.make_opsetid("", OPSET)],
@@ -416,6 +453,12 @@ def build_onnx(model: FixedPointModel, *, with_wprob: bool = True, with_raster: 
     helper.set_model_props(onnx_model, metadata_props(model, with_wprob=with_wprob))
     onnx.checker.check_model(onnx_model, full_check=True)
     return onnx_model
+
+
+MODULES_LAYOUT = (
+    "modules [2] int64 [first, last), default [0, M]: run modules first .. last - 1 alone (a search window; "
+    "vprsnn.search), counts and raster then of neurons [first n, last n)"
+)
 
 
 def input_layout(model: FixedPointModel) -> str:
@@ -451,6 +494,8 @@ def metadata_props(model: FixedPointModel, *, with_wprob: bool = True) -> dict[s
     }
     if with_wprob:
         props["vprsnn.decision"] = as_json(decision_rule("wprob"))
+    if cfg.train.module_size > 0:
+        props["vprsnn.search"] = as_json(search_rule(cfg.train.module_size, len(model.reference_place_ids)))
     return props
 
 

@@ -97,7 +97,12 @@ def onnx_statement(network: Network, model: FixedPointModel | None, options: Wri
         "onnxruntime computes the integer network exactly: spike counts, raster and saturations identical to the "
         "integer simulator; the W+Prob head (float64, another summation order) gives the same decisions, its "
         f"probabilities within {WPROB_ROUNDING:g} of the numpy readout (measured: below 1e-15)."
-        + ensemble_sentence(network)
+        + (
+            (ensemble := ensemble_sentence(network))
+            and ensemble
+            + " The input modules = [first, last) runs those modules alone (a tracking localiser's search "
+            "window, metadata vprsnn.search), as the integer simulator does."
+        )
     )
 
 
@@ -109,7 +114,13 @@ def loihi_statement(network: Network, model: FixedPointModel | None, options: Wr
     return (
         "Lava's bit-accurate Dense + LIF (fixed_pt) compute the candidate raster bit for bit (WTA off) while "
         "a_j < 2**17; the hard WTA is a rule in network.json that a Lava user adds after the LIF population."
-        + (ensemble and ensemble + " network.json's modules are the populations exc_m, one per module.")
+        + (
+            ensemble
+            and ensemble
+            + " network.json's modules are the populations exc_m, one per module; a tracking localiser (localize "
+            "--search-window w, network.json's search rule) powers per frame only the cores of the modules its window "
+            f"meets, at most ceil(w / {network.config.train.module_size}) + 1 modules, and each decision names them."
+        )
         + " Loihi-class cores: "
         + "; ".join(
             f"{budget.chip} {budget.cores} cores ({budget.cores_per_module} per module), {budget.synapses:,} synapses"
