@@ -16,6 +16,13 @@ LENS scored 10 / 14 % at k = 1 where it said 8 / 13 %). On that machine this cha
 moved only LENS files: the trained weights' last bits (the checkpoint's hash), the predictions' confidences in
 their last digits, and the localiser's per-frame decisions and threshold (its frames run one at a time).
 
+Re-recorded a third time (2026-12-07) for the ONNX graph's ``modules`` input and the search rule written into
+ONNX and network.json (issue 43): only the ``.onnx`` files, ``network.json``, ``export.json`` and the export
+command's stdout (its statement) changed; each new entry was taken where the commit before and after it differed
+on one machine, and the record's other entries were left as they were (on that machine, an AMD EPYC, the commit
+before already differed from the record in the last digit of some confidences: two predictions files, two curves
+and LENS's localize lines).
+
 The tool runs in a process of its own with ``OMP_NUM_THREADS=2``, as the record was made: numpy's BLAS takes
 its thread count when it loads (the readout's sums no longer use it, other products still may).
 
