@@ -1,7 +1,7 @@
 """The search window's tracking protocol beside the global localiser, and a kidnapped robot (issue 43).
 
     OMP_NUM_THREADS=1 python bench/bench_tracking.py CHECKPOINT [--query winter] [--k 1,5,10]
-                                                    [--search-window 300] [--patience 3] [--follow-within P]
+                                                    [--search-window 300] [--patience 3] [--follow-within P] [--lost-after N]
                                                     [--jump 1000]
                                                     [--frames N] [--backend integer|onnx --onnx FILE]
 
@@ -52,6 +52,7 @@ def main() -> None:
     parser.add_argument(
         "--follow-within", type=int, help="an unaccepted decision this near the expected place is no miss"
     )
+    parser.add_argument("--lost-after", type=int, help="window frames without an accepted decision before a global one")
     parser.add_argument("--jump", type=int, default=1000, help="places the kidnapped robot jumps ahead")
     parser.add_argument("--jumps", type=int, default=5, help="kidnappings, at evenly spaced frames")
     parser.add_argument("--frames", type=int, help="the table on the first N frames (default: all)")
@@ -65,13 +66,13 @@ def main() -> None:
     dataset = load_selection(ckpt.data, [args.query], ckpt.config.preprocess, source=args.data)
     query = dataset.query(args.query, ckpt.reference_traversals)
     ks = tuple(int(k) for k in args.k.split(","))
-    search = SearchWindow(args.search_window, args.patience, args.follow_within)
+    search = SearchWindow(args.search_window, args.patience, args.follow_within, args.lost_after)
     n = len(query.place_ids)
     first = slice(0, args.frames)
     print(
         f"load average {os.getloadavg()[0]:.1f}; {args.checkpoint}: {ckpt.calibration.shape[0]} neurons, "
         f"{ckpt.calibration.shape[1]} places; query {args.query} ({n} frames, the table on {len(query.place_ids[first])}); window {search.places} places, "
-        f"patience {search.patience}, follow within {search.near}; backend {args.backend}; {args.threads} thread(s)"
+        f"patience {search.patience}, follow within {search.near}, lost after {search.lost_after}; backend {args.backend}; {args.threads} thread(s)"
     )
     began = time.perf_counter()
     rows = tracking_rows(

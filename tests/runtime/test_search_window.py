@@ -21,7 +21,9 @@ from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.deployment import deploy
 from vprsnn_export.runtime.localize import Localizer, SearchWindow, network_part, operating_point, tracking_rows
+from vprsnn_export.targets.contract import search_rule
 from vprsnn_export.targets.intsim import IntegerNetwork
+from vprsnn_export.targets.loihi_description import describe
 from vprsnn_export.targets.onnx_session import run_session, session
 from vprsnn_export.targets.onnx_target import write_onnx
 from vprsnn_export.trainer.pipeline import train_and_calibrate
@@ -57,22 +59,48 @@ def test_the_windows_modules_are_those_its_places_meet():
 
 def test_the_window_follows_accepted_places_and_widens_after_its_patience():
     window = SearchWindow(300, patience=3)
-    assert window.follow(None, 0, 120, True, 1.0) == (120.0, 0)  # a global frame accepted: the window goes there
-    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2)  # not accepted: one more miss looks again
-    assert window.follow(None, 0, None, False, 1.0) == (None, 2)  # no place: global again
-    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0)
-    assert window.follow(50.0, 1, 57, False, 1.5) == (51.5, 2)  # unaccepted: on at the velocity
-    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3)  # the third miss in a row: the next frame is global
+    assert window.follow(None, 0, 120, True, 1.0) == (120.0, 0, 0)  # a global frame accepted: the window goes there
+    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2, 0)  # not accepted: one more miss looks again
+    assert window.follow(None, 0, None, False, 1.0) == (None, 2, 0)  # no place: global again
+    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0, 0)
+    assert window.follow(50.0, 1, 57, False, 1.5) == (51.5, 2, 1)  # unaccepted: on at the velocity
+    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3, 1)  # the third miss in a row: the next frame is global
 
 
 def test_a_window_following_within_near_places_moves_to_an_unaccepted_decision_near_the_expected_place():
     window = SearchWindow(300, patience=3, near=3)
-    assert window.follow(50.0, 1, 54, False, 1.5) == (54.0, 1)  # 2.5 from 51.5: on track, no miss
-    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3)  # 5.5 from 51.5: a miss, the third: global next
-    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0)  # accepted: as without near
-    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2)  # a global frame: as without near
+    assert window.follow(50.0, 1, 54, False, 1.5) == (54.0, 1, 1)  # 2.5 from 51.5: on track, no miss
+    assert window.follow(50.0, 2, 57, False, 1.5) == (None, 3, 1)  # 5.5 from 51.5: a miss, the third: global next
+    assert window.follow(50.0, 1, 57, True, 1.5) == (57.0, 0, 0)  # accepted: as without near
+    assert window.follow(None, 0, 120, False, 1.0) == (120.0, 2, 0)  # a global frame: as without near
     with pytest.raises(InvalidValueError, match="near must be"):
         SearchWindow(300, near=0)
+
+
+def test_a_window_lost_for_lost_after_frames_runs_the_whole_route_until_a_decision_is_accepted():
+    window = SearchWindow(300, patience=3, near=3, lost_after=4)
+    assert window.follow(50.0, 0, 52, False, 1.5, 2) == (52.0, 0, 3)  # followed: no miss, but one more unaccepted
+    assert window.follow(50.0, 0, 52, False, 1.5, 3) == (None, 0, 4)  # the fourth in a row: lost, global next
+    assert window.lost(4) and not window.lost(3) and not SearchWindow(300).lost(100)
+    assert window.follow(None, 0, 900, False, 1.0, 4) == (None, 0, 4)  # lost: global again while unaccepted
+    assert window.follow(None, 0, 900, True, 1.0, 4) == (900.0, 0, 0)  # found: the window goes there
+    assert window.follow(None, 0, 900, False, 1.0, 0) == (900.0, 2, 0)  # a global frame not lost: as before
+    with pytest.raises(InvalidValueError, match="lost after must be"):
+        SearchWindow(300, lost_after=0)
+
+
+def test_a_lost_robot_forgets_the_lost_windows_frames(route):
+    """After ``lost_after`` unaccepted window frames the readout's recent frames are dropped: the next (global)
+    frame decides as a fresh stream's first frame would."""
+    ckpt, _, query, threshold = route
+    search = SearchWindow(100, near=300, lost_after=2)  # every unaccepted window frame followed: lost after two
+    decisions = Localizer(ckpt, options=K3, threshold=1.0, search=search).run_inputs(query.images[:12])
+    kinds = [d.search for d in decisions]
+    assert kinds[:4] == ["global", "window", "window", "global"] and set(kinds[3:]) == {"global"}
+    fresh = Localizer(ckpt, options=K3, threshold=1.0)
+    index, confidence, _ = fresh.stream.push(fresh.counts(query.images[3:4], 3)[0], None)  # frame 3 alone
+    assert (decisions[3].place_id, decisions[3].confidence) == (int(ckpt.reference_place_ids[index]), confidence)
+    assert decisions[4].confidence != confidence  # and the stream goes on from there
 
 
 def test_a_window_over_the_whole_route_decides_as_the_global_localiser(route):
@@ -158,7 +186,11 @@ def test_the_onnx_graph_tracks_as_the_integer_simulator_frame_for_frame(route, t
     run = run_session(session(graph), spikes, modules=(1, 3))
     part = IntegerNetwork(network_part(model, slice(model.config.network.n_neurons, None))).run(spikes, record=True)
     assert np.array_equal(run.counts, part.counts.numpy()) and np.array_equal(run.raster, part.raster.numpy())
-    old = onnx_lib.load(str(graph))  # a graph written before the modules input: its default a constant
+    rule = search_rule(100, PLACES)  # the rule is in the files: ONNX metadata and network.json
+    old = onnx_lib.load(str(graph))
+    assert json.loads({p.key: p.value for p in old.metadata_props}["vprsnn.search"]) == rule
+    assert describe(model).header["search"] == rule and "idle for the frame" in rule["run"]
+    # a graph written before the modules input: its default a constant
     old.graph.input.pop()
     onnx_lib.save(old, str(tmp_path / "old.onnx"))
     assert np.array_equal(
@@ -213,11 +245,14 @@ def test_evaluate_scores_the_tracking_protocol_beside_the_global_one(route, tmp_
     assert main(argv) == 0
     assert "tracking within 100 places (patience 3)" in capsys.readouterr().out
     assert main(["evaluate", str(path), "--query", "winter", "--patience", "2"]) == 2
-    assert "--patience and --follow-within are for --search-window" in capsys.readouterr().err
+    assert "--patience, --follow-within and --lost-after are for --search-window" in capsys.readouterr().err
     assert main([*argv, "--follow-within", "3"]) == 0
     assert "tracking within 100 places (patience 3, following within 3)" in capsys.readouterr().out
     assert main(["evaluate", str(path), "--query", "winter", "--follow-within", "3"]) == 2
-    assert "--patience and --follow-within are for --search-window" in capsys.readouterr().err
+    assert "--patience, --follow-within and --lost-after are for --search-window" in capsys.readouterr().err
+    assert main([*argv, "--follow-within", "3", "--lost-after", "4"]) == 0
+    assert "(patience 3, following within 3, lost after 4)" in capsys.readouterr().out
+    assert main(["evaluate", str(path), "--query", "winter", "--lost-after", "4"]) == 2
 
 
 def test_a_sparse_calibration_localises_as_the_dense_one(route):

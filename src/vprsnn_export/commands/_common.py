@@ -457,12 +457,20 @@ def add_search_options(parser: argparse.ArgumentParser) -> None:
         help="with --search-window: an unaccepted decision within PLACES places of where the window expected it "
         "moves the window there and is no miss (fewer re-localisations; a kidnapped robot is found later)",
     )
+    search.add_argument(
+        "--lost-after",
+        type=positive_int,
+        metavar="N",
+        help="with --search-window: after N window frames in a row without an accepted decision, followed ones "
+        "included, the robot is lost: the recent frames are forgotten and the whole route runs until a decision is "
+        "accepted (with --follow-within, a kidnapped robot is found sooner)",
+    )
 
 
 def search_window(args: argparse.Namespace) -> SearchWindow | None:
     """The SearchWindow of --search-window/--patience (None: the whole route every frame)."""
-    if args.search_window is None and (args.patience is not None or args.follow_within is not None):
-        raise InvalidValueError("--patience and --follow-within are for --search-window")
+    if args.search_window is None and any(v is not None for v in (args.patience, args.follow_within, args.lost_after)):
+        raise InvalidValueError("--patience, --follow-within and --lost-after are for --search-window")
     if args.search_window is None:
         return None
-    return SearchWindow(args.search_window, args.patience or DEFAULT_PATIENCE, args.follow_within)
+    return SearchWindow(args.search_window, args.patience or DEFAULT_PATIENCE, args.follow_within, args.lost_after)

@@ -117,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
         if tracking is not None and search is not None:
             print(
                 f"\ntracking within {search.places} places (patience {search.patience}"
-                f"{'' if search.near is None else f', following within {search.near}'}) beside the whole route, frame by "
+                f"{'' if search.near is None else f', following within {search.near}'}"
+                f"{'' if search.lost_after is None else f', lost after {search.lost_after}'}) beside the whole route, frame by "
                 "frame in stream order, accepting at the whole route's precision-1 point on these queries:"
             )
             rows = [{**row.to_dict(), "events": f"{row.events_per_frame / 1e6:.2f} M"} for row in tracking]

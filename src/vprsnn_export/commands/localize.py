@@ -121,9 +121,10 @@ def run(args: argparse.Namespace) -> int:
     if args.calibrate:
         if args.topic is not None or events:
             raise InvalidValueError("--topic, --event-window-us and --event-count are for --frames, not --calibrate")
-        if any(v is not None for v in (args.search_window, args.patience, args.follow_within)):
+        if any(v is not None for v in (args.search_window, args.patience, args.follow_within, args.lost_after)):
             raise InvalidValueError(
-                "--search-window, --patience and --follow-within are for --frames; --calibrate runs the whole route"
+                "--search-window, --patience, --follow-within and --lost-after are for --frames; --calibrate runs the "
+                "whole route"
             )
         return calibrate(args, source, point_path, onnx, backend)
     stored: OperatingPoint | None = None

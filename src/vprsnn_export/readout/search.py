@@ -24,7 +24,11 @@ class SearchWindow:
     the window run (one WTA over them) and the frame is decided among their places; after ``patience`` frames in a row
     without an accepted decision the next frame runs the whole route (a global re-localisation), as does the first.
     With ``near`` (``--follow-within``), an unaccepted window decision within ``near`` places of where the window
-    expected it (``c_j + v_j``) moves the window there and is no miss: the robot is taken to be on track.
+    expected it (``c_j + v_j``) moves the window there and is no miss: the robot is taken to be on track. With
+    ``lost_after`` (``--lost-after``), after that many window frames in a row without an accepted decision, followed
+    ones included, the robot is lost (:meth:`lost`): the readout forgets its recent frames (they are the lost
+    window's evidence, and they outvote a global frame in the k-frame aggregate) and every frame runs the whole
+    route until one is accepted.
 
     .. math:: c_{j+1} = \\begin{cases} \\hat l_j & \\text{accepted}_j \\text{ or } |\\hat l_j - (c_j + v_j)|
               \\le \\text{near} \\\\ c_j + v_j & \\text{otherwise (a miss)} \\end{cases}, \\quad W_j = [\\,b, b + w), \\; b = \\min(\\max(\\lfloor c_j \\rceil -
@@ -35,31 +39,41 @@ class SearchWindow:
     places: int
     patience: int = DEFAULT_PATIENCE
     near: int | None = None
+    lost_after: int | None = None
 
     def __post_init__(self) -> None:
         for name, value in (
             ("search window", self.places),
             ("patience", self.patience),
             ("near", 1 if self.near is None else self.near),
+            ("lost after", 1 if self.lost_after is None else self.lost_after),
         ):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise InvalidValueError(f"{name} must be a whole number of frames or places >= 1, got {value!r:.40}")
 
     def follow(
-        self, centre: float | None, misses: int, place: int | None, accepted: bool, velocity: float
-    ) -> tuple[float | None, int]:
-        """The next frame's (centre, misses) after a frame decided at place index ``place`` (None: no place):
+        self, centre: float | None, misses: int, place: int | None, accepted: bool, velocity: float, waited: int = 0
+    ) -> tuple[float | None, int, int]:
+        """The next frame's (centre, misses, waited) after a frame decided at place index ``place`` (None: no place):
         ``centre`` None, a global frame, puts the window at its place (None: global again), and when it was not
         accepted one more miss looks at the whole route again; a window frame moves it to an accepted place, else
         ``velocity`` places on (or, within ``near`` of ``centre + velocity``, to its place without a miss), and after
-        ``patience`` misses in a row the next frame is global (centre None)."""
+        ``patience`` misses in a row, or ``lost_after`` window frames in a row without an accepted decision
+        (``waited``), the next frame is global (centre None)."""
         if centre is None:
-            return (None if place is None else float(place)), 0 if accepted else self.patience - 1
+            if not accepted and self.lost(waited):
+                return None, misses, waited  # lost: global until a decision is accepted
+            return (None if place is None else float(place)), 0 if accepted else self.patience - 1, 0
         if accepted and place is not None:
-            return float(place), 0
+            return float(place), 0, 0
+        lost = self.lost_after is not None and waited + 1 >= self.lost_after
         if self.near is not None and place is not None and abs(place - (centre + velocity)) <= self.near:
-            return float(place), misses  # on track: the window follows, no miss
-        return (None if misses + 1 >= self.patience else centre + velocity), misses + 1
+            return (None if lost else float(place)), misses, waited + 1  # on track: the window follows, no miss
+        return (None if lost or misses + 1 >= self.patience else centre + velocity), misses + 1, waited + 1
+
+    def lost(self, waited: int) -> bool:
+        """Whether ``waited`` window frames in a row without an accepted decision make the robot lost (``lost_after``)."""
+        return self.lost_after is not None and waited >= self.lost_after
 
     def modules(self, centre: float, regions: np.ndarray) -> tuple[int, int]:
         """[first, last) modules whose regions meet the window around ``centre`` (a reference place index)."""

@@ -244,7 +244,8 @@ class Localizer:
         self.frame = 0
         self.stream.reset()
         self.centre: float | None = None  # the search window's centre, a reference place index (None: global)
-        self.misses = 0  # frames in a row without an accepted decision
+        self.misses = 0  # frames in a row without an accepted decision (SearchWindow.follow)
+        self.waited = 0  # window frames in a row without an accepted decision, followed ones included
 
     def _frame_counts(
         self, spikes: torch.Tensor
@@ -343,7 +344,12 @@ class Localizer:
             accepted = self.threshold is not None and place is not None and conf >= self.threshold
             if self.search is not None:
                 found = index if place is not None else None
-                self.centre, self.misses = self.search.follow(self.centre, self.misses, found, accepted, velocity)
+                tracking = self.centre is not None
+                self.centre, self.misses, self.waited = self.search.follow(
+                    self.centre, self.misses, found, accepted, velocity, self.waited
+                )
+                if tracking and self.search.lost(self.waited):  # the recent frames are the lost window's: forgotten
+                    self.stream.reset()
             decision = Decision(
                 frame=self.frame,
                 name=name,

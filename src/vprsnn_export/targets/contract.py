@@ -85,7 +85,7 @@ def search_rule(module_size: int, places: int) -> dict[str, Any]:
     return {
         "version": CONTRACT_VERSION,
         "parameters": "w places (--search-window), p frames (--patience, default 3), d places (--follow-within, "
-        "default none); theta, the operating point's confidence threshold",
+        "default none), a frames (--lost-after, default none); theta, the operating point's confidence threshold",
         "regions": f"module m holds places [m {module_size}, min((m + 1) {module_size}, {places}))",
         "window": "b = min(max(round(c) - floor(w / 2), 0), max(L - w, 0)) (round: half to even), L places; run the "
         "modules whose places meet [b, min(b + w, L)) "
@@ -96,9 +96,11 @@ def search_rule(module_size: int, places: int) -> dict[str, Any]:
         "places of modules first .. last - 1 alone (min-max and L1 normalised there; the uniform row, no match, "
         "when flat), aggregated over the last k frames as in the batch readout: place argmax, confidence max, "
         "accepted when confidence >= theta",
-        "follow": "c, misses after a frame at place l (index), velocity v: a global frame sets c = l (none: global "
-        "again), misses = 0 if accepted else p - 1; a window frame: accepted -> c = l, misses = 0; |l - (c + v)| <= d "
-        "-> c = l, misses unchanged; else misses + 1 and c = none (global) once misses reach p, c + v before",
+        "follow": "c, misses, waited after a frame at place l (index), velocity v: a global frame sets c = l (none: "
+        "global again), misses = 0 if accepted else p - 1, waited = 0; a window frame: accepted -> c = l, misses = "
+        "waited = 0; else waited + 1 and |l - (c + v)| <= d -> c = l, misses unchanged; else misses + 1 and c = none "
+        "(global) once misses reach p, c + v before; lost once waited reaches a: c = none, the last k frames are "
+        "forgotten (the aggregate starts again), and frames stay global until one is accepted",
         "project_function": "vprsnn_export.readout.search.SearchWindow; vprsnn-export localize MODEL --search-window "
         "w [--patience p] [--follow-within d] (each decision names its modules [first, last))",
     }
