@@ -40,7 +40,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -62,6 +62,9 @@ from vprsnn_export.readout.search import SearchWindow
 from vprsnn_export.readout.sequence import SequenceOptions
 
 from .backends import open_backend
+
+if TYPE_CHECKING:
+    from vprsnn_export.network.runs import Backend
 
 STREAM = "localize"
 PARTS_KEPT = 16  # the search window's networks kept open (the most recent windows' modules)
@@ -209,9 +212,9 @@ class Localizer:
             if self.readout.modules is None or len(self.readout.modules.regions) < 2:
                 raise InvalidValueError("--search-window needs an ensemble of modules (train.module_size > 0)")
             self._regions = self.readout.modules.regions
-            if self.backend == "onnx" and "modules" not in {
-                i.name for i in runner.session.get_overridable_initializers()
-            }:
+            # an ONNX graph's one session runs every window (targets.onnx_session.SessionBackend's modules input)
+            graph: Any = runner if self.backend == "onnx" else None
+            if graph is not None and "modules" not in {i.name for i in graph.session.get_overridable_initializers()}:
                 raise InvalidValueError(
                     "--search-window needs a graph with the modules input: export it again with this version"
                 )
@@ -226,9 +229,9 @@ class Localizer:
                 """The counts of neurons ``start:stop`` (some consecutive modules) alone, their network opened once (an
                 ONNX graph runs them on its one session: its ``modules`` input)."""
                 part = network_part(isolated, slice(start, stop))
-                if self.backend == "onnx":
+                if graph is not None:
                     group = self.config.network.n_neurons
-                    run = dataclasses.replace(runner, modules=(start // group, stop // group))
+                    run: Backend = dataclasses.replace(graph, modules=(start // group, stop // group))
                 else:
                     run = open_backend(part, self.backend, None, device, threads)[1]
                 return lambda s: frame_counts(run, s, part.calibration, part.config)

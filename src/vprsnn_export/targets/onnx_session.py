@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import onnx
@@ -132,7 +133,7 @@ class SessionBackend:
     graph has those outputs (``record`` cannot add an output the graph lacks). ``modules`` [first, last): run those
     alone, their counts and raster (None: every module)."""
 
-    session: object
+    session: Any  # an onnxruntime.InferenceSession
     batch: int = 128
     name: str = "onnxruntime"
     modules: tuple[int, int] | None = None
