@@ -19,6 +19,7 @@ from . import commands
 from .errors import EXIT_BAD_INPUT, VprError
 from .io.fileio import check_output_folder, output_lock
 from .resources import set_memory_limit
+from .startup import EXIT_INTERRUPTED
 from .threads import set_threads
 from .version import __version__
 
@@ -149,7 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {where}: permission denied ({exc.strerror or exc})", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (KeyboardInterrupt, Terminated) as exc:  # exit 128 + SIGINT or SIGTERM
-        word, code = ("interrupted", 130) if isinstance(exc, KeyboardInterrupt) else ("terminated", 143)
+        interrupted = isinstance(exc, KeyboardInterrupt)
+        word, code = ("interrupted", EXIT_INTERRUPTED) if interrupted else ("terminated", 128 + signal.SIGTERM)
         print(f"error: {word}", file=sys.stderr)
         return code
 

@@ -26,6 +26,7 @@ import torch
 from vprsnn_export.cluster import Cluster, map_tasks
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.data.encoding import calibration_spikes, query_spikes
+from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.dynamics import FloatNetwork
 from vprsnn_export.network.runs import SpikeRun
 
@@ -91,7 +92,7 @@ def train_modules_on_cluster(
     ``timing``: the map's :class:`~vprsnn_export.cluster.TaskTiming` is appended.
     """
     if not rows or any(len(r) == 0 for r in rows):
-        raise ValueError("no training images for a module")
+        raise InvalidValueError("no training images for a module")
     groups = module_groups(len(rows), modules_per_task)
     tasks = [(*group_inputs(images, presentations, [rows[m] for m in group]), cfg) for group in groups]
     bar = "training modules" if progress else None
