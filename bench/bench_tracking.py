@@ -6,7 +6,7 @@
                                                     [--frames N] [--backend integer|onnx --onnx FILE]
 
 On the checkpoint's own data (or --data), the query traversal in stream order, per k: the localiser over the whole
-route every frame ("global") and within the search window ("window W"; ``runtime.localize.tracking_rows``), the
+route every frame ("global") and within the search window ("window W"; ``runtime.tracking.tracking_rows``), the
 window accepting at the global run's operating point at precision 1 on the same frames (as R@100P is chosen):
 accuracy and R@100P in %, synaptic events per frame (input spikes x the neurons that ran), global frames after the
 first (re-localisations) and wall ms per frame. Then the kidnapped robot: 100 frames, a jump of --jump places
@@ -29,7 +29,8 @@ import numpy as np
 import vprsnn_export as vx
 from vprsnn_export.data.dataset import load_selection
 from vprsnn_export.readout.sequence import SequenceOptions
-from vprsnn_export.runtime.localize import Localizer, SearchWindow, operating_point, predicted_places, tracking_rows
+from vprsnn_export.runtime.localize import Localizer, SearchWindow, operating_point, predicted_places
+from vprsnn_export.runtime.tracking import tracking_rows
 from vprsnn_export.threads import set_threads
 
 

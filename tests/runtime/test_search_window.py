@@ -20,7 +20,8 @@ from vprsnn_export.io.checkpoint import save_checkpoint
 from vprsnn_export.network.modules import module_regions
 from vprsnn_export.readout.sequence import SequenceOptions
 from vprsnn_export.runtime.deployment import deploy
-from vprsnn_export.runtime.localize import Localizer, SearchWindow, network_part, operating_point, tracking_rows
+from vprsnn_export.runtime.localize import Localizer, SearchWindow, network_part, operating_point
+from vprsnn_export.runtime.tracking import tracking_rows
 from vprsnn_export.targets.contract import search_rule
 from vprsnn_export.targets.intsim import IntegerNetwork
 from vprsnn_export.targets.loihi_description import describe

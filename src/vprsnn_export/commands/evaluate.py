@@ -64,7 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..runtime.evaluation import evaluate_float
-    from ..runtime.localize import tracking_rows
+    from ..runtime.tracking import tracking_rows
 
     ckpt = load_checkpoint(args.checkpoint)
     if args.predictions is not None:
