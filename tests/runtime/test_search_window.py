@@ -152,6 +152,8 @@ def test_the_tracking_protocol_beside_the_global_one(route):
     assert [(r.protocol, r.k) for r in rows] == [("global", 1), ("window 100", 1), ("global", 3), ("window 100", 3)]
     for whole, window in (rows[:2], rows[2:]):
         assert window.events_per_frame < whole.events_per_frame and whole.relocalisations == 0
+        assert whole.window_events_per_frame == whole.events_per_frame  # the global protocol has no window frames
+        assert 0 < window.window_events_per_frame < whole.events_per_frame
         assert 0 <= window.accuracy <= 1 and 0 <= window.r_at_100p <= 1
 
 

@@ -27,6 +27,7 @@ TRACKING_COLUMNS = (
     ("accuracy", "acc %"),
     ("r_at_100p", "R@100P %"),
     ("events", "events/frame"),
+    ("window_events", "window frame"),
     ("relocalisations", "re-localisations"),
     ("ms_per_frame", "ms/frame"),
 )
@@ -121,7 +122,14 @@ def run(args: argparse.Namespace) -> int:
                 f"{'' if search.lost_after is None else f', lost after {search.lost_after}'}) beside the whole route, frame by "
                 "frame in stream order, accepting at the whole route's precision-1 point on these queries:"
             )
-            rows = [{**row.to_dict(), "events": f"{row.events_per_frame / 1e6:.2f} M"} for row in tracking]
+            rows = [
+                {
+                    **row.to_dict(),
+                    "events": f"{row.events_per_frame / 1e6:.2f} M",
+                    "window_events": f"{row.window_events_per_frame / 1e6:.2f} M",
+                }
+                for row in tracking
+            ]
             print(format_table(rows, TRACKING_COLUMNS))
         if result.modules is not None:
             print(f"\nper module (W+Prob k=1 over the whole route, {result.silenced} hyperactive neurons silenced):")

@@ -26,7 +26,8 @@ from .localize import Decision, Localizer, calibration_curve, input_spikes, oper
 class TrackingRow(JsonDataclass):
     """One protocol's figures on a labelled traversal at one k (:func:`tracking_rows`): the localiser over the
     whole route every frame ("global") or within a search window ("window W"); fractions, events per frame
-    (input spikes x neurons run), global frames after the first, and the wall time per frame."""
+    (input spikes x neurons run; over every frame, and over the window's frames alone: what a frame costs while
+    tracking, whatever the route's length), global frames after the first, and the wall time per frame."""
 
     protocol: str
     k: int
@@ -35,6 +36,7 @@ class TrackingRow(JsonDataclass):
     events_per_frame: float
     relocalisations: int
     ms_per_frame: float
+    window_events_per_frame: float  # the global protocol: events_per_frame
 
 
 def tracking_rows(
@@ -52,7 +54,9 @@ def tracking_rows(
     stream order: the global localiser's decisions, the operating point they give at ``precision`` (chosen on these
     same labelled frames, as R@100P is), and the localiser within ``search`` accepting at that point."""
 
-    def row(protocol: str, k: int, decisions: list[Decision], events: float, began: float) -> TrackingRow:
+    def row(
+        protocol: str, k: int, decisions: list[Decision], events: float, window: float, began: float
+    ) -> TrackingRow:
         """One protocol's row from its decisions since ``began`` (R@100P: the recall at precision 1 of their curve)."""
         seconds = time.perf_counter() - began
         curve = calibration_curve(decisions, place_ids, truth)
@@ -65,6 +69,7 @@ def tracking_rows(
             events_per_frame=float(events),
             relocalisations=max(sum(d.search == "global" for d in decisions) - 1, 0),
             ms_per_frame=1000 * seconds / max(len(decisions), 1),
+            window_events_per_frame=float(window),
         )
 
     rows = []
@@ -75,7 +80,7 @@ def tracking_rows(
         began = time.perf_counter()
         point, decisions, _ = operating_point(whole, images, place_ids, precision=precision, truth=truth)
         events = float(spikes) * network.calibration.shape[0] / max(len(decisions), 1)
-        rows.append(row("global", k, decisions, events, began))
+        rows.append(row("global", k, decisions, events, events, began))
         if point.threshold is None:
             raise InvalidValueError(
                 f"no confidence reaches precision {precision} at k={k} on these queries: the search window has no "
@@ -85,5 +90,8 @@ def tracking_rows(
         began = time.perf_counter()
         decisions = tracked.run_inputs(images)
         events = float(np.mean([d.events or 0 for d in decisions]))
-        rows.append(row(f"window {search.places}", k, decisions, events, began))
+        window = [d.events or 0 for d in decisions if d.search == "window"]
+        rows.append(
+            row(f"window {search.places}", k, decisions, events, float(np.mean(window)) if window else 0.0, began)
+        )
     return rows
