@@ -66,7 +66,7 @@ class SearchWindow:
             return (None if place is None else float(place)), 0 if accepted else self.patience - 1, 0
         if accepted and place is not None:
             return float(place), 0, 0
-        lost = self.lost_after is not None and waited + 1 >= self.lost_after
+        lost = self.lost(waited + 1)
         if self.near is not None and place is not None and abs(place - (centre + velocity)) <= self.near:
             return (None if lost else float(place)), misses, waited + 1  # on track: the window follows, no miss
         return (None if lost or misses + 1 >= self.patience else centre + velocity), misses + 1, waited + 1

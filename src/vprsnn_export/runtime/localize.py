@@ -257,9 +257,10 @@ class Localizer:
         search window) and the modules run (None: no search window): the whole network, or (one frame) the window's
         modules alone."""
         group = self.config.network.n_neurons
-        if self.search is None or self.centre is None:
-            every = (0, self.network.calibration.shape[0] // group)
-            return self._counts(spikes), None, *((None, None) if self.search is None else ("global", every))
+        if self.search is None:
+            return self._counts(spikes), None, None, None
+        if self.centre is None:
+            return self._counts(spikes), None, "global", (0, len(self._regions))
         first, last = self.search.modules(self.centre, self._regions)
         counts = np.zeros((len(spikes), self.network.calibration.shape[0]), dtype=np.int64)
         counts[:, first * group : last * group] = self._window_counts(first * group, last * group)(spikes)
