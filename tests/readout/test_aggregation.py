@@ -9,7 +9,7 @@ import pytest
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout import aggregation
-from vprsnn_export.readout.aggregation import aggregate, aggregate_newest, estimate_velocity, shift_window
+from vprsnn_export.readout.aggregation import aggregate, aggregate_newest, estimate_velocity, frame_term, shift_window
 
 
 def _diagonal(
@@ -186,11 +186,18 @@ def test_invalid_arguments() -> None:
 
 @pytest.mark.parametrize(
     ("frames", "k", "velocity", "rule"),
-    [(10, 10, 1.0, "product"), (3, 5, 1.3, "product"), (7, 5, -0.7, "sum"), (2, 10, 0.5, "product")],
-)
+    [
+        (10, 10, 1.0, "product"), (3, 5, 1.3, "product"), (7, 5, -0.7, "sum"), (2, 10, 0.5, "product"),
+        (9, 5, 1.0, "product"), (6, 5, -2.0, "product"), (8, 3, 0.0, "sum"), (4, 5, 60.0, "product"),
+    ],
+)  # fmt: skip
 def test_the_newest_aggregate_is_the_last_row_of_the_whole(frames, k, velocity, rule):
+    """Bit for bit, with and without the stream's terms (summed when the shift is whole places, else unused)."""
     prob = np.random.default_rng(frames).dirichlet(np.ones(40), frames)
-    assert np.array_equal(aggregate_newest(prob, k, velocity, rule), aggregate(prob, k, velocity, rule)[-1:])
+    whole = aggregate(prob, k, velocity, rule)[-1:]
+    assert aggregate_newest(prob, k, velocity, rule).tobytes() == whole.tobytes()
+    terms = frame_term(prob, rule)
+    assert aggregate_newest(prob, k, velocity, rule, terms=terms).tobytes() == whole.tobytes()
 
 
 @pytest.mark.parametrize("velocity", [2.0, -1.0, 0.0, 7.0])

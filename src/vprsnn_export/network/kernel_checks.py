@@ -19,18 +19,22 @@ Shape = Sequence[int | None]  # None: any length along that axis
 def require_array(
     kernel: str, name: str, array: object, dtypes: Sequence[npt.DTypeLike], shape: Shape, *, writable: bool = False
 ) -> np.ndarray:
-    """``array`` itself if it is a C-contiguous numpy array of one of ``dtypes`` with ``shape``; else refuse it."""
-    allowed = [np.dtype(d) for d in dtypes]
-    axes = ", ".join("*" if length is None else str(length) for length in shape)
-    expected = f"a C-contiguous {'/'.join(str(d) for d in allowed)} array of shape ({axes})"
+    """``array`` itself if it is a C-contiguous numpy array of one of ``dtypes`` with ``shape``; else refuse it (the
+    message is built only then: the checks run before every kernel call, a localiser's frame makes seven)."""
+
+    def refused(got: str) -> InvalidValueError:
+        axes = ", ".join("*" if length is None else str(length) for length in shape)
+        kinds = "/".join(str(np.dtype(d)) for d in dtypes)
+        return InvalidValueError(f"{kernel}: {name} must be a C-contiguous {kinds} array of shape ({axes}), got {got}")
+
     if not isinstance(array, np.ndarray):
-        raise InvalidValueError(f"{kernel}: {name} must be {expected}, got {type(array).__name__}")
-    if array.dtype not in allowed:
-        raise InvalidValueError(f"{kernel}: {name} must be {expected}, got dtype {array.dtype}")
+        raise refused(type(array).__name__)
+    if not any(array.dtype == d for d in dtypes):
+        raise refused(f"dtype {array.dtype}")
     if array.ndim != len(shape) or any(want not in (None, have) for have, want in zip(array.shape, shape, strict=True)):
-        raise InvalidValueError(f"{kernel}: {name} must be {expected}, got shape {array.shape}")
+        raise refused(f"shape {array.shape}")
     if not array.flags.c_contiguous:
-        raise InvalidValueError(f"{kernel}: {name} must be {expected}, got a non-contiguous array")
+        raise refused("a non-contiguous array")
     if writable and not array.flags.writeable:
         raise InvalidValueError(f"{kernel}: {name} is written by the kernel but is read-only")
     return array

@@ -247,13 +247,32 @@ def _aggregate_scored(
 
 
 def aggregate_newest(
-    prob: np.ndarray, k: int, velocity: float, rule: str = DEFAULT_RULE, eps: float = 1e-6
+    prob: np.ndarray,
+    k: int,
+    velocity: float,
+    rule: str = DEFAULT_RULE,
+    eps: float = 1e-6,
+    terms: np.ndarray | None = None,
 ) -> np.ndarray:
     """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
-    k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
-    n = len(prob)
-    shifted, valid = shift_window(prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(float(n)))
-    return RULES.get(rule).combine(shifted, valid, eps)[0]
+    k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last;
+    ``terms``: their :func:`frame_term` rows, kept by a stream as the frames come, so that a window shifted by whole
+    places sums them (:func:`aggregate`'s way) instead of taking k terms per place again."""
+    n, n_places = prob.shape
+    newest, window, combiner = np.array([n - 1]), _window(k, n), RULES.get(rule)
+    if terms is not None:
+        _, valid, _, shift = _window_frames(newest, window, np.array([velocity]), np.arange(float(n)), n_places)
+        if shift is not None:
+            outside = float(combiner.term(np.zeros(1), eps)[0])
+            return combiner.finish(_summed_terms(terms, newest, valid, shift, outside))[0]
+    shifted, valid = shift_window(prob, newest, window, np.full(n, velocity), np.arange(float(n)))
+    return combiner.combine(shifted, valid, eps)[0]
+
+
+def frame_term(row: np.ndarray, rule: str = DEFAULT_RULE, eps: float = 1e-6) -> np.ndarray:
+    """One frame's term of the rule's sum (the product's :math:`\\log(P(l) + \\varepsilon)`), once per frame
+    (:func:`aggregate_newest`'s ``terms``)."""
+    return RULES.get(rule).term(row, eps)
 
 
 def window_scores(

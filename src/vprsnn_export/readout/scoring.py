@@ -102,7 +102,8 @@ class Readout:
         self.calibration = calibration
         self.gamma = real_number("gamma", gamma)
         self.modules = modules
-        self._prepared: tuple[np.ndarray, np.ndarray] | None = None  # the stream's S'' and S^R column sums
+        # the stream's S'' values, S^R column sums and stored entries per neuron
+        self._prepared: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._calibrated: tuple[np.ndarray, np.ndarray] | None = None  # S~ and the silenced neurons
 
     @classmethod
@@ -245,12 +246,13 @@ class Readout:
         """
         sr, silent = self.calibrated()
         if self._prepared is None:  # S'' has S~'s entries (weighted_matrix keeps its structure): its values alone
-            self._prepared = (np.asarray(weighted_matrix(sr, self.gamma).data), np.asarray(sr.sum(axis=0)).ravel())
-        weights, column_sum = self._prepared
+            values = np.asarray(weighted_matrix(sr, self.gamma).data)
+            self._prepared = (values, np.asarray(sr.sum(axis=0)).ravel(), np.diff(sr.indptr))
+        weights, column_sum, stored = self._prepared
         sq = np.asarray(counts, dtype=np.float64)
         rows = np.flatnonzero((sq > 0) & ~silent)  # the active neurons
         first, last, _ = (slice(None) if places is None else places).indices(len(column_sum))
-        starts, lengths = sr.indptr[rows], np.diff(sr.indptr)[rows]
+        starts, lengths = sr.indptr[rows], stored[rows]
         entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
         place = sr.indices[entries]
         inside = (place >= first) & (place < last)

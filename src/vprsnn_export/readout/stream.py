@@ -13,7 +13,7 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import aggregate_newest, stream_contrast, window_scores
+from .aggregation import aggregate_newest, frame_term, stream_contrast, window_scores
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, decide
 from .velocity import VELOCITY_ESTIMATES, causal_estimates
@@ -26,7 +26,7 @@ class ReadoutStream:
 
     def __init__(self, wprob: Callable[[np.ndarray, slice | None], np.ndarray], options: SequenceOptions) -> None:
         self.wprob, self.options = wprob, options
-        self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
+        self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
 
     @property
     def k(self) -> int:
@@ -64,11 +64,14 @@ class ReadoutStream:
                 f"causally: choose {' or '.join(causal_estimates())}"
             )
         length, span, memory = causal(k, options) if tracking and causal is not None else (1, 1, 0)
-        if self._stream is None:  # the recent W+Prob rows, stream-contrast rows and window scores
-            self._stream = (deque(maxlen=max(k, length, memory)), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
-        recent, contrast, scores = self._stream
+        if self._stream is None:  # the recent W+Prob rows, their terms, stream-contrast rows and window scores
+            size = max(k, length, memory)
+            self._stream = (deque(maxlen=size), deque(maxlen=k), deque(maxlen=length), deque(maxlen=max(span - 1, 1)))
+        recent, terms, contrast, scores = self._stream
         row = self.wprob(counts, places)
         recent.append(row)
+        if k > 1:
+            terms.append(frame_term(row, options.rule))
         velocity = options.velocity
         if tracking:
             contrast.append(stream_contrast(np.asarray(recent)[-max(memory, 1) :], memory)[-1])
@@ -79,6 +82,12 @@ class ReadoutStream:
             velocity = float(candidates[int(np.argmax(total))])
             if span > 1:
                 scores.append(newest)
-        final = aggregate_newest(np.asarray(recent)[-k:], k, velocity, options.rule) if k > 1 else row[None]
+        if k > 1:
+            window = slice(-k, None)
+            final = aggregate_newest(
+                np.asarray(list(recent)[window]), k, velocity, options.rule, terms=np.asarray(list(terms)[window])
+            )
+        else:
+            final = row[None]
         index, confidence = decide(final, SEQUENCE_STRATEGY)
         return int(index[0]), float(confidence[0]), float(velocity)

@@ -153,17 +153,18 @@ def frame_counts(runner: Any, spikes: torch.Tensor, calibration: np.ndarray, con
 
 
 def network_part(network: Checkpoint | FixedPointModel, neurons: slice) -> Checkpoint | FixedPointModel:
-    """The network of some consecutive modules' neurons alone (their weights, thresholds and S^R rows)."""
+    """The network of some consecutive modules' neurons alone (their weights, thresholds and S^R rows); the weight
+    columns copied contiguous once (the kernels would copy a strided view at every frame)."""
     if isinstance(network, Checkpoint):
         return dataclasses.replace(
             network,
-            weights=network.weights[:, neurons],
+            weights=np.ascontiguousarray(network.weights[:, neurons]),
             thresholds=network.thresholds[neurons],
             calibration=network.calibration[neurons],
         )
     return dataclasses.replace(
         network,
-        weight_mantissa=network.weight_mantissa[:, neurons],
+        weight_mantissa=np.ascontiguousarray(network.weight_mantissa[:, neurons]),
         scale_multiplier=network.scale_multiplier[neurons],
         threshold=network.threshold[neurons],
         calibration=network.calibration[neurons],
