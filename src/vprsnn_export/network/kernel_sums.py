@@ -113,8 +113,8 @@ def _row_sum(weights: np.ndarray, index: np.ndarray, k: int, total: np.ndarray, 
     Eight rows are added per pass over ``total``, still one after another in that order, so each number is
     the same as one row per pass with an eighth of the loads and stores of ``total`` (1.2-1.5x at 27k neurons).
     Each row is sliced to the columns first and read at j from 0 on: indexed at ``offset + j`` numba cannot prove
-    the index non-negative, keeps its wraparound check and the loop stays scalar (5.7x slower at 400 columns, 7.8x
-    at 27,000: bench/bench_row_sum.py).
+    the index non-negative, keeps its wraparound check and the loop stays scalar (several times slower, the same
+    bits: bench/bench_row_sum.py measures both side by side).
     """
     n = total.shape[0]
     stop = offset + n
