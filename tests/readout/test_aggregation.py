@@ -9,7 +9,15 @@ import pytest
 
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.readout import aggregation
-from vprsnn_export.readout.aggregation import aggregate, aggregate_newest, estimate_velocity, frame_term, shift_window
+from vprsnn_export.readout.aggregation import (
+    aggregate,
+    aggregate_newest,
+    aggregate_newest_on_support,
+    estimate_velocity,
+    frame_term,
+    shift_window,
+)
+from vprsnn_export.readout.rules import RULES
 
 
 def _diagonal(
@@ -192,12 +200,23 @@ def test_invalid_arguments() -> None:
     ],
 )  # fmt: skip
 def test_the_newest_aggregate_is_the_last_row_of_the_whole(frames, k, velocity, rule):
-    """Bit for bit, with and without the stream's terms (summed when the shift is whole places, else unused)."""
-    prob = np.random.default_rng(frames).dirichlet(np.ones(40), frames)
-    whole = aggregate(prob, k, velocity, rule)[-1:]
-    assert aggregate_newest(prob, k, velocity, rule).tobytes() == whole.tobytes()
-    terms = frame_term(prob, rule)
-    assert aggregate_newest(prob, k, velocity, rule, terms=terms).tobytes() == whole.tobytes()
+    """Bit for bit, from the rows and from the stream's terms and supports (when the shift is whole places, else
+    None), on dense rows and on a search window's rows (0 outside their 8 places, at times a whole route's)."""
+    rng = np.random.default_rng(frames)
+    dense = rng.dirichlet(np.ones(40), frames)
+    windowed = dense * (np.abs(np.arange(40)[None] - rng.integers(0, 40, (frames, 1))) < 4)
+    windowed[::3] = dense[::3]  # a global frame now and then
+    for prob in (dense, windowed / windowed.sum(axis=1, keepdims=True)):
+        recent = prob[-min(k, frames) :]
+        whole = aggregate(prob, k, velocity, rule)[-1:]
+        assert aggregate_newest(recent, k, velocity, rule).tobytes() == whole.tobytes()
+        terms, supports = zip(*(frame_term(row, rule) for row in recent), strict=True)
+        assert all(
+            t.tobytes() == RULES.get(rule).term(row, 1e-6).tobytes() for t, row in zip(terms, recent, strict=True)
+        )
+        newest = aggregate_newest_on_support(list(terms), list(supports), velocity, rule)
+        assert (newest is None) == (velocity != round(velocity))
+        assert newest is None or newest.tobytes() == whole.tobytes()
 
 
 @pytest.mark.parametrize("velocity", [2.0, -1.0, 0.0, 7.0])
@@ -245,3 +264,18 @@ def test_whole_place_windows_from_each_frames_term_once_are_the_shifted_windows_
         patch.setattr(aggregation, "_MAX_ELEMENTS", 60)
         chunked, chunked_score = aggregation._aggregate_scored(prob, k, velocity, rule, None, 1e-6)
     assert chunked.tobytes() == expected.tobytes() and chunked_score.tobytes() == expected_score.tobytes()
+
+
+@pytest.mark.parametrize("rule", ["product", "sum"])
+@pytest.mark.parametrize("places", [0, 1, 7, 300])
+def test_a_row_finished_from_its_filled_form_is_the_row_finished(rule, places):
+    """Byte for byte: the rule's finish of a row that is one value at all but some places, from those places alone
+    (the product's e^(fill - peak) taken once), as its finish over the whole row; the fill the peak or not."""
+    rng = np.random.default_rng(places)
+    where = np.sort(rng.choice(1000, places, replace=False))
+    values = rng.normal(-20.0, 8.0, places)
+    for fill in (-69.07755278982137, 5.0):
+        row = np.full(1000, fill)
+        row[where] = values
+        combiner = RULES.get(rule)
+        assert combiner.finish_row(values, where, fill, 1000).tobytes() == combiner.finish(row[None])[0].tobytes()

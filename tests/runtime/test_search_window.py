@@ -153,6 +153,7 @@ def test_the_tracking_protocol_beside_the_global_one(route):
     for whole, window in (rows[:2], rows[2:]):
         assert window.events_per_frame < whole.events_per_frame and whole.relocalisations == 0
         assert whole.window_events_per_frame == whole.events_per_frame  # the global protocol has no window frames
+        assert whole.window_ms_per_frame == whole.ms_per_frame and window.window_ms_per_frame > 0
         assert 0 < window.window_events_per_frame < whole.events_per_frame
         assert 0 <= window.accuracy <= 1 and 0 <= window.r_at_100p <= 1
 

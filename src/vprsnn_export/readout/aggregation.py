@@ -247,32 +247,54 @@ def _aggregate_scored(
 
 
 def aggregate_newest(
-    prob: np.ndarray,
-    k: int,
-    velocity: float,
-    rule: str = DEFAULT_RULE,
-    eps: float = 1e-6,
-    terms: np.ndarray | None = None,
+    prob: np.ndarray, k: int, velocity: float, rule: str = DEFAULT_RULE, eps: float = 1e-6
 ) -> np.ndarray:
     """The newest frame's aggregate alone, ``aggregate(prob, k, velocity, rule)[-1:]`` (the same numbers) at a
-    k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last;
-    ``terms``: their :func:`frame_term` rows, kept by a stream as the frames come, so that a window shifted by whole
-    places sums them (:func:`aggregate`'s way) instead of taking k terms per place again."""
-    n, n_places = prob.shape
-    newest, window, combiner = np.array([n - 1]), _window(k, n), RULES.get(rule)
-    if terms is not None:
-        _, valid, _, shift = _window_frames(newest, window, np.array([velocity]), np.arange(float(n)), n_places)
-        if shift is not None:
-            outside = float(combiner.term(np.zeros(1), eps)[0])
-            return combiner.finish(_summed_terms(terms, newest, valid, shift, outside))[0]
-    shifted, valid = shift_window(prob, newest, window, np.full(n, velocity), np.arange(float(n)))
-    return combiner.combine(shifted, valid, eps)[0]
+    k-th of its cost: a stream needs no other row. ``prob``: the recent frames in stream order, newest last."""
+    n = len(prob)
+    shifted, valid = shift_window(prob, np.array([n - 1]), _window(k, n), np.full(n, velocity), np.arange(float(n)))
+    return RULES.get(rule).combine(shifted, valid, eps)[0]
 
 
-def frame_term(row: np.ndarray, rule: str = DEFAULT_RULE, eps: float = 1e-6) -> np.ndarray:
-    """One frame's term of the rule's sum (the product's :math:`\\log(P(l) + \\varepsilon)`), once per frame
-    (:func:`aggregate_newest`'s ``terms``)."""
-    return RULES.get(rule).term(row, eps)
+def frame_term(row: np.ndarray, rule: str = DEFAULT_RULE, eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's term row of the rule's sum (the product's :math:`\\log(P(l) + \\varepsilon)`) and its support
+    :math:`\\{l : P(l) \\ne 0\\}`, kept by a stream as the frame comes (:func:`aggregate_newest_on_support`):
+    elsewhere the term is the term of 0, so it is taken on the support alone."""
+    combiner = RULES.get(rule)
+    support = np.flatnonzero(row)
+    term = np.full(row.shape, combiner.term(np.zeros(1), eps)[0])
+    term[support] = combiner.term(row[support], eps)
+    return term, support
+
+
+def aggregate_newest_on_support(
+    terms: list[np.ndarray], supports: list[np.ndarray], velocity: float, rule: str = DEFAULT_RULE, eps: float = 1e-6
+) -> np.ndarray | None:
+    r""":func:`aggregate_newest` of the recent frames (oldest first) from their :func:`frame_term` rows and supports,
+    the same numbers, at the cost of the places some shifted frame supports (``U``; None when the frames are not
+    shifted by whole places ``d_o``): elsewhere every term is the term of 0, ``c``.
+
+    .. math:: A(l) = \sum_o t_{j-o}(l - d_o) \; (l \in U), \quad A(l) = c + \dots + c \; (l \notin U), \quad
+              U = \bigcup_o (S_{j-o} + d_o)
+
+    summed in :func:`aggregate`'s order (offset 0 first), then the rule's ``finish`` over every place
+    (:meth:`~.rules.AggregationRule.finish_row`)."""
+    n, n_places = len(terms), len(terms[-1])
+    _, _, _, shift = _window_frames(np.array([n - 1]), n, np.array([velocity]), np.arange(float(n)), n_places)
+    if shift is None:
+        return None
+    combiner = RULES.get(rule)
+    outside = combiner.term(np.zeros(1), eps)  # the term of 0, as every unsupported place's and beyond the map
+    offsets = list(enumerate(shift.tolist()))
+    union = np.unique(np.concatenate([supports[n - 1 - o] + d for o, d in offsets]))
+    union = union[(union >= 0) & (union < n_places)]
+    total, rest = terms[n - 1][union], outside.copy()
+    for o, d in offsets[1:]:
+        source = union - d
+        inside = (source >= 0) & (source < n_places)
+        total += np.where(inside, terms[n - 1 - o][np.where(inside, source, 0)], outside[0])
+        rest += outside
+    return combiner.finish_row(total, union, float(rest[0]), n_places)
 
 
 def window_scores(

@@ -29,6 +29,18 @@ def softmax_finish(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e / e.sum(axis=1, keepdims=True), peak[:, 0]
 
 
+def softmax_finish_filled(
+    values: np.ndarray, where: np.ndarray, fill: float, n_places: int
+) -> tuple[np.ndarray, np.ndarray]:
+    r""":func:`softmax_finish` of the row that is ``fill`` at every place but ``where`` (``values`` there), the same
+    numbers, with :math:`e^{\text{fill} - \text{peak}}` taken once: a search window's aggregate is the term of 0
+    summed at all but a few places (:func:`~vprsnn_export.readout.aggregation.aggregate_newest_on_support`)."""
+    peak = np.array([values.max(initial=fill)])
+    e = np.full(n_places, np.exp(fill - peak)[0])
+    e[where] = np.exp(values - peak[0])
+    return (e / e.sum(keepdims=True))[None], peak
+
+
 def probability_term(probability: np.ndarray, eps: float) -> np.ndarray:
     r"""The sum rule's term of one frame: :math:`\tilde P_m(l)` itself."""
     return probability
@@ -58,6 +70,17 @@ class AggregationRule:
     term: Callable[[np.ndarray, float], np.ndarray]
     finish: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     description: str
+    #: ``finish`` of a row that is one value at all but some places (values, places, value, length), when the rule
+    #: has a quicker form than ``finish`` over the whole row; None: ``finish`` itself
+    finish_filled: Callable[[np.ndarray, np.ndarray, float, int], tuple[np.ndarray, np.ndarray]] | None = None
+
+    def finish_row(self, values: np.ndarray, where: np.ndarray, fill: float, n_places: int) -> np.ndarray:
+        """The finished distribution (1, places) of the row that is ``fill`` but ``values`` at ``where``."""
+        if self.finish_filled is not None:
+            return self.finish_filled(values, where, fill, n_places)[0]
+        row = np.full(n_places, fill)
+        row[where] = values
+        return self.finish(row[None])[0]
 
     def combine(self, shifted: np.ndarray, valid: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
         """``shifted`` (Q, k, places), ``valid`` (Q, k) -> (aggregated distribution (Q, places), window score (Q,));
@@ -68,7 +91,13 @@ class AggregationRule:
 #: The aggregation rules (the CLI's --rule; the first is the default).
 RULES: Registry[AggregationRule] = Registry("aggregation rule")
 RULES.register(
-    AggregationRule("product", log_term, softmax_finish, "product of the frames' probabilities (softmax of log sums)")
+    AggregationRule(
+        "product",
+        log_term,
+        softmax_finish,
+        "product of the frames' probabilities (softmax of log sums)",
+        softmax_finish_filled,
+    )
 )
 RULES.register(AggregationRule("sum", probability_term, l1_finish, "sum of the frames' probabilities"))
 #: The default rule of the library and the CLI: the first registered.

@@ -13,7 +13,7 @@ import numpy as np
 
 from vprsnn_export.errors import InvalidValueError
 
-from .aggregation import aggregate_newest, frame_term, stream_contrast, window_scores
+from .aggregation import aggregate_newest, aggregate_newest_on_support, frame_term, stream_contrast, window_scores
 from .sequence import SequenceOptions
 from .strategies import SEQUENCE_STRATEGY, decide
 from .velocity import VELOCITY_ESTIMATES, causal_estimates
@@ -26,7 +26,9 @@ class ReadoutStream:
 
     def __init__(self, wprob: Callable[[np.ndarray, slice | None], np.ndarray], options: SequenceOptions) -> None:
         self.wprob, self.options = wprob, options
-        self._stream: tuple[deque[np.ndarray], deque[np.ndarray], deque[np.ndarray], deque[np.ndarray]] | None = None
+        self._stream: (
+            tuple[deque[np.ndarray], deque[tuple[np.ndarray, np.ndarray]], deque[np.ndarray], deque[np.ndarray]] | None
+        ) = None
 
     @property
     def k(self) -> int:
@@ -82,11 +84,11 @@ class ReadoutStream:
             velocity = float(candidates[int(np.argmax(total))])
             if span > 1:
                 scores.append(newest)
-        if k > 1:
-            window = slice(-k, None)
-            final = aggregate_newest(
-                np.asarray(list(recent)[window]), k, velocity, options.rule, terms=np.asarray(list(terms)[window])
-            )
+        if k > 1:  # from the terms when the frames are shifted by whole places, else from the rows
+            rows, supports = zip(*terms, strict=True)
+            final = aggregate_newest_on_support(list(rows), list(supports), velocity, options.rule)
+            if final is None:
+                final = aggregate_newest(np.asarray(list(recent)[-k:]), k, velocity, options.rule)
         else:
             final = row[None]
         index, confidence = decide(final, SEQUENCE_STRATEGY)
