@@ -231,7 +231,7 @@ def _aggregate_scored(
     out = np.empty_like(p)
     score = np.empty(n_queries)
     combiner, terms = RULES.get(rule), None
-    outside = float(combiner.term(np.zeros(1), eps)[0])  # a place beyond the map: the term of 0
+    outside = combiner.zero_term(eps)  # a place beyond the map
     chunk = max(1, _MAX_ELEMENTS // n_places)
     for start in range(0, n_queries, chunk):
         queries = np.arange(start, min(start + chunk, n_queries))
@@ -262,7 +262,7 @@ def frame_term(row: np.ndarray, rule: str = DEFAULT_RULE, eps: float = 1e-6) -> 
     elsewhere the term is the term of 0, so it is taken on the support alone."""
     combiner = RULES.get(rule)
     support = np.flatnonzero(row)
-    term = np.full(row.shape, combiner.term(np.zeros(1), eps)[0])
+    term = np.full(row.shape, combiner.zero_term(eps))
     term[support] = combiner.term(row[support], eps)
     return term, support
 
@@ -284,15 +284,15 @@ def aggregate_newest_on_support(
     if shift is None:
         return None
     combiner = RULES.get(rule)
-    outside = combiner.term(np.zeros(1), eps)  # the term of 0, as every unsupported place's and beyond the map
+    outside = combiner.zero_term(eps)  # every unsupported place's term, and beyond the map
     offsets = list(enumerate(shift.tolist()))
     union = np.unique(np.concatenate([supports[n - 1 - o] + d for o, d in offsets]))
     union = union[(union >= 0) & (union < n_places)]
-    total, rest = terms[n - 1][union], outside.copy()
+    total, rest = terms[n - 1][union], np.array([outside])
     for o, d in offsets[1:]:
         source = union - d
         inside = (source >= 0) & (source < n_places)
-        total += np.where(inside, terms[n - 1 - o][np.where(inside, source, 0)], outside[0])
+        total += np.where(inside, terms[n - 1 - o][np.where(inside, source, 0)], outside)
         rest += outside
     return combiner.finish_row(total, union, float(rest[0]), n_places)
 

@@ -74,6 +74,10 @@ class AggregationRule:
     #: has a quicker form than ``finish`` over the whole row; None: ``finish`` itself
     finish_filled: Callable[[np.ndarray, np.ndarray, float, int], tuple[np.ndarray, np.ndarray]] | None = None
 
+    def zero_term(self, eps: float) -> float:
+        """The term of a probability 0: a place beyond the map, or outside a frame's support."""
+        return float(self.term(np.zeros(1), eps)[0])
+
     def finish_row(self, values: np.ndarray, where: np.ndarray, fill: float, n_places: int) -> np.ndarray:
         """The finished distribution (1, places) of the row that is ``fill`` but ``values`` at ``where``."""
         if self.finish_filled is not None:
