@@ -6,9 +6,11 @@ import json
 
 import pytest
 import ray
+from scipy import sparse
 
 from vprsnn_export.cli import main
 from vprsnn_export.cluster import Cluster, map_tasks
+from vprsnn_export.runtime import evaluation
 
 TINY = ["--timesteps", "20", "--epochs", "2", "--neurons", "16", "--module-size", "10", "--seed", "4", "--quiet"]
 
@@ -39,6 +41,27 @@ def test_train_and_evaluate_on_ray_equal_one_process(two_workers, tmp_path, caps
     capsys.readouterr()
     here = evaluate(tmp_path / "alone.npz", capsys)
     there = evaluate(tmp_path / "alone.npz", capsys, "--cluster", "local")
+    assert there["results"] == here["results"] and there["modules"] == here["modules"]
+    assert there["spike_stats"] == here["spike_stats"]
+
+
+def test_a_long_route_is_gathered_from_ray_as_sparse_counts_with_the_same_results(
+    two_workers, tmp_path, capsys, monkeypatch
+):
+    """A long route (more queries x neurons than DENSE_COUNT_ENTRIES: here any) keeps the tasks' counts as CSR, as
+    the local run does, and scores what one process scores."""
+    train(tmp_path / "alone.npz")
+    capsys.readouterr()
+    here = evaluate(tmp_path / "alone.npz", capsys)
+    monkeypatch.setattr(evaluation, "DENSE_COUNT_ENTRIES", 0)
+    kinds, real = [], evaluation.read_out
+    monkeypatch.setattr(
+        evaluation,
+        "read_out",
+        lambda readout, counts, *a, **k: kinds.append(type(counts)) or real(readout, counts, *a, **k),
+    )
+    there = evaluate(tmp_path / "alone.npz", capsys, "--cluster", "local")
+    assert kinds == [sparse.csr_array]
     assert there["results"] == here["results"] and there["modules"] == here["modules"]
     assert there["spike_stats"] == here["spike_stats"]
 

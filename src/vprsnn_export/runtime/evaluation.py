@@ -138,10 +138,14 @@ def evaluate_float(
         raise InvalidValueError(f"--cluster runs the float network, not the backend {backend}")
     else:
         images = {traversal: query_images}
-        run = float_runs_on_cluster(
+        gathered = float_runs_on_cluster(
             ckpt.weights, ckpt.thresholds, network.config, images, query_place_ids, "query", cluster, progress=progress
         )[traversal]
-        counts = run.counts.numpy()
+        # CSR where the local run keeps CSR (a long route), else dense: the same counts either way
+        long_route = sparse_query_counts(network, len(query_place_ids))
+        counts = gathered.counts if long_route else gathered.counts.toarray()
+        no_counts = torch.zeros((len(query_place_ids), 0), dtype=torch.int64)  # the counts are ``counts``
+        run = SpikeRun(no_counts, torch.from_numpy(gathered.candidates_per_step))
     reference_ids = ckpt.reference_place_ids
     readout = Readout.of(ckpt.calibration, ckpt.config, options)
     truth = window(options.tolerance) if truth is None else truth

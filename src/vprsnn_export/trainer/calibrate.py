@@ -60,8 +60,16 @@ def calibrate(
             counts = sparse.vstack(parts, format="csr").T.tocsr()
             total = counts if total is None else total + counts
     assert total is not None
-    if total.shape[0] * total.shape[1] <= dense_entries:  # column-major, as the transposed counts always were:
-        return np.asfortranarray(total.toarray())  # a checkpoint's bytes (its sha256) do not change
+    return calibration_matrix(total, dense_entries)
+
+
+def calibration_matrix(
+    total: sparse.csr_array, dense_entries: int = DENSE_COUNT_ENTRIES
+) -> np.ndarray | sparse.csr_array:
+    """S^R as a checkpoint keeps it: dense int64 when it has at most ``dense_entries`` entries (column-major, as the
+    transposed counts always were, so a checkpoint's bytes and its sha256 do not change), else the CSR array."""
+    if total.shape[0] * total.shape[1] <= dense_entries:
+        return np.asfortranarray(total.toarray())
     return total
 
 

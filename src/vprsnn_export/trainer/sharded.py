@@ -22,15 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy import sparse
 
 from vprsnn_export.cluster import Cluster, map_tasks
 from vprsnn_export.config import Config, wta_group
 from vprsnn_export.data.encoding import calibration_spikes, query_spikes
 from vprsnn_export.errors import InvalidValueError
 from vprsnn_export.network.dynamics import FloatNetwork
-from vprsnn_export.network.runs import SpikeRun
 
 from .batched import module_epochs, side_by_side
+from .calibrate import DENSE_COUNT_ENTRIES, calibration_chunk, calibration_matrix
 from .train import Presentation, TrainedNetwork, history_entry, initial_state
 
 STREAMS = {"query": query_spikes, "calibrate": calibration_spikes}
@@ -118,12 +119,30 @@ def run_group(
     place_ids: np.ndarray,
     traversal: str,
     stream: str,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A task: encode the presentations, run a group of modules (float, CPU); (counts (N, neurons), |C[t]| (N, T))."""
-    spikes = STREAMS[stream](images, place_ids, traversal, cfg)
-    run = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU).run(spikes)
-    assert run.candidates_per_step is not None  # the float network always reports them
-    return run.counts.numpy(), run.candidates_per_step.numpy()
+) -> tuple[sparse.csr_array, np.ndarray]:
+    """A task: encode the presentations and run a group of modules on them (float, CPU),
+    :func:`.calibrate.calibration_chunk` of them at a time (each from its own seed and V = 0 when state-isolated,
+    so the counts are those of all at once): (counts (N, neurons) int64 CSR, |C[t]| (N, T) int32)."""
+    network = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU)
+    chunk = calibration_chunk(cfg, len(place_ids))
+    counts, candidates = [], []
+    for start in range(0, len(place_ids), chunk):
+        part = slice(start, start + chunk)
+        run = network.run(STREAMS[stream](images[part], place_ids[part], traversal, cfg))
+        assert run.candidates_per_step is not None  # the float network always reports them
+        counts.append(sparse.csr_array(run.counts.numpy().astype(np.int64)))
+        candidates.append(run.candidates_per_step.numpy())
+    return sparse.vstack(counts, format="csr"), np.concatenate(candidates)
+
+
+@dataclass(frozen=True)
+class GatheredRun:
+    """One traversal's presentations gathered from the tasks: counts (N, neurons) int64 CSR (a presentation
+    reaches at most T neurons per WTA group, so a 100,000-place route's counts fit where a dense array would not)
+    and |C[t]| (N, T) int32."""
+
+    counts: sparse.csr_array
+    candidates_per_step: np.ndarray
 
 
 def float_runs_on_cluster(
@@ -137,8 +156,8 @@ def float_runs_on_cluster(
     *,
     modules_per_task: int = 1,
     progress: bool = False,
-) -> dict[str, SpikeRun]:
-    """The float ensemble on each traversal's images, split into tasks: one SpikeRun per traversal.
+) -> dict[str, GatheredRun]:
+    """The float ensemble on each traversal's images, split into tasks: one :class:`GatheredRun` per traversal.
 
     Counts and candidates per step equal ``FloatNetwork(weights, thresholds).run`` on the same
     spikes (``stream``: "query" or "calibrate" presentations). With one WTA per module
@@ -166,13 +185,13 @@ def float_runs_on_cluster(
         for w, t, rows in parts
     ]
     done = map_tasks(cluster, run_group, tasks, progress=f"{stream} runs" if progress else None)
-    runs: dict[str, SpikeRun] = {}
+    runs: dict[str, GatheredRun] = {}
     for k, traversal in enumerate(presentations):
         results = done[k * len(parts) : (k + 1) * len(parts)]
-        counts = np.concatenate([c for c, _ in results], axis=axis)
+        counts = (sparse.hstack if axis == 1 else sparse.vstack)([c for c, _ in results], format="csr")
         steps = [c for _, c in results]  # |C[t]|: the module groups' add up, the presentation slices' follow on
-        candidates = np.sum(steps, axis=0, dtype=np.int64).astype(np.int32) if axis == 1 else np.concatenate(steps)
-        runs[traversal] = SpikeRun(torch.from_numpy(counts), torch.from_numpy(candidates))
+        candidates = np.sum(steps, axis=0, dtype=np.int64) if axis == 1 else np.concatenate(steps)
+        runs[traversal] = GatheredRun(counts, np.asarray(candidates, dtype=np.int32))
     return runs
 
 
@@ -186,9 +205,11 @@ def calibrate_on_cluster(
     *,
     modules_per_task: int = 1,
     progress: bool = False,
-) -> np.ndarray:
-    """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network."""
+    dense_entries: int = DENSE_COUNT_ENTRIES,
+) -> np.ndarray | sparse.csr_array:
+    """S^R = sum over reference traversals of counts^T, as :func:`.calibrate.calibrate` on the float network: dense
+    int64 up to ``dense_entries`` entries, else CSR (the same integers)."""
     args = (weights, thresholds, cfg, reference_images, place_ids, "calibrate", cluster)
     runs = float_runs_on_cluster(*args, modules_per_task=modules_per_task, progress=progress)
-    counts = [runs[traversal].counts.numpy().astype(np.int64).T for traversal in reference_images]
-    return sum(counts[1:], counts[0]) if counts else np.zeros((0, 0), dtype=np.int64)
+    counts = [runs[traversal].counts.T.tocsr() for traversal in reference_images]
+    return calibration_matrix(sum(counts[1:], counts[0]), dense_entries)
