@@ -19,6 +19,7 @@ from vprsnn_export.trainer.sharded import (
     float_runs_on_cluster,
     group_inputs,
     module_groups,
+    run_group,
     train_modules_on_cluster,
 )
 from vprsnn_export.trainer.train import Presentation
@@ -109,3 +110,9 @@ def test_group_inputs_renumber_rows_into_the_group_images():
     sub, subp, rows = group_inputs(images, presentations, [np.array([7, 2]), np.array([9])])
     assert sub[:, 0].tolist() == [2, 7, 9] and [p.place_id for p in subp] == [2, 7, 9]
     assert [r.tolist() for r in rows] == [[1, 0], [2]]
+
+
+def test_a_task_without_presentations_returns_empty_counts():
+    cfg, weights, thresholds, _ = small_network("ensemble")
+    counts, candidates = run_group(weights, thresholds, cfg, np.zeros((0, 784), np.float32), np.arange(0), "w", "query")
+    assert counts.shape == (0, 36) and counts.dtype == np.int64 and candidates.shape == (0, cfg.encoder.timesteps)

@@ -83,7 +83,7 @@ class Evaluation(JsonDataclass):
 
     rows: list[dict[str, Any]] = field(metadata=json_options(key="results"))
     spike_stats: SpikeStatistics
-    # (Q, neurons) int64; CSR on a long route (_run_queries)
+    # (Q, neurons) int64; CSR on a long route (_run_queries, or gathered from a cluster)
     query_counts: np.ndarray | sparse.csr_array = field(metadata=NOT_WRITTEN)
     saturations: int = field(default=0, metadata=NOT_WRITTEN)
     max_current: int = field(default=0, metadata=NOT_WRITTEN)

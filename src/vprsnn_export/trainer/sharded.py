@@ -124,6 +124,9 @@ def run_group(
     :func:`.calibrate.calibration_chunk` of them at a time (each from its own seed and V = 0 when state-isolated,
     so the counts are those of all at once): (counts (N, neurons) int64 CSR, |C[t]| (N, T) int32)."""
     network = FloatNetwork.from_arrays(weights, thresholds, cfg, CPU)
+    if len(place_ids) == 0:
+        none = np.zeros((0, cfg.encoder.timesteps), dtype=np.int32)
+        return sparse.csr_array((0, weights.shape[1]), dtype=np.int64), none
     chunk = calibration_chunk(cfg, len(place_ids))
     counts, candidates = [], []
     for start in range(0, len(place_ids), chunk):
@@ -137,9 +140,9 @@ def run_group(
 
 @dataclass(frozen=True)
 class GatheredRun:
-    """One traversal's presentations gathered from the tasks: counts (N, neurons) int64 CSR (a presentation
-    reaches at most T neurons per WTA group, so a 100,000-place route's counts fit where a dense array would not)
-    and |C[t]| (N, T) int32."""
+    """One traversal's presentations gathered from the tasks: counts (N, neurons) int64 CSR (with the hard WTA a
+    presentation spikes at most T times per WTA group, so a 100,000-place route's counts under one WTA fit where a
+    dense array would not) and |C[t]| (N, T) int32."""
 
     counts: sparse.csr_array
     candidates_per_step: np.ndarray
